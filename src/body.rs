@@ -1,0 +1,364 @@
+//! A body: the 1-sublevel set `{x : p((x − center)/scale) ≤ 1}` of a sos-convex polynomial, in the
+//! mesh's own units (meters), and the same body under a rigid pose.
+//!
+//! ```text
+//! body frame:   S = { x ∈ ℝ³ : p(u) ≤ 1 },  u = (x − c) / s          (c = center, s = scale > 0)
+//! posed (R,t):  S' = { x : p(u) ≤ 1 },       u = (Rᵀ(x − t) − c) / s  (paper §IV-C)
+//! ```
+//!
+//! A pose never touches the coefficients: [`PosedBody`] maps the query point into the normalized
+//! frame with one affine map `u = A x + b` (A = Rᵀ/s, b = −(Rᵀt + c)/s), and maps derivatives back
+//! (`∇ₓ = Aᵀ∇ᵤ`, `∇²ₓ = Aᵀ∇²ᵤA`).
+//!
+//! The JSON body file (see [`BodyFile`]) holds `degree`, `exponents`, `coefficients`, `center`,
+//! `scale` and the fit `report`.
+
+use crate::math::{Isometry3, Matrix3, Point3, Real, Vector3};
+use crate::poly::{Eval, Polynomial};
+use crate::{Error, Result};
+use serde::{Deserialize, Serialize};
+
+/// Degrees a body may have (2d ∈ {2, 4, 6, 8}).
+pub const SUPPORTED_DEGREES: [usize; 4] = [2, 4, 6, 8];
+
+/// What the fit that produced a body reported (paper §III, Table 1 columns).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct FitReport {
+    /// Formulation, e.g. `"logdet_p"` (eq. "VAG.log.det"); `"uploaded"` for bodies sent as-is.
+    pub method: String,
+    /// The SDP solver's final status (`"Solved"`, `"AlmostSolved"`, …).
+    pub solver_status: String,
+    /// Seconds spent inside Clarabel.
+    pub solve_seconds: Real,
+    /// Seconds for the whole fit (hull, problem build, solve, checks, volume).
+    pub total_seconds: Real,
+    /// Number of input points.
+    pub num_points: usize,
+    /// Number of convex-hull vertices used as containment constraints.
+    pub num_hull_vertices: usize,
+    /// Volume of the body in cubic mesh units (seeded Monte Carlo).
+    pub volume: Real,
+    /// Standard error of `volume`.
+    pub volume_std_error: Real,
+    /// Volume of the convex hull of the input points.
+    pub hull_volume: Real,
+    /// max over all input points of p(xᵢ) after the final rescale; ≤ 1 always.
+    pub max_point_value: Real,
+    /// Factor the solved polynomial was divided by so that every point satisfies p(xᵢ) ≤ 1 (1 when
+    /// the solver's answer already contained every point).
+    pub containment_rescale: Real,
+    /// Smallest eigenvalue of the sos-convexity Gram matrix (the convexity margin), if known.
+    pub convexity_margin: Option<Real>,
+    /// Free-form notes (e.g. why a degree was chosen).
+    #[serde(default)]
+    pub notes: Vec<String>,
+}
+
+/// A body's on-disk / on-wire JSON form.
+///
+/// `p(x) = Σₖ coefficients[k] · u^a v^b w^c` with `[a, b, c] = exponents[k]` and
+/// `(u, v, w) = (x − center) / scale`, x in the mesh's units.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct BodyFile {
+    /// Total degree 2d ∈ {2, 4, 6, 8}.
+    pub degree: usize,
+    /// Exponent triples `[a, b, c]`, one per coefficient.
+    pub exponents: Vec<[u8; 3]>,
+    /// Coefficients, same length as `exponents`.
+    pub coefficients: Vec<Real>,
+    /// Normalization center `[x, y, z]` in mesh units.
+    pub center: [Real; 3],
+    /// Normalization scale (> 0) in mesh units.
+    pub scale: Real,
+    /// How the body was fitted.
+    #[serde(default)]
+    pub report: FitReport,
+}
+
+/// A validated body: polynomial in normalized coordinates plus its normalization.
+#[derive(Clone, Debug)]
+pub struct Body {
+    polynomial: Polynomial,
+    center: Vector3,
+    scale: Real,
+    /// Minimizer of p in normalized coordinates: an interior point every solver may start from.
+    interior_u: Vector3,
+    /// p at `interior_u` (< 1 for a body with interior).
+    min_value: Real,
+    /// Fit report.
+    pub report: FitReport,
+}
+
+impl Body {
+    /// Validates and builds a body from a polynomial in normalized coordinates.
+    ///
+    /// Checks: degree ∈ {2, 4, 6, 8}; center finite; scale finite and > 0; p has a minimizer with
+    /// p < 1 there and a positive-definite Hessian (a bounded sublevel set with interior).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `degree`, `center`, `scale` or `coefficients`.
+    pub fn new(polynomial: Polynomial, center: [Real; 3], scale: Real, report: FitReport) -> Result<Self> {
+        let degree = polynomial.degree();
+        if !SUPPORTED_DEGREES.contains(&degree) {
+            return Err(Error::invalid("degree", format!("must be one of 2, 4, 6, 8, got {degree}")));
+        }
+        if center.iter().any(|v| !v.is_finite()) {
+            return Err(Error::invalid("center", "must be three finite numbers"));
+        }
+        if !(scale.is_finite() && scale > 0.0) {
+            return Err(Error::invalid("scale", format!("must be finite and > 0, got {scale}")));
+        }
+        let (interior_u, min_value) = minimize_convex(&polynomial).ok_or_else(|| {
+            Error::invalid(
+                "coefficients",
+                "p has no minimizer with positive-definite Hessian: not a bounded convex body",
+            )
+        })?;
+        if min_value >= 1.0 {
+            return Err(Error::invalid(
+                "coefficients",
+                format!("the sublevel set {{p ≤ 1}} is empty or flat (min p = {min_value:.6} ≥ 1)"),
+            ));
+        }
+        Ok(Self { polynomial, center: Vector3::from(center), scale, interior_u, min_value, report })
+    }
+
+    /// Parses and validates a body from its JSON file form.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] for mismatched lengths or any check of [`Body::new`].
+    pub fn from_file(file: BodyFile) -> Result<Self> {
+        if file.exponents.len() != file.coefficients.len() {
+            return Err(Error::invalid(
+                "coefficients",
+                format!("{} coefficients for {} exponents", file.coefficients.len(), file.exponents.len()),
+            ));
+        }
+        if !SUPPORTED_DEGREES.contains(&file.degree) {
+            return Err(Error::invalid("degree", format!("must be one of 2, 4, 6, 8, got {}", file.degree)));
+        }
+        let terms: Vec<([u8; 3], Real)> =
+            file.exponents.iter().copied().zip(file.coefficients.iter().copied()).collect();
+        let p = Polynomial::from_terms(file.degree, &terms)?;
+        Body::new(p, file.center, file.scale, file.report)
+    }
+
+    /// The JSON file form (dense: every monomial of the basis, in graded-lex order).
+    pub fn to_file(&self) -> BodyFile {
+        BodyFile {
+            degree: self.polynomial.degree(),
+            exponents: self.polynomial.exponents().to_vec(),
+            coefficients: self.polynomial.coefficients().to_vec(),
+            center: [self.center.x, self.center.y, self.center.z],
+            scale: self.scale,
+            report: self.report.clone(),
+        }
+    }
+
+    /// Reads a body file (JSON).
+    ///
+    /// # Errors
+    /// [`Error::Io`], [`Error::Json`], or any validation error of [`Body::from_file`].
+    pub fn load(path: &std::path::Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path)?;
+        Body::from_file(serde_json::from_str(&text)?)
+    }
+
+    /// Writes the body file (pretty JSON).
+    ///
+    /// # Errors
+    /// [`Error::Io`] or [`Error::Json`].
+    pub fn save(&self, path: &std::path::Path) -> Result<()> {
+        std::fs::write(path, serde_json::to_string_pretty(&self.to_file())?)?;
+        Ok(())
+    }
+
+    /// Total degree 2d.
+    pub fn degree(&self) -> usize {
+        self.polynomial.degree()
+    }
+
+    /// The polynomial in normalized coordinates u = (x − center)/scale.
+    pub fn polynomial(&self) -> &Polynomial {
+        &self.polynomial
+    }
+
+    /// Normalization center in body-frame units.
+    pub fn center(&self) -> Vector3 {
+        self.center
+    }
+
+    /// Normalization scale (> 0).
+    pub fn scale(&self) -> Real {
+        self.scale
+    }
+
+    /// Minimizer of p in the body frame (meters): a point deep inside the body.
+    pub fn interior_point(&self) -> Point3 {
+        Point3::from(self.center + self.interior_u * self.scale)
+    }
+
+    /// Minimum of p over ℝ³ (< 1).
+    pub fn min_value(&self) -> Real {
+        self.min_value
+    }
+
+    /// p at a body-frame point (meters).
+    pub fn value_at(&self, x: &Point3) -> Real {
+        self.polynomial.value(&((x.coords - self.center) / self.scale))
+    }
+
+    /// The body under a pose.
+    pub fn posed(&self, pose: &Isometry3) -> PosedBody<'_> {
+        PosedBody::new(self, pose)
+    }
+}
+
+/// A body under a rigid pose: evaluates `p(A x + b)` and its world-frame derivatives.
+#[derive(Clone, Copy, Debug)]
+pub struct PosedBody<'a> {
+    /// The body.
+    pub body: &'a Body,
+    /// The pose (body frame → world).
+    pub pose: Isometry3,
+    a: Matrix3,
+    b: Vector3,
+}
+
+impl<'a> PosedBody<'a> {
+    /// Precomputes the world → normalized map `u = A x + b`.
+    pub fn new(body: &'a Body, pose: &Isometry3) -> Self {
+        let rt = pose.rotation.to_rotation_matrix().matrix().transpose();
+        let inv_s = 1.0 / body.scale;
+        let a = rt * inv_s;
+        let b = -(rt * pose.translation.vector + body.center) * inv_s;
+        Self { body, pose: *pose, a, b }
+    }
+
+    /// The linear part A of the world → normalized map (Rᵀ/scale).
+    pub fn linear(&self) -> &Matrix3 {
+        &self.a
+    }
+
+    /// Normalized coordinates of a world point.
+    #[inline]
+    pub fn to_normalized(&self, x: &Vector3) -> Vector3 {
+        self.a * x + self.b
+    }
+
+    /// World point of normalized coordinates.
+    pub fn from_normalized(&self, u: &Vector3) -> Vector3 {
+        self.pose.rotation * (self.body.center + u * self.body.scale) + self.pose.translation.vector
+    }
+
+    /// p'(x) = p(A x + b) at a world point.
+    #[inline]
+    pub fn value(&self, x: &Vector3) -> Real {
+        self.body.polynomial.value(&self.to_normalized(x))
+    }
+
+    /// p'(x), ∇p'(x), ∇²p'(x) at a world point (exact).
+    #[inline]
+    pub fn eval(&self, x: &Vector3) -> Eval {
+        let e = self.body.polynomial.eval(&self.to_normalized(x));
+        let at = self.a.transpose();
+        Eval { value: e.value, gradient: at * e.gradient, hessian: at * e.hessian * self.a }
+    }
+
+    /// The interior point (minimizer of p') in world coordinates.
+    pub fn interior_point(&self) -> Vector3 {
+        self.from_normalized(&self.body.interior_u)
+    }
+}
+
+/// Minimizes a convex polynomial by damped Newton from the origin; `None` unless it converges to
+/// a point with positive-definite Hessian.
+fn minimize_convex(p: &Polynomial) -> Option<(Vector3, Real)> {
+    let mut u = Vector3::zeros();
+    let mut e = p.eval(&u);
+    for _ in 0..200 {
+        let chol = nalgebra::Cholesky::new(e.hessian)?;
+        let step = -chol.solve(&e.gradient);
+        let decrement = -e.gradient.dot(&step);
+        if decrement < 1e-24 {
+            break;
+        }
+        let mut alpha = 1.0;
+        loop {
+            let trial = u + step * alpha;
+            let v = p.value(&trial);
+            if v.is_finite() && v <= e.value - 0.25 * alpha * decrement {
+                u = trial;
+                break;
+            }
+            alpha *= 0.5;
+            if alpha < 1e-12 {
+                return finish(p, u);
+            }
+        }
+        e = p.eval(&u);
+    }
+    finish(p, u)
+}
+
+fn finish(p: &Polynomial, u: Vector3) -> Option<(Vector3, Real)> {
+    let e = p.eval(&u);
+    nalgebra::Cholesky::new(e.hessian)?;
+    (e.gradient.norm() < 1e-6 * (1.0 + e.value.abs())).then_some((u, e.value))
+}
+
+/// An axis-aligned ellipsoid body `Σ ((xᵢ − cᵢ)/rᵢ)² ≤ 1` of degree 2, for tests and examples.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] if a radius is not finite and > 0.
+pub fn ellipsoid(center: [Real; 3], radii: [Real; 3]) -> Result<Body> {
+    if radii.iter().any(|r| !(r.is_finite() && *r > 0.0)) {
+        return Err(Error::invalid("radii", "must be finite and > 0"));
+    }
+    let s = radii.iter().cloned().fold(0.0, Real::max);
+    let terms =
+        [([2, 0, 0], (s / radii[0]).powi(2)), ([0, 2, 0], (s / radii[1]).powi(2)), ([0, 0, 2], (s / radii[2]).powi(2))];
+    let report = FitReport { method: "closed_form_ellipsoid".into(), containment_rescale: 1.0, ..Default::default() };
+    Body::new(Polynomial::from_terms(2, &terms)?, center, s, report)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::pose_from_parts;
+
+    #[test]
+    fn ellipsoid_membership_and_pose() {
+        let e = ellipsoid([1.0, 0.0, 0.0], [2.0, 1.0, 0.5]).unwrap();
+        assert!((e.value_at(&Point3::new(3.0, 0.0, 0.0)) - 1.0).abs() < 1e-12);
+        assert!((e.value_at(&Point3::new(1.0, 0.0, 0.5)) - 1.0).abs() < 1e-12);
+        assert!((e.interior_point() - Point3::new(1.0, 0.0, 0.0)).norm() < 1e-9);
+        // Rotate 90° about z and translate by (0, 0, 5): the long axis now points along y.
+        let h = std::f64::consts::FRAC_1_SQRT_2;
+        let pose = pose_from_parts("pose", [h, 0.0, 0.0, h], [0.0, 0.0, 5.0]).unwrap();
+        let pb = e.posed(&pose);
+        let tip = Vector3::new(0.0, 3.0, 5.0); // R (3,0,0) + t
+        assert!((pb.value(&tip) - 1.0).abs() < 1e-12);
+        let ev = pb.eval(&tip);
+        // Outward normal at the tip is +y; ∇ of Σ(x/r)² there has magnitude 2/r = 1.
+        assert!((ev.gradient - Vector3::new(0.0, 1.0, 0.0)).norm() < 1e-12);
+        assert!((pb.interior_point() - Vector3::new(0.0, 1.0, 5.0)).norm() < 1e-9);
+    }
+
+    #[test]
+    fn json_round_trip_and_validation() {
+        let e = ellipsoid([0.5, -1.0, 2.0], [1.0, 2.0, 3.0]).unwrap();
+        let text = serde_json::to_string(&e.to_file()).unwrap();
+        let back = Body::from_file(serde_json::from_str(&text).unwrap()).unwrap();
+        assert_eq!(back.polynomial(), e.polynomial());
+        let mut bad = e.to_file();
+        bad.degree = 3;
+        assert!(Body::from_file(bad).unwrap_err().to_string().contains("degree"));
+        let mut bad = e.to_file();
+        bad.scale = -1.0;
+        assert!(Body::from_file(bad).unwrap_err().to_string().contains("scale"));
+        let mut bad = e.to_file();
+        bad.coefficients.iter_mut().for_each(|c| *c = -*c);
+        assert!(Body::from_file(bad).unwrap_err().to_string().contains("coefficients"));
+    }
+}

@@ -1,0 +1,6 @@
+//! Subcommands of the `sublevel` binary; each file owns its clap arguments and its `run`.
+
+pub mod bench;
+pub mod fit;
+pub mod query;
+pub mod serve;

@@ -1,0 +1,58 @@
+//! The crate's one error type.
+//!
+//! Outcomes that are not errors (a solver hitting its iteration cap, a fit the solver only
+//! "almost" solved) are values with a status, not errors; an [`Error`] is bad input, a missing
+//! resource, or a broken invariant. The single conversion to a gRPC `Status` lives in
+//! `service::convert`, so the math core never sees tonic.
+
+/// Everything that can go wrong in Sublevel.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// A caller-supplied value is malformed; `field` names it (e.g. `pose_a.rotation`).
+    #[error("invalid argument `{field}`: {reason}")]
+    InvalidArgument {
+        /// The offending field, in the caller's vocabulary.
+        field: String,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// An id does not name an existing resource.
+    #[error("{kind} `{id}` not found")]
+    NotFound {
+        /// The resource kind (`body`, `scene`, `instance`, `job`).
+        kind: &'static str,
+        /// The id that was looked up.
+        id: String,
+    },
+    /// A request exceeds a configured size limit.
+    #[error("resource exhausted: {0}")]
+    ResourceExhausted(String),
+    /// A numerical method failed in a way that is not the caller's fault (e.g. the SDP solver
+    /// returned no usable solution).
+    #[error("numerical failure: {0}")]
+    Numerical(String),
+    /// The persistent store failed.
+    #[error("storage: {0}")]
+    Storage(String),
+    /// Reading or writing a file failed.
+    #[error("io: {0}")]
+    Io(#[from] std::io::Error),
+    /// A JSON document could not be parsed or produced.
+    #[error("json: {0}")]
+    Json(#[from] serde_json::Error),
+}
+
+impl Error {
+    /// Shorthand for [`Error::InvalidArgument`].
+    pub fn invalid(field: impl Into<String>, reason: impl Into<String>) -> Self {
+        Error::InvalidArgument { field: field.into(), reason: reason.into() }
+    }
+
+    /// Shorthand for [`Error::NotFound`].
+    pub fn not_found(kind: &'static str, id: impl Into<String>) -> Self {
+        Error::NotFound { kind, id: id.into() }
+    }
+}
+
+/// `Result` with the crate's [`Error`].
+pub type Result<T, E = Error> = std::result::Result<T, E>;

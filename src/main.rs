@@ -1,0 +1,42 @@
+//! The `sublevel` command: `serve`, `fit`, `query`, `bench`.
+
+mod cli;
+
+use clap::{Parser, Subcommand};
+
+/// Sublevel: collision queries between sos-convex polynomial bodies.
+#[derive(Parser)]
+#[command(name = "sublevel", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run the gRPC server.
+    Serve(cli::serve::ServeArgs),
+    /// Fit a body to a mesh or point cloud and write its JSON body file.
+    Fit(cli::fit::FitArgs),
+    /// Run a distance or growth query between two body files.
+    Query(cli::query::QueryArgs),
+    /// Benchmark fits and queries on the paper's shapes.
+    Bench(cli::bench::BenchArgs),
+}
+
+fn main() -> std::process::ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Serve(a) => cli::serve::run(a),
+        Command::Fit(a) => cli::fit::run(a),
+        Command::Query(a) => cli::query::run(a),
+        Command::Bench(a) => cli::bench::run(a),
+    };
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,16 @@
+//! Polynomial core: monomial bases, dense trivariate polynomials with exact derivatives, and
+//! Gram forms.
+//!
+//! Bodies are 1-sublevel sets `{x : p(x) ≤ 1}` of sos-convex trivariate polynomials of degree
+//! 2d ∈ {2, 4, 6, 8} (paper §III). This module knows nothing of fitting or queries:
+//!
+//! - [`monomial`]: the graded-lex monomial basis z(x) and O(1) indexing;
+//! - [`polynomial`]: [`Polynomial`] with allocation-free value / gradient / Hessian;
+//! - [`gram`]: Gram forms `z(x)ᵀ Q z(x)` in any number of variables, and Clarabel's packed-triangle
+//!   convention used by every SDP in the crate.
+
+pub mod gram;
+pub mod monomial;
+pub mod polynomial;
+
+pub use polynomial::{Eval, Polynomial, MAX_DEGREE};

@@ -1,0 +1,415 @@
+//! Euclidean distance between two posed bodies with witness points (paper §IV-A, eq. "distance"):
+//!
+//! ```text
+//! min ‖x − y‖²   s.t.   p_a'(x) ≤ 1,  p_b'(y) ≤ 1
+//! ```
+//!
+//! Solved in body A's frame (A with the identity pose, B under pose_a⁻¹·pose_b), so world
+//! offsets never enter the arithmetic. The growth measure decides overlap first: the bodies
+//! intersect iff d(p_a‖p_b) ≤ 1, and then the distance is 0 with the growth minimizer as a common
+//! witness. Separated bodies have both constraints active, and Newton's method solves the 8 × 8
+//! KKT system
+//!
+//! ```text
+//! 2(x − y) + λ_a ∇p_a'(x) = 0,   −2(x − y) + λ_b ∇p_b'(y) = 0,   p_a'(x) = 1,   p_b'(y) = 1
+//! ```
+//!
+//! with exact Hessians, from the previous answer (warm start) or from a geometric cold start (the
+//! growth minimizer on B and the matching boundary point of A); a log-barrier path from the two
+//! interior points is the globally convergent fallback. A KKT point with λ_a, λ_b > 0 is the global
+//! minimizer of this convex program.
+
+use super::growth::{solve_growth, GrowthWarmStart};
+use super::newton::{boundary_on_segment, NewtonParams, SolveStatus};
+use crate::body::{Body, PosedBody};
+use crate::math::{Isometry3, Point3, Real, Vector3};
+use nalgebra::{SMatrix, SVector};
+
+/// Answer of a distance query; all points in world coordinates (meters).
+#[derive(Clone, Debug)]
+pub struct DistanceResult {
+    /// ‖x* − y*‖ in meters; 0 when the bodies overlap or touch.
+    pub distance: Real,
+    /// Closest point of body A.
+    pub witness_a: Point3,
+    /// Closest point of body B (equal to `witness_a` when overlapping).
+    pub witness_b: Point3,
+    /// Unit normal from A towards B, (y* − x*)/‖y* − x*‖; zero when overlapping.
+    pub normal: Vector3,
+    /// True when the bodies overlap or touch (d(p_a‖p_b) ≤ 1).
+    pub overlapping: bool,
+    /// How the solve ended; only [`SolveStatus::Converged`] answers are certified optimal.
+    pub status: SolveStatus,
+    /// Newton iterations over all phases (growth check included).
+    pub iterations: usize,
+    /// Final ∞-norm of the KKT residual.
+    pub kkt_residual: Real,
+    /// Whether the answer came from the warm start.
+    pub warm_started: bool,
+    /// State for warm-starting the next query of the same pair.
+    pub warm_start: DistanceWarmStart,
+}
+
+/// Solver state carried between queries of one pair, in body frames so it follows the poses.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct DistanceWarmStart {
+    /// Witness on A in A's body frame (meters).
+    pub a_local: Vector3,
+    /// Witness on B in B's body frame (meters).
+    pub b_local: Vector3,
+    /// Multipliers (λ_a, λ_b) of the two constraints.
+    pub multipliers: [Real; 2],
+    /// Whether `a_local`, `b_local`, `multipliers` hold a converged separated answer.
+    pub valid: bool,
+    /// Warm start of the overlap test d(p_a‖p_b).
+    pub growth: GrowthWarmStart,
+}
+
+/// Distance between body `a` posed by `pose_a` and body `b` posed by `pose_b` (paper eq. "distance").
+///
+/// `warm` is the `warm_start` of a previous answer for the same ordered pair. Never panics on valid
+/// bodies; the answer says whether it converged.
+pub fn distance(
+    a: &Body,
+    pose_a: &Isometry3,
+    b: &Body,
+    pose_b: &Isometry3,
+    warm: Option<&DistanceWarmStart>,
+    params: &NewtonParams,
+) -> DistanceResult {
+    let rel = pose_a.inverse() * pose_b;
+    let ba = PosedBody::new(a, &Isometry3::identity());
+    let bb = PosedBody::new(b, &rel);
+    let mut iterations = 0;
+
+    if let Some(w) = warm.filter(|w| w.valid) {
+        let y0 = rel * Point3::from(w.b_local);
+        let out = kkt_newton(&ba, &bb, w.a_local, y0.coords, w.multipliers, params);
+        iterations += out.iterations;
+        if out.status.converged() {
+            return finish(pose_a, &rel, out, iterations, true, w.growth);
+        }
+    }
+
+    // Overlap test by the growth measure.
+    let g = solve_growth(&ba, &bb, warm.map(|w| &w.growth), params);
+    iterations += g.iterations;
+    let growth_warm = GrowthWarmStart { local: g.x, multiplier: g.mu, valid: g.status.converged() };
+    if g.value <= 1.0 {
+        let p = pose_a * (rel * Point3::from(g.x));
+        return DistanceResult {
+            distance: 0.0,
+            witness_a: p,
+            witness_b: p,
+            normal: Vector3::zeros(),
+            overlapping: true,
+            status: g.status,
+            iterations,
+            kkt_residual: g.residual,
+            warm_started: g.warm_started,
+            warm_start: DistanceWarmStart { growth: growth_warm, ..Default::default() },
+        };
+    }
+
+    // Separated: cold start from the growth minimizer on B.
+    let y0 = (rel * Point3::from(g.x)).coords;
+    let x0 = boundary_on_segment(&ba, &ba.interior_point(), &y0);
+    let lam0 = initial_multipliers(&ba, &bb, &x0, &y0);
+    let out = kkt_newton(&ba, &bb, x0, y0, lam0, params);
+    iterations += out.iterations;
+    if out.status.converged() {
+        return finish(pose_a, &rel, out, iterations, false, growth_warm);
+    }
+    let (xb, yb, lamb, it_b) = barrier(&ba, &bb, params);
+    iterations += it_b;
+    let out = kkt_newton(&ba, &bb, xb, yb, lamb, params);
+    iterations += out.iterations;
+    finish(pose_a, &rel, out, iterations, false, growth_warm)
+}
+
+fn finish(
+    pose_a: &Isometry3,
+    rel: &Isometry3,
+    out: KktOut,
+    iterations: usize,
+    warm_started: bool,
+    growth: GrowthWarmStart,
+) -> DistanceResult {
+    let diff = out.y - out.x;
+    let dist = diff.norm();
+    let normal = if dist > 0.0 { pose_a.rotation * (diff / dist) } else { Vector3::zeros() };
+    let b_local = rel.inverse() * Point3::from(out.y);
+    DistanceResult {
+        distance: dist,
+        witness_a: pose_a * Point3::from(out.x),
+        witness_b: pose_a * Point3::from(out.y),
+        normal,
+        overlapping: false,
+        status: out.status,
+        iterations,
+        kkt_residual: out.residual,
+        warm_started,
+        warm_start: DistanceWarmStart {
+            a_local: out.x,
+            b_local: b_local.coords,
+            multipliers: out.lam,
+            valid: out.status.converged(),
+            growth,
+        },
+    }
+}
+
+/// Least-squares multipliers at (x, y), clamped positive.
+fn initial_multipliers(ba: &PosedBody<'_>, bb: &PosedBody<'_>, x: &Vector3, y: &Vector3) -> [Real; 2] {
+    let ga = ba.eval(x).gradient;
+    let gb = bb.eval(y).gradient;
+    let d = y - x;
+    let la = 2.0 * d.dot(&ga) / ga.norm_squared().max(Real::MIN_POSITIVE);
+    let lb = -2.0 * d.dot(&gb) / gb.norm_squared().max(Real::MIN_POSITIVE);
+    let fix = |l: Real, g: &Vector3| if l.is_finite() && l > 0.0 { l } else { 2.0 * d.norm() / g.norm().max(1e-300) };
+    [fix(la, &ga), fix(lb, &gb)]
+}
+
+struct KktOut {
+    x: Vector3,
+    y: Vector3,
+    lam: [Real; 2],
+    status: SolveStatus,
+    iterations: usize,
+    residual: Real,
+}
+
+type Vec8 = SVector<Real, 8>;
+type Mat8 = SMatrix<Real, 8, 8>;
+
+struct KktState {
+    r: Vec8,
+    jac: Mat8,
+}
+
+fn kkt_state(ba: &PosedBody<'_>, bb: &PosedBody<'_>, x: &Vector3, y: &Vector3, lam: [Real; 2]) -> KktState {
+    let ea = ba.eval(x);
+    let eb = bb.eval(y);
+    let d = x - y;
+    let ra = d * 2.0 + ea.gradient * lam[0];
+    let rb = -d * 2.0 + eb.gradient * lam[1];
+    let r = Vec8::from_column_slice(&[ra.x, ra.y, ra.z, rb.x, rb.y, rb.z, ea.value - 1.0, eb.value - 1.0]);
+    let mut jac = Mat8::zeros();
+    let two = nalgebra::Matrix3::<Real>::identity() * 2.0;
+    jac.fixed_view_mut::<3, 3>(0, 0).copy_from(&(two + ea.hessian * lam[0]));
+    jac.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-two));
+    jac.fixed_view_mut::<3, 3>(3, 0).copy_from(&(-two));
+    jac.fixed_view_mut::<3, 3>(3, 3).copy_from(&(two + eb.hessian * lam[1]));
+    jac.fixed_view_mut::<3, 1>(0, 6).copy_from(&ea.gradient);
+    jac.fixed_view_mut::<3, 1>(3, 7).copy_from(&eb.gradient);
+    jac.fixed_view_mut::<1, 3>(6, 0).copy_from(&ea.gradient.transpose());
+    jac.fixed_view_mut::<1, 3>(7, 3).copy_from(&eb.gradient.transpose());
+    KktState { r, jac }
+}
+
+/// Active-set Newton on the 8 × 8 KKT system, globalized by backtracking on ‖r‖₂.
+fn kkt_newton(
+    ba: &PosedBody<'_>,
+    bb: &PosedBody<'_>,
+    x0: Vector3,
+    y0: Vector3,
+    lam0: [Real; 2],
+    params: &NewtonParams,
+) -> KktOut {
+    let (mut x, mut y, mut lam) = (x0, y0, lam0);
+    let mut st = kkt_state(ba, bb, &x, &y, lam);
+    let mut status = SolveStatus::MaxIterations;
+    let mut it = 0;
+    let converged = |st: &KktState, x: &Vector3, y: &Vector3, lam: [Real; 2]| {
+        let scale = 1.0 + 2.0 * (x - y).norm();
+        st.r.amax() <= params.kkt_tolerance * scale && lam[0] > 0.0 && lam[1] > 0.0
+    };
+    while it < params.max_iterations {
+        if !st.r.amax().is_finite() {
+            status = SolveStatus::Stalled;
+            break;
+        }
+        if converged(&st, &x, &y, lam) {
+            status = SolveStatus::Converged;
+            break;
+        }
+        it += 1;
+        let Some(step) = st.jac.lu().solve(&(-st.r)) else {
+            status = SolveStatus::Stalled;
+            break;
+        };
+        let dx = Vector3::new(step[0], step[1], step[2]);
+        let dy = Vector3::new(step[3], step[4], step[5]);
+        let r0 = st.r.norm();
+        let mut alpha = 1.0;
+        let mut accepted = false;
+        for _ in 0..40 {
+            let (xt, yt) = (x + dx * alpha, y + dy * alpha);
+            let lt = [lam[0] + step[6] * alpha, lam[1] + step[7] * alpha];
+            let tr = kkt_state(ba, bb, &xt, &yt, lt);
+            let r1 = tr.r.norm();
+            if r1.is_finite() && r1 <= (1.0 - 1e-4 * alpha) * r0 {
+                (x, y, lam, st) = (xt, yt, lt, tr);
+                accepted = true;
+                break;
+            }
+            alpha *= 0.5;
+        }
+        if !accepted {
+            status = SolveStatus::Stalled;
+            break;
+        }
+    }
+    if status == SolveStatus::MaxIterations && converged(&st, &x, &y, lam) {
+        status = SolveStatus::Converged;
+    }
+    KktOut { x, y, lam, status, iterations: it, residual: st.r.amax() }
+}
+
+/// Log-barrier path `min ‖x − y‖² − t(log(1 − p_a') + log(1 − p_b'))` from the interior points,
+/// t → 0; returns the final points, multiplier estimates t/(1 − p') and the iterations spent.
+fn barrier(ba: &PosedBody<'_>, bb: &PosedBody<'_>, params: &NewtonParams) -> (Vector3, Vector3, [Real; 2], usize) {
+    let mut x = ba.interior_point();
+    let mut y = bb.interior_point();
+    let f0 = (x - y).norm_squared();
+    let mut t = f0.max(1e-12);
+    let mut it = 0;
+    let max_it = params.max_iterations * 4;
+    let phi = |x: &Vector3, y: &Vector3, t: Real| -> Option<Real> {
+        let (ga, gb) = (1.0 - ba.value(x), 1.0 - bb.value(y));
+        (ga > 0.0 && gb > 0.0).then(|| (x - y).norm_squared() - t * (ga.ln() + gb.ln()))
+    };
+    'outer: while it < max_it {
+        loop {
+            if it >= max_it {
+                break 'outer;
+            }
+            let (ea, eb) = (ba.eval(&x), bb.eval(&y));
+            let (sa, sb) = (1.0 - ea.value, 1.0 - eb.value);
+            let d = x - y;
+            let ga = d * 2.0 + ea.gradient * (t / sa);
+            let gb = -d * 2.0 + eb.gradient * (t / sb);
+            let two = nalgebra::Matrix3::<Real>::identity() * 2.0;
+            let haa = two + ea.hessian * (t / sa) + ea.gradient * ea.gradient.transpose() * (t / (sa * sa));
+            let hbb = two + eb.hessian * (t / sb) + eb.gradient * eb.gradient.transpose() * (t / (sb * sb));
+            let mut h = SMatrix::<Real, 6, 6>::zeros();
+            h.fixed_view_mut::<3, 3>(0, 0).copy_from(&haa);
+            h.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-two));
+            h.fixed_view_mut::<3, 3>(3, 0).copy_from(&(-two));
+            h.fixed_view_mut::<3, 3>(3, 3).copy_from(&hbb);
+            let g = SVector::<Real, 6>::from_column_slice(&[ga.x, ga.y, ga.z, gb.x, gb.y, gb.z]);
+            let Some(chol) = nalgebra::Cholesky::new(h) else { break 'outer };
+            let step = -chol.solve(&g);
+            let dec = -g.dot(&step);
+            it += 1;
+            if dec <= 1e-3 * t {
+                break;
+            }
+            let Some(phi0) = phi(&x, &y, t) else { break 'outer };
+            let (dx, dy) = (Vector3::new(step[0], step[1], step[2]), Vector3::new(step[3], step[4], step[5]));
+            let mut alpha = 1.0;
+            loop {
+                let (xt, yt) = (x + dx * alpha, y + dy * alpha);
+                if let Some(p) = phi(&xt, &yt, t) {
+                    if p <= phi0 - 0.25 * alpha * dec {
+                        (x, y) = (xt, yt);
+                        break;
+                    }
+                }
+                alpha *= 0.5;
+                if alpha < 1e-12 {
+                    break 'outer;
+                }
+            }
+        }
+        if t < 1e-12 * (1.0 + (x - y).norm_squared()) {
+            break;
+        }
+        t *= 0.1;
+    }
+    let sa = (1.0 - ba.value(&x)).max(Real::MIN_POSITIVE);
+    let sb = (1.0 - bb.value(&y)).max(Real::MIN_POSITIVE);
+    (x, y, [t / sa, t / sb], it)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::body::ellipsoid;
+    use crate::math::pose_from_parts;
+
+    #[test]
+    fn spheres_match_closed_form_along_a_motion() {
+        let s1 = ellipsoid([0.1, 0.0, 0.0], [0.5; 3]).unwrap();
+        let s2 = ellipsoid([0.0; 3], [0.8; 3]).unwrap();
+        let pose_a = pose_from_parts("a", [0.8, 0.6, 0.0, 0.0], [10.0, -3.0, 2.0]).unwrap();
+        let center_a = pose_a * Point3::new(0.1, 0.0, 0.0);
+        let mut warm: Option<DistanceWarmStart> = None;
+        let (mut cold_it, mut warm_it) = (0, 0);
+        for k in 0..60 {
+            let c2 = center_a.coords + Vector3::new(3.0 - 0.05 * k as Real, 0.3, -0.2);
+            let pose_b = pose_from_parts("b", [0.6, 0.0, 0.8, 0.0], [c2.x, c2.y, c2.z]).unwrap();
+            let expected = ((c2 - center_a.coords).norm() - 1.3).max(0.0);
+            let r = distance(&s1, &pose_a, &s2, &pose_b, warm.as_ref(), &NewtonParams::default());
+            let c = distance(&s1, &pose_a, &s2, &pose_b, None, &NewtonParams::default());
+            for res in [&r, &c] {
+                assert!(res.status.converged(), "k = {k}: {res:?}");
+                assert!((res.distance - expected).abs() < 1e-9, "k = {k}: {} vs {expected}", res.distance);
+                assert_eq!(res.overlapping, expected == 0.0);
+            }
+            if expected > 0.0 {
+                // Witnesses lie on the surfaces along the line of centers.
+                assert!(((r.witness_a - center_a).norm() - 0.5).abs() < 1e-8);
+                assert!(((r.witness_b.coords - c2).norm() - 0.8).abs() < 1e-8);
+                let n = (c2 - center_a.coords).normalize();
+                assert!((r.normal - n).norm() < 1e-8);
+                if k > 0 {
+                    cold_it += c.iterations;
+                    warm_it += r.iterations;
+                }
+            }
+            warm = Some(r.warm_start);
+        }
+        // Spheres: the cold start on the line of centers is already optimal.
+        assert_eq!(cold_it, 0);
+        assert!(warm_it > 0);
+    }
+
+    #[test]
+    fn warm_starts_save_iterations_on_ellipsoids() {
+        let e1 = ellipsoid([0.0; 3], [0.9, 0.3, 0.5]).unwrap();
+        let e2 = ellipsoid([0.1, 0.0, 0.0], [0.4, 1.0, 0.2]).unwrap();
+        let mut warm: Option<DistanceWarmStart> = None;
+        let (mut cold_it, mut warm_it) = (0, 0);
+        for k in 0..30 {
+            let (s, c) = (0.01 * k as Real).sin_cos();
+            let pose_b = pose_from_parts("b", [c, 0.0, s, 0.0], [2.5 - 0.03 * k as Real, 0.4, 0.1]).unwrap();
+            let w = distance(&e1, &Isometry3::identity(), &e2, &pose_b, warm.as_ref(), &NewtonParams::default());
+            let cold = distance(&e1, &Isometry3::identity(), &e2, &pose_b, None, &NewtonParams::default());
+            assert!(w.status.converged() && cold.status.converged());
+            assert!((w.distance - cold.distance).abs() < 1e-9);
+            // Witnesses on the surfaces and the normal along the witness segment.
+            assert!((e1.value_at(&w.witness_a) - 1.0).abs() < 1e-9);
+            assert!((e2.value_at(&(pose_b.inverse() * w.witness_b)) - 1.0).abs() < 1e-9);
+            if k > 0 {
+                assert!(w.warm_started);
+                cold_it += cold.iterations;
+                warm_it += w.iterations;
+            }
+            warm = Some(w.warm_start);
+        }
+        assert!(warm_it < cold_it, "warm {warm_it} vs cold {cold_it}");
+    }
+
+    #[test]
+    fn elongated_ellipsoids_against_brute_force() {
+        // Two needles crossing at right angles, 0.3 apart along z: distance 0.3 − 2·0.05 = 0.2.
+        let n1 = ellipsoid([0.0; 3], [2.0, 0.05, 0.05]).unwrap();
+        let n2 = ellipsoid([0.0; 3], [2.0, 0.05, 0.05]).unwrap();
+        let h = std::f64::consts::FRAC_1_SQRT_2;
+        let pose_b = pose_from_parts("b", [h, 0.0, 0.0, h], [0.0, 0.0, 0.3]).unwrap();
+        let r = distance(&n1, &Isometry3::identity(), &n2, &pose_b, None, &NewtonParams::default());
+        assert!(r.status.converged());
+        assert!((r.distance - 0.2).abs() < 1e-9, "{}", r.distance);
+    }
+}

@@ -1,0 +1,410 @@
+//! The growth measure d(p₁‖p₂) (paper §IV-B, eq. "overlap"):
+//!
+//! ```text
+//! d(p₁‖p₂) = min p₁'(x)  s.t.  p₂'(x) ≤ 1        (> 1 separated, = 1 touching, < 1 overlapping)
+//! ```
+//!
+//! The problem is solved in body 2's frame (p₂ with the identity pose, p₁ under the relative pose
+//! pose₂⁻¹·pose₁), so large world coordinates never enter the arithmetic. Three cases:
+//!
+//! 1. the unconstrained minimizer of p₁ (precomputed per body) satisfies p₂' ≤ 1: the constraint is
+//!    inactive and d = min p₁ (multiplier 0);
+//! 2. otherwise the constraint is active, and Newton's method solves the KKT system
+//!    `∇p₁' + μ∇p₂' = 0, p₂' = 1` (4 × 4, exact Hessians), from the previous answer (warm start) or from
+//!    the point where the segment between the two interior points leaves body 2 (cold start);
+//! 3. if that fails, a log-barrier path `min p₁' − t·log(1 − p₂')` from body 2's interior point, then
+//!    the KKT polish.
+
+use super::newton::{boundary_on_segment, NewtonParams, SolveStatus};
+use crate::body::{Body, PosedBody};
+use crate::math::{Isometry3, Matrix3, Point3, Real, Vector3};
+
+/// Answer of a growth query: d(p₁‖p₂) = min p₁'(x) s.t. p₂'(x) ≤ 1 (paper eq. "overlap").
+#[derive(Clone, Debug)]
+pub struct GrowthResult {
+    /// d(p₁‖p₂) (dimensionless): > 1 separated, = 1 touching, < 1 overlapping.
+    pub value: Real,
+    /// The minimizer x* in world coordinates (meters); it lies in body 2.
+    pub minimizer: Point3,
+    /// Multiplier μ ≥ 0 of p₂'(x) ≤ 1 (0 when the constraint is inactive).
+    pub multiplier: Real,
+    /// How the solve ended; only [`SolveStatus::Converged`] answers are certified optimal.
+    pub status: SolveStatus,
+    /// Newton iterations over all phases.
+    pub iterations: usize,
+    /// Final ∞-norm of the KKT residual.
+    pub kkt_residual: Real,
+    /// Whether the solve started from a warm start and converged from it.
+    pub warm_started: bool,
+    /// State for warm-starting the next query of the same pair.
+    pub warm_start: GrowthWarmStart,
+}
+
+/// Growth solver state carried between queries of one pair, in body 2's own frame so that it
+/// follows the pose.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct GrowthWarmStart {
+    /// Minimizer in body 2's frame (meters).
+    pub local: Vector3,
+    /// Multiplier μ.
+    pub multiplier: Real,
+    /// Whether this holds a usable state.
+    pub valid: bool,
+}
+
+/// d(p₁‖p₂) for body `p1` posed by `pose1` and body `p2` posed by `pose2` (paper eq. "overlap").
+///
+/// `warm` is the `warm_start` of a previous answer for the same ordered pair (any poses). The
+/// answer always says whether it converged; it never panics on valid bodies.
+pub fn growth(
+    p1: &Body,
+    pose1: &Isometry3,
+    p2: &Body,
+    pose2: &Isometry3,
+    warm: Option<&GrowthWarmStart>,
+    params: &NewtonParams,
+) -> GrowthResult {
+    let rel = pose2.inverse() * pose1;
+    let b1 = PosedBody::new(p1, &rel);
+    let b2 = PosedBody::new(p2, &Isometry3::identity());
+    let core = solve_growth(&b1, &b2, warm, params);
+    GrowthResult {
+        value: core.value,
+        minimizer: pose2 * Point3::from(core.x),
+        multiplier: core.mu,
+        status: core.status,
+        iterations: core.iterations,
+        kkt_residual: core.residual,
+        warm_started: core.warm_started,
+        warm_start: GrowthWarmStart { local: core.x, multiplier: core.mu, valid: core.status.converged() },
+    }
+}
+
+/// Growth answer in the common frame of the two posed bodies.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct GrowthCore {
+    pub value: Real,
+    pub x: Vector3,
+    pub mu: Real,
+    pub status: SolveStatus,
+    pub iterations: usize,
+    pub residual: Real,
+    pub warm_started: bool,
+}
+
+/// Solves d(p₁‖p₂) with both bodies posed in one common frame; `warm.local` is in body 2's frame.
+pub(crate) fn solve_growth(
+    b1: &PosedBody<'_>,
+    b2: &PosedBody<'_>,
+    warm: Option<&GrowthWarmStart>,
+    params: &NewtonParams,
+) -> GrowthCore {
+    // Case 1: the unconstrained minimizer of p₁ lies in body 2.
+    let c1 = b1.interior_point();
+    if b2.value(&c1) <= 1.0 {
+        let e = b1.eval(&c1);
+        return GrowthCore {
+            value: b1.body.min_value(),
+            x: b2.pose.inverse_transform_vector(&(c1 - b2.pose.translation.vector)),
+            mu: 0.0,
+            status: SolveStatus::Converged,
+            iterations: 0,
+            residual: e.gradient.amax(),
+            warm_started: false,
+        };
+    }
+    let mut iterations = 0;
+    // Case 2: active constraint, Newton on the KKT system.
+    if let Some(w) = warm.filter(|w| w.valid && w.multiplier > 0.0) {
+        let x0 = b2.pose * Point3::from(w.local);
+        let out = kkt_newton(b1, b2, x0.coords, w.multiplier, params);
+        iterations += out.iterations;
+        if out.status.converged() {
+            return GrowthCore { iterations, warm_started: true, ..out.with_frame(b2) };
+        }
+    }
+    let c2 = b2.interior_point();
+    let x0 = boundary_on_segment(b2, &c2, &c1);
+    let mu0 = initial_multiplier(b1, b2, &x0);
+    let out = kkt_newton(b1, b2, x0, mu0, params);
+    iterations += out.iterations;
+    if out.status.converged() {
+        return GrowthCore { iterations, ..out.with_frame(b2) };
+    }
+    // Case 3: barrier path from body 2's interior, then the polish.
+    let (xb, mub, it_b) = barrier(b1, b2, &c2, params);
+    iterations += it_b;
+    let out = kkt_newton(b1, b2, xb, mub, params);
+    iterations += out.iterations;
+    GrowthCore { iterations, ..out.with_frame(b2) }
+}
+
+/// Least-squares multiplier for ∇f + μ∇g = 0 at x, clamped positive.
+fn initial_multiplier(b1: &PosedBody<'_>, b2: &PosedBody<'_>, x: &Vector3) -> Real {
+    let gf = b1.eval(x).gradient;
+    let gg = b2.eval(x).gradient;
+    let mu = -gf.dot(&gg) / gg.norm_squared().max(Real::MIN_POSITIVE);
+    if mu.is_finite() && mu > 0.0 {
+        mu
+    } else {
+        gf.norm() / gg.norm().max(Real::MIN_POSITIVE)
+    }
+}
+
+/// Result of one KKT Newton run (x in the common frame).
+struct KktOut {
+    x: Vector3,
+    mu: Real,
+    value: Real,
+    status: SolveStatus,
+    iterations: usize,
+    residual: Real,
+}
+
+impl KktOut {
+    fn with_frame(self, b2: &PosedBody<'_>) -> GrowthCore {
+        let local = b2.pose.inverse_transform_vector(&(self.x - b2.pose.translation.vector));
+        GrowthCore {
+            value: self.value,
+            x: local,
+            mu: self.mu,
+            status: self.status,
+            iterations: self.iterations,
+            residual: self.residual,
+            warm_started: false,
+        }
+    }
+}
+
+/// KKT residual `[∇f + μ∇g; g]` and its parts at (x, μ).
+struct KktState {
+    f: Real,
+    gf: Vector3,
+    hf: Matrix3,
+    g: Real,
+    gg: Vector3,
+    hg: Matrix3,
+    r: [Real; 4],
+}
+
+fn kkt_state(b1: &PosedBody<'_>, b2: &PosedBody<'_>, x: &Vector3, mu: Real) -> KktState {
+    let e1 = b1.eval(x);
+    let e2 = b2.eval(x);
+    let s = e1.gradient + e2.gradient * mu;
+    KktState {
+        f: e1.value,
+        gf: e1.gradient,
+        hf: e1.hessian,
+        g: e2.value - 1.0,
+        gg: e2.gradient,
+        hg: e2.hessian,
+        r: [s.x, s.y, s.z, e2.value - 1.0],
+    }
+}
+
+fn norm_inf(r: &[Real]) -> Real {
+    r.iter().fold(0.0, |m, v| m.max(v.abs()))
+}
+
+/// Active-set Newton on `∇f + μ∇g = 0, g = 0`, globalized by backtracking on ‖r‖₂.
+fn kkt_newton(b1: &PosedBody<'_>, b2: &PosedBody<'_>, x0: Vector3, mu0: Real, params: &NewtonParams) -> KktOut {
+    let (mut x, mut mu) = (x0, mu0);
+    let mut st = kkt_state(b1, b2, &x, mu);
+    let mut status = SolveStatus::MaxIterations;
+    let mut it = 0;
+    while it < params.max_iterations {
+        let res = norm_inf(&st.r);
+        if !res.is_finite() {
+            status = SolveStatus::Stalled;
+            break;
+        }
+        // Scale stationarity by the objective's gradient so far-apart bodies (large p₁) are judged fairly.
+        let scale = 1.0 + st.gf.amax();
+        if res <= params.kkt_tolerance * scale && mu > 0.0 {
+            status = SolveStatus::Converged;
+            break;
+        }
+        it += 1;
+        let w = st.hf + st.hg * mu;
+        let mut k = nalgebra::Matrix4::<Real>::zeros();
+        k.fixed_view_mut::<3, 3>(0, 0).copy_from(&w);
+        k.fixed_view_mut::<3, 1>(0, 3).copy_from(&st.gg);
+        k.fixed_view_mut::<1, 3>(3, 0).copy_from(&st.gg.transpose());
+        let rhs = -nalgebra::Vector4::new(st.r[0], st.r[1], st.r[2], st.r[3]);
+        let Some(step) = k.lu().solve(&rhs) else {
+            status = SolveStatus::Stalled;
+            break;
+        };
+        let dx = Vector3::new(step[0], step[1], step[2]);
+        let dmu = step[3];
+        let r0 = st.r.iter().map(|v| v * v).sum::<Real>().sqrt();
+        let mut alpha = 1.0;
+        let mut accepted = false;
+        for _ in 0..40 {
+            let xt = x + dx * alpha;
+            let mt = mu + dmu * alpha;
+            let tr = kkt_state(b1, b2, &xt, mt);
+            let r1 = tr.r.iter().map(|v| v * v).sum::<Real>().sqrt();
+            if r1.is_finite() && r1 <= (1.0 - 1e-4 * alpha) * r0 {
+                x = xt;
+                mu = mt;
+                st = tr;
+                accepted = true;
+                break;
+            }
+            alpha *= 0.5;
+        }
+        if !accepted {
+            status = SolveStatus::Stalled;
+            break;
+        }
+    }
+    let residual = norm_inf(&st.r);
+    if status == SolveStatus::MaxIterations && residual <= params.kkt_tolerance * (1.0 + st.gf.amax()) && mu > 0.0 {
+        status = SolveStatus::Converged;
+    }
+    KktOut { x, mu, value: st.f, status, iterations: it, residual }
+}
+
+/// Log-barrier path `min f − t·log(−g)` from a strictly feasible point, t → 0; returns the final
+/// point, the multiplier estimate t/(−g), and the Newton iterations spent.
+fn barrier(b1: &PosedBody<'_>, b2: &PosedBody<'_>, start: &Vector3, params: &NewtonParams) -> (Vector3, Real, usize) {
+    let mut x = *start;
+    let mut t = 1.0_f64.max(b1.value(&x).abs());
+    let mut it = 0;
+    let max_it = params.max_iterations * 4;
+    'outer: while it < max_it {
+        // Centering.
+        loop {
+            if it >= max_it {
+                break 'outer;
+            }
+            let st = kkt_state(b1, b2, &x, 0.0);
+            let s = -st.g;
+            let grad = st.gf + st.gg * (t / s);
+            let hess = st.hf + st.hg * (t / s) + st.gg * st.gg.transpose() * (t / (s * s));
+            let Some(chol) = nalgebra::Cholesky::new(hess) else { break 'outer };
+            let dx = -chol.solve(&grad);
+            let dec = -grad.dot(&dx);
+            it += 1;
+            if dec <= 1e-3 * t {
+                break;
+            }
+            let phi0 = st.f - t * s.ln();
+            let mut alpha = 1.0;
+            loop {
+                let xt = x + dx * alpha;
+                let e1 = b1.value(&xt);
+                let gt = b2.value(&xt) - 1.0;
+                if gt < 0.0 && e1 - t * (-gt).ln() <= phi0 - 0.25 * alpha * dec {
+                    x = xt;
+                    break;
+                }
+                alpha *= 0.5;
+                if alpha < 1e-12 {
+                    break 'outer;
+                }
+            }
+        }
+        if t < 1e-10 * (1.0 + b1.value(&x).abs()) {
+            break;
+        }
+        t *= 0.1;
+    }
+    let s = (1.0 - b2.value(&x)).max(Real::MIN_POSITIVE);
+    (x, t / s, it)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::body::ellipsoid;
+    use crate::math::pose_from_parts;
+
+    /// Spheres p = ‖x − c‖²/r²: d(p₁‖p₂) = (max(0, ‖c₁ − c₂‖ − r₂))² / r₁² (closed form).
+    fn sphere_growth(c1: Vector3, r1: Real, c2: Vector3, r2: Real) -> Real {
+        ((c1 - c2).norm() - r2).max(0.0).powi(2) / (r1 * r1)
+    }
+
+    #[test]
+    fn spheres_match_closed_form_cold_and_warm() {
+        let s1 = ellipsoid([0.0; 3], [0.5; 3]).unwrap();
+        let s2 = ellipsoid([0.0; 3], [0.8; 3]).unwrap();
+        let id = Isometry3::identity();
+        let mut warm: Option<GrowthWarmStart> = None;
+        let mut cold_iters = 0;
+        let mut warm_iters = 0;
+        for k in 0..40 {
+            let c2 = Vector3::new(3.0 - 0.05 * k as Real, 0.2, -0.1);
+            let pose2 = pose_from_parts("p", [1.0, 0.0, 0.0, 0.0], [c2.x, c2.y, c2.z]).unwrap();
+            let r = growth(&s1, &id, &s2, &pose2, warm.as_ref(), &NewtonParams::default());
+            let expected = sphere_growth(Vector3::zeros(), 0.5, c2, 0.8);
+            assert!(r.status.converged(), "k = {k}: {r:?}");
+            assert!((r.value - expected).abs() <= 1e-9 * expected.max(1.0), "k = {k}: {} vs {expected}", r.value);
+            let cold = growth(&s1, &id, &s2, &pose2, None, &NewtonParams::default());
+            assert!((cold.value - expected).abs() <= 1e-9 * expected.max(1.0));
+            if k > 0 && expected > 0.0 {
+                cold_iters += cold.iterations;
+                warm_iters += r.iterations;
+            }
+            warm = Some(r.warm_start);
+        }
+        // Spheres: the cold start (boundary point on the line of centers) is already optimal.
+        assert_eq!(cold_iters, 0);
+        assert!(warm_iters > 0);
+    }
+
+    #[test]
+    fn warm_starts_save_iterations_on_ellipsoids() {
+        let e1 = ellipsoid([0.0; 3], [0.9, 0.3, 0.5]).unwrap();
+        let e2 = ellipsoid([0.1, 0.0, 0.0], [0.4, 1.0, 0.2]).unwrap();
+        let n = (0.81_f64 + 0.01 + 0.09 + 0.09).sqrt();
+        let pose1 = pose_from_parts("p", [0.9 / n, 0.1 / n, 0.3 / n, 0.3 / n], [0.0; 3]).unwrap();
+        let mut warm: Option<GrowthWarmStart> = None;
+        let (mut cold_iters, mut warm_iters) = (0, 0);
+        for k in 0..30 {
+            let ang = 0.02 * k as Real;
+            let (s, c) = (0.5 * ang).sin_cos();
+            let pose2 = pose_from_parts("p", [c, 0.0, s, 0.0], [2.5 - 0.03 * k as Real, 0.4, 0.1]).unwrap();
+            let w = growth(&e1, &pose1, &e2, &pose2, warm.as_ref(), &NewtonParams::default());
+            let cold = growth(&e1, &pose1, &e2, &pose2, None, &NewtonParams::default());
+            assert!(w.status.converged() && cold.status.converged());
+            assert!((w.value - cold.value).abs() <= 1e-9 * cold.value.max(1.0), "{} vs {}", w.value, cold.value);
+            // Feasibility and optimality against the closed-form ellipsoid: p₂'(x*) = 1.
+            let local2 = pose2.inverse() * w.minimizer;
+            assert!((e2.value_at(&local2) - 1.0).abs() < 1e-9);
+            if k > 0 {
+                assert!(w.warm_started);
+                cold_iters += cold.iterations;
+                warm_iters += w.iterations;
+            }
+            warm = Some(w.warm_start);
+        }
+        assert!(warm_iters < cold_iters, "warm {warm_iters} vs cold {cold_iters}");
+    }
+
+    #[test]
+    fn contained_minimizer_gives_inactive_constraint() {
+        let small = ellipsoid([0.0; 3], [0.2, 0.3, 0.4]).unwrap();
+        let big = ellipsoid([0.0; 3], [2.0; 3]).unwrap();
+        let id = Isometry3::identity();
+        let r = growth(&small, &id, &big, &id, None, &NewtonParams::default());
+        assert_eq!(r.value, 0.0);
+        assert_eq!(r.multiplier, 0.0);
+        assert!(r.status.converged());
+    }
+
+    #[test]
+    fn rotated_ellipsoid_matches_brute_force() {
+        // p₁: unit sphere at origin; p₂: ellipsoid radii (1, 0.2, 0.2) rotated 90° about z, at (2, 0, 0).
+        // Its long axis is along y, so the closest point to the origin is (1.8, 0, 0): d = 1.8².
+        let s1 = ellipsoid([0.0; 3], [1.0; 3]).unwrap();
+        let e2 = ellipsoid([0.0; 3], [1.0, 0.2, 0.2]).unwrap();
+        let h = std::f64::consts::FRAC_1_SQRT_2;
+        let pose2 = pose_from_parts("p", [h, 0.0, 0.0, h], [2.0, 0.0, 0.0]).unwrap();
+        let r = growth(&s1, &Isometry3::identity(), &e2, &pose2, None, &NewtonParams::default());
+        assert!(r.status.converged());
+        assert!((r.value - 1.8 * 1.8).abs() < 1e-9, "{}", r.value);
+        assert!((r.minimizer - Point3::new(1.8, 0.0, 0.0)).norm() < 1e-6);
+    }
+}

@@ -1,0 +1,1 @@
+//! Scenes: instances of bodies with poses, warm-start caches, and the persistent store. STUB.

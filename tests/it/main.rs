@@ -1,0 +1,5 @@
+//! The one integration-test binary (one link step instead of many): modules by area.
+
+mod fit;
+mod query;
+mod service;
