@@ -10,3 +10,107 @@ pub mod sdp_certificate;
 pub use distance::{distance, DistanceResult, DistanceWarmStart};
 pub use growth::{growth, GrowthResult, GrowthWarmStart};
 pub use newton::{NewtonParams, SolveStatus};
+
+#[cfg(test)]
+pub(crate) mod test_bodies {
+    //! Non-trivial sos-convex test bodies: p(u) = ½‖u‖² + Σᵢ (aᵢ·u + bᵢ)^{2d} is sos-convex (each even
+    //! power of an affine form has yᵀ∇²y = c·((a·u + b)^{d−1}(a·y))², a square).
+    use crate::body::{Body, FitReport};
+    use crate::math::{Real, Vector3};
+    use crate::poly::Polynomial;
+    use rand::{Rng, SeedableRng};
+
+    /// A random body of total degree `degree`, scaled so that p ≤ 1 is a body of size ~1.
+    pub fn random_body(degree: usize, seed: u64) -> Body {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let mut p = Polynomial::from_terms(degree, &[([2, 0, 0], 0.5), ([0, 2, 0], 0.5), ([0, 0, 2], 0.5)]).unwrap();
+        for _ in 0..4 {
+            let a = Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
+            let b: Real = rng.random_range(-0.3..0.3);
+            let lin =
+                Polynomial::from_terms(1, &[([0, 0, 0], b), ([1, 0, 0], a.x), ([0, 1, 0], a.y), ([0, 0, 1], a.z)])
+                    .unwrap();
+            let mut pow = Polynomial::from_terms(0, &[([0, 0, 0], 1.0)]).unwrap();
+            for _ in 0..degree {
+                pow = pow.mul(&lin).unwrap();
+            }
+            for (c, e) in pow.coefficients().iter().zip(pow.exponents()) {
+                let k = crate::poly::monomial::index3(*e);
+                p.coefficients_mut()[k] += c;
+            }
+        }
+        let center = [rng.random_range(-0.2..0.2), 0.1, -0.1];
+        Body::new(p, center, 0.7, FitReport::default()).unwrap()
+    }
+}
+
+#[cfg(test)]
+mod brute_force_tests {
+    use super::test_bodies::random_body;
+    use super::*;
+    use crate::body::PosedBody;
+    use crate::math::{Isometry3, Real, UnitQuaternion, Vector3};
+    use rand::{Rng, SeedableRng};
+
+    /// Boundary points of a posed body along `n` Fibonacci directions from its interior point.
+    fn boundary_samples(b: &PosedBody<'_>, n: usize) -> Vec<Vector3> {
+        let c = b.interior_point();
+        let golden = std::f64::consts::PI * (3.0 - 5.0_f64.sqrt());
+        (0..n)
+            .map(|i| {
+                let z = 1.0 - 2.0 * (i as Real + 0.5) / n as Real;
+                let r = (1.0 - z * z).sqrt();
+                let dir = Vector3::new(r * (golden * i as Real).cos(), r * (golden * i as Real).sin(), z);
+                let far = c + dir * 100.0;
+                super::newton::boundary_on_segment(b, &c, &far)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn higher_degree_bodies_match_brute_force() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        for (i, degree) in [4usize, 6, 8, 4, 6, 8].into_iter().enumerate() {
+            let a = random_body(degree, 100 + i as u64);
+            let b = random_body(degree, 200 + i as u64);
+            let pose_a = Isometry3::from_parts(
+                Vector3::new(rng.random_range(-1.0..1.0), 0.0, 0.0).into(),
+                UnitQuaternion::from_euler_angles(rng.random(), rng.random(), rng.random()),
+            );
+            let pose_b = Isometry3::from_parts(
+                Vector3::new(if i < 3 { 2.5 } else { 1.5 }, rng.random_range(-0.5..0.5), 0.3).into(),
+                UnitQuaternion::from_euler_angles(rng.random(), rng.random(), rng.random()),
+            );
+            let d = distance(&a, &pose_a, &b, &pose_b, None, &NewtonParams::default());
+            let g = growth(&a, &pose_a, &b, &pose_b, None, &NewtonParams::default());
+            assert!(d.status.converged() && g.status.converged(), "degree {degree}: {d:?} {g:?}");
+            let (pa, pb) = (a.posed(&pose_a), b.posed(&pose_b));
+            let sa = boundary_samples(&pa, 3000);
+            let sb = boundary_samples(&pb, 3000);
+            // Brute-force growth: min of p_a' over B's boundary samples (an upper bound, tight to
+            // the sampling resolution).
+            let brute_g = sb.iter().map(|x| pa.value(x)).fold(Real::INFINITY, Real::min);
+            assert!(g.value <= brute_g + 1e-9, "degree {degree}: newton {} > brute {brute_g}", g.value);
+            assert!((brute_g - g.value) / g.value < 2e-2, "degree {degree}: newton {} vs brute {brute_g}", g.value);
+            if d.overlapping {
+                // A common witness inside both bodies proves the overlap.
+                let (va, vb) = (pa.value(&d.witness_a.coords), pb.value(&d.witness_a.coords));
+                assert!(va <= 1.0 + 1e-9 && vb <= 1.0 + 1e-9, "degree {degree}: {va} {vb} {d:?} {g:?}");
+                assert!(g.value <= 1.0);
+                continue;
+            }
+            // Brute-force distance over the sample pairs (upper bound).
+            let mut brute_d = Real::INFINITY;
+            for x in &sa {
+                for y in &sb {
+                    brute_d = brute_d.min((x - y).norm());
+                }
+            }
+            assert!(d.distance <= brute_d + 1e-9, "degree {degree}: newton {} > brute {brute_d}", d.distance);
+            assert!(brute_d - d.distance < 3e-2 * brute_d.max(0.1), "degree {degree}: {} vs {brute_d}", d.distance);
+            // The witnesses are on the boundaries.
+            assert!((pa.value(&d.witness_a.coords) - 1.0).abs() < 1e-9);
+            assert!((pb.value(&d.witness_b.coords) - 1.0).abs() < 1e-9);
+        }
+    }
+}
