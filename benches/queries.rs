@@ -1,1 +1,89 @@
-fn main() {}
+//! Criterion benchmarks of the query engine on the paper's chair and human (fitted bodies bundled in
+//! tests/data): cold and warm distance and growth at every degree present.
+//!
+//! `cargo bench --bench queries` (add `-- distance/6` to filter). Targets (issue 2, 2d = 6, medians):
+//! warm growth ≤ 5 µs, cold distance ≤ 50 µs. Each measured iteration runs the query at all 16 poses of
+//! [`poses`], so divide the reported time by 16 for one query (`sublevel bench` prints per-query medians).
+
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
+use std::hint::black_box;
+use sublevel::math::{Isometry3, UnitQuaternion, Vector3};
+use sublevel::query::{distance, growth, NewtonParams};
+use sublevel::Body;
+
+fn load(name: &str, degree: usize) -> Option<Body> {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("tests/data/{name}.deg{degree}.json"));
+    Body::load(&path).ok()
+}
+
+/// A fixed set of chair poses around the human: separated, touching-ish and overlapping.
+fn poses() -> Vec<Isometry3> {
+    (0..16)
+        .map(|k| {
+            let s = k as f64 / 15.0;
+            let t = Vector3::new(-2.2 + 4.4 * s, 0.4 * (3.0 * s).sin(), 0.2);
+            let r = UnitQuaternion::from_euler_angles(0.3 * s, 1.1 * s, -0.4 * s);
+            Isometry3::from_parts(t.into(), r)
+        })
+        .collect()
+}
+
+fn bench_queries(c: &mut Criterion) {
+    let params = NewtonParams::default();
+    let human_pose = Isometry3::identity();
+    for degree in [2, 4, 6, 8] {
+        let (Some(chair), Some(human)) = (load("chair_101", degree), load("human_10", degree)) else {
+            eprintln!("skipping 2d = {degree}: bodies not bundled");
+            continue;
+        };
+        let ps = poses();
+        // Warm starts from a slightly earlier pose along the same motion.
+        let near: Vec<Isometry3> = ps
+            .iter()
+            .map(|p| Isometry3::from_parts((p.translation.vector - Vector3::new(0.01, 0.0, 0.0)).into(), p.rotation))
+            .collect();
+        let wd: Vec<_> =
+            near.iter().map(|p| distance(&chair, p, &human, &human_pose, None, &params).warm_start).collect();
+        let wg: Vec<_> =
+            near.iter().map(|p| growth(&chair, p, &human, &human_pose, None, &params).warm_start).collect();
+        let mut group = c.benchmark_group("distance");
+        group.bench_function(BenchmarkId::new("cold", degree), |b| {
+            b.iter(|| {
+                for p in &ps {
+                    black_box(distance(&chair, p, &human, &human_pose, None, &params));
+                }
+            })
+        });
+        group.bench_function(BenchmarkId::new("warm", degree), |b| {
+            b.iter(|| {
+                for (p, w) in ps.iter().zip(&wd) {
+                    black_box(distance(&chair, p, &human, &human_pose, Some(w), &params));
+                }
+            })
+        });
+        group.finish();
+        let mut group = c.benchmark_group("growth");
+        group.bench_function(BenchmarkId::new("cold", degree), |b| {
+            b.iter(|| {
+                for p in &ps {
+                    black_box(growth(&chair, p, &human, &human_pose, None, &params));
+                }
+            })
+        });
+        group.bench_function(BenchmarkId::new("warm", degree), |b| {
+            b.iter(|| {
+                for (p, w) in ps.iter().zip(&wg) {
+                    black_box(growth(&chair, p, &human, &human_pose, Some(w), &params));
+                }
+            })
+        });
+        group.finish();
+    }
+}
+
+criterion_group! {
+    name = benches;
+    config = Criterion::default().sample_size(30).measurement_time(std::time::Duration::from_secs(2));
+    targets = bench_queries
+}
+criterion_main!(benches);
