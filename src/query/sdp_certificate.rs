@@ -1,53 +1,656 @@
-//! Level-0 sos certificates (paper eq. "distance.lasserre" with scalar multipliers, and its
-//! analogue for eq. "overlap"), solved by Clarabel. STUB.
+//! Level-0 sos certificates for the two queries, solved by Clarabel: the SDP references the
+//! Newton / active-set solvers are checked against (paper §IV-A eq. "distance.lasserre" with
+//! scalar multipliers, and its analogue for eq. "overlap").
+//!
+//! # Distance
+//!
+//! ```text
+//! max γ   s.t.   ‖x − y‖² − γ − τ (1 − p_a'(x)) − ξ (1 − p_b'(y))  is sos,   τ, ξ ≥ 0
+//! ```
+//!
+//! Every feasible γ is a lower bound on the squared distance; for sos-convex bodies the bound is
+//! exact already at this level (paper §IV-A, Lasserre 2009). Each point is written in its own
+//! body's normalized coordinates, so no posed polynomial is ever expanded:
+//!
+//! ```text
+//! x = R_a (c_a + s_a u) + t_a,   y = R_b (c_b + s_b v) + t_b
+//! x − y = δ + M w,   w = (u, v) ∈ ℝ⁶,   δ = R_a c_a + t_a − R_b c_b − t_b,   M = [s_a R_a | −s_b R_b]
+//! ```
+//!
+//! so `‖x − y‖²` is a quadratic in w and the constraints are the bodies' own polynomials `p_a(u)`,
+//! `p_b(v)`. The sos condition is a 6-variable Gram form of half-degree d = max(d_a, d_b)
+//! (N = 7, 28, 84, 210 at 2d = 2, 4, 6, 8): one PSD block, one equality row per monomial of degree
+//! ≤ 2d. The objective is divided by `L² = max(s_a, s_b)²` for conditioning and scaled back.
+//!
+//! # Growth
+//!
+//! ```text
+//! d(p₁‖p₂) = min p₁'(x) s.t. p₂'(x) ≤ 1;      level 0:  max γ  s.t.  p₁'(x) − γ − τ (1 − p₂'(x)) sos,  τ ≥ 0
+//! ```
+//!
+//! with x in body 2's normalized coordinates v: `x = R₂(c₂ + s₂ v) + t₂`, so p₂' is body 2's own
+//! polynomial and `p₁'(x) = p₁(C v + e)`, `C = R₁ᵀR₂ s₂/s₁`, `e = (R₁ᵀ(R₂c₂ + t₂ − t₁) − c₁)/s₁`,
+//! expanded with [`crate::poly::Polynomial::compose_affine`] (3-variable Gram form, N = 4, 10, 20, 35).
+//!
+//! # Witnesses from the moments
+//!
+//! Clarabel's dual variables of the coefficient-matching rows are the pseudo-moments `y_α = L(w^α)`
+//! of the optimal measure (`y₀ = 1` because γ's column is the constant row; the dual of the PSD
+//! block is the moment matrix). For sos-convex bodies Jensen's inequality for sos-convex
+//! polynomials gives `p(L(w)) ≤ L(p(w)) ≤ 1`, so the first-order moments `(u*, v*)` are feasible
+//! points whose objective equals the bound: they are the minimizers. They are mapped back to world
+//! points.
+//!
+//! # Limits
+//!
+//! Only exact for sos-convex bodies (for merely convex bodies γ is a lower bound). Degree-8 pairs
+//! give a 210 × 210 Gram matrix and take seconds: these are references, not the query path.
+
 use crate::body::Body;
-use crate::math::{Isometry3, Point3, Real};
-use crate::Result;
+use crate::conic::{quiet_settings, ConicBuilder, ConicSolution, Row};
+use crate::math::{Isometry3, Matrix3, Point3, Real, Vector3};
+use crate::poly::gram::{gram_weight, GramStructure};
+use crate::poly::Polynomial;
+use crate::{Error, Result};
+use clarabel::solver::SolverStatus;
 
 /// Level-0 SDP bound on the squared distance.
 #[derive(Clone, Debug)]
 pub struct DistanceCertificate {
-    /// γ*: lower bound on the squared distance (exact for sos-convex bodies).
+    /// γ*: lower bound on the squared distance in m² (exact for sos-convex bodies); ≈ 0 (up to the
+    /// solver tolerance, possibly slightly negative) when the bodies overlap.
     pub squared_distance: Real,
-    /// √max(γ*, 0).
+    /// √max(γ*, 0) in meters.
     pub distance: Real,
-    /// Multiplier τ ≥ 0 of body A's constraint.
+    /// Multiplier τ ≥ 0 of body A's constraint (m², the objective's units).
     pub tau: Real,
-    /// Multiplier ξ ≥ 0 of body B's constraint.
+    /// Multiplier ξ ≥ 0 of body B's constraint (m²).
     pub xi: Real,
-    /// Witness points recovered from the Gram matrix's kernel, when available.
+    /// Witness points (x*, y*) in world coordinates, recovered from the first-order moments of the
+    /// dual (moment) solution; `None` when the moments are not finite or the recovered points violate
+    /// their body's constraint by more than [`WITNESS_FEASIBILITY_TOLERANCE`].
     pub witnesses: Option<(Point3, Point3)>,
-    /// Clarabel's status.
+    /// Clarabel's status (`"Solved"` or `"AlmostSolved"`; other statuses are errors).
     pub solver_status: String,
     /// Seconds inside Clarabel.
     pub solve_seconds: Real,
+    /// Interior-point iterations.
+    pub iterations: u32,
+    /// Side N of the Gram matrix (C(6 + d, d)).
+    pub gram_size: usize,
 }
 
 /// Level-0 SDP bound on d(p₁‖p₂).
 #[derive(Clone, Debug)]
 pub struct GrowthCertificate {
-    /// γ*: lower bound on d(p₁‖p₂) (exact for sos-convex bodies).
+    /// γ*: lower bound on d(p₁‖p₂) (dimensionless; exact for sos-convex bodies).
     pub value: Real,
-    /// Multiplier τ ≥ 0.
+    /// Multiplier τ ≥ 0 (0 when the constraint is inactive).
     pub tau: Real,
-    /// Clarabel's status.
+    /// The minimizer x* in world coordinates, recovered from the first-order moments; `None` when
+    /// not finite or infeasible by more than [`WITNESS_FEASIBILITY_TOLERANCE`].
+    pub minimizer: Option<Point3>,
+    /// Clarabel's status (`"Solved"` or `"AlmostSolved"`; other statuses are errors).
     pub solver_status: String,
     /// Seconds inside Clarabel.
     pub solve_seconds: Real,
+    /// Interior-point iterations.
+    pub iterations: u32,
+    /// Side N of the Gram matrix (C(3 + d, d)).
+    pub gram_size: usize,
 }
 
-/// Certifies the distance between two posed bodies.
+/// How far a moment-recovered witness may exceed its body's level (p − 1, dimensionless) and still
+/// be reported; the SDP's own feasibility tolerance is far below this.
+pub const WITNESS_FEASIBILITY_TOLERANCE: Real = 1e-5;
+
+/// Solver settings of the certificates.
+#[derive(Clone, Copy, Debug)]
+pub struct CertificateParams {
+    /// Clarabel's gap and feasibility tolerances (absolute and relative); default 1e-10, which
+    /// makes the bound accurate to about 1e-8 relative on well-scaled pairs.
+    pub tolerance: Real,
+    /// Clarabel's iteration cap; default 200.
+    pub max_iterations: u32,
+}
+
+impl Default for CertificateParams {
+    fn default() -> Self {
+        Self { tolerance: 1e-10, max_iterations: 200 }
+    }
+}
+
+impl CertificateParams {
+    fn validate(&self) -> Result<()> {
+        if !(self.tolerance.is_finite() && self.tolerance > 0.0 && self.tolerance < 1.0) {
+            return Err(Error::invalid("params.tolerance", format!("must be in (0, 1), got {}", self.tolerance)));
+        }
+        if self.max_iterations == 0 {
+            return Err(Error::invalid("params.max_iterations", "must be at least 1"));
+        }
+        Ok(())
+    }
+}
+
+/// Certifies the distance between body `a` under `pose_a` and body `b` under `pose_b` (paper
+/// eq. "distance.lasserre", level 0) with [`CertificateParams::default`].
 ///
 /// # Errors
 /// [`crate::Error::Numerical`] when Clarabel returns no usable solution.
-pub fn certify_distance(_a: &Body, _pose_a: &Isometry3, _b: &Body, _pose_b: &Isometry3) -> Result<DistanceCertificate> {
-    Err(crate::Error::Numerical("not implemented".into()))
+pub fn certify_distance(a: &Body, pose_a: &Isometry3, b: &Body, pose_b: &Isometry3) -> Result<DistanceCertificate> {
+    certify_distance_with_params(a, pose_a, b, pose_b, &CertificateParams::default())
 }
 
-/// Certifies d(p₁‖p₂).
+/// [`certify_distance`] with explicit solver settings.
+///
+/// Builds the 6-variable Gram form described in the module docs (N = C(6 + d, d),
+/// d = max(deg a, deg b)/2), maximizes γ, and recovers the witnesses from the moments.
+///
+/// # Errors
+/// [`crate::Error::InvalidArgument`] naming `params.tolerance` / `params.max_iterations`;
+/// [`crate::Error::Numerical`] naming Clarabel's status when it is neither `Solved` nor
+/// `AlmostSolved`.
+pub fn certify_distance_with_params(
+    a: &Body,
+    pose_a: &Isometry3,
+    b: &Body,
+    pose_b: &Isometry3,
+    params: &CertificateParams,
+) -> Result<DistanceCertificate> {
+    params.validate()?;
+    let d = a.degree().max(b.degree()) / 2;
+    let gram = GramStructure::new(6, d);
+    let ra = *pose_a.rotation.to_rotation_matrix().matrix();
+    let rb = *pose_b.rotation.to_rotation_matrix().matrix();
+    let len = a.scale().max(b.scale());
+    // x − y = δ + M w, everything divided by L.
+    let delta = (ra * a.center() + pose_a.translation.vector - rb * b.center() - pose_b.translation.vector) / len;
+    let mut m = nalgebra::Matrix3x6::<Real>::zeros();
+    m.fixed_view_mut::<3, 3>(0, 0).copy_from(&(ra * (a.scale() / len)));
+    m.fixed_view_mut::<3, 3>(0, 3).copy_from(&(rb * (-b.scale() / len)));
+    let g = m.transpose() * m;
+    let lin = m.transpose() * delta;
+
+    let nf = gram.full_basis.len();
+    let mut objective_coeffs = vec![0.0; nf];
+    objective_coeffs[0] = delta.norm_squared();
+    for i in 0..6 {
+        objective_coeffs[gram.index_of[&unit_exponent(6, &[i])]] += 2.0 * lin[i];
+        for j in i..6 {
+            let w = if i == j { 1.0 } else { 2.0 };
+            objective_coeffs[gram.index_of[&unit_exponent(6, &[i, j])]] += w * g[(i, j)];
+        }
+    }
+    let pa = embed(a.polynomial(), &gram, 0);
+    let pb = embed(b.polynomial(), &gram, 3);
+
+    let (sol, cols) = solve_level0(&gram, &objective_coeffs, &[pa.as_slice(), pb.as_slice()], params)?;
+    let len2 = len * len;
+    let gamma = sol.x[cols.gamma] * len2;
+    let witnesses = moments_first_order(&gram, &sol, 6).and_then(|w| {
+        let u = Vector3::new(w[0], w[1], w[2]);
+        let v = Vector3::new(w[3], w[4], w[5]);
+        let feasible = a.polynomial().value(&u) <= 1.0 + WITNESS_FEASIBILITY_TOLERANCE
+            && b.polynomial().value(&v) <= 1.0 + WITNESS_FEASIBILITY_TOLERANCE;
+        feasible.then(|| (world_point(a, pose_a, &u), world_point(b, pose_b, &v)))
+    });
+    Ok(DistanceCertificate {
+        squared_distance: gamma,
+        distance: gamma.max(0.0).sqrt(),
+        tau: sol.x[cols.multipliers[0]] * len2,
+        xi: sol.x[cols.multipliers[1]] * len2,
+        witnesses,
+        solver_status: format!("{:?}", sol.status),
+        solve_seconds: sol.solve_seconds,
+        iterations: sol.iterations,
+        gram_size: gram.size(),
+    })
+}
+
+/// Certifies d(p₁‖p₂) for body `p1` under `pose1` and body `p2` under `pose2` (level-0 analogue
+/// of paper eq. "overlap") with [`CertificateParams::default`].
 ///
 /// # Errors
 /// [`crate::Error::Numerical`] when Clarabel returns no usable solution.
-pub fn certify_growth(_p1: &Body, _pose1: &Isometry3, _p2: &Body, _pose2: &Isometry3) -> Result<GrowthCertificate> {
-    Err(crate::Error::Numerical("not implemented".into()))
+pub fn certify_growth(p1: &Body, pose1: &Isometry3, p2: &Body, pose2: &Isometry3) -> Result<GrowthCertificate> {
+    certify_growth_with_params(p1, pose1, p2, pose2, &CertificateParams::default())
+}
+
+/// [`certify_growth`] with explicit solver settings.
+///
+/// Expands `p₁(C v + e)` in body 2's normalized coordinates (module docs), builds the 3-variable
+/// Gram form of half-degree d = max(deg p₁, deg p₂)/2, maximizes γ, and recovers the minimizer from
+/// the moments.
+///
+/// # Errors
+/// [`crate::Error::InvalidArgument`] naming `params.tolerance` / `params.max_iterations`;
+/// [`crate::Error::Numerical`] naming Clarabel's status when it is neither `Solved` nor
+/// `AlmostSolved`.
+pub fn certify_growth_with_params(
+    p1: &Body,
+    pose1: &Isometry3,
+    p2: &Body,
+    pose2: &Isometry3,
+    params: &CertificateParams,
+) -> Result<GrowthCertificate> {
+    params.validate()?;
+    let d = p1.degree().max(p2.degree()) / 2;
+    let gram = GramStructure::new(3, d);
+    let r1t: Matrix3 = pose1.rotation.to_rotation_matrix().matrix().transpose();
+    let r2 = *pose2.rotation.to_rotation_matrix().matrix();
+    let c = r1t * r2 * (p2.scale() / p1.scale());
+    let e = (r1t * (r2 * p2.center() + pose2.translation.vector - pose1.translation.vector) - p1.center()) / p1.scale();
+    let q = p1.polynomial().compose_affine(&c, &e);
+    let objective_coeffs = embed(&q, &gram, 0);
+    let constraint = embed(p2.polynomial(), &gram, 0);
+
+    let (sol, cols) = solve_level0(&gram, &objective_coeffs, &[constraint.as_slice()], params)?;
+    let minimizer = moments_first_order(&gram, &sol, 3).and_then(|w| {
+        let v = Vector3::new(w[0], w[1], w[2]);
+        (p2.polynomial().value(&v) <= 1.0 + WITNESS_FEASIBILITY_TOLERANCE).then(|| world_point(p2, pose2, &v))
+    });
+    Ok(GrowthCertificate {
+        value: sol.x[cols.gamma],
+        tau: sol.x[cols.multipliers[0]],
+        minimizer,
+        solver_status: format!("{:?}", sol.status),
+        solve_seconds: sol.solve_seconds,
+        iterations: sol.iterations,
+        gram_size: gram.size(),
+    })
+}
+
+/// Columns of the level-0 program.
+struct Level0Columns {
+    gamma: usize,
+    multipliers: Vec<usize>,
+}
+
+/// Solves `max γ s.t. f − γ − Σₖ τₖ (1 − gₖ) = z(w)ᵀ Q z(w), Q ⪰ 0, τ ≥ 0` with f and gₖ given by
+/// their coefficients in `gram.full_basis`. Row α reads
+/// `Σ (weights) svec(Q) + γ [α = 0] + Σₖ τₖ ([α = 0] − gₖ,α) = f_α`.
+fn solve_level0(
+    gram: &GramStructure,
+    objective: &[Real],
+    constraints: &[&[Real]],
+    params: &CertificateParams,
+) -> Result<(ConicSolution, Level0Columns)> {
+    let nf = gram.full_basis.len();
+    let mut builder = ConicBuilder::new();
+    let gamma = builder.add_variables(1);
+    let first_tau = builder.add_variables(constraints.len());
+    let multipliers: Vec<usize> = (0..constraints.len()).map(|k| first_tau + k).collect();
+    let q = builder.add_psd_variable(gram.size());
+    builder.set_objective(gamma, -1.0);
+
+    let mut rows: Vec<Row> = vec![Vec::new(); nf];
+    rows[0].push((gamma, 1.0));
+    for (k, g) in constraints.iter().enumerate() {
+        for (alpha, row) in rows.iter_mut().enumerate() {
+            let coeff = if alpha == 0 { 1.0 } else { 0.0 } - g[alpha];
+            if coeff != 0.0 {
+                row.push((multipliers[k], coeff));
+            }
+        }
+    }
+    let n = gram.size();
+    for j in 0..n {
+        for i in 0..=j {
+            let k = crate::poly::gram::triangle_index(i, j);
+            rows[gram.product_of_entry[k]].push((q + k, gram_weight(i, j)));
+        }
+    }
+    builder.add_equalities(rows, objective.to_vec());
+    builder.add_inequalities(multipliers.iter().map(|&c| vec![(c, -1.0)]).collect(), vec![0.0; multipliers.len()]);
+
+    let sol = builder.solve(quiet_settings(params.tolerance, params.max_iterations))?;
+    match sol.status {
+        SolverStatus::Solved | SolverStatus::AlmostSolved => Ok((sol, Level0Columns { gamma, multipliers })),
+        SolverStatus::Unsolved
+        | SolverStatus::PrimalInfeasible
+        | SolverStatus::DualInfeasible
+        | SolverStatus::AlmostPrimalInfeasible
+        | SolverStatus::AlmostDualInfeasible
+        | SolverStatus::MaxIterations
+        | SolverStatus::MaxTime
+        | SolverStatus::NumericalError
+        | SolverStatus::InsufficientProgress
+        | SolverStatus::CallbackTerminated => Err(Error::Numerical(format!(
+            "level-0 sos certificate: Clarabel ended with status {:?} after {} iterations",
+            sol.status, sol.iterations
+        ))),
+    }
+}
+
+/// The exponent vector in `n` variables with one added to each listed variable.
+fn unit_exponent(n: usize, vars: &[usize]) -> Vec<u8> {
+    let mut e = vec![0u8; n];
+    for &i in vars {
+        e[i] += 1;
+    }
+    e
+}
+
+/// Coefficients of a trivariate polynomial in `gram.full_basis`, its variables placed at
+/// positions `offset..offset + 3` of the Gram structure's variables.
+fn embed(p: &Polynomial, gram: &GramStructure, offset: usize) -> Vec<Real> {
+    let n = gram.full_basis[0].len();
+    let mut out = vec![0.0; gram.full_basis.len()];
+    for (c, e) in p.coefficients().iter().zip(p.exponents()) {
+        if *c == 0.0 {
+            continue;
+        }
+        let mut ex = vec![0u8; n];
+        ex[offset..offset + 3].copy_from_slice(e);
+        // Every monomial of p has degree ≤ 2d, so it is in the full basis.
+        if let Some(&k) = gram.index_of.get(&ex) {
+            out[k] += c;
+        }
+    }
+    out
+}
+
+/// First-order pseudo-moments `L(w₁), …, L(wₙ)` from the duals of the equality rows (which come
+/// first, after the PSD block's rows), normalized by `L(1)`; `None` unless finite.
+fn moments_first_order(gram: &GramStructure, sol: &ConicSolution, n: usize) -> Option<Vec<Real>> {
+    // Row order: PSD block rows (triangle of the Gram matrix), then the equality rows.
+    let offset = crate::poly::gram::triangle_len(gram.size());
+    let y0 = *sol.z.get(offset)?;
+    if !(y0.is_finite() && y0.abs() > 1e-12) {
+        return None;
+    }
+    let w: Vec<Real> = (0..n).map(|i| sol.z.get(offset + gram.index_of[&unit_exponent(n, &[i])]).map(|v| v / y0)).collect::<Option<_>>()?;
+    w.iter().all(|v| v.is_finite()).then_some(w)
+}
+
+/// World point of normalized coordinates `u` of `body` under `pose`.
+fn world_point(body: &Body, pose: &Isometry3, u: &Vector3) -> Point3 {
+    pose * Point3::from(body.center() + u * body.scale())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::body::{ellipsoid, FitReport};
+    use crate::math::pose_from_parts;
+
+    fn pose(q: [Real; 4], t: [Real; 3]) -> Isometry3 {
+        let n = q.iter().map(|v| v * v).sum::<Real>().sqrt();
+        pose_from_parts("pose", [q[0] / n, q[1] / n, q[2] / n, q[3] / n], t).unwrap()
+    }
+
+    /// `p(u) = a‖u‖² + b Σ uᵢ^(2k)`: sos-convex (a sum of sos-convex terms), degree 2k, minimum 0 at 0.
+    fn power_body(k: u8, a: Real, b: Real, center: [Real; 3], scale: Real) -> Body {
+        let terms = [
+            ([2, 0, 0], a),
+            ([0, 2, 0], a),
+            ([0, 0, 2], a),
+            ([2 * k, 0, 0], b),
+            ([0, 2 * k, 0], b),
+            ([0, 0, 2 * k], b),
+        ];
+        Body::new(Polynomial::from_terms(2 * k as usize, &terms).unwrap(), center, scale, FitReport::default()).unwrap()
+    }
+
+    fn dir(theta: Real, phi: Real) -> Vector3 {
+        Vector3::new(theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos())
+    }
+
+    /// Brute-force minimum of `f` over the unit sphere: a 90 × 180 grid in (θ, φ), then a compass
+    /// search from the best grid point with steps halved down to 1e-10 rad.
+    fn sphere_min(f: impl Fn(&Vector3) -> Real) -> (Real, Vector3) {
+        let (nt, np) = (90, 180);
+        let (ht, hp) = (std::f64::consts::PI / nt as Real, 2.0 * std::f64::consts::PI / np as Real);
+        let mut best = (Real::INFINITY, 0.0, 0.0);
+        for i in 0..=nt {
+            for j in 0..np {
+                let (t, p) = (i as Real * ht, j as Real * hp);
+                let v = f(&dir(t, p));
+                if v < best.0 {
+                    best = (v, t, p);
+                }
+            }
+        }
+        let (mut v, mut t, mut p) = best;
+        let mut h = ht;
+        while h > 1e-10 {
+            let mut improved = false;
+            for (dt, dp) in [(h, 0.0), (-h, 0.0), (0.0, h), (0.0, -h), (h, h), (-h, -h), (h, -h), (-h, h)] {
+                let w = f(&dir(t + dt, p + dp));
+                if w < v {
+                    (v, t, p) = (w, t + dt, p + dp);
+                    improved = true;
+                }
+            }
+            if !improved {
+                h *= 0.5;
+            }
+        }
+        (v, dir(t, p))
+    }
+
+    /// Boundary point of a posed body whose polynomial has its minimum 0 at u = 0, in direction n
+    /// of its normalized frame: p(ρ n) = 1 by bisection on ρ.
+    fn boundary(body: &Body, pose: &Isometry3, n: &Vector3) -> Point3 {
+        let (mut lo, mut hi) = (0.0, 1.0);
+        while body.polynomial().value(&(n * hi)) < 1.0 {
+            hi *= 2.0;
+        }
+        for _ in 0..200 {
+            let mid = 0.5 * (lo + hi);
+            if body.polynomial().value(&(n * mid)) < 1.0 {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        pose * Point3::from(body.center() + n * (0.5 * (lo + hi) * body.scale()))
+    }
+
+    /// Brute-force distance from a posed body (minimum 0 at u = 0) to a sphere: min over the
+    /// body's boundary of ‖x − c‖, minus r.
+    fn brute_distance_to_sphere(body: &Body, pose: &Isometry3, c: &Point3, r: Real) -> Real {
+        sphere_min(|n| (boundary(body, pose, n) - c).norm()).0 - r
+    }
+
+    /// Brute-force d(p₁‖p₂) when p₁'s minimizer lies outside body 2: min of p₁' over body 2's boundary.
+    fn brute_growth(p1: &Body, pose1: &Isometry3, p2: &Body, pose2: &Isometry3) -> Real {
+        let b1 = p1.posed(pose1);
+        sphere_min(|n| b1.value(&boundary(p2, pose2, n).coords)).0
+    }
+
+    /// Support function of a posed axis-aligned ellipsoid {Σ((xᵢ − cᵢ)/rᵢ)² ≤ 1}:
+    /// h(n) = n·(R c + t) + ‖diag(r) Rᵀ n‖.
+    fn ellipsoid_support(c: [Real; 3], r: [Real; 3], pose: &Isometry3, n: &Vector3) -> Real {
+        let local = pose.rotation.inverse() * n;
+        let center = pose * Point3::new(c[0], c[1], c[2]);
+        n.dot(&center.coords) + Vector3::new(r[0] * local.x, r[1] * local.y, r[2] * local.z).norm()
+    }
+
+    /// Brute-force distance between separated posed ellipsoids by separating-plane duality:
+    /// dist = max over unit n of [−h_B(−n) − h_A(n)].
+    fn brute_ellipsoid_distance(
+        ca: [Real; 3],
+        ra: [Real; 3],
+        pa: &Isometry3,
+        cb: [Real; 3],
+        rb: [Real; 3],
+        pb: &Isometry3,
+    ) -> Real {
+        -sphere_min(|n| ellipsoid_support(cb, rb, pb, &-n) + ellipsoid_support(ca, ra, pa, n)).0
+    }
+
+    fn sphere(c: [Real; 3], r: Real) -> Body {
+        ellipsoid(c, [r; 3]).unwrap()
+    }
+
+    #[test]
+    fn sphere_distance_matches_closed_form_with_witnesses() {
+        let (c1, r1, c2, r2) = (Vector3::new(0.3, -0.2, 0.1), 0.7, Vector3::new(2.1, 0.9, -0.4), 0.5);
+        let a = sphere([0.0; 3], r1);
+        let b = sphere([0.0; 3], r2);
+        let pa = pose([0.9, 0.2, -0.1, 0.3], c1.into());
+        let pb = pose([0.4, -0.5, 0.6, 0.1], c2.into());
+        let cert = certify_distance(&a, &pa, &b, &pb).unwrap();
+        let expected = (c2 - c1).norm() - r1 - r2;
+        assert!((cert.distance - expected).abs() < 1e-6, "{} vs {expected}", cert.distance);
+        assert!((cert.squared_distance - expected * expected).abs() < 1e-6);
+        assert_eq!(cert.gram_size, 7);
+        // KKT: 2(x − y) + τ∇p_a = 0 with ∇p_a = 2(x − c₁)/r₁², |x − c₁| = r₁  ⇒  τ = r₁ · dist.
+        assert!((cert.tau - r1 * expected).abs() < 1e-5, "tau {}", cert.tau);
+        assert!((cert.xi - r2 * expected).abs() < 1e-5, "xi {}", cert.xi);
+        let (x, y) = cert.witnesses.unwrap();
+        let n = (c2 - c1).normalize();
+        assert!((x.coords - (c1 + n * r1)).norm() < 1e-5, "x* = {x}");
+        assert!((y.coords - (c2 - n * r2)).norm() < 1e-5, "y* = {y}");
+    }
+
+    #[test]
+    fn overlapping_spheres_certify_zero() {
+        let a = sphere([0.5, 0.0, 0.0], 1.0);
+        let b = sphere([0.0, 0.0, 0.0], 0.8);
+        let cert = certify_distance(&a, &Isometry3::identity(), &b, &pose([1.0, 0.0, 0.0, 0.0], [1.2, 0.3, 0.0])).unwrap();
+        assert!(cert.squared_distance.abs() <= 1e-7, "γ = {}", cert.squared_distance);
+        let (x, y) = cert.witnesses.unwrap();
+        assert!((x - y).norm() < 1e-4);
+        assert!(a.value_at(&x) <= 1.0 + 1e-6);
+    }
+
+    #[test]
+    fn sphere_growth_matches_closed_form() {
+        let s1 = sphere([0.0; 3], 0.5);
+        let s2 = sphere([0.0; 3], 0.8);
+        for (k, t2) in [[3.0, 0.2, -0.1], [1.5, -0.4, 0.3], [0.9, 0.1, 0.0], [0.2, 0.1, 0.1]].iter().enumerate() {
+            let (c1, c2) = (Vector3::new(0.1, 0.2, 0.3), Vector3::from(*t2));
+            let p1 = pose([0.8, 0.1, 0.5, -0.2], c1.into());
+            let p2 = pose([0.3, 0.9, 0.0, 0.4], c2.into());
+            let cert = certify_growth(&s1, &p1, &s2, &p2).unwrap();
+            let expected = ((c1 - c2).norm() - 0.8).max(0.0).powi(2) / 0.25;
+            assert!((cert.value - expected).abs() < 1e-7 * expected.max(1.0), "case {k}: {} vs {expected}", cert.value);
+            if expected > 0.0 {
+                let x = cert.minimizer.unwrap();
+                let want = c2 + (c1 - c2).normalize() * 0.8;
+                assert!((x.coords - want).norm() < 1e-4, "case {k}: x* = {x}");
+            }
+        }
+    }
+
+    #[test]
+    fn rotated_ellipsoids_match_brute_force_and_are_pose_invariant() {
+        let (ca, ra) = ([0.1, -0.2, 0.0], [0.9, 0.3, 0.5]);
+        let (cb, rb) = ([0.0, 0.3, 0.1], [0.4, 1.0, 0.2]);
+        let a = ellipsoid(ca, ra).unwrap();
+        let b = ellipsoid(cb, rb).unwrap();
+        let pa = pose([0.9, 0.1, 0.3, 0.3], [0.2, -0.1, 0.4]);
+        let pb = pose([0.2, -0.7, 0.4, 0.5], [2.6, 1.0, -0.4]);
+        let cert = certify_distance(&a, &pa, &b, &pb).unwrap();
+        let brute = brute_ellipsoid_distance(ca, ra, &pa, cb, rb, &pb);
+        assert!(brute > 0.3, "test pair must be separated, brute = {brute}");
+        assert!((cert.distance - brute).abs() < 1e-6, "{} vs brute {brute}", cert.distance);
+        let (x, y) = cert.witnesses.unwrap();
+        assert!(((x - y).norm() - brute).abs() < 1e-5);
+        assert!((a.value_at(&(pa.inverse() * x)) - 1.0).abs() < 1e-5);
+
+        let g = certify_growth(&a, &pa, &b, &pb).unwrap();
+        let g_brute = brute_growth(&a, &pa, &b, &pb);
+        assert!((g.value - g_brute).abs() < 1e-6 * g_brute.max(1.0), "{} vs brute {g_brute}", g.value);
+        let g21 = certify_growth(&b, &pb, &a, &pa).unwrap();
+        let g21_brute = brute_growth(&b, &pb, &a, &pa);
+        assert!((g21.value - g21_brute).abs() < 1e-6 * g21_brute.max(1.0), "{} vs {g21_brute}", g21.value);
+
+        // Same rigid motion applied to both bodies: both certificates unchanged.
+        let motion = pose([0.3, 0.5, -0.6, 0.2], [10.0, -4.0, 7.5]);
+        let (ma, mb) = (motion * pa, motion * pb);
+        let moved = certify_distance(&a, &ma, &b, &mb).unwrap();
+        assert!((moved.squared_distance - cert.squared_distance).abs() < 1e-7);
+        let moved_g = certify_growth(&a, &ma, &b, &mb).unwrap();
+        assert!((moved_g.value - g.value).abs() < 1e-7 * g.value.max(1.0));
+        let (mx, _) = moved.witnesses.unwrap();
+        assert!((mx - motion * x).norm() < 1e-5);
+    }
+
+    #[test]
+    fn quartic_body_matches_brute_force() {
+        // p = 0.2‖u‖² + (u₁⁴ + u₂⁴ + u₃⁴), a rounded cube, scale 0.6.
+        let quartic = power_body(2, 0.2, 1.0, [0.1, 0.0, -0.1], 0.6);
+        let pq = pose([0.7, 0.3, -0.2, 0.5], [0.3, 0.2, -0.1]);
+        let ball = sphere([0.0; 3], 0.4);
+        let c = Point3::new(1.6, 1.0, 0.5);
+        let pc = pose([1.0, 0.0, 0.0, 0.0], c.coords.into());
+        let cert = certify_distance(&quartic, &pq, &ball, &pc).unwrap();
+        assert_eq!(cert.gram_size, 28);
+        let brute = brute_distance_to_sphere(&quartic, &pq, &c, 0.4);
+        assert!(brute > 0.2, "brute {brute}");
+        assert!((cert.distance - brute).abs() < 1e-6, "{} vs brute {brute}", cert.distance);
+
+        // Growth both ways against an ellipsoid.
+        let e = ellipsoid([0.0; 3], [0.3, 0.7, 0.4]).unwrap();
+        let pe = pose([0.5, 0.5, 0.5, -0.5], [1.2, -0.6, 0.5]);
+        let g = certify_growth(&quartic, &pq, &e, &pe).unwrap();
+        let g_brute = brute_growth(&quartic, &pq, &e, &pe);
+        assert!((g.value - g_brute).abs() < 1e-6 * g_brute.max(1.0), "{} vs brute {g_brute}", g.value);
+        let g = certify_growth(&e, &pe, &quartic, &pq).unwrap();
+        let g_brute = brute_growth(&e, &pe, &quartic, &pq);
+        assert!((g.value - g_brute).abs() < 1e-6 * g_brute.max(1.0), "{} vs brute {g_brute}", g.value);
+    }
+
+    #[test]
+    fn sextic_body_matches_brute_force() {
+        let sextic = power_body(3, 0.3, 2.0, [0.0; 3], 0.5);
+        let ps = pose([0.6, -0.2, 0.7, 0.1], [-0.2, 0.1, 0.0]);
+        let c = Point3::new(-1.1, 0.8, 0.6);
+        let ball = sphere([0.0; 3], 0.3);
+        let cert = certify_distance(&sextic, &ps, &ball, &pose([1.0, 0.0, 0.0, 0.0], c.coords.into())).unwrap();
+        assert_eq!(cert.gram_size, 84);
+        let brute = brute_distance_to_sphere(&sextic, &ps, &c, 0.3);
+        assert!((cert.distance - brute).abs() < 1e-6, "{} vs brute {brute}", cert.distance);
+    }
+
+    #[test]
+    fn invalid_params_name_the_field() {
+        let s = sphere([0.0; 3], 1.0);
+        let id = Isometry3::identity();
+        let bad = CertificateParams { tolerance: -1.0, ..Default::default() };
+        let err = certify_distance_with_params(&s, &id, &s, &id, &bad).unwrap_err();
+        assert!(err.to_string().contains("params.tolerance"), "{err}");
+        let bad = CertificateParams { max_iterations: 0, ..Default::default() };
+        let err = certify_growth_with_params(&s, &id, &s, &id, &bad).unwrap_err();
+        assert!(err.to_string().contains("params.max_iterations"), "{err}");
+        // Too few iterations is a Numerical error naming Clarabel's status.
+        let few = CertificateParams { max_iterations: 1, ..Default::default() };
+        let err = certify_distance_with_params(&s, &id, &s, &pose([1.0, 0.0, 0.0, 0.0], [3.0, 0.0, 0.0]), &few)
+            .unwrap_err();
+        assert!(err.to_string().contains("MaxIterations"), "{err}");
+    }
+
+    /// Solve times at 2d = 2, 4, 6 (run with `cargo test --release --lib solve_times -- --ignored --nocapture`).
+    #[test]
+    #[ignore]
+    fn solve_times() {
+        let bodies = [sphere([0.0; 3], 0.5), power_body(2, 0.2, 1.0, [0.0; 3], 0.5), power_body(3, 0.2, 1.0, [0.0; 3], 0.5)];
+        let pa = pose([0.9, 0.1, 0.3, 0.3], [0.0; 3]);
+        let pb = pose([0.2, -0.7, 0.4, 0.5], [1.5, 0.4, -0.2]);
+        for body in &bodies {
+            let reps = 10;
+            let (mut td, mut tg, mut wall) = (0.0, 0.0, 0.0);
+            let (mut n_d, mut n_g) = (0, 0);
+            for _ in 0..reps {
+                let start = std::time::Instant::now();
+                let d = certify_distance(body, &pa, body, &pb).unwrap();
+                wall += start.elapsed().as_secs_f64();
+                td += d.solve_seconds;
+                n_d = d.gram_size;
+                let g = certify_growth(body, &pa, body, &pb).unwrap();
+                tg += g.solve_seconds;
+                n_g = g.gram_size;
+            }
+            println!(
+                "2d = {}: distance N = {n_d}: {:.2} ms in Clarabel ({:.2} ms with build); growth N = {n_g}: {:.2} ms",
+                body.degree(),
+                1e3 * td / reps as Real,
+                1e3 * wall / reps as Real,
+                1e3 * tg / reps as Real
+            );
+        }
+    }
 }

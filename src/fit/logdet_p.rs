@@ -1,0 +1,465 @@
+//! The log-det fit of the sos Gram matrix (paper §III-A, eq. "VAG.log.det").
+//!
+//! ```text
+//! maximize    log det P
+//! subject to  p(x) = z(x)ᵀ P z(x),                      z = graded-lex monomials of degree ≤ d
+//!             yᵀ ∇²p(x) y = w(x, y)ᵀ G w(x, y),  G ⪰ 0,  w = y ⊗ z_{d−1}(x)   (p sos-convex)
+//!             p(uᵢ) ≤ 1                                  for every convex-hull vertex uᵢ
+//! ```
+//!
+//! A convex sublevel set that contains the hull vertices contains the whole cloud, so only the
+//! hull vertices become rows. `log det P` is written with Clarabel's PSD and exponential cones:
+//!
+//! ```text
+//! [ P   Z       ]
+//! [ Zᵀ  diag(Z) ] ⪰ 0,   Z lower triangular,   (tᵢ, 1, Zᵢᵢ) ∈ K_exp  (Zᵢᵢ ≥ exp(tᵢ)),   maximize Σ tᵢ
+//! ```
+//!
+//! At the optimum `Σ tᵢ = log det P`. The big block already implies `P ⪰ 0`, so P has no cone of
+//! its own: its packed entries are columns that appear only inside the big block's rows. The
+//! coefficients `c` of p are free columns tied to P by one equation per monomial of degree ≤ 2d;
+//! containment rows and the sos-convexity equations are written in `c` (sparser than in P).
+//!
+//! Sizes (N = C(d+3, 3), M = 3·C(d+2, 3), L = C(2d+3, 3)):
+//!
+//! ```text
+//! 2d   N    M   big block   G block   coefficient eqs   hessian eqs 6·C(2d+1, 3)
+//!  2   4    3     8×8        3×3            10                6
+//!  4  10   12    20×20      12×12           35               60
+//!  6  20   30    40×40      30×30           84              210
+//!  8  35   60    70×70      60×60          165              504
+//! ```
+//!
+//! The problem is affine-invariant up to a constant in the objective (a translation or scaling of
+//! x maps z(x) by a triangular / diagonal matrix of constant determinant), so normalizing the cloud
+//! only improves conditioning; it does not change the fitted body.
+
+use crate::math::{Real, Vector3};
+use crate::poly::gram::{gram_weight, triangle_index, triangle_len, unpack_triangle};
+use crate::poly::monomial::{basis_len, graded_exponents3, index3};
+use crate::poly::Polynomial;
+use crate::{Error, Result};
+use clarabel::algebra::CscMatrix;
+use clarabel::solver::{DefaultInfo, DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
+
+/// Column layout and data of the cone program `min qᵀx s.t. b − A x ∈ K`.
+#[derive(Debug)]
+pub struct LogDetProblem {
+    /// Half degree d (the body has degree 2d).
+    pub half_degree: usize,
+    /// Side N of the Gram matrix P.
+    pub gram_size: usize,
+    /// Side M of the sos-convexity Gram matrix G.
+    pub convexity_gram_size: usize,
+    /// First column of svec(P) (Clarabel's packed triangle, off-diagonals × √2).
+    pub col_p: usize,
+    /// First column of svec(G).
+    pub col_g: usize,
+    /// First column of the coefficients c of p (graded lex, degree ≤ 2d).
+    pub col_c: usize,
+    /// Number of columns.
+    pub num_vars: usize,
+    q: Vec<Real>,
+    a: CscMatrix<Real>,
+    b: Vec<Real>,
+    cones: Vec<SupportedConeT<Real>>,
+}
+
+/// Triplet accumulator for `b − A x ∈ K`, rows appended cone by cone.
+#[derive(Default)]
+struct Rows {
+    ii: Vec<usize>,
+    jj: Vec<usize>,
+    vv: Vec<Real>,
+    b: Vec<Real>,
+    cones: Vec<SupportedConeT<Real>>,
+}
+
+impl Rows {
+    fn next_row(&self) -> usize {
+        self.b.len()
+    }
+    fn push(&mut self, row: usize, col: usize, v: Real) {
+        if v != 0.0 {
+            self.ii.push(row);
+            self.jj.push(col);
+            self.vv.push(v);
+        }
+    }
+}
+
+/// Index of the unordered y-pair (k ≤ l) among (0,0), (0,1), (0,2), (1,1), (1,2), (2,2).
+fn pair_index(k: usize, l: usize) -> usize {
+    let (k, l) = if k <= l { (k, l) } else { (l, k) };
+    match (k, l) {
+        (0, 0) => 0,
+        (0, 1) => 1,
+        (0, 2) => 2,
+        (1, 1) => 3,
+        (1, 2) => 4,
+        _ => 5,
+    }
+}
+
+impl LogDetProblem {
+    /// Builds the program for half degree `d ∈ 1..=4` and the normalized hull vertices `hull`.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `degree` when `d` is outside 1..=4.
+    pub fn build(d: usize, hull: &[Vector3]) -> Result<Self> {
+        if !(1..=4).contains(&d) {
+            return Err(Error::invalid("degree", format!("must be one of 2, 4, 6, 8, got {}", 2 * d)));
+        }
+        let half = graded_exponents3(d);
+        let n = half.len();
+        let low = graded_exponents3(d - 1);
+        let nl = low.len();
+        let m = 3 * nl;
+        let full = graded_exponents3(2 * d);
+        let l = full.len();
+
+        // Columns: P | Z (lower triangle, packed as the upper triangle of Zᵀ) | t | c | G.
+        let col_p = 0;
+        let col_z = col_p + triangle_len(n);
+        let col_t = col_z + triangle_len(n);
+        let col_c = col_t + n;
+        let col_g = col_c + l;
+        let num_vars = col_g + triangle_len(m);
+        let z_col = |i: usize, j: usize| col_z + triangle_index(j, i); // Z(i, j), i ≥ j
+
+        let mut r = Rows::default();
+
+        // (1) c_α = Σ_{zᵢzⱼ = x^α} (2 − δᵢⱼ) Pᵢⱼ, in svec terms weight 1 / √2.
+        let base = r.next_row();
+        for k in 0..l {
+            r.push(base + k, col_c + k, 1.0);
+        }
+        for j in 0..n {
+            for i in 0..=j {
+                let e = [half[i][0] + half[j][0], half[i][1] + half[j][1], half[i][2] + half[j][2]];
+                r.push(base + index3(e), col_p + triangle_index(i, j), -gram_weight(i, j));
+            }
+        }
+        // (2) yᵀ∇²p y = wᵀ G w: one row per (y-pair k ≤ l, x-monomial β of degree ≤ 2d − 2).
+        let lb = basis_len(3, 2 * d - 2);
+        let base2 = base + l;
+        for (ci, alpha) in full.iter().enumerate() {
+            for k in 0..3 {
+                for ll in k..3 {
+                    let ak = alpha[k] as usize;
+                    let al = alpha[ll] as usize;
+                    let f = if k == ll { (ak * ak.saturating_sub(1)) as Real } else { 2.0 * (ak * al) as Real };
+                    if f == 0.0 {
+                        continue;
+                    }
+                    let mut beta = *alpha;
+                    beta[k] -= 1;
+                    beta[ll] -= 1;
+                    r.push(base2 + pair_index(k, ll) * lb + index3(beta), col_c + ci, f);
+                }
+            }
+        }
+        for bcol in 0..m {
+            for acol in 0..=bcol {
+                let (ka, ia) = (acol / nl, acol % nl);
+                let (kb, ib) = (bcol / nl, bcol % nl);
+                let beta = [low[ia][0] + low[ib][0], low[ia][1] + low[ib][1], low[ia][2] + low[ib][2]];
+                r.push(
+                    base2 + pair_index(ka, kb) * lb + index3(beta),
+                    col_g + triangle_index(acol, bcol),
+                    -gram_weight(acol, bcol),
+                );
+            }
+        }
+        let num_eq = l + 6 * lb;
+        r.b.extend(std::iter::repeat_n(0.0, num_eq));
+        r.cones.push(SupportedConeT::ZeroConeT(num_eq));
+
+        // (3) p(uᵢ) ≤ 1 on the hull vertices: 1 − Σ c_α uᵢ^α ≥ 0.
+        if !hull.is_empty() {
+            let poly = Polynomial::zero(2 * d);
+            for u in hull {
+                let row = r.next_row();
+                for (k, e) in poly.exponents().iter().enumerate() {
+                    let v = u.x.powi(e[0] as i32) * u.y.powi(e[1] as i32) * u.z.powi(e[2] as i32);
+                    r.push(row, col_c + k, v);
+                }
+                r.b.push(1.0);
+            }
+            r.cones.push(SupportedConeT::NonnegativeConeT(hull.len()));
+        }
+
+        // (4) [[P, Z], [Zᵀ, diag Z]] ⪰ 0 as a 2N × 2N packed triangle of affine expressions.
+        let nn = 2 * n;
+        let base4 = r.next_row();
+        let s2 = std::f64::consts::SQRT_2;
+        for j in 0..nn {
+            for i in 0..=j {
+                let row = base4 + triangle_index(i, j);
+                if j < n {
+                    r.push(row, col_p + triangle_index(i, j), -1.0);
+                } else if i < n {
+                    let jz = j - n;
+                    if i >= jz {
+                        r.push(row, z_col(i, jz), -s2);
+                    }
+                } else if i == j {
+                    r.push(row, z_col(i - n, i - n), -1.0);
+                }
+            }
+        }
+        r.b.extend(std::iter::repeat_n(0.0, triangle_len(nn)));
+        r.cones.push(SupportedConeT::PSDTriangleConeT(nn));
+
+        // (5) G ⪰ 0.
+        let base5 = r.next_row();
+        for k in 0..triangle_len(m) {
+            r.push(base5 + k, col_g + k, -1.0);
+        }
+        r.b.extend(std::iter::repeat_n(0.0, triangle_len(m)));
+        r.cones.push(SupportedConeT::PSDTriangleConeT(m));
+
+        // (6) (tᵢ, 1, Zᵢᵢ) ∈ K_exp: Zᵢᵢ ≥ exp(tᵢ).
+        for i in 0..n {
+            let row = r.next_row();
+            r.push(row, col_t + i, -1.0);
+            r.push(row + 2, z_col(i, i), -1.0);
+            r.b.extend([0.0, 1.0, 0.0]);
+            r.cones.push(SupportedConeT::ExponentialConeT());
+        }
+
+        let mut q = vec![0.0; num_vars];
+        q[col_t..col_t + n].iter_mut().for_each(|v| *v = -1.0);
+        let a = CscMatrix::new_from_triplets(r.b.len(), num_vars, r.ii, r.jj, r.vv);
+        Ok(Self {
+            half_degree: d,
+            gram_size: n,
+            convexity_gram_size: m,
+            col_p,
+            col_g,
+            col_c,
+            num_vars,
+            q,
+            a,
+            b: r.b,
+            cones: r.cones,
+        })
+    }
+
+    /// Number of constraint rows.
+    pub fn num_rows(&self) -> usize {
+        self.b.len()
+    }
+
+    /// Solves with Clarabel, calling `progress(iteration, primal cost)` after every interior-point
+    /// iteration (Clarabel's termination callback, forwarded over a channel from a scoped solver
+    /// thread because the callback must be `Send + Sync + 'static`).
+    ///
+    /// # Errors
+    /// [`Error::Numerical`] when Clarabel rejects the data or the solver thread panics. A status
+    /// other than `Solved` is returned in the solution, not as an error (see [`usable_status`]).
+    pub fn solve(
+        &self,
+        settings: DefaultSettings<Real>,
+        progress: &mut dyn FnMut(u32, Real),
+    ) -> Result<RawSolution> {
+        let (tx, rx) = std::sync::mpsc::channel::<(u32, Real)>();
+        std::thread::scope(|scope| {
+            let handle = scope.spawn(move || -> Result<RawSolution> {
+                let p = CscMatrix::zeros((self.num_vars, self.num_vars));
+                let mut solver = DefaultSolver::new(&p, &self.q, &self.a, &self.b, &self.cones, settings)
+                    .map_err(|e| Error::Numerical(format!("Clarabel rejected the fit problem: {e}")))?;
+                solver.set_termination_callback(move |info: &DefaultInfo<Real>| {
+                    let _ = tx.send((info.iterations, info.cost_primal));
+                    false
+                });
+                solver.solve();
+                let sol = &solver.solution;
+                Ok(RawSolution {
+                    x: sol.x.clone(),
+                    status: sol.status,
+                    solve_seconds: sol.solve_time,
+                    iterations: sol.iterations,
+                })
+            });
+            for (it, cost) in rx {
+                progress(it, cost);
+            }
+            handle.join().map_err(|_| Error::Numerical("the Clarabel solver thread panicked".into()))?
+        })
+    }
+
+    /// The Gram matrix P (N × N) from a solution.
+    pub fn gram(&self, x: &[Real]) -> nalgebra::DMatrix<Real> {
+        unpack_triangle(&x[self.col_p..self.col_p + triangle_len(self.gram_size)], self.gram_size)
+    }
+
+    /// The sos-convexity Gram matrix G (M × M) from a solution.
+    pub fn convexity_gram(&self, x: &[Real]) -> nalgebra::DMatrix<Real> {
+        let len = triangle_len(self.convexity_gram_size);
+        unpack_triangle(&x[self.col_g..self.col_g + len], self.convexity_gram_size)
+    }
+
+    /// p = z(x)ᵀ P z(x) expanded in the graded-lex basis of degree 2d (exactly sos for P ⪰ 0).
+    ///
+    /// # Errors
+    /// [`Error::Numerical`] when a coefficient is not finite.
+    pub fn polynomial_of_gram(&self, p: &nalgebra::DMatrix<Real>) -> Result<Polynomial> {
+        let half = graded_exponents3(self.half_degree);
+        let mut c = vec![0.0; basis_len(3, 2 * self.half_degree)];
+        for j in 0..half.len() {
+            for i in 0..=j {
+                let e = [half[i][0] + half[j][0], half[i][1] + half[j][1], half[i][2] + half[j][2]];
+                c[index3(e)] += if i == j { 1.0 } else { 2.0 } * p[(i, j)];
+            }
+        }
+        Polynomial::from_coefficients(2 * self.half_degree, c)
+            .map_err(|e| Error::Numerical(format!("the solver returned an unusable Gram matrix: {e}")))
+    }
+}
+
+/// Clarabel's raw answer.
+#[derive(Clone, Debug)]
+pub struct RawSolution {
+    /// Primal variables.
+    pub x: Vec<Real>,
+    /// Final status.
+    pub status: SolverStatus,
+    /// Seconds inside Clarabel.
+    pub solve_seconds: Real,
+    /// Interior-point iterations.
+    pub iterations: u32,
+}
+
+/// Maps every Clarabel status explicitly: `Solved` / `AlmostSolved` give a usable answer (its
+/// name is recorded in the report); everything else is an [`Error::Numerical`] naming the status.
+///
+/// # Errors
+/// [`Error::Numerical`] for every status other than `Solved` and `AlmostSolved`.
+pub fn usable_status(status: SolverStatus) -> Result<&'static str> {
+    let why = match status {
+        SolverStatus::Solved => return Ok("Solved"),
+        SolverStatus::AlmostSolved => return Ok("AlmostSolved"),
+        SolverStatus::Unsolved => "Unsolved (the solver did not run)",
+        SolverStatus::PrimalInfeasible => "PrimalInfeasible",
+        SolverStatus::DualInfeasible => "DualInfeasible (log det unbounded: too few hull vertices?)",
+        SolverStatus::AlmostPrimalInfeasible => "AlmostPrimalInfeasible",
+        SolverStatus::AlmostDualInfeasible => "AlmostDualInfeasible (log det unbounded: too few hull vertices?)",
+        SolverStatus::MaxIterations => "MaxIterations (raise max_solver_iterations)",
+        SolverStatus::MaxTime => "MaxTime",
+        SolverStatus::NumericalError => "NumericalError",
+        SolverStatus::InsufficientProgress => "InsufficientProgress",
+        SolverStatus::CallbackTerminated => "CallbackTerminated",
+    };
+    Err(Error::Numerical(format!("the log-det fit SDP ended with status {why}")))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::poly::gram::GramStructure;
+
+    /// The sos-convexity rows agree with an independent expansion through `GramStructure` in six
+    /// variables (x, y): for random c and G satisfying nothing, the residual of each row equals
+    /// coeff(yᵀ∇²p y) − coeff(wᵀGw) computed independently.
+    #[test]
+    fn hessian_rows_match_six_variable_gram_expansion() {
+        let d = 2;
+        let prob = LogDetProblem::build(d, &[]).unwrap();
+        let full = graded_exponents3(2 * d);
+        let low = graded_exponents3(d - 1);
+        let nl = low.len();
+        // Six-variable half basis: y_k · x^β, variables ordered (x1, x2, x3, y1, y2, y3).
+        let mut half6 = Vec::new();
+        for k in 0..3 {
+            for e in &low {
+                let mut v = vec![e[0], e[1], e[2], 0, 0, 0];
+                v[3 + k] = 1;
+                half6.push(v);
+            }
+        }
+        let gs = GramStructure::with_half_basis(6, half6, 2 * d);
+        // A random symmetric G and random c.
+        let m = 3 * nl;
+        let mut g = nalgebra::DMatrix::zeros(m, m);
+        for i in 0..m {
+            for j in 0..=i {
+                let v = ((i * 7 + j * 13) % 11) as f64 / 11.0 - 0.4;
+                g[(i, j)] = v;
+                g[(j, i)] = v;
+            }
+        }
+        let c: Vec<f64> = (0..full.len()).map(|k| ((k * 5) % 9) as f64 / 9.0 - 0.3).collect();
+        let rhs6 = gs.polynomial_of(&g);
+        // Residual rows 35.. of A x for x = (c, svec G), other columns 0.
+        let mut x = vec![0.0; prob.num_vars];
+        x[prob.col_c..prob.col_c + full.len()].copy_from_slice(&c);
+        for j in 0..m {
+            for i in 0..=j {
+                x[prob.col_g + triangle_index(i, j)] = g[(i, j)] * gram_weight(i, j);
+            }
+        }
+        let mut ax = vec![0.0; prob.num_rows()];
+        for col in 0..prob.num_vars {
+            for k in prob.a.colptr[col]..prob.a.colptr[col + 1] {
+                ax[prob.a.rowval[k]] += prob.a.nzval[k] * x[col];
+            }
+        }
+        let lb = basis_len(3, 2 * d - 2);
+        let low2 = graded_exponents3(2 * d - 2);
+        for k in 0..3 {
+            for l in k..3 {
+                for beta in &low2 {
+                    // LHS coefficient of y_k y_l x^β in yᵀ∇²p y from the coefficients directly.
+                    let mut lhs = 0.0;
+                    for (ci, a) in full.iter().enumerate() {
+                        let mut bb = *a;
+                        let ok = if k == l { a[k] >= 2 } else { a[k] >= 1 && a[l] >= 1 };
+                        if !ok {
+                            continue;
+                        }
+                        bb[k] -= 1;
+                        bb[l] -= 1;
+                        if bb != *beta {
+                            continue;
+                        }
+                        let f = if k == l {
+                            (a[k] as f64) * (a[k] as f64 - 1.0)
+                        } else {
+                            2.0 * a[k] as f64 * a[l] as f64
+                        };
+                        lhs += f * c[ci];
+                    }
+                    let mut e6 = vec![beta[0], beta[1], beta[2], 0, 0, 0];
+                    e6[3 + k] += 1;
+                    e6[3 + l] += 1;
+                    let rhs = rhs6[gs.index_of[&e6]];
+                    let row = full.len() + pair_index(k, l) * lb + index3(*beta);
+                    assert!((ax[row] - (lhs - rhs)).abs() < 1e-12, "row {row}: {} vs {}", ax[row], lhs - rhs);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn every_status_is_mapped() {
+        assert_eq!(usable_status(SolverStatus::Solved).unwrap(), "Solved");
+        assert_eq!(usable_status(SolverStatus::AlmostSolved).unwrap(), "AlmostSolved");
+        for s in [
+            SolverStatus::Unsolved,
+            SolverStatus::PrimalInfeasible,
+            SolverStatus::DualInfeasible,
+            SolverStatus::AlmostPrimalInfeasible,
+            SolverStatus::AlmostDualInfeasible,
+            SolverStatus::MaxIterations,
+            SolverStatus::MaxTime,
+            SolverStatus::NumericalError,
+            SolverStatus::InsufficientProgress,
+            SolverStatus::CallbackTerminated,
+        ] {
+            let e = usable_status(s).unwrap_err();
+            assert!(matches!(e, Error::Numerical(_)));
+            assert!(e.to_string().contains(&format!("{s:?}")), "{e}");
+        }
+    }
+}
