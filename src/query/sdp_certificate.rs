@@ -279,8 +279,7 @@ pub fn certify_growth_with_params(
     let r1t: Matrix3 = pose1.rotation.to_rotation_matrix().matrix().transpose();
     let r2 = *pose2.rotation.to_rotation_matrix().matrix();
     let c = r1t * r2 * (p2.scale() / p1.scale());
-    let e =
-        (r1t * (r2 * p2.center() + pose2.translation.vector - pose1.translation.vector) - p1.center()) / p1.scale();
+    let e = (r1t * (r2 * p2.center() + pose2.translation.vector - pose1.translation.vector) - p1.center()) / p1.scale();
     let q = p1.polynomial().compose_affine(&c, &e);
     let objective_coeffs = embed(&q, &gram, 0);
     let constraint = embed(p2.polynomial(), &gram, 0);
@@ -574,7 +573,8 @@ mod tests {
     fn overlapping_spheres_certify_zero() {
         let a = sphere([0.5, 0.0, 0.0], 1.0);
         let b = sphere([0.0, 0.0, 0.0], 0.8);
-        let cert = certify_distance(&a, &Isometry3::identity(), &b, &pose([1.0, 0.0, 0.0, 0.0], [1.2, 0.3, 0.0])).unwrap();
+        let cert =
+            certify_distance(&a, &Isometry3::identity(), &b, &pose([1.0, 0.0, 0.0, 0.0], [1.2, 0.3, 0.0])).unwrap();
         assert!(cert.squared_distance.abs() <= 1e-7, "γ = {}", cert.squared_distance);
         let (x, y) = cert.witnesses.unwrap();
         assert!((x - y).norm() < 1e-4);
@@ -690,8 +690,8 @@ mod tests {
         assert!(err.to_string().contains("params.max_iterations"), "{err}");
         // Too few iterations is a Numerical error naming Clarabel's status.
         let few = CertificateParams { max_iterations: 1, ..Default::default() };
-        let err = certify_distance_with_params(&s, &id, &s, &pose([1.0, 0.0, 0.0, 0.0], [3.0, 0.0, 0.0]), &few)
-            .unwrap_err();
+        let err =
+            certify_distance_with_params(&s, &id, &s, &pose([1.0, 0.0, 0.0, 0.0], [3.0, 0.0, 0.0]), &few).unwrap_err();
         assert!(err.to_string().contains("MaxIterations"), "{err}");
     }
 
@@ -699,7 +699,8 @@ mod tests {
     #[test]
     #[ignore]
     fn solve_times() {
-        let bodies = [sphere([0.0; 3], 0.5), power_body(2, 0.2, 1.0, [0.0; 3], 0.5), power_body(3, 0.2, 1.0, [0.0; 3], 0.5)];
+        let bodies =
+            [sphere([0.0; 3], 0.5), power_body(2, 0.2, 1.0, [0.0; 3], 0.5), power_body(3, 0.2, 1.0, [0.0; 3], 0.5)];
         let pa = pose([0.9, 0.1, 0.3, 0.3], [0.0; 3]);
         let pb = pose([0.2, -0.7, 0.4, 0.5], [1.5, 0.4, -0.2]);
         for body in &bodies {
