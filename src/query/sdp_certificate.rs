@@ -22,6 +22,22 @@
 //! (N = 7, 28, 84, 210 at 2d = 2, 4, 6, 8): one PSD block, one equality row per monomial of degree
 //! ≤ 2d. The objective is divided by `L² = max(s_a, s_b)²` for conditioning and scaled back.
 //!
+//! # Block structure (default)
+//!
+//! The full 6-variable Gram matrix costs O(N⁶) per interior-point iteration (Clarabel factors its
+//! N(N+1)/2-sized dense block: ~0.3 s at 2d = 4, minutes at 2d = 6). By default the sos polynomial
+//! is instead written as a sum of three smaller Gram forms,
+//!
+//! ```text
+//! ‖x − y‖² − γ − τ(1 − p_a(u)) − ξ(1 − p_b(v)) = σ₀(1, u, v) + σ_a(z_d(u)) + σ_b(z_d(v))
+//! ```
+//!
+//! (sizes 7, C(3+d, d), C(3+d, d)). Any feasible γ is still a lower bound, and it stays exact for
+//! sos-convex bodies: at the optimum, write τ p_a(u) = τ[p_a(u*) + ∇p_a(u*)ᵀ(u − u*)] + τ B_a(u),
+//! where the Bregman remainder B_a is sos for sos-convex p_a (Helton–Nie); what is left of the
+//! Lagrangian is a convex quadratic with zero gradient and value at (u*, v*), i.e. a sos quadratic
+//! in (1, u, v). [`CertificateParams::full_gram`] selects the full form.
+//!
 //! # Growth
 //!
 //! ```text
@@ -49,7 +65,8 @@
 use crate::body::Body;
 use crate::conic::{quiet_settings, ConicBuilder, ConicSolution, Row};
 use crate::math::{Isometry3, Matrix3, Point3, Real, Vector3};
-use crate::poly::gram::{gram_weight, GramStructure};
+use crate::poly::gram::{gram_weight, triangle_index, GramStructure};
+use crate::poly::monomial::graded_exponents;
 use crate::poly::Polynomial;
 use crate::{Error, Result};
 use clarabel::solver::SolverStatus;
@@ -76,8 +93,9 @@ pub struct DistanceCertificate {
     pub solve_seconds: Real,
     /// Interior-point iterations.
     pub iterations: u32,
-    /// Side N of the Gram matrix (C(6 + d, d)).
-    pub gram_size: usize,
+    /// Sides of the Gram blocks: `[7, C(3 + d, d), C(3 + d, d)]` for the block-structured form,
+    /// `[C(6 + d, d)]` for the full 6-variable form (see [`CertificateParams::full_gram`]).
+    pub gram_sizes: Vec<usize>,
 }
 
 /// Level-0 SDP bound on d(p₁‖p₂).
@@ -112,11 +130,16 @@ pub struct CertificateParams {
     pub tolerance: Real,
     /// Clarabel's iteration cap; default 200.
     pub max_iterations: u32,
+    /// Distance only: use one full 6-variable Gram block (N = C(6 + d, d): 28, 84, 210 at 2d = 4,
+    /// 6, 8) instead of the default block-structured form (module docs, "Block structure"). Both
+    /// give the exact distance for sos-convex bodies; the full form is a (possibly) stronger bound for
+    /// other bodies but costs O(N⁶) per Clarabel iteration (about 0.3 s at 2d = 4, minutes at 2d = 6).
+    pub full_gram: bool,
 }
 
 impl Default for CertificateParams {
     fn default() -> Self {
-        Self { tolerance: 1e-10, max_iterations: 200 }
+        Self { tolerance: 1e-10, max_iterations: 200, full_gram: false }
     }
 }
 
@@ -159,7 +182,23 @@ pub fn certify_distance_with_params(
 ) -> Result<DistanceCertificate> {
     params.validate()?;
     let d = a.degree().max(b.degree()) / 2;
-    let gram = GramStructure::new(6, d);
+    let blocks = if params.full_gram {
+        vec![GramStructure::new(6, d)]
+    } else {
+        // (1, u, v) for the quadratic part; z_d(u) and z_d(v) for each body's own polynomial.
+        let pad = |e: &Vec<u8>, offset: usize| {
+            let mut out = vec![0u8; 6];
+            out[offset..offset + 3].copy_from_slice(e);
+            out
+        };
+        let half3 = graded_exponents(3, d);
+        vec![
+            GramStructure::with_half_basis(6, graded_exponents(6, 1), 2 * d),
+            GramStructure::with_half_basis(6, half3.iter().map(|e| pad(e, 0)).collect(), 2 * d),
+            GramStructure::with_half_basis(6, half3.iter().map(|e| pad(e, 3)).collect(), 2 * d),
+        ]
+    };
+    let gram = &blocks[0];
     let ra = *pose_a.rotation.to_rotation_matrix().matrix();
     let rb = *pose_b.rotation.to_rotation_matrix().matrix();
     let len = a.scale().max(b.scale());
@@ -181,13 +220,14 @@ pub fn certify_distance_with_params(
             objective_coeffs[gram.index_of[&unit_exponent(6, &[i, j])]] += w * g[(i, j)];
         }
     }
-    let pa = embed(a.polynomial(), &gram, 0);
-    let pb = embed(b.polynomial(), &gram, 3);
+    let pa = embed(a.polynomial(), gram, 0);
+    let pb = embed(b.polynomial(), gram, 3);
 
-    let (sol, cols) = solve_level0(&gram, &objective_coeffs, &[pa.as_slice(), pb.as_slice()], params)?;
+    let level0 = solve_level0(&blocks, &objective_coeffs, &[pa.as_slice(), pb.as_slice()], params)?;
+    let sol = &level0.sol;
     let len2 = len * len;
-    let gamma = sol.x[cols.gamma] * len2;
-    let witnesses = moments_first_order(&gram, &sol, 6).and_then(|w| {
+    let gamma = sol.x[level0.gamma] * len2;
+    let witnesses = moments_first_order(gram, &level0, 6).and_then(|w| {
         let u = Vector3::new(w[0], w[1], w[2]);
         let v = Vector3::new(w[3], w[4], w[5]);
         let feasible = a.polynomial().value(&u) <= 1.0 + WITNESS_FEASIBILITY_TOLERANCE
@@ -197,13 +237,13 @@ pub fn certify_distance_with_params(
     Ok(DistanceCertificate {
         squared_distance: gamma,
         distance: gamma.max(0.0).sqrt(),
-        tau: sol.x[cols.multipliers[0]] * len2,
-        xi: sol.x[cols.multipliers[1]] * len2,
+        tau: sol.x[level0.multipliers[0]] * len2,
+        xi: sol.x[level0.multipliers[1]] * len2,
         witnesses,
         solver_status: format!("{:?}", sol.status),
         solve_seconds: sol.solve_seconds,
         iterations: sol.iterations,
-        gram_size: gram.size(),
+        gram_sizes: blocks.iter().map(GramStructure::size).collect(),
     })
 }
 
@@ -244,14 +284,16 @@ pub fn certify_growth_with_params(
     let objective_coeffs = embed(&q, &gram, 0);
     let constraint = embed(p2.polynomial(), &gram, 0);
 
-    let (sol, cols) = solve_level0(&gram, &objective_coeffs, &[constraint.as_slice()], params)?;
-    let minimizer = moments_first_order(&gram, &sol, 3).and_then(|w| {
+    let blocks = [gram];
+    let level0 = solve_level0(&blocks, &objective_coeffs, &[constraint.as_slice()], params)?;
+    let (gram, sol) = (&blocks[0], &level0.sol);
+    let minimizer = moments_first_order(gram, &level0, 3).and_then(|w| {
         let v = Vector3::new(w[0], w[1], w[2]);
         (p2.polynomial().value(&v) <= 1.0 + WITNESS_FEASIBILITY_TOLERANCE).then(|| world_point(p2, pose2, &v))
     });
     Ok(GrowthCertificate {
-        value: sol.x[cols.gamma],
-        tau: sol.x[cols.multipliers[0]],
+        value: sol.x[level0.gamma],
+        tau: sol.x[level0.multipliers[0]],
         minimizer,
         solver_status: format!("{:?}", sol.status),
         solve_seconds: sol.solve_seconds,
@@ -260,30 +302,42 @@ pub fn certify_growth_with_params(
     })
 }
 
-/// Columns of the level-0 program.
-struct Level0Columns {
+/// Columns and dual positions of a solved level-0 program.
+struct Level0Solution {
+    sol: ConicSolution,
     gamma: usize,
     multipliers: Vec<usize>,
+    /// For each monomial of the full basis, its equality row's index in `sol.z` (if it has one).
+    row_of: Vec<Option<usize>>,
 }
 
-/// Solves `max γ s.t. f − γ − Σₖ τₖ (1 − gₖ) = z(w)ᵀ Q z(w), Q ⪰ 0, τ ≥ 0` with f and gₖ given by
-/// their coefficients in `gram.full_basis`. Row α reads
-/// `Σ (weights) svec(Q) + γ [α = 0] + Σₖ τₖ ([α = 0] − gₖ,α) = f_α`.
+/// Solves `max γ s.t. f − γ − Σₖ τₖ (1 − gₖ) = Σ_b z_b(w)ᵀ Q_b z_b(w), Q_b ⪰ 0, τ ≥ 0`, with f and gₖ
+/// given by their coefficients in the blocks' common `full_basis`. Row α reads
+/// `Σ_b (weights) svec(Q_b) + γ [α = 0] + Σₖ τₖ ([α = 0] − gₖ,α) = f_α`; monomials no term touches
+/// get no row.
 fn solve_level0(
-    gram: &GramStructure,
+    blocks: &[GramStructure],
     objective: &[Real],
     constraints: &[&[Real]],
     params: &CertificateParams,
-) -> Result<(ConicSolution, Level0Columns)> {
-    let nf = gram.full_basis.len();
+) -> Result<Level0Solution> {
+    let nf = blocks.first().map_or(0, |g| g.full_basis.len());
     let mut builder = ConicBuilder::new();
     let gamma = builder.add_variables(1);
     let first_tau = builder.add_variables(constraints.len());
     let multipliers: Vec<usize> = (0..constraints.len()).map(|k| first_tau + k).collect();
-    let q = builder.add_psd_variable(gram.size());
     builder.set_objective(gamma, -1.0);
 
     let mut rows: Vec<Row> = vec![Vec::new(); nf];
+    for gram in blocks {
+        let q = builder.add_psd_variable(gram.size());
+        for j in 0..gram.size() {
+            for i in 0..=j {
+                let k = triangle_index(i, j);
+                rows[gram.product_of_entry[k]].push((q + k, gram_weight(i, j)));
+            }
+        }
+    }
     rows[0].push((gamma, 1.0));
     for (k, g) in constraints.iter().enumerate() {
         for (alpha, row) in rows.iter_mut().enumerate() {
@@ -293,19 +347,28 @@ fn solve_level0(
             }
         }
     }
-    let n = gram.size();
-    for j in 0..n {
-        for i in 0..=j {
-            let k = crate::poly::gram::triangle_index(i, j);
-            rows[gram.product_of_entry[k]].push((q + k, gram_weight(i, j)));
+    let first_row = builder.num_rows();
+    let mut row_of = vec![None; nf];
+    let (mut kept, mut rhs) = (Vec::new(), Vec::new());
+    for (alpha, row) in rows.into_iter().enumerate() {
+        if row.is_empty() {
+            if objective[alpha] != 0.0 {
+                return Err(Error::Numerical(format!(
+                    "level-0 sos certificate: monomial {alpha} of the objective is outside every Gram block"
+                )));
+            }
+            continue;
         }
+        row_of[alpha] = Some(first_row + kept.len());
+        kept.push(row);
+        rhs.push(objective[alpha]);
     }
-    builder.add_equalities(rows, objective.to_vec());
+    builder.add_equalities(kept, rhs);
     builder.add_inequalities(multipliers.iter().map(|&c| vec![(c, -1.0)]).collect(), vec![0.0; multipliers.len()]);
 
     let sol = builder.solve(quiet_settings(params.tolerance, params.max_iterations))?;
     match sol.status {
-        SolverStatus::Solved | SolverStatus::AlmostSolved => Ok((sol, Level0Columns { gamma, multipliers })),
+        SolverStatus::Solved | SolverStatus::AlmostSolved => Ok(Level0Solution { sol, gamma, multipliers, row_of }),
         SolverStatus::Unsolved
         | SolverStatus::PrimalInfeasible
         | SolverStatus::DualInfeasible
@@ -350,16 +413,17 @@ fn embed(p: &Polynomial, gram: &GramStructure, offset: usize) -> Vec<Real> {
     out
 }
 
-/// First-order pseudo-moments `L(w₁), …, L(wₙ)` from the duals of the equality rows (which come
-/// first, after the PSD block's rows), normalized by `L(1)`; `None` unless finite.
-fn moments_first_order(gram: &GramStructure, sol: &ConicSolution, n: usize) -> Option<Vec<Real>> {
-    // Row order: PSD block rows (triangle of the Gram matrix), then the equality rows.
-    let offset = crate::poly::gram::triangle_len(gram.size());
-    let y0 = *sol.z.get(offset)?;
+/// First-order pseudo-moments `L(w₁), …, L(wₙ)` from the duals of the equality rows, normalized by
+/// `L(1)`; `None` unless finite.
+fn moments_first_order(gram: &GramStructure, level0: &Level0Solution, n: usize) -> Option<Vec<Real>> {
+    let z = &level0.sol.z;
+    let y0 = *z.get(level0.row_of[0]?)?;
     if !(y0.is_finite() && y0.abs() > 1e-12) {
         return None;
     }
-    let w: Vec<Real> = (0..n).map(|i| sol.z.get(offset + gram.index_of[&unit_exponent(n, &[i])]).map(|v| v / y0)).collect::<Option<_>>()?;
+    let w: Vec<Real> = (0..n)
+        .map(|i| level0.row_of[gram.index_of[&unit_exponent(n, &[i])]].and_then(|r| z.get(r)).map(|v| v / y0))
+        .collect::<Option<_>>()?;
     w.iter().all(|v| v.is_finite()).then_some(w)
 }
 
@@ -495,7 +559,7 @@ mod tests {
         let expected = (c2 - c1).norm() - r1 - r2;
         assert!((cert.distance - expected).abs() < 1e-6, "{} vs {expected}", cert.distance);
         assert!((cert.squared_distance - expected * expected).abs() < 1e-6);
-        assert_eq!(cert.gram_size, 7);
+        assert_eq!(cert.gram_sizes, vec![7, 4, 4]);
         // KKT: 2(x − y) + τ∇p_a = 0 with ∇p_a = 2(x − c₁)/r₁², |x − c₁| = r₁  ⇒  τ = r₁ · dist.
         assert!((cert.tau - r1 * expected).abs() < 1e-5, "tau {}", cert.tau);
         assert!((cert.xi - r2 * expected).abs() < 1e-5, "xi {}", cert.xi);
@@ -509,7 +573,8 @@ mod tests {
     fn overlapping_spheres_certify_zero() {
         let a = sphere([0.5, 0.0, 0.0], 1.0);
         let b = sphere([0.0, 0.0, 0.0], 0.8);
-        let cert = certify_distance(&a, &Isometry3::identity(), &b, &pose([1.0, 0.0, 0.0, 0.0], [1.2, 0.3, 0.0])).unwrap();
+        let cert =
+            certify_distance(&a, &Isometry3::identity(), &b, &pose([1.0, 0.0, 0.0, 0.0], [1.2, 0.3, 0.0])).unwrap();
         assert!(cert.squared_distance.abs() <= 1e-7, "γ = {}", cert.squared_distance);
         let (x, y) = cert.witnesses.unwrap();
         assert!((x - y).norm() < 1e-4);
@@ -578,10 +643,17 @@ mod tests {
         let c = Point3::new(1.6, 1.0, 0.5);
         let pc = pose([1.0, 0.0, 0.0, 0.0], c.coords.into());
         let cert = certify_distance(&quartic, &pq, &ball, &pc).unwrap();
-        assert_eq!(cert.gram_size, 28);
+        assert_eq!(cert.gram_sizes, vec![7, 10, 10]);
         let brute = brute_distance_to_sphere(&quartic, &pq, &c, 0.4);
         assert!(brute > 0.2, "brute {brute}");
         assert!((cert.distance - brute).abs() < 1e-6, "{} vs brute {brute}", cert.distance);
+        // The full 6-variable Gram form (N = 28) gives the same bound.
+        let full = CertificateParams { full_gram: true, ..Default::default() };
+        let cert_full = certify_distance_with_params(&quartic, &pq, &ball, &pc, &full).unwrap();
+        assert_eq!(cert_full.gram_sizes, vec![28]);
+        assert!((cert_full.squared_distance - cert.squared_distance).abs() < 1e-7);
+        let ((x, _), (xf, _)) = (cert.witnesses.unwrap(), cert_full.witnesses.unwrap());
+        assert!((x - xf).norm() < 1e-4);
 
         // Growth both ways against an ellipsoid.
         let e = ellipsoid([0.0; 3], [0.3, 0.7, 0.4]).unwrap();
@@ -601,7 +673,7 @@ mod tests {
         let c = Point3::new(-1.1, 0.8, 0.6);
         let ball = sphere([0.0; 3], 0.3);
         let cert = certify_distance(&sextic, &ps, &ball, &pose([1.0, 0.0, 0.0, 0.0], c.coords.into())).unwrap();
-        assert_eq!(cert.gram_size, 84);
+        assert_eq!(cert.gram_sizes, vec![7, 20, 20]);
         let brute = brute_distance_to_sphere(&sextic, &ps, &c, 0.3);
         assert!((cert.distance - brute).abs() < 1e-6, "{} vs brute {brute}", cert.distance);
     }
@@ -618,8 +690,8 @@ mod tests {
         assert!(err.to_string().contains("params.max_iterations"), "{err}");
         // Too few iterations is a Numerical error naming Clarabel's status.
         let few = CertificateParams { max_iterations: 1, ..Default::default() };
-        let err = certify_distance_with_params(&s, &id, &s, &pose([1.0, 0.0, 0.0, 0.0], [3.0, 0.0, 0.0]), &few)
-            .unwrap_err();
+        let err =
+            certify_distance_with_params(&s, &id, &s, &pose([1.0, 0.0, 0.0, 0.0], [3.0, 0.0, 0.0]), &few).unwrap_err();
         assert!(err.to_string().contains("MaxIterations"), "{err}");
     }
 
@@ -627,30 +699,36 @@ mod tests {
     #[test]
     #[ignore]
     fn solve_times() {
-        let bodies = [sphere([0.0; 3], 0.5), power_body(2, 0.2, 1.0, [0.0; 3], 0.5), power_body(3, 0.2, 1.0, [0.0; 3], 0.5)];
+        let bodies =
+            [sphere([0.0; 3], 0.5), power_body(2, 0.2, 1.0, [0.0; 3], 0.5), power_body(3, 0.2, 1.0, [0.0; 3], 0.5)];
         let pa = pose([0.9, 0.1, 0.3, 0.3], [0.0; 3]);
         let pb = pose([0.2, -0.7, 0.4, 0.5], [1.5, 0.4, -0.2]);
         for body in &bodies {
             let reps = 10;
             let (mut td, mut tg, mut wall) = (0.0, 0.0, 0.0);
-            let (mut n_d, mut n_g) = (0, 0);
+            let (mut n_d, mut n_g) = (Vec::new(), 0);
             for _ in 0..reps {
                 let start = std::time::Instant::now();
                 let d = certify_distance(body, &pa, body, &pb).unwrap();
                 wall += start.elapsed().as_secs_f64();
                 td += d.solve_seconds;
-                n_d = d.gram_size;
+                n_d = d.gram_sizes;
                 let g = certify_growth(body, &pa, body, &pb).unwrap();
                 tg += g.solve_seconds;
                 n_g = g.gram_size;
             }
             println!(
-                "2d = {}: distance N = {n_d}: {:.2} ms in Clarabel ({:.2} ms with build); growth N = {n_g}: {:.2} ms",
+                "2d = {}: distance N = {n_d:?}: {:.2} ms in Clarabel ({:.2} ms with build); growth N = {n_g}: {:.2} ms",
                 body.degree(),
                 1e3 * td / reps as Real,
                 1e3 * wall / reps as Real,
                 1e3 * tg / reps as Real
             );
+            if body.degree() <= 4 {
+                let full = CertificateParams { full_gram: true, ..Default::default() };
+                let d = certify_distance_with_params(body, &pa, body, &pb, &full).unwrap();
+                println!("   full 6-variable form N = {:?}: {:.2} ms", d.gram_sizes, 1e3 * d.solve_seconds);
+            }
         }
     }
 }
