@@ -1,5 +1,6 @@
 //! `sublevel serve --addr 127.0.0.1:50051 --data-dir DIR [--demo]`: runs the gRPC server until
-//! Ctrl-C (or SIGTERM), logging with `tracing` (filter with `RUST_LOG`, default `info`).
+//! Ctrl-C (or SIGTERM), logging with `tracing` to stderr (filter with `RUST_LOG`, default `info`);
+//! stdout carries only the demo ids and the `listening on ADDR` line.
 //!
 //! `--demo` makes sure the store holds two bodies named `chair_101` and `human_10` (embedded in
 //! the binary) and a scene `demo` with one instance of each, side by side, and prints their ids;
@@ -40,7 +41,7 @@ pub fn run(args: ServeArgs) -> Result<()> {
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
     // Ignore the error of a second init (a subscriber already set by an embedding program).
-    let _ = tracing_subscriber::fmt().with_env_filter(filter).try_init();
+    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
     let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
     runtime.block_on(async move {
         let config = ServerConfig { data_dir: args.data_dir.clone(), ..ServerConfig::default() };
