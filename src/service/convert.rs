@@ -124,7 +124,7 @@ pub fn fit_degree(degree: u32) -> Result<usize> {
 /// non-finite coordinate; [`Error::ResourceExhausted`] above `max_points` points.
 pub fn points_from_proto(cloud: &pb::PointCloud, max_points: usize) -> Result<Vec<Point3>> {
     let xyz = &cloud.xyz;
-    if xyz.len() % 3 != 0 {
+    if !xyz.len().is_multiple_of(3) {
         return Err(Error::invalid("points.xyz", format!("length {} is not a multiple of 3", xyz.len())));
     }
     check_point_count("points.xyz", xyz.len() / 3, max_points)?;
@@ -167,7 +167,7 @@ pub fn check_cloud(field: &str, points: &[Point3]) -> Result<()> {
     }) / n;
     let eig = cov.symmetric_eigenvalues();
     let (lo, hi) = (eig.min(), eig.max());
-    if !(hi > 0.0) || lo <= 1e-12 * hi {
+    if hi.is_nan() || hi <= 0.0 || lo <= 1e-12 * hi {
         return Err(Error::invalid(
             field,
             format!("degenerate cloud: the points lie on a plane, a line or one point (covariance eigenvalues {lo:.3e} … {hi:.3e})"),

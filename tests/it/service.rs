@@ -534,7 +534,7 @@ async fn end_to_end_chair_slides_through_human() {
         set_pose(&mut c, &scene, &i_chair, proto_pose(&pose_chair)).await;
         let d = distance(&mut c, &scene, &i_chair, &i_human).await;
         let g = growth(&mut c, &scene, &i_chair, &i_human).await;
-        let (ds, gs) = (d.solve.clone().unwrap(), g.solve.clone().unwrap());
+        let (ds, gs) = (d.solve.unwrap(), g.solve.unwrap());
         assert!(ds.converged && gs.converged, "k = {k}: {d:?} {g:?}");
         let cd = certify_distance(chair, &pose_chair, human, &human_pose).unwrap();
         let sq = d.distance * d.distance;
