@@ -1,10 +1,136 @@
-//! `sublevel serve`. STUB.
+//! `sublevel serve --addr 127.0.0.1:50051 --data-dir DIR [--demo]`: runs the gRPC server until
+//! Ctrl-C (or SIGTERM), logging with `tracing` to stderr (filter with `RUST_LOG`, default `info`);
+//! stdout carries only the demo ids and the `listening on ADDR` line.
+//!
+//! `--demo` makes sure the store holds two bodies named `chair_101` and `human_10` (embedded in
+//! the binary) and a scene `demo` with one instance of each, side by side, and prints their ids;
+//! a second start finds them by name and adds nothing.
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::Arc;
+use sublevel::body::BodyFile;
+use sublevel::math::{pose_from_parts, Isometry3};
+use sublevel::scene::Catalog;
+use sublevel::service::{open_catalog, serve_catalog, ServerConfig};
+use sublevel::{Body, Error, Result};
+
+/// The demo chair (a degree-4 fit of `chair_101.off`, in body-file JSON).
+const DEMO_CHAIR: &str = include_str!("../../data/demo/chair_101.json");
+/// The demo human (a degree-4 fit of `human_10.off`, in body-file JSON).
+const DEMO_HUMAN: &str = include_str!("../../data/demo/human_10.json");
+/// Name of the demo scene.
+const DEMO_SCENE: &str = "demo";
 
 /// Arguments of `sublevel serve`.
 #[derive(clap::Args, Debug)]
-pub struct ServeArgs {}
+pub struct ServeArgs {
+    /// Address to listen on.
+    #[arg(long, env = "SUBLEVEL_ADDR", default_value = "127.0.0.1:50051")]
+    addr: SocketAddr,
+    /// Directory of the database (created if missing).
+    #[arg(long, env = "SUBLEVEL_DATA_DIR", default_value = "./sublevel-data")]
+    data_dir: PathBuf,
+    /// Preload the demo bodies `chair_101`, `human_10` and the scene `demo` (idempotent).
+    #[arg(long, env = "SUBLEVEL_DEMO")]
+    demo: bool,
+}
 
 /// Runs `sublevel serve`.
-pub fn run(_args: ServeArgs) -> sublevel::Result<()> {
-    Err(sublevel::Error::Numerical("`serve` not implemented yet".into()))
+pub fn run(args: ServeArgs) -> Result<()> {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    // Ignore the error of a second init (a subscriber already set by an embedding program).
+    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
+    let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
+    runtime.block_on(async move {
+        let config = ServerConfig { data_dir: args.data_dir.clone(), ..ServerConfig::default() };
+        let catalog = open_catalog(&config)?;
+        if args.demo {
+            let demo = seed_demo(&catalog)?;
+            println!("demo: body chair_101 = {}", demo.chair);
+            println!("demo: body human_10  = {}", demo.human);
+            println!("demo: scene demo     = {} (instances {}, {})", demo.scene, demo.instances[0], demo.instances[1]);
+        }
+        let listener = tokio::net::TcpListener::bind(args.addr).await?;
+        let addr = listener.local_addr()?;
+        tracing::info!(%addr, data_dir = %args.data_dir.display(), "listening");
+        // On stdout too, for scripts and tests that bind port 0.
+        println!("listening on {addr}");
+        serve_catalog(listener, catalog, config, shutdown_signal()).await
+    })
+}
+
+/// Completes on Ctrl-C or (on Unix) SIGTERM, as sent by `docker stop` and Kubernetes.
+async fn shutdown_signal() {
+    let ctrl_c = async {
+        if let Err(e) = tokio::signal::ctrl_c().await {
+            tracing::error!(error = %e, "cannot listen for Ctrl-C");
+            std::future::pending::<()>().await;
+        }
+    };
+    #[cfg(unix)]
+    let term = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut s) => {
+                s.recv().await;
+            }
+            Err(e) => {
+                tracing::error!(error = %e, "cannot listen for SIGTERM");
+                std::future::pending::<()>().await;
+            }
+        }
+    };
+    #[cfg(not(unix))]
+    let term = std::future::pending::<()>();
+    tokio::select! {
+        () = ctrl_c => {},
+        () = term => {},
+    }
+    tracing::info!("shutdown requested");
+}
+
+/// Ids of the demo data.
+struct Demo {
+    chair: String,
+    human: String,
+    scene: String,
+    instances: [String; 2],
+}
+
+/// Finds a body by name, or stores the embedded one.
+fn ensure_body(catalog: &Catalog, name: &str, json: &str) -> Result<String> {
+    if let Some(e) = catalog.bodies().into_iter().find(|e| e.name == name) {
+        return Ok(e.id.clone());
+    }
+    let file: BodyFile = serde_json::from_str(json)?;
+    let body =
+        Body::from_file(file).map_err(|e| Error::invalid(format!("embedded demo body {name}"), e.to_string()))?;
+    catalog.add_body(name, body)
+}
+
+/// Seeds (or finds) the demo bodies and scene. The human stands beside the chair, one combined
+/// "radius" (normalization scales) away along x, so they start apart.
+fn seed_demo(catalog: &Arc<Catalog>) -> Result<Demo> {
+    let chair = ensure_body(catalog, "chair_101", DEMO_CHAIR)?;
+    let human = ensure_body(catalog, "human_10", DEMO_HUMAN)?;
+    let scene = match catalog.scenes().into_iter().find(|s| s.name == DEMO_SCENE) {
+        Some(s) => s.id,
+        None => catalog.create_scene(DEMO_SCENE)?,
+    };
+    let view = catalog.get_scene(&scene)?;
+    let find = |body: &str| view.instances.iter().find(|i| i.body_id == body).map(|i| i.id.clone());
+    let chair_body = catalog.body(&chair)?;
+    let human_body = catalog.body(&human)?;
+    let gap = 1.5 * (chair_body.body.scale() + human_body.body.scale());
+    let at = |x: f64| -> Result<Isometry3> { pose_from_parts("demo pose", [1.0, 0.0, 0.0, 0.0], [x, 0.0, 0.0]) };
+    let i_chair = match find(&chair) {
+        Some(id) => id,
+        None => catalog.add_instance(&scene, &chair, at(0.0)?)?,
+    };
+    let i_human = match find(&human) {
+        Some(id) => id,
+        None => catalog.add_instance(&scene, &human, at(gap)?)?,
+    };
+    Ok(Demo { chair, human, scene, instances: [i_chair, i_human] })
 }

@@ -1,1 +1,99 @@
-//! Scenes: instances of bodies with poses, warm-start caches, and the persistent store. STUB.
+//! Scenes: instances of bodies under rigid poses, warm-start caches, and the persistent store.
+//!
+//! A *scene* is a set of *instances*; each instance is a stored [`Body`](crate::Body) placed in the
+//! world by a pose `x ↦ R x + t` (unit quaternion `(w, x, y, z)`, translation in meters; paper
+//! §IV-C). Queries always run between two instances of one scene:
+//!
+//! ```text
+//! distance(a, b)  = min ‖x − y‖   s.t. p_a'(x) ≤ 1, p_b'(y) ≤ 1      (eq. "distance")
+//! growth(1, 2)    = min p_1'(x)   s.t. p_2'(x) ≤ 1                   (eq. "overlap")
+//! ```
+//!
+//! A moving scene asks the same pairs again and again with slightly different poses, so every
+//! answer leaves a warm start in a per-scene [`cache::WarmStartCache`], keyed by the ordered pair
+//! and the query kind. Warm starts live in body frames, so they stay meaningful when poses change;
+//! they are dropped when an instance is removed (or its scene deleted).
+//!
+//! Three layers:
+//!
+//! - [`store`]: the [`store::Store`] trait (bodies, scenes, instances with their poses; put / get /
+//!   list / delete) and its redb implementation [`store::RedbStore`]. Bodies are stored as their
+//!   JSON body file, scenes and instances as serde JSON. Every write is one transaction.
+//! - [`cache`]: the warm-start cache.
+//! - [`Catalog`]: the in-memory state the service works on — parsed bodies (`Arc<Body>`, so
+//!   queries never touch the database), scenes with their instances and caches — written through
+//!   to the store. Input is validated before anything is written, and memory changes only after
+//!   the store committed, so bad input never loses or half-writes data.
+//!
+//! This module knows nothing of gRPC, tokio or prost; `service` translates.
+
+pub mod cache;
+mod catalog;
+pub mod store;
+
+pub use catalog::{BodyEntry, Catalog, InstanceView, QueryAnswer, QueryKind, QueryPair, SceneView, MAX_NAME_BYTES};
+
+use crate::body::BodyFile;
+use crate::math::{pose_from_parts, pose_to_parts, Isometry3, Real};
+use crate::Result;
+use serde::{Deserialize, Serialize};
+
+/// A pose as stored: unit quaternion `[w, x, y, z]` and translation `[tx, ty, tz]` in meters.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StoredPose {
+    /// Unit quaternion `[w, x, y, z]`.
+    pub rotation: [Real; 4],
+    /// Translation in meters.
+    pub translation: [Real; 3],
+}
+
+impl StoredPose {
+    /// The stored form of a pose.
+    pub fn from_isometry(pose: &Isometry3) -> Self {
+        let (rotation, translation) = pose_to_parts(pose);
+        Self { rotation, translation }
+    }
+
+    /// The pose, validated as by [`pose_from_parts`].
+    ///
+    /// # Errors
+    /// [`crate::Error::InvalidArgument`] naming `field` for a non-finite entry or non-unit quaternion.
+    pub fn to_isometry(&self, field: &str) -> Result<Isometry3> {
+        pose_from_parts(field, self.rotation, self.translation)
+    }
+}
+
+/// A body as stored: its name and its JSON body file.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct BodyRecord {
+    /// Human-readable name (not necessarily unique).
+    pub name: String,
+    /// The body file (degree, exponents, coefficients, center, scale, fit report).
+    pub body: BodyFile,
+}
+
+/// A scene's own fields as stored (its instances are stored separately, one record each, so a
+/// pose update writes only the instances that moved).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SceneMeta {
+    /// Human-readable name (not necessarily unique).
+    pub name: String,
+}
+
+/// An instance as stored.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct InstanceRecord {
+    /// Id of the instantiated body.
+    pub body_id: String,
+    /// Its pose.
+    pub pose: StoredPose,
+}
+
+/// A scene with all its instances, as read back from the store.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SceneRecord {
+    /// The scene's own fields.
+    pub meta: SceneMeta,
+    /// Instances by id.
+    pub instances: std::collections::BTreeMap<String, InstanceRecord>,
+}

@@ -1,1 +1,151 @@
-//! The gRPC service layer (tonic). STUB.
+//! The gRPC API `sublevel.v1` (tonic): the only module that knows tonic, prost and tokio.
+//!
+//! Handlers follow one recipe: **validate → call the core → convert**. Validation and every
+//! proto ↔ core conversion (including the single `Error → tonic::Status` mapping) live in
+//! [`convert`]; the handlers in `handlers.rs` stay short. The math core ([`crate::scene`],
+//! [`crate::query`], [`crate::fit`]) never sees a proto type.
+//!
+//! Work placement:
+//!
+//! - queries (microseconds) and pose updates (no fsync) run inline on the async threads;
+//! - structural writes (uploads, scenes, instances: one fsync'd redb transaction each) and mesh
+//!   parsing run on tokio's blocking pool;
+//! - fits (seconds to minutes of SDP solving, paper §III) run on the blocking pool too, at most
+//!   [`ServerConfig::max_concurrent_fits`] at a time, reporting progress through one
+//!   `tokio::sync::watch` channel per job that `WatchFitJob` streams from.
+//!
+//! The server also serves `grpc.health.v1` (tonic-health; `""` and `sublevel.v1.Sublevel` report
+//! SERVING) and server reflection v1 (tonic-reflection), so `grpcurl` works without the proto.
+//!
+//! # Adding an RPC
+//!
+//! 1. declare it with commented messages in `proto/sublevel/v1/sublevel.proto`;
+//! 2. add its conversions (and field validation) to [`convert`];
+//! 3. implement it in `handlers.rs` as validate → core call → convert;
+//! 4. add a round-trip and an error test to `tests/it/service.rs`.
+
+pub mod convert;
+mod handlers;
+mod jobs;
+
+use crate::fit::FitSettings;
+use crate::query::NewtonParams;
+use crate::scene::store::RedbStore;
+use crate::scene::Catalog;
+use crate::{Error, Result};
+use std::future::Future;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+pub use handlers::SublevelService;
+
+/// Code generated from `proto/sublevel/v1/sublevel.proto` (messages, client and server).
+#[allow(missing_docs, clippy::all, clippy::pedantic)]
+pub mod pb {
+    tonic::include_proto!("sublevel.v1");
+
+    /// The encoded `FileDescriptorSet` of `sublevel.v1`, for server reflection.
+    pub const FILE_DESCRIPTOR_SET: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/sublevel_descriptor.bin"));
+}
+
+/// Fully qualified gRPC name of the service (`sublevel.v1.Sublevel`).
+pub const SERVICE_NAME: &str = "sublevel.v1.Sublevel";
+
+/// Server settings and request limits.
+#[derive(Clone, Debug)]
+pub struct ServerConfig {
+    /// Directory of the redb database (created if missing).
+    pub data_dir: PathBuf,
+    /// Largest encoded request or response, in bytes (tonic rejects larger messages with
+    /// OUT_OF_RANGE before a handler runs).
+    pub max_message_bytes: usize,
+    /// Most points one fit may use (after mesh parsing).
+    pub max_fit_points: usize,
+    /// Most pairs in one `BatchQuery`.
+    pub max_batch_pairs: usize,
+    /// Most poses in one `SetPoses`.
+    pub max_poses_per_call: usize,
+    /// Fits running at the same time (each is CPU-heavy; the rest queue).
+    pub max_concurrent_fits: usize,
+    /// Tolerances of every query.
+    pub newton: NewtonParams,
+    /// Settings of every fit (the degree comes from each request).
+    pub fit: FitSettings,
+}
+
+impl Default for ServerConfig {
+    fn default() -> Self {
+        Self {
+            data_dir: PathBuf::from("./sublevel-data"),
+            max_message_bytes: 64 * 1024 * 1024,
+            max_fit_points: 2_000_000,
+            max_batch_pairs: 10_000,
+            max_poses_per_call: 100_000,
+            max_concurrent_fits: 1,
+            newton: NewtonParams::default(),
+            fit: FitSettings::default(),
+        }
+    }
+}
+
+/// Opens the catalog stored in `config.data_dir` (redb), creating it if missing.
+///
+/// # Errors
+/// [`Error::Io`] / [`Error::Storage`] when the database cannot be opened (e.g. another server
+/// holds it).
+pub fn open_catalog(config: &ServerConfig) -> Result<Arc<Catalog>> {
+    let store = RedbStore::open_dir(&config.data_dir)?;
+    Ok(Arc::new(Catalog::open(Box::new(store), config.newton)?))
+}
+
+/// Serves `sublevel.v1`, health and reflection on `listener` until `shutdown` completes, with the
+/// catalog stored in `config.data_dir`.
+///
+/// Tests pass a throwaway `127.0.0.1:0` listener and a oneshot receiver; the binary passes
+/// Ctrl-C. In-flight requests finish before this returns; running fit jobs are abandoned.
+///
+/// # Errors
+/// Those of [`open_catalog`]; [`Error::Io`] when the transport fails.
+pub async fn serve(
+    listener: tokio::net::TcpListener,
+    config: ServerConfig,
+    shutdown: impl Future<Output = ()> + Send,
+) -> Result<()> {
+    let catalog = open_catalog(&config)?;
+    serve_catalog(listener, catalog, config, shutdown).await
+}
+
+/// Like [`serve`], with an already opened catalog (e.g. one the caller preloaded with demo data).
+///
+/// # Errors
+/// [`Error::Io`] when reflection cannot be built or the transport fails.
+pub async fn serve_catalog(
+    listener: tokio::net::TcpListener,
+    catalog: Arc<Catalog>,
+    config: ServerConfig,
+    shutdown: impl Future<Output = ()> + Send,
+) -> Result<()> {
+    use pb::sublevel_server::SublevelServer;
+    let (reporter, health) = tonic_health::server::health_reporter();
+    reporter.set_serving::<SublevelServer<SublevelService>>().await;
+    let reflection = tonic_reflection::server::Builder::configure()
+        .register_encoded_file_descriptor_set(pb::FILE_DESCRIPTOR_SET)
+        .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
+        .build_v1()
+        .map_err(|e| Error::Io(std::io::Error::other(format!("reflection: {e}"))))?;
+    let max = config.max_message_bytes;
+    let service = SublevelServer::new(SublevelService::new(catalog, config))
+        .max_decoding_message_size(max)
+        .max_encoding_message_size(max);
+    let addr = listener.local_addr().ok();
+    tracing::info!(?addr, "serving {SERVICE_NAME}");
+    tonic::transport::Server::builder()
+        .add_service(health)
+        .add_service(reflection)
+        .add_service(service)
+        .serve_with_incoming_shutdown(tokio_stream::wrappers::TcpListenerStream::new(listener), shutdown)
+        .await
+        .map_err(|e| Error::Io(std::io::Error::other(format!("transport: {e}"))))?;
+    tracing::info!("server stopped");
+    Ok(())
+}

@@ -1,0 +1,525 @@
+//! The in-memory catalog of bodies and scenes, written through to a [`Store`].
+
+use super::cache::WarmStartCache;
+use super::store::Store;
+use super::{BodyRecord, InstanceRecord, SceneMeta, StoredPose};
+use crate::body::Body;
+use crate::math::Isometry3;
+use crate::query::{distance, growth, DistanceResult, GrowthResult, NewtonParams};
+use crate::{Error, Result};
+use std::collections::BTreeMap;
+use std::sync::{Arc, Mutex, MutexGuard, RwLock, RwLockReadGuard, RwLockWriteGuard};
+
+/// Longest accepted body or scene name, in bytes.
+pub const MAX_NAME_BYTES: usize = 256;
+
+/// A stored body, parsed once and shared with every query that uses it.
+#[derive(Debug)]
+pub struct BodyEntry {
+    /// The body's id.
+    pub id: String,
+    /// Its name.
+    pub name: String,
+    /// The validated body.
+    pub body: Arc<Body>,
+}
+
+/// Which query to run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum QueryKind {
+    /// Euclidean distance between `first` and `second` (eq. "distance").
+    Distance,
+    /// Growth measure d(first ‖ second) (eq. "overlap").
+    Growth,
+}
+
+/// One query of a batch: a kind and an ordered pair of instance ids.
+#[derive(Clone, Debug)]
+pub struct QueryPair {
+    /// Which query.
+    pub kind: QueryKind,
+    /// First instance (A, or p₁).
+    pub first: String,
+    /// Second instance (B, or p₂).
+    pub second: String,
+}
+
+/// The answer of one query of a batch.
+#[derive(Clone, Debug)]
+pub enum QueryAnswer {
+    /// A distance answer.
+    Distance(DistanceResult),
+    /// A growth answer.
+    Growth(GrowthResult),
+}
+
+/// An instance as seen from outside: its body and pose.
+#[derive(Clone, Debug)]
+pub struct InstanceView {
+    /// The instance's id.
+    pub id: String,
+    /// The instantiated body's id.
+    pub body_id: String,
+    /// Its pose.
+    pub pose: Isometry3,
+}
+
+/// A scene as seen from outside.
+#[derive(Clone, Debug)]
+pub struct SceneView {
+    /// The scene's id.
+    pub id: String,
+    /// Its name.
+    pub name: String,
+    /// Its instances, ordered by id.
+    pub instances: Vec<InstanceView>,
+}
+
+#[derive(Debug)]
+struct Instance {
+    body_id: String,
+    body: Arc<Body>,
+    pose: Isometry3,
+}
+
+#[derive(Debug)]
+struct SceneState {
+    id: String,
+    name: String,
+    instances: BTreeMap<String, Instance>,
+    cache: WarmStartCache,
+    /// Set (under this scene's lock) when the scene is deleted, so a request that fetched the
+    /// scene just before cannot write it back to the store.
+    deleted: bool,
+}
+
+/// Bodies and scenes in memory, written through to a [`Store`].
+///
+/// Locks are std locks, not async ones: every critical section is short (a map lookup, a
+/// microsecond query, or one store transaction) and never awaits. Lock order, to rule out
+/// deadlocks: `bodies` → `scenes` → one scene's mutex.
+pub struct Catalog {
+    store: Box<dyn Store>,
+    bodies: RwLock<BTreeMap<String, Arc<BodyEntry>>>,
+    scenes: RwLock<BTreeMap<String, Arc<Mutex<SceneState>>>>,
+    params: NewtonParams,
+}
+
+impl std::fmt::Debug for Catalog {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Catalog").field("params", &self.params).finish_non_exhaustive()
+    }
+}
+
+// A panic while holding a lock cannot leave these maps half-updated (every update is a single
+// insert/remove after the store committed), so a poisoned lock is safe to keep using.
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
+}
+fn read<T>(m: &RwLock<T>) -> RwLockReadGuard<'_, T> {
+    m.read().unwrap_or_else(|e| e.into_inner())
+}
+fn write<T>(m: &RwLock<T>) -> RwLockWriteGuard<'_, T> {
+    m.write().unwrap_or_else(|e| e.into_inner())
+}
+
+/// A fresh random id with a kind prefix, e.g. `b-3f29c0d1a4e5b6c7`. Ids never contain `/`.
+pub(crate) fn new_id(prefix: &str) -> String {
+    format!("{prefix}-{:016x}", rand::random::<u64>())
+}
+
+fn check_name(field: &str, name: &str) -> Result<()> {
+    if name.len() > MAX_NAME_BYTES {
+        return Err(Error::invalid(field, format!("at most {MAX_NAME_BYTES} bytes, got {}", name.len())));
+    }
+    Ok(())
+}
+
+impl Catalog {
+    /// Loads every body and scene of `store` into memory.
+    ///
+    /// A stored body that no longer validates, or an instance whose body is missing, is skipped
+    /// with a warning (and left in the store) rather than keeping the server from starting.
+    ///
+    /// # Errors
+    /// [`Error::Storage`] when the store cannot be read.
+    pub fn open(store: Box<dyn Store>, params: NewtonParams) -> Result<Self> {
+        let mut bodies = BTreeMap::new();
+        for (id, rec) in store.list_bodies()? {
+            match Body::from_file(rec.body) {
+                Ok(body) => {
+                    let entry = BodyEntry { id: id.clone(), name: rec.name, body: Arc::new(body) };
+                    bodies.insert(id, Arc::new(entry));
+                }
+                Err(e) => tracing::warn!(body_id = %id, error = %e, "skipping stored body that does not validate"),
+            }
+        }
+        let mut scenes = BTreeMap::new();
+        for (id, rec) in store.list_scenes()? {
+            let mut instances = BTreeMap::new();
+            for (iid, inst) in rec.instances {
+                let Some(entry) = bodies.get(&inst.body_id) else {
+                    tracing::warn!(scene_id = %id, instance_id = %iid, body_id = %inst.body_id, "skipping instance of missing body");
+                    continue;
+                };
+                match inst.pose.to_isometry("pose") {
+                    Ok(pose) => {
+                        instances.insert(iid, Instance { body_id: inst.body_id, body: entry.body.clone(), pose });
+                    }
+                    Err(e) => tracing::warn!(scene_id = %id, instance_id = %iid, error = %e, "skipping instance"),
+                }
+            }
+            let state = SceneState {
+                id: id.clone(),
+                name: rec.meta.name,
+                instances,
+                cache: WarmStartCache::default(),
+                deleted: false,
+            };
+            scenes.insert(id, Arc::new(Mutex::new(state)));
+        }
+        tracing::info!(bodies = bodies.len(), scenes = scenes.len(), "catalog loaded");
+        Ok(Self { store, bodies: RwLock::new(bodies), scenes: RwLock::new(scenes), params })
+    }
+
+    /// The Newton parameters every query uses.
+    pub fn params(&self) -> &NewtonParams {
+        &self.params
+    }
+
+    // ----------------------------------------------------------------------------------------
+    // Bodies
+    // ----------------------------------------------------------------------------------------
+
+    /// Stores a validated body under a fresh id and returns the id.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `name` for an over-long name; [`Error::Storage`].
+    pub fn add_body(&self, name: &str, body: Body) -> Result<String> {
+        check_name("name", name)?;
+        let id = new_id("b");
+        self.store.put_body(&id, &BodyRecord { name: name.to_owned(), body: body.to_file() })?;
+        let entry = BodyEntry { id: id.clone(), name: name.to_owned(), body: Arc::new(body) };
+        write(&self.bodies).insert(id.clone(), Arc::new(entry));
+        Ok(id)
+    }
+
+    /// The body with id `id`.
+    ///
+    /// # Errors
+    /// [`Error::NotFound`] (kind `body`).
+    pub fn body(&self, id: &str) -> Result<Arc<BodyEntry>> {
+        read(&self.bodies).get(id).cloned().ok_or_else(|| Error::not_found("body", id))
+    }
+
+    /// All bodies, ordered by id.
+    pub fn bodies(&self) -> Vec<Arc<BodyEntry>> {
+        read(&self.bodies).values().cloned().collect()
+    }
+
+    /// Deletes a body that no instance uses.
+    ///
+    /// # Errors
+    /// [`Error::NotFound`]; [`Error::InvalidArgument`] naming `body_id` while an instance uses it;
+    /// [`Error::Storage`].
+    pub fn delete_body(&self, id: &str) -> Result<()> {
+        let mut bodies = write(&self.bodies);
+        if !bodies.contains_key(id) {
+            return Err(Error::not_found("body", id));
+        }
+        for scene in read(&self.scenes).values() {
+            let s = lock(scene);
+            if let Some((iid, _)) = s.instances.iter().find(|(_, inst)| inst.body_id == id) {
+                return Err(Error::invalid(
+                    "body_id",
+                    format!("body `{id}` is used by instance `{iid}` of scene `{}`; remove it first", s.id),
+                ));
+            }
+        }
+        self.store.delete_body(id)?;
+        bodies.remove(id);
+        Ok(())
+    }
+
+    // ----------------------------------------------------------------------------------------
+    // Scenes
+    // ----------------------------------------------------------------------------------------
+
+    /// Creates an empty scene and returns its id.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `name` for an over-long name; [`Error::Storage`].
+    pub fn create_scene(&self, name: &str) -> Result<String> {
+        check_name("name", name)?;
+        let id = new_id("s");
+        self.store.put_scene(&id, &SceneMeta { name: name.to_owned() })?;
+        let state = SceneState {
+            id: id.clone(),
+            name: name.to_owned(),
+            instances: BTreeMap::new(),
+            cache: WarmStartCache::default(),
+            deleted: false,
+        };
+        write(&self.scenes).insert(id.clone(), Arc::new(Mutex::new(state)));
+        Ok(id)
+    }
+
+    fn scene(&self, id: &str) -> Result<Arc<Mutex<SceneState>>> {
+        read(&self.scenes).get(id).cloned().ok_or_else(|| Error::not_found("scene", id))
+    }
+
+    /// Locks a live scene (one that was not deleted meanwhile).
+    fn with_scene<T>(&self, id: &str, f: impl FnOnce(&mut SceneState) -> Result<T>) -> Result<T> {
+        let scene = self.scene(id)?;
+        let mut s = lock(&scene);
+        if s.deleted {
+            return Err(Error::not_found("scene", id));
+        }
+        f(&mut s)
+    }
+
+    /// A scene with its instances.
+    ///
+    /// # Errors
+    /// [`Error::NotFound`] (kind `scene`).
+    pub fn get_scene(&self, id: &str) -> Result<SceneView> {
+        self.with_scene(id, |s| Ok(view(s)))
+    }
+
+    /// All scenes, ordered by id.
+    pub fn scenes(&self) -> Vec<SceneView> {
+        read(&self.scenes).values().map(|s| view(&lock(s))).collect()
+    }
+
+    /// Deletes a scene with its instances and warm starts.
+    ///
+    /// # Errors
+    /// [`Error::NotFound`]; [`Error::Storage`].
+    pub fn delete_scene(&self, id: &str) -> Result<()> {
+        let mut scenes = write(&self.scenes);
+        let scene = scenes.get(id).cloned().ok_or_else(|| Error::not_found("scene", id))?;
+        let mut s = lock(&scene);
+        self.store.delete_scene(id)?;
+        s.deleted = true;
+        drop(s);
+        scenes.remove(id);
+        Ok(())
+    }
+
+    /// Adds an instance of body `body_id` to scene `scene_id` under `pose`; returns its id.
+    ///
+    /// # Errors
+    /// [`Error::NotFound`] for the scene or the body; [`Error::Storage`].
+    pub fn add_instance(&self, scene_id: &str, body_id: &str, pose: Isometry3) -> Result<String> {
+        // Hold the bodies lock so the body cannot be deleted between the check and the insert.
+        let bodies = read(&self.bodies);
+        let body = bodies.get(body_id).ok_or_else(|| Error::not_found("body", body_id))?.body.clone();
+        self.with_scene(scene_id, |s| {
+            let id = new_id("i");
+            let rec = InstanceRecord { body_id: body_id.to_owned(), pose: StoredPose::from_isometry(&pose) };
+            self.store.put_instances(scene_id, &[(&id, &rec)], false)?;
+            s.instances.insert(id.clone(), Instance { body_id: body_id.to_owned(), body, pose });
+            Ok(id)
+        })
+    }
+
+    /// Sets the poses of many instances of one scene: all or nothing.
+    ///
+    /// Poses must already be validated (see [`crate::math::pose_from_parts`]); `poses[k].0` is
+    /// the instance id. Returns the number of instances updated.
+    ///
+    /// # Errors
+    /// [`Error::NotFound`] for the scene; [`Error::InvalidArgument`] naming `poses[k].instance_id`
+    /// for an unknown or repeated instance (nothing changes then); [`Error::Storage`].
+    pub fn set_poses(&self, scene_id: &str, poses: &[(String, Isometry3)]) -> Result<usize> {
+        self.with_scene(scene_id, |s| {
+            let mut seen = std::collections::HashSet::new();
+            let mut records = Vec::with_capacity(poses.len());
+            for (k, (iid, pose)) in poses.iter().enumerate() {
+                let field = format!("poses[{k}].instance_id");
+                let inst = s
+                    .instances
+                    .get(iid)
+                    .ok_or_else(|| Error::invalid(&field, format!("no instance `{iid}` in scene `{scene_id}`")))?;
+                if !seen.insert(iid.as_str()) {
+                    return Err(Error::invalid(field, format!("instance `{iid}` appears twice")));
+                }
+                records.push(InstanceRecord { body_id: inst.body_id.clone(), pose: StoredPose::from_isometry(pose) });
+            }
+            let rows: Vec<(&str, &InstanceRecord)> =
+                poses.iter().zip(records.iter()).map(|((iid, _), rec)| (iid.as_str(), rec)).collect();
+            self.store.put_instances(scene_id, &rows, true)?;
+            for (iid, pose) in poses {
+                if let Some(inst) = s.instances.get_mut(iid) {
+                    inst.pose = *pose;
+                }
+            }
+            Ok(poses.len())
+        })
+    }
+
+    /// Removes an instance and every warm start involving it.
+    ///
+    /// # Errors
+    /// [`Error::NotFound`] for the scene or the instance; [`Error::Storage`].
+    pub fn remove_instance(&self, scene_id: &str, instance_id: &str) -> Result<()> {
+        self.with_scene(scene_id, |s| {
+            if !s.instances.contains_key(instance_id) {
+                return Err(Error::not_found("instance", instance_id));
+            }
+            self.store.delete_instance(scene_id, instance_id)?;
+            s.instances.remove(instance_id);
+            s.cache.invalidate_instance(instance_id);
+            Ok(())
+        })
+    }
+
+    /// Number of warm starts cached for a scene (for monitoring and tests).
+    ///
+    /// # Errors
+    /// [`Error::NotFound`] for the scene.
+    pub fn cached_warm_starts(&self, scene_id: &str) -> Result<usize> {
+        self.with_scene(scene_id, |s| Ok(s.cache.len()))
+    }
+
+    // ----------------------------------------------------------------------------------------
+    // Queries
+    // ----------------------------------------------------------------------------------------
+
+    /// Distance between instances `a` and `b` of a scene (eq. "distance"), warm-started from the
+    /// previous answer of the same ordered pair; the new answer's warm start replaces it.
+    ///
+    /// # Errors
+    /// [`Error::NotFound`] for the scene or an instance.
+    pub fn distance(&self, scene_id: &str, a: &str, b: &str) -> Result<DistanceResult> {
+        self.with_scene(scene_id, |s| run_distance(s, a, b, &self.params))
+    }
+
+    /// Growth measure d(p₁‖p₂) between instances `p1` and `p2` (eq. "overlap"), warm-started
+    /// like [`Catalog::distance`].
+    ///
+    /// # Errors
+    /// [`Error::NotFound`] for the scene or an instance.
+    pub fn growth(&self, scene_id: &str, p1: &str, p2: &str) -> Result<GrowthResult> {
+        self.with_scene(scene_id, |s| run_growth(s, p1, p2, &self.params))
+    }
+
+    /// Many queries of one scene under one lock (so all see the same poses); answers in order.
+    ///
+    /// # Errors
+    /// [`Error::NotFound`] for the scene or any instance (checked before any query runs).
+    pub fn batch(&self, scene_id: &str, pairs: &[QueryPair]) -> Result<Vec<QueryAnswer>> {
+        self.with_scene(scene_id, |s| {
+            for p in pairs {
+                for id in [&p.first, &p.second] {
+                    if !s.instances.contains_key(id) {
+                        return Err(Error::not_found("instance", id.as_str()));
+                    }
+                }
+            }
+            pairs
+                .iter()
+                .map(|p| match p.kind {
+                    QueryKind::Distance => {
+                        run_distance(s, &p.first, &p.second, &self.params).map(QueryAnswer::Distance)
+                    }
+                    QueryKind::Growth => run_growth(s, &p.first, &p.second, &self.params).map(QueryAnswer::Growth),
+                })
+                .collect()
+        })
+    }
+}
+
+fn view(s: &SceneState) -> SceneView {
+    SceneView {
+        id: s.id.clone(),
+        name: s.name.clone(),
+        instances: s
+            .instances
+            .iter()
+            .map(|(id, i)| InstanceView { id: id.clone(), body_id: i.body_id.clone(), pose: i.pose })
+            .collect(),
+    }
+}
+
+fn instance<'a>(s: &'a SceneState, id: &str) -> Result<&'a Instance> {
+    s.instances.get(id).ok_or_else(|| Error::not_found("instance", id))
+}
+
+fn run_distance(s: &mut SceneState, a: &str, b: &str, params: &NewtonParams) -> Result<DistanceResult> {
+    let (ia, ib) = (instance(s, a)?, instance(s, b)?);
+    let r = distance(&ia.body, &ia.pose, &ib.body, &ib.pose, s.cache.distance(a, b), params);
+    s.cache.put_distance(a, b, r.warm_start);
+    Ok(r)
+}
+
+fn run_growth(s: &mut SceneState, p1: &str, p2: &str, params: &NewtonParams) -> Result<GrowthResult> {
+    let (i1, i2) = (instance(s, p1)?, instance(s, p2)?);
+    let r = growth(&i1.body, &i1.pose, &i2.body, &i2.pose, s.cache.growth(p1, p2), params);
+    s.cache.put_growth(p1, p2, r.warm_start);
+    Ok(r)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::body::ellipsoid;
+    use crate::math::pose_from_parts;
+    use crate::scene::store::RedbStore;
+
+    fn at(x: f64) -> Isometry3 {
+        pose_from_parts("pose", [1.0, 0.0, 0.0, 0.0], [x, 0.0, 0.0]).unwrap()
+    }
+
+    fn open(dir: &std::path::Path) -> Catalog {
+        Catalog::open(Box::new(RedbStore::open_dir(dir).unwrap()), NewtonParams::default()).unwrap()
+    }
+
+    #[test]
+    fn catalog_persists_and_warm_starts_follow_the_pair() {
+        let dir = tempfile::tempdir().unwrap();
+        let (scene, i1, i2);
+        {
+            let c = open(dir.path());
+            let b1 = c.add_body("r1", ellipsoid([0.0; 3], [0.5; 3]).unwrap()).unwrap();
+            let b2 = c.add_body("r2", ellipsoid([0.0; 3], [0.25; 3]).unwrap()).unwrap();
+            scene = c.create_scene("s").unwrap();
+            i1 = c.add_instance(&scene, &b1, at(0.0)).unwrap();
+            i2 = c.add_instance(&scene, &b2, at(2.0)).unwrap();
+            // Spheres: distance = ‖c₁ − c₂‖ − r₁ − r₂.
+            let d = c.distance(&scene, &i1, &i2).unwrap();
+            assert!((d.distance - 1.25).abs() < 1e-9, "{}", d.distance);
+            assert!(!d.warm_started);
+            c.set_poses(&scene, &[(i2.clone(), at(1.5))]).unwrap();
+            let d = c.distance(&scene, &i1, &i2).unwrap();
+            assert!((d.distance - 0.75).abs() < 1e-9, "{}", d.distance);
+            assert!(d.warm_started);
+            // Growth of spheres: (‖c₁ − c₂‖ − r₂)² / r₁².
+            let g = c.growth(&scene, &i1, &i2).unwrap();
+            assert!((g.value - (1.25f64 / 0.5).powi(2)).abs() < 1e-9, "{}", g.value);
+            assert_eq!(c.cached_warm_starts(&scene).unwrap(), 2);
+            // A bad batch entry changes nothing; an unknown instance is NotFound.
+            let err = c.set_poses(&scene, &[(i2.clone(), at(9.0)), ("i-nope".into(), at(0.0))]).unwrap_err();
+            assert!(err.to_string().contains("poses[1].instance_id"), "{err}");
+            assert!(matches!(c.distance(&scene, &i1, "i-nope"), Err(Error::NotFound { .. })));
+            // The body is in use.
+            assert!(c.delete_body(&b1).unwrap_err().to_string().contains("body_id"));
+        }
+        let c = open(dir.path());
+        let v = c.get_scene(&scene).unwrap();
+        assert_eq!(v.instances.len(), 2);
+        let p2 = v.instances.iter().find(|i| i.id == i2).unwrap().pose;
+        assert!((p2.translation.vector.x - 1.5).abs() < 1e-15, "the failed batch must not have moved i2");
+        assert_eq!(c.cached_warm_starts(&scene).unwrap(), 0, "warm starts are memory only");
+        let d = c.distance(&scene, &i1, &i2).unwrap();
+        assert!((d.distance - 0.75).abs() < 1e-9);
+        c.remove_instance(&scene, &i1).unwrap();
+        assert_eq!(c.cached_warm_starts(&scene).unwrap(), 0);
+        c.delete_scene(&scene).unwrap();
+        assert!(matches!(c.get_scene(&scene), Err(Error::NotFound { .. })));
+        drop(c);
+        let c = open(dir.path());
+        assert!(c.get_scene(&scene).is_err());
+        assert_eq!(c.bodies().len(), 2);
+    }
+}

@@ -1,0 +1,459 @@
+//! Every conversion between proto messages and core types, the request validation that goes with
+//! them, and the crate's single `Error → tonic::Status` mapping.
+//!
+//! | [`Error`]            | gRPC code            |
+//! |----------------------|----------------------|
+//! | `InvalidArgument`    | INVALID_ARGUMENT     |
+//! | `NotFound`           | NOT_FOUND            |
+//! | `ResourceExhausted`  | RESOURCE_EXHAUSTED   |
+//! | `Numerical`          | INTERNAL             |
+//! | `Storage`, `Io`      | UNAVAILABLE          |
+//! | `Json`               | INVALID_ARGUMENT (only request JSON is parsed in handlers) |
+//!
+//! Field names in messages use the request's vocabulary with indices, e.g.
+//! `poses[3].pose.rotation` or `data.coefficients`.
+
+use super::pb;
+use crate::body::{BodyFile, FitReport, SUPPORTED_DEGREES};
+use crate::fit::FitStage;
+use crate::math::{pose_from_parts, pose_to_parts, Isometry3, Point3, Real, Vector3};
+use crate::query::{DistanceResult, GrowthResult, SolveStatus};
+use crate::scene::{BodyEntry, InstanceView, QueryAnswer, QueryKind, SceneView};
+use crate::{Error, Result};
+use tonic::{Code, Status};
+
+impl From<Error> for Status {
+    fn from(e: Error) -> Self {
+        let code = match &e {
+            Error::InvalidArgument { .. } | Error::Json(_) => Code::InvalidArgument,
+            Error::NotFound { .. } => Code::NotFound,
+            Error::ResourceExhausted(_) => Code::ResourceExhausted,
+            Error::Numerical(_) => Code::Internal,
+            Error::Storage(_) | Error::Io(_) => Code::Unavailable,
+        };
+        Status::new(code, e.to_string())
+    }
+}
+
+/// Re-labels an [`Error::InvalidArgument`]'s field as `prefix.field` (other errors unchanged), so
+/// errors of core validation name the field as the client sent it.
+pub fn prefix_field(e: Error, prefix: &str) -> Error {
+    match e {
+        Error::InvalidArgument { field, reason } => {
+            Error::InvalidArgument { field: format!("{prefix}.{field}"), reason }
+        }
+        other => other,
+    }
+}
+
+/// Rejects an empty id.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `field`.
+pub fn require_id<'a>(field: &str, id: &'a str) -> Result<&'a str> {
+    if id.is_empty() {
+        return Err(Error::invalid(field, "must not be empty"));
+    }
+    Ok(id)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Geometry
+// ---------------------------------------------------------------------------------------------
+
+/// A proto point as a core point.
+pub fn point_from_proto(v: &pb::Vec3) -> Point3 {
+    Point3::new(v.x, v.y, v.z)
+}
+
+/// A core point as a proto point.
+pub fn point_to_proto(p: &Point3) -> pb::Vec3 {
+    pb::Vec3 { x: p.x, y: p.y, z: p.z }
+}
+
+/// A core vector as a proto vector.
+pub fn vector_to_proto(v: &Vector3) -> pb::Vec3 {
+    pb::Vec3 { x: v.x, y: v.y, z: v.z }
+}
+
+/// A validated pose; `field` names the pose (e.g. `poses[3].pose`). An absent pose, rotation or
+/// translation means identity / zero.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `field.translation` for a non-finite translation or
+/// `field.rotation` for a non-finite or non-unit quaternion.
+pub fn pose_from_proto(field: &str, pose: Option<&pb::Pose>) -> Result<Isometry3> {
+    let Some(pose) = pose else { return Ok(Isometry3::identity()) };
+    let t = pose.translation.as_ref().map_or([0.0; 3], |t| [t.x, t.y, t.z]);
+    if t.iter().any(|v| !v.is_finite()) {
+        return Err(Error::invalid(format!("{field}.translation"), "must be three finite numbers (meters)"));
+    }
+    let q = pose.rotation.as_ref().map_or([1.0, 0.0, 0.0, 0.0], |q| [q.w, q.x, q.y, q.z]);
+    pose_from_parts(&format!("{field}.rotation"), q, t)
+}
+
+/// A pose as a proto pose.
+pub fn pose_to_proto(pose: &Isometry3) -> pb::Pose {
+    let (q, t) = pose_to_parts(pose);
+    pb::Pose {
+        rotation: Some(pb::Quaternion { w: q[0], x: q[1], y: q[2], z: q[3] }),
+        translation: Some(pb::Vec3 { x: t[0], y: t[1], z: t[2] }),
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Bodies and fits
+// ---------------------------------------------------------------------------------------------
+
+/// Checks a requested fit degree.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `degree` unless it is 2, 4, 6 or 8.
+pub fn fit_degree(degree: u32) -> Result<usize> {
+    let d = degree as usize;
+    if !SUPPORTED_DEGREES.contains(&d) {
+        return Err(Error::invalid("degree", format!("must be one of 2, 4, 6, 8, got {degree}")));
+    }
+    Ok(d)
+}
+
+/// Unpacks a point cloud `x0, y0, z0, x1, …`.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `points.xyz` for a length that is not a multiple of 3 or a
+/// non-finite coordinate; [`Error::ResourceExhausted`] above `max_points` points.
+pub fn points_from_proto(cloud: &pb::PointCloud, max_points: usize) -> Result<Vec<Point3>> {
+    let xyz = &cloud.xyz;
+    if !xyz.len().is_multiple_of(3) {
+        return Err(Error::invalid("points.xyz", format!("length {} is not a multiple of 3", xyz.len())));
+    }
+    check_point_count("points.xyz", xyz.len() / 3, max_points)?;
+    if let Some(i) = xyz.iter().position(|v| !v.is_finite()) {
+        return Err(Error::invalid("points.xyz", format!("coordinate {i} is not finite")));
+    }
+    Ok(xyz.chunks_exact(3).map(|c| Point3::new(c[0], c[1], c[2])).collect())
+}
+
+/// Fails with [`Error::ResourceExhausted`] naming `field` when `n > max_points`.
+///
+/// # Errors
+/// As described.
+pub fn check_point_count(field: &str, n: usize, max_points: usize) -> Result<()> {
+    if n > max_points {
+        return Err(Error::ResourceExhausted(format!(
+            "`{field}`: {n} points exceed the limit of {max_points} per fit"
+        )));
+    }
+    Ok(())
+}
+
+/// Checks that a cloud can enclose a body with interior: at least 4 finite points that are not
+/// all on one plane (the smallest eigenvalue of their covariance is not negligible).
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `field`.
+pub fn check_cloud(field: &str, points: &[Point3]) -> Result<()> {
+    if points.len() < 4 {
+        return Err(Error::invalid(field, format!("need at least 4 points, got {}", points.len())));
+    }
+    if points.iter().any(|p| !p.coords.iter().all(|v| v.is_finite())) {
+        return Err(Error::invalid(field, "every coordinate must be finite"));
+    }
+    let n = points.len() as Real;
+    let mean = points.iter().fold(Vector3::zeros(), |a, p| a + p.coords) / n;
+    let cov = points.iter().fold(crate::math::Matrix3::zeros(), |a, p| {
+        let d = p.coords - mean;
+        a + d * d.transpose()
+    }) / n;
+    let eig = cov.symmetric_eigenvalues();
+    let (lo, hi) = (eig.min(), eig.max());
+    if hi.is_nan() || hi <= 0.0 || lo <= 1e-12 * hi {
+        return Err(Error::invalid(
+            field,
+            format!("degenerate cloud: the points lie on a plane, a line or one point (covariance eigenvalues {lo:.3e} … {hi:.3e})"),
+        ));
+    }
+    Ok(())
+}
+
+/// A core fit stage as the proto enum.
+pub fn fit_stage_to_proto(stage: FitStage) -> pb::FitStage {
+    match stage {
+        FitStage::Hull => pb::FitStage::Hull,
+        FitStage::Build => pb::FitStage::Build,
+        FitStage::Solve => pb::FitStage::Solve,
+        FitStage::Verify => pb::FitStage::Verify,
+        FitStage::Volume => pb::FitStage::Volume,
+        FitStage::Done => pb::FitStage::Done,
+    }
+}
+
+/// A fit report as the proto message.
+pub fn report_to_proto(r: &FitReport) -> pb::FitReport {
+    pb::FitReport {
+        method: r.method.clone(),
+        solver_status: r.solver_status.clone(),
+        solve_seconds: r.solve_seconds,
+        total_seconds: r.total_seconds,
+        num_points: r.num_points as u64,
+        num_hull_vertices: r.num_hull_vertices as u64,
+        volume: r.volume,
+        volume_std_error: r.volume_std_error,
+        hull_volume: r.hull_volume,
+        max_point_value: r.max_point_value,
+        containment_rescale: r.containment_rescale,
+        convexity_margin: r.convexity_margin,
+        notes: r.notes.clone(),
+    }
+}
+
+/// A proto fit report as the core one.
+pub fn report_from_proto(r: &pb::FitReport) -> FitReport {
+    FitReport {
+        method: r.method.clone(),
+        solver_status: r.solver_status.clone(),
+        solve_seconds: r.solve_seconds,
+        total_seconds: r.total_seconds,
+        num_points: r.num_points as usize,
+        num_hull_vertices: r.num_hull_vertices as usize,
+        volume: r.volume,
+        volume_std_error: r.volume_std_error,
+        hull_volume: r.hull_volume,
+        max_point_value: r.max_point_value,
+        containment_rescale: r.containment_rescale,
+        convexity_margin: r.convexity_margin,
+        notes: r.notes.clone(),
+    }
+}
+
+/// A body file as structured proto fields.
+pub fn body_file_to_proto(f: &BodyFile) -> pb::BodyData {
+    pb::BodyData {
+        degree: f.degree as u32,
+        exponents: f.exponents.iter().flat_map(|e| e.iter().map(|&v| u32::from(v))).collect(),
+        coefficients: f.coefficients.clone(),
+        center: Some(pb::Vec3 { x: f.center[0], y: f.center[1], z: f.center[2] }),
+        scale: f.scale,
+        report: Some(report_to_proto(&f.report)),
+    }
+}
+
+/// Structured proto fields as a body file (not yet validated as a body: see
+/// [`crate::Body::from_file`]). An absent report becomes method `"uploaded"`.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `data.exponents` for a length that is not 3 × the number of
+/// coefficients or an exponent above 8.
+pub fn body_file_from_proto(d: &pb::BodyData) -> Result<BodyFile> {
+    if d.exponents.len() != 3 * d.coefficients.len() {
+        return Err(Error::invalid(
+            "data.exponents",
+            format!(
+                "{} entries for {} coefficients; expected 3 per coefficient",
+                d.exponents.len(),
+                d.coefficients.len()
+            ),
+        ));
+    }
+    let exponents = d
+        .exponents
+        .chunks_exact(3)
+        .enumerate()
+        .map(|(k, c)| {
+            let e = |v: u32| u8::try_from(v).ok().filter(|&v| v <= 8);
+            match (e(c[0]), e(c[1]), e(c[2])) {
+                (Some(a), Some(b), Some(cc)) => Ok([a, b, cc]),
+                _ => Err(Error::invalid(format!("data.exponents[{k}]"), format!("exponent {c:?} exceeds 8"))),
+            }
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let report = d.report.as_ref().map_or_else(uploaded_report, report_from_proto);
+    Ok(BodyFile {
+        degree: d.degree as usize,
+        exponents,
+        coefficients: d.coefficients.clone(),
+        center: d.center.as_ref().map_or([0.0; 3], |c| [c.x, c.y, c.z]),
+        scale: d.scale,
+        report,
+    })
+}
+
+/// The report of a body uploaded without one.
+pub fn uploaded_report() -> FitReport {
+    FitReport { method: "uploaded".into(), containment_rescale: 1.0, ..Default::default() }
+}
+
+/// A body entry as the proto summary.
+pub fn body_summary(e: &BodyEntry) -> pb::BodySummary {
+    pb::BodySummary {
+        body_id: e.id.clone(),
+        name: e.name.clone(),
+        degree: e.body.degree() as u32,
+        method: e.body.report.method.clone(),
+        volume: e.body.report.volume,
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Scenes
+// ---------------------------------------------------------------------------------------------
+
+/// An instance as the proto message.
+pub fn instance_to_proto(i: &InstanceView) -> pb::Instance {
+    pb::Instance { instance_id: i.id.clone(), body_id: i.body_id.clone(), pose: Some(pose_to_proto(&i.pose)) }
+}
+
+/// A scene as the proto response.
+pub fn scene_to_proto(s: &SceneView) -> pb::GetSceneResponse {
+    pb::GetSceneResponse {
+        scene_id: s.id.clone(),
+        name: s.name.clone(),
+        instances: s.instances.iter().map(instance_to_proto).collect(),
+    }
+}
+
+/// Validates the entries of a `SetPoses` request.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `poses[k].instance_id` (empty) or `poses[k].pose.rotation` /
+/// `poses[k].pose.translation`; [`Error::ResourceExhausted`] above `max_poses`.
+pub fn poses_from_proto(poses: &[pb::InstancePose], max_poses: usize) -> Result<Vec<(String, Isometry3)>> {
+    if poses.len() > max_poses {
+        return Err(Error::ResourceExhausted(format!(
+            "`poses`: {} entries exceed the limit of {max_poses}",
+            poses.len()
+        )));
+    }
+    poses
+        .iter()
+        .enumerate()
+        .map(|(k, p)| {
+            require_id(&format!("poses[{k}].instance_id"), &p.instance_id)?;
+            Ok((p.instance_id.clone(), pose_from_proto(&format!("poses[{k}].pose"), p.pose.as_ref())?))
+        })
+        .collect()
+}
+
+// ---------------------------------------------------------------------------------------------
+// Queries
+// ---------------------------------------------------------------------------------------------
+
+/// A solve status as the proto enum.
+pub fn status_to_proto(s: SolveStatus) -> pb::SolveStatus {
+    match s {
+        SolveStatus::Converged => pb::SolveStatus::Converged,
+        SolveStatus::MaxIterations => pb::SolveStatus::MaxIterations,
+        SolveStatus::Stalled => pb::SolveStatus::Stalled,
+    }
+}
+
+fn solve_info(status: SolveStatus, iterations: usize, kkt_residual: Real, warm_started: bool) -> pb::SolveInfo {
+    pb::SolveInfo {
+        converged: status.converged(),
+        status: status_to_proto(status) as i32,
+        iterations: u32::try_from(iterations).unwrap_or(u32::MAX),
+        kkt_residual,
+        warm_started,
+    }
+}
+
+/// A distance answer as the proto message.
+pub fn distance_to_proto(r: &DistanceResult) -> pb::DistanceAnswer {
+    pb::DistanceAnswer {
+        distance: r.distance,
+        witness_a: Some(point_to_proto(&r.witness_a)),
+        witness_b: Some(point_to_proto(&r.witness_b)),
+        normal: Some(vector_to_proto(&r.normal)),
+        overlapping: r.overlapping,
+        solve: Some(solve_info(r.status, r.iterations, r.kkt_residual, r.warm_started)),
+    }
+}
+
+/// A growth answer as the proto message.
+pub fn growth_to_proto(r: &GrowthResult) -> pb::GrowthAnswer {
+    pb::GrowthAnswer {
+        value: r.value,
+        minimizer: Some(point_to_proto(&r.minimizer)),
+        multiplier: r.multiplier,
+        separated: r.value > 1.0,
+        solve: Some(solve_info(r.status, r.iterations, r.kkt_residual, r.warm_started)),
+    }
+}
+
+/// A batch answer as the proto message.
+pub fn answer_to_proto(a: &QueryAnswer) -> pb::QueryAnswer {
+    let answer = match a {
+        QueryAnswer::Distance(d) => pb::query_answer::Answer::Distance(distance_to_proto(d)),
+        QueryAnswer::Growth(g) => pb::query_answer::Answer::Growth(growth_to_proto(g)),
+    };
+    pb::QueryAnswer { answer: Some(answer) }
+}
+
+/// Validates the pairs of a `BatchQuery`.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `pairs[k].kind` / `pairs[k].first` / `pairs[k].second`;
+/// [`Error::ResourceExhausted`] above `max_pairs`.
+pub fn pairs_from_proto(pairs: &[pb::QueryPair], max_pairs: usize) -> Result<Vec<crate::scene::QueryPair>> {
+    if pairs.len() > max_pairs {
+        return Err(Error::ResourceExhausted(format!(
+            "`pairs`: {} entries exceed the limit of {max_pairs}",
+            pairs.len()
+        )));
+    }
+    pairs
+        .iter()
+        .enumerate()
+        .map(|(k, p)| {
+            let kind = match pb::QueryKind::try_from(p.kind) {
+                Ok(pb::QueryKind::Distance) => QueryKind::Distance,
+                Ok(pb::QueryKind::Growth) => QueryKind::Growth,
+                _ => return Err(Error::invalid(format!("pairs[{k}].kind"), "must be DISTANCE or GROWTH")),
+            };
+            require_id(&format!("pairs[{k}].first"), &p.first)?;
+            require_id(&format!("pairs[{k}].second"), &p.second)?;
+            Ok(crate::scene::QueryPair { kind, first: p.first.clone(), second: p.second.clone() })
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn errors_map_to_codes_and_keep_the_field() {
+        let s = Status::from(Error::invalid("poses[3].pose.rotation", "bad"));
+        assert_eq!(s.code(), Code::InvalidArgument);
+        assert!(s.message().contains("poses[3].pose.rotation"));
+        assert_eq!(Status::from(Error::not_found("scene", "s-1")).code(), Code::NotFound);
+        assert_eq!(Status::from(Error::ResourceExhausted("x".into())).code(), Code::ResourceExhausted);
+        assert_eq!(Status::from(Error::Numerical("x".into())).code(), Code::Internal);
+        assert_eq!(Status::from(Error::Storage("x".into())).code(), Code::Unavailable);
+    }
+
+    #[test]
+    fn degenerate_clouds_are_rejected() {
+        let cube: Vec<Point3> =
+            (0..8).map(|i| Point3::new((i & 1) as Real, ((i >> 1) & 1) as Real, ((i >> 2) & 1) as Real)).collect();
+        assert!(check_cloud("points", &cube).is_ok());
+        let plane: Vec<Point3> = cube.iter().map(|p| Point3::new(p.x, p.y, 0.0)).collect();
+        let e = check_cloud("mesh", &plane).unwrap_err();
+        assert!(e.to_string().contains("`mesh`") && e.to_string().contains("degenerate"), "{e}");
+        assert!(check_cloud("points", &cube[..3]).is_err());
+    }
+
+    #[test]
+    fn pose_validation_names_the_field() {
+        let bad = pb::Pose { rotation: Some(pb::Quaternion { w: 1.0, x: 1.0, y: 0.0, z: 0.0 }), translation: None };
+        let e = pose_from_proto("poses[3].pose", Some(&bad)).unwrap_err();
+        assert!(e.to_string().contains("poses[3].pose.rotation"), "{e}");
+        let nan = pb::Pose { rotation: None, translation: Some(pb::Vec3 { x: f64::NAN, y: 0.0, z: 0.0 }) };
+        let e = pose_from_proto("pose", Some(&nan)).unwrap_err();
+        assert!(e.to_string().contains("pose.translation"), "{e}");
+        let h = std::f64::consts::FRAC_1_SQRT_2;
+        let p = pose_from_parts("p", [h, 0.0, h, 0.0], [1.0, -2.0, 3.0]).unwrap();
+        let back = pose_from_proto("p", Some(&pose_to_proto(&p))).unwrap();
+        assert!((back.to_homogeneous() - p.to_homogeneous()).amax() < 1e-15);
+    }
+}

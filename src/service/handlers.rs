@@ -1,0 +1,237 @@
+//! The `sublevel.v1.Sublevel` handlers: validate → call the core → convert.
+
+use super::convert::{self as cv, prefix_field, require_id};
+use super::jobs::{is_terminal, FitJobs};
+use super::pb::{self, sublevel_server::Sublevel};
+use super::ServerConfig;
+use crate::body::{Body, BodyFile};
+use crate::fit::mesh::parse_points;
+use crate::scene::Catalog;
+use crate::{Error, Result};
+use std::sync::Arc;
+use tokio_stream::wrappers::ReceiverStream;
+use tonic::{Request, Response, Status};
+
+/// The service state shared by all requests.
+#[derive(Debug)]
+pub struct SublevelService {
+    catalog: Arc<Catalog>,
+    config: ServerConfig,
+    jobs: FitJobs,
+}
+
+impl SublevelService {
+    /// A service over `catalog` with `config`'s limits.
+    pub fn new(catalog: Arc<Catalog>, config: ServerConfig) -> Self {
+        let jobs = FitJobs::new(config.max_concurrent_fits);
+        Self { catalog, config, jobs }
+    }
+}
+
+/// Runs blocking work (an fsync'd store write, mesh parsing) on tokio's blocking pool.
+async fn blocking<T: Send + 'static>(f: impl FnOnce() -> Result<T> + Send + 'static) -> Result<T, Status> {
+    match tokio::task::spawn_blocking(f).await {
+        Ok(r) => r.map_err(Status::from),
+        Err(e) => Err(Status::internal(format!("worker failed: {e}"))),
+    }
+}
+
+type Reply<T> = Result<Response<T>, Status>;
+
+#[tonic::async_trait]
+impl Sublevel for SublevelService {
+    async fn start_fit_job(&self, request: Request<pb::StartFitJobRequest>) -> Reply<pb::StartFitJobResponse> {
+        let req = request.into_inner();
+        let degree = cv::fit_degree(req.degree)?;
+        if req.name.len() > crate::scene::MAX_NAME_BYTES {
+            return Err(Error::invalid("name", format!("at most {} bytes", crate::scene::MAX_NAME_BYTES)).into());
+        }
+        let max = self.config.max_fit_points;
+        let points = match req.source {
+            None => return Err(Error::invalid("source", "set `points` or `mesh`").into()),
+            Some(pb::start_fit_job_request::Source::Points(cloud)) => {
+                let points = cv::points_from_proto(&cloud, max)?;
+                cv::check_cloud("points", &points)?;
+                points
+            }
+            Some(pb::start_fit_job_request::Source::Mesh(mesh)) => {
+                if mesh.data.is_empty() {
+                    return Err(Error::invalid("mesh.data", "must not be empty").into());
+                }
+                let format = mesh.format.trim().to_ascii_lowercase();
+                if format.is_empty() {
+                    return Err(Error::invalid("mesh.format", "must name the format (off, obj, stl, ply, xyz)").into());
+                }
+                blocking(move || {
+                    let points = parse_points(&mesh.data, &format)?;
+                    cv::check_point_count("mesh", points.len(), max)?;
+                    cv::check_cloud("mesh", &points)?;
+                    Ok(points)
+                })
+                .await?
+            }
+        };
+        let mut settings = self.config.fit.clone();
+        settings.degree = degree;
+        let job_id = self.jobs.start(self.catalog.clone(), req.name, points, settings);
+        Ok(Response::new(pb::StartFitJobResponse { job_id }))
+    }
+
+    type WatchFitJobStream = ReceiverStream<Result<pb::FitJobUpdate, Status>>;
+
+    async fn watch_fit_job(&self, request: Request<pb::WatchFitJobRequest>) -> Reply<Self::WatchFitJobStream> {
+        let job_id = request.into_inner().job_id;
+        let mut rx = self.jobs.watch(require_id("job_id", &job_id)?)?;
+        let (tx, out) = tokio::sync::mpsc::channel(16);
+        tokio::spawn(async move {
+            loop {
+                let update = rx.borrow_and_update().clone();
+                let done = is_terminal(&update);
+                if tx.send(Ok(update)).await.is_err() || done {
+                    break;
+                }
+                if rx.changed().await.is_err() {
+                    // The job's task ended without a terminal update (runtime shutting down).
+                    let _ = tx.send(Err(Status::unavailable("fit job abandoned: server shutting down"))).await;
+                    break;
+                }
+            }
+        });
+        Ok(Response::new(ReceiverStream::new(out)))
+    }
+
+    async fn upload_body(&self, request: Request<pb::UploadBodyRequest>) -> Reply<pb::UploadBodyResponse> {
+        let req = request.into_inner();
+        let (file, prefix): (BodyFile, &str) = match req.body {
+            None => return Err(Error::invalid("body", "set `body_json` or `data`").into()),
+            Some(pb::upload_body_request::Body::BodyJson(text)) => {
+                let mut file: BodyFile =
+                    serde_json::from_str(&text).map_err(|e| Error::invalid("body_json", e.to_string()))?;
+                if file.report.method.is_empty() {
+                    file.report = cv::uploaded_report();
+                }
+                (file, "body_json")
+            }
+            Some(pb::upload_body_request::Body::Data(data)) => (cv::body_file_from_proto(&data)?, "data"),
+        };
+        let body = Body::from_file(file).map_err(|e| prefix_field(e, prefix))?;
+        let catalog = self.catalog.clone();
+        let body_id = blocking(move || catalog.add_body(&req.name, body)).await?;
+        Ok(Response::new(pb::UploadBodyResponse { body_id }))
+    }
+
+    async fn get_body(&self, request: Request<pb::GetBodyRequest>) -> Reply<pb::GetBodyResponse> {
+        let req = request.into_inner();
+        let entry = self.catalog.body(require_id("body_id", &req.body_id)?)?;
+        let file = entry.body.to_file();
+        let body_json = serde_json::to_string(&file).map_err(Error::from)?;
+        Ok(Response::new(pb::GetBodyResponse {
+            body_id: entry.id.clone(),
+            name: entry.name.clone(),
+            data: Some(cv::body_file_to_proto(&file)),
+            body_json,
+        }))
+    }
+
+    async fn list_bodies(&self, _request: Request<pb::ListBodiesRequest>) -> Reply<pb::ListBodiesResponse> {
+        let bodies = self.catalog.bodies().iter().map(|e| cv::body_summary(e)).collect();
+        Ok(Response::new(pb::ListBodiesResponse { bodies }))
+    }
+
+    async fn delete_body(&self, request: Request<pb::DeleteBodyRequest>) -> Reply<pb::DeleteBodyResponse> {
+        let id = request.into_inner().body_id;
+        require_id("body_id", &id)?;
+        let catalog = self.catalog.clone();
+        blocking(move || catalog.delete_body(&id)).await?;
+        Ok(Response::new(pb::DeleteBodyResponse {}))
+    }
+
+    async fn create_scene(&self, request: Request<pb::CreateSceneRequest>) -> Reply<pb::CreateSceneResponse> {
+        let name = request.into_inner().name;
+        let catalog = self.catalog.clone();
+        let scene_id = blocking(move || catalog.create_scene(&name)).await?;
+        Ok(Response::new(pb::CreateSceneResponse { scene_id }))
+    }
+
+    async fn get_scene(&self, request: Request<pb::GetSceneRequest>) -> Reply<pb::GetSceneResponse> {
+        let id = request.into_inner().scene_id;
+        let scene = self.catalog.get_scene(require_id("scene_id", &id)?)?;
+        Ok(Response::new(cv::scene_to_proto(&scene)))
+    }
+
+    async fn list_scenes(&self, _request: Request<pb::ListScenesRequest>) -> Reply<pb::ListScenesResponse> {
+        let scenes = self
+            .catalog
+            .scenes()
+            .into_iter()
+            .map(|s| pb::SceneSummary {
+                scene_id: s.id,
+                name: s.name,
+                num_instances: u32::try_from(s.instances.len()).unwrap_or(u32::MAX),
+            })
+            .collect();
+        Ok(Response::new(pb::ListScenesResponse { scenes }))
+    }
+
+    async fn delete_scene(&self, request: Request<pb::DeleteSceneRequest>) -> Reply<pb::DeleteSceneResponse> {
+        let id = request.into_inner().scene_id;
+        require_id("scene_id", &id)?;
+        let catalog = self.catalog.clone();
+        blocking(move || catalog.delete_scene(&id)).await?;
+        Ok(Response::new(pb::DeleteSceneResponse {}))
+    }
+
+    async fn add_instance(&self, request: Request<pb::AddInstanceRequest>) -> Reply<pb::AddInstanceResponse> {
+        let req = request.into_inner();
+        require_id("scene_id", &req.scene_id)?;
+        require_id("body_id", &req.body_id)?;
+        let pose = cv::pose_from_proto("pose", req.pose.as_ref())?;
+        let catalog = self.catalog.clone();
+        let instance_id = blocking(move || catalog.add_instance(&req.scene_id, &req.body_id, pose)).await?;
+        Ok(Response::new(pb::AddInstanceResponse { instance_id }))
+    }
+
+    async fn set_poses(&self, request: Request<pb::SetPosesRequest>) -> Reply<pb::SetPosesResponse> {
+        let req = request.into_inner();
+        require_id("scene_id", &req.scene_id)?;
+        let poses = cv::poses_from_proto(&req.poses, self.config.max_poses_per_call)?;
+        // Inline: pose updates commit without fsync (see `RedbStore`), so this is short.
+        let updated = self.catalog.set_poses(&req.scene_id, &poses)?;
+        Ok(Response::new(pb::SetPosesResponse { updated: u32::try_from(updated).unwrap_or(u32::MAX) }))
+    }
+
+    async fn remove_instance(&self, request: Request<pb::RemoveInstanceRequest>) -> Reply<pb::RemoveInstanceResponse> {
+        let req = request.into_inner();
+        require_id("scene_id", &req.scene_id)?;
+        require_id("instance_id", &req.instance_id)?;
+        let catalog = self.catalog.clone();
+        blocking(move || catalog.remove_instance(&req.scene_id, &req.instance_id)).await?;
+        Ok(Response::new(pb::RemoveInstanceResponse {}))
+    }
+
+    async fn distance(&self, request: Request<pb::DistanceRequest>) -> Reply<pb::DistanceResponse> {
+        let req = request.into_inner();
+        require_id("scene_id", &req.scene_id)?;
+        require_id("instance_a", &req.instance_a)?;
+        require_id("instance_b", &req.instance_b)?;
+        let r = self.catalog.distance(&req.scene_id, &req.instance_a, &req.instance_b)?;
+        Ok(Response::new(pb::DistanceResponse { answer: Some(cv::distance_to_proto(&r)) }))
+    }
+
+    async fn growth(&self, request: Request<pb::GrowthRequest>) -> Reply<pb::GrowthResponse> {
+        let req = request.into_inner();
+        require_id("scene_id", &req.scene_id)?;
+        require_id("instance_1", &req.instance_1)?;
+        require_id("instance_2", &req.instance_2)?;
+        let r = self.catalog.growth(&req.scene_id, &req.instance_1, &req.instance_2)?;
+        Ok(Response::new(pb::GrowthResponse { answer: Some(cv::growth_to_proto(&r)) }))
+    }
+
+    async fn batch_query(&self, request: Request<pb::BatchQueryRequest>) -> Reply<pb::BatchQueryResponse> {
+        let req = request.into_inner();
+        require_id("scene_id", &req.scene_id)?;
+        let pairs = cv::pairs_from_proto(&req.pairs, self.config.max_batch_pairs)?;
+        let answers = self.catalog.batch(&req.scene_id, &pairs)?;
+        Ok(Response::new(pb::BatchQueryResponse { answers: answers.iter().map(cv::answer_to_proto).collect() }))
+    }
+}
