@@ -144,10 +144,8 @@ pub fn bounding_box(p: &Polynomial, interior: &Vector3) -> Result<(Vector3, Vect
         let pick = |k: usize| planes[k][(corner >> k) & 1];
         let (a, b) = ((0..3).map(|k| pick(k).0.transpose()).collect::<Vec<_>>(), Vector3::from_fn(|k, _| pick(k).1));
         let m = crate::math::Matrix3::from_rows(&a);
-        let x = m
-            .lu()
-            .solve(&b)
-            .ok_or_else(|| Error::Numerical("singular corner system in the bounding box".into()))?;
+        let x =
+            m.lu().solve(&b).ok_or_else(|| Error::Numerical("singular corner system in the bounding box".into()))?;
         // The corner must satisfy the three opposite halfspaces (cube-like combinatorics).
         for (k, pair) in planes.iter().enumerate() {
             let (n, c) = pair[1 - ((corner >> k) & 1)];

@@ -23,14 +23,7 @@ fn chair4() -> &'static (Vec<Point3>, Body, Vec<FitProgress>) {
 /// Points on the unit sphere: ±eₖ (which make the unit sphere the minimum-volume enclosing
 /// ellipsoid, by John's condition Σ uuᵀ = 2I, Σ u = 0) plus a Fibonacci spiral.
 fn sphere_points(n: usize) -> Vec<Vector3> {
-    let mut v = vec![
-        Vector3::x(),
-        -Vector3::x(),
-        Vector3::y(),
-        -Vector3::y(),
-        Vector3::z(),
-        -Vector3::z(),
-    ];
+    let mut v = vec![Vector3::x(), -Vector3::x(), Vector3::y(), -Vector3::y(), Vector3::z(), -Vector3::z()];
     let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
     for i in 0..n {
         let z = 1.0 - 2.0 * (i as Real + 0.5) / n as Real;
