@@ -396,9 +396,9 @@ mod tests {
             }
         }
         let mut ax = vec![0.0; prob.num_rows()];
-        for col in 0..prob.num_vars {
+        for (col, xc) in x.iter().enumerate() {
             for k in prob.a.colptr[col]..prob.a.colptr[col + 1] {
-                ax[prob.a.rowval[k]] += prob.a.nzval[k] * x[col];
+                ax[prob.a.rowval[k]] += prob.a.nzval[k] * xc;
             }
         }
         let lb = basis_len(3, 2 * d - 2);

@@ -41,7 +41,7 @@ fn inner_newton(p: &Polynomial, lambda: Real, e: &Vector3, mut u: Vector3) -> Ve
             None => -g,
         };
         let dec = -g.dot(&step);
-        if !(dec > 1e-28) {
+        if dec.is_nan() || dec <= 1e-28 {
             break;
         }
         let f0 = f(&u);
@@ -132,7 +132,8 @@ pub fn bounding_box(p: &Polynomial, interior: &Vector3) -> Result<(Vector3, Vect
             e[k] = if s == 0 { 1.0 } else { -1.0 };
             let v = support_point(p, &e, interior)?;
             let (pv, n) = p.value_gradient(&v);
-            if !(n.dot(&e) > 0.9 * n.norm()) {
+            let along = n.dot(&e);
+            if along.is_nan() || along <= 0.9 * n.norm() {
                 return Err(Error::Numerical(format!("support normal {n} is not close to the axis {e}")));
             }
             *plane = (n, n.dot(&v) + 1.0 - pv);

@@ -110,8 +110,8 @@ fn chair_fit_reports_every_stage_in_order() {
     let order = [FitStage::Hull, FitStage::Build, FitStage::Solve, FitStage::Verify, FitStage::Volume, FitStage::Done];
     let stages: Vec<usize> = log.iter().map(|p| order.iter().position(|s| *s == p.stage).unwrap()).collect();
     assert!(stages.windows(2).all(|w| w[0] <= w[1]), "{stages:?}");
-    for s in 0..order.len() {
-        assert!(stages.contains(&s), "stage {:?} never reported", order[s]);
+    for (s, stage) in order.iter().enumerate() {
+        assert!(stages.contains(&s), "stage {stage:?} never reported");
     }
     assert!(log.windows(2).all(|w| w[0].fraction <= w[1].fraction));
     let iterations = log.iter().filter(|p| p.message.starts_with("Clarabel iteration")).count();
