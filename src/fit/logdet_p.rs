@@ -258,11 +258,7 @@ impl LogDetProblem {
     /// # Errors
     /// [`Error::Numerical`] when Clarabel rejects the data or the solver thread panics. A status
     /// other than `Solved` is returned in the solution, not as an error (see [`usable_status`]).
-    pub fn solve(
-        &self,
-        settings: DefaultSettings<Real>,
-        progress: &mut dyn FnMut(u32, Real),
-    ) -> Result<RawSolution> {
+    pub fn solve(&self, settings: DefaultSettings<Real>, progress: &mut dyn FnMut(u32, Real)) -> Result<RawSolution> {
         let (tx, rx) = std::sync::mpsc::channel::<(u32, Real)>();
         std::thread::scope(|scope| {
             let handle = scope.spawn(move || -> Result<RawSolution> {
@@ -400,9 +396,9 @@ mod tests {
             }
         }
         let mut ax = vec![0.0; prob.num_rows()];
-        for col in 0..prob.num_vars {
+        for (col, xc) in x.iter().enumerate() {
             for k in prob.a.colptr[col]..prob.a.colptr[col + 1] {
-                ax[prob.a.rowval[k]] += prob.a.nzval[k] * x[col];
+                ax[prob.a.rowval[k]] += prob.a.nzval[k] * xc;
             }
         }
         let lb = basis_len(3, 2 * d - 2);
@@ -423,11 +419,8 @@ mod tests {
                         if bb != *beta {
                             continue;
                         }
-                        let f = if k == l {
-                            (a[k] as f64) * (a[k] as f64 - 1.0)
-                        } else {
-                            2.0 * a[k] as f64 * a[l] as f64
-                        };
+                        let f =
+                            if k == l { (a[k] as f64) * (a[k] as f64 - 1.0) } else { 2.0 * a[k] as f64 * a[l] as f64 };
                         lhs += f * c[ci];
                     }
                     let mut e6 = vec![beta[0], beta[1], beta[2], 0, 0, 0];

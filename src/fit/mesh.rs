@@ -70,9 +70,8 @@ fn text(bytes: &[u8], fmt: &str) -> Result<String> {
 
 fn parse_coord(tok: Option<&str>, line: usize, fmt: &str) -> Result<Real> {
     let tok = tok.ok_or_else(|| Error::invalid("mesh", format!("{fmt} line {line}: expected 3 coordinates")))?;
-    let v: Real = tok
-        .parse()
-        .map_err(|_| Error::invalid("mesh", format!("{fmt} line {line}: `{tok}` is not a number")))?;
+    let v: Real =
+        tok.parse().map_err(|_| Error::invalid("mesh", format!("{fmt} line {line}: `{tok}` is not a number")))?;
     if !v.is_finite() {
         return Err(Error::invalid("mesh", format!("{fmt} line {line}: coordinate `{tok}` is not finite")));
     }
@@ -112,9 +111,8 @@ fn parse_off(bytes: &[u8]) -> Result<Vec<Point3>> {
     }
     let mut pts = Vec::with_capacity(nv.min(10_000_000));
     for k in 0..nv {
-        let (l, c) = lines
-            .next()
-            .ok_or_else(|| Error::invalid("mesh", format!("off file ends after {k} of {nv} vertices")))?;
+        let (l, c) =
+            lines.next().ok_or_else(|| Error::invalid("mesh", format!("off file ends after {k} of {nv} vertices")))?;
         let mut it = c.split_whitespace();
         let x = parse_coord(it.next(), l, "off")?;
         let y = parse_coord(it.next(), l, "off")?;
@@ -207,12 +205,15 @@ mod tests {
     fn off_parses_and_reports_line_numbers() {
         let off = b"OFF\n# a comment\n4 1 0\n0 0 0\n1 0 0\n0 1.5 0\n0 0 -2e-1\n3 0 1 2\n";
         let p = parse_points(off, "off").unwrap();
-        assert_eq!(p, vec![
-            Point3::new(0.0, 0.0, 0.0),
-            Point3::new(1.0, 0.0, 0.0),
-            Point3::new(0.0, 1.5, 0.0),
-            Point3::new(0.0, 0.0, -0.2)
-        ]);
+        assert_eq!(
+            p,
+            vec![
+                Point3::new(0.0, 0.0, 0.0),
+                Point3::new(1.0, 0.0, 0.0),
+                Point3::new(0.0, 1.5, 0.0),
+                Point3::new(0.0, 0.0, -0.2)
+            ]
+        );
         // Counts on the header line.
         assert_eq!(parse_points(b"OFF 1 0 0\n1 2 3\n", ".OFF").unwrap(), vec![Point3::new(1.0, 2.0, 3.0)]);
         expect_mesh_error(parse_points(b"OFF\n2 0 0\n1 2 3\n4 x 6\n", "off"), "off line 4: `x` is not a number");
@@ -260,12 +261,15 @@ mod tests {
         let ascii = b"solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 2 0\nendloop\nendfacet\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 0 3\nendloop\nendfacet\nendsolid t\n";
         let mut p = parse_points(ascii, "stl").unwrap();
         p.sort_by(|a, b| a.coords.iter().partial_cmp(b.coords.iter()).unwrap());
-        assert_eq!(p, vec![
-            Point3::new(0.0, 0.0, 0.0),
-            Point3::new(0.0, 0.0, 3.0),
-            Point3::new(0.0, 2.0, 0.0),
-            Point3::new(1.0, 0.0, 0.0)
-        ]);
+        assert_eq!(
+            p,
+            vec![
+                Point3::new(0.0, 0.0, 0.0),
+                Point3::new(0.0, 0.0, 3.0),
+                Point3::new(0.0, 2.0, 0.0),
+                Point3::new(1.0, 0.0, 0.0)
+            ]
+        );
         let bin = stl_binary(&[[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 2.0, 0.0]]]);
         let mut q = parse_points(&bin, "stl").unwrap();
         q.sort_by(|a, b| a.coords.iter().partial_cmp(b.coords.iter()).unwrap());
@@ -291,7 +295,13 @@ mod tests {
         let q = parse_points(&bin, "ply").unwrap();
         assert_eq!(q, vec![Point3::new(1.0, 2.0, 3.0), Point3::new(-4.0, 0.5, 6.0)]);
         expect_mesh_error(parse_points(b"ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\nend_header\n1 2\n", "ply"), "ply");
-        expect_mesh_error(parse_points(b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nend_header\n1 2\n", "ply"), "missing property `z`");
+        expect_mesh_error(
+            parse_points(
+                b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nend_header\n1 2\n",
+                "ply",
+            ),
+            "missing property `z`",
+        );
         expect_mesh_error(parse_points(b"not a ply", "ply"), "ply");
     }
 

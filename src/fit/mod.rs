@@ -254,7 +254,10 @@ pub fn fit_points(points: &[Point3], settings: &FitSettings, progress: &mut dyn 
         progress,
         FitStage::Done,
         1.0,
-        format!("volume {:.4} ± {:.4} (hull {:.4})", body.report.volume, body.report.volume_std_error, body.report.hull_volume),
+        format!(
+            "volume {:.4} ± {:.4} (hull {:.4})",
+            body.report.volume, body.report.volume_std_error, body.report.hull_volume
+        ),
     );
     Ok(body)
 }
@@ -265,7 +268,8 @@ mod tests {
 
     #[test]
     fn settings_are_validated_by_field() {
-        let pts: Vec<Point3> = (0..10).map(|i| Point3::new(i as Real, (i * i) as Real, (i * i * i % 5) as Real)).collect();
+        let pts: Vec<Point3> =
+            (0..10).map(|i| Point3::new(i as Real, (i * i) as Real, (i * i * i % 5) as Real)).collect();
         for (s, field) in [
             (FitSettings::default().with_degree(3), "degree"),
             (FitSettings::default().with_degree(10), "degree"),

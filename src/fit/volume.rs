@@ -41,7 +41,7 @@ fn inner_newton(p: &Polynomial, lambda: Real, e: &Vector3, mut u: Vector3) -> Ve
             None => -g,
         };
         let dec = -g.dot(&step);
-        if !(dec > 1e-28) {
+        if dec.is_nan() || dec <= 1e-28 {
             break;
         }
         let f0 = f(&u);
@@ -132,7 +132,8 @@ pub fn bounding_box(p: &Polynomial, interior: &Vector3) -> Result<(Vector3, Vect
             e[k] = if s == 0 { 1.0 } else { -1.0 };
             let v = support_point(p, &e, interior)?;
             let (pv, n) = p.value_gradient(&v);
-            if !(n.dot(&e) > 0.9 * n.norm()) {
+            let along = n.dot(&e);
+            if along.is_nan() || along <= 0.9 * n.norm() {
                 return Err(Error::Numerical(format!("support normal {n} is not close to the axis {e}")));
             }
             *plane = (n, n.dot(&v) + 1.0 - pv);
@@ -144,10 +145,8 @@ pub fn bounding_box(p: &Polynomial, interior: &Vector3) -> Result<(Vector3, Vect
         let pick = |k: usize| planes[k][(corner >> k) & 1];
         let (a, b) = ((0..3).map(|k| pick(k).0.transpose()).collect::<Vec<_>>(), Vector3::from_fn(|k, _| pick(k).1));
         let m = crate::math::Matrix3::from_rows(&a);
-        let x = m
-            .lu()
-            .solve(&b)
-            .ok_or_else(|| Error::Numerical("singular corner system in the bounding box".into()))?;
+        let x =
+            m.lu().solve(&b).ok_or_else(|| Error::Numerical("singular corner system in the bounding box".into()))?;
         // The corner must satisfy the three opposite halfspaces (cube-like combinatorics).
         for (k, pair) in planes.iter().enumerate() {
             let (n, c) = pair[1 - ((corner >> k) & 1)];

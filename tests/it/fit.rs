@@ -23,14 +23,7 @@ fn chair4() -> &'static (Vec<Point3>, Body, Vec<FitProgress>) {
 /// Points on the unit sphere: ±eₖ (which make the unit sphere the minimum-volume enclosing
 /// ellipsoid, by John's condition Σ uuᵀ = 2I, Σ u = 0) plus a Fibonacci spiral.
 fn sphere_points(n: usize) -> Vec<Vector3> {
-    let mut v = vec![
-        Vector3::x(),
-        -Vector3::x(),
-        Vector3::y(),
-        -Vector3::y(),
-        Vector3::z(),
-        -Vector3::z(),
-    ];
+    let mut v = vec![Vector3::x(), -Vector3::x(), Vector3::y(), -Vector3::y(), Vector3::z(), -Vector3::z()];
     let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
     for i in 0..n {
         let z = 1.0 - 2.0 * (i as Real + 0.5) / n as Real;
@@ -117,8 +110,8 @@ fn chair_fit_reports_every_stage_in_order() {
     let order = [FitStage::Hull, FitStage::Build, FitStage::Solve, FitStage::Verify, FitStage::Volume, FitStage::Done];
     let stages: Vec<usize> = log.iter().map(|p| order.iter().position(|s| *s == p.stage).unwrap()).collect();
     assert!(stages.windows(2).all(|w| w[0] <= w[1]), "{stages:?}");
-    for s in 0..order.len() {
-        assert!(stages.contains(&s), "stage {:?} never reported", order[s]);
+    for (s, stage) in order.iter().enumerate() {
+        assert!(stages.contains(&s), "stage {stage:?} never reported");
     }
     assert!(log.windows(2).all(|w| w[0].fraction <= w[1].fraction));
     let iterations = log.iter().filter(|p| p.message.starts_with("Clarabel iteration")).count();
