@@ -30,13 +30,17 @@ async fn main() -> Result<(), Box<dyn std::error::Error>> {
         return Err("no scene named `demo`: start the server with `sublevel serve --demo`".into());
     };
     let scene = client.get_scene(pb::GetSceneRequest { scene_id: demo.scene_id.clone() }).await?.into_inner();
-    let name_of = |body_id: &str| bodies.iter().find(|b| b.body_id == body_id).map(|b| b.name.clone()).unwrap_or_default();
+    let name_of =
+        |body_id: &str| bodies.iter().find(|b| b.body_id == body_id).map(|b| b.name.clone()).unwrap_or_default();
     let chair = scene.instances.iter().find(|i| name_of(&i.body_id) == "chair_101").ok_or("no chair instance")?;
     let human = scene.instances.iter().find(|i| name_of(&i.body_id) == "human_10").ok_or("no human instance")?;
     let human_x = human.pose.as_ref().and_then(|p| p.translation.as_ref()).map(|t| t.x).unwrap_or(0.0);
 
     println!("\nchair slides through the human (human at x = {human_x:.2} m):");
-    println!("{:>8} {:>10} {:>11} {:>6} {:>6} {:>12} {:>6} {:>6}", "x [m]", "distance", "d(chair|h)", "conv", "iters", "kkt", "warm", "");
+    println!(
+        "{:>8} {:>10} {:>11} {:>6} {:>6} {:>12} {:>6} {:>6}",
+        "x [m]", "distance", "d(chair|h)", "conv", "iters", "kkt", "warm", ""
+    );
     for k in 0..=12 {
         let x = human_x - 2.4 + 0.4 * k as f64;
         client
