@@ -134,20 +134,10 @@ pub fn run(args: BenchArgs) -> Result<()> {
             "degree,fit_chair_s,distance_cold_us,distance_warm_us,growth_cold_us,growth_warm_us,paper_s,speedup_cold,speedup_warm,converged,total\n",
         );
         for r in &rows {
-            let paper = paper_seconds(r.degree);
+            let v = r.values();
             text.push_str(&format!(
                 "{},{:.4},{:.3},{:.3},{:.3},{:.3},{},{:.0},{:.0},{},{}\n",
-                r.degree,
-                r.fit_chair_s,
-                r.dist_cold,
-                r.dist_warm,
-                r.growth_cold,
-                r.growth_warm,
-                paper,
-                paper * 1e6 / r.dist_cold,
-                paper * 1e6 / r.dist_warm,
-                r.converged,
-                r.total
+                r.degree, v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], r.converged, r.total
             ));
         }
         if let Some(dir) = path.parent() {
@@ -157,6 +147,23 @@ pub fn run(args: BenchArgs) -> Result<()> {
         eprintln!("wrote {}", path.display());
     }
     Ok(())
+}
+
+impl Row {
+    /// fit s, distance cold/warm µs, growth cold/warm µs, paper s, speed-up cold, speed-up warm.
+    fn values(&self) -> [Real; 8] {
+        let paper = paper_seconds(self.degree);
+        [
+            self.fit_chair_s,
+            self.dist_cold,
+            self.dist_warm,
+            self.growth_cold,
+            self.growth_warm,
+            paper,
+            paper * 1e6 / self.dist_cold,
+            paper * 1e6 / self.dist_warm,
+        ]
+    }
 }
 
 fn paper_seconds(degree: usize) -> Real {
@@ -237,20 +244,10 @@ fn print_table(rows: &[Row]) {
         "converged"
     );
     for r in rows {
-        let paper = paper_seconds(r.degree);
+        let v = r.values();
         println!(
             "{:>3} {:>8.2}s {:>10.2} {:>10.2} {:>10.2} {:>10.2} {:>8.3}s {:>10.0}x {:>10.0}x {:>5}/{:<5}",
-            r.degree,
-            r.fit_chair_s,
-            r.dist_cold,
-            r.dist_warm,
-            r.growth_cold,
-            r.growth_warm,
-            paper,
-            paper * 1e6 / r.dist_cold,
-            paper * 1e6 / r.dist_warm,
-            r.converged,
-            r.total
+            r.degree, v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], r.converged, r.total
         );
     }
     println!("x cold / x warm: speed-up of our distance query over the paper's Table 2 (MATLAB fmincon).");
