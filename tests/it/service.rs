@@ -558,6 +558,9 @@ async fn end_to_end_chair_slides_through_human() {
             cold_iters += cold_d.iterations + cold_g.iterations;
         }
     }
+    eprintln!(
+        "end-to-end: {overlapping} overlapping / {separated} separated poses; Newton iterations over 23 moves: warm {warm_iters} vs cold {cold_iters}"
+    );
     assert!(overlapping > 0 && separated > 0, "the slide must pass through: {overlapping} / {separated}");
     assert!(warm_answers >= 23, "only {warm_answers} of 46 answers were warm-started");
     assert!(warm_iters < cold_iters, "warm {warm_iters} vs cold {cold_iters}");
