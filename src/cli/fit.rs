@@ -32,6 +32,12 @@ pub struct FitArgs {
     /// Clarabel's iteration cap.
     #[arg(long, default_value_t = 200)]
     pub max_iterations: u32,
+    /// Direct solver of Clarabel's KKT systems: faer or qdldl.
+    #[arg(long, default_value = "faer")]
+    pub linear_solver: String,
+    /// Threads of the KKT factorization (faer only; 0 = solver's choice, 1 = sequential).
+    #[arg(long, default_value_t = 1)]
+    pub solver_threads: u32,
     /// No progress on stderr.
     #[arg(long, short)]
     pub quiet: bool,
@@ -52,6 +58,8 @@ pub fn run(args: FitArgs) -> sublevel::Result<()> {
         seed: args.seed,
         solver_tolerance: args.tolerance,
         max_solver_iterations: args.max_iterations,
+        linear_solver: args.linear_solver.parse()?,
+        solver_threads: args.solver_threads,
         ..FitSettings::default()
     };
     let quiet = args.quiet;

@@ -1,7 +1,7 @@
 //! Integration tests: fitting (paper §III-A, eq. "VAG.log.det") and mesh loading.
 
 use std::sync::OnceLock;
-use sublevel::fit::{fit_points, mesh, FitProgress, FitSettings, FitStage};
+use sublevel::fit::{fit_points, mesh, FitProgress, FitSettings, FitStage, KktSolver};
 use sublevel::math::{Matrix3, Point3, Real, UnitQuaternion, Vector3};
 use sublevel::{Body, Error};
 
@@ -85,6 +85,25 @@ fn chair_degree_4_contains_every_vertex() {
     assert!(r.containment_rescale >= 1.0 && r.containment_rescale < 1.0 + 1e-4, "{}", r.containment_rescale);
     assert!(matches!(r.solver_status.as_str(), "Solved" | "AlmostSolved"));
     assert!(r.total_seconds >= r.solve_seconds && r.solve_seconds > 0.0);
+}
+
+#[test]
+fn chair_degree_4_is_the_same_with_either_kkt_solver() {
+    // The default (faer) fit against an independent solve of the same SDP with QDLDL: the
+    // optimum is unique (log det is strictly concave in P and p is linear in P), so both give the
+    // same polynomial up to the solver tolerance, and the same volume with the same seed.
+    let (pts, body, _) = chair4();
+    assert_eq!(FitSettings::default().linear_solver, KktSolver::Faer);
+    let settings = FitSettings { linear_solver: KktSolver::Qdldl, ..FitSettings::default().with_degree(4) };
+    let other = fit_points(pts, &settings, &mut |_| {}).unwrap();
+    let (a, b) = (body.polynomial().coefficients(), other.polynomial().coefficients());
+    let scale = a.iter().fold(0.0 as Real, |m, v| m.max(v.abs()));
+    let diff = a.iter().zip(b).fold(0.0 as Real, |m, (x, y)| m.max((x - y).abs()));
+    assert!(diff < 1e-4 * scale, "max coefficient difference {diff:e} (largest coefficient {scale})");
+    let (ra, rb) = (&body.report, &other.report);
+    assert!((ra.volume - rb.volume).abs() < ra.volume_std_error, "{} vs {}", ra.volume, rb.volume);
+    assert!((ra.volume - 1.222).abs() < 3.0 * ra.volume_std_error, "volume {} ± {}", ra.volume, ra.volume_std_error);
+    assert!(ra.notes.iter().any(|n| n.contains("(faer)")) && rb.notes.iter().any(|n| n.contains("(qdldl)")));
 }
 
 #[test]
