@@ -156,9 +156,15 @@ impl ConicBuilder {
 }
 
 /// Clarabel settings with quiet output and the given tolerances (Clarabel's defaults are 1e-8).
+///
+/// The KKT solver is pinned to QDLDL on one thread: these small certificate SDPs were validated with
+/// it, and on a shared 2-core machine a multi-threaded factorization only spins. (Fits choose their
+/// own solver through `fit::FitSettings`.)
 pub fn quiet_settings(tol: f64, max_iter: u32) -> DefaultSettings<f64> {
     DefaultSettings {
         verbose: false,
+        direct_solve_method: "qdldl".to_string(),
+        max_threads: 1,
         tol_gap_abs: tol,
         tol_gap_rel: tol,
         tol_feas: tol,
