@@ -52,6 +52,30 @@ pub struct FitReport {
     /// Free-form notes (e.g. why a degree was chosen).
     #[serde(default)]
     pub notes: Vec<String>,
+    /// Relaxed-convexity parameter c of eq. "VAG.param.convex" the fit used (0: p sos-convex).
+    #[serde(default)]
+    pub convexity_relaxation: Real,
+    /// True when the fit did not impose sos-convexity on p (c > 0, inverse moment): the body may be
+    /// nonconvex, and queries on it answer with level-0 SDP lower bounds (paper §IV-A).
+    #[serde(default)]
+    pub nonconvex: bool,
+    /// Why this degree was chosen, when the fit chose it (`--degree auto`).
+    #[serde(default)]
+    pub degree_choice: Option<DegreeChoice>,
+}
+
+/// How `--degree auto` chose a body's degree: the lowest degree whose volume is within
+/// `volume_tolerance` (relative) of the next degree's.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct DegreeChoice {
+    /// Relative volume tolerance τ asked for.
+    pub volume_tolerance: Real,
+    /// Every degree fitted, with its volume and standard error: `(2d, volume, std_error)`.
+    pub candidates: Vec<(usize, Real, Real)>,
+    /// The degree kept.
+    pub chosen: usize,
+    /// One sentence saying why.
+    pub reason: String,
 }
 
 /// A body's on-disk / on-wire JSON form.

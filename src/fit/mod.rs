@@ -23,20 +23,55 @@ pub mod logdet_p;
 pub mod mesh;
 pub mod volume;
 
-/// Which formulation a fit uses.
+/// Which formulation a fit uses (paper §III; the body file's `report.method`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum FitMethod {
     /// Maximize log det P of the sos Gram matrix, p sos-convex (eq. "VAG.log.det").
     #[default]
     LogDetP,
+    /// Minimize trace P⁻¹ via [[V, I],[I, P]] ⪰ 0, p sos-convex (trace form of eq. "VAG.log.det").
+    TraceP,
+    /// Magnani et al.: maximize log det H of the sos-convexity Gram matrix (eq. "Magnani.log.det").
+    LogDetH,
+    /// Magnani et al. with the trace objective: minimize trace H⁻¹ (paper §III-A-1).
+    TraceH,
+    /// Lasserre–Pauwels inverse moment polynomial z(x)ᵀ M_d⁻¹ z(x), scaled to the smallest level
+    /// containing every point (eq. "inverse.moment.poly"); no SDP, no convexity.
+    InverseMoment,
 }
 
 impl FitMethod {
-    /// The method's name in fit reports (`"logdet_p"`).
+    /// Every method, in Table 1 order.
+    pub const ALL: [FitMethod; 5] =
+        [FitMethod::LogDetP, FitMethod::TraceP, FitMethod::LogDetH, FitMethod::TraceH, FitMethod::InverseMoment];
+
+    /// The method's name in fit reports, the CLI and the gRPC fit job (`"logdet_p"`, `"trace_p"`,
+    /// `"logdet_h"`, `"trace_h"`, `"inverse_moment"`).
     pub fn name(&self) -> &'static str {
         match self {
             FitMethod::LogDetP => "logdet_p",
+            FitMethod::TraceP => "trace_p",
+            FitMethod::LogDetH => "logdet_h",
+            FitMethod::TraceH => "trace_h",
+            FitMethod::InverseMoment => "inverse_moment",
         }
+    }
+}
+
+impl std::str::FromStr for FitMethod {
+    type Err = Error;
+
+    /// Parses a method name (see [`FitMethod::name`]).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `method` for an unknown name.
+    fn from_str(s: &str) -> Result<Self> {
+        FitMethod::ALL.iter().copied().find(|m| m.name() == s).ok_or_else(|| {
+            Error::invalid(
+                "method",
+                format!("must be one of logdet_p, trace_p, logdet_h, trace_h, inverse_moment, got {s:?}"),
+            )
+        })
     }
 }
 
@@ -88,6 +123,10 @@ pub struct FitSettings {
     pub degree: usize,
     /// Formulation.
     pub method: FitMethod,
+    /// Relaxed-convexity parameter c ≥ 0 of eq. "VAG.param.convex": p + c(‖u‖²)ᵈ is required to be
+    /// sos-convex instead of p (u = normalized coordinates). 0 (the default) means p sos-convex.
+    /// Only for `LogDetP` and `TraceP`; with c > 0 the body may be nonconvex.
+    pub convexity_relaxation: Real,
     /// Monte Carlo samples for the volume estimate (at least; doubled up to 16× until the
     /// relative standard error is below 1 %).
     pub volume_samples: usize,
@@ -110,6 +149,7 @@ impl Default for FitSettings {
         Self {
             degree: 4,
             method: FitMethod::LogDetP,
+            convexity_relaxation: 0.0,
             volume_samples: 200_000,
             seed: 1,
             solver_tolerance: 1e-8,
@@ -217,6 +257,9 @@ fn report(progress: &mut dyn FnMut(&FitProgress), stage: FitStage, fraction: Rea
 pub fn fit_points(points: &[Point3], settings: &FitSettings, progress: &mut dyn FnMut(&FitProgress)) -> Result<Body> {
     let start = std::time::Instant::now();
     settings.validate()?;
+    if settings.method != FitMethod::LogDetP || settings.convexity_relaxation != 0.0 {
+        return Err(Error::invalid("method", format!("{} is not implemented yet", settings.method.name())));
+    }
     report(progress, FitStage::Hull, 0.0, format!("convex hull of {} points", points.len()));
     let cloud = hull::normalize_and_hull(points)?;
 
@@ -288,6 +331,7 @@ pub fn fit_points(points: &[Point3], settings: &FitSettings, progress: &mut dyn 
             raw.iterations,
             settings.linear_solver.name()
         )],
+        ..Default::default()
     };
     let center = [cloud.center.x, cloud.center.y, cloud.center.z];
     let body = Body::new(poly, center, cloud.scale, fit_report.clone())

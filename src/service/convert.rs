@@ -204,6 +204,16 @@ pub fn report_to_proto(r: &FitReport) -> pb::FitReport {
         containment_rescale: r.containment_rescale,
         convexity_margin: r.convexity_margin,
         notes: r.notes.clone(),
+        convexity_relaxation: r.convexity_relaxation,
+        nonconvex: r.nonconvex,
+        degree_choice: r.degree_choice.as_ref().map(|c| pb::DegreeChoice {
+            volume_tolerance: c.volume_tolerance,
+            degrees: c.candidates.iter().map(|k| k.0 as u32).collect(),
+            volumes: c.candidates.iter().map(|k| k.1).collect(),
+            volume_std_errors: c.candidates.iter().map(|k| k.2).collect(),
+            chosen: c.chosen as u32,
+            reason: c.reason.clone(),
+        }),
     }
 }
 
@@ -223,6 +233,20 @@ pub fn report_from_proto(r: &pb::FitReport) -> FitReport {
         containment_rescale: r.containment_rescale,
         convexity_margin: r.convexity_margin,
         notes: r.notes.clone(),
+        convexity_relaxation: r.convexity_relaxation,
+        nonconvex: r.nonconvex,
+        degree_choice: r.degree_choice.as_ref().map(|c| crate::body::DegreeChoice {
+            volume_tolerance: c.volume_tolerance,
+            candidates: c
+                .degrees
+                .iter()
+                .zip(&c.volumes)
+                .zip(&c.volume_std_errors)
+                .map(|((&d, &v), &e)| (d as usize, v, e))
+                .collect(),
+            chosen: c.chosen as usize,
+            reason: c.reason.clone(),
+        }),
     }
 }
 
