@@ -117,7 +117,10 @@ impl Body {
     /// Validates and builds a body from a polynomial in normalized coordinates.
     ///
     /// Checks: degree ∈ {2, 4, 6, 8}; center finite; scale finite and > 0; p has a minimizer with
-    /// p < 1 there and a positive-definite Hessian (a bounded sublevel set with interior).
+    /// p < 1 there and a positive-definite Hessian (a bounded sublevel set with interior). For a
+    /// body whose report says `nonconvex`, a strict local minimizer found by modified Newton from
+    /// the best point of a grid over the normalized unit cube is accepted when Newton from the
+    /// origin fails.
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] naming `degree`, `center`, `scale` or `coefficients`.
@@ -132,7 +135,16 @@ impl Body {
         if !(scale.is_finite() && scale > 0.0) {
             return Err(Error::invalid("scale", format!("must be finite and > 0, got {scale}")));
         }
-        let (interior_u, min_value) = minimize_convex(&polynomial).ok_or_else(|| {
+        let found = minimize_convex(&polynomial).or_else(|| {
+            // A nonconvex body (relaxed convexity, inverse moment): any strict local minimizer
+            // with p < 1 is an interior point.
+            if report.nonconvex {
+                minimize_from_grid(&polynomial)
+            } else {
+                None
+            }
+        });
+        let (interior_u, min_value) = found.ok_or_else(|| {
             Error::invalid(
                 "coefficients",
                 "p has no minimizer with positive-definite Hessian: not a bounded convex body",
@@ -305,6 +317,57 @@ fn minimize_convex(p: &Polynomial) -> Option<(Vector3, Real)> {
         let step = -chol.solve(&e.gradient);
         let decrement = -e.gradient.dot(&step);
         if decrement < 1e-24 {
+            break;
+        }
+        let mut alpha = 1.0;
+        loop {
+            let trial = u + step * alpha;
+            let v = p.value(&trial);
+            if v.is_finite() && v <= e.value - 0.25 * alpha * decrement {
+                u = trial;
+                break;
+            }
+            alpha *= 0.5;
+            if alpha < 1e-12 {
+                return finish(p, u);
+            }
+        }
+        e = p.eval(&u);
+    }
+    finish(p, u)
+}
+
+/// A strict local minimizer of a possibly nonconvex polynomial: Newton with the Hessian's
+/// eigenvalues replaced by max(|λ|, δ) (a descent direction everywhere) and backtracking, started
+/// from the point of a 9 × 9 × 9 grid over [−1, 1]³ (the normalized cloud's cube) with the
+/// smallest p; `None` unless it ends at a point with positive-definite Hessian.
+fn minimize_from_grid(p: &Polynomial) -> Option<(Vector3, Real)> {
+    let mut u = Vector3::zeros();
+    let mut best = p.value(&u);
+    for i in 0..9 {
+        for j in 0..9 {
+            for k in 0..9 {
+                let v = Vector3::new(i as Real / 4.0 - 1.0, j as Real / 4.0 - 1.0, k as Real / 4.0 - 1.0);
+                let pv = p.value(&v);
+                if pv < best {
+                    best = pv;
+                    u = v;
+                }
+            }
+        }
+    }
+    let mut e = p.eval(&u);
+    for _ in 0..200 {
+        let eig = e.hessian.symmetric_eigen();
+        let scale = eig.eigenvalues.iter().fold(0.0 as Real, |m, v| m.max(v.abs()));
+        let floor = 1e-10 * (1.0 + scale);
+        let mut step = Vector3::zeros();
+        for k in 0..3 {
+            let v = eig.eigenvectors.column(k);
+            step -= v * (v.dot(&e.gradient) / eig.eigenvalues[k].abs().max(floor));
+        }
+        let decrement = -e.gradient.dot(&step);
+        if !(decrement >= 1e-24) {
             break;
         }
         let mut alpha = 1.0;

@@ -1,10 +1,10 @@
-//! `sublevel fit MESH --degree 6 --output body.json`: fit a body to a mesh (paper §III-A) and
-//! write its JSON body file. Progress (stage and Clarabel iteration) goes to stderr, a one-line
-//! summary to stdout.
+//! `sublevel fit MESH --degree 6 [--method trace_h] [--relaxation 10] --output body.json`: fit a
+//! body to a mesh (paper §III) and write its JSON body file. Progress (stage and Clarabel
+//! iteration) goes to stderr, a one-line summary (with the method and c) to stdout.
 
 use std::io::Write;
 use std::path::PathBuf;
-use sublevel::fit::{fit_points, mesh, FitProgress, FitSettings, FitStage};
+use sublevel::fit::{fit_points, mesh, FitMethod, FitProgress, FitSettings, FitStage};
 
 /// Arguments of `sublevel fit`.
 #[derive(clap::Args, Debug)]
@@ -14,6 +14,13 @@ pub struct FitArgs {
     /// Total degree 2d of the polynomial: 2, 4, 6 or 8.
     #[arg(long, short, default_value_t = 4)]
     pub degree: usize,
+    /// Formulation (paper §III): logdet_p, trace_p, logdet_h, trace_h or inverse_moment.
+    #[arg(long, default_value = "logdet_p")]
+    pub method: String,
+    /// Relaxed-convexity parameter c ≥ 0 of eq. "VAG.param.convex" (p + c‖u‖^{2d} sos-convex, u the
+    /// cloud normalized into the unit ball); c > 0 only with logdet_p or trace_p.
+    #[arg(long, default_value_t = 0.0)]
+    pub relaxation: f64,
     /// Where to write the body file (JSON); defaults to the mesh path with extension `.body.json`.
     #[arg(long, short)]
     pub output: Option<PathBuf>,
@@ -52,8 +59,21 @@ pub fn run(args: FitArgs) -> sublevel::Result<()> {
         Some(f) => mesh::parse_points(&std::fs::read(&args.mesh)?, f)?,
         None => mesh::load_points(&args.mesh)?,
     };
+    let method: FitMethod = args.method.parse()?;
+    let c = args.relaxation;
+    if !(c.is_finite() && c >= 0.0) {
+        return Err(sublevel::Error::invalid("relaxation", format!("must be finite and ≥ 0, got {c}")));
+    }
+    if c > 0.0 && !matches!(method, FitMethod::LogDetP | FitMethod::TraceP) {
+        return Err(sublevel::Error::invalid(
+            "relaxation",
+            format!("only logdet_p and trace_p take --relaxation, not {}", method.name()),
+        ));
+    }
     let settings = FitSettings {
         degree: args.degree,
+        method,
+        convexity_relaxation: c,
         volume_samples: args.samples,
         seed: args.seed,
         solver_tolerance: args.tolerance,
@@ -83,10 +103,14 @@ pub fn run(args: FitArgs) -> sublevel::Result<()> {
     body.save(&output)?;
     let r = &body.report;
     let name = args.mesh.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let method = if r.convexity_relaxation > 0.0 {
+        format!("{} (c = {})", r.method, r.convexity_relaxation)
+    } else {
+        r.method.clone()
+    };
     println!(
-        "{name}: degree {} {} {}, {} points / {} hull vertices, volume {:.4} ± {:.4} (hull {:.4}), solve {:.2} s, total {:.2} s -> {}",
+        "{name}: degree {} {method} {}, {} points / {} hull vertices, volume {:.4} ± {:.4} (hull {:.4}), solve {:.2} s, total {:.2} s -> {}",
         body.degree(),
-        r.method,
         r.solver_status,
         r.num_points,
         r.num_hull_vertices,

@@ -101,14 +101,118 @@ fn pair_index(k: usize, l: usize) -> usize {
     }
 }
 
+/// The objective of a fit (paper §III-A): log det or trace of the inverse of a Gram matrix.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Objective {
+    /// Maximize log det X through `[[X, Z], [Zᵀ, diag Z]] ⪰ 0` and exponential cones.
+    LogDet,
+    /// Minimize trace V with `[[V, I], [I, X]] ⪰ 0`, i.e. V ⪰ X⁻¹ (Schur complement).
+    Trace,
+}
+
+/// Which Gram matrix the objective acts on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ObjectiveMatrix {
+    /// The sos Gram matrix P of p = z(x)ᵀ P z(x) (N × N; eq. "VAG.log.det", ours).
+    P,
+    /// The sos-convexity Gram matrix H = G of yᵀ∇²p y = wᵀ H w (M × M; eq. "Magnani.log.det").
+    H,
+}
+
+/// What to build: degree, objective × matrix, and the relaxed-convexity parameter c.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ProblemSpec {
+    /// Half degree d (the body has degree 2d), 1..=4.
+    pub half_degree: usize,
+    /// log det or trace.
+    pub objective: Objective,
+    /// P (ours) or H (Magnani et al.).
+    pub matrix: ObjectiveMatrix,
+    /// c ≥ 0 of eq. "VAG.param.convex": p + c(‖u‖²)ᵈ sos-convex instead of p, u normalized
+    /// coordinates. Only with the objective on P.
+    pub convexity_relaxation: Real,
+}
+
+impl ProblemSpec {
+    /// The log det P program of eq. "VAG.log.det" (c = 0).
+    pub fn log_det_p(half_degree: usize) -> Self {
+        Self { half_degree, objective: Objective::LogDet, matrix: ObjectiveMatrix::P, convexity_relaxation: 0.0 }
+    }
+}
+
+/// Coefficients of q(u) = (u₁² + u₂² + u₃²)ᵈ in the graded-lex basis of degree 2d (multinomial
+/// theorem: q = Σ_{a+b+c=d} d!/(a! b! c!) u₁^{2a} u₂^{2b} u₃^{2c}).
+pub fn norm_power_coefficients(d: usize) -> Vec<Real> {
+    let fact = |k: usize| (1..=k).map(|v| v as Real).product::<Real>();
+    let mut q = vec![0.0; basis_len(3, 2 * d)];
+    for a in 0..=d {
+        for b in 0..=d - a {
+            let c = d - a - b;
+            q[index3([2 * a as u8, 2 * b as u8, 2 * c as u8])] = fact(d) / (fact(a) * fact(b) * fact(c));
+        }
+    }
+    q
+}
+
+/// p = z(x)ᵀ P z(x) expanded in the graded-lex basis of degree 2d, for a symmetric N × N matrix
+/// P over the half basis z of degree ≤ d (exactly sos for P ⪰ 0).
+///
+/// # Errors
+/// [`Error::Numerical`] when P has the wrong size or a coefficient is not finite.
+pub fn polynomial_of_gram(half_degree: usize, p: &nalgebra::DMatrix<Real>) -> Result<Polynomial> {
+    let half = graded_exponents3(half_degree);
+    if p.nrows() != half.len() || p.ncols() != half.len() {
+        return Err(Error::Numerical(format!(
+            "Gram matrix is {}×{}, expected {}×{}",
+            p.nrows(),
+            p.ncols(),
+            half.len(),
+            half.len()
+        )));
+    }
+    let mut c = vec![0.0; basis_len(3, 2 * half_degree)];
+    for j in 0..half.len() {
+        for i in 0..=j {
+            let e = [half[i][0] + half[j][0], half[i][1] + half[j][1], half[i][2] + half[j][2]];
+            c[index3(e)] += if i == j { 1.0 } else { 2.0 } * p[(i, j)];
+        }
+    }
+    Polynomial::from_coefficients(2 * half_degree, c)
+        .map_err(|e| Error::Numerical(format!("unusable Gram matrix: {e}")))
+}
+
 impl LogDetProblem {
-    /// Builds the program for half degree `d ∈ 1..=4` and the normalized hull vertices `hull`.
+    /// Builds the log det P program of eq. "VAG.log.det" for half degree `d ∈ 1..=4` and the
+    /// normalized hull vertices `hull` (shorthand for [`LogDetProblem::build_spec`] with
+    /// [`ProblemSpec::log_det_p`]).
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] naming `degree` when `d` is outside 1..=4.
     pub fn build(d: usize, hull: &[Vector3]) -> Result<Self> {
+        Self::build_spec(&ProblemSpec::log_det_p(d), hull)
+    }
+
+    /// Builds the program of `spec` with one containment row `p(uᵢ) ≤ 1` per point of `points`
+    /// (normalized coordinates).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `degree` when `d` is outside 1..=4, or
+    /// `convexity_relaxation` when c is negative or not finite, or c > 0 with the objective on H
+    /// (the relaxed Gram matrix would enter the objective, see paper §III-B-2).
+    pub fn build_spec(spec: &ProblemSpec, points: &[Vector3]) -> Result<Self> {
+        let d = spec.half_degree;
         if !(1..=4).contains(&d) {
             return Err(Error::invalid("degree", format!("must be one of 2, 4, 6, 8, got {}", 2 * d)));
+        }
+        let c_relax = spec.convexity_relaxation;
+        if !(c_relax.is_finite() && c_relax >= 0.0) {
+            return Err(Error::invalid("convexity_relaxation", format!("must be finite and ≥ 0, got {c_relax}")));
+        }
+        if c_relax > 0.0 && spec.matrix == ObjectiveMatrix::H {
+            return Err(Error::invalid(
+                "convexity_relaxation",
+                "relaxed convexity needs the objective on P (logdet_p or trace_p), not on H",
+            ));
         }
         let half = graded_exponents3(d);
         let n = half.len();
@@ -117,15 +221,28 @@ impl LogDetProblem {
         let m = 3 * nl;
         let full = graded_exponents3(2 * d);
         let l = full.len();
+        // Side of the matrix the objective acts on.
+        let k = match spec.matrix {
+            ObjectiveMatrix::P => n,
+            ObjectiveMatrix::H => m,
+        };
 
-        // Columns: P | Z (lower triangle, packed as the upper triangle of Zᵀ) | t | c | G.
+        // Columns: P | objective extras | c | G, where the extras are Z (lower triangle, packed
+        // as the upper triangle of Zᵀ) and t for log det, V for trace. For log det P this is the
+        // original layout P | Z | t | c | G.
         let col_p = 0;
-        let col_z = col_p + triangle_len(n);
-        let col_t = col_z + triangle_len(n);
-        let col_c = col_t + n;
+        let col_x0 = col_p + triangle_len(n);
+        let (col_z, col_t, col_v, col_c) = match spec.objective {
+            Objective::LogDet => (col_x0, col_x0 + triangle_len(k), 0, col_x0 + triangle_len(k) + k),
+            Objective::Trace => (0, 0, col_x0, col_x0 + triangle_len(k)),
+        };
         let col_g = col_c + l;
         let num_vars = col_g + triangle_len(m);
         let z_col = |i: usize, j: usize| col_z + triangle_index(j, i); // Z(i, j), i ≥ j
+        let col_x = match spec.matrix {
+            ObjectiveMatrix::P => col_p,
+            ObjectiveMatrix::H => col_g,
+        };
 
         let mut r = Rows::default();
 
@@ -140,9 +257,12 @@ impl LogDetProblem {
                 r.push(base + index3(e), col_p + triangle_index(i, j), -gram_weight(i, j));
             }
         }
-        // (2) yᵀ∇²p y = wᵀ G w: one row per (y-pair k ≤ l, x-monomial β of degree ≤ 2d − 2).
+        // (2) yᵀ∇²(p + c q) y = wᵀ G w, q = (‖u‖²)ᵈ: one row per (y-pair k ≤ l, x-monomial β of
+        // degree ≤ 2d − 2). The known part c·yᵀ∇²q y moves to the right-hand side.
         let lb = basis_len(3, 2 * d - 2);
         let base2 = base + l;
+        let mut rhs2 = vec![0.0; 6 * lb];
+        let q_relax = if c_relax > 0.0 { norm_power_coefficients(d) } else { vec![0.0; l] };
         for (ci, alpha) in full.iter().enumerate() {
             for k in 0..3 {
                 for ll in k..3 {
@@ -155,7 +275,9 @@ impl LogDetProblem {
                     let mut beta = *alpha;
                     beta[k] -= 1;
                     beta[ll] -= 1;
-                    r.push(base2 + pair_index(k, ll) * lb + index3(beta), col_c + ci, f);
+                    let row = pair_index(k, ll) * lb + index3(beta);
+                    r.push(base2 + row, col_c + ci, f);
+                    rhs2[row] -= c_relax * f * q_relax[ci];
                 }
             }
         }
@@ -172,13 +294,14 @@ impl LogDetProblem {
             }
         }
         let num_eq = l + 6 * lb;
-        r.b.extend(std::iter::repeat_n(0.0, num_eq));
+        r.b.extend(std::iter::repeat_n(0.0, l));
+        r.b.extend(rhs2);
         r.cones.push(SupportedConeT::ZeroConeT(num_eq));
 
-        // (3) p(uᵢ) ≤ 1 on the hull vertices: 1 − Σ c_α uᵢ^α ≥ 0.
-        if !hull.is_empty() {
+        // (3) p(uᵢ) ≤ 1 on the containment points: 1 − Σ c_α uᵢ^α ≥ 0.
+        if !points.is_empty() {
             let poly = Polynomial::zero(2 * d);
-            for u in hull {
+            for u in points {
                 let row = r.next_row();
                 for (k, e) in poly.exponents().iter().enumerate() {
                     let v = u.x.powi(e[0] as i32) * u.y.powi(e[1] as i32) * u.z.powi(e[2] as i32);
@@ -186,50 +309,81 @@ impl LogDetProblem {
                 }
                 r.b.push(1.0);
             }
-            r.cones.push(SupportedConeT::NonnegativeConeT(hull.len()));
+            r.cones.push(SupportedConeT::NonnegativeConeT(points.len()));
         }
 
-        // (4) [[P, Z], [Zᵀ, diag Z]] ⪰ 0 as a 2N × 2N packed triangle of affine expressions.
-        let nn = 2 * n;
+        // (4) The objective block, a 2k × 2k packed triangle of affine expressions holding X:
+        //     log det: [[X, Z], [Zᵀ, diag Z]] ⪰ 0;   trace: [[V, I], [I, X]] ⪰ 0.
+        let kk = 2 * k;
         let base4 = r.next_row();
         let s2 = std::f64::consts::SQRT_2;
-        for j in 0..nn {
+        let mut b4 = vec![0.0; triangle_len(kk)];
+        for j in 0..kk {
             for i in 0..=j {
                 let row = base4 + triangle_index(i, j);
-                if j < n {
-                    r.push(row, col_p + triangle_index(i, j), -1.0);
-                } else if i < n {
-                    let jz = j - n;
-                    if i >= jz {
-                        r.push(row, z_col(i, jz), -s2);
+                match spec.objective {
+                    Objective::LogDet => {
+                        if j < k {
+                            r.push(row, col_x + triangle_index(i, j), -1.0);
+                        } else if i < k {
+                            let jz = j - k;
+                            if i >= jz {
+                                r.push(row, z_col(i, jz), -s2);
+                            }
+                        } else if i == j {
+                            r.push(row, z_col(i - k, i - k), -1.0);
+                        }
                     }
-                } else if i == j {
-                    r.push(row, z_col(i - n, i - n), -1.0);
+                    Objective::Trace => {
+                        if j < k {
+                            r.push(row, col_v + triangle_index(i, j), -1.0);
+                        } else if i < k {
+                            if i == j - k {
+                                b4[triangle_index(i, j)] = s2;
+                            }
+                        } else {
+                            r.push(row, col_x + triangle_index(i - k, j - k), -1.0);
+                        }
+                    }
                 }
             }
         }
-        r.b.extend(std::iter::repeat_n(0.0, triangle_len(nn)));
-        r.cones.push(SupportedConeT::PSDTriangleConeT(nn));
+        r.b.extend(b4);
+        r.cones.push(SupportedConeT::PSDTriangleConeT(kk));
 
-        // (5) G ⪰ 0.
+        // (5) The other Gram matrix gets a cone of its own: G ⪰ 0 (objective on P) or P ⪰ 0
+        // (objective on H: p sos).
+        let (col_o, size_o) = match spec.matrix {
+            ObjectiveMatrix::P => (col_g, m),
+            ObjectiveMatrix::H => (col_p, n),
+        };
         let base5 = r.next_row();
-        for k in 0..triangle_len(m) {
-            r.push(base5 + k, col_g + k, -1.0);
+        for k in 0..triangle_len(size_o) {
+            r.push(base5 + k, col_o + k, -1.0);
         }
-        r.b.extend(std::iter::repeat_n(0.0, triangle_len(m)));
-        r.cones.push(SupportedConeT::PSDTriangleConeT(m));
-
-        // (6) (tᵢ, 1, Zᵢᵢ) ∈ K_exp: Zᵢᵢ ≥ exp(tᵢ).
-        for i in 0..n {
-            let row = r.next_row();
-            r.push(row, col_t + i, -1.0);
-            r.push(row + 2, z_col(i, i), -1.0);
-            r.b.extend([0.0, 1.0, 0.0]);
-            r.cones.push(SupportedConeT::ExponentialConeT());
-        }
+        r.b.extend(std::iter::repeat_n(0.0, triangle_len(size_o)));
+        r.cones.push(SupportedConeT::PSDTriangleConeT(size_o));
 
         let mut q = vec![0.0; num_vars];
-        q[col_t..col_t + n].iter_mut().for_each(|v| *v = -1.0);
+        match spec.objective {
+            // (6) (tᵢ, 1, Zᵢᵢ) ∈ K_exp: Zᵢᵢ ≥ exp(tᵢ); maximize Σ tᵢ.
+            Objective::LogDet => {
+                for i in 0..k {
+                    let row = r.next_row();
+                    r.push(row, col_t + i, -1.0);
+                    r.push(row + 2, z_col(i, i), -1.0);
+                    r.b.extend([0.0, 1.0, 0.0]);
+                    r.cones.push(SupportedConeT::ExponentialConeT());
+                }
+                q[col_t..col_t + k].iter_mut().for_each(|v| *v = -1.0);
+            }
+            // Minimize trace V.
+            Objective::Trace => {
+                for i in 0..k {
+                    q[col_v + triangle_index(i, i)] = 1.0;
+                }
+            }
+        }
         let a = CscMatrix::new_from_triplets(r.b.len(), num_vars, r.ii, r.jj, r.vv);
         Ok(Self {
             half_degree: d,
@@ -285,6 +439,36 @@ impl LogDetProblem {
         })
     }
 
+    /// [`LogDetProblem::solve`], re-solved with a shorter interior-point step (Clarabel's
+    /// `max_step_fraction` 0.9, then 0.7) when Clarabel ends with `InsufficientProgress` or
+    /// `NumericalError`; the returned time and iterations add up every attempt.
+    ///
+    /// # Errors
+    /// As [`LogDetProblem::solve`].
+    pub fn solve_with_retry(
+        &self,
+        settings: &DefaultSettings<Real>,
+        progress: &mut dyn FnMut(u32, Real),
+    ) -> Result<RawSolution> {
+        let mut raw = self.solve(settings.clone(), progress)?;
+        for fraction in [0.9, 0.7] {
+            if !matches!(raw.status, SolverStatus::InsufficientProgress | SolverStatus::NumericalError)
+                || settings.max_step_fraction <= fraction
+            {
+                continue;
+            }
+            let mut retry = settings.clone();
+            retry.max_step_fraction = fraction;
+            let next = self.solve(retry, progress)?;
+            raw = RawSolution {
+                solve_seconds: raw.solve_seconds + next.solve_seconds,
+                iterations: raw.iterations + next.iterations,
+                ..next
+            };
+        }
+        Ok(raw)
+    }
+
     /// The Gram matrix P (N × N) from a solution.
     pub fn gram(&self, x: &[Real]) -> nalgebra::DMatrix<Real> {
         unpack_triangle(&x[self.col_p..self.col_p + triangle_len(self.gram_size)], self.gram_size)
@@ -301,16 +485,7 @@ impl LogDetProblem {
     /// # Errors
     /// [`Error::Numerical`] when a coefficient is not finite.
     pub fn polynomial_of_gram(&self, p: &nalgebra::DMatrix<Real>) -> Result<Polynomial> {
-        let half = graded_exponents3(self.half_degree);
-        let mut c = vec![0.0; basis_len(3, 2 * self.half_degree)];
-        for j in 0..half.len() {
-            for i in 0..=j {
-                let e = [half[i][0] + half[j][0], half[i][1] + half[j][1], half[i][2] + half[j][2]];
-                c[index3(e)] += if i == j { 1.0 } else { 2.0 } * p[(i, j)];
-            }
-        }
-        Polynomial::from_coefficients(2 * self.half_degree, c)
-            .map_err(|e| Error::Numerical(format!("the solver returned an unusable Gram matrix: {e}")))
+        polynomial_of_gram(self.half_degree, p)
     }
 }
 
@@ -347,7 +522,7 @@ pub fn usable_status(status: SolverStatus) -> Result<&'static str> {
         SolverStatus::InsufficientProgress => "InsufficientProgress",
         SolverStatus::CallbackTerminated => "CallbackTerminated",
     };
-    Err(Error::Numerical(format!("the log-det fit SDP ended with status {why}")))
+    Err(Error::Numerical(format!("the fit SDP ended with status {why}")))
 }
 
 #[cfg(test)]

@@ -1,14 +1,18 @@
-//! Fitting bodies to point clouds (paper §III-A).
+//! Fitting bodies to point clouds (paper §III: §III-A sos-convex, §III-B relaxed / inverse moment).
 //!
-//! [`fit_points`] turns a cloud into a [`Body`] `{x : p((x − c)/s) ≤ 1}` with p sos-convex of
-//! degree 2d, in five stages, each reported through the progress callback:
+//! [`fit_points`] turns a cloud into a [`Body`] `{x : p((x − c)/s) ≤ 1}` with p of
+//! degree 2d (sos-convex unless the method relaxes convexity), in five stages, each reported
+//! through the progress callback:
 //!
 //! ```text
 //! Hull    validate, normalize (u = (x − c)/s, cloud in the unit ball), convex hull   (hull.rs)
-//! Build   the cone program of eq. "VAG.log.det"                                      (logdet_p.rs)
-//! Solve   Clarabel, one progress report per interior-point iteration
+//! Build   the cone program of the method (log det / trace of P or H)                 (logdet_p.rs)
+//!         or the moment matrix (inverse moment)                              (inverse_moment.rs)
+//! Solve   Clarabel, one progress report per interior-point iteration; with relaxed
+//!         convexity in rounds that add violated points as rows                     (relaxed.rs)
 //! Verify  p on EVERY input point; if max p(uᵢ) > 1, divide p by it (exact containment)
-//! Volume  seeded Monte Carlo in a provably containing box                           (volume.rs)
+//! Volume  seeded Monte Carlo in a provably containing box (convex bodies) or in cells
+//!         proven to cover {p ≤ 1} (nonconvex sos bodies)                              (volume.rs)
 //! ```
 //!
 //! Containment is never approximate: after the final rescale `max_i p(uᵢ) ≤ 1` holds in floating
@@ -16,11 +20,14 @@
 
 use crate::body::{Body, FitReport};
 use crate::math::{Point3, Real};
+use crate::poly::Polynomial;
 use crate::{Error, Result};
 
 pub mod hull;
+pub mod inverse_moment;
 pub mod logdet_p;
 pub mod mesh;
+pub mod relaxed;
 pub mod volume;
 
 /// Which formulation a fit uses (paper §III; the body file's `report.method`).
@@ -185,11 +192,24 @@ impl FitSettings {
         self
     }
 
+    /// Sets the formulation.
+    pub fn with_method(mut self, method: FitMethod) -> Self {
+        self.method = method;
+        self
+    }
+
+    /// Sets the relaxed-convexity parameter c (normalized coordinates, eq. "VAG.param.convex").
+    pub fn with_relaxation(mut self, c: Real) -> Self {
+        self.convexity_relaxation = c;
+        self
+    }
+
     /// Checks every field.
     ///
     /// # Errors
-    /// [`Error::InvalidArgument`] naming `degree`, `volume_samples`, `solver_tolerance` or
-    /// `max_solver_iterations`.
+    /// [`Error::InvalidArgument`] naming `degree`, `volume_samples`, `solver_tolerance`,
+    /// `max_solver_iterations` or `convexity_relaxation` (negative, not finite, or > 0 with a
+    /// method other than `LogDetP` / `TraceP`).
     pub fn validate(&self) -> Result<()> {
         if !crate::body::SUPPORTED_DEGREES.contains(&self.degree) {
             return Err(Error::invalid("degree", format!("must be one of 2, 4, 6, 8, got {}", self.degree)));
@@ -205,6 +225,16 @@ impl FitSettings {
         }
         if self.max_solver_iterations == 0 {
             return Err(Error::invalid("max_solver_iterations", "must be at least 1"));
+        }
+        let c = self.convexity_relaxation;
+        if !(c.is_finite() && c >= 0.0) {
+            return Err(Error::invalid("convexity_relaxation", format!("must be finite and ≥ 0, got {c}")));
+        }
+        if c > 0.0 && !matches!(self.method, FitMethod::LogDetP | FitMethod::TraceP) {
+            return Err(Error::invalid(
+                "convexity_relaxation",
+                format!("only logdet_p and trace_p take a relaxation c > 0, not {}", self.method.name()),
+            ));
         }
         Ok(())
     }
@@ -242,56 +272,242 @@ fn report(progress: &mut dyn FnMut(&FitProgress), stage: FitStage, fraction: Rea
     progress(&FitProgress { stage, fraction, message });
 }
 
-/// Fits a body to a point cloud by eq. "VAG.log.det" (paper §III-A).
+/// Fits a body to a point cloud with the formulation `settings.method` (paper §III).
 ///
 /// `points` are in the mesh's units (meters). The returned body stores its polynomial in
 /// normalized coordinates `u = (x − center)/scale` (see [`hull`] for the choice of center and
 /// scale); its report holds the solver status, timings, hull and volume figures, the containment
-/// rescale and the convexity margin (smallest eigenvalue of the sos-convexity Gram matrix G of the
-/// final, rescaled p).
+/// rescale and the convexity margin.
+///
+/// - `LogDetP`, `TraceP`, `LogDetH`, `TraceH` with c = 0: p sos-convex, containment rows on the
+///   convex-hull vertices only (a convex sublevel set containing them contains the cloud); the
+///   margin is λ_min of the sos-convexity Gram matrix G of the final, rescaled p.
+/// - `LogDetP`, `TraceP` with c = `convexity_relaxation` > 0 (eq. "VAG.param.convex"): p + c(‖u‖²)ᵈ
+///   sos-convex in normalized coordinates u (the cloud is normalized into the unit ball, as in
+///   the paper). The body may be nonconvex, so containment rows are added in rounds (see
+///   [`relaxed`]) until p ≤ 1 on every point; `report.nonconvex` is set and the margin is that of
+///   the relaxed Gram matrix (of p + c(‖u‖²)ᵈ, divided by the containment rescale).
+/// - `InverseMoment` (eq. "inverse.moment.poly", see [`inverse_moment`]): no SDP, nonconvex, no
+///   margin.
+///
+/// Every body contains every input point: after the final rescale `max_i p(uᵢ) ≤ 1` holds in
+/// floating point, and the largest value is recorded in the report.
 ///
 /// # Errors
-/// [`Error::InvalidArgument`] naming `points` for an empty, non-finite or degenerate cloud, or a
-/// settings field; [`Error::Numerical`] when Clarabel ends with a status other than `Solved` /
-/// `AlmostSolved` (the status is named) or the result is not a bounded body.
+/// [`Error::InvalidArgument`] naming `points` for an empty, non-finite or degenerate cloud (for the
+/// inverse moment also a singular moment matrix), or a settings field; [`Error::Numerical`] when
+/// Clarabel ends with a status other than `Solved` / `AlmostSolved` (the status is named) or the
+/// result is not a bounded body.
 pub fn fit_points(points: &[Point3], settings: &FitSettings, progress: &mut dyn FnMut(&FitProgress)) -> Result<Body> {
+    fit_impl(points, settings, settings.convexity_relaxation > 0.0, progress)
+}
+
+/// [`fit_points`] for `LogDetP` / `TraceP` with containment rows added in rounds (hull vertices
+/// and a subsample first, then the violated points) whatever c is — the path `fit_points` takes
+/// for c > 0. With c = 0 it solves the same program as [`fit_points`] with extra inactive rows,
+/// so it returns the same body up to the solver tolerance.
+///
+/// # Errors
+/// As [`fit_points`]; [`Error::InvalidArgument`] naming `method` for another method.
+pub fn fit_points_in_rounds(
+    points: &[Point3],
+    settings: &FitSettings,
+    progress: &mut dyn FnMut(&FitProgress),
+) -> Result<Body> {
+    if !matches!(settings.method, FitMethod::LogDetP | FitMethod::TraceP) {
+        return Err(Error::invalid("method", "containment rounds are for logdet_p and trace_p"));
+    }
+    fit_impl(points, settings, true, progress)
+}
+
+/// What a formulation hands to the common verify / volume stages.
+pub(crate) struct Solved {
+    /// p before the containment rescale (normalized coordinates).
+    pub(crate) poly: Polynomial,
+    pub(crate) solver_status: String,
+    pub(crate) solve_seconds: Real,
+    /// Sos-convexity Gram matrix of p (or of p + c q when relaxed), if the method has one.
+    pub(crate) convexity_gram: Option<nalgebra::DMatrix<Real>>,
+    /// Sos Gram matrix P of p = zᵀPz, for the volume box of a nonconvex body.
+    pub(crate) sos_gram: Option<nalgebra::DMatrix<Real>>,
+    pub(crate) nonconvex: bool,
+    pub(crate) notes: Vec<String>,
+}
+
+fn clarabel_settings(settings: &FitSettings) -> clarabel::solver::DefaultSettings<Real> {
+    let mut clarabel = crate::conic::quiet_settings(settings.solver_tolerance, settings.max_solver_iterations);
+    clarabel.direct_solve_method = settings.linear_solver.name().into();
+    clarabel.max_threads = settings.solver_threads;
+    clarabel
+}
+
+fn spec_of(settings: &FitSettings) -> logdet_p::ProblemSpec {
+    use logdet_p::{Objective, ObjectiveMatrix};
+    let (objective, matrix) = match settings.method {
+        FitMethod::TraceP => (Objective::Trace, ObjectiveMatrix::P),
+        FitMethod::LogDetH => (Objective::LogDet, ObjectiveMatrix::H),
+        FitMethod::TraceH => (Objective::Trace, ObjectiveMatrix::H),
+        FitMethod::LogDetP | FitMethod::InverseMoment => (Objective::LogDet, ObjectiveMatrix::P),
+    };
+    logdet_p::ProblemSpec {
+        half_degree: settings.degree / 2,
+        objective,
+        matrix,
+        convexity_relaxation: settings.convexity_relaxation,
+    }
+}
+
+/// Name of the objective for progress messages.
+fn objective_label(spec: &logdet_p::ProblemSpec) -> &'static str {
+    use logdet_p::{Objective, ObjectiveMatrix};
+    match (spec.objective, spec.matrix) {
+        (Objective::LogDet, ObjectiveMatrix::P) => "log det P",
+        (Objective::LogDet, ObjectiveMatrix::H) => "log det H",
+        (Objective::Trace, ObjectiveMatrix::P) => "−trace P⁻¹",
+        (Objective::Trace, ObjectiveMatrix::H) => "−trace H⁻¹",
+    }
+}
+
+fn fit_impl(
+    points: &[Point3],
+    settings: &FitSettings,
+    rounds: bool,
+    progress: &mut dyn FnMut(&FitProgress),
+) -> Result<Body> {
     let start = std::time::Instant::now();
     settings.validate()?;
-    if settings.method != FitMethod::LogDetP || settings.convexity_relaxation != 0.0 {
-        return Err(Error::invalid("method", format!("{} is not implemented yet", settings.method.name())));
-    }
     report(progress, FitStage::Hull, 0.0, format!("convex hull of {} points", points.len()));
     let cloud = hull::normalize_and_hull(points)?;
-
     let d = settings.degree / 2;
+    let solved = if settings.method == FitMethod::InverseMoment {
+        report(progress, FitStage::Build, 0.05, format!("degree-{} moment matrix of {} points", 2 * d, points.len()));
+        inverse_moment::solve(d, &cloud.points)?
+    } else if rounds {
+        solve_in_rounds(&cloud, settings, progress)?
+    } else {
+        solve_on_hull(&cloud, settings, progress)?
+    };
+    finish(start, points.len(), &cloud, solved, settings, progress)
+}
+
+/// c = 0: one SDP with containment rows on the hull vertices.
+fn solve_on_hull(
+    cloud: &hull::NormalizedCloud,
+    settings: &FitSettings,
+    progress: &mut dyn FnMut(&FitProgress),
+) -> Result<Solved> {
+    let spec = spec_of(settings);
     report(
         progress,
         FitStage::Build,
         0.05,
         format!("building the degree-{} program on {} hull vertices", settings.degree, cloud.hull_vertices.len()),
     );
-    let problem = logdet_p::LogDetProblem::build(d, &cloud.hull_vertices)?;
-
+    let problem = logdet_p::LogDetProblem::build_spec(&spec, &cloud.hull_vertices)?;
     report(
         progress,
         FitStage::Solve,
         0.1,
         format!("Clarabel: {} variables, {} rows", problem.num_vars, problem.num_rows()),
     );
-    let max_iter = settings.max_solver_iterations;
-    let mut clarabel = crate::conic::quiet_settings(settings.solver_tolerance, max_iter);
-    clarabel.direct_solve_method = settings.linear_solver.name().into();
-    clarabel.max_threads = settings.solver_threads;
-    let raw = problem.solve(clarabel, &mut |it, cost| {
+    let label = objective_label(&spec);
+    let raw = problem.solve_with_retry(&clarabel_settings(settings), &mut |it, cost| {
         // Interior-point methods take 20–40 iterations here; map them onto [0.1, 0.8].
         let frac = 0.1 + 0.7 * (it as Real / 40.0).min(1.0);
-        report(progress, FitStage::Solve, frac, format!("Clarabel iteration {it}, log det P ≈ {:.6}", -cost));
+        report(progress, FitStage::Solve, frac, format!("Clarabel iteration {it}, {label} ≈ {:.6}", -cost));
     })?;
     let status = logdet_p::usable_status(raw.status)?;
-
-    report(progress, FitStage::Verify, 0.8, format!("checking p ≤ 1 on all {} points", points.len()));
     let gram = problem.gram(&raw.x);
-    let mut poly = problem.polynomial_of_gram(&gram)?;
+    Ok(Solved {
+        poly: problem.polynomial_of_gram(&gram)?,
+        solver_status: status.into(),
+        solve_seconds: raw.solve_seconds,
+        convexity_gram: Some(problem.convexity_gram(&raw.x)),
+        sos_gram: Some(gram),
+        nonconvex: false,
+        notes: vec![format!(
+            "normalized by center = bounding-box midpoint, scale = max distance to it; Clarabel {} iterations ({})",
+            raw.iterations,
+            settings.linear_solver.name()
+        )],
+    })
+}
+
+/// Containment rows in rounds (relaxed convexity, or any c through [`fit_points_in_rounds`]).
+fn solve_in_rounds(
+    cloud: &hull::NormalizedCloud,
+    settings: &FitSettings,
+    progress: &mut dyn FnMut(&FitProgress),
+) -> Result<Solved> {
+    let spec = spec_of(settings);
+    report(
+        progress,
+        FitStage::Build,
+        0.05,
+        format!(
+            "degree-{} program, c = {}, containment rows in rounds over {} points",
+            settings.degree,
+            settings.convexity_relaxation,
+            cloud.points.len()
+        ),
+    );
+    let label = objective_label(&spec);
+    let out = relaxed::solve_in_rounds(cloud, &spec, &clarabel_settings(settings), &mut |round, it, cost| {
+        // Round r takes [0.1 + 0.7(1 − 1/(r+1)), 0.1 + 0.7(1 − 1/(r+2))].
+        let r = round as Real;
+        let lo = 0.1 + 0.7 * (1.0 - 1.0 / (r + 1.0));
+        let hi = 0.1 + 0.7 * (1.0 - 1.0 / (r + 2.0));
+        let frac = lo + (hi - lo) * (it as Real / 40.0).min(1.0);
+        report(
+            progress,
+            FitStage::Solve,
+            frac,
+            format!("Clarabel iteration {it} (containment round {}), {label} ≈ {:.6}", round + 1, -cost),
+        );
+    })?;
+    let rows: Vec<String> = out.rows_per_round.iter().map(|r| r.to_string()).collect();
+    let mut notes = vec![
+        format!(
+            "normalized by center = bounding-box midpoint, scale = max distance to it; Clarabel {} iterations in all ({})",
+            out.iterations,
+            settings.linear_solver.name()
+        ),
+        format!(
+            "relaxed convexity c = {} (normalized coordinates, cloud in the unit ball): {} containment round(s), rows {} of {} points",
+            settings.convexity_relaxation,
+            out.rows_per_round.len(),
+            rows.join(" → "),
+            cloud.points.len()
+        ),
+    ];
+    if !out.converged {
+        notes.push(format!(
+            "round cap {} reached with points still outside; the final rescale restores containment",
+            relaxed::MAX_ROUNDS
+        ));
+    }
+    Ok(Solved {
+        poly: out.polynomial,
+        solver_status: out.status.into(),
+        solve_seconds: out.solve_seconds,
+        convexity_gram: Some(out.convexity_gram),
+        sos_gram: Some(out.gram),
+        nonconvex: settings.convexity_relaxation > 0.0,
+        notes,
+    })
+}
+
+/// Verify (containment rescale), body construction and volume, common to every method.
+fn finish(
+    start: std::time::Instant,
+    num_points: usize,
+    cloud: &hull::NormalizedCloud,
+    solved: Solved,
+    settings: &FitSettings,
+    progress: &mut dyn FnMut(&FitProgress),
+) -> Result<Body> {
+    report(progress, FitStage::Verify, 0.8, format!("checking p ≤ 1 on all {} points", num_points));
+    let mut poly = solved.poly;
     let mut max_value = cloud.points.iter().map(|u| poly.value(u)).fold(Real::NEG_INFINITY, Real::max);
     if !max_value.is_finite() || max_value <= 0.0 {
         return Err(Error::Numerical(format!("fitted polynomial has max value {max_value} on the cloud")));
@@ -310,36 +526,48 @@ pub fn fit_points(points: &[Point3], settings: &FitSettings, progress: &mut dyn 
     if max_value > 1.0 {
         return Err(Error::Numerical(format!("could not rescale p to contain every point (max {max_value})")));
     }
-    let g = problem.convexity_gram(&raw.x) / rescale;
-    let margin = g.symmetric_eigenvalues().iter().copied().fold(Real::INFINITY, Real::min);
+    let margin = solved
+        .convexity_gram
+        .map(|g| (g / rescale).symmetric_eigenvalues().iter().copied().fold(Real::INFINITY, Real::min));
 
     let mut fit_report = FitReport {
         method: settings.method.name().into(),
-        solver_status: status.into(),
-        solve_seconds: raw.solve_seconds,
+        solver_status: solved.solver_status,
+        solve_seconds: solved.solve_seconds,
         total_seconds: 0.0,
-        num_points: points.len(),
+        num_points,
         num_hull_vertices: cloud.hull_vertices.len(),
         volume: 0.0,
         volume_std_error: 0.0,
         hull_volume: cloud.hull_volume(),
         max_point_value: max_value,
         containment_rescale: rescale,
-        convexity_margin: Some(margin),
-        notes: vec![format!(
-            "normalized by center = bounding-box midpoint, scale = max distance to it; Clarabel {} iterations ({})",
-            raw.iterations,
-            settings.linear_solver.name()
-        )],
+        convexity_margin: margin,
+        notes: solved.notes,
+        convexity_relaxation: settings.convexity_relaxation,
+        nonconvex: solved.nonconvex,
         ..Default::default()
     };
     let center = [cloud.center.x, cloud.center.y, cloud.center.z];
     let body = Body::new(poly, center, cloud.scale, fit_report.clone())
-        .map_err(|e| Error::Numerical(format!("the fitted polynomial is not a bounded convex body: {e}")))?;
+        .map_err(|e| Error::Numerical(format!("the fitted polynomial is not a bounded body: {e}")))?;
 
     report(progress, FitStage::Volume, 0.85, format!("Monte Carlo volume, {} samples", settings.volume_samples));
-    let interior = (body.interior_point().coords - cloud.center) / cloud.scale;
-    let est = volume::monte_carlo_volume(body.polynomial(), &interior, settings.volume_samples, settings.seed)?;
+    let est = if solved.nonconvex {
+        let gram = solved
+            .sos_gram
+            .ok_or_else(|| Error::Numerical("a nonconvex body needs its sos Gram matrix for the volume box".into()))?;
+        let lambda = (gram / rescale).symmetric_eigenvalues().iter().copied().fold(Real::INFINITY, Real::min);
+        let est = volume::monte_carlo_volume_sos(body.polynomial(), lambda, settings.volume_samples, settings.seed)?;
+        fit_report.notes.push(format!(
+            "volume box: cells of side {:.4} covering {{p ≤ 1}} inside the ball |u| ≤ {:.3} (λ_min(P) = {lambda:.3e})",
+            est.cell_side, est.radius
+        ));
+        est.estimate
+    } else {
+        let interior = (body.interior_point().coords - cloud.center) / cloud.scale;
+        volume::monte_carlo_volume(body.polynomial(), &interior, settings.volume_samples, settings.seed)?
+    };
     let s3 = cloud.scale.powi(3);
     fit_report.volume = est.volume * s3;
     fit_report.volume_std_error = est.std_error * s3;

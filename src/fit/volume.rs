@@ -1,5 +1,9 @@
-//! Volume of a convex sublevel set `{u : p(u) ≤ 1}` by seeded Monte Carlo in a box that provably
+//! Volume of a sublevel set `{u : p(u) ≤ 1}` by seeded Monte Carlo in a region that provably
 //! contains it.
+//!
+//! Convex p ([`monte_carlo_volume`]): a box from supporting halfspaces, see below. Nonconvex sos p
+//! ([`monte_carlo_volume_sos`]): cubes proven to cover the set, see [`sos_radius`] and
+//! [`covering_cells`].
 //!
 //! The box comes from six supporting halfspaces of the convex body (see [`bounding_box`]), taken
 //! at approximate support points along ±eₖ. A support point maximizes eᵀu on `{p ≤ 1}`; it is
@@ -8,6 +12,7 @@
 //! Every sample uses one `ChaCha8` stream seeded by the caller, so the estimate is reproducible.
 
 use crate::math::{Real, Vector3};
+use crate::poly::monomial::index3;
 use crate::poly::Polynomial;
 use crate::{Error, Result};
 use rand::{Rng, SeedableRng};
@@ -191,6 +196,244 @@ pub fn monte_carlo_volume(p: &Polynomial, interior: &Vector3, samples: usize, se
         let vol = box_volume * f;
         if (hits > 0 && se < 0.01 * vol) || n >= cap {
             return Ok(VolumeEstimate { volume: vol, std_error: se, samples: n, lo, hi });
+        }
+        target *= 2;
+    }
+}
+
+/// Largest multinomial coefficient d!/(a! b! c!) over a + b + c = d, d ≤ 4: K_d with
+/// (‖u‖²)ᵈ ≤ K_d Σ_{|α| = d} u^{2α}.
+const MAX_MULTINOMIAL: [Real; 5] = [1.0, 1.0, 2.0, 6.0, 12.0];
+
+/// A radius R with `{u : p(u) ≤ 1} ⊂ {‖u‖ ≤ R}` for p = z(u)ᵀ P z(u) of degree 2d, P ⪰ λ I, λ > 0.
+///
+/// ```text
+/// p(u) ≥ λ ‖z(u)‖² ≥ λ Σ_{|α|=d} u^{2α} ≥ λ ‖u‖^{2d} / K_d     (multinomial theorem)
+/// ⇒ p(u) > 1 whenever ‖u‖ > R = (K_d / λ)^{1/(2d)}
+/// ```
+///
+/// `lambda_min` must be a lower bound on λ_min(P) of the Gram matrix the coefficients of p were
+/// expanded from; R is padded by 1e-6 relative for the rounding of that expansion.
+///
+/// # Errors
+/// [`Error::Numerical`] when `lambda_min` is not positive and finite or `degree` is not 2, 4, 6, 8.
+pub fn sos_radius(degree: usize, lambda_min: Real) -> Result<Real> {
+    if !(lambda_min.is_finite() && lambda_min > 0.0) {
+        return Err(Error::Numerical(format!("the sos Gram matrix is not positive definite (λ_min = {lambda_min:e})")));
+    }
+    if !matches!(degree, 2 | 4 | 6 | 8) {
+        return Err(Error::Numerical(format!("no sos radius for degree {degree}")));
+    }
+    let d = degree / 2;
+    Ok((MAX_MULTINOMIAL[d] / lambda_min).powf(1.0 / degree as Real) * (1.0 + 1e-6))
+}
+
+/// Interval bounds of a polynomial on axis-aligned cubes, by re-expansion at the cube's center:
+/// with `q(t) = p(b + h t) = Σ_β q_β t^β`, `t ∈ [−1, 1]³`,
+///
+/// ```text
+/// q_β = h^{|β|} Σ_{α ≥ β} c_α Πₖ C(αₖ, βₖ) bₖ^{αₖ − βₖ}
+/// q₀ + Σ_{β ≠ 0} lo_β ≤ p ≤ q₀ + Σ_{β ≠ 0} hi_β,   (lo, hi)_β = (min(0, q_β), max(0, q_β)) if every
+///                                                  βₖ is even (t^β ∈ [0, 1]), else (−|q_β|, |q_β|)
+/// ```
+pub struct CubeBounds<'a> {
+    p: &'a Polynomial,
+    /// (index of α, index of β, Πₖ C(αₖ, βₖ), α − β).
+    terms: Vec<(usize, usize, Real, [u8; 3])>,
+    even: Vec<bool>,
+    total_degree: Vec<i32>,
+}
+
+impl<'a> CubeBounds<'a> {
+    /// Precomputes the re-expansion of `p`.
+    pub fn new(p: &'a Polynomial) -> Self {
+        let binom = |n: u8, k: u8| -> Real { (0..k).fold(1.0, |acc, i| acc * (n - i) as Real / (i + 1) as Real) };
+        let mut terms = Vec::new();
+        for (ia, a) in p.exponents().iter().enumerate() {
+            for b0 in 0..=a[0] {
+                for b1 in 0..=a[1] {
+                    for b2 in 0..=a[2] {
+                        let w = binom(a[0], b0) * binom(a[1], b1) * binom(a[2], b2);
+                        terms.push((ia, index3([b0, b1, b2]), w, [a[0] - b0, a[1] - b1, a[2] - b2]));
+                    }
+                }
+            }
+        }
+        let even = p.exponents().iter().map(|e| e.iter().all(|k| k % 2 == 0)).collect();
+        let total_degree = p.exponents().iter().map(|e| e.iter().map(|k| *k as i32).sum()).collect();
+        Self { p, terms, even, total_degree }
+    }
+
+    /// Lower and upper bounds of p on the cube `center + [−half, half]³`.
+    pub fn bounds(&self, center: &Vector3, half: Real) -> (Real, Real) {
+        let deg = self.p.degree();
+        let mut bp = [[1.0; 9]; 3];
+        for k in 0..3 {
+            for e in 1..=deg {
+                bp[k][e] = bp[k][e - 1] * center[k];
+            }
+        }
+        let c = self.p.coefficients();
+        let mut q = [0.0; 165];
+        for &(ia, ib, w, r) in &self.terms {
+            q[ib] += c[ia] * w * bp[0][r[0] as usize] * bp[1][r[1] as usize] * bp[2][r[2] as usize];
+        }
+        let (mut lo, mut hi) = (q[0], q[0]);
+        for ib in 1..c.len() {
+            let v = q[ib] * half.powi(self.total_degree[ib]);
+            if self.even[ib] {
+                lo += v.min(0.0);
+                hi += v.max(0.0);
+            } else {
+                lo -= v.abs();
+                hi += v.abs();
+            }
+        }
+        (lo, hi)
+    }
+}
+
+/// Cubes covering `{u : p(u) ≤ 1}` inside the cube `[−radius, radius]³`.
+#[derive(Clone, Debug)]
+pub struct CubeCover {
+    /// Centers of the cubes on which p may cross 1 (neither bound settles it).
+    pub boundary: Vec<Vector3>,
+    /// Number of cubes proven inside (upper bound of p ≤ 1 − 1e-9).
+    pub inside: usize,
+    /// Half side of every cube.
+    pub half: Real,
+    /// Bounding box of all kept cubes.
+    pub lo: Vector3,
+    /// Upper corner of that box.
+    pub hi: Vector3,
+}
+
+/// Most boundary cubes a cover may hold before refinement stops.
+const MAX_CUBES: usize = 2_000_000;
+
+/// Refines `[−radius, radius]³` by octree subdivision down to cubes of side ≤ `target_side`
+/// (or until [`MAX_CUBES`] would be exceeded), dropping cubes where the lower bound of
+/// [`CubeBounds`] exceeds 1 + 1e-9 (p > 1 on the whole cube) and setting aside cubes where the
+/// upper bound is below 1 − 1e-9 (inside). If `{p ≤ 1}` lies in the starting cube (e.g. radius from
+/// [`sos_radius`]), the kept cubes cover it; the 1e-9 margins absorb the rounding of the bounds.
+pub fn covering_cells(p: &Polynomial, radius: Real, target_side: Real) -> CubeCover {
+    let bounds = CubeBounds::new(p);
+    let mut cells = vec![Vector3::zeros()];
+    let mut half = radius;
+    let mut inside_cells: Vec<Vector3> = Vec::new();
+    let mut inside_half: Vec<Real> = Vec::new();
+    loop {
+        let mut keep = Vec::with_capacity(cells.len());
+        for c in &cells {
+            let (lo, hi) = bounds.bounds(c, half);
+            if lo > 1.0 + 1e-9 {
+                continue;
+            }
+            if hi < 1.0 - 1e-9 {
+                inside_cells.push(*c);
+                inside_half.push(half);
+            } else {
+                keep.push(*c);
+            }
+        }
+        if 2.0 * half <= target_side || keep.len() * 8 > MAX_CUBES || keep.is_empty() {
+            cells = keep;
+            break;
+        }
+        let h2 = half / 2.0;
+        cells = keep
+            .iter()
+            .flat_map(|c| {
+                (0..8).map(move |k| {
+                    c + Vector3::new(
+                        if k & 1 == 0 { -h2 } else { h2 },
+                        if k & 2 == 0 { -h2 } else { h2 },
+                        if k & 4 == 0 { -h2 } else { h2 },
+                    )
+                })
+            })
+            .collect();
+        half = h2;
+    }
+    // Inside cubes of coarser levels are split into cubes of the final size so that every cube
+    // has the same volume (the count is what matters; their volume is exact).
+    let mut inside = 0usize;
+    let mut lo = Vector3::repeat(Real::INFINITY);
+    let mut hi = Vector3::repeat(Real::NEG_INFINITY);
+    for (c, h) in inside_cells.iter().zip(&inside_half) {
+        let ratio = (h / half).round() as usize;
+        inside += ratio * ratio * ratio;
+        lo = lo.inf(&c.add_scalar(-h));
+        hi = hi.sup(&c.add_scalar(*h));
+    }
+    for c in &cells {
+        lo = lo.inf(&c.add_scalar(-half));
+        hi = hi.sup(&c.add_scalar(half));
+    }
+    CubeCover { boundary: cells, inside, half, lo, hi }
+}
+
+/// A volume estimate of a (possibly nonconvex) sos body and the cover it sampled.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SosVolumeEstimate {
+    /// The estimate; `lo`/`hi` are the bounding box of the cover.
+    pub estimate: VolumeEstimate,
+    /// Radius of the ball that provably contains the body ([`sos_radius`]).
+    pub radius: Real,
+    /// Side of the cover's cubes.
+    pub cell_side: Real,
+}
+
+/// Estimates the volume of `{u : p(u) ≤ 1}` for an sos p = z(u)ᵀ P z(u) with λ_min(P) ≥
+/// `lambda_min` > 0, convex or not: cubes proven inside count exactly, and at least `samples`
+/// uniform samples of the boundary cubes (doubled up to 16× until the relative standard error is
+/// below 1 %) estimate the rest. The body provably lies in the cover: in the ball of
+/// [`sos_radius`], and outside the kept cubes p > 1 by [`CubeBounds`].
+///
+/// # Errors
+/// [`Error::Numerical`] when `lambda_min` is not positive (see [`sos_radius`]).
+pub fn monte_carlo_volume_sos(
+    p: &Polynomial,
+    lambda_min: Real,
+    samples: usize,
+    seed: u64,
+) -> Result<SosVolumeEstimate> {
+    let radius = sos_radius(p.degree(), lambda_min)?;
+    let cover = covering_cells(p, radius, 0.04);
+    let side = 2.0 * cover.half;
+    let cell_volume = side.powi(3);
+    let inside_volume = cover.inside as Real * cell_volume;
+    let boundary_volume = cover.boundary.len() as Real * cell_volume;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let (mut n, mut hits) = (0usize, 0usize);
+    let mut target = samples.max(1000);
+    let cap = target * 16;
+    let finish = |vol: Real, se: Real, n: usize| SosVolumeEstimate {
+        estimate: VolumeEstimate { volume: vol, std_error: se, samples: n, lo: cover.lo, hi: cover.hi },
+        radius,
+        cell_side: side,
+    };
+    if cover.boundary.is_empty() {
+        return Ok(finish(inside_volume, 0.0, 0));
+    }
+    loop {
+        while n < target {
+            let c = cover.boundary[rng.random_range(0..cover.boundary.len())];
+            let u = Vector3::new(
+                c.x + cover.half * (2.0 * rng.random::<Real>() - 1.0),
+                c.y + cover.half * (2.0 * rng.random::<Real>() - 1.0),
+                c.z + cover.half * (2.0 * rng.random::<Real>() - 1.0),
+            );
+            if p.value(&u) <= 1.0 {
+                hits += 1;
+            }
+            n += 1;
+        }
+        let f = hits as Real / n as Real;
+        let se = boundary_volume * (f * (1.0 - f) / n as Real).sqrt();
+        let vol = inside_volume + boundary_volume * f;
+        if (vol > 0.0 && se < 0.01 * vol) || n >= cap {
+            return Ok(finish(vol, se, n));
         }
         target *= 2;
     }

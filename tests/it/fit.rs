@@ -189,3 +189,289 @@ fn psb_meshes_load_with_their_vertex_counts() {
     let same = mesh::parse_points(&std::fs::read(psb("chair_101.off")).unwrap(), "OFF").unwrap();
     assert_eq!(same.len(), 8499);
 }
+
+// ---- Every formulation of §III (trace / Magnani / relaxed / inverse moment) -------------------
+
+use sublevel::fit::{fit_points_in_rounds, FitMethod};
+
+/// The rotated, shifted ellipsoid x = c + M u, |u| = 1 of the degree-2 tests, with its cloud.
+struct EllipsoidCloud {
+    m: Matrix3,
+    c: Vector3,
+    pts: Vec<Point3>,
+}
+
+fn ellipsoid_cloud() -> EllipsoidCloud {
+    let radii = Vector3::new(1.5, 1.0, 0.6);
+    let rot = UnitQuaternion::from_euler_angles(0.3, -0.5, 1.1);
+    let c = Vector3::new(0.3, -0.2, 1.0);
+    let m = rot.to_rotation_matrix().into_inner() * Matrix3::from_diagonal(&radii);
+    let pts = sphere_points(200).iter().map(|u| Point3::from(c + m * u)).collect();
+    EllipsoidCloud { m, c, pts }
+}
+
+/// Exact volume (input units) of the ellipsoid {p ≤ 1} of a degree-2 body: with p(u) = uᵀAu + bᵀu + k
+/// in normalized coordinates, {p ≤ 1} = {(u − u₀)ᵀA(u − u₀) ≤ r} with r = 1 − k + bᵀA⁻¹b/4, of volume
+/// 4/3 π r^{3/2} / √det A, times scale³.
+fn quadratic_body_volume(body: &Body) -> Real {
+    let p = body.polynomial();
+    let coef = |e: [u8; 3]| p.coefficients()[p.exponents().iter().position(|x| *x == e).unwrap()];
+    let a = Matrix3::new(
+        coef([2, 0, 0]),
+        coef([1, 1, 0]) / 2.0,
+        coef([1, 0, 1]) / 2.0,
+        coef([1, 1, 0]) / 2.0,
+        coef([0, 2, 0]),
+        coef([0, 1, 1]) / 2.0,
+        coef([1, 0, 1]) / 2.0,
+        coef([0, 1, 1]) / 2.0,
+        coef([0, 0, 2]),
+    );
+    let b = Vector3::new(coef([1, 0, 0]), coef([0, 1, 0]), coef([0, 0, 1]));
+    let r = 1.0 - coef([0, 0, 0]) + b.dot(&(a.try_inverse().unwrap() * b)) / 4.0;
+    4.0 / 3.0 * std::f64::consts::PI * r.powf(1.5) / a.determinant().sqrt() * body.scale().powi(3)
+}
+
+#[test]
+fn ellipsoid_cloud_at_degree_2_logdet_h_gives_back_the_ellipsoid_and_trace_forms_are_larger() {
+    let e = ellipsoid_cloud();
+    let minv = e.m.try_inverse().unwrap();
+    let q = |x: &Vector3| (minv * (x - e.c)).norm_squared();
+    let settings = FitSettings::default().with_degree(2).with_solver_tolerance(1e-10).with_volume_samples(20_000);
+    let exact = 4.0 / 3.0 * std::f64::consts::PI * e.m.determinant().abs();
+    // Both log det forms are exact at 2d = 2 (paper §III-A-2): log det P returns 1/4 + 3/4 q,
+    // log det H (det of the Hessian, any constant shift only lowers det A) returns q itself.
+    let ours = fit_points(&e.pts, &settings, &mut |_| {}).unwrap();
+    let magnani = fit_points(&e.pts, &settings.clone().with_method(FitMethod::LogDetH), &mut |_| {}).unwrap();
+    assert_eq!(magnani.report.method, "logdet_h");
+    let mut max_err: Real = 0.0;
+    for u in sphere_points(50) {
+        for s in [0.0, 0.5, 1.0, 1.3] {
+            let x = e.c + e.m * (u * s);
+            max_err = max_err.max((magnani.value_at(&Point3::from(x)) - q(&x)).abs());
+            max_err = max_err.max((ours.value_at(&Point3::from(x)) - (0.25 + 0.75 * q(&x))).abs());
+        }
+    }
+    assert!(max_err < 1e-5, "max |p − closed form| = {max_err:e}");
+    for body in [&ours, &magnani] {
+        assert!((quadratic_body_volume(body) - exact).abs() < 1e-5 * exact);
+        assert!(body.report.convexity_margin.unwrap() > 0.0);
+    }
+    // Trace forms: ellipsoids containing every point, never smaller than the minimum-volume one.
+    for method in [FitMethod::TraceP, FitMethod::TraceH] {
+        let body = fit_points(&e.pts, &settings.clone().with_method(method), &mut |_| {}).unwrap();
+        assert_eq!(body.report.method, method.name());
+        let max = e.pts.iter().map(|x| body.value_at(x)).fold(Real::NEG_INFINITY, Real::max);
+        assert!(max <= 1.0 + 1e-12 && max >= 1.0 - 1e-6, "{method:?}: max p(xᵢ) = {max}");
+        let v = quadratic_body_volume(&body);
+        assert!(v >= exact * (1.0 - 1e-6), "{method:?}: volume {v} < minimum {exact}");
+        let r = &body.report;
+        assert!((r.volume - v).abs() < 4.0 * r.volume_std_error, "{method:?}: MC {} vs exact {v}", r.volume);
+        assert!(!r.nonconvex && r.convexity_margin.unwrap() > -1e-9);
+    }
+}
+
+#[test]
+fn magnani_log_det_h_is_looser_than_ours_on_the_chair() {
+    // Paper Table 1, chair at 2d = 4: log det H 1.55, log det P 1.19.
+    let (pts, ours, _) = chair4();
+    let settings = FitSettings::default().with_degree(4).with_method(FitMethod::LogDetH).with_volume_samples(50_000);
+    let magnani = fit_points(pts, &settings, &mut |_| {}).unwrap();
+    let (a, b) = (&ours.report, &magnani.report);
+    assert!(
+        a.volume + 3.0 * (a.volume_std_error + b.volume_std_error) < b.volume,
+        "log det P {} ± {} vs log det H {} ± {}",
+        a.volume,
+        a.volume_std_error,
+        b.volume,
+        b.volume_std_error
+    );
+    let max = pts.iter().map(|x| magnani.value_at(x)).fold(Real::NEG_INFINITY, Real::max);
+    assert!(max <= 1.0 + 1e-12, "max p(xᵢ) = {max}");
+    assert!(b.convexity_margin.unwrap() > 0.0, "H ≻ 0 at the log det optimum");
+}
+
+/// The chair at 2d = 4 with relaxed convexity c = 10, fitted once.
+fn chair4_relaxed() -> &'static Body {
+    static BODY: OnceLock<Body> = OnceLock::new();
+    BODY.get_or_init(|| {
+        let (pts, _, _) = chair4();
+        let settings = FitSettings::default().with_degree(4).with_relaxation(10.0).with_volume_samples(50_000);
+        fit_points(pts, &settings, &mut |_| {}).unwrap()
+    })
+}
+
+#[test]
+fn relaxed_convexity_contains_every_point_and_is_tighter() {
+    let (pts, convex, _) = chair4();
+    let body = chair4_relaxed();
+    let r = &body.report;
+    let max = pts.iter().map(|x| body.value_at(x)).fold(Real::NEG_INFINITY, Real::max);
+    assert!(max <= 1.0 + 1e-12, "max p(xᵢ) = {max}");
+    assert!(max >= 1.0 - 1e-6, "max p(xᵢ) = {max}: the fit is not tight");
+    assert!(r.nonconvex && r.convexity_relaxation == 10.0);
+    assert!(r.notes.iter().any(|n| n.contains("containment round")), "{:?}", r.notes);
+    assert!(r.containment_rescale < 1.0 + 1e-4, "rounds left points outside: rescale {}", r.containment_rescale);
+    assert!(r.convexity_margin.is_some());
+    // Paper Table 1, chair at 2d = 4: c = 10 gives 0.72 against 1.19 for c = 0.
+    let c0 = &convex.report;
+    assert!(
+        r.volume + 3.0 * (r.volume_std_error + c0.volume_std_error) < c0.volume,
+        "c = 10: {} ± {}, c = 0: {}",
+        r.volume,
+        r.volume_std_error,
+        c0.volume
+    );
+    assert!(r.volume_std_error < 0.01 * r.volume);
+    let (vol, se) = brute_force_volume(body, 1.25, 400_000);
+    assert!(
+        (r.volume - vol).abs() < 4.0 * (se + r.volume_std_error),
+        "{} ± {} vs {vol} ± {se}",
+        r.volume,
+        r.volume_std_error
+    );
+}
+
+#[test]
+fn relaxed_convexity_at_zero_through_the_rounds_equals_log_det_p() {
+    let (pts, body, _) = chair4();
+    let settings = FitSettings::default().with_degree(4);
+    let rounds = fit_points_in_rounds(pts, &settings, &mut |_| {}).unwrap();
+    let (a, b) = (body.polynomial().coefficients(), rounds.polynomial().coefficients());
+    let scale = a.iter().fold(0.0 as Real, |m, v| m.max(v.abs()));
+    let diff = a.iter().zip(b).fold(0.0 as Real, |m, (x, y)| m.max((x - y).abs()));
+    assert!(diff < 1e-4 * scale, "max coefficient difference {diff:e} (largest coefficient {scale})");
+    assert!(!rounds.report.nonconvex);
+    assert!((rounds.report.volume - body.report.volume).abs() < body.report.volume_std_error);
+}
+
+#[test]
+fn inverse_moment_at_degree_2_is_the_covariance_ellipsoid() {
+    // z = (1, x): M₁ = [[1, x̄ᵀ], [x̄, (1/m) Σ x xᵀ]] and z(x)ᵀ M₁⁻¹ z(x) = 1 + (x − x̄)ᵀ Σ⁻¹ (x − x̄)
+    // with Σ = (1/m) Σ (x − x̄)(x − x̄)ᵀ (Schur complement); p is that divided by its max on the cloud.
+    let e = ellipsoid_cloud();
+    let m = e.pts.len() as Real;
+    let mean = e.pts.iter().fold(Vector3::zeros(), |a, x| a + x.coords) / m;
+    let cov = e.pts.iter().fold(Matrix3::zeros(), |a, x| a + (x.coords - mean) * (x.coords - mean).transpose()) / m;
+    let cinv = cov.try_inverse().unwrap();
+    let raw = |x: &Vector3| 1.0 + (x - mean).dot(&(cinv * (x - mean)));
+    let gamma = e.pts.iter().map(|x| raw(&x.coords)).fold(Real::NEG_INFINITY, Real::max);
+    let settings =
+        FitSettings::default().with_degree(2).with_method(FitMethod::InverseMoment).with_volume_samples(20_000);
+    let body = fit_points(&e.pts, &settings, &mut |_| {}).unwrap();
+    let mut max_err: Real = 0.0;
+    for u in sphere_points(40) {
+        for s in [0.0, 0.7, 1.0, 1.5] {
+            let x = e.c + e.m * (u * s);
+            max_err = max_err.max((body.value_at(&Point3::from(x)) - raw(&x) / gamma).abs());
+        }
+    }
+    assert!(max_err < 1e-9, "max |p − closed form| = {max_err:e}");
+    // Same axes as the ellipsoid: the Fibonacci cloud's second moment is ≈ I/3, so Σ ≈ M Mᵀ/3.
+    let axes = e.m * e.m.transpose() / 3.0;
+    assert!((cov - axes).norm() < 0.02 * axes.norm(), "Σ = {cov}, M Mᵀ/3 = {axes}");
+    // Containment on every point with max exactly 1 (to rounding), flagged nonconvex, no margin.
+    let max = e.pts.iter().map(|x| body.value_at(x)).fold(Real::NEG_INFINITY, Real::max);
+    assert!(max <= 1.0 + 1e-12 && max >= 1.0 - 1e-12, "max p(xᵢ) = {max}");
+    let r = &body.report;
+    assert!(r.nonconvex && r.convexity_margin.is_none() && r.method == "inverse_moment");
+    // Its volume is the ellipsoid's closed form (the body is an ellipsoid at 2d = 2).
+    let exact = quadratic_body_volume(&body);
+    assert!((r.volume - exact).abs() < 4.0 * r.volume_std_error, "MC {} vs exact {exact}", r.volume);
+}
+
+#[test]
+fn inverse_moment_on_the_chair_contains_every_point() {
+    let (pts, _, _) = chair4();
+    let settings =
+        FitSettings::default().with_degree(4).with_method(FitMethod::InverseMoment).with_volume_samples(50_000);
+    let body = fit_points(pts, &settings, &mut |_| {}).unwrap();
+    let max = pts.iter().map(|x| body.value_at(x)).fold(Real::NEG_INFINITY, Real::max);
+    assert!((1.0 - 1e-12..=1.0).contains(&max), "max p(xᵢ) = {max}");
+    let r = &body.report;
+    assert!(body.value_at(&body.interior_point()) < 1.0);
+    assert!(r.volume_std_error < 0.01 * r.volume);
+    // Independent reference for the covered-cells estimator: plain Monte Carlo in the normalized
+    // cube [−1.25, 1.25]³ (the cloud lies in the unit ball; p > 1 on the cube's faces is checked).
+    let (vol, se) = brute_force_volume(&body, 1.25, 400_000);
+    assert!(
+        (r.volume - vol).abs() < 4.0 * (se + r.volume_std_error),
+        "{} ± {} vs {vol} ± {se}",
+        r.volume,
+        r.volume_std_error
+    );
+}
+
+/// Plain Monte Carlo volume (input units) of a body in the normalized cube [−h, h]³, h the first of
+/// h₀, 1.6 h₀, 2.56 h₀, … with p > 1 on a 60 × 60 grid of each face of the cube.
+fn brute_force_volume(body: &Body, h0: Real, n: usize) -> (Real, Real) {
+    use rand::{Rng, SeedableRng};
+    let p = body.polynomial();
+    let mut h = h0;
+    while !cube_faces_are_outside(p, h) {
+        h *= 1.6;
+        assert!(h < 10.0, "the body reaches |u| = 10");
+    }
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(99);
+    let hits = (0..n)
+        .filter(|_| {
+            let u = Vector3::new(rng.random_range(-h..h), rng.random_range(-h..h), rng.random_range(-h..h));
+            p.value(&u) <= 1.0
+        })
+        .count();
+    let f = hits as Real / n as Real;
+    let cube = (2.0 * h * body.scale()).powi(3);
+    (cube * f, cube * (f * (1.0 - f) / n as Real).sqrt())
+}
+
+/// p > 1 on a 60 × 60 grid of each face of [−h, h]³.
+fn cube_faces_are_outside(p: &sublevel::poly::Polynomial, h: Real) -> bool {
+    for k in 0..3 {
+        for s in [-h, h] {
+            for i in 0..60 {
+                for j in 0..60 {
+                    let mut u = Vector3::zeros();
+                    u[k] = s;
+                    u[(k + 1) % 3] = -h + 2.0 * h * i as Real / 59.0;
+                    u[(k + 2) % 3] = -h + 2.0 * h * j as Real / 59.0;
+                    if p.value(&u) <= 1.0 {
+                        return false;
+                    }
+                }
+            }
+        }
+    }
+    true
+}
+
+#[test]
+fn bad_relaxation_and_degenerate_moment_clouds_are_invalid() {
+    let e = ellipsoid_cloud();
+    let base = FitSettings::default().with_degree(2);
+    for (s, field) in [
+        (base.clone().with_relaxation(-1.0), "convexity_relaxation"),
+        (base.clone().with_relaxation(Real::NAN), "convexity_relaxation"),
+        (base.clone().with_relaxation(Real::INFINITY), "convexity_relaxation"),
+        (base.clone().with_relaxation(10.0).with_method(FitMethod::LogDetH), "convexity_relaxation"),
+        (base.clone().with_relaxation(10.0).with_method(FitMethod::TraceH), "convexity_relaxation"),
+        (base.clone().with_relaxation(1.0).with_method(FitMethod::InverseMoment), "convexity_relaxation"),
+    ] {
+        match fit_points(&e.pts, &s, &mut |_| {}) {
+            Err(Error::InvalidArgument { field: f, .. }) => assert_eq!(f, field),
+            other => panic!("expected InvalidArgument({field}), got {other:?}"),
+        }
+    }
+    // Points on a quadric (the ellipsoid): the degree-4 moment matrix is singular.
+    let settings = FitSettings::default().with_degree(4).with_method(FitMethod::InverseMoment);
+    match fit_points(&e.pts, &settings, &mut |_| {}) {
+        Err(Error::InvalidArgument { field, reason }) => {
+            assert_eq!(field, "points");
+            assert!(reason.contains("singular"), "{reason}");
+        }
+        other => panic!("expected InvalidArgument(points), got {other:?}"),
+    }
+    match fit_points_in_rounds(&e.pts, &base.with_method(FitMethod::LogDetH), &mut |_| {}) {
+        Err(Error::InvalidArgument { field, .. }) => assert_eq!(field, "method"),
+        other => panic!("expected InvalidArgument(method), got {other:?}"),
+    }
+}

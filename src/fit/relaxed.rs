@@ -1,0 +1,135 @@
+//! Containment rows in rounds, for fits whose body may be nonconvex (paper §III-B-2, eq.
+//! "VAG.param.convex": p + c(‖u‖²)ᵈ sos-convex).
+//!
+//! Without convexity, containing the hull vertices no longer implies containing the cloud, so
+//! every point must satisfy p(uᵢ) ≤ 1. Rather than one row per point (thousands of dense rows),
+//! the program is solved in rounds:
+//!
+//! ```text
+//! rows ← hull vertices ∪ a strided subsample of INITIAL_SAMPLE points
+//! repeat (at most MAX_ROUNDS times):
+//!     solve; evaluate p on every point
+//!     violated ← points with p(uᵢ) > 1 + VIOLATION_TOLERANCE that are not rows yet
+//!     if none: stop;  else add the ROUND_ADD worst violated points as rows
+//! ```
+//!
+//! Each round's program is a relaxation of the program with all points, so its optimum is at
+//! least as good; when no point is violated the round's optimum is feasible for the full program,
+//! hence optimal for it (up to the violation tolerance, which the caller's final rescale absorbs).
+//! If the round cap is reached the caller still rescales p to contain every point — points are
+//! never dropped.
+
+use super::hull::NormalizedCloud;
+use super::logdet_p::{usable_status, LogDetProblem, ProblemSpec};
+use crate::math::{Real, Vector3};
+use crate::poly::Polynomial;
+use crate::Result;
+use clarabel::solver::DefaultSettings;
+
+/// Points of the subsample added to the hull vertices in the first round.
+pub const INITIAL_SAMPLE: usize = 64;
+/// Most violated points added per round.
+pub const ROUND_ADD: usize = 300;
+/// Rounds before giving up on adding rows (the final rescale then restores containment).
+pub const MAX_ROUNDS: usize = 12;
+/// Clarabel's `max_step_fraction` in the rounds (default 0.99).
+pub const ROUND_STEP_FRACTION: Real = 0.9;
+/// p(uᵢ) above 1 + this counts as violated (solver-tolerance overshoot is left to the rescale).
+pub const VIOLATION_TOLERANCE: Real = 1e-6;
+
+/// The last round's solution.
+#[derive(Debug)]
+pub struct RoundsOutcome {
+    /// p = zᵀ P z of the last round (normalized coordinates, before any rescale).
+    pub polynomial: Polynomial,
+    /// Sos Gram matrix P (N × N).
+    pub gram: nalgebra::DMatrix<Real>,
+    /// Sos-convexity Gram matrix of p + c(‖u‖²)ᵈ (M × M).
+    pub convexity_gram: nalgebra::DMatrix<Real>,
+    /// Clarabel's status of the last round.
+    pub status: &'static str,
+    /// Seconds inside Clarabel, all rounds.
+    pub solve_seconds: Real,
+    /// Interior-point iterations, all rounds.
+    pub iterations: u32,
+    /// Containment rows of each round.
+    pub rows_per_round: Vec<usize>,
+    /// False when the round cap was reached with points still violated.
+    pub converged: bool,
+}
+
+/// Solves `spec` with containment rows added in rounds (see the module docs), calling
+/// `progress(round, iteration, primal cost)` after each interior-point iteration.
+///
+/// Clarabel's default step fraction 0.99 stalls (`InsufficientProgress` after ~8 iterations) on
+/// the chair with a few hundred redundant containment rows beyond the hull; the rounds therefore
+/// use [`ROUND_STEP_FRACTION`] (and [`LogDetProblem::solve_with_retry`] shortens it further if
+/// needed).
+///
+/// # Errors
+/// Whatever [`LogDetProblem::build_spec`] or [`LogDetProblem::solve`] return, and
+/// [`crate::Error::Numerical`] for an unusable solver status in any round.
+pub fn solve_in_rounds(
+    cloud: &NormalizedCloud,
+    spec: &ProblemSpec,
+    settings: &DefaultSettings<Real>,
+    progress: &mut dyn FnMut(usize, u32, Real),
+) -> Result<RoundsOutcome> {
+    let n = cloud.points.len();
+    // Hull vertices are cloud points: mark them (by exact coordinates) so that no point becomes
+    // a duplicate row (duplicate rows stall Clarabel).
+    let key = |u: &Vector3| [u.x.to_bits(), u.y.to_bits(), u.z.to_bits()];
+    let hull: std::collections::HashSet<[u64; 3]> = cloud.hull_vertices.iter().map(key).collect();
+    let mut in_rows: Vec<bool> = cloud.points.iter().map(|u| hull.contains(&key(u))).collect();
+    let mut rows: Vec<Vector3> = cloud.hull_vertices.clone();
+    let stride = n.div_ceil(INITIAL_SAMPLE).max(1);
+    for i in (0..n).step_by(stride) {
+        if !in_rows[i] {
+            in_rows[i] = true;
+            rows.push(cloud.points[i]);
+        }
+    }
+    let mut settings = settings.clone();
+    settings.max_step_fraction = settings.max_step_fraction.min(ROUND_STEP_FRACTION);
+    let settings = &settings;
+    let mut rows_per_round = Vec::new();
+    let (mut solve_seconds, mut iterations) = (0.0, 0);
+    for round in 0..MAX_ROUNDS {
+        rows_per_round.push(rows.len());
+        let problem = LogDetProblem::build_spec(spec, &rows)?;
+        let raw = problem.solve_with_retry(settings, &mut |it, cost| progress(round, it, cost))?;
+        solve_seconds += raw.solve_seconds;
+        iterations += raw.iterations;
+        let status = usable_status(raw.status)?;
+        let gram = problem.gram(&raw.x);
+        let polynomial = problem.polynomial_of_gram(&gram)?;
+        let mut violated: Vec<(Real, usize)> = cloud
+            .points
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| !in_rows[*i])
+            .map(|(i, u)| (polynomial.value(u), i))
+            .filter(|(v, _)| !(*v <= 1.0 + VIOLATION_TOLERANCE))
+            .collect();
+        let done = violated.is_empty();
+        if done || round + 1 == MAX_ROUNDS {
+            return Ok(RoundsOutcome {
+                polynomial,
+                gram,
+                convexity_gram: problem.convexity_gram(&raw.x),
+                status,
+                solve_seconds,
+                iterations,
+                rows_per_round,
+                converged: done,
+            });
+        }
+        // Worst first (NaN counts as worst).
+        violated.sort_by(|a, b| b.0.partial_cmp(&a.0).unwrap_or(std::cmp::Ordering::Less));
+        for &(_, i) in violated.iter().take(ROUND_ADD) {
+            in_rows[i] = true;
+            rows.push(cloud.points[i]);
+        }
+    }
+    Err(crate::Error::Numerical("containment rounds ended without a solution".into()))
+}
