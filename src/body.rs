@@ -367,7 +367,7 @@ fn minimize_from_grid(p: &Polynomial) -> Option<(Vector3, Real)> {
             step -= v * (v.dot(&e.gradient) / eig.eigenvalues[k].abs().max(floor));
         }
         let decrement = -e.gradient.dot(&step);
-        if !(decrement >= 1e-24) {
+        if decrement.is_nan() || decrement < 1e-24 {
             break;
         }
         let mut alpha = 1.0;
@@ -447,5 +447,20 @@ mod tests {
         let mut bad = e.to_file();
         bad.coefficients.iter_mut().for_each(|c| *c = -*c);
         assert!(Body::from_file(bad).unwrap_err().to_string().contains("coefficients"));
+    }
+
+    #[test]
+    fn nonconvex_bodies_get_a_local_minimizer() {
+        // p = (x² − 1/2)² + y² + z² + 0.1: Newton from the origin meets the indefinite Hessian
+        // diag(−2, 2, 2); the minimizers are (±1/√2, 0, 0) with p = 0.1 and Hessian diag(4, 2, 2).
+        let terms = [([4, 0, 0], 1.0), ([2, 0, 0], -1.0), ([0, 0, 0], 0.35), ([0, 2, 0], 1.0), ([0, 0, 2], 1.0)];
+        let p = Polynomial::from_terms(4, &terms).unwrap();
+        let convex = FitReport::default();
+        assert!(Body::new(p.clone(), [0.0; 3], 1.0, convex).unwrap_err().to_string().contains("coefficients"));
+        let report = FitReport { nonconvex: true, ..Default::default() };
+        let body = Body::new(p, [1.0, 2.0, 3.0], 2.0, report).unwrap();
+        assert!((body.min_value() - 0.1).abs() < 1e-12, "{}", body.min_value());
+        let u = (body.interior_point().coords - Vector3::new(1.0, 2.0, 3.0)) / 2.0;
+        assert!((u.x.abs() - 0.5f64.sqrt()).abs() < 1e-8 && u.y.abs() < 1e-8 && u.z.abs() < 1e-8, "{u}");
     }
 }

@@ -80,7 +80,6 @@ pub fn run(args: FitArgs) -> sublevel::Result<()> {
         max_solver_iterations: args.max_iterations,
         linear_solver: args.linear_solver.parse()?,
         solver_threads: args.solver_threads,
-        ..FitSettings::default()
     };
     let quiet = args.quiet;
     let mut stderr = std::io::stderr();

@@ -64,7 +64,7 @@ pub fn inverse_moment_gram(half_degree: usize, points: &[Vector3]) -> Result<DMa
     };
     let chol = nalgebra::Cholesky::new(scaled).ok_or_else(singular)?;
     let min_pivot = (0..n).map(|i| chol.l_dirty()[(i, i)].powi(2)).fold(Real::INFINITY, Real::min);
-    if !(min_pivot >= SINGULAR_PIVOT) {
+    if min_pivot.is_nan() || min_pivot < SINGULAR_PIVOT {
         return Err(singular());
     }
     let inv = chol.inverse();

@@ -609,6 +609,41 @@ mod tests {
         }
     }
 
+    /// With relaxation c, p = −c(‖u‖²)ᵈ and G = 0 satisfy the sos-convexity rows exactly
+    /// (yᵀ∇²(p + c q)y = 0 = wᵀ0w), and q's coefficients evaluate to (‖u‖²)ᵈ.
+    #[test]
+    fn relaxed_rows_move_c_q_to_the_right_hand_side() {
+        for d in 1..=4 {
+            let q = norm_power_coefficients(d);
+            let poly = Polynomial::from_coefficients(2 * d, q.clone()).unwrap();
+            let u = Vector3::new(0.3, -0.7, 1.1);
+            assert!((poly.value(&u) - u.norm_squared().powi(d as i32)).abs() < 1e-12);
+            let spec = ProblemSpec { convexity_relaxation: 2.5, ..ProblemSpec::log_det_p(d) };
+            let prob = LogDetProblem::build_spec(&spec, &[]).unwrap();
+            let mut x = vec![0.0; prob.num_vars];
+            for (k, v) in q.iter().enumerate() {
+                x[prob.col_c + k] = -2.5 * v;
+            }
+            let l = q.len();
+            let rows = l + 6 * basis_len(3, 2 * d - 2);
+            let mut ax = vec![0.0; prob.num_rows()];
+            for (col, xc) in x.iter().enumerate() {
+                for k in prob.a.colptr[col]..prob.a.colptr[col + 1] {
+                    ax[prob.a.rowval[k]] += prob.a.nzval[k] * xc;
+                }
+            }
+            for (r, (axr, br)) in ax.iter().zip(&prob.b).enumerate().take(rows).skip(l) {
+                assert!((axr - br).abs() < 1e-12, "d = {d}, row {r}: {axr} vs {br}");
+            }
+            assert!(prob.b[l..rows].iter().any(|v| *v != 0.0));
+        }
+        let bad = ProblemSpec { matrix: ObjectiveMatrix::H, convexity_relaxation: 1.0, ..ProblemSpec::log_det_p(2) };
+        assert!(matches!(
+            LogDetProblem::build_spec(&bad, &[]),
+            Err(Error::InvalidArgument { field, .. }) if field == "convexity_relaxation"
+        ));
+    }
+
     #[test]
     fn every_status_is_mapped() {
         assert_eq!(usable_status(SolverStatus::Solved).unwrap(), "Solved");

@@ -109,7 +109,7 @@ pub fn solve_in_rounds(
             .enumerate()
             .filter(|(i, _)| !in_rows[*i])
             .map(|(i, u)| (polynomial.value(u), i))
-            .filter(|(v, _)| !(*v <= 1.0 + VIOLATION_TOLERANCE))
+            .filter(|(v, _)| v.is_nan() || *v > 1.0 + VIOLATION_TOLERANCE)
             .collect();
         let done = violated.is_empty();
         if done || round + 1 == MAX_ROUNDS {

@@ -279,9 +279,9 @@ impl<'a> CubeBounds<'a> {
             q[ib] += c[ia] * w * bp[0][r[0] as usize] * bp[1][r[1] as usize] * bp[2][r[2] as usize];
         }
         let (mut lo, mut hi) = (q[0], q[0]);
-        for ib in 1..c.len() {
-            let v = q[ib] * half.powi(self.total_degree[ib]);
-            if self.even[ib] {
+        for ((qb, deg), even) in q.iter().zip(&self.total_degree).zip(&self.even).take(c.len()).skip(1) {
+            let v = qb * half.powi(*deg);
+            if *even {
                 lo += v.min(0.0);
                 hi += v.max(0.0);
             } else {
@@ -473,5 +473,89 @@ mod tests {
         let g74: Real = 0.919_062_526_848_883;
         let exact = 8.0 * g54.powi(3) / g74;
         assert!((v.volume - exact).abs() < 4.0 * v.std_error, "{} vs {exact}", v.volume);
+    }
+
+    #[test]
+    fn cube_bounds_enclose_sampled_values() {
+        let p =
+            Polynomial::from_coefficients(4, (0..35).map(|k| ((k * 7) % 11) as Real / 5.0 - 1.0).collect()).unwrap();
+        let b = CubeBounds::new(&p);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        for _ in 0..50 {
+            let c = Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
+            let h = rng.random_range(0.01..0.5);
+            let (lo, hi) = b.bounds(&c, h);
+            // Exact at the center for a zero-size cube, and enclosing on random points of the cube.
+            assert!((b.bounds(&c, 0.0).0 - p.value(&c)).abs() < 1e-12 * (1.0 + p.value(&c).abs()));
+            for _ in 0..50 {
+                let t = Vector3::new(rng.random_range(-h..h), rng.random_range(-h..h), rng.random_range(-h..h));
+                let v = p.value(&(c + t));
+                assert!(lo <= v + 1e-12 && v <= hi + 1e-12, "{lo} ≤ {v} ≤ {hi}");
+            }
+        }
+    }
+
+    #[test]
+    fn sos_cover_volume_of_an_ellipsoid() {
+        // p = 1/2 + 1/2 (x²/4 + y² + 4z²) = zᵀ diag(1/2, 1/8, 1/2, 2) z, z = (1, x, y, z):
+        // {p ≤ 1} is the ellipsoid with semi-axes (2, 1, 1/2), volume 4/3 π.
+        let p = Polynomial::from_terms(2, &[([0, 0, 0], 0.5), ([2, 0, 0], 0.125), ([0, 2, 0], 0.5), ([0, 0, 2], 2.0)])
+            .unwrap();
+        let r = sos_radius(2, 0.125).unwrap();
+        assert!((r - 8f64.sqrt()).abs() < 1e-5 && r >= 2.0, "radius {r}");
+        let est = monte_carlo_volume_sos(&p, 0.125, 100_000, 3).unwrap();
+        let exact = 4.0 / 3.0 * std::f64::consts::PI;
+        let v = est.estimate;
+        assert!(v.std_error < 0.01 * v.volume);
+        assert!((v.volume - exact).abs() < 4.0 * v.std_error + 1e-12, "{} vs {exact} ± {}", v.volume, v.std_error);
+        // The cover's box holds the ellipsoid's extent and is at most a cube side larger.
+        let want = Vector3::new(2.0, 1.0, 0.5);
+        for k in 0..3 {
+            assert!(v.hi[k] >= want[k] && v.lo[k] <= -want[k]);
+            assert!(v.hi[k] <= want[k] + est.cell_side && v.lo[k] >= -want[k] - est.cell_side);
+        }
+        assert!(sos_radius(2, 0.0).is_err() && sos_radius(2, Real::NAN).is_err());
+    }
+
+    #[test]
+    fn sos_cover_volume_of_a_nonconvex_body_matches_plain_sampling() {
+        // A nonconvex sos quartic: p = ((x² − 1/2)² + y² + z²)·2 + 0.05 ‖z(u)‖²-ish terms, whose
+        // sublevel set is two lobes around x = ±0.7 joined near the origin.
+        let d = 2;
+        let half = crate::poly::monomial::graded_exponents3(d);
+        let n = half.len();
+        let mut gram = nalgebra::DMatrix::<Real>::identity(n, n) * 0.05;
+        // (x² − 1/2)²: z_x² = index of [2,0,0], constant index 0.
+        let ix2 = half.iter().position(|e| *e == [2, 0, 0]).unwrap();
+        gram[(0, 0)] += 0.5;
+        gram[(ix2, ix2)] += 2.0;
+        gram[(0, ix2)] -= 1.0;
+        gram[(ix2, 0)] -= 1.0;
+        for e in [[0, 1, 0], [0, 0, 1]] {
+            let i = half.iter().position(|h| *h == e).unwrap();
+            gram[(i, i)] += 2.0;
+        }
+        let lambda = gram.symmetric_eigenvalues().min();
+        assert!(lambda > 0.0);
+        let p = crate::fit::logdet_p::polynomial_of_gram(d, &gram).unwrap();
+        // Nonconvex: the Hessian at the origin has a negative eigenvalue.
+        assert!(p.eval(&Vector3::zeros()).hessian.symmetric_eigenvalues().min() < 0.0);
+        let est = monte_carlo_volume_sos(&p, lambda, 100_000, 9).unwrap();
+        // Plain uniform sampling of the provable cube [−R, R]³.
+        let r = est.radius;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(10);
+        let m = 2_000_000;
+        let hits = (0..m)
+            .filter(|_| {
+                let u = Vector3::new(rng.random_range(-r..r), rng.random_range(-r..r), rng.random_range(-r..r));
+                p.value(&u) <= 1.0
+            })
+            .count();
+        let f = hits as Real / m as Real;
+        let cube = (2.0 * r).powi(3);
+        let (vol, se) = (cube * f, cube * (f * (1.0 - f) / m as Real).sqrt());
+        let v = est.estimate;
+        assert!(v.std_error < 0.01 * v.volume);
+        assert!((v.volume - vol).abs() < 4.0 * (se + v.std_error), "{} ± {} vs {vol} ± {se}", v.volume, v.std_error);
     }
 }

@@ -262,7 +262,7 @@ fn ellipsoid_cloud_at_degree_2_logdet_h_gives_back_the_ellipsoid_and_trace_forms
         let body = fit_points(&e.pts, &settings.clone().with_method(method), &mut |_| {}).unwrap();
         assert_eq!(body.report.method, method.name());
         let max = e.pts.iter().map(|x| body.value_at(x)).fold(Real::NEG_INFINITY, Real::max);
-        assert!(max <= 1.0 + 1e-12 && max >= 1.0 - 1e-6, "{method:?}: max p(xᵢ) = {max}");
+        assert!((1.0 - 1e-6..=1.0 + 1e-12).contains(&max), "{method:?}: max p(xᵢ) = {max}");
         let v = quadratic_body_volume(&body);
         assert!(v >= exact * (1.0 - 1e-6), "{method:?}: volume {v} < minimum {exact}");
         let r = &body.report;
@@ -372,7 +372,7 @@ fn inverse_moment_at_degree_2_is_the_covariance_ellipsoid() {
     assert!((cov - axes).norm() < 0.02 * axes.norm(), "Σ = {cov}, M Mᵀ/3 = {axes}");
     // Containment on every point with max exactly 1 (to rounding), flagged nonconvex, no margin.
     let max = e.pts.iter().map(|x| body.value_at(x)).fold(Real::NEG_INFINITY, Real::max);
-    assert!(max <= 1.0 + 1e-12 && max >= 1.0 - 1e-12, "max p(xᵢ) = {max}");
+    assert!((1.0 - 1e-12..=1.0 + 1e-12).contains(&max), "max p(xᵢ) = {max}");
     let r = &body.report;
     assert!(r.nonconvex && r.convexity_margin.is_none() && r.method == "inverse_moment");
     // Its volume is the ellipsoid's closed form (the body is an ellipsoid at 2d = 2).
