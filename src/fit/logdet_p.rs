@@ -1,4 +1,19 @@
-//! The log-det fit of the sos Gram matrix (paper §III-A, eq. "VAG.log.det").
+//! The cone programs of every SDP fit of paper §III: objective log det or trace (of the inverse)
+//! of the sos Gram matrix P (ours, eq. "VAG.log.det") or of the sos-convexity Gram matrix H
+//! (Magnani et al., eq. "Magnani.log.det"), optionally with relaxed convexity (eq.
+//! "VAG.param.convex": p + c(‖u‖²)ᵈ sos-convex, objective on P only). One builder,
+//! [`LogDetProblem::build_spec`], serves all four objectives; the log det P program below is
+//! its original and default case, built exactly as before (same columns, rows and cones).
+//!
+//! ```text
+//! objective block on X ∈ {P (N × N), H = G (M × M)}:
+//!   log det X:      [[X, Z], [Zᵀ, diag Z]] ⪰ 0,  (tᵢ, 1, Zᵢᵢ) ∈ K_exp,  maximize Σ tᵢ
+//!   trace X⁻¹:      [[V, I], [I, X]] ⪰ 0,  minimize trace V           (Schur: V ⪰ X⁻¹)
+//! the other Gram matrix gets a plain PSD cone (G ⪰ 0, or P ⪰ 0 i.e. p sos for Magnani's forms)
+//! relaxed convexity: the sos-convexity rows read yᵀ∇²p y − wᵀGw = −c yᵀ∇²q y, q = (‖u‖²)ᵈ
+//! ```
+//!
+//! The log det P program in detail:
 //!
 //! ```text
 //! maximize    log det P
