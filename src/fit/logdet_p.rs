@@ -455,8 +455,9 @@ impl LogDetProblem {
     }
 
     /// [`LogDetProblem::solve`], re-solved with a shorter interior-point step (Clarabel's
-    /// `max_step_fraction` 0.9, then 0.7) when Clarabel ends with `InsufficientProgress` or
-    /// `NumericalError`; the returned time and iterations add up every attempt.
+    /// `max_step_fraction` 0.9, then 0.7, then 0.9 with the other KKT solver of faer / QDLDL)
+    /// while Clarabel ends with `InsufficientProgress` or `NumericalError`; the returned time and iterations add up every attempt, and `progress`
+    /// sees the iterations numbered across attempts.
     ///
     /// # Errors
     /// As [`LogDetProblem::solve`].
@@ -466,15 +467,21 @@ impl LogDetProblem {
         progress: &mut dyn FnMut(u32, Real),
     ) -> Result<RawSolution> {
         let mut raw = self.solve(settings.clone(), progress)?;
-        for fraction in [0.9, 0.7] {
+        let other_solver = if settings.direct_solve_method == "qdldl" { "faer" } else { "qdldl" };
+        for (fraction, solver) in [(0.9, None), (0.7, None), (0.9, Some(other_solver))] {
             if !matches!(raw.status, SolverStatus::InsufficientProgress | SolverStatus::NumericalError)
-                || settings.max_step_fraction <= fraction
+                || (solver.is_none() && settings.max_step_fraction <= fraction)
             {
                 continue;
             }
             let mut retry = settings.clone();
-            retry.max_step_fraction = fraction;
-            let next = self.solve(retry, progress)?;
+            retry.max_step_fraction = retry.max_step_fraction.min(fraction);
+            if let Some(s) = solver {
+                retry.direct_solve_method = s.into();
+            }
+            // Iterations keep counting across attempts so that progress never goes back.
+            let offset = raw.iterations;
+            let next = self.solve(retry, &mut |it, cost| progress(offset + it, cost))?;
             raw = RawSolution {
                 solve_seconds: raw.solve_seconds + next.solve_seconds,
                 iterations: raw.iterations + next.iterations,

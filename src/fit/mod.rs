@@ -480,7 +480,9 @@ fn solve_in_rounds(
             cloud.points.len()
         ),
     ];
-    if !out.converged {
+    if let Some(why) = &out.failed_round {
+        notes.push(format!("{why}: kept the previous round's solution; the final rescale restores containment"));
+    } else if !out.converged {
         notes.push(format!(
             "round cap {} reached with points still outside; the final rescale restores containment",
             relaxed::MAX_ROUNDS

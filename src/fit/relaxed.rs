@@ -57,8 +57,11 @@ pub struct RoundsOutcome {
     pub iterations: u32,
     /// Containment rows of each round.
     pub rows_per_round: Vec<usize>,
-    /// False when the round cap was reached with points still violated.
+    /// False when the round cap was reached (or a round failed) with points still violated.
     pub converged: bool,
+    /// Set when a round after the first ended without a usable solution and the previous
+    /// round's solution was kept (says which round and its status).
+    pub failed_round: Option<String>,
 }
 
 /// Solves `spec` with containment rows added in rounds (see the module docs), calling
@@ -71,7 +74,8 @@ pub struct RoundsOutcome {
 ///
 /// # Errors
 /// Whatever [`LogDetProblem::build_spec`] or [`LogDetProblem::solve`] return, and
-/// [`crate::Error::Numerical`] for an unusable solver status in any round.
+/// [`crate::Error::Numerical`] for an unusable solver status in the first round (a later failed
+/// round keeps the previous round's solution, see [`RoundsOutcome::failed_round`]).
 pub fn solve_in_rounds(
     cloud: &NormalizedCloud,
     spec: &ProblemSpec,
@@ -96,6 +100,7 @@ pub fn solve_in_rounds(
     settings.max_step_fraction = settings.max_step_fraction.min(ROUND_STEP_FRACTION);
     let settings = &settings;
     let mut rows_per_round = Vec::new();
+    let mut last: Option<RoundsOutcome> = None;
     let (mut solve_seconds, mut iterations) = (0.0, 0);
     for round in 0..MAX_ROUNDS {
         rows_per_round.push(rows.len());
@@ -103,7 +108,19 @@ pub fn solve_in_rounds(
         let raw = problem.solve_with_retry(settings, &mut |it, cost| progress(round, it, cost))?;
         solve_seconds += raw.solve_seconds;
         iterations += raw.iterations;
-        let status = usable_status(raw.status)?;
+        let status = match (usable_status(raw.status), last.take()) {
+            (Ok(s), _) => s,
+            (Err(e), None) => return Err(e),
+            // A later round failed: keep the previous round's solution (the caller's rescale
+            // restores containment of the points it violates).
+            (Err(_), Some(mut prev)) => {
+                prev.solve_seconds = solve_seconds;
+                prev.iterations = iterations;
+                prev.rows_per_round = rows_per_round;
+                prev.failed_round = Some(format!("round {} ended with status {:?}", round + 1, raw.status));
+                return Ok(prev);
+            }
+        };
         let gram = problem.gram(&raw.x);
         let polynomial = problem.polynomial_of_gram(&gram)?;
         let mut violated: Vec<(Real, usize)> = cloud
@@ -115,18 +132,21 @@ pub fn solve_in_rounds(
             .filter(|(v, _)| v.is_nan() || *v > 1.0 + VIOLATION_TOLERANCE)
             .collect();
         let done = violated.is_empty();
+        let outcome = RoundsOutcome {
+            polynomial,
+            gram,
+            convexity_gram: problem.convexity_gram(&raw.x),
+            status,
+            solve_seconds,
+            iterations,
+            rows_per_round: rows_per_round.clone(),
+            converged: done,
+            failed_round: None,
+        };
         if done || round + 1 == MAX_ROUNDS {
-            return Ok(RoundsOutcome {
-                polynomial,
-                gram,
-                convexity_gram: problem.convexity_gram(&raw.x),
-                status,
-                solve_seconds,
-                iterations,
-                rows_per_round,
-                converged: done,
-            });
+            return Ok(outcome);
         }
+        last = Some(outcome);
         // Worst first (NaN counts as worst).
         violated.sort_by(|a, b| b.0.partial_cmp(&a.0).unwrap_or(std::cmp::Ordering::Less));
         for &(_, i) in violated.iter().take(ROUND_ADD) {
