@@ -98,6 +98,9 @@ pub struct CertificateSummary {
     pub solver_status: String,
     /// Whether the certificate is verified (module docs, "Verified SDP").
     pub verified: bool,
+    /// Newton's value that was compared (squared distance or d(p₁‖p₂)), when Newton ran; kept even
+    /// when the answer was replaced by the SDP's.
+    pub newton_value: Option<Real>,
 }
 
 /// A certified distance answer (paper eq. "distance" / "distance.lasserre").
@@ -174,6 +177,7 @@ fn summary(
         solve_seconds: seconds,
         solver_status: status.to_string(),
         verified,
+        newton_value: newton,
     }
 }
 
@@ -250,7 +254,12 @@ pub fn certified_distance(
             converged: true,
         };
     }
-    let converged = s.verified && c.witnesses.is_some();
+    let witnesses = c.witnesses.or_else(|| {
+        let (x, y) = c.moment_witnesses?;
+        Some((project_to_body(a, pose_a, &x)?, project_to_body(b, pose_b, &y)?))
+    });
+    let converged = s.verified && witnesses.is_some();
+    let c = DistanceCertificate { witnesses, ..c };
     let result = distance_from_certificate(&c, pose_a, pose_b, newton, a.scale().max(b.scale()), converged);
     CertifiedDistance {
         result,
@@ -296,6 +305,36 @@ fn distance_from_certificate(
         ..newton
     }
 }
+
+/// A moment-recovered point moved onto `body` (under `pose`) when it lies slightly outside: Newton
+/// steps on p'(x) = 1 along the gradient (the least displacement to first order). The moments of a
+/// thin body (axis ratio 1e-3) are accurate to ~1e-8 m, which can exceed the level tolerance
+/// [`WITNESS_FEASIBILITY_TOLERANCE`] by itself. `None` when the point is not within
+/// [`PROJECTION_MAX_SHIFT`] × scale of the body or the steps do not reach p' ≤ 1 + 1e-12.
+fn project_to_body(body: &Body, pose: &Isometry3, x: &Point3) -> Option<Point3> {
+    let posed = body.posed(pose);
+    let start = x.coords;
+    let mut y = start;
+    for _ in 0..50 {
+        let e = posed.eval(&y);
+        if !e.value.is_finite() {
+            return None;
+        }
+        if e.value <= 1.0 + 1e-12 {
+            return ((y - start).norm() <= PROJECTION_MAX_SHIFT * body.scale()).then_some(Point3::from(y));
+        }
+        let g2 = e.gradient.norm_squared();
+        if g2 == 0.0 {
+            return None;
+        }
+        // Aim slightly inside the level set so rounding lands on the feasible side.
+        y -= e.gradient * ((e.value - (1.0 - 1e-13)) / g2);
+    }
+    None
+}
+
+/// Largest displacement (relative to the body's scale) [`project_to_body`] accepts.
+const PROJECTION_MAX_SHIFT: Real = 1e-4;
 
 /// γ ≤ this × (larger body scale)² counts as touching or overlapping in an SDP answer.
 const OVERLAP_RELATIVE: Real = 1e-10;
@@ -409,8 +448,9 @@ pub fn certified_growth(
             converged: true,
         };
     }
-    let converged = s.verified && c.minimizer.is_some();
-    let x = c.minimizer.unwrap_or(newton.minimizer);
+    let minimizer = c.minimizer.or_else(|| project_to_body(p2, pose2, &c.moment_minimizer?));
+    let converged = s.verified && minimizer.is_some();
+    let x = minimizer.unwrap_or(newton.minimizer);
     let result = GrowthResult {
         value: c.value,
         minimizer: x,

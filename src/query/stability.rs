@@ -288,11 +288,12 @@ pub fn run_case(case: &StabilityCase, params: &CertifyParams) -> CaseReport {
                 AnswerSource::SdpFallback if converged => {
                     rep.flagged += 1;
                     rep.failures.push(format!(
-                        "{}: pair {k} {what}: Newton {status:?} value {value:.3e}, replaced by the SDP ({})",
+                        "{}: pair {k} {what}: Newton {status:?} value {}, replaced by the SDP ({})",
                         case.name,
+                        cert.as_ref().and_then(|c| c.newton_value).map_or("-".into(), |v| format!("{v:.10e}")),
                         cert.as_ref().map_or("-".into(), |c| format!(
-                            "bound {:.6e}, newton gap {:.1e}",
-                            c.bound, c.relative_gap
+                            "bound {:.10e}, verified {:.10e}, gap {:.1e}",
+                            c.bound, c.verified_bound, c.relative_gap
                         ))
                     ));
                 }

@@ -429,6 +429,7 @@ pub fn certificate_to_proto(c: &CertificateSummary) -> pb::Certificate {
         gram_min_eigenvalue: c.gram_min_eigenvalue,
         solve_seconds: c.solve_seconds,
         verified: c.verified,
+        newton_value: c.newton_value.unwrap_or(Real::NAN),
     }
 }
 
