@@ -649,7 +649,7 @@ async fn certified_queries_and_gradients_on_the_demo_scene() {
         let d = c.distance(req).await.unwrap().into_inner().answer.unwrap();
         assert_eq!(d.source, pb::AnswerSource::Newton as i32, "{d:?}");
         assert!(d.solve.as_ref().unwrap().converged && !d.lower_bound);
-        let cert = d.certificate.clone().unwrap();
+        let cert = d.certificate.unwrap();
         let direct = certify_distance(&chair, &pose_chair, &human, &pose_human).unwrap();
         assert!(
             (cert.bound - direct.squared_distance).abs() <= 1e-6 * direct.squared_distance.abs().max(1e-3),
@@ -668,7 +668,7 @@ async fn certified_queries_and_gradients_on_the_demo_scene() {
             with_gradient: true,
         };
         let g = c.growth(greq).await.unwrap().into_inner().answer.unwrap();
-        let gc = g.certificate.clone().unwrap();
+        let gc = g.certificate.unwrap();
         let direct_g = certify_growth(&chair, &pose_chair, &human, &pose_human).unwrap();
         assert!((gc.bound - direct_g.value).abs() <= 1e-6 * direct_g.value.abs().max(1.0), "{gc:?} vs {direct_g:?}");
         assert!(gc.agrees && g.source == pb::AnswerSource::Newton as i32, "{g:?}");
