@@ -54,6 +54,7 @@ async fn main() -> Result<(), Box<dyn std::error::Error>> {
                 scene_id: scene.scene_id.clone(),
                 instance_a: chair.instance_id.clone(),
                 instance_b: human.instance_id.clone(),
+                ..Default::default()
             })
             .await?
             .into_inner();
@@ -62,6 +63,7 @@ async fn main() -> Result<(), Box<dyn std::error::Error>> {
                 scene_id: scene.scene_id.clone(),
                 instance_1: chair.instance_id.clone(),
                 instance_2: human.instance_id.clone(),
+                ..Default::default()
             })
             .await?
             .into_inner();

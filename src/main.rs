@@ -22,6 +22,8 @@ enum Command {
     Query(cli::query::QueryArgs),
     /// Benchmark fits and queries on the paper's shapes.
     Bench(cli::bench::BenchArgs),
+    /// Run the stability suite (hard query configurations, Newton vs the SDP) and print a table.
+    Stability(cli::stability::StabilityArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -31,6 +33,7 @@ fn main() -> std::process::ExitCode {
         Command::Fit(a) => cli::fit::run(a),
         Command::Query(a) => cli::query::run(a),
         Command::Bench(a) => cli::bench::run(a),
+        Command::Stability(a) => cli::stability::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -4,3 +4,4 @@ pub mod bench;
 pub mod fit;
 pub mod query;
 pub mod serve;
+pub mod stability;

@@ -1,10 +1,13 @@
-//! `sublevel query distance|growth A.json B.json --pose-a w,x,y,z,tx,ty,tz --pose-b … [--json] [--certify]`:
+//! `sublevel query distance|growth A.json B.json --pose-a w,x,y,z,tx,ty,tz --pose-b … [--json] [--certify]
+//! [--gradient]`:
 //! one query between two body files, for scripts and debugging.
 
 use serde_json::json;
 use sublevel::math::{pose_from_parts, Isometry3};
-use sublevel::query::sdp_certificate::{certify_distance, certify_growth};
-use sublevel::query::{distance, growth, NewtonParams};
+use sublevel::query::{
+    certified_distance, certified_growth, distance_gradient, growth_gradient, CertificateSummary, CertifyMode,
+    CertifyParams, NewtonParams, PoseGradient,
+};
 use sublevel::{Body, Error, Result};
 
 /// Which query to run.
@@ -35,9 +38,15 @@ pub struct QueryArgs {
     /// Print JSON instead of text.
     #[arg(long)]
     json: bool,
-    /// Also solve the level-0 sos certificate (an SDP with Clarabel) and print it beside the answer.
+    /// Always solve the level-0 sos certificate (an SDP with Clarabel), compare it with Newton's answer
+    /// and print it (without it the SDP runs only as a fallback when Newton fails, or for nonconvex
+    /// bodies as a lower bound).
     #[arg(long)]
     certify: bool,
+    /// Also print the gradients of the value with respect to both poses (twists: linear [value/m],
+    /// angular about the world origin [value/rad]; pose ← exp(ξ^)·pose).
+    #[arg(long)]
+    gradient: bool,
     /// KKT-residual tolerance of the Newton solver.
     #[arg(long, default_value_t = sublevel::math::NEWTON_KKT_TOLERANCE)]
     tolerance: f64,
@@ -55,18 +64,39 @@ fn parse_pose(field: &str, text: &str) -> Result<Isometry3> {
     pose_from_parts(field, [v[0], v[1], v[2], v[3]], [v[4], v[5], v[6]])
 }
 
+fn certificate_json(c: &Option<CertificateSummary>) -> serde_json::Value {
+    match c {
+        None => serde_json::Value::Null,
+        Some(c) => json!({
+            "bound": c.bound, "verified_bound": c.verified_bound, "agrees": c.agrees,
+            "relative_gap": c.relative_gap, "gram_min_eigenvalue": c.gram_min_eigenvalue,
+            "solve_seconds": c.solve_seconds, "solver_status": c.solver_status, "verified": c.verified,
+            "newton_value": c.newton_value,
+        }),
+    }
+}
+
+fn gradient_json(g: &PoseGradient) -> serde_json::Value {
+    json!({ "linear": [g.linear.x, g.linear.y, g.linear.z], "angular": [g.angular.x, g.angular.y, g.angular.z] })
+}
+
 /// Runs `sublevel query`.
 pub fn run(args: QueryArgs) -> Result<()> {
     let a = Body::load(&args.a)?;
     let b = Body::load(&args.b)?;
     let pose_a = parse_pose("--pose-a", &args.pose_a)?;
     let pose_b = parse_pose("--pose-b", &args.pose_b)?;
-    let params = NewtonParams { kkt_tolerance: args.tolerance, ..NewtonParams::default() };
+    let params = CertifyParams {
+        newton: NewtonParams { kkt_tolerance: args.tolerance, ..NewtonParams::default() },
+        ..CertifyParams::default()
+    };
+    let mode = if args.certify { CertifyMode::Certify } else { CertifyMode::Newton };
     let start = std::time::Instant::now();
     let out = match args.kind {
         QueryKind::Distance => {
-            let r = distance(&a, &pose_a, &b, &pose_b, None, &params);
+            let c = certified_distance(&a, &pose_a, &b, &pose_b, None, &params, mode);
             let micros = start.elapsed().as_secs_f64() * 1e6;
+            let r = &c.result;
             let mut v = json!({
                 "query": "distance",
                 "distance": r.distance,
@@ -74,43 +104,47 @@ pub fn run(args: QueryArgs) -> Result<()> {
                 "witness_b": [r.witness_b.x, r.witness_b.y, r.witness_b.z],
                 "normal": [r.normal.x, r.normal.y, r.normal.z],
                 "overlapping": r.overlapping,
-                "converged": r.status.converged(),
+                "converged": c.converged,
+                "source": format!("{:?}", c.source),
+                "lower_bound": c.lower_bound,
+                "tight": c.tight,
                 "status": format!("{:?}", r.status),
                 "iterations": r.iterations,
                 "kkt_residual": r.kkt_residual,
                 "microseconds": micros,
+                "certificate": certificate_json(&c.certificate),
             });
-            if args.certify {
-                let c = certify_distance(&a, &pose_a, &b, &pose_b)?;
-                v["certificate"] = json!({
-                    "distance": c.distance, "squared_distance": c.squared_distance,
-                    "solver_status": c.solver_status, "solve_seconds": c.solve_seconds,
-                    "agrees": (c.squared_distance.max(0.0) - r.distance * r.distance).abs() <= 1e-6 * (r.distance * r.distance).max(1.0),
-                });
+            if args.gradient && !c.lower_bound {
+                let (ga, gb) = distance_gradient(r);
+                v["gradient_a"] = gradient_json(&ga);
+                v["gradient_b"] = gradient_json(&gb);
             }
             v
         }
         QueryKind::Growth => {
-            let r = growth(&a, &pose_a, &b, &pose_b, None, &params);
+            let c = certified_growth(&a, &pose_a, &b, &pose_b, None, &params, mode);
             let micros = start.elapsed().as_secs_f64() * 1e6;
+            let r = &c.result;
             let mut v = json!({
                 "query": "growth",
                 "value": r.value,
                 "minimizer": [r.minimizer.x, r.minimizer.y, r.minimizer.z],
                 "multiplier": r.multiplier,
                 "separated": r.value > 1.0,
-                "converged": r.status.converged(),
+                "converged": c.converged,
+                "source": format!("{:?}", c.source),
+                "lower_bound": c.lower_bound,
+                "tight": c.tight,
                 "status": format!("{:?}", r.status),
                 "iterations": r.iterations,
                 "kkt_residual": r.kkt_residual,
                 "microseconds": micros,
+                "certificate": certificate_json(&c.certificate),
             });
-            if args.certify {
-                let c = certify_growth(&a, &pose_a, &b, &pose_b)?;
-                v["certificate"] = json!({
-                    "value": c.value, "solver_status": c.solver_status, "solve_seconds": c.solve_seconds,
-                    "agrees": (c.value - r.value).abs() <= 1e-6 * r.value.abs().max(1.0),
-                });
+            if args.gradient && !c.lower_bound {
+                let (g1, g2) = growth_gradient(&a, &pose_a, r);
+                v["gradient_a"] = gradient_json(&g1);
+                v["gradient_b"] = gradient_json(&g2);
             }
             v
         }

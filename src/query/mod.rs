@@ -2,12 +2,20 @@
 //! the growth measure d(p₁‖p₂), solved by a warm-started Newton / active-set method, and their
 //! level-0 sos certificates.
 
+pub mod certified;
 pub mod distance;
+pub mod gradient;
 pub mod growth;
 pub mod newton;
 pub mod sdp_certificate;
+pub mod stability;
 
+pub use certified::{
+    certified_distance, certified_growth, AnswerSource, CertificateSummary, CertifiedDistance, CertifiedGrowth,
+    CertifyMode, CertifyParams,
+};
 pub use distance::{distance, DistanceResult, DistanceWarmStart};
+pub use gradient::{distance_gradient, growth_gradient, PoseGradient};
 pub use growth::{growth, GrowthResult, GrowthWarmStart};
 pub use newton::{NewtonParams, SolveStatus};
 

@@ -120,6 +120,10 @@ pub struct DistanceCertificate {
     /// dual (moment) solution; `None` when the moments are not finite or the recovered points violate
     /// their body's constraint by more than [`WITNESS_FEASIBILITY_TOLERANCE`].
     pub witnesses: Option<(Point3, Point3)>,
+    /// The same first-order moments mapped to world points without the feasibility filter (`None`
+    /// only when not finite). For nonconvex bodies (paper §IV-A) they may lie outside their body;
+    /// when both are feasible and ‖x − y‖² meets the bound, the lower bound is tight.
+    pub moment_witnesses: Option<(Point3, Point3)>,
     /// Clarabel's status (`"Solved"` or `"AlmostSolved"`; other statuses are errors).
     pub solver_status: String,
     /// Seconds inside Clarabel (both passes).
@@ -151,6 +155,9 @@ pub struct GrowthCertificate {
     /// The minimizer x* in world coordinates, recovered from the first-order moments; `None` when
     /// not finite or infeasible by more than [`WITNESS_FEASIBILITY_TOLERANCE`].
     pub minimizer: Option<Point3>,
+    /// The same first-order moments mapped to a world point without the feasibility filter (`None`
+    /// only when not finite); for nonconvex bodies it may lie outside body 2.
+    pub moment_minimizer: Option<Point3>,
     /// Clarabel's status (`"Solved"` or `"AlmostSolved"`; other statuses are errors).
     pub solver_status: String,
     /// Seconds inside Clarabel (both passes).
@@ -288,12 +295,15 @@ pub fn certify_distance_with_params(
     let len2 = len * len;
     let gamma = sol.x[run.sol.gamma] * len2;
     let witnesses = run.witnesses_normalized.map(|(u, v)| (world_point(a, pose_a, &u), world_point(b, pose_b, &v)));
+    let moment_witnesses =
+        run.moments_normalized.map(|(u, v)| (world_point(a, pose_a, &u), world_point(b, pose_b, &v)));
     Ok(DistanceCertificate {
         squared_distance: gamma,
         distance: gamma.max(0.0).sqrt(),
         tau: sol.x[run.sol.multipliers[0]] * len2,
         xi: sol.x[run.sol.multipliers[1]] * len2,
         witnesses,
+        moment_witnesses,
         solver_status: format!("{:?}", sol.status),
         solve_seconds: seconds,
         iterations,
@@ -326,6 +336,8 @@ struct DistanceRun {
     sol: Level0Solution,
     /// Moment-recovered witnesses in the bodies' normalized coordinates, if finite and feasible.
     witnesses_normalized: Option<(Vector3, Vector3)>,
+    /// The same moments without the feasibility filter, if finite.
+    moments_normalized: Option<(Vector3, Vector3)>,
 }
 
 /// Solves the distance program with body a's variables in `frames.0`, body b's in `frames.1`, and
@@ -384,14 +396,16 @@ fn solve_distance_in(
     let pa = embed(&compose(a, &fa), gram, 0);
     let pb = embed(&compose(b, &fb), gram, 3);
     let sol = solve_level0(&blocks, &objective, &[pa.as_slice(), pb.as_slice()], params)?;
-    let witnesses_normalized = moments_first_order(&blocks[0], &sol, 6).and_then(|w| {
+    let moments_normalized = moments_first_order(&blocks[0], &sol, 6).map(|w| {
         let u = fa.origin + Vector3::new(w[0], w[1], w[2]) * fa.scale;
         let v = fb.origin + Vector3::new(w[3], w[4], w[5]) * fb.scale;
-        let feasible = a.polynomial().value(&u) <= 1.0 + WITNESS_FEASIBILITY_TOLERANCE
-            && b.polynomial().value(&v) <= 1.0 + WITNESS_FEASIBILITY_TOLERANCE;
-        feasible.then_some((u, v))
+        (u, v)
     });
-    Ok(DistanceRun { blocks, objective, pa, pb, sol, witnesses_normalized })
+    let witnesses_normalized = moments_normalized.filter(|(u, v)| {
+        a.polynomial().value(u) <= 1.0 + WITNESS_FEASIBILITY_TOLERANCE
+            && b.polynomial().value(v) <= 1.0 + WITNESS_FEASIBILITY_TOLERANCE
+    });
+    Ok(DistanceRun { blocks, objective, pa, pb, sol, witnesses_normalized, moments_normalized })
 }
 
 /// Certifies d(p₁‖p₂) for body `p1` under `pose1` and body `p2` under `pose2` (level-0 analogue
@@ -455,6 +469,7 @@ pub fn certify_growth_with_params(
         value: sol.x[run.sol.gamma],
         tau: sol.x[run.sol.multipliers[0]],
         minimizer: run.minimizer.map(Point3::from),
+        moment_minimizer: run.moment_minimizer.map(Point3::from),
         solver_status: format!("{:?}", sol.status),
         solve_seconds: seconds,
         iterations,
@@ -507,6 +522,8 @@ struct GrowthRun {
     sol: Level0Solution,
     /// Moment-recovered minimizer (world), if finite and feasible.
     minimizer: Option<Vector3>,
+    /// The same moments without the feasibility filter, if finite.
+    moment_minimizer: Option<Vector3>,
 }
 
 /// Solves the growth program in `frame`'s variables.
@@ -525,10 +542,9 @@ fn solve_growth_in(
     let blocks = [gram];
     let sol = solve_level0(&blocks, &objective, &[constraint.as_slice()], params)?;
     let b2 = p2.posed(pose2);
-    let minimizer = moments_first_order(&blocks[0], &sol, 3)
-        .map(|w| frame.world(&w))
-        .filter(|x| b2.value(x) <= 1.0 + WITNESS_FEASIBILITY_TOLERANCE);
-    Ok(GrowthRun { blocks, objective, constraint, sol, minimizer })
+    let moment_minimizer = moments_first_order(&blocks[0], &sol, 3).map(|w| frame.world(&w));
+    let minimizer = moment_minimizer.filter(|x| b2.value(x) <= 1.0 + WITNESS_FEASIBILITY_TOLERANCE);
+    Ok(GrowthRun { blocks, objective, constraint, sol, minimizer, moment_minimizer })
 }
 
 /// A geometric guess of the growth minimizer: p₁'s interior point if it lies in body 2, else where

@@ -5,7 +5,10 @@ use super::store::Store;
 use super::{BodyRecord, InstanceRecord, SceneMeta, StoredPose};
 use crate::body::Body;
 use crate::math::Isometry3;
-use crate::query::{distance, growth, DistanceResult, GrowthResult, NewtonParams};
+use crate::query::{
+    certified_distance, certified_growth, distance_gradient, growth_gradient, AnswerSource, CertifiedDistance,
+    CertifiedGrowth, CertifyMode, CertifyParams, DistanceResult, GrowthResult, NewtonParams, PoseGradient,
+};
 use crate::{Error, Result};
 use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex, MutexGuard, RwLock, RwLockReadGuard, RwLockWriteGuard};
@@ -33,7 +36,18 @@ pub enum QueryKind {
     Growth,
 }
 
-/// One query of a batch: a kind and an ordered pair of instance ids.
+/// Per-query options: certification mode and pose gradients.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct QueryOptions {
+    /// [`CertifyMode::Newton`] (default: the SDP only as a fallback) or [`CertifyMode::Certify`]
+    /// (always attach the level-0 certificate); see [`crate::query::certified`].
+    pub mode: CertifyMode,
+    /// Also return the gradients of the value with respect to both poses
+    /// ([`crate::query::gradient`]).
+    pub with_gradient: bool,
+}
+
+/// One query of a batch: a kind, an ordered pair of instance ids and its options.
 #[derive(Clone, Debug)]
 pub struct QueryPair {
     /// Which query.
@@ -42,15 +56,36 @@ pub struct QueryPair {
     pub first: String,
     /// Second instance (B, or p₂).
     pub second: String,
+    /// Certification and gradient options.
+    pub options: QueryOptions,
+}
+
+/// A certified distance answer with optional pose gradients.
+#[derive(Clone, Debug)]
+pub struct DistanceReply {
+    /// The answer with its source and certificate.
+    pub answer: CertifiedDistance,
+    /// (∂D/∂ξ_a, ∂D/∂ξ_b) when asked for and the answer is not a lower bound (twists, see
+    /// [`crate::query::gradient`]).
+    pub gradients: Option<(PoseGradient, PoseGradient)>,
+}
+
+/// A certified growth answer with optional pose gradients.
+#[derive(Clone, Debug)]
+pub struct GrowthReply {
+    /// The answer with its source and certificate.
+    pub answer: CertifiedGrowth,
+    /// (∂d/∂ξ₁, ∂d/∂ξ₂) when asked for and the answer is not a lower bound.
+    pub gradients: Option<(PoseGradient, PoseGradient)>,
 }
 
 /// The answer of one query of a batch.
 #[derive(Clone, Debug)]
 pub enum QueryAnswer {
     /// A distance answer.
-    Distance(DistanceResult),
+    Distance(DistanceReply),
     /// A growth answer.
-    Growth(GrowthResult),
+    Growth(GrowthReply),
 }
 
 /// An instance as seen from outside: its body and pose.
@@ -387,12 +422,14 @@ impl Catalog {
     // ----------------------------------------------------------------------------------------
 
     /// Distance between instances `a` and `b` of a scene (eq. "distance"), warm-started from the
-    /// previous answer of the same ordered pair; the new answer's warm start replaces it.
+    /// previous answer of the same ordered pair; the new answer's warm start replaces it. The
+    /// default path of [`Catalog::distance_with`] (SDP only as a fallback; a lower bound for
+    /// nonconvex bodies — use `distance_with` to see which).
     ///
     /// # Errors
     /// [`Error::NotFound`] for the scene or an instance.
     pub fn distance(&self, scene_id: &str, a: &str, b: &str) -> Result<DistanceResult> {
-        self.with_scene(scene_id, |s| run_distance(s, a, b, &self.params))
+        Ok(self.distance_with(scene_id, a, b, &QueryOptions::default())?.answer.result)
     }
 
     /// Growth measure d(p₁‖p₂) between instances `p1` and `p2` (eq. "overlap"), warm-started
@@ -401,7 +438,31 @@ impl Catalog {
     /// # Errors
     /// [`Error::NotFound`] for the scene or an instance.
     pub fn growth(&self, scene_id: &str, p1: &str, p2: &str) -> Result<GrowthResult> {
-        self.with_scene(scene_id, |s| run_growth(s, p1, p2, &self.params))
+        Ok(self.growth_with(scene_id, p1, p2, &QueryOptions::default())?.answer.result)
+    }
+
+    /// [`Catalog::distance`] with options: the certified answer ([`certified_distance`]) and, on
+    /// request, its pose gradients. Runs under the scene's lock (a certificate takes milliseconds
+    /// to seconds, so [`CertifyMode::Certify`] is for checking, not for the control loop).
+    ///
+    /// # Errors
+    /// [`Error::NotFound`] for the scene or an instance.
+    pub fn distance_with(&self, scene_id: &str, a: &str, b: &str, options: &QueryOptions) -> Result<DistanceReply> {
+        let params = self.certify_params();
+        self.with_scene(scene_id, |s| run_distance(s, a, b, &params, options))
+    }
+
+    /// [`Catalog::growth`] with options, like [`Catalog::distance_with`].
+    ///
+    /// # Errors
+    /// [`Error::NotFound`] for the scene or an instance.
+    pub fn growth_with(&self, scene_id: &str, p1: &str, p2: &str, options: &QueryOptions) -> Result<GrowthReply> {
+        let params = self.certify_params();
+        self.with_scene(scene_id, |s| run_growth(s, p1, p2, &params, options))
+    }
+
+    fn certify_params(&self) -> CertifyParams {
+        CertifyParams { newton: self.params, ..CertifyParams::default() }
     }
 
     /// Many queries of one scene under one lock (so all see the same poses); answers in order.
@@ -417,13 +478,16 @@ impl Catalog {
                     }
                 }
             }
+            let params = self.certify_params();
             pairs
                 .iter()
                 .map(|p| match p.kind {
                     QueryKind::Distance => {
-                        run_distance(s, &p.first, &p.second, &self.params).map(QueryAnswer::Distance)
+                        run_distance(s, &p.first, &p.second, &params, &p.options).map(QueryAnswer::Distance)
                     }
-                    QueryKind::Growth => run_growth(s, &p.first, &p.second, &self.params).map(QueryAnswer::Growth),
+                    QueryKind::Growth => {
+                        run_growth(s, &p.first, &p.second, &params, &p.options).map(QueryAnswer::Growth)
+                    }
                 })
                 .collect()
         })
@@ -446,18 +510,38 @@ fn instance<'a>(s: &'a SceneState, id: &str) -> Result<&'a Instance> {
     s.instances.get(id).ok_or_else(|| Error::not_found("instance", id))
 }
 
-fn run_distance(s: &mut SceneState, a: &str, b: &str, params: &NewtonParams) -> Result<DistanceResult> {
+fn run_distance(
+    s: &mut SceneState,
+    a: &str,
+    b: &str,
+    params: &CertifyParams,
+    options: &QueryOptions,
+) -> Result<DistanceReply> {
     let (ia, ib) = (instance(s, a)?, instance(s, b)?);
-    let r = distance(&ia.body, &ia.pose, &ib.body, &ib.pose, s.cache.distance(a, b), params);
-    s.cache.put_distance(a, b, r.warm_start);
-    Ok(r)
+    let r = certified_distance(&ia.body, &ia.pose, &ib.body, &ib.pose, s.cache.distance(a, b), params, options.mode);
+    let gradients =
+        (options.with_gradient && r.source != AnswerSource::SdpLowerBound).then(|| distance_gradient(&r.result));
+    if !r.lower_bound {
+        s.cache.put_distance(a, b, r.result.warm_start);
+    }
+    Ok(DistanceReply { answer: r, gradients })
 }
 
-fn run_growth(s: &mut SceneState, p1: &str, p2: &str, params: &NewtonParams) -> Result<GrowthResult> {
+fn run_growth(
+    s: &mut SceneState,
+    p1: &str,
+    p2: &str,
+    params: &CertifyParams,
+    options: &QueryOptions,
+) -> Result<GrowthReply> {
     let (i1, i2) = (instance(s, p1)?, instance(s, p2)?);
-    let r = growth(&i1.body, &i1.pose, &i2.body, &i2.pose, s.cache.growth(p1, p2), params);
-    s.cache.put_growth(p1, p2, r.warm_start);
-    Ok(r)
+    let r = certified_growth(&i1.body, &i1.pose, &i2.body, &i2.pose, s.cache.growth(p1, p2), params, options.mode);
+    let gradients = (options.with_gradient && r.source != AnswerSource::SdpLowerBound)
+        .then(|| growth_gradient(&i1.body, &i1.pose, &r.result));
+    if !r.lower_bound {
+        s.cache.put_growth(p1, p2, r.result.warm_start);
+    }
+    Ok(GrowthReply { answer: r, gradients })
 }
 
 #[cfg(test)]

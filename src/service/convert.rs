@@ -17,8 +17,12 @@ use super::pb;
 use crate::body::{BodyFile, FitReport, SUPPORTED_DEGREES};
 use crate::fit::FitStage;
 use crate::math::{pose_from_parts, pose_to_parts, Isometry3, Point3, Real, Vector3};
-use crate::query::{DistanceResult, GrowthResult, SolveStatus};
-use crate::scene::{BodyEntry, InstanceView, QueryAnswer, QueryKind, SceneView};
+use crate::query::{
+    AnswerSource, CertificateSummary, CertifyMode, DistanceResult, GrowthResult, PoseGradient, SolveStatus,
+};
+use crate::scene::{
+    BodyEntry, DistanceReply, GrowthReply, InstanceView, QueryAnswer, QueryKind, QueryOptions, SceneView,
+};
 use crate::{Error, Result};
 use tonic::{Code, Status};
 
@@ -390,6 +394,7 @@ pub fn distance_to_proto(r: &DistanceResult) -> pb::DistanceAnswer {
         normal: Some(vector_to_proto(&r.normal)),
         overlapping: r.overlapping,
         solve: Some(solve_info(r.status, r.iterations, r.kkt_residual, r.warm_started)),
+        ..Default::default()
     }
 }
 
@@ -401,14 +406,85 @@ pub fn growth_to_proto(r: &GrowthResult) -> pb::GrowthAnswer {
         multiplier: r.multiplier,
         separated: r.value > 1.0,
         solve: Some(solve_info(r.status, r.iterations, r.kkt_residual, r.warm_started)),
+        ..Default::default()
     }
+}
+
+/// An answer source as the proto enum.
+pub fn source_to_proto(s: AnswerSource) -> pb::AnswerSource {
+    match s {
+        AnswerSource::Newton => pb::AnswerSource::Newton,
+        AnswerSource::SdpFallback => pb::AnswerSource::SdpFallback,
+        AnswerSource::SdpLowerBound => pb::AnswerSource::SdpLowerBound,
+    }
+}
+
+/// A certificate summary as the proto message.
+pub fn certificate_to_proto(c: &CertificateSummary) -> pb::Certificate {
+    pb::Certificate {
+        bound: c.bound,
+        verified_bound: c.verified_bound,
+        agrees: c.agrees,
+        relative_gap: c.relative_gap,
+        gram_min_eigenvalue: c.gram_min_eigenvalue,
+        solve_seconds: c.solve_seconds,
+        verified: c.verified,
+        newton_value: c.newton_value.unwrap_or(Real::NAN),
+    }
+}
+
+/// A pose gradient as the proto message.
+pub fn gradient_to_proto(g: &PoseGradient) -> pb::PoseGradient {
+    pb::PoseGradient { linear: Some(vector_to_proto(&g.linear)), angular: Some(vector_to_proto(&g.angular)) }
+}
+
+/// A certified distance answer (with optional gradients) as the proto message; `solve.converged`
+/// is the certified answer's `converged`.
+pub fn distance_reply_to_proto(r: &DistanceReply) -> pb::DistanceAnswer {
+    let c = &r.answer;
+    let mut out = distance_to_proto(&c.result);
+    if let Some(solve) = out.solve.as_mut() {
+        solve.converged = c.converged;
+    }
+    out.source = source_to_proto(c.source) as i32;
+    out.certificate = c.certificate.as_ref().map(certificate_to_proto);
+    out.lower_bound = c.lower_bound;
+    out.tight = c.tight;
+    if let Some((ga, gb)) = &r.gradients {
+        out.gradient_a = Some(gradient_to_proto(ga));
+        out.gradient_b = Some(gradient_to_proto(gb));
+    }
+    out
+}
+
+/// A certified growth answer (with optional gradients) as the proto message.
+pub fn growth_reply_to_proto(r: &GrowthReply) -> pb::GrowthAnswer {
+    let c = &r.answer;
+    let mut out = growth_to_proto(&c.result);
+    if let Some(solve) = out.solve.as_mut() {
+        solve.converged = c.converged;
+    }
+    out.source = source_to_proto(c.source) as i32;
+    out.certificate = c.certificate.as_ref().map(certificate_to_proto);
+    out.lower_bound = c.lower_bound;
+    out.tight = c.tight;
+    if let Some((g1, g2)) = &r.gradients {
+        out.gradient_1 = Some(gradient_to_proto(g1));
+        out.gradient_2 = Some(gradient_to_proto(g2));
+    }
+    out
+}
+
+/// The query options of a request's `certify` / `with_gradient` flags.
+pub fn query_options(certify: bool, with_gradient: bool) -> QueryOptions {
+    QueryOptions { mode: if certify { CertifyMode::Certify } else { CertifyMode::Newton }, with_gradient }
 }
 
 /// A batch answer as the proto message.
 pub fn answer_to_proto(a: &QueryAnswer) -> pb::QueryAnswer {
     let answer = match a {
-        QueryAnswer::Distance(d) => pb::query_answer::Answer::Distance(distance_to_proto(d)),
-        QueryAnswer::Growth(g) => pb::query_answer::Answer::Growth(growth_to_proto(g)),
+        QueryAnswer::Distance(d) => pb::query_answer::Answer::Distance(distance_reply_to_proto(d)),
+        QueryAnswer::Growth(g) => pb::query_answer::Answer::Growth(growth_reply_to_proto(g)),
     };
     pb::QueryAnswer { answer: Some(answer) }
 }
@@ -436,7 +512,12 @@ pub fn pairs_from_proto(pairs: &[pb::QueryPair], max_pairs: usize) -> Result<Vec
             };
             require_id(&format!("pairs[{k}].first"), &p.first)?;
             require_id(&format!("pairs[{k}].second"), &p.second)?;
-            Ok(crate::scene::QueryPair { kind, first: p.first.clone(), second: p.second.clone() })
+            Ok(crate::scene::QueryPair {
+                kind,
+                first: p.first.clone(),
+                second: p.second.clone(),
+                options: query_options(p.certify, p.with_gradient),
+            })
         })
         .collect()
 }

@@ -214,8 +214,15 @@ impl Sublevel for SublevelService {
         require_id("scene_id", &req.scene_id)?;
         require_id("instance_a", &req.instance_a)?;
         require_id("instance_b", &req.instance_b)?;
-        let r = self.catalog.distance(&req.scene_id, &req.instance_a, &req.instance_b)?;
-        Ok(Response::new(pb::DistanceResponse { answer: Some(cv::distance_to_proto(&r)) }))
+        let options = cv::query_options(req.certify, req.with_gradient);
+        let r = if req.certify {
+            // The SDP takes milliseconds to seconds: off the async workers.
+            let catalog = self.catalog.clone();
+            blocking(move || catalog.distance_with(&req.scene_id, &req.instance_a, &req.instance_b, &options)).await?
+        } else {
+            self.catalog.distance_with(&req.scene_id, &req.instance_a, &req.instance_b, &options)?
+        };
+        Ok(Response::new(pb::DistanceResponse { answer: Some(cv::distance_reply_to_proto(&r)) }))
     }
 
     async fn growth(&self, request: Request<pb::GrowthRequest>) -> Reply<pb::GrowthResponse> {
@@ -223,15 +230,26 @@ impl Sublevel for SublevelService {
         require_id("scene_id", &req.scene_id)?;
         require_id("instance_1", &req.instance_1)?;
         require_id("instance_2", &req.instance_2)?;
-        let r = self.catalog.growth(&req.scene_id, &req.instance_1, &req.instance_2)?;
-        Ok(Response::new(pb::GrowthResponse { answer: Some(cv::growth_to_proto(&r)) }))
+        let options = cv::query_options(req.certify, req.with_gradient);
+        let r = if req.certify {
+            let catalog = self.catalog.clone();
+            blocking(move || catalog.growth_with(&req.scene_id, &req.instance_1, &req.instance_2, &options)).await?
+        } else {
+            self.catalog.growth_with(&req.scene_id, &req.instance_1, &req.instance_2, &options)?
+        };
+        Ok(Response::new(pb::GrowthResponse { answer: Some(cv::growth_reply_to_proto(&r)) }))
     }
 
     async fn batch_query(&self, request: Request<pb::BatchQueryRequest>) -> Reply<pb::BatchQueryResponse> {
         let req = request.into_inner();
         require_id("scene_id", &req.scene_id)?;
         let pairs = cv::pairs_from_proto(&req.pairs, self.config.max_batch_pairs)?;
-        let answers = self.catalog.batch(&req.scene_id, &pairs)?;
+        let answers = if pairs.iter().any(|p| p.options.mode == crate::query::CertifyMode::Certify) {
+            let catalog = self.catalog.clone();
+            blocking(move || catalog.batch(&req.scene_id, &pairs)).await?
+        } else {
+            self.catalog.batch(&req.scene_id, &pairs)?
+        };
         Ok(Response::new(pb::BatchQueryResponse { answers: answers.iter().map(cv::answer_to_proto).collect() }))
     }
 }

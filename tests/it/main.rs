@@ -1,5 +1,7 @@
 //! The one integration-test binary (one link step instead of many): modules by area.
 
 mod fit;
+mod gradient;
 mod query;
 mod service;
+mod stability;

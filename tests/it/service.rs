@@ -73,12 +73,18 @@ async fn add(c: &mut SublevelClient<Channel>, scene: &str, body: &str, p: pb::Po
 }
 
 async fn distance(c: &mut SublevelClient<Channel>, scene: &str, a: &str, b: &str) -> pb::DistanceAnswer {
-    let req = pb::DistanceRequest { scene_id: scene.into(), instance_a: a.into(), instance_b: b.into() };
+    let req = pb::DistanceRequest {
+        scene_id: scene.into(),
+        instance_a: a.into(),
+        instance_b: b.into(),
+        ..Default::default()
+    };
     c.distance(req).await.unwrap().into_inner().answer.unwrap()
 }
 
 async fn growth(c: &mut SublevelClient<Channel>, scene: &str, a: &str, b: &str) -> pb::GrowthAnswer {
-    let req = pb::GrowthRequest { scene_id: scene.into(), instance_1: a.into(), instance_2: b.into() };
+    let req =
+        pb::GrowthRequest { scene_id: scene.into(), instance_1: a.into(), instance_2: b.into(), ..Default::default() };
     c.growth(req).await.unwrap().into_inner().answer.unwrap()
 }
 
@@ -144,8 +150,12 @@ async fn round_trip_spheres_match_closed_forms_and_warm_start() {
 
     // Batch: both kinds, both orders, against the same closed forms.
     let c2 = Vector3::new(3.0, 5.0, 0.3);
-    let pair =
-        |kind: pb::QueryKind, a: &str, b: &str| pb::QueryPair { kind: kind as i32, first: a.into(), second: b.into() };
+    let pair = |kind: pb::QueryKind, a: &str, b: &str| pb::QueryPair {
+        kind: kind as i32,
+        first: a.into(),
+        second: b.into(),
+        ..Default::default()
+    };
     let pairs = vec![
         pair(pb::QueryKind::Distance, &i1, &i2),
         pair(pb::QueryKind::Growth, &i2, &i1),
@@ -179,7 +189,12 @@ async fn round_trip_spheres_match_closed_forms_and_warm_start() {
 
     // Removing an instance works and queries on it are NOT_FOUND.
     c.remove_instance(pb::RemoveInstanceRequest { scene_id: scene.clone(), instance_id: i2.clone() }).await.unwrap();
-    let req = pb::DistanceRequest { scene_id: scene.clone(), instance_a: i1.clone(), instance_b: i2.clone() };
+    let req = pb::DistanceRequest {
+        scene_id: scene.clone(),
+        instance_a: i1.clone(),
+        instance_b: i2.clone(),
+        ..Default::default()
+    };
     assert_eq!(c.distance(req).await.unwrap_err().code(), Code::NotFound);
     server.stop().await;
 }
@@ -277,15 +292,25 @@ async fn bad_input_gets_the_right_code_naming_the_field() {
     assert_status(c.add_instance(req).await, Code::NotFound, "b-nope");
     let req = pb::GetSceneRequest { scene_id: "s-nope".into() };
     assert_status(c.get_scene(req).await, Code::NotFound, "s-nope");
-    let req = pb::DistanceRequest { scene_id: scene.clone(), instance_a: i1.clone(), instance_b: "i-nope".into() };
+    let req = pb::DistanceRequest {
+        scene_id: scene.clone(),
+        instance_a: i1.clone(),
+        instance_b: "i-nope".into(),
+        ..Default::default()
+    };
     assert_status(c.distance(req).await, Code::NotFound, "i-nope");
-    let req = pb::GrowthRequest { scene_id: scene.clone(), instance_1: String::new(), instance_2: i1.clone() };
+    let req = pb::GrowthRequest {
+        scene_id: scene.clone(),
+        instance_1: String::new(),
+        instance_2: i1.clone(),
+        ..Default::default()
+    };
     assert_status(c.growth(req).await, Code::InvalidArgument, "instance_1");
     assert_status(c.watch_fit_job(pb::WatchFitJobRequest { job_id: "j-nope".into() }).await, Code::NotFound, "j-nope");
     assert_status(c.delete_body(pb::DeleteBodyRequest { body_id: b.clone() }).await, Code::InvalidArgument, "body_id");
 
     // Batches.
-    let pair = |kind: i32| pb::QueryPair { kind, first: i1.clone(), second: i2.clone() };
+    let pair = |kind: i32| pb::QueryPair { kind, first: i1.clone(), second: i2.clone(), ..Default::default() };
     let req = pb::BatchQueryRequest { scene_id: scene.clone(), pairs: vec![pair(1), pair(0)] };
     assert_status(c.batch_query(req).await, Code::InvalidArgument, "pairs[1].kind");
     let req = pb::BatchQueryRequest { scene_id: scene.clone(), pairs: vec![pair(1); 5] };
@@ -564,5 +589,193 @@ async fn end_to_end_chair_slides_through_human() {
     assert!(overlapping > 0 && separated > 0, "the slide must pass through: {overlapping} / {separated}");
     assert!(warm_answers >= 23, "only {warm_answers} of 46 answers were warm-started");
     assert!(warm_iters < cold_iters, "warm {warm_iters} vs cold {cold_iters}");
+    server.stop().await;
+}
+
+/// Uploads a body given as a `Body` (its JSON file form) and returns its id.
+async fn upload_body(c: &mut SublevelClient<Channel>, name: &str, body: &sublevel::Body) -> String {
+    let json = serde_json::to_string(&body.to_file()).unwrap();
+    let req = pb::UploadBodyRequest { name: name.into(), body: Some(pb::upload_body_request::Body::BodyJson(json)) };
+    c.upload_body(req).await.unwrap().into_inner().body_id
+}
+
+fn demo_bodies() -> (sublevel::Body, sublevel::Body) {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("data/demo");
+    (
+        sublevel::Body::load(&dir.join("chair_101.json")).unwrap(),
+        sublevel::Body::load(&dir.join("human_10.json")).unwrap(),
+    )
+}
+
+fn twist(g: &Option<pb::PoseGradient>) -> [f64; 6] {
+    let g = g.as_ref().unwrap();
+    let (l, a) = (v(&g.linear), v(&g.angular));
+    [l.x, l.y, l.z, a.x, a.y, a.z]
+}
+
+/// The demo scene (chair at the origin, human beside it, then moved closer and turned): `certify`
+/// attaches a certificate that agrees with a direct `certify_distance` / `certify_growth` (1e-6
+/// relative on the squared distance and on d), `with_gradient` returns gradients that match
+/// central finite differences of direct Newton solves (1e-5 relative), in single and batch queries.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn certified_queries_and_gradients_on_the_demo_scene() {
+    use sublevel::query::gradient::perturb_pose;
+    use sublevel::query::sdp_certificate::{certify_distance, certify_growth};
+    use sublevel::query::{distance as newton_distance, growth as newton_growth, NewtonParams};
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(config(dir.path())).await;
+    let mut c = server.client().await;
+    let (chair, human) = demo_bodies();
+    let (b_chair, b_human) =
+        (upload_body(&mut c, "chair_101", &chair).await, upload_body(&mut c, "human_10", &human).await);
+    let scene = c.create_scene(pb::CreateSceneRequest { name: "demo".into() }).await.unwrap().into_inner().scene_id;
+    let gap = 1.5 * (chair.scale() + human.scale());
+    let i_chair = add(&mut c, &scene, &b_chair, at([0.0; 3])).await;
+    let pose_chair = Isometry3::identity();
+    let i_human = add(&mut c, &scene, &b_human, at([gap, 0.0, 0.0])).await;
+    let h = (0.3f64 / 2.0).sin_cos();
+    for pose_human in [
+        pose_from_parts("h", [1.0, 0.0, 0.0, 0.0], [gap, 0.0, 0.0]).unwrap(),
+        pose_from_parts("h", [h.1, 0.0, 0.0, h.0], [0.55 * gap, 0.1, 0.0]).unwrap(),
+    ] {
+        set_pose(&mut c, &scene, &i_human, sublevel::service::convert::pose_to_proto(&pose_human)).await;
+        let req = pb::DistanceRequest {
+            scene_id: scene.clone(),
+            instance_a: i_chair.clone(),
+            instance_b: i_human.clone(),
+            certify: true,
+            with_gradient: true,
+        };
+        let d = c.distance(req).await.unwrap().into_inner().answer.unwrap();
+        assert_eq!(d.source, pb::AnswerSource::Newton as i32, "{d:?}");
+        assert!(d.solve.as_ref().unwrap().converged && !d.lower_bound);
+        let cert = d.certificate.unwrap();
+        let direct = certify_distance(&chair, &pose_chair, &human, &pose_human).unwrap();
+        assert!(
+            (cert.bound - direct.squared_distance).abs() <= 1e-6 * direct.squared_distance.abs().max(1e-3),
+            "{cert:?} vs {direct:?}"
+        );
+        assert!(cert.agrees && cert.verified, "{cert:?}");
+        let sq = d.distance * d.distance;
+        assert!((sq - direct.squared_distance.max(0.0)).abs() <= 1e-6 * sq.max(1e-3));
+        assert!(cert.solve_seconds > 0.0);
+
+        let greq = pb::GrowthRequest {
+            scene_id: scene.clone(),
+            instance_1: i_chair.clone(),
+            instance_2: i_human.clone(),
+            certify: true,
+            with_gradient: true,
+        };
+        let g = c.growth(greq).await.unwrap().into_inner().answer.unwrap();
+        let gc = g.certificate.unwrap();
+        let direct_g = certify_growth(&chair, &pose_chair, &human, &pose_human).unwrap();
+        assert!((gc.bound - direct_g.value).abs() <= 1e-6 * direct_g.value.abs().max(1.0), "{gc:?} vs {direct_g:?}");
+        assert!(gc.agrees && g.source == pb::AnswerSource::Newton as i32, "{g:?}");
+
+        // Gradients against central finite differences (h = 1e-5) of direct solves.
+        let params = NewtonParams::default();
+        let fd = |f: &dyn Fn(&Isometry3, &Isometry3) -> f64, which: usize| -> [f64; 6] {
+            let mut out = [0.0; 6];
+            for (k, o) in out.iter_mut().enumerate() {
+                let eval = |s: f64| {
+                    let mut xi = [0.0; 6];
+                    xi[k] = s * 1e-5;
+                    let (lin, ang) = (Vector3::new(xi[0], xi[1], xi[2]), Vector3::new(xi[3], xi[4], xi[5]));
+                    if which == 0 {
+                        f(&perturb_pose(&pose_chair, &lin, &ang), &pose_human)
+                    } else {
+                        f(&pose_chair, &perturb_pose(&pose_human, &lin, &ang))
+                    }
+                };
+                *o = (eval(1.0) - eval(-1.0)) / 2e-5;
+            }
+            out
+        };
+        let close = |what: &str, a: [f64; 6], b: [f64; 6]| {
+            let scale = a.iter().chain(b.iter()).fold(1.0f64, |m, x| m.max(x.abs()));
+            for k in 0..6 {
+                assert!((a[k] - b[k]).abs() <= 1e-5 * scale, "{what}: {a:?} vs finite differences {b:?}");
+            }
+        };
+        let fd_d = |x: &Isometry3, y: &Isometry3| newton_distance(&chair, x, &human, y, None, &params).distance;
+        let fd_g = |x: &Isometry3, y: &Isometry3| newton_growth(&chair, x, &human, y, None, &params).value;
+        close("distance / chair", twist(&d.gradient_a), fd(&fd_d, 0));
+        close("distance / human", twist(&d.gradient_b), fd(&fd_d, 1));
+        close("growth / chair", twist(&g.gradient_1), fd(&fd_g, 0));
+        close("growth / human", twist(&g.gradient_2), fd(&fd_g, 1));
+
+        // The same through BatchQuery.
+        let pair = |kind: pb::QueryKind| pb::QueryPair {
+            kind: kind as i32,
+            first: i_chair.clone(),
+            second: i_human.clone(),
+            certify: true,
+            with_gradient: true,
+        };
+        let req = pb::BatchQueryRequest {
+            scene_id: scene.clone(),
+            pairs: vec![pair(pb::QueryKind::Distance), pair(pb::QueryKind::Growth)],
+        };
+        let answers = c.batch_query(req).await.unwrap().into_inner().answers;
+        let Some(pb::query_answer::Answer::Distance(bd)) = &answers[0].answer else { panic!("{answers:?}") };
+        assert!((bd.distance - d.distance).abs() < 1e-9 && bd.certificate.as_ref().unwrap().agrees);
+        close("batch distance / chair", twist(&bd.gradient_a), twist(&d.gradient_a));
+        let Some(pb::query_answer::Answer::Growth(bg)) = &answers[1].answer else { panic!("{answers:?}") };
+        assert!(bg.certificate.as_ref().unwrap().agrees && bg.gradient_1.is_some());
+    }
+    // Without the flags: no certificate, no gradients, source NEWTON.
+    let d = distance(&mut c, &scene, &i_chair, &i_human).await;
+    assert!(d.certificate.is_none() && d.gradient_a.is_none() && d.source == pb::AnswerSource::Newton as i32);
+    server.stop().await;
+}
+
+/// A nonconvex body (flagged `report.nonconvex`: the "jack" p = ‖u‖² + 30 Σ uᵢ²uⱼ²) uploaded as
+/// JSON answers with the SDP lower bound: source SDP_LOWER_BOUND, lower_bound, no gradients, and a
+/// distance no larger than the brute-force distance over exact boundary samples.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn nonconvex_body_answers_with_an_sdp_lower_bound() {
+    use sublevel::body::FitReport;
+    use sublevel::poly::Polynomial;
+    let k = 30.0;
+    let terms = [([2, 0, 0], 1.0), ([0, 2, 0], 1.0), ([0, 0, 2], 1.0), ([2, 2, 0], k), ([0, 2, 2], k), ([2, 0, 2], k)];
+    let report = FitReport { method: "uploaded".into(), nonconvex: true, ..FitReport::default() };
+    let jack = sublevel::Body::new(Polynomial::from_terms(4, &terms).unwrap(), [0.0; 3], 0.5, report).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(config(dir.path())).await;
+    let mut c = server.client().await;
+    let b_jack = upload_body(&mut c, "jack", &jack).await;
+    let b_ball = upload_sphere(&mut c, "ball", [0.0; 3], 0.3).await;
+    let scene = c.create_scene(pb::CreateSceneRequest { name: "nc".into() }).await.unwrap().into_inner().scene_id;
+    let i_jack = add(&mut c, &scene, &b_jack, at([0.0; 3])).await;
+    let ball_center = Vector3::new(0.9, 0.7, 0.1);
+    let i_ball = add(&mut c, &scene, &b_ball, at([ball_center.x, ball_center.y, ball_center.z])).await;
+    let req = pb::DistanceRequest {
+        scene_id: scene.clone(),
+        instance_a: i_jack.clone(),
+        instance_b: i_ball.clone(),
+        certify: false,
+        with_gradient: true,
+    };
+    let d = c.distance(req).await.unwrap().into_inner().answer.unwrap();
+    assert_eq!(d.source, pb::AnswerSource::SdpLowerBound as i32, "{d:?}");
+    assert!(d.lower_bound && d.certificate.is_some() && d.gradient_a.is_none(), "{d:?}");
+    // Brute force: the jack's boundary along 20 000 directions (closed-form radius), minus r.
+    let golden = std::f64::consts::PI * (3.0 - 5.0f64.sqrt());
+    let n = 20_000;
+    let mut brute = f64::INFINITY;
+    for i in 0..n {
+        let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+        let r = (1.0 - z * z).sqrt();
+        let u = Vector3::new(r * (golden * i as f64).cos(), r * (golden * i as f64).sin(), z);
+        let q = k * (u.x * u.x * u.y * u.y + u.y * u.y * u.z * u.z + u.x * u.x * u.z * u.z);
+        let rho = if q < 1e-15 { 1.0 } else { ((-1.0 + (1.0 + 4.0 * q).sqrt()) / (2.0 * q)).sqrt() };
+        brute = brute.min((u * rho * 0.5 - ball_center).norm() - 0.3);
+    }
+    assert!(brute > 0.1, "{brute}");
+    assert!(d.distance >= 0.0 && d.distance <= brute + 1e-9, "lower bound {} vs brute force {brute}", d.distance);
+    let g = growth(&mut c, &scene, &i_ball, &i_jack).await;
+    assert_eq!(g.source, pb::AnswerSource::SdpLowerBound as i32);
+    assert!(g.lower_bound);
     server.stop().await;
 }
