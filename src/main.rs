@@ -22,6 +22,10 @@ enum Command {
     Query(cli::query::QueryArgs),
     /// Benchmark fits and queries on the paper's shapes.
     Bench(cli::bench::BenchArgs),
+    /// Reproduce the paper's Table 1 (bounding volumes of the five shapes) next to its numbers.
+    Table1(cli::table1::Table1Args),
+    /// Fit time against degree, log det P vs log det H (the paper's construction-time figure).
+    FitTime(cli::fit_time::FitTimeArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -31,6 +35,8 @@ fn main() -> std::process::ExitCode {
         Command::Fit(a) => cli::fit::run(a),
         Command::Query(a) => cli::query::run(a),
         Command::Bench(a) => cli::bench::run(a),
+        Command::Table1(a) => cli::table1::run(a),
+        Command::FitTime(a) => cli::fit_time::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -2,5 +2,7 @@
 
 pub mod bench;
 pub mod fit;
+pub mod fit_time;
 pub mod query;
 pub mod serve;
+pub mod table1;

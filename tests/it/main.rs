@@ -3,3 +3,4 @@
 mod fit;
 mod query;
 mod service;
+mod table;
