@@ -24,6 +24,10 @@ enum Command {
     Bench(cli::bench::BenchArgs),
     /// Run the stability suite (hard query configurations, Newton vs the SDP) and print a table.
     Stability(cli::stability::StabilityArgs),
+    /// Reproduce the paper's Table 1 (bounding volumes of the five shapes) next to its numbers.
+    Table1(cli::table1::Table1Args),
+    /// Fit time against degree, log det P vs log det H (the paper's construction-time figure).
+    FitTime(cli::fit_time::FitTimeArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -34,6 +38,8 @@ fn main() -> std::process::ExitCode {
         Command::Query(a) => cli::query::run(a),
         Command::Bench(a) => cli::bench::run(a),
         Command::Stability(a) => cli::stability::run(a),
+        Command::Table1(a) => cli::table1::run(a),
+        Command::FitTime(a) => cli::fit_time::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

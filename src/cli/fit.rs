@@ -1,19 +1,45 @@
-//! `sublevel fit MESH --degree 6 [--method trace_h] [--relaxation 10] --output body.json`: fit a
-//! body to a mesh (paper §III) and write its JSON body file. Progress (stage and Clarabel
-//! iteration) goes to stderr, a one-line summary (with the method and c) to stdout.
+//! `sublevel fit MESH --degree 6 [--method trace_h] [--relaxation 10] --output body.json`: fit a body to a mesh (paper §III-A) and
+//! write its JSON body file. Progress (stage and Clarabel iteration) goes to stderr, a one-line
+//! summary to stdout. `--degree auto --volume-tolerance τ` fits 2, 4, 6, 8 in turn and keeps the
+//! lowest degree within τ of the next one (see [`sublevel::fit::auto`]).
 
 use std::io::Write;
 use std::path::PathBuf;
-use sublevel::fit::{fit_points, mesh, FitMethod, FitProgress, FitSettings, FitStage};
+use sublevel::fit::{auto, fit_points, mesh, FitMethod, FitProgress, FitSettings, FitStage};
+
+/// `--degree`: a total degree 2d, or `auto`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DegreeArg {
+    /// A fixed total degree 2d.
+    Fixed(usize),
+    /// Choose among 2, 4, 6, 8 by `--volume-tolerance` (see [`sublevel::fit::auto`]).
+    Auto,
+}
+
+impl std::str::FromStr for DegreeArg {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        if s.eq_ignore_ascii_case("auto") {
+            return Ok(DegreeArg::Auto);
+        }
+        s.parse::<usize>().map(DegreeArg::Fixed).map_err(|_| format!("expected 2, 4, 6, 8 or auto, got {s:?}"))
+    }
+}
 
 /// Arguments of `sublevel fit`.
 #[derive(clap::Args, Debug)]
 pub struct FitArgs {
     /// Mesh or point cloud (.off, .obj, .stl, .ply, .xyz).
     pub mesh: PathBuf,
-    /// Total degree 2d of the polynomial: 2, 4, 6 or 8.
-    #[arg(long, short, default_value_t = 4)]
-    pub degree: usize,
+    /// Total degree 2d of the polynomial: 2, 4, 6, 8, or `auto` (the lowest degree whose volume
+    /// is within --volume-tolerance of the next degree's).
+    #[arg(long, short, default_value = "4")]
+    pub degree: DegreeArg,
+    /// With `--degree auto`: relative volume tolerance τ; a degree is kept when the next one
+    /// shrinks the volume by no more than τ.
+    #[arg(long, default_value_t = 0.05)]
+    pub volume_tolerance: f64,
     /// Formulation (paper §III): logdet_p, trace_p, logdet_h, trace_h or inverse_moment.
     #[arg(long, default_value = "logdet_p")]
     pub method: String,
@@ -71,7 +97,10 @@ pub fn run(args: FitArgs) -> sublevel::Result<()> {
         ));
     }
     let settings = FitSettings {
-        degree: args.degree,
+        degree: match args.degree {
+            DegreeArg::Fixed(d) => d,
+            DegreeArg::Auto => 2,
+        },
         method,
         convexity_relaxation: c,
         volume_samples: args.samples,
@@ -97,7 +126,12 @@ pub fn run(args: FitArgs) -> sublevel::Result<()> {
             let _ = writeln!(stderr);
         }
     };
-    let body = fit_points(&points, &settings, &mut progress)?;
+    let body = match args.degree {
+        DegreeArg::Fixed(_) => fit_points(&points, &settings, &mut progress)?,
+        DegreeArg::Auto => {
+            auto::fit_auto(&points, &settings, &auto::DEFAULT_AUTO_DEGREES, args.volume_tolerance, &mut progress)?
+        }
+    };
     let output = args.output.clone().unwrap_or_else(|| args.mesh.with_extension("body.json"));
     body.save(&output)?;
     let r = &body.report;
@@ -120,5 +154,9 @@ pub fn run(args: FitArgs) -> sublevel::Result<()> {
         r.total_seconds,
         output.display()
     );
+    if let Some(choice) = &r.degree_choice {
+        let list: Vec<String> = choice.candidates.iter().map(|(d, v, e)| format!("2d={d}: {v:.4} ± {e:.4}")).collect();
+        println!("degree auto (τ = {}): {}; {}", choice.volume_tolerance, list.join(", "), choice.reason);
+    }
     Ok(())
 }

@@ -2,6 +2,8 @@
 
 pub mod bench;
 pub mod fit;
+pub mod fit_time;
 pub mod query;
 pub mod serve;
 pub mod stability;
+pub mod table1;

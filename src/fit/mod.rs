@@ -23,6 +23,8 @@ use crate::math::{Point3, Real};
 use crate::poly::Polynomial;
 use crate::{Error, Result};
 
+pub mod auto;
+pub mod baselines;
 pub mod hull;
 pub mod inverse_moment;
 pub mod logdet_p;

@@ -121,6 +121,50 @@ pub fn fit_degree(degree: u32) -> Result<usize> {
     Ok(d)
 }
 
+/// The fit options of a `StartFitJobRequest` (everything but the points and the name).
+#[derive(Clone, Debug, PartialEq)]
+pub struct FitOptions {
+    /// Total degree 2d (with `auto`: the lowest candidate).
+    pub degree: usize,
+    /// Formulation.
+    pub method: crate::fit::FitMethod,
+    /// Relaxed-convexity parameter c ≥ 0 (eq. "VAG.param.convex").
+    pub convexity_relaxation: Real,
+    /// With `auto_degree`: the candidate degrees and the relative volume tolerance.
+    pub auto: Option<(Vec<usize>, Real)>,
+}
+
+/// Validates the fit options of a request: `degree` (2, 4, 6, 8; with `auto_degree` 0 or one of
+/// them, the highest candidate), `method` (empty means logdet_p), `convexity_relaxation` (finite,
+/// ≥ 0) and `volume_tolerance` (finite, in [0, 1); 0 means 0.05 with `auto_degree`).
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `degree`, `method`, `convexity_relaxation` or
+/// `volume_tolerance`.
+pub fn fit_options(req: &pb::StartFitJobRequest) -> Result<FitOptions> {
+    let method = if req.method.trim().is_empty() {
+        crate::fit::FitMethod::LogDetP
+    } else {
+        req.method.trim().parse::<crate::fit::FitMethod>()?
+    };
+    let c = req.convexity_relaxation;
+    if !(c.is_finite() && c >= 0.0) {
+        return Err(Error::invalid("convexity_relaxation", format!("must be finite and >= 0, got {c}")));
+    }
+    let tol = req.volume_tolerance;
+    if !(tol.is_finite() && (0.0..1.0).contains(&tol)) {
+        return Err(Error::invalid("volume_tolerance", format!("must be in [0, 1), got {tol}")));
+    }
+    if !req.auto_degree {
+        return Ok(FitOptions { degree: fit_degree(req.degree)?, method, convexity_relaxation: c, auto: None });
+    }
+    let top = if req.degree == 0 { 8 } else { fit_degree(req.degree)? };
+    let degrees: Vec<usize> = SUPPORTED_DEGREES.iter().copied().filter(|d| *d <= top).collect();
+    let tol = if req.volume_tolerance == 0.0 { 0.05 } else { req.volume_tolerance };
+    crate::fit::auto::validate_auto(&degrees, tol)?;
+    Ok(FitOptions { degree: degrees[0], method, convexity_relaxation: c, auto: Some((degrees, tol)) })
+}
+
 /// Unpacks a point cloud `x0, y0, z0, x1, …`.
 ///
 /// # Errors

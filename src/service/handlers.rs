@@ -42,7 +42,7 @@ type Reply<T> = Result<Response<T>, Status>;
 impl Sublevel for SublevelService {
     async fn start_fit_job(&self, request: Request<pb::StartFitJobRequest>) -> Reply<pb::StartFitJobResponse> {
         let req = request.into_inner();
-        let degree = cv::fit_degree(req.degree)?;
+        let fit = cv::fit_options(&req)?;
         if req.name.len() > crate::scene::MAX_NAME_BYTES {
             return Err(Error::invalid("name", format!("at most {} bytes", crate::scene::MAX_NAME_BYTES)).into());
         }
@@ -72,8 +72,10 @@ impl Sublevel for SublevelService {
             }
         };
         let mut settings = self.config.fit.clone();
-        settings.degree = degree;
-        let job_id = self.jobs.start(self.catalog.clone(), req.name, points, settings);
+        settings.degree = fit.degree;
+        settings.method = fit.method;
+        settings.convexity_relaxation = fit.convexity_relaxation;
+        let job_id = self.jobs.start(self.catalog.clone(), req.name, points, settings, fit.auto);
         Ok(Response::new(pb::StartFitJobResponse { job_id }))
     }
 

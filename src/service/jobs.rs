@@ -3,8 +3,9 @@
 
 use super::convert::fit_stage_to_proto;
 use super::pb;
+use crate::fit::auto::fit_auto;
 use crate::fit::{fit_points, FitProgress, FitSettings};
-use crate::math::Point3;
+use crate::math::{Point3, Real};
 use crate::scene::Catalog;
 use crate::{Error, Result};
 use std::collections::HashMap;
@@ -46,13 +47,15 @@ impl FitJobs {
     }
 
     /// Starts fitting `points` (already validated) and returns the job id. On success the body is
-    /// stored in `catalog` under `name` (the job id when empty).
+    /// stored in `catalog` under `name` (the job id when empty). With `auto = Some((degrees, τ))`
+    /// the degree is chosen by [`fit_auto`] (progress messages then name the degree being fitted).
     pub(crate) fn start(
         &self,
         catalog: Arc<Catalog>,
         name: String,
         points: Vec<Point3>,
         settings: FitSettings,
+        auto: Option<(Vec<usize>, Real)>,
     ) -> String {
         let job_id = format!("j-{:016x}", rand::random::<u64>());
         let first = update(&job_id, pb::FitStage::Queued, 0.0, "waiting for a fitting slot", pb::JobState::Running);
@@ -69,7 +72,14 @@ impl FitJobs {
         let id = job_id.clone();
         tokio::spawn(async move {
             let permit = slots.acquire_owned().await;
-            tracing::info!(job_id = %id, points = points.len(), degree = settings.degree, "fit started");
+            tracing::info!(
+                job_id = %id,
+                points = points.len(),
+                degree = settings.degree,
+                method = settings.method.name(),
+                auto = auto.is_some(),
+                "fit started"
+            );
             let tx = Arc::new(tx);
             let tx_fit = tx.clone();
             let id_fit = id.clone();
@@ -79,7 +89,10 @@ impl FitJobs {
                     let stage = fit_stage_to_proto(p.stage);
                     tx_fit.send_replace(update(&id_fit, stage, p.fraction, &p.message, pb::JobState::Running));
                 };
-                let body = fit_points(&points, &settings, &mut progress)?;
+                let body = match &auto {
+                    None => fit_points(&points, &settings, &mut progress)?,
+                    Some((degrees, tol)) => fit_auto(&points, &settings, degrees, *tol, &mut progress)?,
+                };
                 catalog.add_body(&name, body)
             })
             .await;

@@ -5,3 +5,4 @@ mod gradient;
 mod query;
 mod service;
 mod stability;
+mod table;

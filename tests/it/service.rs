@@ -336,6 +336,7 @@ async fn bad_input_gets_the_right_code_naming_the_field() {
         name: "f".into(),
         degree,
         source: Some(pb::start_fit_job_request::Source::Points(pb::PointCloud { xyz })),
+        ..Default::default()
     };
     let cube: Vec<f64> = (0..8).flat_map(|i| [(i & 1) as f64, ((i >> 1) & 1) as f64, ((i >> 2) & 1) as f64]).collect();
     assert_status(c.start_fit_job(fit(3, cube.clone())).await, Code::InvalidArgument, "degree");
@@ -352,10 +353,13 @@ async fn bad_input_gets_the_right_code_naming_the_field() {
         name: "m".into(),
         degree: 4,
         source: Some(pb::start_fit_job_request::Source::Mesh(pb::Mesh { data: data.to_vec(), format: format.into() })),
+        ..Default::default()
     };
     assert_status(c.start_fit_job(mesh(b"OFF\nthis is not a mesh", "off")).await, Code::InvalidArgument, "mesh");
     assert_status(c.start_fit_job(mesh(b"", "off")).await, Code::InvalidArgument, "mesh.data");
-    let r = c.start_fit_job(pb::StartFitJobRequest { name: "n".into(), degree: 4, source: None }).await;
+    let r = c
+        .start_fit_job(pb::StartFitJobRequest { name: "n".into(), degree: 4, source: None, ..Default::default() })
+        .await;
     assert_status(r, Code::InvalidArgument, "source");
 
     // Oversized message: refused by the transport before any handler (tonic says OUT_OF_RANGE).
@@ -425,6 +429,7 @@ async fn fit_job_streams_progress_to_a_terminal_state() {
         name: "ball".into(),
         degree: 2,
         source: Some(pb::start_fit_job_request::Source::Points(pb::PointCloud { xyz: xyz.clone() })),
+        ..Default::default()
     };
     let job_id = c.start_fit_job(req).await.unwrap().into_inner().job_id;
     let mut stream = c.watch_fit_job(pb::WatchFitJobRequest { job_id: job_id.clone() }).await.unwrap().into_inner();
@@ -524,6 +529,7 @@ async fn end_to_end_chair_slides_through_human() {
             name: name.into(),
             degree: 4,
             source: Some(pb::start_fit_job_request::Source::Mesh(pb::Mesh { data, format: "off".into() })),
+            ..Default::default()
         };
         let job_id = c.start_fit_job(req).await.unwrap().into_inner().job_id;
         let mut stream = c.watch_fit_job(pb::WatchFitJobRequest { job_id }).await.unwrap().into_inner();
@@ -777,5 +783,61 @@ async fn nonconvex_body_answers_with_an_sdp_lower_bound() {
     let g = growth(&mut c, &scene, &i_ball, &i_jack).await;
     assert_eq!(g.source, pb::AnswerSource::SdpLowerBound as i32);
     assert!(g.lower_bound);
+    server.stop().await;
+}
+
+/// A fit job with `auto_degree` fits 2 then 4 on an ellipsoid cloud and keeps 2d = 2 (degree 4
+/// is not smaller), recording the choice in the body's report; bad fit options are refused
+/// before a job exists, naming the field.
+#[tokio::test]
+async fn fit_job_with_auto_degree_and_validated_options() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(config(dir.path())).await;
+    let mut c = server.client().await;
+    // Points on an ellipsoid with radii 0.5, 0.3, 0.2 (a stretched sphere cloud).
+    let xyz: Vec<f64> = sphere_points([0.0; 3], 1.0, 400)
+        .chunks(3)
+        .flat_map(|p| [0.1 + 0.5 * p[0], -0.2 + 0.3 * p[1], 0.2 * p[2]])
+        .collect();
+    let req = |method: &str, c: f64, tol: f64| pb::StartFitJobRequest {
+        name: "auto".into(),
+        degree: 4,
+        source: Some(pb::start_fit_job_request::Source::Points(pb::PointCloud { xyz: xyz.clone() })),
+        method: method.into(),
+        convexity_relaxation: c,
+        auto_degree: true,
+        volume_tolerance: tol,
+    };
+    assert_status(c.start_fit_job(req("simplex", 0.0, 0.05)).await, Code::InvalidArgument, "method");
+    assert_status(c.start_fit_job(req("", -1.0, 0.05)).await, Code::InvalidArgument, "convexity_relaxation");
+    assert_status(c.start_fit_job(req("", f64::NAN, 0.05)).await, Code::InvalidArgument, "convexity_relaxation");
+    assert_status(c.start_fit_job(req("", 0.0, 1.5)).await, Code::InvalidArgument, "volume_tolerance");
+    let mut bad_degree = req("", 0.0, 0.05);
+    bad_degree.degree = 5;
+    assert_status(c.start_fit_job(bad_degree).await, Code::InvalidArgument, "degree");
+
+    let job_id = c.start_fit_job(req("logdet_p", 0.0, 0.05)).await.unwrap().into_inner().job_id;
+    let mut stream = c.watch_fit_job(pb::WatchFitJobRequest { job_id }).await.unwrap().into_inner();
+    let mut last = None;
+    while let Some(u) = stream.message().await.unwrap() {
+        if u.state == pb::JobState::Running as i32 && u.stage != pb::FitStage::Queued as i32 {
+            assert!(u.message.starts_with("degree 2: ") || u.message.starts_with("degree 4: "), "{}", u.message);
+        }
+        last = Some(u);
+    }
+    let last = last.unwrap();
+    assert_eq!(last.state, pb::JobState::Succeeded as i32, "{last:?}");
+    let got = c.get_body(pb::GetBodyRequest { body_id: last.body_id }).await.unwrap().into_inner();
+    let body = sublevel::Body::from_file(serde_json::from_str(&got.body_json).unwrap()).unwrap();
+    assert_eq!(body.degree(), 2);
+    let choice = body.report.degree_choice.clone().expect("degree choice recorded");
+    assert_eq!(choice.chosen, 2);
+    assert_eq!(choice.volume_tolerance, 0.05);
+    assert_eq!(choice.candidates.iter().map(|c| c.0).collect::<Vec<_>>(), vec![2, 4]);
+    assert!(choice.reason.starts_with("degree 2 was kept because degree 4"), "{}", choice.reason);
+    // The 2d = 2 candidate is the ellipsoid itself: volume 4/3 π · 0.5 · 0.3 · 0.2 within 3 std errors.
+    let exact = 4.0 / 3.0 * std::f64::consts::PI * 0.5 * 0.3 * 0.2;
+    let (_, v2, e2) = choice.candidates[0];
+    assert!((v2 - exact).abs() <= 3.0 * e2 + 1e-3 * exact, "{v2} ± {e2} vs {exact}");
     server.stop().await;
 }

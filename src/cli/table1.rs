@@ -1,0 +1,505 @@
+//! `sublevel table1 [DIR]`: the paper's Table 1 (`tab:bounding.volumes`, volumes of bounding
+//! bodies of five Labeled-PSB shapes) in one command, next to the paper's numbers.
+//!
+//! Rows: convex hull, minimum ball, minimum-volume oriented box (the paper's "AABB" column) and
+//! the axis-aligned box (extra row), then every fitted body of the table: sos-convex 2d = 2
+//! (log det / trace), 2d = 4 and 6 × {log det H, trace H, log det P, trace P}, inverse moment
+//! 2d = 2, 4, 6, and sos with relaxed convexity c = 10, 100 × 2d = 4, 6 × {log det P, trace P}.
+//! Each cell: our volume ± its Monte Carlo standard error, the paper's value, the ratio ours/paper.
+//! A fit that errors (e.g. a formulation not available in this build) shows "—" and its status.
+//!
+//! For 2d = 2 the paper's log-det value can be checked independently: the 2d = 2 log-det body is
+//! the minimum-volume enclosing ellipsoid of the hull vertices, which Khachiyan's algorithm
+//! computes with a duality bound (`fit::baselines::mvee_khachiyan`); a paper value below that
+//! bound is unreachable by any ellipsoid containing every vertex.
+
+use plotters::prelude::*;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+use sublevel::fit::baselines::{self, Baselines};
+use sublevel::fit::{fit_points, mesh::load_points, FitMethod, FitSettings};
+use sublevel::math::{Point3, Real};
+use sublevel::{Error, Result};
+
+/// The five shapes: file stem, column title, the paper's #points / #hull vertices.
+pub const SHAPES: [(&str, &str, usize, usize); 5] = [
+    ("human_10", "Human (10)", 9508, 364),
+    ("chair_101", "Chair (101)", 8499, 320),
+    ("hand_181", "Hand (181)", 7242, 652),
+    ("vase_361", "Vase (361)", 14859, 1443),
+    ("octopus_121", "Octopus (121)", 5944, 414),
+];
+
+/// A selected shape: its column in [`SHAPES`] and its entry.
+type ShapeRef = (usize, &'static (&'static str, &'static str, usize, usize));
+
+/// What a row computes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum RowKind {
+    /// Convex hull volume.
+    Hull,
+    /// Minimum enclosing ball.
+    Sphere,
+    /// Minimum-volume oriented box (the paper's "AABB").
+    Obb,
+    /// Axis-aligned box in file coordinates (not in the paper).
+    Aabb,
+    /// A fitted body.
+    Fit {
+        /// Formulation.
+        method: FitMethod,
+        /// Total degree 2d.
+        degree: usize,
+        /// Convexity relaxation c of eq. "VAG.param.convex".
+        c: Real,
+    },
+}
+
+/// One row of Table 1.
+#[derive(Clone, Copy, Debug)]
+pub struct Row {
+    /// Key for `--rows` (prefix match on `-`-separated words).
+    pub key: &'static str,
+    /// Label of the row ("Bounding Body" column).
+    pub label: &'static str,
+    /// Objective ("Objective fcn" column).
+    pub objective: &'static str,
+    /// What it computes.
+    pub kind: RowKind,
+    /// The paper's values for the five shapes (None: not in the paper).
+    pub paper: Option<[Real; 5]>,
+    /// Line of `sos_geom_v7.tex` the values come from (0: not in the paper).
+    pub source_line: usize,
+}
+
+const fn fit(method: FitMethod, degree: usize, c: Real) -> RowKind {
+    RowKind::Fit { method, degree, c }
+}
+
+use FitMethod::{InverseMoment as IM, LogDetH as LDH, LogDetP as LDP, TraceH as TRH, TraceP as TRP};
+
+/// The paper's Table 1, row by row, with the source line in `../shared/paper/sos_geom_v7.tex`.
+#[rustfmt::skip]
+pub const ROWS: [Row; 25] = [
+    Row { key: "hull", label: "Convex-Hull", objective: "", kind: RowKind::Hull, paper: Some([0.29, 0.66, 0.36, 0.91, 0.5]), source_line: 223 },
+    Row { key: "sphere", label: "Sphere", objective: "", kind: RowKind::Sphere, paper: Some([3.74, 3.73, 3.84, 3.91, 4.1]), source_line: 224 },
+    Row { key: "obb", label: "Box (min-volume OBB)", objective: "", kind: RowKind::Obb, paper: Some([0.59, 1.0, 0.81, 1.73, 1.28]), source_line: 225 },
+    Row { key: "aabb", label: "Box (axis-aligned)", objective: "", kind: RowKind::Aabb, paper: None, source_line: 0 },
+    Row { key: "sos-convex-2-logdet_p", label: "sos-convex (2d=2)", objective: "logdet", kind: fit(LDP, 2, 0.0), paper: Some([0.58, 1.79, 0.82, 1.16, 1.30]), source_line: 227 },
+    Row { key: "sos-convex-2-trace_p", label: "sos-convex (2d=2)", objective: "trace", kind: fit(TRP, 2, 0.0), paper: Some([0.97, 1.80, 1.40, 1.2, 1.76]), source_line: 228 },
+    Row { key: "sos-convex-4-logdet_h", label: "sos-convex (2d=4)", objective: "logdet(H^-1)", kind: fit(LDH, 4, 0.0), paper: Some([0.57, 1.55, 0.69, 1.13, 1.04]), source_line: 230 },
+    Row { key: "sos-convex-4-trace_h", label: "sos-convex (2d=4)", objective: "trace(H^-1)", kind: fit(TRH, 4, 0.0), paper: Some([0.56, 2.16, 1.28, 1.09, 3.13]), source_line: 231 },
+    Row { key: "sos-convex-4-logdet_p", label: "sos-convex (2d=4)", objective: "logdet(P^-1)", kind: fit(LDP, 4, 0.0), paper: Some([0.44, 1.19, 0.53, 1.05, 0.86]), source_line: 232 },
+    Row { key: "sos-convex-4-trace_p", label: "sos-convex (2d=4)", objective: "trace(P^-1)", kind: fit(TRP, 4, 0.0), paper: Some([0.57, 1.25, 0.92, 1.09, 1.02]), source_line: 233 },
+    Row { key: "sos-convex-6-logdet_h", label: "sos-convex (2d=6)", objective: "logdet(H^-1)", kind: fit(LDH, 6, 0.0), paper: Some([0.57, 1.27, 0.58, 1.09, 0.93]), source_line: 235 },
+    Row { key: "sos-convex-6-trace_h", label: "sos-convex (2d=6)", objective: "trace(H^-1)", kind: fit(TRH, 6, 0.0), paper: Some([0.56, 1.30, 0.57, 1.09, 0.87]), source_line: 236 },
+    Row { key: "sos-convex-6-logdet_p", label: "sos-convex (2d=6)", objective: "logdet(P^-1)", kind: fit(LDP, 6, 0.0), paper: Some([0.41, 1.02, 0.45, 0.99, 0.74]), source_line: 237 },
+    Row { key: "sos-convex-6-trace_p", label: "sos-convex (2d=6)", objective: "trace(P^-1)", kind: fit(TRP, 6, 0.0), paper: Some([0.45, 1.21, 0.48, 1.03, 0.79]), source_line: 238 },
+    Row { key: "inverse-moment-2", label: "Inverse-Moment (2d=2)", objective: "", kind: fit(IM, 2, 0.0), paper: Some([4.02, 1.42, 2.14, 1.36, 1.74]), source_line: 241 },
+    Row { key: "inverse-moment-4", label: "Inverse-Moment (2d=4)", objective: "", kind: fit(IM, 4, 0.0), paper: Some([1.53, 0.95, 0.90, 1.25, 0.75]), source_line: 242 },
+    Row { key: "inverse-moment-6", label: "Inverse-Moment (2d=6)", objective: "", kind: fit(IM, 6, 0.0), paper: Some([0.48, 0.54, 0.58, 1.10, 0.57]), source_line: 243 },
+    Row { key: "sos-4-c10-logdet_p", label: "sos (2d=4, c=10)", objective: "logdet(P^-1)", kind: fit(LDP, 4, 10.0), paper: Some([0.38, 0.72, 0.42, 1.05, 0.63]), source_line: 246 },
+    Row { key: "sos-4-c10-trace_p", label: "sos (2d=4, c=10)", objective: "trace(P^-1)", kind: fit(TRP, 4, 10.0), paper: Some([0.51, 0.78, 0.48, 1.11, 0.71]), source_line: 247 },
+    Row { key: "sos-6-c10-logdet_p", label: "sos (2d=6, c=10)", objective: "logdet(P^-1)", kind: fit(LDP, 6, 10.0), paper: Some([0.35, 0.49, 0.34, 0.92, 0.41]), source_line: 250 },
+    Row { key: "sos-6-c10-trace_p", label: "sos (2d=6, c=10)", objective: "trace(P^-1)", kind: fit(TRP, 6, 10.0), paper: Some([0.37, 0.56, 0.39, 0.99, 0.54]), source_line: 251 },
+    Row { key: "sos-4-c100-logdet_p", label: "sos (2d=4, c=100)", objective: "logdet(P^-1)", kind: fit(LDP, 4, 100.0), paper: Some([0.36, 0.64, 0.39, 1.05, 0.46]), source_line: 254 },
+    Row { key: "sos-4-c100-trace_p", label: "sos (2d=4, c=100)", objective: "trace(P^-1)", kind: fit(TRP, 4, 100.0), paper: Some([0.42, 0.74, 0.46, 1.10, 0.54]), source_line: 255 },
+    Row { key: "sos-6-c100-logdet_p", label: "sos (2d=6, c=100)", objective: "logdet(P^-1)", kind: fit(LDP, 6, 100.0), paper: Some([0.21, 0.21, 0.26, 0.82, 0.28]), source_line: 258 },
+    Row { key: "sos-6-c100-trace_p", label: "sos (2d=6, c=100)", objective: "trace(P^-1)", kind: fit(TRP, 6, 100.0), paper: Some([0.22, 0.30, 0.29, 0.85, 0.37]), source_line: 259 },
+];
+
+/// Rows and shapes of `--quick`.
+pub const QUICK_ROWS: [&str; 8] = [
+    "hull",
+    "sphere",
+    "obb",
+    "aabb",
+    "sos-convex-2",
+    "sos-convex-4-logdet_p",
+    "inverse-moment-2",
+    "sos-4-c10-logdet_p",
+];
+/// Shapes of `--quick`.
+pub const QUICK_SHAPES: [&str; 2] = ["human_10", "chair_101"];
+
+/// Arguments of `sublevel table1`.
+#[derive(clap::Args, Debug)]
+pub struct Table1Args {
+    /// Folder with the five meshes (human_10.off, chair_101.off, hand_181.off, vase_361.off,
+    /// octopus_121.off).
+    #[arg(default_value = "../shared/data/psb")]
+    pub dir: PathBuf,
+    /// CSV output, one line per (row, shape).
+    #[arg(long)]
+    pub csv: Option<PathBuf>,
+    /// PNG chart of ours / paper per row and shape.
+    #[arg(long)]
+    pub png: Option<PathBuf>,
+    /// Monte Carlo samples per volume (raised by the fit until the std error is below 1 %).
+    #[arg(long, default_value_t = 200_000)]
+    pub samples: usize,
+    /// Seed of the volume estimates.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Rows to compute (keys or key prefixes, e.g. hull,sphere,obb,sos-convex-4,inverse-moment);
+    /// all rows by default.
+    #[arg(long, value_delimiter = ',')]
+    pub rows: Vec<String>,
+    /// Shapes to compute (file stems, e.g. chair_101); all five by default.
+    #[arg(long, value_delimiter = ',')]
+    pub shapes: Vec<String>,
+    /// A fast check: human and chair, the baselines and a few fitted rows, 50 000 samples.
+    #[arg(long)]
+    pub quick: bool,
+}
+
+/// One computed cell.
+#[derive(Clone, Debug, Default)]
+pub struct Cell {
+    /// Volume (cubic mesh units), None when the row failed.
+    pub volume: Option<Real>,
+    /// Its standard error (0 for exact baselines; the duality gap for the MVEE).
+    pub std_error: Real,
+    /// Seconds spent on the cell.
+    pub seconds: Real,
+    /// "ok", or the fit's status / error.
+    pub status: String,
+}
+
+fn row_selected(row: &Row, filters: &[String]) -> bool {
+    filters.is_empty()
+        || filters.iter().any(|f| {
+            let f = f.trim();
+            row.key == f || row.key.starts_with(&format!("{f}-"))
+        })
+}
+
+fn fmt_ratio(ours: Option<Real>, paper: Option<Real>) -> String {
+    match (ours, paper) {
+        (Some(o), Some(p)) if p > 0.0 => format!("{:.2}", o / p),
+        _ => "—".into(),
+    }
+}
+
+/// Runs `sublevel table1`.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `rows` or `shapes` when a filter selects nothing; I/O errors
+/// of the meshes, CSV or PNG. Fits that fail do not fail the command (their cells show "—").
+pub fn run(args: Table1Args) -> Result<()> {
+    let (row_filter, shape_filter, samples) = if args.quick {
+        let rows = if args.rows.is_empty() { QUICK_ROWS.iter().map(|s| s.to_string()).collect() } else { args.rows };
+        let shapes =
+            if args.shapes.is_empty() { QUICK_SHAPES.iter().map(|s| s.to_string()).collect() } else { args.shapes };
+        (rows, shapes, args.samples.min(50_000))
+    } else {
+        (args.rows, args.shapes, args.samples)
+    };
+    let rows: Vec<&Row> = ROWS.iter().filter(|r| row_selected(r, &row_filter)).collect();
+    if rows.is_empty() {
+        return Err(Error::invalid("rows", format!("{row_filter:?} selects no row")));
+    }
+    let shapes: Vec<ShapeRef> = SHAPES
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| shape_filter.is_empty() || shape_filter.iter().any(|f| f.trim() == s.0))
+        .collect();
+    if shapes.is_empty() {
+        return Err(Error::invalid("shapes", format!("{shape_filter:?} selects no shape")));
+    }
+    let needs_mvee = rows.iter().any(|r| matches!(r.kind, RowKind::Fit { degree: 2, .. }));
+
+    // Per shape: points, baselines, MVEE.
+    let mut clouds: Vec<(Vec<Point3>, Baselines, Option<baselines::Mvee>)> = Vec::new();
+    for (_, s) in &shapes {
+        let path = args.dir.join(format!("{}.off", s.0));
+        let t = Instant::now();
+        let points = load_points(&path)?;
+        let b = baselines::baselines(&points)?;
+        let mvee = if needs_mvee { Some(baselines::mvee_khachiyan(&b.hull.vertices, 1e-7, 200_000)?) } else { None };
+        eprintln!(
+            "{}: {} points, {} hull vertices, baselines in {:.2} s",
+            s.0,
+            points.len(),
+            b.hull.vertices.len(),
+            t.elapsed().as_secs_f64()
+        );
+        clouds.push((points, b, mvee));
+    }
+
+    // Compute every cell.
+    let mut cells: Vec<Vec<Cell>> = Vec::new();
+    for (ri, row) in rows.iter().enumerate() {
+        let mut line = Vec::new();
+        for (si, (_, s)) in shapes.iter().enumerate() {
+            let (points, b, _) = &clouds[si];
+            let t = Instant::now();
+            let exact = |v: Real| Cell { volume: Some(v), std_error: 0.0, seconds: 0.0, status: "ok".into() };
+            let mut cell = match row.kind {
+                RowKind::Hull => exact(b.hull.volume),
+                RowKind::Sphere => exact(b.sphere.volume()),
+                RowKind::Obb => exact(b.obb.volume()),
+                RowKind::Aabb => exact(b.aabb.volume()),
+                RowKind::Fit { method, degree, c } => {
+                    let settings = FitSettings {
+                        degree,
+                        method,
+                        convexity_relaxation: c,
+                        volume_samples: samples,
+                        seed: args.seed,
+                        ..FitSettings::default()
+                    };
+                    match fit_points(points, &settings, &mut |_| {}) {
+                        Ok(body) => Cell {
+                            volume: Some(body.report.volume),
+                            std_error: body.report.volume_std_error,
+                            seconds: body.report.total_seconds,
+                            status: body.report.solver_status.clone(),
+                        },
+                        Err(e) => Cell { volume: None, std_error: 0.0, seconds: 0.0, status: e.to_string() },
+                    }
+                }
+            };
+            cell.seconds = t.elapsed().as_secs_f64();
+            eprintln!(
+                "[{}/{}] {} {} {}: {} ({:.2} s)",
+                ri + 1,
+                rows.len(),
+                row.label,
+                row.objective,
+                s.0,
+                cell.volume
+                    .map_or_else(|| format!("— ({})", cell.status), |v| format!("{v:.4} ± {:.4}", cell.std_error)),
+                cell.seconds
+            );
+            line.push(cell);
+        }
+        cells.push(line);
+    }
+
+    print_table(&rows, &shapes, &cells, &clouds);
+    if let Some(path) = &args.csv {
+        write_csv(path, &rows, &shapes, &cells)?;
+        eprintln!("wrote {}", path.display());
+    }
+    if let Some(path) = &args.png {
+        match draw_chart(path, &rows, &shapes, &cells) {
+            Ok(()) => eprintln!("wrote {}", path.display()),
+            Err(e) => eprintln!("could not draw {}: {e}", path.display()),
+        }
+    }
+    Ok(())
+}
+
+type Clouds = [(Vec<Point3>, Baselines, Option<baselines::Mvee>)];
+
+fn print_table(rows: &[&Row], shapes: &[ShapeRef], cells: &[Vec<Cell>], clouds: &Clouds) {
+    let mut out = String::new();
+    let w = 26;
+    out.push_str(&format!("{:<24} {:<14}", "Object", ""));
+    for (_, s) in shapes {
+        out.push_str(&format!(" | {:<w$}", s.1));
+    }
+    out.push_str(&format!("\n{:<24} {:<14}", "#points/hull vertices", "ours (paper)"));
+    for (si, (_, s)) in shapes.iter().enumerate() {
+        let ours = format!("{}/{} ({}/{})", clouds[si].0.len(), clouds[si].1.hull.vertices.len(), s.2, s.3);
+        out.push_str(&format!(" | {ours:<w$}"));
+    }
+    out.push_str(&format!("\n{:<24} {:<14}", "Bounding body", "objective"));
+    for _ in shapes {
+        out.push_str(&format!(" | {:<w$}", "ours ± se   paper  ratio"));
+    }
+    out.push('\n');
+    out.push_str(&"-".repeat(39 + shapes.len() * (w + 3)));
+    out.push('\n');
+    for (ri, row) in rows.iter().enumerate() {
+        out.push_str(&format!("{:<24} {:<14}", row.label, row.objective));
+        for (si, (col, _)) in shapes.iter().enumerate() {
+            let c = &cells[ri][si];
+            let paper = row.paper.map(|p| p[*col]);
+            let ours = match c.volume {
+                Some(v) if c.std_error > 0.0 => format!("{v:.3}±{:.3}", c.std_error),
+                Some(v) => format!("{v:.3}"),
+                None => "—".into(),
+            };
+            let p = paper.map_or_else(|| "—".to_string(), |p| format!("{p:.2}"));
+            let text = format!("{ours:<12} {p:>5}  {:>5}", fmt_ratio(c.volume, paper));
+            out.push_str(&format!(" | {text:<w$}"));
+        }
+        out.push('\n');
+        if let RowKind::Fit { degree: 2, method: FitMethod::LogDetP, .. } = row.kind {
+            out.push_str(&format!("{:<24} {:<14}", "  MVEE (Khachiyan)", "[lo, up]"));
+            for (si, _) in shapes.iter().enumerate() {
+                let text = clouds[si]
+                    .2
+                    .map_or_else(|| "—".into(), |m| format!("{:.4} [{:.4}, {:.4}]", m.volume, m.lower_bound, m.volume));
+                out.push_str(&format!(" | {text:<w$}"));
+            }
+            out.push('\n');
+            for (si, (col, s)) in shapes.iter().enumerate() {
+                if let (Some(m), Some(p)) = (clouds[si].2, row.paper.map(|p| p[*col])) {
+                    // The paper rounds to 2 decimals: only a value below the bound by more than
+                    // the rounding is unreachable.
+                    if p + 0.005 < m.lower_bound {
+                        out.push_str(&format!(
+                            "    {}: paper {p:.2} — MVEE (Khachiyan) = {:.4} (duality bound ≥ {:.4}): no ellipsoid containing every vertex is smaller\n",
+                            s.0, m.volume, m.lower_bound
+                        ));
+                    }
+                }
+            }
+        }
+        if let RowKind::Fit { method: FitMethod::InverseMoment, degree: 6, .. } = row.kind {
+            out.push_str(
+                "    inverse moment: ours is the level set containing every vertex; a smaller paper volume is a lower level that leaves vertices out\n",
+            );
+        }
+    }
+    // Summary over the fitted sos rows.
+    let (mut within, mut total) = (0, 0);
+    let (mut rows_within, mut rows_total) = (0, 0);
+    for (ri, row) in rows.iter().enumerate() {
+        let is_sos = matches!(row.kind, RowKind::Fit { method, .. } if method != FitMethod::InverseMoment);
+        if !is_sos {
+            continue;
+        }
+        let mut row_ok = true;
+        let mut row_any = false;
+        for (si, (col, _)) in shapes.iter().enumerate() {
+            if let (Some(v), Some(p)) = (cells[ri][si].volume, row.paper.map(|p| p[*col])) {
+                total += 1;
+                row_any = true;
+                if v <= 1.02 * p {
+                    within += 1;
+                } else {
+                    row_ok = false;
+                }
+            }
+        }
+        if row_any {
+            rows_total += 1;
+            if row_ok {
+                rows_within += 1;
+            }
+        }
+    }
+    let lines: Vec<usize> = rows.iter().map(|r| r.source_line).filter(|l| *l > 0).collect();
+    if let (Some(lo), Some(hi)) = (lines.iter().min(), lines.iter().max()) {
+        out.push_str(&format!(
+            "paper values: ../shared/paper/sos_geom_v7.tex lines {lo}–{hi} (tab:bounding.volumes)\n"
+        ));
+    }
+    out.push_str(&format!(
+        "summary: {rows_within} of {rows_total} sos rows are ≤ 1.02 × paper on every shape ({within} of {total} cells)\n"
+    ));
+    print!("{out}");
+    let _ = std::io::stdout().flush();
+}
+
+fn csv_field(s: &str) -> String {
+    if s.contains(',') || s.contains('"') || s.contains('\n') {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
+}
+
+fn write_csv(path: &Path, rows: &[&Row], shapes: &[ShapeRef], cells: &[Vec<Cell>]) -> Result<()> {
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)?;
+    }
+    let mut out = String::from("row,objective,degree,c,shape,volume,std_error,paper,ratio,fit_seconds,status\n");
+    for (ri, row) in rows.iter().enumerate() {
+        let (degree, c) = match row.kind {
+            RowKind::Fit { degree, c, .. } => (degree.to_string(), c.to_string()),
+            _ => (String::new(), String::new()),
+        };
+        let objective = match row.kind {
+            RowKind::Fit { method, .. } => method.name(),
+            _ => "",
+        };
+        for (si, (col, s)) in shapes.iter().enumerate() {
+            let cell = &cells[ri][si];
+            let paper = row.paper.map(|p| p[*col]);
+            let opt = |v: Option<Real>| v.map_or_else(String::new, |v| format!("{v}"));
+            let ratio = match (cell.volume, paper) {
+                (Some(v), Some(p)) => Some(v / p),
+                _ => None,
+            };
+            out.push_str(&format!(
+                "{},{},{},{},{},{},{},{},{},{:.3},{}\n",
+                row.key,
+                objective,
+                degree,
+                c,
+                s.0,
+                opt(cell.volume),
+                if cell.volume.is_some() { format!("{}", cell.std_error) } else { String::new() },
+                opt(paper),
+                opt(ratio),
+                cell.seconds,
+                csv_field(&cell.status)
+            ));
+        }
+    }
+    std::fs::write(path, out)?;
+    Ok(())
+}
+
+fn draw_chart(
+    path: &Path,
+    rows: &[&Row],
+    shapes: &[ShapeRef],
+    cells: &[Vec<Cell>],
+) -> std::result::Result<(), Box<dyn std::error::Error>> {
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)?;
+    }
+    let root = BitMapBackend::new(path, (1600, 800)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let n = rows.len() as f64;
+    let mut chart = ChartBuilder::on(&root)
+        .caption("Table 1: our volume / the paper's, per row and shape", ("sans-serif", 26))
+        .margin(20)
+        .x_label_area_size(200)
+        .y_label_area_size(70)
+        .build_cartesian_2d(-0.5..n - 0.5, (0.1f64..10.0).log_scale())?;
+    let keys: Vec<&str> = rows.iter().map(|r| r.key).collect();
+    chart
+        .configure_mesh()
+        .x_labels(rows.len())
+        .x_label_formatter(&|x| {
+            let i = x.round();
+            if (x - i).abs() < 1e-6 && i >= 0.0 && (i as usize) < keys.len() {
+                keys[i as usize].to_string()
+            } else {
+                String::new()
+            }
+        })
+        .x_label_style(("sans-serif", 14).into_font().transform(FontTransform::Rotate90))
+        .y_desc("ours / paper (log scale)")
+        .draw()?;
+    chart.draw_series(LineSeries::new([(-0.5, 1.0), (n - 0.5, 1.0)], BLACK.stroke_width(1)))?;
+    let colors = [RED, BLUE, GREEN, MAGENTA, CYAN];
+    for (si, (_, s)) in shapes.iter().enumerate() {
+        let color = colors[si % colors.len()];
+        let offset = (si as f64 - (shapes.len() as f64 - 1.0) / 2.0) * 0.12;
+        let pts: Vec<(f64, f64)> = rows
+            .iter()
+            .enumerate()
+            .filter_map(|(ri, row)| {
+                let p = row.paper?[shapes[si].0];
+                let v = cells[ri][si].volume?;
+                (v > 0.0 && p > 0.0).then_some((ri as f64 + offset, (v / p).clamp(0.1, 10.0)))
+            })
+            .collect();
+        chart
+            .draw_series(pts.into_iter().map(move |(x, y)| Circle::new((x, y), 5, color.filled())))?
+            .label(s.1)
+            .legend(move |(x, y)| Circle::new((x, y), 5, color.filled()));
+    }
+    chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
+    root.present()?;
+    Ok(())
+}
