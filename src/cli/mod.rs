@@ -2,5 +2,6 @@
 
 pub mod bench;
 pub mod fit;
+pub mod group;
 pub mod query;
 pub mod serve;

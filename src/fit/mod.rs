@@ -18,6 +18,7 @@ use crate::body::{Body, FitReport};
 use crate::math::{Point3, Real};
 use crate::{Error, Result};
 
+pub mod containment;
 pub mod hull;
 pub mod logdet_p;
 pub mod mesh;

@@ -32,6 +32,7 @@ mod catalog;
 pub mod store;
 
 pub use catalog::{BodyEntry, Catalog, InstanceView, QueryAnswer, QueryKind, QueryPair, SceneView, MAX_NAME_BYTES};
+pub use catalog::PosedInstance;
 
 use crate::body::BodyFile;
 use crate::math::{pose_from_parts, pose_to_parts, Isometry3, Real};
