@@ -128,10 +128,7 @@ impl ContainmentSettings {
             return Err(Error::invalid("degree", format!("must be one of 2, 4, 6, got {}", self.degree)));
         }
         if !MULTIPLIER_DEGREES.contains(&self.multiplier_degree) {
-            return Err(Error::invalid(
-                "multiplier_degree",
-                format!("must be 0 or 2, got {}", self.multiplier_degree),
-            ));
+            return Err(Error::invalid("multiplier_degree", format!("must be 0 or 2, got {}", self.multiplier_degree)));
         }
         if self.volume_samples == 0 || self.volume_samples > 1_000_000_000 {
             return Err(Error::invalid("volume_samples", "must be between 1 and 1e9"));
@@ -593,7 +590,10 @@ pub fn contain_bodies(
         progress,
         FitStage::Verify,
         0.8,
-        format!("Clarabel {status} in {} iterations; checking p ≤ 1 on {samples} boundary points per body", sol.iterations),
+        format!(
+            "Clarabel {status} in {} iterations; checking p ≤ 1 on {samples} boundary points per body",
+            sol.iterations
+        ),
     );
     let mut poly = problem.polynomial(&sol.x)?;
     let mut checks = Vec::with_capacity(samples * bodies.len());

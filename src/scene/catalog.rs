@@ -505,7 +505,13 @@ impl Catalog {
     /// # Errors
     /// [`Error::NotFound`] for the scene, the body or an instance to remove (nothing changes
     /// then); [`Error::Storage`].
-    pub fn replace_instances(&self, scene_id: &str, remove: &[String], body_id: &str, pose: Isometry3) -> Result<String> {
+    pub fn replace_instances(
+        &self,
+        scene_id: &str,
+        remove: &[String],
+        body_id: &str,
+        pose: Isometry3,
+    ) -> Result<String> {
         let bodies = read(&self.bodies);
         let body = bodies.get(body_id).ok_or_else(|| Error::not_found("body", body_id))?.body.clone();
         self.with_scene(scene_id, |s| {

@@ -31,8 +31,8 @@ pub mod cache;
 mod catalog;
 pub mod store;
 
-pub use catalog::{BodyEntry, Catalog, InstanceView, QueryAnswer, QueryKind, QueryPair, SceneView, MAX_NAME_BYTES};
 pub use catalog::PosedInstance;
+pub use catalog::{BodyEntry, Catalog, InstanceView, QueryAnswer, QueryKind, QueryPair, SceneView, MAX_NAME_BYTES};
 
 use crate::body::BodyFile;
 use crate::math::{pose_from_parts, pose_to_parts, Isometry3, Real};
