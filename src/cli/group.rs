@@ -14,7 +14,7 @@ use sublevel::{Body, Error, Result};
 pub struct GroupArgs {
     /// Body files (JSON), each optionally posed as `BODY.json@w,x,y,z,tx,ty,tz` (unit quaternion,
     /// translation in meters; identity when omitted).
-    #[arg(required = true, allow_hyphen_values = true)]
+    #[arg(required = true)]
     pub bodies: Vec<String>,
     /// Total degree 2d of the containing polynomial: 2, 4 or 6.
     #[arg(long, short, default_value_t = 4)]
