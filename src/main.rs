@@ -18,6 +18,8 @@ enum Command {
     Serve(cli::serve::ServeArgs),
     /// Fit a body to a mesh or point cloud and write its JSON body file.
     Fit(cli::fit::FitArgs),
+    /// Contain posed body files with one sos-convex body (paper §V) and write its body file.
+    Group(cli::group::GroupArgs),
     /// Run a distance or growth query between two body files.
     Query(cli::query::QueryArgs),
     /// Benchmark fits and queries on the paper's shapes.
@@ -35,6 +37,7 @@ fn main() -> std::process::ExitCode {
     let result = match cli.command {
         Command::Serve(a) => cli::serve::run(a),
         Command::Fit(a) => cli::fit::run(a),
+        Command::Group(a) => cli::group::run(a),
         Command::Query(a) => cli::query::run(a),
         Command::Bench(a) => cli::bench::run(a),
         Command::Stability(a) => cli::stability::run(a),

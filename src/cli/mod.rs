@@ -3,6 +3,7 @@
 pub mod bench;
 pub mod fit;
 pub mod fit_time;
+pub mod group;
 pub mod query;
 pub mod serve;
 pub mod stability;

@@ -25,6 +25,7 @@ use crate::{Error, Result};
 
 pub mod auto;
 pub mod baselines;
+pub mod containment;
 pub mod hull;
 pub mod inverse_moment;
 pub mod logdet_p;

@@ -32,8 +32,8 @@ mod catalog;
 pub mod store;
 
 pub use catalog::{
-    BodyEntry, Catalog, DistanceReply, GrowthReply, InstanceView, QueryAnswer, QueryKind, QueryOptions, QueryPair,
-    SceneView, MAX_NAME_BYTES,
+    BodyEntry, Catalog, DistanceReply, GrowthReply, InstanceView, PosedInstance, QueryAnswer, QueryKind, QueryOptions,
+    QueryPair, SceneView, MAX_NAME_BYTES,
 };
 
 use crate::body::BodyFile;

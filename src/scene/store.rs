@@ -75,6 +75,20 @@ pub trait Store: Send + Sync {
     /// # Errors
     /// [`Error::Storage`] when the database fails.
     fn delete_instance(&self, scene_id: &str, instance_id: &str) -> Result<bool>;
+    /// Deletes the instances `remove` of one scene and inserts `add`, in one transaction (used to
+    /// replace grouped instances by their containing body, paper §V).
+    ///
+    /// The default implementation is two transactions (not atomic); stores should override it.
+    ///
+    /// # Errors
+    /// [`Error::Storage`] when the database fails.
+    fn replace_instances(&self, scene_id: &str, remove: &[&str], add: &[(&str, &InstanceRecord)]) -> Result<()> {
+        self.put_instances(scene_id, add, false)?;
+        for id in remove {
+            self.delete_instance(scene_id, id)?;
+        }
+        Ok(())
+    }
 }
 
 const BODIES: TableDefinition<&str, &str> = TableDefinition::new("bodies");
@@ -274,6 +288,24 @@ impl Store for RedbStore {
             let removed = txn.open_table(INSTANCES).map_err(storage)?.remove(key.as_str()).map_err(storage)?.is_some();
             Ok(removed)
         })
+    }
+
+    fn replace_instances(&self, scene_id: &str, remove: &[&str], add: &[(&str, &InstanceRecord)]) -> Result<()> {
+        let rows = add
+            .iter()
+            .map(|(id, rec)| Ok((instance_key(scene_id, id), serde_json::to_string(rec)?)))
+            .collect::<Result<Vec<_>>>()?;
+        self.write(Durability::Immediate, |txn| {
+            let mut t = txn.open_table(INSTANCES).map_err(storage)?;
+            for id in remove {
+                t.remove(instance_key(scene_id, id).as_str()).map_err(storage)?;
+            }
+            for (k, v) in &rows {
+                t.insert(k.as_str(), v.as_str()).map_err(storage)?;
+            }
+            Ok(true)
+        })
+        .map(|_| ())
     }
 }
 

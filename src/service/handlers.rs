@@ -1,7 +1,7 @@
 //! The `sublevel.v1.Sublevel` handlers: validate → call the core → convert.
 
 use super::convert::{self as cv, prefix_field, require_id};
-use super::jobs::{is_terminal, FitJobs};
+use super::jobs::{is_terminal, FitJobs, GroupJob};
 use super::pb::{self, sublevel_server::Sublevel};
 use super::ServerConfig;
 use crate::body::{Body, BodyFile};
@@ -253,5 +253,53 @@ impl Sublevel for SublevelService {
             self.catalog.batch(&req.scene_id, &pairs)?
         };
         Ok(Response::new(pb::BatchQueryResponse { answers: answers.iter().map(cv::answer_to_proto).collect() }))
+    }
+
+    async fn start_group_job(&self, request: Request<pb::StartGroupJobRequest>) -> Reply<pb::StartFitJobResponse> {
+        use crate::fit::containment::{ContainmentSettings, CONTAINMENT_DEGREES, MAX_CONTAINED_BODIES};
+        let req = request.into_inner();
+        require_id("scene_id", &req.scene_id)?;
+        let degree = req.degree as usize;
+        if !CONTAINMENT_DEGREES.contains(&degree) {
+            return Err(Error::invalid("degree", format!("must be 2, 4 or 6, got {}", req.degree)).into());
+        }
+        let settings = ContainmentSettings {
+            degree,
+            multiplier_degree: req.multiplier_degree as usize,
+            volume_samples: self.config.fit.volume_samples,
+            seed: self.config.fit.seed,
+            solver_tolerance: self.config.fit.solver_tolerance,
+            max_solver_iterations: self.config.fit.max_solver_iterations,
+            linear_solver: self.config.fit.linear_solver,
+        };
+        settings.validate()?;
+        if req.name.len() > crate::scene::MAX_NAME_BYTES {
+            return Err(Error::invalid("name", format!("at most {} bytes", crate::scene::MAX_NAME_BYTES)).into());
+        }
+        let mut seen = std::collections::HashSet::new();
+        for (k, id) in req.instance_ids.iter().enumerate() {
+            require_id(&format!("instance_ids[{k}]"), id)?;
+            if !seen.insert(id.as_str()) {
+                return Err(Error::invalid("instance_ids", format!("instance `{id}` appears twice")).into());
+            }
+        }
+        let too_many = |n: usize| {
+            Status::from(Error::ResourceExhausted(format!(
+                "instance_ids: at most {MAX_CONTAINED_BODIES} instances per group, got {n}"
+            )))
+        };
+        if req.instance_ids.len() > MAX_CONTAINED_BODIES {
+            return Err(too_many(req.instance_ids.len()));
+        }
+        let instances = self.catalog.posed_instances(&req.scene_id, &req.instance_ids)?;
+        if instances.is_empty() {
+            return Err(Error::invalid("instance_ids", "fewer than 1 instance to group (the scene is empty)").into());
+        }
+        if instances.len() > MAX_CONTAINED_BODIES {
+            return Err(too_many(instances.len()));
+        }
+        let job = GroupJob { scene_id: req.scene_id, instances, name: req.name, replace: req.replace, settings };
+        let job_id = self.jobs.start_group(self.catalog.clone(), job);
+        Ok(Response::new(pb::StartFitJobResponse { job_id }))
     }
 }

@@ -2,6 +2,7 @@
 
 mod fit;
 mod gradient;
+mod group;
 mod query;
 mod service;
 mod stability;
