@@ -1,4 +1,4 @@
-//! The `sublevel` command: `serve`, `fit`, `query`, `bench`.
+//! The `sublevel` command: `serve`, `fit`, `query`, `bench`, `chart`.
 
 mod cli;
 
@@ -22,6 +22,8 @@ enum Command {
     Query(cli::query::QueryArgs),
     /// Benchmark fits and queries on the paper's shapes.
     Bench(cli::bench::BenchArgs),
+    /// Charts: speed against accuracy per model, Newton tolerance against time and error.
+    Chart(cli::chart::ChartArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -31,6 +33,7 @@ fn main() -> std::process::ExitCode {
         Command::Fit(a) => cli::fit::run(a),
         Command::Query(a) => cli::query::run(a),
         Command::Bench(a) => cli::bench::run(a),
+        Command::Chart(a) => cli::chart::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -3,6 +3,7 @@
 //! level-0 sos certificates.
 
 pub mod distance;
+pub(crate) mod fast_eval;
 pub mod growth;
 pub mod newton;
 pub mod sdp_certificate;
