@@ -392,6 +392,7 @@ fn print_table(rows: &[Row], peer: &PeerRow) {
 // ---------------------------------------------------------------------------------------------
 
 /// A triangle mesh read from an OFF file: vertices (meters) and triangles (polygons fanned).
+#[derive(Debug)]
 pub struct OffMesh {
     /// Vertex positions.
     pub vertices: Vec<sublevel::math::Point3>,

@@ -115,7 +115,9 @@ pub fn distance(
                     NewtonParams { max_iterations: params.max_iterations.min(SPECULATIVE_ITERATIONS), ..*params };
                 let out = kkt_newton(&ba, &bb, x0, y0, lam0, &capped);
                 iterations += out.iterations;
-                if out.status.converged() && (out.y - out.x).norm_squared() > 0.0 {
+                // Near contact (x ≈ y) the multipliers lose meaning: let the growth test decide.
+                let clear = (out.y - out.x).norm() > 1e-6 * (a.scale() + b.scale());
+                if out.status.converged() && clear {
                     return finish(pose_a, &rel, out, iterations, false, GrowthWarmStart::default());
                 }
             }
