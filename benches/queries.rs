@@ -28,6 +28,29 @@ fn poses() -> Vec<Isometry3> {
         .collect()
 }
 
+/// One value + gradient + Hessian evaluation: the reference `Polynomial::eval` against the
+/// precomputed-table `FastPoly::eval` (the query hot path), and value + gradient only.
+fn bench_eval(c: &mut Criterion) {
+    for degree in [2, 4, 6, 8] {
+        let Some(chair) = load("chair_101", degree) else { continue };
+        let pts: Vec<Vector3> =
+            (0..16).map(|k| Vector3::new(0.1 * k as f64 - 0.8, 0.3 - 0.02 * k as f64, 0.05 * k as f64 - 0.4)).collect();
+        let mut group = c.benchmark_group("eval");
+        group.bench_function(BenchmarkId::new("reference", degree), |b| {
+            b.iter(|| pts.iter().map(|u| black_box(chair.polynomial().eval(black_box(u))).value).sum::<f64>())
+        });
+        group.bench_function(BenchmarkId::new("fast", degree), |b| {
+            b.iter(|| pts.iter().map(|u| black_box(chair.fast_polynomial().eval(black_box(u))).value).sum::<f64>())
+        });
+        group.bench_function(BenchmarkId::new("fast_value_gradient", degree), |b| {
+            b.iter(|| {
+                pts.iter().map(|u| black_box(chair.fast_polynomial().value_gradient(black_box(u))).0).sum::<f64>()
+            })
+        });
+        group.finish();
+    }
+}
+
 fn bench_queries(c: &mut Criterion) {
     let params = NewtonParams::default();
     let human_pose = Isometry3::identity();
@@ -84,6 +107,6 @@ fn bench_queries(c: &mut Criterion) {
 criterion_group! {
     name = benches;
     config = Criterion::default().sample_size(30).measurement_time(std::time::Duration::from_secs(2));
-    targets = bench_queries
+    targets = bench_eval, bench_queries
 }
 criterion_main!(benches);

@@ -14,7 +14,7 @@
 //! `scale` and the fit `report`.
 
 use crate::math::{Isometry3, Matrix3, Point3, Real, Vector3};
-use crate::poly::{Eval, Polynomial};
+use crate::poly::{Eval, FastPoly, Polynomial};
 use crate::{Error, Result};
 use serde::{Deserialize, Serialize};
 
@@ -109,6 +109,8 @@ pub struct Body {
     interior_u: Vector3,
     /// p at `interior_u` (< 1 for a body with interior).
     min_value: Real,
+    /// Precomputed derivative tables of `polynomial` for the query hot path.
+    fast: FastPoly,
     /// Fit report.
     pub report: FitReport,
 }
@@ -156,7 +158,8 @@ impl Body {
                 format!("the sublevel set {{p ≤ 1}} is empty or flat (min p = {min_value:.6} ≥ 1)"),
             ));
         }
-        Ok(Self { polynomial, center: Vector3::from(center), scale, interior_u, min_value, report })
+        let fast = FastPoly::new(&polynomial);
+        Ok(Self { polynomial, center: Vector3::from(center), scale, interior_u, min_value, fast, report })
     }
 
     /// Parses and validates a body from its JSON file form.
@@ -217,6 +220,12 @@ impl Body {
     /// The polynomial in normalized coordinates u = (x − center)/scale.
     pub fn polynomial(&self) -> &Polynomial {
         &self.polynomial
+    }
+
+    /// The polynomial with its gradient / Hessian coefficient tables precomputed (built once in
+    /// [`Body::new`]; the query solvers evaluate through it).
+    pub fn fast_polynomial(&self) -> &FastPoly {
+        &self.fast
     }
 
     /// Normalization center in body-frame units.

@@ -1,4 +1,4 @@
-//! The `sublevel` command: `serve`, `fit`, `query`, `bench`.
+//! The `sublevel` command: `serve`, `fit`, `query`, `bench`, `chart`.
 
 mod cli;
 
@@ -30,6 +30,8 @@ enum Command {
     Table1(cli::table1::Table1Args),
     /// Fit time against degree, log det P vs log det H (the paper's construction-time figure).
     FitTime(cli::fit_time::FitTimeArgs),
+    /// Charts: speed against accuracy per model, Newton tolerance against time and error.
+    Chart(cli::chart::ChartArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -43,6 +45,7 @@ fn main() -> std::process::ExitCode {
         Command::Stability(a) => cli::stability::run(a),
         Command::Table1(a) => cli::table1::run(a),
         Command::FitTime(a) => cli::fit_time::run(a),
+        Command::Chart(a) => cli::chart::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

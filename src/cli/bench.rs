@@ -25,8 +25,9 @@ pub struct BenchArgs {
     /// Degrees 2d of the query benchmark, comma separated.
     #[arg(long, default_value = "2,4,6,8", value_delimiter = ',')]
     degrees: Vec<usize>,
-    /// Degrees 2d at which the chair's fit is timed (2d = 8 takes about half a minute).
-    #[arg(long, default_value = "2,4,6,8", value_delimiter = ',')]
+    /// Degrees 2d at which the chair's fit is timed (2d = 8 takes about half a minute); the flag
+    /// without values times no fit.
+    #[arg(long, default_value = "2,4,6,8", value_delimiter = ',', num_args = 0..)]
     fit_degrees: Vec<usize>,
     /// Folder of bundled fitted bodies `{chair_101,human_10}.deg{2d}.json`; a degree whose files are
     /// missing is fitted on the spot.
@@ -44,6 +45,9 @@ pub struct BenchArgs {
     /// Seed of the random poses.
     #[arg(long, default_value_t = 7)]
     seed: u64,
+    /// Cold poses at which the exact mesh–mesh distance is computed (slow) for the error columns.
+    #[arg(long, default_value_t = 100)]
+    mesh_poses: usize,
     /// Optional CSV output of the summary table.
     #[arg(long)]
     csv: Option<std::path::PathBuf>,
@@ -64,7 +68,7 @@ pub fn median(mut v: Vec<Real>) -> Real {
 }
 
 /// Times `f` as the mean of `repeats` back-to-back calls, in microseconds.
-fn time_us<T>(repeats: usize, mut f: impl FnMut() -> T) -> (Real, T) {
+pub fn time_us<T>(repeats: usize, mut f: impl FnMut() -> T) -> (Real, T) {
     let start = Instant::now();
     let mut out = f();
     for _ in 1..repeats {
@@ -83,6 +87,30 @@ fn random_rotation(rng: &mut ChaCha8Rng) -> UnitQuaternion {
     UnitQuaternion::new_normalize(q)
 }
 
+/// The random chair poses around the human of the cold queries (mix of separated and overlapping).
+pub fn cold_poses(seed: u64, n: usize) -> Vec<Isometry3> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    (0..n)
+        .map(|_| {
+            let t = Vector3::new(rng.random_range(-2.5..2.5), rng.random_range(-2.5..2.5), rng.random_range(-2.5..2.5));
+            Isometry3::from_parts(t.into(), random_rotation(&mut rng))
+        })
+        .collect()
+}
+
+/// The warm motion: the chair slides through the human while turning slowly (paper Fig. "penetration").
+pub fn motion_poses(n: usize) -> Vec<Isometry3> {
+    let axis = nalgebra::Unit::new_normalize(Vector3::new(0.2, 1.0, 0.1));
+    let n = n.max(2);
+    (0..n)
+        .map(|k| {
+            let s = k as Real / (n - 1) as Real;
+            let t = Vector3::new(-2.5 + 5.0 * s, 0.3, 0.1);
+            Isometry3::from_parts(t.into(), UnitQuaternion::from_axis_angle(&axis, 1.5 * s))
+        })
+        .collect()
+}
+
 /// One row of the summary.
 struct Row {
     degree: usize,
@@ -93,6 +121,46 @@ struct Row {
     growth_warm: Real,
     converged: usize,
     total: usize,
+    /// Mean / max |ours − exact mesh–mesh| over the separated ground-truth poses (meters).
+    err: (Real, Real),
+}
+
+/// The parry3d-f64 side of the benchmark (degree-independent).
+struct PeerRow {
+    hull_cold: Real,
+    hull_warm: Real,
+    mesh: Real,
+    /// Exact mesh–mesh distances at the first `exact.len()` cold poses.
+    exact: Vec<Real>,
+    hull_err: (Real, Real),
+}
+
+fn bench_peers(args: &BenchArgs, peers: &PeerShapes, cold: &[Isometry3], motion: &[Isometry3]) -> PeerRow {
+    let human_pose = Isometry3::identity();
+    let hull_cold =
+        median(cold.iter().map(|p| time_us(args.repeats, || peers.hull_distance(p, &human_pose)).0).collect());
+    let mut dir = parry3d_f64::math::Vector::ZERO;
+    let mut hw = Vec::new();
+    for (k, p) in motion.iter().enumerate() {
+        let start = dir;
+        let (us, _) = time_us(args.repeats, || {
+            dir = start;
+            peers.hull_distance_warm(p, &human_pose, &mut dir)
+        });
+        if k > 0 {
+            hw.push(us);
+        }
+    }
+    let n_exact = args.mesh_poses.min(cold.len());
+    let mut mesh_us = Vec::new();
+    let mut exact = Vec::new();
+    for p in &cold[..n_exact] {
+        let (us, d) = time_us(1, || peers.mesh_distance(p, &human_pose));
+        mesh_us.push(us);
+        exact.push(d);
+    }
+    let hull: Vec<Real> = cold[..n_exact].iter().map(|p| peers.hull_distance(p, &human_pose)).collect();
+    PeerRow { hull_cold, hull_warm: median(hw), mesh: median(mesh_us), hull_err: error_stats(&hull, &exact), exact }
 }
 
 /// Runs `sublevel bench`.
@@ -112,32 +180,50 @@ pub fn run(args: BenchArgs) -> Result<()> {
         eprintln!("fit chair_101 at 2d = {degree}: {secs:.2} s, volume {:.3}", body.report.volume);
         fit_times.push((degree, secs));
     }
+    let cold = cold_poses(args.seed, args.poses);
+    let motion = motion_poses(args.motion_steps);
+    let peers = PeerShapes::new(
+        &load_off_mesh(&args.psb.join("chair_101.off"))?,
+        &load_off_mesh(&args.psb.join("human_10.off"))?,
+    )?;
+    eprintln!("timing parry3d-f64 (hull GJK, mesh–mesh on {} poses)", args.mesh_poses.min(cold.len()));
+    let peer = bench_peers(&args, &peers, &cold, &motion);
     let mut rows = Vec::new();
     for &degree in &args.degrees {
-        let load_or_fit = |name: &str, points: &[sublevel::math::Point3]| -> Result<Body> {
-            let path = args.bodies.join(format!("{name}.deg{degree}.json"));
-            if path.exists() {
-                return Body::load(&path);
-            }
-            eprintln!("{} missing: fitting {name} at 2d = {degree}", path.display());
-            let settings = FitSettings { degree, volume_samples: 20_000, ..FitSettings::default() };
-            fit_points(points, &settings, &mut |_| {})
-        };
-        let chair_body = load_or_fit("chair_101", &chair)?;
-        let human_body = load_or_fit("human_10", &human)?;
+        let (chair_body, human_body) = load_or_fit_pair(&args.bodies, degree, &chair, &human)?;
         let fit_s = fit_times.iter().find(|(d, _)| *d == degree).map(|f| f.1).unwrap_or(Real::NAN);
-        rows.push(bench_queries(&args, degree, &chair_body, &human_body, fit_s, &params));
+        rows.push(bench_queries(&args, degree, &chair_body, &human_body, fit_s, &params, &cold, &motion, &peer.exact));
     }
-    print_table(&rows);
+    print_table(&rows, &peer);
     if let Some(path) = &args.csv {
         let mut text = String::from(
-            "degree,fit_chair_s,distance_cold_us,distance_warm_us,growth_cold_us,growth_warm_us,paper_s,speedup_cold,speedup_warm,converged,total\n",
+            "degree,fit_chair_s,distance_cold_us,distance_warm_us,growth_cold_us,growth_warm_us,paper_s,speedup_cold,speedup_warm,converged,total,\
+parry_hull_cold_us,parry_hull_warm_us,parry_mesh_us,hull_over_ours_cold,hull_over_ours_warm,err_mean_m,err_max_m,hull_err_mean_m,hull_err_max_m\n",
         );
         for r in &rows {
             let v = r.values();
             text.push_str(&format!(
-                "{},{:.4},{:.3},{:.3},{:.3},{:.3},{},{:.0},{:.0},{},{}\n",
-                r.degree, v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], r.converged, r.total
+                "{},{:.4},{:.3},{:.3},{:.3},{:.3},{},{:.0},{:.0},{},{},{:.3},{:.3},{:.1},{:.3},{:.3},{:.5},{:.5},{:.5},{:.5}\n",
+                r.degree,
+                v[0],
+                v[1],
+                v[2],
+                v[3],
+                v[4],
+                v[5],
+                v[6],
+                v[7],
+                r.converged,
+                r.total,
+                peer.hull_cold,
+                peer.hull_warm,
+                peer.mesh,
+                peer.hull_cold / r.dist_cold,
+                peer.hull_warm / r.dist_warm,
+                r.err.0,
+                r.err.1,
+                peer.hull_err.0,
+                peer.hull_err.1
             ));
         }
         if let Some(dir) = path.parent() {
@@ -147,6 +233,29 @@ pub fn run(args: BenchArgs) -> Result<()> {
         eprintln!("wrote {}", path.display());
     }
     Ok(())
+}
+
+/// The bundled chair and human bodies at `degree` (`{name}.deg{2d}.json` under `dir`), fitted on the
+/// spot when missing.
+///
+/// # Errors
+/// Any load or fit error.
+pub fn load_or_fit_pair(
+    dir: &std::path::Path,
+    degree: usize,
+    chair: &[sublevel::math::Point3],
+    human: &[sublevel::math::Point3],
+) -> Result<(Body, Body)> {
+    let load_or_fit = |name: &str, points: &[sublevel::math::Point3]| -> Result<Body> {
+        let path = dir.join(format!("{name}.deg{degree}.json"));
+        if path.exists() {
+            return Body::load(&path);
+        }
+        eprintln!("{} missing: fitting {name} at 2d = {degree}", path.display());
+        let settings = FitSettings { degree, volume_samples: 20_000, ..FitSettings::default() };
+        fit_points(points, &settings, &mut |_| {})
+    };
+    Ok((load_or_fit("chair_101", chair)?, load_or_fit("human_10", human)?))
 }
 
 impl Row {
@@ -170,6 +279,7 @@ fn paper_seconds(degree: usize) -> Real {
     PAPER_TABLE2_SECONDS.iter().find(|(d, _)| *d == degree).map(|p| p.1).unwrap_or(Real::NAN)
 }
 
+#[allow(clippy::too_many_arguments)]
 fn bench_queries(
     args: &BenchArgs,
     degree: usize,
@@ -177,35 +287,32 @@ fn bench_queries(
     human: &Body,
     fit_chair_s: Real,
     params: &NewtonParams,
+    cold: &[Isometry3],
+    motion: &[Isometry3],
+    exact: &[Real],
 ) -> Row {
-    let mut rng = ChaCha8Rng::seed_from_u64(args.seed);
     let human_pose = Isometry3::identity();
     let (mut dc, mut gc) = (Vec::new(), Vec::new());
     let mut converged = 0;
     let mut total = 0;
-    // Cold: random chair poses around the human (mix of separated and overlapping).
-    for _ in 0..args.poses {
-        let t = Vector3::new(rng.random_range(-2.5..2.5), rng.random_range(-2.5..2.5), rng.random_range(-2.5..2.5));
-        let pose = Isometry3::from_parts(t.into(), random_rotation(&mut rng));
-        let (us, d) = time_us(args.repeats, || distance(chair, &pose, human, &human_pose, None, params));
+    let mut ours = Vec::new();
+    for (i, pose) in cold.iter().enumerate() {
+        let (us, d) = time_us(args.repeats, || distance(chair, pose, human, &human_pose, None, params));
         dc.push(us);
-        let (us, g) = time_us(args.repeats, || growth(chair, &pose, human, &human_pose, None, params));
+        if i < exact.len() {
+            ours.push(d.distance);
+        }
+        let (us, g) = time_us(args.repeats, || growth(chair, pose, human, &human_pose, None, params));
         gc.push(us);
         converged += usize::from(d.status.converged()) + usize::from(g.status.converged());
         total += 2;
     }
-    // Warm: the chair slides through the human while turning slowly (paper Fig. "penetration").
     let (mut dw, mut gw) = (Vec::new(), Vec::new());
     let mut wd: Option<DistanceWarmStart> = None;
     let mut wg: Option<GrowthWarmStart> = None;
-    let axis = nalgebra::Unit::new_normalize(Vector3::new(0.2, 1.0, 0.1));
-    let n = args.motion_steps.max(2);
-    for k in 0..n {
-        let s = k as Real / (n - 1) as Real;
-        let t = Vector3::new(-2.5 + 5.0 * s, 0.3, 0.1);
-        let pose = Isometry3::from_parts(t.into(), UnitQuaternion::from_axis_angle(&axis, 1.5 * s));
-        let (us, d) = time_us(args.repeats, || distance(chair, &pose, human, &human_pose, wd.as_ref(), params));
-        let (usg, g) = time_us(args.repeats, || growth(chair, &pose, human, &human_pose, wg.as_ref(), params));
+    for (k, pose) in motion.iter().enumerate() {
+        let (us, d) = time_us(args.repeats, || distance(chair, pose, human, &human_pose, wd.as_ref(), params));
+        let (usg, g) = time_us(args.repeats, || growth(chair, pose, human, &human_pose, wg.as_ref(), params));
         if k > 0 {
             dw.push(us);
             gw.push(usg);
@@ -224,10 +331,11 @@ fn bench_queries(
         growth_warm: median(gw),
         converged,
         total,
+        err: error_stats(&ours, exact),
     }
 }
 
-fn print_table(rows: &[Row]) {
+fn print_table(rows: &[Row], peer: &PeerRow) {
     println!("chair_101 vs human_10; query times are medians in microseconds (in-process, this machine)");
     println!(
         "{:>3} {:>9} {:>10} {:>10} {:>10} {:>10} {:>9} {:>11} {:>11} {:>10}",
@@ -243,11 +351,210 @@ fn print_table(rows: &[Row]) {
     }
     println!("x cold / x warm: speed-up of our distance query over the paper's Table 2 (MATLAB fmincon).");
     println!("fit chair: `-` where the fit was not timed (--fit-degrees); the queries then use the bundled bodies.");
+    println!();
+    let n_sep = peer.exact.iter().filter(|d| **d > 0.0).count();
+    println!(
+        "peers (parry3d-f64, same poses): GJK on the convex hulls cold {:.2} µs, warm {:.2} µs; exact mesh–mesh {:.1} µs",
+        peer.hull_cold, peer.hull_warm, peer.mesh
+    );
+    println!(
+        "{:>8} {:>10} {:>10} {:>12} {:>12} {:>13} {:>13}",
+        "model", "cold µs", "warm µs", "hull/ours c", "hull/ours w", "err mean [m]", "err max [m]"
+    );
+    for r in rows {
+        println!(
+            "{:>8} {:>10.2} {:>10.2} {:>11.2}x {:>11.2}x {:>13.4} {:>13.4}",
+            format!("sos 2d={}", r.degree),
+            r.dist_cold,
+            r.dist_warm,
+            peer.hull_cold / r.dist_cold,
+            peer.hull_warm / r.dist_warm,
+            r.err.0,
+            r.err.1
+        );
+    }
+    println!(
+        "{:>8} {:>10.2} {:>10.2} {:>12} {:>12} {:>13.4} {:>13.4}",
+        "hull GJK", peer.hull_cold, peer.hull_warm, "1.00x", "1.00x", peer.hull_err.0, peer.hull_err.1
+    );
+    println!(
+        "{:>8} {:>10.1} {:>10} {:>12} {:>12} {:>13} {:>13}",
+        "mesh", peer.mesh, "-", "-", "-", "0 (truth)", "0 (truth)"
+    );
+    println!(
+        "errors: |model − exact mesh–mesh distance| over the {n_sep} separated poses of the first {} cold poses.",
+        peer.exact.len()
+    );
+}
+
+// ---------------------------------------------------------------------------------------------
+// Peer baselines (parry3d-f64) and the exact mesh–mesh ground truth, shared with `sublevel chart`.
+// ---------------------------------------------------------------------------------------------
+
+/// A triangle mesh read from an OFF file: vertices (meters) and triangles (polygons fanned).
+#[derive(Debug)]
+pub struct OffMesh {
+    /// Vertex positions.
+    pub vertices: Vec<sublevel::math::Point3>,
+    /// Triangles as vertex indices.
+    pub triangles: Vec<[u32; 3]>,
+}
+
+/// Reads an OFF mesh with its faces (polygons are split into fans).
+///
+/// # Errors
+/// [`Error::Io`] when unreadable; [`Error::InvalidArgument`] naming `mesh` for malformed text.
+pub fn load_off_mesh(path: &std::path::Path) -> Result<OffMesh> {
+    let text = std::fs::read_to_string(path)?;
+    let bad = |what: &str| Error::invalid("mesh", format!("{}: {what}", path.display()));
+    let mut tokens = text
+        .lines()
+        .map(|l| l.split('#').next().unwrap_or(""))
+        .flat_map(|l| l.split_whitespace())
+        .filter(|t| !t.is_empty());
+    if tokens.next() != Some("OFF") {
+        return Err(bad("missing OFF header"));
+    }
+    let mut num =
+        |what: &str| -> Result<Real> { tokens.next().and_then(|t| t.parse::<Real>().ok()).ok_or_else(|| bad(what)) };
+    let nv = num("vertex count")? as usize;
+    let nf = num("face count")? as usize;
+    let _ne = num("edge count")?;
+    let mut vertices = Vec::with_capacity(nv);
+    for _ in 0..nv {
+        vertices.push(sublevel::math::Point3::new(num("vertex")?, num("vertex")?, num("vertex")?));
+    }
+    let mut triangles = Vec::with_capacity(nf);
+    for _ in 0..nf {
+        let k = num("face size")? as usize;
+        let idx: Vec<u32> = (0..k).map(|_| num("face index").map(|v| v as u32)).collect::<Result<_>>()?;
+        if idx.iter().any(|&i| i as usize >= nv) {
+            return Err(bad("face index out of range"));
+        }
+        for j in 1..k.saturating_sub(1) {
+            triangles.push([idx[0], idx[j], idx[j + 1]]);
+        }
+    }
+    Ok(OffMesh { vertices, triangles })
+}
+
+fn parry_vec(p: &sublevel::math::Point3) -> parry3d_f64::math::Vector {
+    parry3d_f64::math::Vector::new(p.x, p.y, p.z)
+}
+
+/// Our pose as parry's (glam) pose.
+pub fn parry_pose(iso: &Isometry3) -> parry3d_f64::math::Pose {
+    let q = iso.rotation.quaternion();
+    let t = iso.translation.vector;
+    parry3d_f64::math::Pose::from_parts(
+        parry3d_f64::math::Vector::new(t.x, t.y, t.z),
+        parry3d_f64::math::Rot3::from_xyzw(q.i, q.j, q.k, q.w),
+    )
+}
+
+/// The peer shapes of one pair: convex hulls (for GJK) and the triangle meshes (exact distance).
+pub struct PeerShapes {
+    /// Convex hull of A's points.
+    pub hull_a: parry3d_f64::shape::ConvexPolyhedron,
+    /// Convex hull of B's points.
+    pub hull_b: parry3d_f64::shape::ConvexPolyhedron,
+    /// A's triangle mesh.
+    pub mesh_a: parry3d_f64::shape::TriMesh,
+    /// B's triangle mesh.
+    pub mesh_b: parry3d_f64::shape::TriMesh,
+}
+
+impl PeerShapes {
+    /// Builds the hulls and meshes from two OFF meshes.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `mesh` when parry rejects a hull or a mesh.
+    pub fn new(a: &OffMesh, b: &OffMesh) -> Result<Self> {
+        let hull = |m: &OffMesh| {
+            let pts: Vec<_> = m.vertices.iter().map(parry_vec).collect();
+            parry3d_f64::shape::ConvexPolyhedron::from_convex_hull(&pts)
+                .ok_or_else(|| Error::invalid("mesh", "parry could not build the convex hull"))
+        };
+        let tri = |m: &OffMesh| {
+            parry3d_f64::shape::TriMesh::new(m.vertices.iter().map(parry_vec).collect(), m.triangles.clone())
+                .map_err(|e| Error::invalid("mesh", format!("parry rejected the triangle mesh: {e:?}")))
+        };
+        Ok(Self { hull_a: hull(a)?, hull_b: hull(b)?, mesh_a: tri(a)?, mesh_b: tri(b)? })
+    }
+
+    /// Cold GJK distance between the hulls (`parry3d_f64::query::distance`).
+    pub fn hull_distance(&self, pose_a: &Isometry3, pose_b: &Isometry3) -> Real {
+        parry3d_f64::query::distance(&parry_pose(pose_a), &self.hull_a, &parry_pose(pose_b), &self.hull_b)
+            .map_or(Real::NAN, |d| d.distance)
+    }
+
+    /// Warm GJK distance between the hulls: the simplex starts from `dir` (A's frame, the previous
+    /// closest-point difference), which is updated.
+    pub fn hull_distance_warm(
+        &self,
+        pose_a: &Isometry3,
+        pose_b: &Isometry3,
+        dir: &mut parry3d_f64::math::Vector,
+    ) -> Real {
+        use parry3d_f64::query::gjk::{self, CsoPoint, GJKResult, VoronoiSimplex};
+        let pos12 = parry_pose(pose_a).inv_mul(&parry_pose(pose_b));
+        let back = -pos12.translation;
+        let n = if dir.length_squared() > 1e-24 {
+            dir.normalize()
+        } else if back.length_squared() > 1e-24 {
+            back.normalize()
+        } else {
+            parry3d_f64::math::Vector::X
+        };
+        let mut simplex = VoronoiSimplex::new();
+        simplex.reset(CsoPoint::from_shapes(&pos12, &self.hull_a, &self.hull_b, n));
+        match gjk::closest_points(&pos12, &self.hull_a, &self.hull_b, Real::MAX, true, &mut simplex) {
+            GJKResult::ClosestPoints(p1, p2, _) => {
+                *dir = p1 - p2;
+                dir.length()
+            }
+            _ => 0.0,
+        }
+    }
+
+    /// Exact distance between the triangle meshes (the ground truth).
+    pub fn mesh_distance(&self, pose_a: &Isometry3, pose_b: &Isometry3) -> Real {
+        parry3d_f64::query::distance(&parry_pose(pose_a), &self.mesh_a, &parry_pose(pose_b), &self.mesh_b)
+            .map_or(Real::NAN, |d| d.distance)
+    }
+}
+
+/// Mean and max of |model − exact| over the poses where the exact distance is positive.
+pub fn error_stats(model: &[Real], exact: &[Real]) -> (Real, Real) {
+    let errs: Vec<Real> = model.iter().zip(exact).filter(|(_, e)| **e > 0.0).map(|(m, e)| (m - e).abs()).collect();
+    if errs.is_empty() {
+        return (Real::NAN, Real::NAN);
+    }
+    (errs.iter().sum::<Real>() / errs.len() as Real, errs.iter().cloned().fold(0.0, Real::max))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn error_stats_skip_overlapping_poses() {
+        let (mean, max) = error_stats(&[0.9, 2.0, 0.0], &[1.0, 2.5, 0.0]);
+        assert!((mean - 0.3).abs() < 1e-12 && (max - 0.5).abs() < 1e-12);
+        assert!(error_stats(&[1.0], &[0.0]).0.is_nan());
+    }
+
+    #[test]
+    fn off_mesh_fans_polygons() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("quad.off");
+        std::fs::write(&path, "OFF\n4 1 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3\n").unwrap();
+        let m = load_off_mesh(&path).unwrap();
+        assert_eq!(m.vertices.len(), 4);
+        assert_eq!(m.triangles, vec![[0, 1, 2], [0, 2, 3]]);
+        std::fs::write(&path, "OFF\n1 1 0\n0 0 0\n3 0 1 2\n").unwrap();
+        assert!(load_off_mesh(&path).unwrap_err().to_string().contains("mesh"));
+    }
 
     #[test]
     fn median_of_odd_and_even_samples() {

@@ -1,6 +1,7 @@
 //! Subcommands of the `sublevel` binary; each file owns its clap arguments and its `run`.
 
 pub mod bench;
+pub mod chart;
 pub mod fit;
 pub mod fit_time;
 pub mod group;

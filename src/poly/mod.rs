@@ -6,11 +6,14 @@
 //!
 //! - [`monomial`]: the graded-lex monomial basis z(x) and O(1) indexing;
 //! - [`polynomial`]: [`Polynomial`] with allocation-free value / gradient / Hessian;
+//! - [`fast`]: [`FastPoly`], precomputed derivative tables for the query hot path;
 //! - [`gram`]: Gram forms `z(x)ᵀ Q z(x)` in any number of variables, and Clarabel's packed-triangle
 //!   convention used by every SDP in the crate.
 
+pub mod fast;
 pub mod gram;
 pub mod monomial;
 pub mod polynomial;
 
+pub use fast::FastPoly;
 pub use polynomial::{Eval, Polynomial, MAX_DEGREE};

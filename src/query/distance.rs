@@ -14,15 +14,19 @@
 //! 2(x − y) + λ_a ∇p_a'(x) = 0,   −2(x − y) + λ_b ∇p_b'(y) = 0,   p_a'(x) = 1,   p_b'(y) = 1
 //! ```
 //!
-//! with exact Hessians, from the previous answer (warm start) or from a geometric cold start (the
-//! growth minimizer on B and the matching boundary point of A); a log-barrier path from the two
-//! interior points is the globally convergent fallback. A KKT point with λ_a, λ_b > 0 is the global
+//! with exact Hessians, from the previous answer (warm start) or from a geometric cold start. Cold:
+//! when the segment between the interior points crosses both boundaries in order (A's exit before
+//! B's entry), Newton starts straight from those two crossings and a converged answer with positive
+//! multipliers needs no overlap test; otherwise (or when that run fails) the growth measure decides
+//! overlap and the growth minimizer on B with the matching boundary point of A is the start. A
+//! log-barrier path from the two interior points is the globally convergent fallback. A KKT point with λ_a, λ_b > 0 is the global
 //! minimizer of this convex program.
 
+use super::fast_eval::{solve_kkt8, FastPosed, ValueGradient};
 use super::growth::{solve_growth, GrowthWarmStart};
 use super::newton::{boundary_on_segment, NewtonParams, SolveStatus};
 use crate::body::{Body, PosedBody};
-use crate::math::{Isometry3, Point3, Real, Vector3};
+use crate::math::{Isometry3, Matrix3, Point3, Real, Vector3};
 use nalgebra::{SMatrix, SVector};
 
 /// Answer of a distance query; all points in world coordinates (meters).
@@ -65,6 +69,10 @@ pub struct DistanceWarmStart {
     pub growth: GrowthWarmStart,
 }
 
+/// Iteration cap of the speculative cold Newton run from the interior-point segment (the full
+/// growth-first path follows when it does not converge).
+const SPECULATIVE_ITERATIONS: usize = 30;
+
 /// Distance between body `a` posed by `pose_a` and body `b` posed by `pose_b` (paper eq. "distance").
 ///
 /// `warm` is the `warm_start` of a previous answer for the same ordered pair. Never panics on valid
@@ -88,6 +96,31 @@ pub fn distance(
         iterations += out.iterations;
         if out.status.converged() {
             return finish(pose_a, &rel, out, iterations, true, w.growth);
+        }
+    }
+
+    // Cold start without a growth warm start: a cheap overlap certificate on the segment between
+    // the interior points, else Newton straight from the segment's boundary points. A converged
+    // KKT point with λ_a, λ_b > 0 is the global minimizer, so separation needs no growth solve.
+    if !warm.is_some_and(|w| w.growth.valid) {
+        let (ca, cb) = (ba.interior_point(), bb.interior_point());
+        let (fa, fb) = (FastPosed::new(&ba), FastPosed::new(&bb));
+        if fb.value(&ca) > 1.0 && fa.value(&cb) > 1.0 {
+            let x0 = boundary_on_segment(&ba, &ca, &cb);
+            let y0 = boundary_on_segment(&bb, &cb, &ca);
+            // Separated along the segment: A's crossing comes before B's.
+            if (x0 - ca).norm_squared() < (y0 - ca).norm_squared() {
+                let lam0 = initial_multipliers(&ba, &bb, &x0, &y0);
+                let capped =
+                    NewtonParams { max_iterations: params.max_iterations.min(SPECULATIVE_ITERATIONS), ..*params };
+                let out = kkt_newton(&ba, &bb, x0, y0, lam0, &capped);
+                iterations += out.iterations;
+                // Near contact (x ≈ y) the multipliers lose meaning: let the growth test decide.
+                let clear = (out.y - out.x).norm() > 1e-6 * (a.scale() + b.scale());
+                if out.status.converged() && clear {
+                    return finish(pose_a, &rel, out, iterations, false, GrowthWarmStart::default());
+                }
+            }
         }
     }
 
@@ -161,8 +194,8 @@ fn finish(
 
 /// Least-squares multipliers at (x, y), clamped positive.
 fn initial_multipliers(ba: &PosedBody<'_>, bb: &PosedBody<'_>, x: &Vector3, y: &Vector3) -> [Real; 2] {
-    let ga = ba.eval(x).gradient;
-    let gb = bb.eval(y).gradient;
+    let ga = FastPosed::new(ba).value_gradient(x).gradient;
+    let gb = FastPosed::new(bb).value_gradient(y).gradient;
     let d = y - x;
     let la = 2.0 * d.dot(&ga) / ga.norm_squared().max(Real::MIN_POSITIVE);
     let lb = -2.0 * d.dot(&gb) / gb.norm_squared().max(Real::MIN_POSITIVE);
@@ -182,32 +215,67 @@ struct KktOut {
 type Vec8 = SVector<Real, 8>;
 type Mat8 = SMatrix<Real, 8, 8>;
 
-struct KktState {
-    r: Vec8,
-    jac: Mat8,
+/// Value, gradient and residual of the KKT system at one iterate (no Hessians: those are computed
+/// from the kept monomial tables only when a Newton step is taken).
+struct KktPoint {
+    ea: ValueGradient,
+    eb: ValueGradient,
+    ra: Vector3,
+    rb: Vector3,
+    ca: Real,
+    cb: Real,
 }
 
-fn kkt_state(ba: &PosedBody<'_>, bb: &PosedBody<'_>, x: &Vector3, y: &Vector3, lam: [Real; 2]) -> KktState {
-    let ea = ba.eval(x);
-    let eb = bb.eval(y);
-    let d = x - y;
-    let ra = d * 2.0 + ea.gradient * lam[0];
-    let rb = -d * 2.0 + eb.gradient * lam[1];
-    let r = Vec8::from_column_slice(&[ra.x, ra.y, ra.z, rb.x, rb.y, rb.z, ea.value - 1.0, eb.value - 1.0]);
+impl KktPoint {
+    fn new(fa: &FastPosed<'_>, fb: &FastPosed<'_>, x: &Vector3, y: &Vector3, lam: [Real; 2]) -> Self {
+        let ea = fa.value_gradient(x);
+        let eb = fb.value_gradient(y);
+        let d = (x - y) * 2.0;
+        let ra = d + ea.gradient * lam[0];
+        let rb = -d + eb.gradient * lam[1];
+        let (ca, cb) = (ea.value - 1.0, eb.value - 1.0);
+        Self { ea, eb, ra, rb, ca, cb }
+    }
+
+    fn norm_inf(&self) -> Real {
+        self.ra.amax().max(self.rb.amax()).max(self.ca.abs()).max(self.cb.abs())
+    }
+
+    fn norm2(&self) -> Real {
+        (self.ra.norm_squared() + self.rb.norm_squared() + self.ca * self.ca + self.cb * self.cb).sqrt()
+    }
+}
+
+/// The Newton step at `pt`: closed-form block elimination, dense LU if that is singular.
+fn newton_step(
+    fa: &FastPosed<'_>,
+    fb: &FastPosed<'_>,
+    pt: &KktPoint,
+    lam: [Real; 2],
+) -> Option<(Vector3, Vector3, [Real; 2])> {
+    let two = Matrix3::identity() * 2.0;
+    let wa = two + fa.hessian(&pt.ea) * lam[0];
+    let wb = two + fb.hessian(&pt.eb) * lam[1];
+    let (ga, gb) = (&pt.ea.gradient, &pt.eb.gradient);
+    if let Some(step) = solve_kkt8(&wa, &wb, ga, gb, &pt.ra, &pt.rb, pt.ca, pt.cb) {
+        return Some(step);
+    }
     let mut jac = Mat8::zeros();
-    let two = nalgebra::Matrix3::<Real>::identity() * 2.0;
-    jac.fixed_view_mut::<3, 3>(0, 0).copy_from(&(two + ea.hessian * lam[0]));
+    jac.fixed_view_mut::<3, 3>(0, 0).copy_from(&wa);
     jac.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-two));
     jac.fixed_view_mut::<3, 3>(3, 0).copy_from(&(-two));
-    jac.fixed_view_mut::<3, 3>(3, 3).copy_from(&(two + eb.hessian * lam[1]));
-    jac.fixed_view_mut::<3, 1>(0, 6).copy_from(&ea.gradient);
-    jac.fixed_view_mut::<3, 1>(3, 7).copy_from(&eb.gradient);
-    jac.fixed_view_mut::<1, 3>(6, 0).copy_from(&ea.gradient.transpose());
-    jac.fixed_view_mut::<1, 3>(7, 3).copy_from(&eb.gradient.transpose());
-    KktState { r, jac }
+    jac.fixed_view_mut::<3, 3>(3, 3).copy_from(&wb);
+    jac.fixed_view_mut::<3, 1>(0, 6).copy_from(ga);
+    jac.fixed_view_mut::<3, 1>(3, 7).copy_from(gb);
+    jac.fixed_view_mut::<1, 3>(6, 0).copy_from(&ga.transpose());
+    jac.fixed_view_mut::<1, 3>(7, 3).copy_from(&gb.transpose());
+    let r = Vec8::from_column_slice(&[pt.ra.x, pt.ra.y, pt.ra.z, pt.rb.x, pt.rb.y, pt.rb.z, pt.ca, pt.cb]);
+    let step = jac.lu().solve(&(-r))?;
+    Some((Vector3::new(step[0], step[1], step[2]), Vector3::new(step[3], step[4], step[5]), [step[6], step[7]]))
 }
 
-/// Active-set Newton on the 8 × 8 KKT system, globalized by backtracking on ‖r‖₂.
+/// Active-set Newton on the 8 × 8 KKT system, globalized by backtracking on ‖r‖₂ (trial points
+/// cost value and gradient only).
 fn kkt_newton(
     ba: &PosedBody<'_>,
     bb: &PosedBody<'_>,
@@ -216,40 +284,39 @@ fn kkt_newton(
     lam0: [Real; 2],
     params: &NewtonParams,
 ) -> KktOut {
+    let (fa, fb) = (FastPosed::new(ba), FastPosed::new(bb));
     let (mut x, mut y, mut lam) = (x0, y0, lam0);
-    let mut st = kkt_state(ba, bb, &x, &y, lam);
+    let mut pt = KktPoint::new(&fa, &fb, &x, &y, lam);
     let mut status = SolveStatus::MaxIterations;
     let mut it = 0;
-    let converged = |st: &KktState, x: &Vector3, y: &Vector3, lam: [Real; 2]| {
+    let converged = |pt: &KktPoint, x: &Vector3, y: &Vector3, lam: [Real; 2]| {
         let scale = 1.0 + 2.0 * (x - y).norm();
-        st.r.amax() <= params.kkt_tolerance * scale && lam[0] > 0.0 && lam[1] > 0.0
+        pt.norm_inf() <= params.kkt_tolerance * scale && lam[0] > 0.0 && lam[1] > 0.0
     };
     while it < params.max_iterations {
-        if !st.r.amax().is_finite() {
+        if !pt.norm_inf().is_finite() {
             status = SolveStatus::Stalled;
             break;
         }
-        if converged(&st, &x, &y, lam) {
+        if converged(&pt, &x, &y, lam) {
             status = SolveStatus::Converged;
             break;
         }
         it += 1;
-        let Some(step) = st.jac.lu().solve(&(-st.r)) else {
+        let Some((dx, dy, dl)) = newton_step(&fa, &fb, &pt, lam) else {
             status = SolveStatus::Stalled;
             break;
         };
-        let dx = Vector3::new(step[0], step[1], step[2]);
-        let dy = Vector3::new(step[3], step[4], step[5]);
-        let r0 = st.r.norm();
+        let r0 = pt.norm2();
         let mut alpha = 1.0;
         let mut accepted = false;
         for _ in 0..40 {
             let (xt, yt) = (x + dx * alpha, y + dy * alpha);
-            let lt = [lam[0] + step[6] * alpha, lam[1] + step[7] * alpha];
-            let tr = kkt_state(ba, bb, &xt, &yt, lt);
-            let r1 = tr.r.norm();
+            let lt = [lam[0] + dl[0] * alpha, lam[1] + dl[1] * alpha];
+            let tr = KktPoint::new(&fa, &fb, &xt, &yt, lt);
+            let r1 = tr.norm2();
             if r1.is_finite() && r1 <= (1.0 - 1e-4 * alpha) * r0 {
-                (x, y, lam, st) = (xt, yt, lt, tr);
+                (x, y, lam, pt) = (xt, yt, lt, tr);
                 accepted = true;
                 break;
             }
@@ -260,10 +327,10 @@ fn kkt_newton(
             break;
         }
     }
-    if status == SolveStatus::MaxIterations && converged(&st, &x, &y, lam) {
+    if status == SolveStatus::MaxIterations && converged(&pt, &x, &y, lam) {
         status = SolveStatus::Converged;
     }
-    KktOut { x, y, lam, status, iterations: it, residual: st.r.amax() }
+    KktOut { x, y, lam, status, iterations: it, residual: pt.norm_inf() }
 }
 
 /// Log-barrier path `min ‖x − y‖² − t(log(1 − p_a') + log(1 − p_b'))` from the interior points,

@@ -15,6 +15,7 @@
 //! 3. if that fails, a log-barrier path `min p₁' − t·log(1 − p₂')` from body 2's interior point, then
 //!    the KKT polish.
 
+use super::fast_eval::{solve_kkt4, FastPosed, ValueGradient};
 use super::newton::{boundary_on_segment, NewtonParams, SolveStatus};
 use crate::body::{Body, PosedBody};
 use crate::math::{Isometry3, Matrix3, Point3, Real, Vector3};
@@ -101,8 +102,8 @@ pub(crate) fn solve_growth(
 ) -> GrowthCore {
     // Case 1: the unconstrained minimizer of p₁ lies in body 2.
     let c1 = b1.interior_point();
-    if b2.value(&c1) <= 1.0 {
-        let e = b1.eval(&c1);
+    if FastPosed::new(b2).value(&c1) <= 1.0 {
+        let e = FastPosed::new(b1).value_gradient(&c1);
         return GrowthCore {
             value: b1.body.min_value(),
             x: b2.pose.inverse_transform_vector(&(c1 - b2.pose.translation.vector)),
@@ -141,8 +142,8 @@ pub(crate) fn solve_growth(
 
 /// Least-squares multiplier for ∇f + μ∇g = 0 at x, clamped positive.
 fn initial_multiplier(b1: &PosedBody<'_>, b2: &PosedBody<'_>, x: &Vector3) -> Real {
-    let gf = b1.eval(x).gradient;
-    let gg = b2.eval(x).gradient;
+    let gf = FastPosed::new(b1).value_gradient(x).gradient;
+    let gg = FastPosed::new(b2).value_gradient(x).gradient;
     let mu = -gf.dot(&gg) / gg.norm_squared().max(Real::MIN_POSITIVE);
     if mu.is_finite() && mu > 0.0 {
         mu
@@ -176,7 +177,7 @@ impl KktOut {
     }
 }
 
-/// KKT residual `[∇f + μ∇g; g]` and its parts at (x, μ).
+/// Values, gradients and Hessians of both bodies at x (the barrier path).
 struct KktState {
     f: Real,
     gf: Vector3,
@@ -184,71 +185,91 @@ struct KktState {
     g: Real,
     gg: Vector3,
     hg: Matrix3,
-    r: [Real; 4],
 }
 
-fn kkt_state(b1: &PosedBody<'_>, b2: &PosedBody<'_>, x: &Vector3, mu: Real) -> KktState {
+fn kkt_state(b1: &PosedBody<'_>, b2: &PosedBody<'_>, x: &Vector3) -> KktState {
     let e1 = b1.eval(x);
     let e2 = b2.eval(x);
-    let s = e1.gradient + e2.gradient * mu;
-    KktState {
-        f: e1.value,
-        gf: e1.gradient,
-        hf: e1.hessian,
-        g: e2.value - 1.0,
-        gg: e2.gradient,
-        hg: e2.hessian,
-        r: [s.x, s.y, s.z, e2.value - 1.0],
+    KktState { f: e1.value, gf: e1.gradient, hf: e1.hessian, g: e2.value - 1.0, gg: e2.gradient, hg: e2.hessian }
+}
+
+/// Value, gradient and residual `[∇f + μ∇g; g]` at one iterate; Hessians come later from the kept
+/// monomial tables, only when a Newton step is taken.
+struct KktPoint {
+    e1: ValueGradient,
+    e2: ValueGradient,
+    r: Vector3,
+    c: Real,
+}
+
+impl KktPoint {
+    fn new(f1: &FastPosed<'_>, f2: &FastPosed<'_>, x: &Vector3, mu: Real) -> Self {
+        let e1 = f1.value_gradient(x);
+        let e2 = f2.value_gradient(x);
+        let r = e1.gradient + e2.gradient * mu;
+        let c = e2.value - 1.0;
+        Self { e1, e2, r, c }
+    }
+
+    fn norm_inf(&self) -> Real {
+        self.r.amax().max(self.c.abs())
+    }
+
+    fn norm2(&self) -> Real {
+        (self.r.norm_squared() + self.c * self.c).sqrt()
     }
 }
 
-fn norm_inf(r: &[Real]) -> Real {
-    r.iter().fold(0.0, |m, v| m.max(v.abs()))
+/// The Newton step at `pt`: closed-form elimination, dense LU if that is singular.
+fn newton_step(f1: &FastPosed<'_>, f2: &FastPosed<'_>, pt: &KktPoint, mu: Real) -> Option<(Vector3, Real)> {
+    let w = f1.hessian(&pt.e1) + f2.hessian(&pt.e2) * mu;
+    let gg = &pt.e2.gradient;
+    if let Some(step) = solve_kkt4(&w, gg, &pt.r, pt.c) {
+        return Some(step);
+    }
+    let mut k = nalgebra::Matrix4::<Real>::zeros();
+    k.fixed_view_mut::<3, 3>(0, 0).copy_from(&w);
+    k.fixed_view_mut::<3, 1>(0, 3).copy_from(gg);
+    k.fixed_view_mut::<1, 3>(3, 0).copy_from(&gg.transpose());
+    let step = k.lu().solve(&-nalgebra::Vector4::new(pt.r.x, pt.r.y, pt.r.z, pt.c))?;
+    Some((Vector3::new(step[0], step[1], step[2]), step[3]))
 }
 
-/// Active-set Newton on `∇f + μ∇g = 0, g = 0`, globalized by backtracking on ‖r‖₂.
+/// Active-set Newton on `∇f + μ∇g = 0, g = 0`, globalized by backtracking on ‖r‖₂ (trial points
+/// cost value and gradient only).
 fn kkt_newton(b1: &PosedBody<'_>, b2: &PosedBody<'_>, x0: Vector3, mu0: Real, params: &NewtonParams) -> KktOut {
+    let (f1, f2) = (FastPosed::new(b1), FastPosed::new(b2));
     let (mut x, mut mu) = (x0, mu0);
-    let mut st = kkt_state(b1, b2, &x, mu);
+    let mut pt = KktPoint::new(&f1, &f2, &x, mu);
     let mut status = SolveStatus::MaxIterations;
     let mut it = 0;
+    // Scale stationarity by the objective's gradient so far-apart bodies (large p₁) are judged fairly.
+    let converged =
+        |pt: &KktPoint, mu: Real| pt.norm_inf() <= params.kkt_tolerance * (1.0 + pt.e1.gradient.amax()) && mu > 0.0;
     while it < params.max_iterations {
-        let res = norm_inf(&st.r);
-        if !res.is_finite() {
+        if !pt.norm_inf().is_finite() {
             status = SolveStatus::Stalled;
             break;
         }
-        // Scale stationarity by the objective's gradient so far-apart bodies (large p₁) are judged fairly.
-        let scale = 1.0 + st.gf.amax();
-        if res <= params.kkt_tolerance * scale && mu > 0.0 {
+        if converged(&pt, mu) {
             status = SolveStatus::Converged;
             break;
         }
         it += 1;
-        let w = st.hf + st.hg * mu;
-        let mut k = nalgebra::Matrix4::<Real>::zeros();
-        k.fixed_view_mut::<3, 3>(0, 0).copy_from(&w);
-        k.fixed_view_mut::<3, 1>(0, 3).copy_from(&st.gg);
-        k.fixed_view_mut::<1, 3>(3, 0).copy_from(&st.gg.transpose());
-        let rhs = -nalgebra::Vector4::new(st.r[0], st.r[1], st.r[2], st.r[3]);
-        let Some(step) = k.lu().solve(&rhs) else {
+        let Some((dx, dmu)) = newton_step(&f1, &f2, &pt, mu) else {
             status = SolveStatus::Stalled;
             break;
         };
-        let dx = Vector3::new(step[0], step[1], step[2]);
-        let dmu = step[3];
-        let r0 = st.r.iter().map(|v| v * v).sum::<Real>().sqrt();
+        let r0 = pt.norm2();
         let mut alpha = 1.0;
         let mut accepted = false;
         for _ in 0..40 {
             let xt = x + dx * alpha;
             let mt = mu + dmu * alpha;
-            let tr = kkt_state(b1, b2, &xt, mt);
-            let r1 = tr.r.iter().map(|v| v * v).sum::<Real>().sqrt();
+            let tr = KktPoint::new(&f1, &f2, &xt, mt);
+            let r1 = tr.norm2();
             if r1.is_finite() && r1 <= (1.0 - 1e-4 * alpha) * r0 {
-                x = xt;
-                mu = mt;
-                st = tr;
+                (x, mu, pt) = (xt, mt, tr);
                 accepted = true;
                 break;
             }
@@ -259,11 +280,10 @@ fn kkt_newton(b1: &PosedBody<'_>, b2: &PosedBody<'_>, x0: Vector3, mu0: Real, pa
             break;
         }
     }
-    let residual = norm_inf(&st.r);
-    if status == SolveStatus::MaxIterations && residual <= params.kkt_tolerance * (1.0 + st.gf.amax()) && mu > 0.0 {
+    if status == SolveStatus::MaxIterations && converged(&pt, mu) {
         status = SolveStatus::Converged;
     }
-    KktOut { x, mu, value: st.f, status, iterations: it, residual }
+    KktOut { x, mu, value: pt.e1.value, status, iterations: it, residual: pt.norm_inf() }
 }
 
 /// Log-barrier path `min f − t·log(−g)` from a strictly feasible point, t → 0; returns the final
@@ -279,7 +299,7 @@ fn barrier(b1: &PosedBody<'_>, b2: &PosedBody<'_>, start: &Vector3, params: &New
             if it >= max_it {
                 break 'outer;
             }
-            let st = kkt_state(b1, b2, &x, 0.0);
+            let st = kkt_state(b1, b2, &x);
             let s = -st.g;
             let grad = st.gf + st.gg * (t / s);
             let hess = st.hf + st.hg * (t / s) + st.gg * st.gg.transpose() * (t / (s * s));

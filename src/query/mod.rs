@@ -5,6 +5,7 @@
 pub mod certified;
 pub mod distance;
 pub mod gradient;
+pub(crate) mod fast_eval;
 pub mod growth;
 pub mod newton;
 pub mod sdp_certificate;

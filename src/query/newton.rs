@@ -61,7 +61,7 @@ pub(crate) fn boundary_on_segment(body: &PosedBody<'_>, inside: &Vector3, outsid
     let mut s = 1.0;
     for _ in 0..100 {
         let x = inside + dir * s;
-        let (v, g) = body.body.polynomial().value_gradient(&body.to_normalized(&x));
+        let (v, g) = body.body.fast_polynomial().value_gradient(&body.to_normalized(&x));
         let r = v - 1.0;
         if r.abs() < 1e-15 {
             break;

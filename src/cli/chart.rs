@@ -1,0 +1,340 @@
+//! `sublevel chart`: speed against accuracy of the collision models, and the Newton tolerance's
+//! price, as CSV and PNG (plotters, bitmap backend).
+//!
+//! ```text
+//! speed-accuracy   x = median cold distance-query time (µs, log scale), y = |distance − exact
+//!                  mesh–mesh distance| (mean and max over the separated poses, meters); one point
+//!                  per model: sos-convex 2d = 2/4/6/8, convex hull (parry GJK), [+ baselines]
+//! tolerance        x = Newton KKT tolerance 1e-4 … 1e-12 (log), y = median time and the error
+//!                  against the tolerance-1e-12 answer, per degree
+//! ```
+//!
+//! A model is a [`ModelRow`] (name, time, errors); adding one is adding a row (see
+//! [`extra_model_rows`]).
+
+use super::bench::{cold_poses, error_stats, load_off_mesh, load_or_fit_pair, median, time_us, PeerShapes};
+use plotters::prelude::*;
+use sublevel::fit::mesh::load_points;
+use sublevel::math::{Isometry3, Real};
+use sublevel::query::{distance, NewtonParams};
+use sublevel::{Error, Result};
+
+/// Arguments of `sublevel chart`.
+#[derive(clap::Args, Debug)]
+pub struct ChartArgs {
+    /// Which chart.
+    #[command(subcommand)]
+    kind: ChartKind,
+}
+
+/// The charts.
+#[derive(clap::Subcommand, Debug)]
+enum ChartKind {
+    /// Query time against distance error per model (sos-convex degrees, hull GJK, baselines).
+    SpeedAccuracy(CommonArgs),
+    /// Newton KKT tolerance against median query time and error vs the 1e-12 answer.
+    Tolerance(CommonArgs),
+}
+
+/// Options shared by both charts.
+#[derive(clap::Args, Debug)]
+struct CommonArgs {
+    /// Folder with chair_101.off and human_10.off.
+    #[arg(long, default_value = "../shared/data/psb")]
+    psb: std::path::PathBuf,
+    /// Folder of fitted bodies `{chair_101,human_10}.deg{2d}.json` (missing ones are fitted).
+    #[arg(long, default_value = "tests/data")]
+    bodies: std::path::PathBuf,
+    /// Degrees 2d, comma separated.
+    #[arg(long, default_value = "2,4,6,8", value_delimiter = ',')]
+    degrees: Vec<usize>,
+    /// Random chair poses around the human (the exact mesh–mesh distance is computed at each).
+    #[arg(long, default_value_t = 100)]
+    poses: usize,
+    /// Back-to-back calls averaged per timed query.
+    #[arg(long, default_value_t = 20)]
+    repeats: usize,
+    /// Seed of the poses (same as `sublevel bench`).
+    #[arg(long, default_value_t = 7)]
+    seed: u64,
+    /// CSV output.
+    #[arg(long)]
+    csv: Option<std::path::PathBuf>,
+    /// PNG output.
+    #[arg(long)]
+    png: Option<std::path::PathBuf>,
+}
+
+/// One model of the speed-accuracy chart.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ModelRow {
+    /// Display name, e.g. `sos 2d=6` or `hull (parry GJK)`.
+    pub name: String,
+    /// Median cold distance-query time in microseconds.
+    pub time_us: Real,
+    /// Mean |distance − exact| over separated poses (meters).
+    pub err_mean: Real,
+    /// Max |distance − exact| over separated poses (meters).
+    pub err_max: Real,
+}
+
+/// HOOK for further baselines (e.g. `fit::baselines::{BoundingSphere, OrientedBox}` once that module
+/// exists on this branch): time their distance on `poses` (chair posed, human at the identity) and
+/// return one [`ModelRow`] each with [`error_stats`] against `exact`. None on this branch yet.
+pub fn extra_model_rows(_poses: &[Isometry3], _exact: &[Real], _repeats: usize) -> Vec<ModelRow> {
+    Vec::new()
+}
+
+/// Runs `sublevel chart`.
+///
+/// # Errors
+/// Bad arguments ([`Error::InvalidArgument`] naming the flag), unreadable meshes or bodies, or a
+/// failed write.
+pub fn run(args: ChartArgs) -> Result<()> {
+    match args.kind {
+        ChartKind::SpeedAccuracy(a) => speed_accuracy(&a),
+        ChartKind::Tolerance(a) => tolerance(&a),
+    }
+}
+
+fn check(a: &CommonArgs) -> Result<()> {
+    if a.repeats == 0 {
+        return Err(Error::invalid("--repeats", "must be at least 1"));
+    }
+    if a.poses == 0 {
+        return Err(Error::invalid("--poses", "must be at least 1"));
+    }
+    Ok(())
+}
+
+fn speed_accuracy(a: &CommonArgs) -> Result<()> {
+    check(a)?;
+    let chair_mesh = load_off_mesh(&a.psb.join("chair_101.off"))?;
+    let human_mesh = load_off_mesh(&a.psb.join("human_10.off"))?;
+    let peers = PeerShapes::new(&chair_mesh, &human_mesh)?;
+    let (chair_pts, human_pts) =
+        (load_points(&a.psb.join("chair_101.off"))?, load_points(&a.psb.join("human_10.off"))?);
+    let poses = cold_poses(a.seed, a.poses);
+    let id = Isometry3::identity();
+    eprintln!("exact mesh–mesh distances at {} poses", poses.len());
+    let exact: Vec<Real> = poses.iter().map(|p| peers.mesh_distance(p, &id)).collect();
+    let params = NewtonParams::default();
+    let mut rows = Vec::new();
+    for &degree in &a.degrees {
+        let (chair, human) = load_or_fit_pair(&a.bodies, degree, &chair_pts, &human_pts)?;
+        let mut times = Vec::new();
+        let mut dists = Vec::new();
+        for p in &poses {
+            let (us, r) = time_us(a.repeats, || distance(&chair, p, &human, &id, None, &params));
+            times.push(us);
+            dists.push(r.distance);
+        }
+        let (err_mean, err_max) = error_stats(&dists, &exact);
+        rows.push(ModelRow { name: format!("sos 2d={degree}"), time_us: median(times), err_mean, err_max });
+    }
+    let mut times = Vec::new();
+    let mut dists = Vec::new();
+    for p in &poses {
+        let (us, d) = time_us(a.repeats, || peers.hull_distance(p, &id));
+        times.push(us);
+        dists.push(d);
+    }
+    let (err_mean, err_max) = error_stats(&dists, &exact);
+    rows.push(ModelRow { name: "hull (parry GJK)".into(), time_us: median(times), err_mean, err_max });
+    rows.extend(extra_model_rows(&poses, &exact, a.repeats));
+
+    let n_sep = exact.iter().filter(|d| **d > 0.0).count();
+    println!("speed vs accuracy: chair_101 vs human_10, {n_sep} separated of {} poses", poses.len());
+    println!("{:>18} {:>12} {:>14} {:>14}", "model", "median µs", "err mean [m]", "err max [m]");
+    for r in &rows {
+        println!("{:>18} {:>12.2} {:>14.5} {:>14.5}", r.name, r.time_us, r.err_mean, r.err_max);
+    }
+    if let Some(path) = &a.csv {
+        let mut text = String::from("model,median_us,err_mean_m,err_max_m\n");
+        for r in &rows {
+            text.push_str(&format!("{},{:.4},{:.6},{:.6}\n", r.name, r.time_us, r.err_mean, r.err_max));
+        }
+        write(path, text.as_bytes())?;
+    }
+    if let Some(path) = &a.png {
+        let pts: Vec<(String, Real, Real, Real)> =
+            rows.iter().map(|r| (r.name.clone(), r.time_us, r.err_mean, r.err_max)).collect();
+        plot_points(
+            path,
+            "Speed vs accuracy (chair_101 vs human_10)",
+            "median distance query time [µs] (log)",
+            "|d − d_mesh| [m]",
+            &pts,
+        )?;
+    }
+    Ok(())
+}
+
+/// Tolerances of the tolerance chart.
+pub const TOLERANCES: [Real; 5] = [1e-4, 1e-6, 1e-8, 1e-10, 1e-12];
+
+fn tolerance(a: &CommonArgs) -> Result<()> {
+    check(a)?;
+    let (chair_pts, human_pts) =
+        (load_points(&a.psb.join("chair_101.off"))?, load_points(&a.psb.join("human_10.off"))?);
+    let poses = cold_poses(a.seed, a.poses);
+    let id = Isometry3::identity();
+    let mut rows: Vec<(usize, Real, Real, Real, Real)> = Vec::new();
+    for &degree in &a.degrees {
+        let (chair, human) = load_or_fit_pair(&a.bodies, degree, &chair_pts, &human_pts)?;
+        let tight = NewtonParams { kkt_tolerance: 1e-12, ..NewtonParams::default() };
+        let reference: Vec<Real> =
+            poses.iter().map(|p| distance(&chair, p, &human, &id, None, &tight).distance).collect();
+        for &tol in &TOLERANCES {
+            let params = NewtonParams { kkt_tolerance: tol, ..NewtonParams::default() };
+            let mut times = Vec::new();
+            let mut errs = Vec::new();
+            for (p, r) in poses.iter().zip(&reference) {
+                let (us, d) = time_us(a.repeats, || distance(&chair, p, &human, &id, None, &params));
+                times.push(us);
+                errs.push((d.distance - r).abs());
+            }
+            let mean = errs.iter().sum::<Real>() / errs.len() as Real;
+            let max = errs.iter().cloned().fold(0.0, Real::max);
+            rows.push((degree, tol, median(times), mean, max));
+        }
+    }
+    println!("Newton KKT tolerance: cold distance, chair_101 vs human_10, {} poses", poses.len());
+    println!("{:>3} {:>9} {:>11} {:>14} {:>14}", "2d", "tolerance", "median µs", "err mean [m]", "err max [m]");
+    for r in &rows {
+        println!("{:>3} {:>9.0e} {:>11.2} {:>14.3e} {:>14.3e}", r.0, r.1, r.2, r.3, r.4);
+    }
+    if let Some(path) = &a.csv {
+        let mut text = String::from("degree,kkt_tolerance,median_us,err_mean_m,err_max_m\n");
+        for r in &rows {
+            text.push_str(&format!("{},{:e},{:.4},{:e},{:e}\n", r.0, r.1, r.2, r.3, r.4));
+        }
+        write(path, text.as_bytes())?;
+    }
+    if let Some(path) = &a.png {
+        plot_tolerance(path, &rows)?;
+    }
+    Ok(())
+}
+
+fn write(path: &std::path::Path, bytes: &[u8]) -> Result<()> {
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)?;
+    }
+    std::fs::write(path, bytes)?;
+    eprintln!("wrote {}", path.display());
+    Ok(())
+}
+
+fn plot_err(e: impl std::fmt::Display) -> Error {
+    Error::invalid("--png", format!("plotting failed: {e}"))
+}
+
+/// Log-x scatter of (name, x, y_mean, y_max): a filled dot at the mean, a ring at the max, a label.
+fn plot_points(
+    path: &std::path::Path,
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    pts: &[(String, Real, Real, Real)],
+) -> Result<()> {
+    let finite = |v: Real| v.is_finite() && v >= 0.0;
+    let xs: Vec<Real> = pts.iter().map(|p| p.1).filter(|v| finite(*v) && *v > 0.0).collect();
+    let ys: Vec<Real> = pts.iter().flat_map(|p| [p.2, p.3]).filter(|v| finite(*v)).collect();
+    if xs.is_empty() || ys.is_empty() {
+        return Err(Error::invalid("--png", "no finite points to plot"));
+    }
+    let (x0, x1) = (xs.iter().cloned().fold(Real::INFINITY, Real::min), xs.iter().cloned().fold(0.0, Real::max));
+    let y1 = ys.iter().cloned().fold(0.0, Real::max) * 1.15 + 1e-6;
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)?;
+    }
+    let root = BitMapBackend::new(path, (1000, 700)).into_drawing_area();
+    root.fill(&WHITE).map_err(plot_err)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 26))
+        .margin(20)
+        .x_label_area_size(50)
+        .y_label_area_size(80)
+        .build_cartesian_2d((x0 / 2.0..x1 * 2.0).log_scale(), 0.0..y1)
+        .map_err(plot_err)?;
+    chart.configure_mesh().x_desc(x_label).y_desc(y_label).draw().map_err(plot_err)?;
+    let palette = [&BLUE, &RED, &GREEN, &MAGENTA, &CYAN, &BLACK];
+    for (i, (name, x, mean, max)) in pts.iter().enumerate() {
+        if !(finite(*x) && *x > 0.0) {
+            continue;
+        }
+        let color = palette[i % palette.len()];
+        if finite(*mean) {
+            chart.draw_series(std::iter::once(Circle::new((*x, *mean), 6, color.filled()))).map_err(plot_err)?;
+        }
+        if finite(*max) {
+            chart.draw_series(std::iter::once(Circle::new((*x, *max), 6, color.stroke_width(2)))).map_err(plot_err)?;
+            chart
+                .draw_series(std::iter::once(PathElement::new(vec![(*x, mean.max(0.0)), (*x, *max)], color)))
+                .map_err(plot_err)?;
+        }
+        let y_text = if finite(*max) { *max } else { *mean };
+        chart
+            .draw_series(std::iter::once(Text::new(name.clone(), (*x * 1.08, y_text), ("sans-serif", 16).into_font())))
+            .map_err(plot_err)?;
+    }
+    chart
+        .draw_series(std::iter::once(Text::new(
+            "filled: mean error, ring: max error".to_string(),
+            (x0 / 1.8, y1 * 0.95),
+            ("sans-serif", 15).into_font(),
+        )))
+        .map_err(plot_err)?;
+    root.present().map_err(plot_err)?;
+    eprintln!("wrote {}", path.display());
+    Ok(())
+}
+
+/// Tolerance chart: per degree, median time against tolerance (left) and max error (right).
+fn plot_tolerance(path: &std::path::Path, rows: &[(usize, Real, Real, Real, Real)]) -> Result<()> {
+    if rows.is_empty() {
+        return Err(Error::invalid("--png", "no rows to plot"));
+    }
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)?;
+    }
+    let root = BitMapBackend::new(path, (1200, 550)).into_drawing_area();
+    root.fill(&WHITE).map_err(plot_err)?;
+    let (left, right) = root.split_horizontally(600);
+    let t_max = rows.iter().map(|r| r.2).fold(0.0, Real::max) * 1.2 + 1e-3;
+    let e_min = rows.iter().map(|r| r.4).filter(|v| *v > 0.0).fold(Real::INFINITY, Real::min).min(1e-12);
+    let e_max = rows.iter().map(|r| r.4).fold(0.0, Real::max).max(1e-10) * 10.0;
+    let mut degrees: Vec<usize> = rows.iter().map(|r| r.0).collect();
+    degrees.dedup();
+    let palette = [&BLUE, &RED, &GREEN, &MAGENTA];
+    let mut c1 = ChartBuilder::on(&left)
+        .caption("median cold distance time", ("sans-serif", 22))
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(60)
+        .build_cartesian_2d((1e-13..1e-3).log_scale(), 0.0..t_max)
+        .map_err(plot_err)?;
+    c1.configure_mesh().x_desc("KKT tolerance").y_desc("µs").draw().map_err(plot_err)?;
+    let mut c2 = ChartBuilder::on(&right)
+        .caption("max |d − d(1e-12)|", ("sans-serif", 22))
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d((1e-13..1e-3).log_scale(), (e_min / 10.0..e_max).log_scale())
+        .map_err(plot_err)?;
+    c2.configure_mesh().x_desc("KKT tolerance").y_desc("m").draw().map_err(plot_err)?;
+    for (i, d) in degrees.iter().enumerate() {
+        let color = palette[i % palette.len()];
+        let pts: Vec<_> = rows.iter().filter(|r| r.0 == *d).collect();
+        c1.draw_series(LineSeries::new(pts.iter().map(|r| (r.1, r.2)), color))
+            .map_err(plot_err)?
+            .label(format!("2d = {d}"))
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
+        c2.draw_series(LineSeries::new(pts.iter().map(|r| (r.1, r.4.max(e_min / 10.0))), color)).map_err(plot_err)?;
+    }
+    c1.configure_series_labels().border_style(BLACK).background_style(WHITE).draw().map_err(plot_err)?;
+    root.present().map_err(plot_err)?;
+    eprintln!("wrote {}", path.display());
+    Ok(())
+}

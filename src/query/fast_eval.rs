@@ -1,0 +1,200 @@
+//! Hot-path evaluation of a posed body for the Newton solvers: p'(x) = p(A x + b) through the
+//! body's precomputed derivative tables ([`crate::poly::FastPoly`]), with the Hessian computed
+//! only when a Newton step needs it (`∇ₓ = Aᵀ∇ᵤ`, `∇²ₓ = Aᵀ∇²ᵤA`, A = Rᵀ/scale).
+//!
+//! Also the closed-form small linear algebra of the KKT systems (3 × 3 inverses by cofactors,
+//! block elimination of the 4 × 4 growth and 8 × 8 distance systems).
+
+use crate::body::PosedBody;
+use crate::math::{Matrix3, Real, Vector3};
+use crate::poly::fast::Monomials;
+use crate::poly::FastPoly;
+
+/// A posed body's world → normalized map and its derivative tables.
+#[derive(Clone, Copy)]
+pub(crate) struct FastPosed<'a> {
+    poly: &'a FastPoly,
+    a: Matrix3,
+    at: Matrix3,
+    b: Vector3,
+}
+
+/// Value and world gradient at one point, with the monomial table for a later Hessian.
+pub(crate) struct ValueGradient {
+    pub value: Real,
+    pub gradient: Vector3,
+    pub monomials: Monomials,
+}
+
+impl<'a> FastPosed<'a> {
+    /// The evaluator of a posed body.
+    pub fn new(pb: &PosedBody<'a>) -> Self {
+        let a = *pb.linear();
+        Self { poly: pb.body.fast_polynomial(), a, at: a.transpose(), b: pb.to_normalized(&Vector3::zeros()) }
+    }
+
+    /// p'(x).
+    #[inline]
+    pub fn value(&self, x: &Vector3) -> Real {
+        self.poly.value(&(self.a * x + self.b))
+    }
+
+    /// p'(x) and ∇p'(x), keeping the monomial table.
+    #[inline]
+    pub fn value_gradient(&self, x: &Vector3) -> ValueGradient {
+        let monomials = self.poly.monomials(&(self.a * x + self.b));
+        let (value, g) = self.poly.value_gradient_from(&monomials);
+        ValueGradient { value, gradient: self.at * g, monomials }
+    }
+
+    /// ∇²p'(x) from the monomial table of [`Self::value_gradient`] at x.
+    #[inline]
+    pub fn hessian(&self, vg: &ValueGradient) -> Matrix3 {
+        self.at * self.poly.hessian_from(&vg.monomials) * self.a
+    }
+}
+
+/// Inverse of a 3 × 3 matrix by cofactors; `None` when (nearly) singular relative to its entries.
+#[inline]
+pub(crate) fn inverse3(m: &Matrix3) -> Option<Matrix3> {
+    let c00 = m[(1, 1)] * m[(2, 2)] - m[(1, 2)] * m[(2, 1)];
+    let c01 = m[(1, 2)] * m[(2, 0)] - m[(1, 0)] * m[(2, 2)];
+    let c02 = m[(1, 0)] * m[(2, 1)] - m[(1, 1)] * m[(2, 0)];
+    let det = m[(0, 0)] * c00 + m[(0, 1)] * c01 + m[(0, 2)] * c02;
+    let s = m.amax();
+    if !(det.is_finite() && det.abs() > 1e-14 * s * s * s && s > 0.0) {
+        return None;
+    }
+    let inv_det = 1.0 / det;
+    Some(Matrix3::new(
+        c00 * inv_det,
+        (m[(0, 2)] * m[(2, 1)] - m[(0, 1)] * m[(2, 2)]) * inv_det,
+        (m[(0, 1)] * m[(1, 2)] - m[(0, 2)] * m[(1, 1)]) * inv_det,
+        c01 * inv_det,
+        (m[(0, 0)] * m[(2, 2)] - m[(0, 2)] * m[(2, 0)]) * inv_det,
+        (m[(0, 2)] * m[(1, 0)] - m[(0, 0)] * m[(1, 2)]) * inv_det,
+        c02 * inv_det,
+        (m[(0, 1)] * m[(2, 0)] - m[(0, 0)] * m[(2, 1)]) * inv_det,
+        (m[(0, 0)] * m[(1, 1)] - m[(0, 1)] * m[(1, 0)]) * inv_det,
+    ))
+}
+
+/// Solves the growth KKT system `[W g; gᵀ 0] [dx; dμ] = −[r; c]` by eliminating dx
+/// (dμ = (c − gᵀW⁻¹r)/(gᵀW⁻¹g)); `None` when W or the Schur complement is singular.
+#[inline]
+pub(crate) fn solve_kkt4(w: &Matrix3, g: &Vector3, r: &Vector3, c: Real) -> Option<(Vector3, Real)> {
+    let wi = inverse3(w)?;
+    let wg = wi * g;
+    let wr = wi * r;
+    let s = g.dot(&wg);
+    if !(s.is_finite() && s.abs() > 1e-300) {
+        return None;
+    }
+    let dmu = (c - g.dot(&wr)) / s;
+    let dx = -(wr + wg * dmu);
+    (dx.iter().all(|v| v.is_finite()) && dmu.is_finite()).then_some((dx, dmu))
+}
+
+/// Solves the distance KKT system (8 × 8)
+///
+/// ```text
+/// [ Wa  −2I  ga  0 ] [dx]     [ra]
+/// [ −2I  Wb  0  gb ] [dy]  = −[rb]
+/// [ gaᵀ  0   0   0 ] [dλa]    [ca]
+/// [ 0   gbᵀ  0   0 ] [dλb]    [cb]
+/// ```
+///
+/// by block elimination: the 6 × 6 block M = [[Wa, −2I], [−2I, Wb]] through Wa⁻¹ and the Schur
+/// complement Wb − 4Wa⁻¹, then the 2 × 2 Schur complement GᵀM⁻¹G of the constraints.
+#[allow(clippy::too_many_arguments)]
+#[inline]
+pub(crate) fn solve_kkt8(
+    wa: &Matrix3,
+    wb: &Matrix3,
+    ga: &Vector3,
+    gb: &Vector3,
+    ra: &Vector3,
+    rb: &Vector3,
+    ca: Real,
+    cb: Real,
+) -> Option<(Vector3, Vector3, [Real; 2])> {
+    let ai = inverse3(wa)?;
+    let si = inverse3(&(wb - ai * 4.0))?;
+    // M⁻¹ [f; g]: q = Si (g + 2 Ai f), p = Ai (f + 2 q).
+    let solve = |f: &Vector3, g: &Vector3| {
+        let q = si * (g + ai * f * 2.0);
+        let p = ai * (f + q * 2.0);
+        (p, q)
+    };
+    let (p0, q0) = solve(ra, rb);
+    let z = Vector3::zeros();
+    let (p1, q1) = solve(ga, &z);
+    let (p2, q2) = solve(&z, gb);
+    let (s11, s12, s21, s22) = (ga.dot(&p1), ga.dot(&p2), gb.dot(&q1), gb.dot(&q2));
+    let det = s11 * s22 - s12 * s21;
+    let scale = (s11.abs() + s12.abs()) * (s21.abs() + s22.abs());
+    if !(det.is_finite() && det.abs() > 1e-14 * scale && scale > 0.0) {
+        return None;
+    }
+    let (h1, h2) = (ca - ga.dot(&p0), cb - gb.dot(&q0));
+    let l1 = (s22 * h1 - s12 * h2) / det;
+    let l2 = (s11 * h2 - s21 * h1) / det;
+    let dx = -(p0 + p1 * l1 + p2 * l2);
+    let dy = -(q0 + q1 * l1 + q2 * l2);
+    let ok = dx.iter().chain(dy.iter()).all(|v| v.is_finite()) && l1.is_finite() && l2.is_finite();
+    ok.then_some((dx, dy, [l1, l2]))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{SMatrix, SVector};
+    use rand::{Rng, SeedableRng};
+
+    fn random_spd(rng: &mut rand_chacha::ChaCha8Rng) -> Matrix3 {
+        let b = Matrix3::from_fn(|_, _| rng.random_range(-1.0..1.0));
+        b * b.transpose() + Matrix3::identity() * 0.1
+    }
+
+    #[test]
+    fn block_solves_match_dense_lu() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let v = |rng: &mut rand_chacha::ChaCha8Rng| {
+            Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0))
+        };
+        for _ in 0..50 {
+            // Growth 4 × 4.
+            let (w, g, r, c) = (random_spd(&mut rng), v(&mut rng), v(&mut rng), rng.random_range(-1.0..1.0));
+            let mut k = nalgebra::Matrix4::<Real>::zeros();
+            k.fixed_view_mut::<3, 3>(0, 0).copy_from(&w);
+            k.fixed_view_mut::<3, 1>(0, 3).copy_from(&g);
+            k.fixed_view_mut::<1, 3>(3, 0).copy_from(&g.transpose());
+            let dense = k.lu().solve(&-nalgebra::Vector4::new(r.x, r.y, r.z, c)).unwrap();
+            let (dx, dmu) = solve_kkt4(&w, &g, &r, c).unwrap();
+            assert!((dx - dense.fixed_rows::<3>(0)).amax() < 1e-9 * (1.0 + dense.amax()));
+            assert!((dmu - dense[3]).abs() < 1e-9 * (1.0 + dense.amax()));
+            // Distance 8 × 8.
+            let two = Matrix3::identity() * 2.0;
+            let (wa, wb) = (two + random_spd(&mut rng), two + random_spd(&mut rng));
+            let (ga, gb, ra, rb) = (v(&mut rng), v(&mut rng), v(&mut rng), v(&mut rng));
+            let (ca, cb) = (rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
+            let mut j = SMatrix::<Real, 8, 8>::zeros();
+            j.fixed_view_mut::<3, 3>(0, 0).copy_from(&wa);
+            j.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-two));
+            j.fixed_view_mut::<3, 3>(3, 0).copy_from(&(-two));
+            j.fixed_view_mut::<3, 3>(3, 3).copy_from(&wb);
+            j.fixed_view_mut::<3, 1>(0, 6).copy_from(&ga);
+            j.fixed_view_mut::<3, 1>(3, 7).copy_from(&gb);
+            j.fixed_view_mut::<1, 3>(6, 0).copy_from(&ga.transpose());
+            j.fixed_view_mut::<1, 3>(7, 3).copy_from(&gb.transpose());
+            let rhs = -SVector::<Real, 8>::from_column_slice(&[ra.x, ra.y, ra.z, rb.x, rb.y, rb.z, ca, cb]);
+            let dense = j.lu().solve(&rhs).unwrap();
+            let (dx, dy, dl) = solve_kkt8(&wa, &wb, &ga, &gb, &ra, &rb, ca, cb).unwrap();
+            let tol = 1e-9 * (1.0 + dense.amax());
+            assert!((dx - dense.fixed_rows::<3>(0)).amax() < tol);
+            assert!((dy - dense.fixed_rows::<3>(3)).amax() < tol);
+            assert!((dl[0] - dense[6]).abs() < tol && (dl[1] - dense[7]).abs() < tol);
+        }
+        assert!(inverse3(&Matrix3::zeros()).is_none());
+    }
+}
