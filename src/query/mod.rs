@@ -4,8 +4,8 @@
 
 pub mod certified;
 pub mod distance;
-pub mod gradient;
 pub(crate) mod fast_eval;
+pub mod gradient;
 pub mod growth;
 pub mod newton;
 pub mod sdp_certificate;
