@@ -529,6 +529,21 @@ pub fn contain_bodies(
             bodies.len()
         )));
     }
+    for (i, (body, _)) in bodies.iter().enumerate() {
+        // The top-degree form of 1 − p − τᵢ(1 − gᵢ) must be nonnegative; with 2k + deg gᵢ < 2d it
+        // is −p's, so p's top form would vanish and log det P = −∞ (the paper's 2k = 2d − deg gᵢ).
+        if settings.multiplier_degree + body.degree() < settings.degree {
+            return Err(Error::invalid(
+                "multiplier_degree",
+                format!(
+                    "2k + deg g must be at least 2d = {}: body {i} has degree {}, so 2k must be at least {}",
+                    settings.degree,
+                    body.degree(),
+                    settings.degree - body.degree()
+                ),
+            ));
+        }
+    }
     for (i, (_, pose)) in bodies.iter().enumerate() {
         let q = pose.rotation.quaternion();
         if !(pose.translation.vector.iter().all(|v| v.is_finite()) && q.coords.iter().all(|v| v.is_finite())) {
