@@ -38,6 +38,7 @@
 //! Sizes (per body, with the same degree for every body): at 2d = 4 and deg g = 4, 2k = 0, each
 //! body adds a 10 × 10 Gram and 35 equations; 2k = 2 raises its degree to 6 (20 × 20, 84 rows).
 
+use super::logdet_p::pair_index;
 use super::{volume, FitProgress, FitStage, KktSolver};
 use crate::body::{Body, FitReport};
 use crate::conic::{quiet_settings, ConicBuilder, Row};
@@ -148,19 +149,6 @@ impl ContainmentSettings {
 
 fn report(progress: &mut dyn FnMut(&FitProgress), stage: FitStage, fraction: Real, message: String) {
     progress(&FitProgress { stage, fraction, message });
-}
-
-/// Index of the unordered y-pair (k ≤ l) among (0,0), (0,1), (0,2), (1,1), (1,2), (2,2).
-fn pair_index(k: usize, l: usize) -> usize {
-    let (k, l) = if k <= l { (k, l) } else { (l, k) };
-    match (k, l) {
-        (0, 0) => 0,
-        (0, 1) => 1,
-        (0, 2) => 2,
-        (1, 1) => 3,
-        (1, 2) => 4,
-        _ => 5,
-    }
 }
 
 fn add3(a: [u8; 3], b: [u8; 3]) -> [u8; 3] {

@@ -104,7 +104,7 @@ impl Rows {
 }
 
 /// Index of the unordered y-pair (k ≤ l) among (0,0), (0,1), (0,2), (1,1), (1,2), (2,2).
-fn pair_index(k: usize, l: usize) -> usize {
+pub(crate) fn pair_index(k: usize, l: usize) -> usize {
     let (k, l) = if k <= l { (k, l) } else { (l, k) };
     match (k, l) {
         (0, 0) => 0,
