@@ -22,6 +22,11 @@
 //! (dimensionless). Newton's value `n` and the SDP bound `s` agree when
 //! `|n − s| ≤ AGREEMENT_RELATIVE · |s|` or `|n − s| ≤ AGREEMENT_ABSOLUTE` (the absolute branch covers
 //! values near 0: touching and overlapping pairs, where the SDP's bound is 0 up to its tolerance).
+//! An overlapping distance answer (0) is certified by its common witness point: when it lies in both
+//! bodies (p(x) ≤ 1 + [`OVERLAP_POINT_TOLERANCE`] for each), the value 0 is attained at a feasible
+//! point and is a lower bound of any squared distance, so it is optimal; the SDP then only has to
+//! not contradict it (bound ≤ `AGREEMENT_ABSOLUTE`). This covers overlaps where the SDP ends
+//! `AlmostSolved` a few 1e-9 below 0 with an unverifiable a-posteriori bound.
 //!
 //! # Verified SDP
 //!
@@ -56,6 +61,10 @@ pub const AGREEMENT_RELATIVE: Real = 1e-6;
 /// Absolute tolerance of the agreement rule, in the objective's units (m² for the squared
 /// distance; dimensionless for d(p₁‖p₂)).
 pub const AGREEMENT_ABSOLUTE: Real = 1e-9;
+
+/// Slack on p(x) ≤ 1 when a common witness point certifies an overlap (distance 0): the point lies
+/// in both bodies scaled about their interior by at most this relative amount.
+pub const OVERLAP_POINT_TOLERANCE: Real = 1e-9;
 
 /// When to solve the level-0 SDP certificate.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -196,6 +205,13 @@ fn growth_summary(c: &GrowthCertificate, newton: Option<Real>) -> CertificateSum
     summary(c.value, c.verified_value, c.gram_min_eigenvalue, c.solve_seconds, &c.solver_status, newton)
 }
 
+/// Whether `x` (world frame) lies in both posed bodies up to [`OVERLAP_POINT_TOLERANCE`]: a primal
+/// certificate that the distance is 0.
+fn common_point_certifies_overlap(a: &Body, pose_a: &Isometry3, b: &Body, pose_b: &Isometry3, x: &Point3) -> bool {
+    let inside = |body: &Body, pose: &Isometry3| body.value_at(&(pose.inverse() * x)) <= 1.0 + OVERLAP_POINT_TOLERANCE;
+    inside(a, pose_a) && inside(b, pose_b)
+}
+
 fn is_nonconvex(a: &Body, b: &Body) -> bool {
     a.report.nonconvex || b.report.nonconvex
 }
@@ -242,7 +258,13 @@ pub fn certified_distance(
             converged: newton_ok,
         };
     };
-    let s = distance_summary(&c, Some(n2));
+    let mut s = distance_summary(&c, Some(n2));
+    if newton_ok && newton.overlapping && common_point_certifies_overlap(a, pose_a, b, pose_b, &newton.witness_a) {
+        // Distance 0 is proven by the common witness point itself (objective 0 at a feasible
+        // point, and a squared distance is ≥ 0); the SDP only has to not contradict it.
+        s.agrees = s.bound <= AGREEMENT_ABSOLUTE;
+        s.relative_gap = 0.0;
+    }
     if newton_ok && (s.agrees || !s.verified) {
         // Agreement, or an unverified certificate that cannot overrule a converged KKT point.
         return CertifiedDistance {
