@@ -10,7 +10,7 @@
 //! ```
 //!
 //! A model is a [`ModelRow`] (name, time, errors); adding one is adding a row (see
-//! [`extra_model_rows`]).
+//! [`extra_model_rows`], which holds the sphere, oriented-box and relaxed-convexity models).
 
 use super::bench::{cold_poses, error_stats, load_off_mesh, load_or_fit_pair, median, time_us, PeerShapes};
 use plotters::prelude::*;
@@ -78,11 +78,89 @@ pub struct ModelRow {
     pub err_max: Real,
 }
 
-/// HOOK for further baselines (e.g. `fit::baselines::{BoundingSphere, OrientedBox}` once that module
-/// exists on this branch): time their distance on `poses` (chair posed, human at the identity) and
-/// return one [`ModelRow`] each with [`error_stats`] against `exact`. None on this branch yet.
-pub fn extra_model_rows(_poses: &[Isometry3], _exact: &[Real], _repeats: usize) -> Vec<ModelRow> {
-    Vec::new()
+/// The baseline models of Table 1 and the relaxed-convexity body, timed and scored on `poses`
+/// (chair posed, human at the identity) against `exact`:
+///
+/// - bounding sphere (exact minimum ball, `fit::baselines::min_enclosing_ball`): closed-form
+///   distance max(0, ‖c₁ − c₂‖ − r₁ − r₂);
+/// - oriented box (`fit::baselines::min_volume_obb`): parry3d's cuboid–cuboid distance;
+/// - sos c = 10, 2d = 4 (eq. "VAG.param.convex", fitted here): the level-0 SDP lower bound of
+///   `query::certified_distance` (nonconvex bodies), timed once per pose (an SDP per query).
+///
+/// # Errors
+/// A failed baseline or fit.
+pub fn extra_model_rows(
+    chair: &[sublevel::math::Point3],
+    human: &[sublevel::math::Point3],
+    poses: &[Isometry3],
+    exact: &[Real],
+    repeats: usize,
+) -> Result<Vec<ModelRow>> {
+    use sublevel::fit::baselines::{convex_hull, min_enclosing_ball, min_volume_obb, OrientedBox};
+    let id = Isometry3::identity();
+    let mut rows = Vec::new();
+    let score = |name: &str, times: Vec<Real>, dists: Vec<Real>| {
+        let (err_mean, err_max) = error_stats(&dists, exact);
+        ModelRow { name: name.into(), time_us: median(times), err_mean, err_max }
+    };
+
+    let (ball_a, ball_b) = (min_enclosing_ball(chair, 1)?, min_enclosing_ball(human, 1)?);
+    let (mut times, mut dists) = (Vec::new(), Vec::new());
+    for p in poses {
+        let (us, d) = time_us(repeats, || {
+            let gap = (p * ball_a.center - ball_b.center).norm() - ball_a.radius - ball_b.radius;
+            gap.max(0.0)
+        });
+        times.push(us);
+        dists.push(d);
+    }
+    rows.push(score("sphere", times, dists));
+
+    let cuboid = |b: &OrientedBox| -> Result<(parry3d_f64::shape::Cuboid, Isometry3)> {
+        let m = sublevel::math::Matrix3::from_columns(&b.axes);
+        let r = nalgebra::Rotation3::from_matrix_eps(&m, 1e-12, 100, nalgebra::Rotation3::identity());
+        let h = b.half_extents;
+        let pose = Isometry3::from_parts(b.center.coords.into(), nalgebra::UnitQuaternion::from_rotation_matrix(&r));
+        Ok((parry3d_f64::shape::Cuboid::new(parry3d_f64::math::Vector::new(h.x, h.y, h.z)), pose))
+    };
+    let (box_a, local_a) = cuboid(&min_volume_obb(&convex_hull(chair)?)?)?;
+    let (box_b, local_b) = cuboid(&min_volume_obb(&convex_hull(human)?)?)?;
+    let pose_b = super::bench::parry_pose(&(id * local_b));
+    let (mut times, mut dists) = (Vec::new(), Vec::new());
+    for p in poses {
+        let pose_a = super::bench::parry_pose(&(p * local_a));
+        let (us, d) = time_us(repeats, || {
+            parry3d_f64::query::distance(&pose_a, &box_a, &pose_b, &box_b).map_or(Real::NAN, |d| d.distance)
+        });
+        times.push(us);
+        dists.push(d);
+    }
+    rows.push(score("oriented box", times, dists));
+
+    eprintln!("fitting the chair and the human with c = 10 at 2d = 4 (relaxed convexity)");
+    let settings =
+        sublevel::fit::FitSettings { degree: 4, volume_samples: 20_000, ..Default::default() }.with_relaxation(10.0);
+    let chair_c = sublevel::fit::fit_points(chair, &settings, &mut |_| {})?;
+    let human_c = sublevel::fit::fit_points(human, &settings, &mut |_| {})?;
+    let params = sublevel::query::CertifyParams::default();
+    let (mut times, mut dists) = (Vec::new(), Vec::new());
+    for p in poses {
+        let (us, r) = time_us(1, || {
+            sublevel::query::certified_distance(
+                &chair_c,
+                p,
+                &human_c,
+                &id,
+                None,
+                &params,
+                sublevel::query::CertifyMode::Newton,
+            )
+        });
+        times.push(us);
+        dists.push(r.result.distance);
+    }
+    rows.push(score("sos c=10 2d=4 (lower bound)", times, dists));
+    Ok(rows)
 }
 
 /// Runs `sublevel chart`.
@@ -141,7 +219,7 @@ fn speed_accuracy(a: &CommonArgs) -> Result<()> {
     }
     let (err_mean, err_max) = error_stats(&dists, &exact);
     rows.push(ModelRow { name: "hull (parry GJK)".into(), time_us: median(times), err_mean, err_max });
-    rows.extend(extra_model_rows(&poses, &exact, a.repeats));
+    rows.extend(extra_model_rows(&chair_pts, &human_pts, &poses, &exact, a.repeats)?);
 
     let n_sep = exact.iter().filter(|d| **d > 0.0).count();
     println!("speed vs accuracy: chair_101 vs human_10, {n_sep} separated of {} poses", poses.len());
