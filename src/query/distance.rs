@@ -22,7 +22,7 @@
 //! log-barrier path from the two interior points is the globally convergent fallback. A KKT point with λ_a, λ_b > 0 is the global
 //! minimizer of this convex program.
 
-use super::fast_eval::{solve_kkt8, FastPosed, ValueGradient};
+use super::fast_eval::{solve_kkt8, FastPosed, PosedEval};
 use super::growth::{solve_growth, GrowthWarmStart};
 use super::newton::{boundary_on_segment, NewtonParams, SolveStatus};
 use crate::body::{Body, PosedBody};
@@ -194,8 +194,8 @@ fn finish(
 
 /// Least-squares multipliers at (x, y), clamped positive.
 fn initial_multipliers(ba: &PosedBody<'_>, bb: &PosedBody<'_>, x: &Vector3, y: &Vector3) -> [Real; 2] {
-    let ga = FastPosed::new(ba).value_gradient(x).gradient;
-    let gb = FastPosed::new(bb).value_gradient(y).gradient;
+    let ga = FastPosed::new(ba).value_gradient(x).1;
+    let gb = FastPosed::new(bb).value_gradient(y).1;
     let d = y - x;
     let la = 2.0 * d.dot(&ga) / ga.norm_squared().max(Real::MIN_POSITIVE);
     let lb = -2.0 * d.dot(&gb) / gb.norm_squared().max(Real::MIN_POSITIVE);
@@ -218,8 +218,8 @@ type Mat8 = SMatrix<Real, 8, 8>;
 /// Value, gradient and residual of the KKT system at one iterate (no Hessians: those are computed
 /// from the kept monomial tables only when a Newton step is taken).
 struct KktPoint {
-    ea: ValueGradient,
-    eb: ValueGradient,
+    ea: PosedEval,
+    eb: PosedEval,
     ra: Vector3,
     rb: Vector3,
     ca: Real,
@@ -228,8 +228,8 @@ struct KktPoint {
 
 impl KktPoint {
     fn new(fa: &FastPosed<'_>, fb: &FastPosed<'_>, x: &Vector3, y: &Vector3, lam: [Real; 2]) -> Self {
-        let ea = fa.value_gradient(x);
-        let eb = fb.value_gradient(y);
+        let ea = fa.eval(x);
+        let eb = fb.eval(y);
         let d = (x - y) * 2.0;
         let ra = d + ea.gradient * lam[0];
         let rb = -d + eb.gradient * lam[1];

@@ -7,10 +7,9 @@
 
 use crate::body::PosedBody;
 use crate::math::{Matrix3, Real, Vector3};
-use crate::poly::fast::Monomials;
 use crate::poly::FastPoly;
 
-/// A posed body's world → normalized map and its derivative tables.
+/// A posed body's world → normalized map and its fast evaluator.
 #[derive(Clone, Copy)]
 pub(crate) struct FastPosed<'a> {
     poly: &'a FastPoly,
@@ -19,11 +18,12 @@ pub(crate) struct FastPosed<'a> {
     b: Vector3,
 }
 
-/// Value and world gradient at one point, with the monomial table for a later Hessian.
-pub(crate) struct ValueGradient {
+/// Value, world gradient and normalized-frame Hessian at one point (one evaluation pass); the
+/// world Hessian `Aᵀ∇²ᵤA` is formed only when a Newton step needs it ([`FastPosed::hessian`]).
+pub(crate) struct PosedEval {
     pub value: Real,
     pub gradient: Vector3,
-    pub monomials: Monomials,
+    hessian_u: Matrix3,
 }
 
 impl<'a> FastPosed<'a> {
@@ -39,18 +39,24 @@ impl<'a> FastPosed<'a> {
         self.poly.value(&(self.a * x + self.b))
     }
 
-    /// p'(x) and ∇p'(x), keeping the monomial table.
+    /// p'(x) and ∇p'(x).
     #[inline]
-    pub fn value_gradient(&self, x: &Vector3) -> ValueGradient {
-        let monomials = self.poly.monomials(&(self.a * x + self.b));
-        let (value, g) = self.poly.value_gradient_from(&monomials);
-        ValueGradient { value, gradient: self.at * g, monomials }
+    pub fn value_gradient(&self, x: &Vector3) -> (Real, Vector3) {
+        let (v, g) = self.poly.value_gradient(&(self.a * x + self.b));
+        (v, self.at * g)
     }
 
-    /// ∇²p'(x) from the monomial table of [`Self::value_gradient`] at x.
+    /// p'(x), ∇p'(x) and (deferred) ∇²p'(x) in one pass.
     #[inline]
-    pub fn hessian(&self, vg: &ValueGradient) -> Matrix3 {
-        self.at * self.poly.hessian_from(&vg.monomials) * self.a
+    pub fn eval(&self, x: &Vector3) -> PosedEval {
+        let e = self.poly.eval(&(self.a * x + self.b));
+        PosedEval { value: e.value, gradient: self.at * e.gradient, hessian_u: e.hessian }
+    }
+
+    /// ∇²p'(x) from the evaluation of [`Self::eval`] at x.
+    #[inline]
+    pub fn hessian(&self, e: &PosedEval) -> Matrix3 {
+        self.at * e.hessian_u * self.a
     }
 }
 

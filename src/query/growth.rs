@@ -15,7 +15,7 @@
 //! 3. if that fails, a log-barrier path `min p₁' − t·log(1 − p₂')` from body 2's interior point, then
 //!    the KKT polish.
 
-use super::fast_eval::{solve_kkt4, FastPosed, ValueGradient};
+use super::fast_eval::{solve_kkt4, FastPosed, PosedEval};
 use super::newton::{boundary_on_segment, NewtonParams, SolveStatus};
 use crate::body::{Body, PosedBody};
 use crate::math::{Isometry3, Matrix3, Point3, Real, Vector3};
@@ -103,14 +103,14 @@ pub(crate) fn solve_growth(
     // Case 1: the unconstrained minimizer of p₁ lies in body 2.
     let c1 = b1.interior_point();
     if FastPosed::new(b2).value(&c1) <= 1.0 {
-        let e = FastPosed::new(b1).value_gradient(&c1);
+        let (_, g1) = FastPosed::new(b1).value_gradient(&c1);
         return GrowthCore {
             value: b1.body.min_value(),
             x: b2.pose.inverse_transform_vector(&(c1 - b2.pose.translation.vector)),
             mu: 0.0,
             status: SolveStatus::Converged,
             iterations: 0,
-            residual: e.gradient.amax(),
+            residual: g1.amax(),
             warm_started: false,
         };
     }
@@ -142,8 +142,8 @@ pub(crate) fn solve_growth(
 
 /// Least-squares multiplier for ∇f + μ∇g = 0 at x, clamped positive.
 fn initial_multiplier(b1: &PosedBody<'_>, b2: &PosedBody<'_>, x: &Vector3) -> Real {
-    let gf = FastPosed::new(b1).value_gradient(x).gradient;
-    let gg = FastPosed::new(b2).value_gradient(x).gradient;
+    let gf = FastPosed::new(b1).value_gradient(x).1;
+    let gg = FastPosed::new(b2).value_gradient(x).1;
     let mu = -gf.dot(&gg) / gg.norm_squared().max(Real::MIN_POSITIVE);
     if mu.is_finite() && mu > 0.0 {
         mu
@@ -196,16 +196,16 @@ fn kkt_state(b1: &PosedBody<'_>, b2: &PosedBody<'_>, x: &Vector3) -> KktState {
 /// Value, gradient and residual `[∇f + μ∇g; g]` at one iterate; Hessians come later from the kept
 /// monomial tables, only when a Newton step is taken.
 struct KktPoint {
-    e1: ValueGradient,
-    e2: ValueGradient,
+    e1: PosedEval,
+    e2: PosedEval,
     r: Vector3,
     c: Real,
 }
 
 impl KktPoint {
     fn new(f1: &FastPosed<'_>, f2: &FastPosed<'_>, x: &Vector3, mu: Real) -> Self {
-        let e1 = f1.value_gradient(x);
-        let e2 = f2.value_gradient(x);
+        let e1 = f1.eval(x);
+        let e2 = f2.eval(x);
         let r = e1.gradient + e2.gradient * mu;
         let c = e2.value - 1.0;
         Self { e1, e2, r, c }
