@@ -1,8 +1,8 @@
 //! Criterion benchmarks of the query engine on the paper's chair and human (fitted bodies bundled in
 //! tests/data): cold and warm distance and growth at every degree present.
 //!
-//! `cargo bench --bench queries` (add `-- distance/6` to filter). Targets (issue 2, 2d = 6, medians):
-//! warm growth ≤ 5 µs, cold distance ≤ 50 µs. Each measured iteration runs the query at all 16 poses of
+//! `cargo bench --bench queries` (add `-- distance/6` to filter). Targets (issue 4, 2d = 6, medians):
+//! warm growth ≤ 0.5 µs, warm distance ≤ 0.7 µs, cold distance ≤ 2.5 µs. Each measured iteration runs the query at all 16 poses of
 //! [`poses`], so divide the reported time by 16 for one query (`sublevel bench` prints per-query medians).
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
@@ -29,7 +29,7 @@ fn poses() -> Vec<Isometry3> {
 }
 
 /// One value + gradient + Hessian evaluation: the reference `Polynomial::eval` against the
-/// precomputed-table `FastPoly::eval` (the query hot path), and value + gradient only.
+/// table-free, degree-specialised `FastPoly::eval` (the query hot path), and value + gradient only.
 fn bench_eval(c: &mut Criterion) {
     for degree in [2, 4, 6, 8] {
         let Some(chair) = load("chair_101", degree) else { continue };

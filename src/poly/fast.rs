@@ -1,87 +1,188 @@
-//! Precomputed derivative tables for fast value / gradient / Hessian evaluation of one polynomial
-//! at many points (the query hot path, paper §IV).
+//! Fast value / gradient / Hessian evaluation of one polynomial at many points (the query hot
+//! path, paper §IV), without a monomial table.
+//!
+//! The coefficients are rearranged once per body into triangular (c, b, a) order, and p is
+//! evaluated as nested sums over the exponents of z, y, x:
 //!
 //! ```text
-//! m_k(u) = u^aₖ v^bₖ w^cₖ                     all monomials of degree ≤ 2d from power tables,
-//!                                              walked in graded-lex order
-//! p    = Σ_{k < N}   cₖ  m_k                   N  = C(2d + 3, 3)
-//! ∇p   = Σ_{k < N₁}  gₖ  m_k   (gₖ ∈ ℝ³)       N₁ = C(2d + 2, 3): ∂p/∂uᵢ has degree 2d − 1
-//! ∇²p  = Σ_{k < N₂}  hₖ  m_k   (hₖ ∈ ℝ⁶)       N₂ = C(2d + 1, 3)
+//! p(u) = Σ_c w^c Σ_b v^b Σ_a c_abc u^a          a + b + c ≤ 2d
+//! S_j(b, c) = Σ_a c_abc ∂ʲ(u^a)                 j = 0, 1, 2   (x-derivatives, dot products)
+//! T_jk(c)   = Σ_b S_j(b, c) ∂ᵏ(v^b)            j + k ≤ 2     (mixed x/y derivatives)
+//! ∂ʲₓ∂ᵏᵧ∂ˡ_z p = Σ_c T_jk(c) ∂ˡ(w^c)             j + k + l ≤ 2
 //! ```
 //!
-//! The coefficient rows gₖ, hₖ are the coefficients of the derivative polynomials in the same
-//! graded-lex basis, precomputed once per body, so one evaluation is one pass building the monomial
-//! table and three fused multiply–add loops over fixed-width rows (no allocation, no power tables,
-//! no per-term index arithmetic). The Hessian pass is separate ([`FastPoly::hessian`]) so a line
-//! search or a convergence check can stop after value and gradient.
+//! Value, gradient and Hessian come out of one pass (about 3 fused multiply–adds per coefficient
+//! at the inner level, all sums independent). The kernels are specialised per degree 2d ∈ 0..=8
+//! by a const generic, so the triangular loops have constant bounds and unroll.
 
 use super::monomial::{basis_len, index3};
 use super::polynomial::{Polynomial, MAX_DEGREE};
 use crate::math::{Matrix3, Real, Vector3};
 
-/// Number of monomials of degree ≤ 8 in three variables (the largest monomial table).
+/// Number of monomials of degree ≤ 8 in three variables (the largest basis).
 pub const MAX_MONOMIALS: usize = 165;
 
-/// The monomial values `m_k(u)` of one point, graded-lex order; only the first
-/// [`FastPoly::len`] entries are meaningful.
-#[derive(Clone, Copy, Debug)]
-pub struct Monomials {
-    /// `m_k(u)`, k < N.
-    pub values: [Real; MAX_MONOMIALS],
-}
-
-/// A polynomial with its gradient and Hessian coefficient tables precomputed (see the module docs).
+/// A polynomial with its coefficients rearranged for the fast kernels (see the module docs).
 #[derive(Clone, Debug, PartialEq)]
 pub struct FastPoly {
     degree: usize,
-    /// Value coefficients cₖ, length N.
-    value: Vec<Real>,
-    /// Rows `[cₖ, ∂ₓ, ∂ᵧ, ∂_z]` for k < N₁ (value coefficient and the gradient polynomials').
-    grad: Vec<[Real; 4]>,
-    /// Rows `[xx, xy, xz, yy, yz, zz]` of the Hessian polynomials, k < N₂.
-    hess: Vec<[Real; 6]>,
+    len: usize,
+    /// c_abc in (c, b, a) triangular order (c outermost, a innermost, all ascending); zero padded.
+    coef: [Real; MAX_MONOMIALS],
+}
+
+/// Powers t^k and their first and second derivatives k t^(k−1), k (k − 1) t^(k−2), k ≤ D.
+#[inline(always)]
+fn powers<const D: usize>(t: Real) -> ([Real; MAX_DEGREE + 1], [Real; MAX_DEGREE + 1], [Real; MAX_DEGREE + 1]) {
+    let mut p = [0.0; MAX_DEGREE + 1];
+    let mut d = [0.0; MAX_DEGREE + 1];
+    let mut dd = [0.0; MAX_DEGREE + 1];
+    p[0] = 1.0;
+    for k in 1..=D {
+        p[k] = p[k - 1] * t;
+        d[k] = k as Real * p[k - 1];
+        if k >= 2 {
+            dd[k] = (k * (k - 1)) as Real * p[k - 2];
+        }
+    }
+    (p, d, dd)
+}
+
+/// p(u).
+#[inline(always)]
+fn value_kernel<const D: usize>(coef: &[Real; MAX_MONOMIALS], u: &Vector3) -> Real {
+    let (px, _, _) = powers::<D>(u.x);
+    let (py, _, _) = powers::<D>(u.y);
+    let (pz, _, _) = powers::<D>(u.z);
+    let mut v = 0.0;
+    let mut k = 0;
+    for (c, &wc) in pz.iter().enumerate().take(D + 1) {
+        let mut t = 0.0;
+        for (b, &vb) in py.iter().enumerate().take(D + 1 - c) {
+            let n = D + 1 - b - c;
+            let mut s = 0.0;
+            for (q, pa) in coef[k..k + n].iter().zip(&px) {
+                s += q * pa;
+            }
+            k += n;
+            t += s * vb;
+        }
+        v += t * wc;
+    }
+    v
+}
+
+/// p(u) and ∇p(u).
+#[inline(always)]
+fn gradient_kernel<const D: usize>(coef: &[Real; MAX_MONOMIALS], u: &Vector3) -> (Real, Vector3) {
+    let (px, dx, _) = powers::<D>(u.x);
+    let (py, dy, _) = powers::<D>(u.y);
+    let (pz, dz, _) = powers::<D>(u.z);
+    let mut o = [0.0; 4];
+    let mut k = 0;
+    for c in 0..D + 1 {
+        let mut t = [0.0; 3];
+        for b in 0..D + 1 - c {
+            let n = D + 1 - b - c;
+            let (mut s0, mut s1) = (0.0, 0.0);
+            for ((q, pa), da) in coef[k..k + n].iter().zip(&px).zip(&dx) {
+                s0 += q * pa;
+                s1 += q * da;
+            }
+            k += n;
+            t[0] += s0 * py[b];
+            t[1] += s1 * py[b];
+            t[2] += s0 * dy[b];
+        }
+        o[0] += t[0] * pz[c];
+        o[1] += t[1] * pz[c];
+        o[2] += t[2] * pz[c];
+        o[3] += t[0] * dz[c];
+    }
+    (o[0], Vector3::new(o[1], o[2], o[3]))
+}
+
+/// p(u), ∇p(u) and ∇²p(u).
+#[inline(always)]
+fn full_kernel<const D: usize>(coef: &[Real; MAX_MONOMIALS], u: &Vector3) -> super::Eval {
+    let (px, dx, ddx) = powers::<D>(u.x);
+    let (py, dy, ddy) = powers::<D>(u.y);
+    let (pz, dz, ddz) = powers::<D>(u.z);
+    // o = [p, px, py, pz, pxx, pxy, pxz, pyy, pyz, pzz]
+    let mut o = [0.0; 10];
+    let mut k = 0;
+    for c in 0..D + 1 {
+        // t = [T00, T10, T20, T01, T11, T02]
+        let mut t = [0.0; 6];
+        for b in 0..D + 1 - c {
+            let n = D + 1 - b - c;
+            let (mut s0, mut s1, mut s2) = (0.0, 0.0, 0.0);
+            for (((q, pa), da), dda) in coef[k..k + n].iter().zip(&px).zip(&dx).zip(&ddx) {
+                s0 += q * pa;
+                s1 += q * da;
+                s2 += q * dda;
+            }
+            k += n;
+            t[0] += s0 * py[b];
+            t[1] += s1 * py[b];
+            t[2] += s2 * py[b];
+            t[3] += s0 * dy[b];
+            t[4] += s1 * dy[b];
+            t[5] += s0 * ddy[b];
+        }
+        o[0] += t[0] * pz[c];
+        o[1] += t[1] * pz[c];
+        o[2] += t[3] * pz[c];
+        o[3] += t[0] * dz[c];
+        o[4] += t[2] * pz[c];
+        o[5] += t[4] * pz[c];
+        o[6] += t[1] * dz[c];
+        o[7] += t[5] * pz[c];
+        o[8] += t[3] * dz[c];
+        o[9] += t[0] * ddz[c];
+    }
+    super::Eval {
+        value: o[0],
+        gradient: Vector3::new(o[1], o[2], o[3]),
+        hessian: Matrix3::new(o[4], o[5], o[6], o[5], o[7], o[8], o[6], o[8], o[9]),
+    }
+}
+
+/// Calls `$kernel::<D>` for the runtime degree `$d` (0..=8).
+macro_rules! dispatch {
+    ($d:expr, $kernel:ident, $($arg:expr),*) => {
+        match $d {
+            0 => $kernel::<0>($($arg),*),
+            1 => $kernel::<1>($($arg),*),
+            2 => $kernel::<2>($($arg),*),
+            3 => $kernel::<3>($($arg),*),
+            4 => $kernel::<4>($($arg),*),
+            5 => $kernel::<5>($($arg),*),
+            6 => $kernel::<6>($($arg),*),
+            7 => $kernel::<7>($($arg),*),
+            _ => $kernel::<8>($($arg),*),
+        }
+    };
 }
 
 impl FastPoly {
-    /// Precomputes the derivative tables of `p` (degree ≤ 8; any degree the crate accepts).
+    /// Rearranges the coefficients of `p` (degree ≤ 8; any degree the crate accepts).
     pub fn new(p: &Polynomial) -> Self {
         let degree = p.degree().min(MAX_DEGREE);
-        let n = basis_len(3, degree);
-        let n1 = if degree >= 1 { basis_len(3, degree - 1) } else { 0 };
-        let n2 = if degree >= 2 { basis_len(3, degree - 2) } else { 0 };
-        let exps = p.exponents();
+        let len = basis_len(3, degree);
         let c = p.coefficients();
-        let coef = |e: [u8; 3]| -> Real {
-            let k = index3(e);
-            if (e[0] + e[1] + e[2]) as usize <= degree && k < n {
-                c[k]
-            } else {
-                0.0
+        let mut coef = [0.0; MAX_MONOMIALS];
+        let mut k = 0;
+        for ec in 0..=degree {
+            for eb in 0..=degree - ec {
+                for ea in 0..=degree - eb - ec {
+                    let i = index3([ea as u8, eb as u8, ec as u8]);
+                    coef[k] = c.get(i).copied().unwrap_or(0.0);
+                    k += 1;
+                }
             }
-        };
-        let shift = |e: &[u8; 3], d: [u8; 3]| [e[0] + d[0], e[1] + d[1], e[2] + d[2]];
-        let f = |v: u8| v as Real;
-        let mut grad = Vec::with_capacity(n1);
-        for e in exps.iter().take(n1) {
-            grad.push([
-                coef(*e),
-                f(e[0] + 1) * coef(shift(e, [1, 0, 0])),
-                f(e[1] + 1) * coef(shift(e, [0, 1, 0])),
-                f(e[2] + 1) * coef(shift(e, [0, 0, 1])),
-            ]);
         }
-        let mut hess = Vec::with_capacity(n2);
-        for e in exps.iter().take(n2) {
-            hess.push([
-                f(e[0] + 2) * f(e[0] + 1) * coef(shift(e, [2, 0, 0])),
-                f(e[0] + 1) * f(e[1] + 1) * coef(shift(e, [1, 1, 0])),
-                f(e[0] + 1) * f(e[2] + 1) * coef(shift(e, [1, 0, 1])),
-                f(e[1] + 2) * f(e[1] + 1) * coef(shift(e, [0, 2, 0])),
-                f(e[1] + 1) * f(e[2] + 1) * coef(shift(e, [0, 1, 1])),
-                f(e[2] + 2) * f(e[2] + 1) * coef(shift(e, [0, 0, 2])),
-            ]);
-        }
-        Self { degree, value: c[..n].to_vec(), grad, hess }
+        Self { degree, len, coef }
     }
 
     /// Total degree bound 2d.
@@ -91,106 +192,30 @@ impl FastPoly {
 
     /// Number of monomials N = C(2d + 3, 3).
     pub fn len(&self) -> usize {
-        self.value.len()
+        self.len
     }
 
     /// True for an empty basis (never for a valid polynomial: N ≥ 1).
     pub fn is_empty(&self) -> bool {
-        self.value.is_empty()
-    }
-
-    /// The monomial table `m_k(u)`, k < N, from power tables (two multiplies per monomial, all
-    /// independent), walking the graded-lex order structurally.
-    #[inline]
-    pub fn monomials(&self, u: &Vector3) -> Monomials {
-        let d = self.degree;
-        let (mut px, mut py, mut pz) = ([1.0; MAX_DEGREE + 1], [1.0; MAX_DEGREE + 1], [1.0; MAX_DEGREE + 1]);
-        for i in 1..=d {
-            px[i] = px[i - 1] * u.x;
-            py[i] = py[i - 1] * u.y;
-            pz[i] = pz[i - 1] * u.z;
-        }
-        let mut m = [0.0; MAX_MONOMIALS];
-        let mut k = 0;
-        for t in 0..=d {
-            for a in (0..=t).rev() {
-                let xa = px[a];
-                for b in (0..=t - a).rev() {
-                    m[k] = xa * py[b] * pz[t - a - b];
-                    k += 1;
-                }
-            }
-        }
-        Monomials { values: m }
-    }
-
-    /// p(u) from a monomial table.
-    #[inline]
-    pub fn value_from(&self, m: &Monomials) -> Real {
-        let mut acc = [0.0; 4];
-        let chunks = self.value.chunks_exact(4);
-        let rest = chunks.remainder();
-        let n4 = self.value.len() - rest.len();
-        for (c, mm) in chunks.zip(m.values[..n4].chunks_exact(4)) {
-            for j in 0..4 {
-                acc[j] += c[j] * mm[j];
-            }
-        }
-        let mut v = (acc[0] + acc[1]) + (acc[2] + acc[3]);
-        for (c, mm) in rest.iter().zip(&m.values[n4..self.value.len()]) {
-            v += c * mm;
-        }
-        v
-    }
-
-    /// p(u) and ∇p(u) from a monomial table.
-    #[inline]
-    pub fn value_gradient_from(&self, m: &Monomials) -> (Real, Vector3) {
-        let n1 = self.grad.len();
-        let mut acc = [0.0; 4];
-        for (row, &mk) in self.grad.iter().zip(&m.values[..n1]) {
-            for j in 0..4 {
-                acc[j] += row[j] * mk;
-            }
-        }
-        let mut v = acc[0];
-        for (c, mk) in self.value[n1..].iter().zip(&m.values[n1..self.value.len()]) {
-            v += c * mk;
-        }
-        (v, Vector3::new(acc[1], acc[2], acc[3]))
-    }
-
-    /// ∇²p(u) from a monomial table.
-    #[inline]
-    pub fn hessian_from(&self, m: &Monomials) -> Matrix3 {
-        let n2 = self.hess.len();
-        let mut h = [0.0; 6];
-        for (row, &mk) in self.hess.iter().zip(&m.values[..n2]) {
-            for j in 0..6 {
-                h[j] += row[j] * mk;
-            }
-        }
-        Matrix3::new(h[0], h[1], h[2], h[1], h[3], h[4], h[2], h[4], h[5])
+        self.len == 0
     }
 
     /// p(u).
     #[inline]
     pub fn value(&self, u: &Vector3) -> Real {
-        self.value_from(&self.monomials(u))
+        dispatch!(self.degree, value_kernel, &self.coef, u)
     }
 
     /// p(u) and ∇p(u).
     #[inline]
     pub fn value_gradient(&self, u: &Vector3) -> (Real, Vector3) {
-        self.value_gradient_from(&self.monomials(u))
+        dispatch!(self.degree, gradient_kernel, &self.coef, u)
     }
 
-    /// p(u), ∇p(u) and ∇²p(u).
+    /// p(u), ∇p(u) and ∇²p(u) in one pass.
     #[inline]
     pub fn eval(&self, u: &Vector3) -> super::Eval {
-        let m = self.monomials(u);
-        let (value, gradient) = self.value_gradient_from(&m);
-        super::Eval { value, gradient, hessian: self.hessian_from(&m) }
+        dispatch!(self.degree, full_kernel, &self.coef, u)
     }
 }
 
@@ -217,6 +242,8 @@ mod tests {
                 assert!((r.gradient - e.gradient).amax() <= 1e-12 * scale, "degree {degree}");
                 assert!((r.hessian - e.hessian).amax() <= 1e-12 * scale, "degree {degree}");
                 assert!((f.value(&u) - r.value).abs() <= 1e-12 * scale);
+                let (v, g) = f.value_gradient(&u);
+                assert!((v - r.value).abs() <= 1e-12 * scale && (g - r.gradient).amax() <= 1e-12 * scale);
             }
         }
     }

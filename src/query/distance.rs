@@ -22,7 +22,7 @@
 //! log-barrier path from the two interior points is the globally convergent fallback. A KKT point with λ_a, λ_b > 0 is the global
 //! minimizer of this convex program.
 
-use super::fast_eval::{solve_kkt8, FastPosed, ValueGradient};
+use super::fast_eval::{solve_kkt8, FastPosed, PosedEval, CHORD_RESIDUAL};
 use super::growth::{solve_growth, GrowthWarmStart};
 use super::newton::{boundary_on_segment, NewtonParams, SolveStatus};
 use crate::body::{Body, PosedBody};
@@ -194,8 +194,8 @@ fn finish(
 
 /// Least-squares multipliers at (x, y), clamped positive.
 fn initial_multipliers(ba: &PosedBody<'_>, bb: &PosedBody<'_>, x: &Vector3, y: &Vector3) -> [Real; 2] {
-    let ga = FastPosed::new(ba).value_gradient(x).gradient;
-    let gb = FastPosed::new(bb).value_gradient(y).gradient;
+    let ga = FastPosed::new(ba).value_gradient(x).1;
+    let gb = FastPosed::new(bb).value_gradient(y).1;
     let d = y - x;
     let la = 2.0 * d.dot(&ga) / ga.norm_squared().max(Real::MIN_POSITIVE);
     let lb = -2.0 * d.dot(&gb) / gb.norm_squared().max(Real::MIN_POSITIVE);
@@ -215,11 +215,11 @@ struct KktOut {
 type Vec8 = SVector<Real, 8>;
 type Mat8 = SMatrix<Real, 8, 8>;
 
-/// Value, gradient and residual of the KKT system at one iterate (no Hessians: those are computed
-/// from the kept monomial tables only when a Newton step is taken).
+/// Value, gradient and residual of the KKT system at one iterate, with the Hessians when they were
+/// evaluated (one pass per body either way).
 struct KktPoint {
-    ea: ValueGradient,
-    eb: ValueGradient,
+    ea: PosedEval,
+    eb: PosedEval,
     ra: Vector3,
     rb: Vector3,
     ca: Real,
@@ -227,9 +227,9 @@ struct KktPoint {
 }
 
 impl KktPoint {
-    fn new(fa: &FastPosed<'_>, fb: &FastPosed<'_>, x: &Vector3, y: &Vector3, lam: [Real; 2]) -> Self {
-        let ea = fa.value_gradient(x);
-        let eb = fb.value_gradient(y);
+    fn new(fa: &FastPosed<'_>, fb: &FastPosed<'_>, x: &Vector3, y: &Vector3, lam: [Real; 2], hessian: bool) -> Self {
+        let ea = fa.eval(x, hessian);
+        let eb = fb.eval(y, hessian);
         let d = (x - y) * 2.0;
         let ra = d + ea.gradient * lam[0];
         let rb = -d + eb.gradient * lam[1];
@@ -246,16 +246,12 @@ impl KktPoint {
     }
 }
 
-/// The Newton step at `pt`: closed-form block elimination, dense LU if that is singular.
-fn newton_step(
-    fa: &FastPosed<'_>,
-    fb: &FastPosed<'_>,
-    pt: &KktPoint,
-    lam: [Real; 2],
-) -> Option<(Vector3, Vector3, [Real; 2])> {
+/// The Newton step for the Hessians `(ha, hb)` at `pt`: closed-form block elimination, dense LU if
+/// that is singular.
+fn newton_step(h: &(Matrix3, Matrix3), pt: &KktPoint, lam: [Real; 2]) -> Option<(Vector3, Vector3, [Real; 2])> {
     let two = Matrix3::identity() * 2.0;
-    let wa = two + fa.hessian(&pt.ea) * lam[0];
-    let wb = two + fb.hessian(&pt.eb) * lam[1];
+    let wa = two + h.0 * lam[0];
+    let wb = two + h.1 * lam[1];
     let (ga, gb) = (&pt.ea.gradient, &pt.eb.gradient);
     if let Some(step) = solve_kkt8(&wa, &wb, ga, gb, &pt.ra, &pt.rb, pt.ca, pt.cb) {
         return Some(step);
@@ -274,8 +270,9 @@ fn newton_step(
     Some((Vector3::new(step[0], step[1], step[2]), Vector3::new(step[3], step[4], step[5]), [step[6], step[7]]))
 }
 
-/// Active-set Newton on the 8 × 8 KKT system, globalized by backtracking on ‖r‖₂ (trial points
-/// cost value and gradient only).
+/// Active-set Newton on the 8 × 8 KKT system, globalized by backtracking on ‖r‖₂. Every point is
+/// evaluated once; near the solution (residual below [`CHORD_RESIDUAL`]) trial points skip the
+/// Hessians and a further step reuses the last ones (chord step), refreshed when it stalls.
 fn kkt_newton(
     ba: &PosedBody<'_>,
     bb: &PosedBody<'_>,
@@ -286,12 +283,13 @@ fn kkt_newton(
 ) -> KktOut {
     let (fa, fb) = (FastPosed::new(ba), FastPosed::new(bb));
     let (mut x, mut y, mut lam) = (x0, y0, lam0);
-    let mut pt = KktPoint::new(&fa, &fb, &x, &y, lam);
+    let mut pt = KktPoint::new(&fa, &fb, &x, &y, lam, true);
+    let mut hess: Option<(Matrix3, Matrix3)> = None;
     let mut status = SolveStatus::MaxIterations;
     let mut it = 0;
+    let scale = |x: &Vector3, y: &Vector3| 1.0 + 2.0 * (x - y).norm();
     let converged = |pt: &KktPoint, x: &Vector3, y: &Vector3, lam: [Real; 2]| {
-        let scale = 1.0 + 2.0 * (x - y).norm();
-        pt.norm_inf() <= params.kkt_tolerance * scale && lam[0] > 0.0 && lam[1] > 0.0
+        pt.norm_inf() <= params.kkt_tolerance * scale(x, y) && lam[0] > 0.0 && lam[1] > 0.0
     };
     while it < params.max_iterations {
         if !pt.norm_inf().is_finite() {
@@ -302,27 +300,49 @@ fn kkt_newton(
             status = SolveStatus::Converged;
             break;
         }
+        // Fresh Hessians when this point has them, else the last ones (chord step).
+        let fresh = match (fa.hessian(&pt.ea), fb.hessian(&pt.eb)) {
+            (Some(ha), Some(hb)) => {
+                hess = Some((ha, hb));
+                true
+            }
+            _ => false,
+        };
+        let Some(h) = hess else {
+            pt = KktPoint::new(&fa, &fb, &x, &y, lam, true);
+            continue;
+        };
         it += 1;
-        let Some((dx, dy, dl)) = newton_step(&fa, &fb, &pt, lam) else {
+        let Some((dx, dy, dl)) = newton_step(&h, &pt, lam) else {
             status = SolveStatus::Stalled;
             break;
         };
         let r0 = pt.norm2();
+        let cheap = r0 <= CHORD_RESIDUAL * scale(&x, &y);
         let mut alpha = 1.0;
         let mut accepted = false;
         for _ in 0..40 {
             let (xt, yt) = (x + dx * alpha, y + dy * alpha);
             let lt = [lam[0] + dl[0] * alpha, lam[1] + dl[1] * alpha];
-            let tr = KktPoint::new(&fa, &fb, &xt, &yt, lt);
+            let tr = KktPoint::new(&fa, &fb, &xt, &yt, lt, !cheap);
             let r1 = tr.norm2();
-            if r1.is_finite() && r1 <= (1.0 - 1e-4 * alpha) * r0 {
+            // A chord step must at least halve the residual; otherwise refresh the Hessians here.
+            let bound = if fresh { (1.0 - 1e-4 * alpha) * r0 } else { 0.5 * r0 };
+            if r1.is_finite() && r1 <= bound {
                 (x, y, lam, pt) = (xt, yt, lt, tr);
                 accepted = true;
+                break;
+            }
+            if !fresh {
                 break;
             }
             alpha *= 0.5;
         }
         if !accepted {
+            if !fresh {
+                pt = KktPoint::new(&fa, &fb, &x, &y, lam, true);
+                continue;
+            }
             status = SolveStatus::Stalled;
             break;
         }

@@ -7,10 +7,9 @@
 
 use crate::body::PosedBody;
 use crate::math::{Matrix3, Real, Vector3};
-use crate::poly::fast::Monomials;
 use crate::poly::FastPoly;
 
-/// A posed body's world → normalized map and its derivative tables.
+/// A posed body's world → normalized map and its fast evaluator.
 #[derive(Clone, Copy)]
 pub(crate) struct FastPosed<'a> {
     poly: &'a FastPoly,
@@ -19,11 +18,13 @@ pub(crate) struct FastPosed<'a> {
     b: Vector3,
 }
 
-/// Value and world gradient at one point, with the monomial table for a later Hessian.
-pub(crate) struct ValueGradient {
+/// Value, world gradient and (when evaluated) the normalized-frame Hessian at one point (one
+/// evaluation pass); the world Hessian `Aᵀ∇²ᵤA` is formed only when a Newton step needs it
+/// ([`FastPosed::hessian`]).
+pub(crate) struct PosedEval {
     pub value: Real,
     pub gradient: Vector3,
-    pub monomials: Monomials,
+    hessian_u: Option<Matrix3>,
 }
 
 impl<'a> FastPosed<'a> {
@@ -39,20 +40,37 @@ impl<'a> FastPosed<'a> {
         self.poly.value(&(self.a * x + self.b))
     }
 
-    /// p'(x) and ∇p'(x), keeping the monomial table.
+    /// p'(x) and ∇p'(x).
     #[inline]
-    pub fn value_gradient(&self, x: &Vector3) -> ValueGradient {
-        let monomials = self.poly.monomials(&(self.a * x + self.b));
-        let (value, g) = self.poly.value_gradient_from(&monomials);
-        ValueGradient { value, gradient: self.at * g, monomials }
+    pub fn value_gradient(&self, x: &Vector3) -> (Real, Vector3) {
+        let (v, g) = self.poly.value_gradient(&(self.a * x + self.b));
+        (v, self.at * g)
     }
 
-    /// ∇²p'(x) from the monomial table of [`Self::value_gradient`] at x.
+    /// p'(x), ∇p'(x) and, when `hessian` is set, (deferred) ∇²p'(x), in one pass.
     #[inline]
-    pub fn hessian(&self, vg: &ValueGradient) -> Matrix3 {
-        self.at * self.poly.hessian_from(&vg.monomials) * self.a
+    pub fn eval(&self, x: &Vector3, hessian: bool) -> PosedEval {
+        let u = self.a * x + self.b;
+        if hessian {
+            let e = self.poly.eval(&u);
+            PosedEval { value: e.value, gradient: self.at * e.gradient, hessian_u: Some(e.hessian) }
+        } else {
+            let (value, g) = self.poly.value_gradient(&u);
+            PosedEval { value, gradient: self.at * g, hessian_u: None }
+        }
+    }
+
+    /// ∇²p'(x) from an evaluation of [`Self::eval`] at x that included the Hessian.
+    #[inline]
+    pub fn hessian(&self, e: &PosedEval) -> Option<Matrix3> {
+        e.hessian_u.map(|h| self.at * h * self.a)
     }
 }
+
+/// KKT residual (2-norm, relative to the solver's stationarity scale) below which the next trial
+/// point is evaluated without Hessians: it is expected to be converged, and if not, the next step
+/// reuses the last Hessians (a chord step), refreshed when that step does not halve the residual.
+pub(crate) const CHORD_RESIDUAL: Real = 1e-3;
 
 /// Inverse of a 3 × 3 matrix by cofactors; `None` when (nearly) singular relative to its entries.
 #[inline]
@@ -154,6 +172,28 @@ mod tests {
     fn random_spd(rng: &mut rand_chacha::ChaCha8Rng) -> Matrix3 {
         let b = Matrix3::from_fn(|_, _| rng.random_range(-1.0..1.0));
         b * b.transpose() + Matrix3::identity() * 0.1
+    }
+
+    #[test]
+    fn posed_eval_matches_reference_with_and_without_hessian() {
+        let body = crate::body::ellipsoid([0.1, -0.2, 0.0], [0.9, 0.3, 0.5]).unwrap();
+        let pose = crate::math::pose_from_parts("p", [0.9, 0.1, 0.3, 0.3], [1.0, -2.0, 0.5]).unwrap();
+        let pb = PosedBody::new(&body, &pose);
+        let f = FastPosed::new(&pb);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+        for _ in 0..20 {
+            let x = Vector3::new(rng.random_range(0.0..2.0), rng.random_range(-3.0..-1.0), rng.random_range(0.0..1.0));
+            let r = pb.eval(&x);
+            let (full, vg) = (f.eval(&x, true), f.eval(&x, false));
+            let scale = 1.0 + r.value.abs() + r.gradient.amax() + r.hessian.amax();
+            for e in [&full, &vg] {
+                assert!((e.value - r.value).abs() <= 1e-12 * scale);
+                assert!((e.gradient - r.gradient).amax() <= 1e-12 * scale);
+            }
+            assert!((f.hessian(&full).unwrap() - r.hessian).amax() <= 1e-12 * scale);
+            assert!(f.hessian(&vg).is_none());
+            assert!((f.value(&x) - r.value).abs() <= 1e-12 * scale);
+        }
     }
 
     #[test]

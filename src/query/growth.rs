@@ -15,7 +15,7 @@
 //! 3. if that fails, a log-barrier path `min p₁' − t·log(1 − p₂')` from body 2's interior point, then
 //!    the KKT polish.
 
-use super::fast_eval::{solve_kkt4, FastPosed, ValueGradient};
+use super::fast_eval::{solve_kkt4, FastPosed, PosedEval, CHORD_RESIDUAL};
 use super::newton::{boundary_on_segment, NewtonParams, SolveStatus};
 use crate::body::{Body, PosedBody};
 use crate::math::{Isometry3, Matrix3, Point3, Real, Vector3};
@@ -103,14 +103,14 @@ pub(crate) fn solve_growth(
     // Case 1: the unconstrained minimizer of p₁ lies in body 2.
     let c1 = b1.interior_point();
     if FastPosed::new(b2).value(&c1) <= 1.0 {
-        let e = FastPosed::new(b1).value_gradient(&c1);
+        let (_, g1) = FastPosed::new(b1).value_gradient(&c1);
         return GrowthCore {
             value: b1.body.min_value(),
             x: b2.pose.inverse_transform_vector(&(c1 - b2.pose.translation.vector)),
             mu: 0.0,
             status: SolveStatus::Converged,
             iterations: 0,
-            residual: e.gradient.amax(),
+            residual: g1.amax(),
             warm_started: false,
         };
     }
@@ -142,8 +142,8 @@ pub(crate) fn solve_growth(
 
 /// Least-squares multiplier for ∇f + μ∇g = 0 at x, clamped positive.
 fn initial_multiplier(b1: &PosedBody<'_>, b2: &PosedBody<'_>, x: &Vector3) -> Real {
-    let gf = FastPosed::new(b1).value_gradient(x).gradient;
-    let gg = FastPosed::new(b2).value_gradient(x).gradient;
+    let gf = FastPosed::new(b1).value_gradient(x).1;
+    let gg = FastPosed::new(b2).value_gradient(x).1;
     let mu = -gf.dot(&gg) / gg.norm_squared().max(Real::MIN_POSITIVE);
     if mu.is_finite() && mu > 0.0 {
         mu
@@ -193,19 +193,19 @@ fn kkt_state(b1: &PosedBody<'_>, b2: &PosedBody<'_>, x: &Vector3) -> KktState {
     KktState { f: e1.value, gf: e1.gradient, hf: e1.hessian, g: e2.value - 1.0, gg: e2.gradient, hg: e2.hessian }
 }
 
-/// Value, gradient and residual `[∇f + μ∇g; g]` at one iterate; Hessians come later from the kept
-/// monomial tables, only when a Newton step is taken.
+/// Value, gradient and residual `[∇f + μ∇g; g]` at one iterate, with the Hessians when they were
+/// evaluated (one pass per body either way).
 struct KktPoint {
-    e1: ValueGradient,
-    e2: ValueGradient,
+    e1: PosedEval,
+    e2: PosedEval,
     r: Vector3,
     c: Real,
 }
 
 impl KktPoint {
-    fn new(f1: &FastPosed<'_>, f2: &FastPosed<'_>, x: &Vector3, mu: Real) -> Self {
-        let e1 = f1.value_gradient(x);
-        let e2 = f2.value_gradient(x);
+    fn new(f1: &FastPosed<'_>, f2: &FastPosed<'_>, x: &Vector3, mu: Real, hessian: bool) -> Self {
+        let e1 = f1.eval(x, hessian);
+        let e2 = f2.eval(x, hessian);
         let r = e1.gradient + e2.gradient * mu;
         let c = e2.value - 1.0;
         Self { e1, e2, r, c }
@@ -220,9 +220,10 @@ impl KktPoint {
     }
 }
 
-/// The Newton step at `pt`: closed-form elimination, dense LU if that is singular.
-fn newton_step(f1: &FastPosed<'_>, f2: &FastPosed<'_>, pt: &KktPoint, mu: Real) -> Option<(Vector3, Real)> {
-    let w = f1.hessian(&pt.e1) + f2.hessian(&pt.e2) * mu;
+/// The Newton step for the Hessians `(h1, h2)` at `pt`: closed-form elimination, dense LU if that is
+/// singular.
+fn newton_step(h: &(Matrix3, Matrix3), pt: &KktPoint, mu: Real) -> Option<(Vector3, Real)> {
+    let w = h.0 + h.1 * mu;
     let gg = &pt.e2.gradient;
     if let Some(step) = solve_kkt4(&w, gg, &pt.r, pt.c) {
         return Some(step);
@@ -235,17 +236,19 @@ fn newton_step(f1: &FastPosed<'_>, f2: &FastPosed<'_>, pt: &KktPoint, mu: Real) 
     Some((Vector3::new(step[0], step[1], step[2]), step[3]))
 }
 
-/// Active-set Newton on `∇f + μ∇g = 0, g = 0`, globalized by backtracking on ‖r‖₂ (trial points
-/// cost value and gradient only).
+/// Active-set Newton on `∇f + μ∇g = 0, g = 0`, globalized by backtracking on ‖r‖₂. Every point is
+/// evaluated once; near the solution (residual below [`CHORD_RESIDUAL`]) trial points skip the
+/// Hessians and a further step reuses the last ones (chord step), refreshed when it stalls.
 fn kkt_newton(b1: &PosedBody<'_>, b2: &PosedBody<'_>, x0: Vector3, mu0: Real, params: &NewtonParams) -> KktOut {
     let (f1, f2) = (FastPosed::new(b1), FastPosed::new(b2));
     let (mut x, mut mu) = (x0, mu0);
-    let mut pt = KktPoint::new(&f1, &f2, &x, mu);
+    let mut pt = KktPoint::new(&f1, &f2, &x, mu, true);
+    let mut hess: Option<(Matrix3, Matrix3)> = None;
     let mut status = SolveStatus::MaxIterations;
     let mut it = 0;
     // Scale stationarity by the objective's gradient so far-apart bodies (large p₁) are judged fairly.
-    let converged =
-        |pt: &KktPoint, mu: Real| pt.norm_inf() <= params.kkt_tolerance * (1.0 + pt.e1.gradient.amax()) && mu > 0.0;
+    let scale = |pt: &KktPoint| 1.0 + pt.e1.gradient.amax();
+    let converged = |pt: &KktPoint, mu: Real| pt.norm_inf() <= params.kkt_tolerance * scale(pt) && mu > 0.0;
     while it < params.max_iterations {
         if !pt.norm_inf().is_finite() {
             status = SolveStatus::Stalled;
@@ -255,27 +258,49 @@ fn kkt_newton(b1: &PosedBody<'_>, b2: &PosedBody<'_>, x0: Vector3, mu0: Real, pa
             status = SolveStatus::Converged;
             break;
         }
+        // Fresh Hessians when this point has them, else the last ones (chord step).
+        let fresh = match (f1.hessian(&pt.e1), f2.hessian(&pt.e2)) {
+            (Some(h1), Some(h2)) => {
+                hess = Some((h1, h2));
+                true
+            }
+            _ => false,
+        };
+        let Some(h) = hess else {
+            pt = KktPoint::new(&f1, &f2, &x, mu, true);
+            continue;
+        };
         it += 1;
-        let Some((dx, dmu)) = newton_step(&f1, &f2, &pt, mu) else {
+        let Some((dx, dmu)) = newton_step(&h, &pt, mu) else {
             status = SolveStatus::Stalled;
             break;
         };
         let r0 = pt.norm2();
+        let cheap = r0 <= CHORD_RESIDUAL * scale(&pt);
         let mut alpha = 1.0;
         let mut accepted = false;
         for _ in 0..40 {
             let xt = x + dx * alpha;
             let mt = mu + dmu * alpha;
-            let tr = KktPoint::new(&f1, &f2, &xt, mt);
+            let tr = KktPoint::new(&f1, &f2, &xt, mt, !cheap);
             let r1 = tr.norm2();
-            if r1.is_finite() && r1 <= (1.0 - 1e-4 * alpha) * r0 {
+            // A chord step must at least halve the residual; otherwise refresh the Hessians here.
+            let bound = if fresh { (1.0 - 1e-4 * alpha) * r0 } else { 0.5 * r0 };
+            if r1.is_finite() && r1 <= bound {
                 (x, mu, pt) = (xt, mt, tr);
                 accepted = true;
+                break;
+            }
+            if !fresh {
                 break;
             }
             alpha *= 0.5;
         }
         if !accepted {
+            if !fresh {
+                pt = KktPoint::new(&f1, &f2, &x, mu, true);
+                continue;
+            }
             status = SolveStatus::Stalled;
             break;
         }
