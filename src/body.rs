@@ -319,31 +319,7 @@ impl<'a> PosedBody<'a> {
 /// Minimizes a convex polynomial by damped Newton from the origin; `None` unless it converges to
 /// a point with positive-definite Hessian.
 fn minimize_convex(p: &Polynomial) -> Option<(Vector3, Real)> {
-    let mut u = Vector3::zeros();
-    let mut e = p.eval(&u);
-    for _ in 0..200 {
-        let chol = nalgebra::Cholesky::new(e.hessian)?;
-        let step = -chol.solve(&e.gradient);
-        let decrement = -e.gradient.dot(&step);
-        if decrement < 1e-24 {
-            break;
-        }
-        let mut alpha = 1.0;
-        loop {
-            let trial = u + step * alpha;
-            let v = p.value(&trial);
-            if v.is_finite() && v <= e.value - 0.25 * alpha * decrement {
-                u = trial;
-                break;
-            }
-            alpha *= 0.5;
-            if alpha < 1e-12 {
-                return finish(p, u);
-            }
-        }
-        e = p.eval(&u);
-    }
-    finish(p, u)
+    descend(p, Vector3::zeros(), |e| Some(-nalgebra::Cholesky::new(e.hessian)?.solve(&e.gradient)))
 }
 
 /// A strict local minimizer of a possibly nonconvex polynomial: Newton with the Hessian's
@@ -365,8 +341,7 @@ fn minimize_from_grid(p: &Polynomial) -> Option<(Vector3, Real)> {
             }
         }
     }
-    let mut e = p.eval(&u);
-    for _ in 0..200 {
+    descend(p, u, |e| {
         let eig = e.hessian.symmetric_eigen();
         let scale = eig.eigenvalues.iter().fold(0.0 as Real, |m, v| m.max(v.abs()));
         let floor = 1e-10 * (1.0 + scale);
@@ -375,6 +350,20 @@ fn minimize_from_grid(p: &Polynomial) -> Option<(Vector3, Real)> {
             let v = eig.eigenvectors.column(k);
             step -= v * (v.dot(&e.gradient) / eig.eigenvalues[k].abs().max(floor));
         }
+        Some(step)
+    })
+}
+
+/// Damped Newton descent from `u` with the step rule `newton_step` (None: give up, no minimizer)
+/// and an Armijo backtracking line search; ends at [`finish`].
+fn descend(
+    p: &Polynomial,
+    mut u: Vector3,
+    newton_step: impl Fn(&crate::poly::Eval) -> Option<Vector3>,
+) -> Option<(Vector3, Real)> {
+    let mut e = p.eval(&u);
+    for _ in 0..200 {
+        let step = newton_step(&e)?;
         let decrement = -e.gradient.dot(&step);
         if decrement.is_nan() || decrement < 1e-24 {
             break;

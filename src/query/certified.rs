@@ -112,19 +112,20 @@ pub struct CertificateSummary {
     pub newton_value: Option<Real>,
 }
 
-/// A certified distance answer (paper eq. "distance" / "distance.lasserre").
+/// A certified answer: the solver's result `R` with where it comes from and its certificate.
 #[derive(Clone, Debug)]
-pub struct CertifiedDistance {
-    /// The answer. For `source != Newton` its `distance`, witnesses, normal and `overlapping` are the
-    /// SDP's (`status`, `iterations`, `kkt_residual` stay Newton's when Newton ran), and `warm_start`
-    /// is seeded from the SDP's witnesses and multipliers when it is verified.
-    pub result: DistanceResult,
+pub struct Certified<R> {
+    /// The answer. For `source != Newton` its value and points are the SDP's (distance: `distance`,
+    /// witnesses, normal, `overlapping`; growth: `value`, `minimizer`, `multiplier`), while
+    /// `status`, `iterations`, `kkt_residual` stay Newton's when Newton ran; the warm start is
+    /// seeded from the SDP's solution when it is verified.
+    pub result: R,
     /// Where the answer comes from.
     pub source: AnswerSource,
     /// The certificate, when one was solved.
     pub certificate: Option<CertificateSummary>,
-    /// True when the answer is only a lower bound (nonconvex bodies): `result.distance` ≤ the true
-    /// distance, and `overlapping` then means "not proven separated".
+    /// True when the answer is only a lower bound (nonconvex bodies): the value is ≤ the true one,
+    /// and a distance's `overlapping` then means "not proven separated".
     pub lower_bound: bool,
     /// Lower bounds only: the moment witnesses are feasible and attain the bound (so it is exact).
     pub tight: bool,
@@ -132,22 +133,18 @@ pub struct CertifiedDistance {
     pub converged: bool,
 }
 
-/// A certified growth answer d(p₁‖p₂) (paper eq. "overlap").
-#[derive(Clone, Debug)]
-pub struct CertifiedGrowth {
-    /// The answer; for `source != Newton` its `value`, `minimizer` and `multiplier` are the SDP's.
-    pub result: GrowthResult,
-    /// Where the answer comes from.
-    pub source: AnswerSource,
-    /// The certificate, when one was solved.
-    pub certificate: Option<CertificateSummary>,
-    /// True when `result.value` is only a lower bound on d(p₁‖p₂) (nonconvex bodies).
-    pub lower_bound: bool,
-    /// Lower bounds only: the moment minimizer is feasible and attains the bound (so it is exact).
-    pub tight: bool,
-    /// True when the answer is a converged Newton answer or a verified SDP answer.
-    pub converged: bool,
+impl<R> Certified<R> {
+    /// Newton's answer as it is (`source = Newton`, not a lower bound).
+    fn newton(result: R, certificate: Option<CertificateSummary>, converged: bool) -> Self {
+        Self { result, source: AnswerSource::Newton, certificate, lower_bound: false, tight: false, converged }
+    }
 }
+
+/// A certified distance answer (paper eq. "distance" / "distance.lasserre").
+pub type CertifiedDistance = Certified<DistanceResult>;
+
+/// A certified growth answer d(p₁‖p₂) (paper eq. "overlap").
+pub type CertifiedGrowth = Certified<GrowthResult>;
 
 /// Settings of a certified query: the Newton solver's and the certificate's.
 #[derive(Clone, Copy, Debug, Default)]
@@ -238,25 +235,11 @@ pub fn certified_distance(
     let newton = distance(a, pose_a, b, pose_b, warm, &params.newton);
     let newton_ok = newton.status.converged();
     if newton_ok && mode == CertifyMode::Newton {
-        return CertifiedDistance {
-            result: newton,
-            source: AnswerSource::Newton,
-            certificate: None,
-            lower_bound: false,
-            tight: false,
-            converged: true,
-        };
+        return CertifiedDistance::newton(newton, None, true);
     }
     let n2 = newton.distance * newton.distance;
     let Ok(c) = certify_distance_with_params(a, pose_a, b, pose_b, cert) else {
-        return CertifiedDistance {
-            result: newton,
-            source: AnswerSource::Newton,
-            certificate: None,
-            lower_bound: false,
-            tight: false,
-            converged: newton_ok,
-        };
+        return CertifiedDistance::newton(newton, None, newton_ok);
     };
     let mut s = distance_summary(&c, Some(n2));
     if newton_ok && newton.overlapping && common_point_certifies_overlap(a, pose_a, b, pose_b, &newton.witness_a) {
@@ -267,14 +250,7 @@ pub fn certified_distance(
     }
     if newton_ok && (s.agrees || !s.verified) {
         // Agreement, or an unverified certificate that cannot overrule a converged KKT point.
-        return CertifiedDistance {
-            result: newton,
-            source: AnswerSource::Newton,
-            certificate: Some(s),
-            lower_bound: false,
-            tight: false,
-            converged: true,
-        };
+        return CertifiedDistance::newton(newton, Some(s), true);
     }
     let witnesses = c.witnesses.or_else(|| {
         let (x, y) = c.moment_witnesses?;
@@ -440,35 +416,14 @@ pub fn certified_growth(
     let newton = growth(p1, pose1, p2, pose2, warm, &params.newton);
     let newton_ok = newton.status.converged();
     if newton_ok && mode == CertifyMode::Newton {
-        return CertifiedGrowth {
-            result: newton,
-            source: AnswerSource::Newton,
-            certificate: None,
-            lower_bound: false,
-            tight: false,
-            converged: true,
-        };
+        return CertifiedGrowth::newton(newton, None, true);
     }
     let Ok(c) = certify_growth_with_params(p1, pose1, p2, pose2, cert) else {
-        return CertifiedGrowth {
-            result: newton,
-            source: AnswerSource::Newton,
-            certificate: None,
-            lower_bound: false,
-            tight: false,
-            converged: newton_ok,
-        };
+        return CertifiedGrowth::newton(newton, None, newton_ok);
     };
     let s = growth_summary(&c, Some(newton.value));
     if newton_ok && (s.agrees || !s.verified) {
-        return CertifiedGrowth {
-            result: newton,
-            source: AnswerSource::Newton,
-            certificate: Some(s),
-            lower_bound: false,
-            tight: false,
-            converged: true,
-        };
+        return CertifiedGrowth::newton(newton, Some(s), true);
     }
     let minimizer = c.minimizer.or_else(|| project_to_body(p2, pose2, &c.moment_minimizer?));
     let converged = s.verified && minimizer.is_some();
