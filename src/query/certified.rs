@@ -292,6 +292,8 @@ fn distance_from_certificate(
         multipliers: [c.tau, c.xi],
         valid: verified && !overlapping && c.tau > 0.0 && c.xi > 0.0,
         growth: GrowthWarmStart::default(),
+        relative_pose: pose_a.inverse() * pose_b,
+        previous: None,
     };
     DistanceResult {
         distance: if overlapping { 0.0 } else { d },
@@ -436,6 +438,8 @@ pub fn certified_growth(
             local: (pose2.inverse() * x).coords,
             multiplier: c.tau.max(0.0),
             valid: converged,
+            relative_pose: pose2.inverse() * pose1,
+            previous: None,
         },
         ..newton
     };

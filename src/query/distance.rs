@@ -24,7 +24,9 @@
 
 use super::fast_eval::{solve_kkt8, FastPosed, PosedEval, CHORD_RESIDUAL};
 use super::growth::{solve_growth, GrowthWarmStart};
-use super::newton::{boundary_on_segment, NewtonParams, SolveStatus};
+use super::newton::{
+    boundary_on_segment_within, secant_coefficient, NewtonParams, SolveStatus, START_BOUNDARY_TOLERANCE,
+};
 use crate::body::{Body, PosedBody};
 use crate::math::{Isometry3, Matrix3, Point3, Real, Vector3};
 use nalgebra::{SMatrix, SVector};
@@ -55,7 +57,7 @@ pub struct DistanceResult {
 }
 
 /// Solver state carried between queries of one pair, in body frames so it follows the poses.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug)]
 pub struct DistanceWarmStart {
     /// Witness on A in A's body frame (meters).
     pub a_local: Vector3,
@@ -67,7 +69,66 @@ pub struct DistanceWarmStart {
     pub valid: bool,
     /// Warm start of the overlap test d(p_a‖p_b).
     pub growth: GrowthWarmStart,
+    /// Relative pose pose_a⁻¹·pose_b at which the witnesses were solved.
+    pub relative_pose: Isometry3,
+    /// The separated answer before this one (set when this answer was warm-started): the next
+    /// query extrapolates along the motion from the two (secant predictor).
+    pub previous: Option<DistancePrevious>,
 }
+
+/// An earlier separated distance answer of a pair, for the secant predictor of
+/// [`DistanceWarmStart`].
+#[derive(Clone, Copy, Debug)]
+pub struct DistancePrevious {
+    /// Witness on A in A's body frame (meters).
+    pub a_local: Vector3,
+    /// Witness on B in B's body frame (meters).
+    pub b_local: Vector3,
+    /// Multipliers (λ_a, λ_b).
+    pub multipliers: [Real; 2],
+    /// Relative pose pose_a⁻¹·pose_b of that answer.
+    pub relative_pose: Isometry3,
+}
+
+impl Default for DistanceWarmStart {
+    fn default() -> Self {
+        Self {
+            a_local: Vector3::zeros(),
+            b_local: Vector3::zeros(),
+            multipliers: [0.0; 2],
+            valid: false,
+            growth: GrowthWarmStart::default(),
+            relative_pose: Isometry3::identity(),
+            previous: None,
+        }
+    }
+}
+
+impl DistanceWarmStart {
+    /// Start (witness on A in A's frame, witness on B in B's frame, multipliers) for relative pose
+    /// `rel`: extrapolated along the motion when the previous answer is known and the pose keeps
+    /// moving the same way ([`secant_coefficient`]), else the last answer.
+    fn predict(&self, rel: &Isometry3, length: Real) -> (Vector3, Vector3, [Real; 2]) {
+        if let Some(p) = self.previous {
+            let sigma = secant_coefficient(&p.relative_pose, &self.relative_pose, rel, length);
+            if sigma > 0.0 {
+                let lam = |i: usize| {
+                    let l = self.multipliers[i] + (self.multipliers[i] - p.multipliers[i]) * sigma;
+                    l.max(0.5 * self.multipliers[i])
+                };
+                return (
+                    self.a_local + (self.a_local - p.a_local) * sigma,
+                    self.b_local + (self.b_local - p.b_local) * sigma,
+                    [lam(0), lam(1)],
+                );
+            }
+        }
+        (self.a_local, self.b_local, self.multipliers)
+    }
+}
+
+/// d(p_a‖p_b) − 1 below which a pair whose separated Newton solve fails is answered as touching.
+const TOUCH_GROWTH_TOLERANCE: Real = 1e-9;
 
 /// Iteration cap of the speculative cold Newton run from the interior-point segment (the full
 /// growth-first path follows when it does not converge).
@@ -90,12 +151,19 @@ pub fn distance(
     let bb = PosedBody::new(b, &rel);
     let mut iterations = 0;
 
+    let previous = warm.filter(|w| w.valid).map(|w| DistancePrevious {
+        a_local: w.a_local,
+        b_local: w.b_local,
+        multipliers: w.multipliers,
+        relative_pose: w.relative_pose,
+    });
     if let Some(w) = warm.filter(|w| w.valid) {
-        let y0 = rel * Point3::from(w.b_local);
-        let out = kkt_newton(&ba, &bb, w.a_local, y0.coords, w.multipliers, params);
+        let (a0, b0, lam0) = w.predict(&rel, a.scale() + b.scale());
+        let y0 = rel * Point3::from(b0);
+        let out = kkt_newton(&ba, &bb, a0, y0.coords, lam0, params);
         iterations += out.iterations;
         if out.status.converged() {
-            return finish(pose_a, &rel, out, iterations, true, w.growth);
+            return finish(pose_a, &rel, out, iterations, true, w.growth, previous);
         }
     }
 
@@ -106,8 +174,8 @@ pub fn distance(
         let (ca, cb) = (ba.interior_point(), bb.interior_point());
         let (fa, fb) = (FastPosed::new(&ba), FastPosed::new(&bb));
         if fb.value(&ca) > 1.0 && fa.value(&cb) > 1.0 {
-            let x0 = boundary_on_segment(&ba, &ca, &cb);
-            let y0 = boundary_on_segment(&bb, &cb, &ca);
+            let x0 = boundary_on_segment_within(&ba, &ca, &cb, START_BOUNDARY_TOLERANCE);
+            let y0 = boundary_on_segment_within(&bb, &cb, &ca, START_BOUNDARY_TOLERANCE);
             // Separated along the segment: A's crossing comes before B's.
             if (x0 - ca).norm_squared() < (y0 - ca).norm_squared() {
                 let lam0 = initial_multipliers(&ba, &bb, &x0, &y0);
@@ -118,7 +186,7 @@ pub fn distance(
                 // Near contact (x ≈ y) the multipliers lose meaning: let the growth test decide.
                 let clear = (out.y - out.x).norm() > 1e-6 * (a.scale() + b.scale());
                 if out.status.converged() && clear {
-                    return finish(pose_a, &rel, out, iterations, false, GrowthWarmStart::default());
+                    return finish(pose_a, &rel, out, iterations, false, GrowthWarmStart::default(), previous);
                 }
             }
         }
@@ -127,10 +195,10 @@ pub fn distance(
     // Overlap test by the growth measure.
     let g = solve_growth(&ba, &bb, warm.map(|w| &w.growth), params);
     iterations += g.iterations;
-    let growth_warm = GrowthWarmStart { local: g.x, multiplier: g.mu, valid: g.status.converged() };
-    if g.value <= 1.0 {
+    let growth_warm = GrowthWarmStart::after(warm.map(|w| &w.growth), g.x, g.mu, g.status.converged(), rel.inverse());
+    let touching = |iterations: usize| {
         let p = pose_a * (rel * Point3::from(g.x));
-        return DistanceResult {
+        DistanceResult {
             distance: 0.0,
             witness_a: p,
             witness_b: p,
@@ -141,23 +209,32 @@ pub fn distance(
             kkt_residual: g.residual,
             warm_started: g.warm_started,
             warm_start: DistanceWarmStart { growth: growth_warm, ..Default::default() },
-        };
+        }
+    };
+    if g.value <= 1.0 {
+        return touching(iterations);
     }
 
     // Separated: cold start from the growth minimizer on B.
     let y0 = (rel * Point3::from(g.x)).coords;
-    let x0 = boundary_on_segment(&ba, &ba.interior_point(), &y0);
+    let x0 = boundary_on_segment_within(&ba, &ba.interior_point(), &y0, START_BOUNDARY_TOLERANCE);
     let lam0 = initial_multipliers(&ba, &bb, &x0, &y0);
     let out = kkt_newton(&ba, &bb, x0, y0, lam0, params);
     iterations += out.iterations;
     if out.status.converged() {
-        return finish(pose_a, &rel, out, iterations, false, growth_warm);
+        return finish(pose_a, &rel, out, iterations, false, growth_warm, previous);
+    }
+    // Touching within the growth solve's tolerance: at exact tangency the separated KKT system is
+    // degenerate (x = y, λ → 0), so Newton cannot converge there; the growth answer is the
+    // touching point (the distance is below ~TOUCH_GROWTH_TOLERANCE × the bodies' size).
+    if g.status.converged() && g.value <= 1.0 + TOUCH_GROWTH_TOLERANCE {
+        return touching(iterations);
     }
     let (xb, yb, lamb, it_b) = barrier(&ba, &bb, params);
     iterations += it_b;
     let out = kkt_newton(&ba, &bb, xb, yb, lamb, params);
     iterations += out.iterations;
-    finish(pose_a, &rel, out, iterations, false, growth_warm)
+    finish(pose_a, &rel, out, iterations, false, growth_warm, previous)
 }
 
 fn finish(
@@ -167,6 +244,7 @@ fn finish(
     iterations: usize,
     warm_started: bool,
     growth: GrowthWarmStart,
+    previous: Option<DistancePrevious>,
 ) -> DistanceResult {
     let diff = out.y - out.x;
     let dist = diff.norm();
@@ -188,6 +266,8 @@ fn finish(
             multipliers: out.lam,
             valid: out.status.converged(),
             growth,
+            relative_pose: *rel,
+            previous,
         },
     }
 }

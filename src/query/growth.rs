@@ -16,7 +16,9 @@
 //!    the KKT polish.
 
 use super::fast_eval::{solve_kkt4, FastPosed, PosedEval, CHORD_RESIDUAL};
-use super::newton::{boundary_on_segment, NewtonParams, SolveStatus};
+use super::newton::{
+    boundary_on_segment_within, secant_coefficient, NewtonParams, SolveStatus, START_BOUNDARY_TOLERANCE,
+};
 use crate::body::{Body, PosedBody};
 use crate::math::{Isometry3, Matrix3, Point3, Real, Vector3};
 
@@ -43,7 +45,7 @@ pub struct GrowthResult {
 
 /// Growth solver state carried between queries of one pair, in body 2's own frame so that it
 /// follows the pose.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug)]
 pub struct GrowthWarmStart {
     /// Minimizer in body 2's frame (meters).
     pub local: Vector3,
@@ -51,6 +53,68 @@ pub struct GrowthWarmStart {
     pub multiplier: Real,
     /// Whether this holds a usable state.
     pub valid: bool,
+    /// Relative pose pose₂⁻¹·pose₁ at which `local` was solved.
+    pub relative_pose: Isometry3,
+    /// The answer before this one for the same pair (set when this answer was warm-started): with
+    /// it the next query extrapolates along the motion (secant predictor) instead of restarting
+    /// from `local`.
+    pub previous: Option<GrowthPrevious>,
+}
+
+/// An earlier growth answer of a pair, for the secant predictor of [`GrowthWarmStart`].
+#[derive(Clone, Copy, Debug)]
+pub struct GrowthPrevious {
+    /// Minimizer in body 2's frame (meters).
+    pub local: Vector3,
+    /// Multiplier μ.
+    pub multiplier: Real,
+    /// Relative pose pose₂⁻¹·pose₁ of that answer.
+    pub relative_pose: Isometry3,
+}
+
+impl Default for GrowthWarmStart {
+    fn default() -> Self {
+        Self {
+            local: Vector3::zeros(),
+            multiplier: 0.0,
+            valid: false,
+            relative_pose: Isometry3::identity(),
+            previous: None,
+        }
+    }
+}
+
+impl GrowthWarmStart {
+    /// The state after an answer (`local`, `multiplier`, converged or not) at relative pose `rel`,
+    /// remembering the `warm` state it started from (if valid) for the secant predictor.
+    pub(crate) fn after(
+        warm: Option<&GrowthWarmStart>,
+        local: Vector3,
+        multiplier: Real,
+        valid: bool,
+        rel: Isometry3,
+    ) -> Self {
+        let previous = warm.filter(|w| w.valid && w.multiplier > 0.0).map(|w| GrowthPrevious {
+            local: w.local,
+            multiplier: w.multiplier,
+            relative_pose: w.relative_pose,
+        });
+        Self { local, multiplier, valid, relative_pose: rel, previous }
+    }
+
+    /// Start (minimizer in body 2's frame, multiplier) for relative pose `rel`: extrapolated along
+    /// the motion when the previous answer is known and the pose keeps moving the same way
+    /// ([`secant_coefficient`]), else the last answer. `length` weighs rotations (meters).
+    pub(crate) fn predict(&self, rel: &Isometry3, length: Real) -> (Vector3, Real) {
+        if let Some(p) = self.previous.filter(|p| p.multiplier > 0.0) {
+            let sigma = secant_coefficient(&p.relative_pose, &self.relative_pose, rel, length);
+            if sigma > 0.0 {
+                let mu = self.multiplier + (self.multiplier - p.multiplier) * sigma;
+                return (self.local + (self.local - p.local) * sigma, mu.max(0.5 * self.multiplier));
+            }
+        }
+        (self.local, self.multiplier)
+    }
 }
 
 /// d(p₁‖p₂) for body `p1` posed by `pose1` and body `p2` posed by `pose2` (paper eq. "overlap").
@@ -77,7 +141,7 @@ pub fn growth(
         iterations: core.iterations,
         kkt_residual: core.residual,
         warm_started: core.warm_started,
-        warm_start: GrowthWarmStart { local: core.x, multiplier: core.mu, valid: core.status.converged() },
+        warm_start: GrowthWarmStart::after(warm, core.x, core.mu, core.status.converged(), rel),
     }
 }
 
@@ -102,30 +166,48 @@ pub(crate) fn solve_growth(
 ) -> GrowthCore {
     // Case 1: the unconstrained minimizer of p₁ lies in body 2.
     let c1 = b1.interior_point();
-    if FastPosed::new(b2).value(&c1) <= 1.0 {
-        let (_, g1) = FastPosed::new(b1).value_gradient(&c1);
-        return GrowthCore {
-            value: b1.body.min_value(),
-            x: b2.pose.inverse_transform_vector(&(c1 - b2.pose.translation.vector)),
-            mu: 0.0,
-            status: SolveStatus::Converged,
-            iterations: 0,
-            residual: g1.amax(),
-            warm_started: false,
-        };
+    let inactive = |iterations: usize| {
+        (FastPosed::new(b2).value(&c1) <= 1.0).then(|| {
+            let (_, g1) = FastPosed::new(b1).value_gradient(&c1);
+            GrowthCore {
+                value: b1.body.min_value(),
+                x: b2.pose.inverse_transform_vector(&(c1 - b2.pose.translation.vector)),
+                mu: 0.0,
+                status: SolveStatus::Converged,
+                iterations,
+                residual: g1.amax(),
+                warm_started: false,
+            }
+        })
+    };
+    // For convex bodies the warm start goes first: a converged KKT point with μ > 0 is then the
+    // global minimizer (and cannot occur when p₁'s minimizer lies strictly inside body 2). A
+    // nonconvex body (relaxed convexity) checks case 1 first, as its KKT points may be local.
+    let convex = !b1.body.report.nonconvex && !b2.body.report.nonconvex;
+    if !convex {
+        if let Some(core) = inactive(0) {
+            return core;
+        }
     }
     let mut iterations = 0;
-    // Case 2: active constraint, Newton on the KKT system.
     if let Some(w) = warm.filter(|w| w.valid && w.multiplier > 0.0) {
-        let x0 = b2.pose * Point3::from(w.local);
-        let out = kkt_newton(b1, b2, x0.coords, w.multiplier, params);
+        let rel = b2.pose.inverse() * b1.pose;
+        let (local, mu) = w.predict(&rel, b1.body.scale());
+        let x0 = b2.pose * Point3::from(local);
+        let out = kkt_newton(b1, b2, x0.coords, mu, params);
         iterations += out.iterations;
         if out.status.converged() {
             return GrowthCore { iterations, warm_started: true, ..out.with_frame(b2) };
         }
     }
+    if convex {
+        if let Some(core) = inactive(iterations) {
+            return core;
+        }
+    }
+    // Case 2: active constraint, Newton on the KKT system from the cold start.
     let c2 = b2.interior_point();
-    let x0 = boundary_on_segment(b2, &c2, &c1);
+    let x0 = boundary_on_segment_within(b2, &c2, &c1, START_BOUNDARY_TOLERANCE);
     let mu0 = initial_multiplier(b1, b2, &x0);
     let out = kkt_newton(b1, b2, x0, mu0, params);
     iterations += out.iterations;
