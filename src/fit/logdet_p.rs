@@ -78,6 +78,9 @@ pub struct LogDetProblem {
     a: CscMatrix<Real>,
     b: Vec<Real>,
     cones: Vec<SupportedConeT<Real>>,
+    /// svec(G) as affine functions of the columns (the sos-convexity identities solved for one
+    /// entry each).
+    gram_image: Vec<AffineEntry>,
 }
 
 /// Triplet accumulator for `b − A x ∈ K`, rows appended cone by cone.
@@ -101,6 +104,21 @@ impl Rows {
             self.vv.push(v);
         }
     }
+    /// Row `row` of a cone block holding the value of `entry` (slack s = b − A x = entry): pushes
+    /// −coefficient for every term and returns the constant, the row's share of b.
+    fn push_affine(&mut self, row: usize, entry: &AffineEntry) -> Real {
+        for &(col, coef) in &entry.terms {
+            self.push(row, col, -coef);
+        }
+        entry.constant
+    }
+}
+
+/// One entry of a packed Gram matrix as an affine function of the columns: Σ coef·x[col] + constant.
+#[derive(Clone, Debug, Default)]
+struct AffineEntry {
+    terms: Vec<(usize, Real)>,
+    constant: Real,
 }
 
 /// Index of the unordered y-pair (k ≤ l) among (0,0), (0,1), (0,2), (1,1), (1,2), (2,2).
@@ -252,12 +270,9 @@ impl LogDetProblem {
             Objective::Trace => (0, 0, col_x0, col_x0 + triangle_len(k)),
         };
         let col_g = col_c + l;
-        let num_vars = col_g + triangle_len(m);
+        // Free entries of svec(G): all but one per sos-convexity identity (see (2)).
+        let num_vars = col_g + triangle_len(m) - 6 * basis_len(3, 2 * d - 2);
         let z_col = |i: usize, j: usize| col_z + triangle_index(j, i); // Z(i, j), i ≥ j
-        let col_x = match spec.matrix {
-            ObjectiveMatrix::P => col_p,
-            ObjectiveMatrix::H => col_g,
-        };
 
         let mut r = Rows::default();
 
@@ -272,11 +287,14 @@ impl LogDetProblem {
                 r.push(base + index3(e), col_p + triangle_index(i, j), -gram_weight(i, j));
             }
         }
-        // (2) yᵀ∇²(p + c q) y = wᵀ G w, q = (‖u‖²)ᵈ: one row per (y-pair k ≤ l, x-monomial β of
-        // degree ≤ 2d − 2). The known part c·yᵀ∇²q y moves to the right-hand side.
+        // (2) yᵀ∇²(p + c q) y = wᵀ G w, q = (‖u‖²)ᵈ: one identity per (y-pair k ≤ l, x-monomial β of
+        // degree ≤ 2d − 2), Σ_α f·c_α − Σ_{e ∈ group} w_e·svec(G)_e = −c·(yᵀ∇²q y)_β. The identities
+        // are not rows: each one is solved for one svec entry of G (its pivot, a diagonal entry when
+        // the group has one), so G is an affine image of c and of its other entries (the free
+        // columns Y), and only G's PSD cone (or the objective block, for H) carries those rows.
         let lb = basis_len(3, 2 * d - 2);
-        let base2 = base + l;
         let mut rhs2 = vec![0.0; 6 * lb];
+        let mut hess_c: Vec<Vec<(usize, Real)>> = vec![Vec::new(); 6 * lb];
         let q_relax = if c_relax > 0.0 { norm_power_coefficients(d) } else { vec![0.0; l] };
         for (ci, alpha) in full.iter().enumerate() {
             for k in 0..3 {
@@ -291,27 +309,39 @@ impl LogDetProblem {
                     beta[k] -= 1;
                     beta[ll] -= 1;
                     let row = pair_index(k, ll) * lb + index3(beta);
-                    r.push(base2 + row, col_c + ci, f);
+                    hess_c[row].push((col_c + ci, f));
                     rhs2[row] -= c_relax * f * q_relax[ci];
                 }
             }
         }
+        // Entries of svec(G) grouped by the identity they enter, with their svec weights.
+        let mut groups: Vec<Vec<(usize, Real)>> = vec![Vec::new(); 6 * lb];
         for bcol in 0..m {
             for acol in 0..=bcol {
                 let (ka, ia) = (acol / nl, acol % nl);
                 let (kb, ib) = (bcol / nl, bcol % nl);
                 let beta = [low[ia][0] + low[ib][0], low[ia][1] + low[ib][1], low[ia][2] + low[ib][2]];
-                r.push(
-                    base2 + pair_index(ka, kb) * lb + index3(beta),
-                    col_g + triangle_index(acol, bcol),
-                    -gram_weight(acol, bcol),
-                );
+                groups[pair_index(ka, kb) * lb + index3(beta)]
+                    .push((triangle_index(acol, bcol), gram_weight(acol, bcol)));
             }
         }
-        let num_eq = l + 6 * lb;
+        let mut gram_image = vec![AffineEntry::default(); triangle_len(m)];
+        let mut next_y = col_g;
+        for (row, group) in groups.iter().enumerate() {
+            let Some(&(pivot, w_pivot)) = group.iter().find(|(_, w)| *w == 1.0).or(group.first()) else {
+                continue;
+            };
+            let mut pivot_terms: Vec<(usize, Real)> = hess_c[row].iter().map(|&(col, f)| (col, f / w_pivot)).collect();
+            for &(e, w) in group.iter().filter(|(e, _)| *e != pivot) {
+                gram_image[e] = AffineEntry { terms: vec![(next_y, 1.0)], constant: 0.0 };
+                pivot_terms.push((next_y, -w / w_pivot));
+                next_y += 1;
+            }
+            gram_image[pivot] = AffineEntry { terms: pivot_terms, constant: -rhs2[row] / w_pivot };
+        }
+        debug_assert_eq!(next_y, num_vars);
         r.b.extend(std::iter::repeat_n(0.0, l));
-        r.b.extend(rhs2);
-        r.cones.push(SupportedConeT::ZeroConeT(num_eq));
+        r.cones.push(SupportedConeT::ZeroConeT(l));
 
         // (3) p(uᵢ) ≤ 1 on the containment points: 1 − Σ c_α uᵢ^α ≥ 0.
         if !points.is_empty() {
@@ -327,6 +357,13 @@ impl LogDetProblem {
             r.cones.push(SupportedConeT::NonnegativeConeT(points.len()));
         }
 
+        // svec entry e of the matrix X the objective acts on (P: a column; H = G: its affine image).
+        let p_entry = |e: usize| AffineEntry { terms: vec![(col_p + e, 1.0)], constant: 0.0 };
+        let x_entry = |e: usize| match spec.matrix {
+            ObjectiveMatrix::P => p_entry(e),
+            ObjectiveMatrix::H => gram_image[e].clone(),
+        };
+
         // (4) The objective block, a 2k × 2k packed triangle of affine expressions holding X:
         //     log det: [[X, Z], [Zᵀ, diag Z]] ⪰ 0;   trace: [[V, I], [I, X]] ⪰ 0.
         let kk = 2 * k;
@@ -339,7 +376,7 @@ impl LogDetProblem {
                 match spec.objective {
                     Objective::LogDet => {
                         if j < k {
-                            r.push(row, col_x + triangle_index(i, j), -1.0);
+                            b4[triangle_index(i, j)] += r.push_affine(row, &x_entry(triangle_index(i, j)));
                         } else if i < k {
                             let jz = j - k;
                             if i >= jz {
@@ -357,7 +394,8 @@ impl LogDetProblem {
                                 b4[triangle_index(i, j)] = s2;
                             }
                         } else {
-                            r.push(row, col_x + triangle_index(i - k, j - k), -1.0);
+                            let e = triangle_index(i - k, j - k);
+                            b4[triangle_index(i, j)] += r.push_affine(row, &x_entry(e));
                         }
                     }
                 }
@@ -368,15 +406,19 @@ impl LogDetProblem {
 
         // (5) The other Gram matrix gets a cone of its own: G ⪰ 0 (objective on P) or P ⪰ 0
         // (objective on H: p sos).
-        let (col_o, size_o) = match spec.matrix {
-            ObjectiveMatrix::P => (col_g, m),
-            ObjectiveMatrix::H => (col_p, n),
+        let size_o = match spec.matrix {
+            ObjectiveMatrix::P => m,
+            ObjectiveMatrix::H => n,
         };
         let base5 = r.next_row();
-        for k in 0..triangle_len(size_o) {
-            r.push(base5 + k, col_o + k, -1.0);
+        for e in 0..triangle_len(size_o) {
+            let entry = match spec.matrix {
+                ObjectiveMatrix::P => &gram_image[e],
+                ObjectiveMatrix::H => &p_entry(e),
+            };
+            let constant = r.push_affine(base5 + e, entry);
+            r.b.push(constant);
         }
-        r.b.extend(std::iter::repeat_n(0.0, triangle_len(size_o)));
         r.cones.push(SupportedConeT::PSDTriangleConeT(size_o));
 
         let mut q = vec![0.0; num_vars];
@@ -412,6 +454,7 @@ impl LogDetProblem {
             a,
             b: r.b,
             cones: r.cones,
+            gram_image,
         })
     }
 
@@ -498,8 +541,16 @@ impl LogDetProblem {
 
     /// The sos-convexity Gram matrix G (M × M) from a solution.
     pub fn convexity_gram(&self, x: &[Real]) -> nalgebra::DMatrix<Real> {
-        let len = triangle_len(self.convexity_gram_size);
-        unpack_triangle(&x[self.col_g..self.col_g + len], self.convexity_gram_size)
+        unpack_triangle(&self.convexity_gram_svec(x), self.convexity_gram_size)
+    }
+
+    /// svec(G) (Clarabel's packed triangle) from a solution: the free entries are columns, the
+    /// others follow from the sos-convexity identities.
+    pub fn convexity_gram_svec(&self, x: &[Real]) -> Vec<Real> {
+        self.gram_image
+            .iter()
+            .map(|e| e.constant + e.terms.iter().map(|&(col, coef)| coef * x[col]).sum::<Real>())
+            .collect()
     }
 
     /// p = z(x)ᵀ P z(x) expanded in the graded-lex basis of degree 2d (exactly sos for P ⪰ 0).
@@ -552,17 +603,12 @@ mod tests {
     use super::*;
     use crate::poly::gram::GramStructure;
 
-    /// The sos-convexity rows agree with an independent expansion through `GramStructure` in six
-    /// variables (x, y): for random c and G satisfying nothing, the residual of each row equals
-    /// coeff(yᵀ∇²p y) − coeff(wᵀGw) computed independently.
-    #[test]
-    fn hessian_rows_match_six_variable_gram_expansion() {
-        let d = 2;
-        let prob = LogDetProblem::build(d, &[]).unwrap();
+    /// Coefficients of yᵀ∇²p y (p given by its graded-lex coefficients `c`) and of wᵀGw, both
+    /// indexed by six-variable exponents (x1, x2, x3, y1, y2, y3): the first directly from the
+    /// derivative formula, the second through an independent `GramStructure` expansion.
+    fn hessian_and_gram_coefficients(d: usize, c: &[Real], g: &nalgebra::DMatrix<Real>) -> Vec<(Real, Real)> {
         let full = graded_exponents3(2 * d);
         let low = graded_exponents3(d - 1);
-        let nl = low.len();
-        // Six-variable half basis: y_k · x^β, variables ordered (x1, x2, x3, y1, y2, y3).
         let mut half6 = Vec::new();
         for k in 0..3 {
             for e in &low {
@@ -572,45 +618,18 @@ mod tests {
             }
         }
         let gs = GramStructure::with_half_basis(6, half6, 2 * d);
-        // A random symmetric G and random c.
-        let m = 3 * nl;
-        let mut g = nalgebra::DMatrix::zeros(m, m);
-        for i in 0..m {
-            for j in 0..=i {
-                let v = ((i * 7 + j * 13) % 11) as f64 / 11.0 - 0.4;
-                g[(i, j)] = v;
-                g[(j, i)] = v;
-            }
-        }
-        let c: Vec<f64> = (0..full.len()).map(|k| ((k * 5) % 9) as f64 / 9.0 - 0.3).collect();
-        let rhs6 = gs.polynomial_of(&g);
-        // Residual rows 35.. of A x for x = (c, svec G), other columns 0.
-        let mut x = vec![0.0; prob.num_vars];
-        x[prob.col_c..prob.col_c + full.len()].copy_from_slice(&c);
-        for j in 0..m {
-            for i in 0..=j {
-                x[prob.col_g + triangle_index(i, j)] = g[(i, j)] * gram_weight(i, j);
-            }
-        }
-        let mut ax = vec![0.0; prob.num_rows()];
-        for (col, xc) in x.iter().enumerate() {
-            for k in prob.a.colptr[col]..prob.a.colptr[col + 1] {
-                ax[prob.a.rowval[k]] += prob.a.nzval[k] * xc;
-            }
-        }
-        let lb = basis_len(3, 2 * d - 2);
-        let low2 = graded_exponents3(2 * d - 2);
+        let rhs6 = gs.polynomial_of(g);
+        let mut out = Vec::new();
         for k in 0..3 {
             for l in k..3 {
-                for beta in &low2 {
-                    // LHS coefficient of y_k y_l x^β in yᵀ∇²p y from the coefficients directly.
+                for beta in &graded_exponents3(2 * d - 2) {
                     let mut lhs = 0.0;
                     for (ci, a) in full.iter().enumerate() {
-                        let mut bb = *a;
                         let ok = if k == l { a[k] >= 2 } else { a[k] >= 1 && a[l] >= 1 };
                         if !ok {
                             continue;
                         }
+                        let mut bb = *a;
                         bb[k] -= 1;
                         bb[l] -= 1;
                         if bb != *beta {
@@ -623,18 +642,49 @@ mod tests {
                     let mut e6 = vec![beta[0], beta[1], beta[2], 0, 0, 0];
                     e6[3 + k] += 1;
                     e6[3 + l] += 1;
-                    let rhs = rhs6[gs.index_of[&e6]];
-                    let row = full.len() + pair_index(k, l) * lb + index3(*beta);
-                    assert!((ax[row] - (lhs - rhs)).abs() < 1e-12, "row {row}: {} vs {}", ax[row], lhs - rhs);
+                    out.push((lhs, rhs6[gs.index_of[&e6]]));
                 }
             }
         }
+        out
     }
 
-    /// With relaxation c, p = −c(‖u‖²)ᵈ and G = 0 satisfy the sos-convexity rows exactly
-    /// (yᵀ∇²(p + c q)y = 0 = wᵀ0w), and q's coefficients evaluate to (‖u‖²)ᵈ.
+    /// The sos-convexity identities are built into G's affine image: for arbitrary c and
+    /// arbitrary free columns of G, the G returned by `convexity_gram` satisfies
+    /// coeff(yᵀ∇²p y) = coeff(wᵀGw) for every monomial, checked against an independent expansion
+    /// through `GramStructure` in six variables (x, y); the free columns reappear as entries of G.
     #[test]
-    fn relaxed_rows_move_c_q_to_the_right_hand_side() {
+    fn gram_image_satisfies_the_sos_convexity_identities() {
+        for d in 1..=3 {
+            let prob = LogDetProblem::build(d, &[]).unwrap();
+            let l = basis_len(3, 2 * d);
+            let mut x = vec![0.0; prob.num_vars];
+            for (k, v) in x.iter_mut().enumerate().skip(prob.col_c) {
+                *v = (k as f64 * 0.618_034).fract() - 0.5; // distinct values
+            }
+            let c = x[prob.col_c..prob.col_c + l].to_vec();
+            let g = prob.convexity_gram(&x);
+            let mut checked = 0;
+            for (lhs, rhs) in hessian_and_gram_coefficients(d, &c, &g) {
+                assert!((lhs - rhs).abs() < 1e-12 * (1.0 + lhs.abs()), "d = {d}: {lhs} vs {rhs}");
+                checked += 1;
+            }
+            assert_eq!(checked, 6 * basis_len(3, 2 * d - 2));
+            // Every free column is an entry of svec(G), each used once.
+            let svec = prob.convexity_gram_svec(&x);
+            let free: Vec<Real> = x[prob.col_g..].to_vec();
+            for v in &free {
+                assert_eq!(svec.iter().filter(|s| *s == v).count(), 1, "d = {d}: free value {v}");
+            }
+            assert_eq!(prob.num_vars - prob.col_g, triangle_len(prob.convexity_gram_size) - checked);
+        }
+    }
+
+    /// With relaxation c, p = −c(‖u‖²)ᵈ with the free entries of G at 0 gives G = 0
+    /// (yᵀ∇²(p + c q)y = 0 = wᵀ0w), p = 0 gives the Gram matrix of c·yᵀ∇²q y (independent
+    /// expansion), and q's coefficients evaluate to (‖u‖²)ᵈ.
+    #[test]
+    fn relaxed_identities_move_c_q_into_the_gram_image() {
         for d in 1..=4 {
             let q = norm_power_coefficients(d);
             let poly = Polynomial::from_coefficients(2 * d, q.clone()).unwrap();
@@ -646,18 +696,16 @@ mod tests {
             for (k, v) in q.iter().enumerate() {
                 x[prob.col_c + k] = -2.5 * v;
             }
-            let l = q.len();
-            let rows = l + 6 * basis_len(3, 2 * d - 2);
-            let mut ax = vec![0.0; prob.num_rows()];
-            for (col, xc) in x.iter().enumerate() {
-                for k in prob.a.colptr[col]..prob.a.colptr[col + 1] {
-                    ax[prob.a.rowval[k]] += prob.a.nzval[k] * xc;
+            let g = prob.convexity_gram(&x);
+            assert!(g.amax() < 1e-12, "d = {d}: |G| = {}", g.amax());
+            if d <= 3 {
+                let g0 = prob.convexity_gram(&vec![0.0; prob.num_vars]);
+                assert!(g0.amax() > 1.0);
+                let cq: Vec<Real> = q.iter().map(|v| 2.5 * v).collect();
+                for (lhs, rhs) in hessian_and_gram_coefficients(d, &cq, &g0) {
+                    assert!((lhs - rhs).abs() < 1e-12 * (1.0 + lhs.abs()), "d = {d}: {lhs} vs {rhs}");
                 }
             }
-            for (r, (axr, br)) in ax.iter().zip(&prob.b).enumerate().take(rows).skip(l) {
-                assert!((axr - br).abs() < 1e-12, "d = {d}, row {r}: {axr} vs {br}");
-            }
-            assert!(prob.b[l..rows].iter().any(|v| *v != 0.0));
         }
         let bad = ProblemSpec { matrix: ObjectiveMatrix::H, convexity_relaxation: 1.0, ..ProblemSpec::log_det_p(2) };
         assert!(matches!(
