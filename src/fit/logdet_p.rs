@@ -81,6 +81,13 @@ pub struct LogDetProblem {
     /// svec(G) as affine functions of the columns (the sos-convexity identities solved for one
     /// entry each).
     gram_image: Vec<AffineEntry>,
+    /// svec(P) as affine functions of the columns (the coefficient identities solved for one
+    /// entry each).
+    p_image: Vec<AffineEntry>,
+    /// Scales σ of the half-basis monomials (P's basis is z/σ).
+    scale_p: Vec<Real>,
+    /// Scales σ of the degree ≤ d − 1 monomials (G's basis is y ⊗ z_{d−1}/σ).
+    scale_g: Vec<Real>,
 }
 
 /// Triplet accumulator for `b − A x ∈ K`, rows appended cone by cone.
@@ -112,6 +119,84 @@ impl Rows {
         }
         entry.constant
     }
+}
+
+/// Smallest eigenvalue the program requires of the sos-convexity Gram matrix G' (scaled basis,
+/// see [`basis_scales`]; G = Σ⁻¹G'Σ⁻¹ with σ ≤ 1 on the unit ball, so λ_min(G) ≥ this too). A
+/// floor of 10⁻⁶ keeps the certified convexity margin positive after the solver's last residual
+/// (about 10⁻⁹ in G', up to −5·10⁻⁷ in G at 2d = 8 without it) and moves the body by ~10⁻⁶.
+pub const CONVEXITY_FLOOR: Real = 1e-6;
+
+/// Scales σ_α of the monomials u^α of a Gram basis: their root mean square over `points` (the
+/// containment points, normalized coordinates), or 1 when `identity` is set (trace objectives:
+/// trace X⁻¹ is not invariant under a diagonal change of basis), when there are no points or
+/// the mean is not positive. The fit writes P and G in the basis u^α/σ_α: log det changes by a
+/// constant, the body not at all, but the Gram matrices at the optimum have entries of order one
+/// instead of spanning many decades (on the unit ball, u^α of degree 4 is ~10⁻² on the cloud).
+fn basis_scales(exponents: &[[u8; 3]], points: &[Vector3], identity: bool) -> Vec<Real> {
+    exponents
+        .iter()
+        .map(|e| {
+            if identity || points.is_empty() {
+                return 1.0;
+            }
+            let mean = points
+                .iter()
+                .map(|u| (u.x.powi(e[0] as i32) * u.y.powi(e[1] as i32) * u.z.powi(e[2] as i32)).powi(2))
+                .sum::<Real>()
+                / points.len() as Real;
+            if mean.is_finite() && mean > 1e-300 {
+                mean.sqrt()
+            } else {
+                1.0
+            }
+        })
+        .collect()
+}
+
+/// X = Σ⁻¹ X' Σ⁻¹ for the Gram matrix X' in the scaled basis z/σ.
+fn unscale(mut scaled: nalgebra::DMatrix<Real>, scales: &[Real]) -> nalgebra::DMatrix<Real> {
+    for j in 0..scaled.ncols() {
+        for i in 0..scaled.nrows() {
+            scaled[(i, j)] /= scales[i] * scales[j];
+        }
+    }
+    scaled
+}
+
+/// Values of affine entries at x.
+fn evaluate(entries: &[AffineEntry], x: &[Real]) -> Vec<Real> {
+    entries.iter().map(|e| e.constant + e.terms.iter().map(|&(col, coef)| coef * x[col]).sum::<Real>()).collect()
+}
+
+/// Solves linear identities `Σ_{e ∈ group} w_e·svec(X)_e = known(group)` (group entries given as
+/// (svec index, w_e, on the diagonal)) for one entry of each group (its pivot: a diagonal entry
+/// when the group has one), returning every entry
+/// of svec(X) (length `len`) as an affine function of the columns: the other entries become
+/// free columns numbered from `first_col` in group order, and `known(g)` gives the right side of
+/// group g as (terms, constant). Every entry must belong to exactly one group.
+fn solve_identities(
+    groups: &[Vec<(usize, Real, bool)>],
+    len: usize,
+    first_col: usize,
+    known: impl Fn(usize) -> (Vec<(usize, Real)>, Real),
+) -> Vec<AffineEntry> {
+    let mut image = vec![AffineEntry::default(); len];
+    let mut next = first_col;
+    for (g, group) in groups.iter().enumerate() {
+        let Some(&(pivot, w_pivot, _)) = group.iter().find(|(_, _, diagonal)| *diagonal).or(group.first()) else {
+            continue;
+        };
+        let (terms, constant) = known(g);
+        let mut pivot_terms: Vec<(usize, Real)> = terms.into_iter().map(|(col, v)| (col, v / w_pivot)).collect();
+        for &(e, w, _) in group.iter().filter(|(e, _, _)| *e != pivot) {
+            image[e] = AffineEntry { terms: vec![(next, 1.0)], constant: 0.0 };
+            pivot_terms.push((next, -w / w_pivot));
+            next += 1;
+        }
+        image[pivot] = AffineEntry { terms: pivot_terms, constant: constant / w_pivot };
+    }
+    image
 }
 
 /// One entry of a packed Gram matrix as an affine function of the columns: Σ coef·x[col] + constant.
@@ -264,7 +349,7 @@ impl LogDetProblem {
         // as the upper triangle of Zᵀ) and t for log det, V for trace. For log det P this is the
         // original layout P | Z | t | c | G.
         let col_p = 0;
-        let col_x0 = col_p + triangle_len(n);
+        let col_x0 = col_p + triangle_len(n) - l;
         let (col_z, col_t, col_v, col_c) = match spec.objective {
             Objective::LogDet => (col_x0, col_x0 + triangle_len(k), 0, col_x0 + triangle_len(k) + k),
             Objective::Trace => (0, 0, col_x0, col_x0 + triangle_len(k)),
@@ -276,17 +361,28 @@ impl LogDetProblem {
 
         let mut r = Rows::default();
 
-        // (1) c_α = Σ_{zᵢzⱼ = x^α} (2 − δᵢⱼ) Pᵢⱼ, in svec terms weight 1 / √2.
-        let base = r.next_row();
-        for k in 0..l {
-            r.push(base + k, col_c + k, 1.0);
-        }
+        // (1) c_α = Σ_{zᵢzⱼ = x^α} (2 − δᵢⱼ) Pᵢⱼ (svec weight √2 off the diagonal): not rows
+        // either; each identity is solved for one svec entry of P (a diagonal entry when x^α is a
+        // square), so P is an affine image of c and of its other entries (the free columns).
+        // P and G are written in the basis of scaled monomials (see `basis_scales`): svec entries
+        // of σᵢσⱼPᵢⱼ, so an entry enters its identity with weight (2 − δᵢⱼ)/(√2^(1−δᵢⱼ) σᵢσⱼ).
+        let scale_p =
+            basis_scales(&half, points, spec.objective == Objective::Trace && spec.matrix == ObjectiveMatrix::P);
+        let scale_g =
+            basis_scales(&low, points, spec.objective == Objective::Trace && spec.matrix == ObjectiveMatrix::H);
+        // The coefficient columns hold τ_α c_α (τ the same root mean square over the full basis).
+        let scale_c = basis_scales(&full, points, false);
+        let mut p_groups: Vec<Vec<(usize, Real, bool)>> = vec![Vec::new(); l];
         for j in 0..n {
             for i in 0..=j {
                 let e = [half[i][0] + half[j][0], half[i][1] + half[j][1], half[i][2] + half[j][2]];
-                r.push(base + index3(e), col_p + triangle_index(i, j), -gram_weight(i, j));
+                let w = gram_weight(i, j) / (scale_p[i] * scale_p[j]);
+                p_groups[index3(e)].push((triangle_index(i, j), w, i == j));
             }
         }
+        let p_image = solve_identities(&p_groups, triangle_len(n), col_p, |alpha| {
+            (vec![(col_c + alpha, 1.0 / scale_c[alpha])], 0.0)
+        });
         // (2) yᵀ∇²(p + c q) y = wᵀ G w, q = (‖u‖²)ᵈ: one identity per (y-pair k ≤ l, x-monomial β of
         // degree ≤ 2d − 2), Σ_α f·c_α − Σ_{e ∈ group} w_e·svec(G)_e = −c·(yᵀ∇²q y)_β. The identities
         // are not rows: each one is solved for one svec entry of G (its pivot, a diagonal entry when
@@ -309,39 +405,23 @@ impl LogDetProblem {
                     beta[k] -= 1;
                     beta[ll] -= 1;
                     let row = pair_index(k, ll) * lb + index3(beta);
-                    hess_c[row].push((col_c + ci, f));
+                    hess_c[row].push((col_c + ci, f / scale_c[ci]));
                     rhs2[row] -= c_relax * f * q_relax[ci];
                 }
             }
         }
         // Entries of svec(G) grouped by the identity they enter, with their svec weights.
-        let mut groups: Vec<Vec<(usize, Real)>> = vec![Vec::new(); 6 * lb];
+        let mut groups: Vec<Vec<(usize, Real, bool)>> = vec![Vec::new(); 6 * lb];
         for bcol in 0..m {
             for acol in 0..=bcol {
                 let (ka, ia) = (acol / nl, acol % nl);
                 let (kb, ib) = (bcol / nl, bcol % nl);
                 let beta = [low[ia][0] + low[ib][0], low[ia][1] + low[ib][1], low[ia][2] + low[ib][2]];
-                groups[pair_index(ka, kb) * lb + index3(beta)]
-                    .push((triangle_index(acol, bcol), gram_weight(acol, bcol)));
+                let w = gram_weight(acol, bcol) / (scale_g[ia] * scale_g[ib]);
+                groups[pair_index(ka, kb) * lb + index3(beta)].push((triangle_index(acol, bcol), w, acol == bcol));
             }
         }
-        let mut gram_image = vec![AffineEntry::default(); triangle_len(m)];
-        let mut next_y = col_g;
-        for (row, group) in groups.iter().enumerate() {
-            let Some(&(pivot, w_pivot)) = group.iter().find(|(_, w)| *w == 1.0).or(group.first()) else {
-                continue;
-            };
-            let mut pivot_terms: Vec<(usize, Real)> = hess_c[row].iter().map(|&(col, f)| (col, f / w_pivot)).collect();
-            for &(e, w) in group.iter().filter(|(e, _)| *e != pivot) {
-                gram_image[e] = AffineEntry { terms: vec![(next_y, 1.0)], constant: 0.0 };
-                pivot_terms.push((next_y, -w / w_pivot));
-                next_y += 1;
-            }
-            gram_image[pivot] = AffineEntry { terms: pivot_terms, constant: -rhs2[row] / w_pivot };
-        }
-        debug_assert_eq!(next_y, num_vars);
-        r.b.extend(std::iter::repeat_n(0.0, l));
-        r.cones.push(SupportedConeT::ZeroConeT(l));
+        let gram_image = solve_identities(&groups, triangle_len(m), col_g, |row| (hess_c[row].clone(), -rhs2[row]));
 
         // (3) p(uᵢ) ≤ 1 on the containment points: 1 − Σ c_α uᵢ^α ≥ 0.
         if !points.is_empty() {
@@ -350,7 +430,7 @@ impl LogDetProblem {
                 let row = r.next_row();
                 for (k, e) in poly.exponents().iter().enumerate() {
                     let v = u.x.powi(e[0] as i32) * u.y.powi(e[1] as i32) * u.z.powi(e[2] as i32);
-                    r.push(row, col_c + k, v);
+                    r.push(row, col_c + k, v / scale_c[k]);
                 }
                 r.b.push(1.0);
             }
@@ -358,7 +438,7 @@ impl LogDetProblem {
         }
 
         // svec entry e of the matrix X the objective acts on (P: a column; H = G: its affine image).
-        let p_entry = |e: usize| AffineEntry { terms: vec![(col_p + e, 1.0)], constant: 0.0 };
+        let p_entry = |e: usize| p_image[e].clone();
         let x_entry = |e: usize| match spec.matrix {
             ObjectiveMatrix::P => p_entry(e),
             ObjectiveMatrix::H => gram_image[e].clone(),
@@ -411,13 +491,18 @@ impl LogDetProblem {
             ObjectiveMatrix::H => n,
         };
         let base5 = r.next_row();
-        for e in 0..triangle_len(size_o) {
-            let entry = match spec.matrix {
-                ObjectiveMatrix::P => &gram_image[e],
-                ObjectiveMatrix::H => &p_entry(e),
-            };
-            let constant = r.push_affine(base5 + e, entry);
-            r.b.push(constant);
+        // G's cone holds G' − εI (ε = CONVEXITY_FLOOR, scaled basis): the solver's last residual
+        // cannot then leave G' (exactly tied to p by the identities) with a negative eigenvalue.
+        for j in 0..size_o {
+            for i in 0..=j {
+                let e = triangle_index(i, j);
+                let (entry, floor) = match spec.matrix {
+                    ObjectiveMatrix::P => (&gram_image[e], if i == j { CONVEXITY_FLOOR } else { 0.0 }),
+                    ObjectiveMatrix::H => (&p_entry(e), 0.0),
+                };
+                let constant = r.push_affine(base5 + e, entry);
+                r.b.push(constant - floor);
+            }
         }
         r.cones.push(SupportedConeT::PSDTriangleConeT(size_o));
 
@@ -455,6 +540,9 @@ impl LogDetProblem {
             b: r.b,
             cones: r.cones,
             gram_image,
+            p_image,
+            scale_p,
+            scale_g,
         })
     }
 
@@ -499,8 +587,9 @@ impl LogDetProblem {
 
     /// [`LogDetProblem::solve`], re-solved with a shorter interior-point step (Clarabel's
     /// `max_step_fraction` 0.9, then 0.7, then 0.9 with the other KKT solver of faer / QDLDL)
-    /// while Clarabel ends with `InsufficientProgress` or `NumericalError`; the returned time and iterations add up every attempt, and `progress`
-    /// sees the iterations numbered across attempts.
+    /// while Clarabel ends with `InsufficientProgress` or `NumericalError`, every retry with
+    /// iterative refinement on; the returned time and iterations add up every attempt, and
+    /// `progress` sees the iterations numbered across attempts.
     ///
     /// # Errors
     /// As [`LogDetProblem::solve`].
@@ -519,6 +608,8 @@ impl LogDetProblem {
             }
             let mut retry = settings.clone();
             retry.max_step_fraction = retry.max_step_fraction.min(fraction);
+            // A retry is the careful path: refined KKT solves (they cost a third of the time).
+            retry.iterative_refinement_enable = true;
             if let Some(s) = solver {
                 retry.direct_solve_method = s.into();
             }
@@ -536,21 +627,16 @@ impl LogDetProblem {
 
     /// The Gram matrix P (N × N) from a solution.
     pub fn gram(&self, x: &[Real]) -> nalgebra::DMatrix<Real> {
-        unpack_triangle(&x[self.col_p..self.col_p + triangle_len(self.gram_size)], self.gram_size)
+        let scaled = unpack_triangle(&evaluate(&self.p_image, x), self.gram_size);
+        unscale(scaled, &self.scale_p)
     }
 
     /// The sos-convexity Gram matrix G (M × M) from a solution.
     pub fn convexity_gram(&self, x: &[Real]) -> nalgebra::DMatrix<Real> {
-        unpack_triangle(&self.convexity_gram_svec(x), self.convexity_gram_size)
-    }
-
-    /// svec(G) (Clarabel's packed triangle) from a solution: the free entries are columns, the
-    /// others follow from the sos-convexity identities.
-    pub fn convexity_gram_svec(&self, x: &[Real]) -> Vec<Real> {
-        self.gram_image
-            .iter()
-            .map(|e| e.constant + e.terms.iter().map(|&(col, coef)| coef * x[col]).sum::<Real>())
-            .collect()
+        let scaled = unpack_triangle(&evaluate(&self.gram_image, x), self.convexity_gram_size);
+        let nl = self.scale_g.len();
+        let scales: Vec<Real> = (0..self.convexity_gram_size).map(|a| self.scale_g[a % nl]).collect();
+        unscale(scaled, &scales)
     }
 
     /// p = z(x)ᵀ P z(x) expanded in the graded-lex basis of degree 2d (exactly sos for P ⪰ 0).
@@ -671,7 +757,7 @@ mod tests {
             }
             assert_eq!(checked, 6 * basis_len(3, 2 * d - 2));
             // Every free column is an entry of svec(G), each used once.
-            let svec = prob.convexity_gram_svec(&x);
+            let svec = evaluate(&prob.gram_image, &x);
             let free: Vec<Real> = x[prob.col_g..].to_vec();
             for v in &free {
                 assert_eq!(svec.iter().filter(|s| *s == v).count(), 1, "d = {d}: free value {v}");
