@@ -59,8 +59,8 @@ pub struct FitArgs {
     /// Seed of the volume estimate.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Clarabel's gap and feasibility tolerance.
-    #[arg(long, default_value_t = 1e-8)]
+    /// Clarabel's gap and feasibility tolerance (see `FitSettings::solver_tolerance`).
+    #[arg(long, default_value_t = 1e-6)]
     pub tolerance: f64,
     /// Clarabel's iteration cap.
     #[arg(long, default_value_t = 200)]
@@ -71,6 +71,10 @@ pub struct FitArgs {
     /// Threads of the KKT factorization (faer only; 0 = solver's choice, 1 = sequential).
     #[arg(long, default_value_t = 1)]
     pub solver_threads: u32,
+    /// Clarabel's iterative refinement of the KKT solves (off by default, see
+    /// `FitSettings::iterative_refinement`).
+    #[arg(long)]
+    pub refinement: bool,
     /// No progress on stderr.
     #[arg(long, short)]
     pub quiet: bool,
@@ -109,6 +113,7 @@ pub fn run(args: FitArgs) -> sublevel::Result<()> {
         max_solver_iterations: args.max_iterations,
         linear_solver: args.linear_solver.parse()?,
         solver_threads: args.solver_threads,
+        iterative_refinement: args.refinement,
     };
     let quiet = args.quiet;
     let mut stderr = std::io::stderr();
