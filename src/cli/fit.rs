@@ -44,7 +44,7 @@ pub struct FitArgs {
     #[arg(long, default_value = "logdet_p")]
     pub method: String,
     /// Relaxed-convexity parameter c ≥ 0 of eq. "VAG.param.convex" (p + c‖u‖^{2d} sos-convex, u the
-    /// cloud normalized into the unit ball); c > 0 only with logdet_p or trace_p.
+    /// bounding box normalized into [−1, 1]³); c > 0 only with logdet_p or trace_p.
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub relaxation: f64,
     /// Where to write the body file (JSON); defaults to the mesh path with extension `.body.json`.

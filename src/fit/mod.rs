@@ -5,7 +5,7 @@
 //! through the progress callback:
 //!
 //! ```text
-//! Hull    validate, normalize (u = (x − c)/s, cloud in the unit ball), convex hull   (hull.rs)
+//! Hull    validate, normalize (u = (x − c)/s, bounding box in [−1, 1]³), convex hull (hull.rs)
 //! Build   the cone program of the method (log det / trace of P or H)                 (logdet_p.rs)
 //!         or the moment matrix (inverse moment)                              (inverse_moment.rs)
 //! Solve   Clarabel, one progress report per interior-point iteration; with relaxed
@@ -297,8 +297,8 @@ fn report(progress: &mut dyn FnMut(&FitProgress), stage: FitStage, fraction: Rea
 ///   convex-hull vertices only (a convex sublevel set containing them contains the cloud); the
 ///   margin is λ_min of the sos-convexity Gram matrix G of the final, rescaled p.
 /// - `LogDetP`, `TraceP` with c = `convexity_relaxation` > 0 (eq. "VAG.param.convex"): p + c(‖u‖²)ᵈ
-///   sos-convex in normalized coordinates u (the cloud is normalized into the unit ball, as in
-///   the paper). The body may be nonconvex, so containment rows are added in rounds (see
+///   sos-convex in normalized coordinates u (the cloud's bounding box is normalized into [−1, 1]³; see
+///   [`hull`] for why this scale). The body may be nonconvex, so containment rows are added in rounds (see
 ///   [`relaxed`]) until p ≤ 1 on every point; `report.nonconvex` is set and the margin is that of
 ///   the relaxed Gram matrix (of p + c(‖u‖²)ᵈ, divided by the containment rescale).
 /// - `InverseMoment` (eq. "inverse.moment.poly", see [`inverse_moment`]): no SDP, nonconvex, no
@@ -448,7 +448,7 @@ fn solve_on_hull(
         sos_gram: Some(gram),
         nonconvex: false,
         notes: vec![format!(
-            "normalized by center = bounding-box midpoint, scale = max distance to it; Clarabel {} iterations ({})",
+            "normalized by center = bounding-box midpoint, scale = half its longest side; Clarabel {} iterations ({})",
             raw.iterations,
             settings.linear_solver.name()
         )],
@@ -490,12 +490,12 @@ fn solve_in_rounds(
     let rows: Vec<String> = out.rows_per_round.iter().map(|r| r.to_string()).collect();
     let mut notes = vec![
         format!(
-            "normalized by center = bounding-box midpoint, scale = max distance to it; Clarabel {} iterations in all ({})",
+            "normalized by center = bounding-box midpoint, scale = half its longest side; Clarabel {} iterations in all ({})",
             out.iterations,
             settings.linear_solver.name()
         ),
         format!(
-            "relaxed convexity c = {} (normalized coordinates, cloud in the unit ball): {} containment round(s), rows {} of {} points",
+            "relaxed convexity c = {} (normalized coordinates, bounding box in [−1, 1]³): {} containment round(s), rows {} of {} points",
             settings.convexity_relaxation,
             out.rows_per_round.len(),
             rows.join(" → "),

@@ -372,10 +372,24 @@ fn distance_lower_bound(
     let s = distance_summary(&c, None);
     let bound = c.verified_squared_distance.min(c.squared_distance).max(0.0);
     let length = a.scale().max(b.scale());
-    let (x, y) = c.moment_witnesses.unwrap_or((empty.witness_a, empty.witness_b));
-    let feasible = c.moment_witnesses.is_some()
-        && a.value_at(&(pose_a.inverse() * x)) <= 1.0 + WITNESS_FEASIBILITY_TOLERANCE
-        && b.value_at(&(pose_b.inverse() * y)) <= 1.0 + WITNESS_FEASIBILITY_TOLERANCE;
+    // Witness candidates: from the kernel of the Gram matrix (paper §IV-A, when one-dimensional)
+    // and from the first-order moments. Of those lying in their bodies, the one whose distance
+    // comes closest to the bound (interior-point kernels are accurate only to about the square
+    // root of the solver's tolerance, the moments to the tolerance); else the first available.
+    let is_feasible = |(x, y): &(Point3, Point3)| {
+        a.value_at(&(pose_a.inverse() * x)) <= 1.0 + WITNESS_FEASIBILITY_TOLERANCE
+            && b.value_at(&(pose_b.inverse() * y)) <= 1.0 + WITNESS_FEASIBILITY_TOLERANCE
+    };
+    let candidates = [c.kernel_witnesses, c.moment_witnesses];
+    let gap = |(x, y): &&(Point3, Point3)| ((y - x).norm_squared() - bound).abs();
+    let chosen = candidates
+        .iter()
+        .flatten()
+        .filter(|w| is_feasible(w))
+        .min_by(|p, q| gap(p).total_cmp(&gap(q)))
+        .or(candidates.iter().flatten().next());
+    let (x, y) = chosen.copied().unwrap_or((empty.witness_a, empty.witness_b));
+    let feasible = chosen.is_some_and(is_feasible);
     let tight = feasible && s.verified && values_agree((y - x).norm_squared(), bound);
     let overlapping = bound <= OVERLAP_RELATIVE * length * length;
     let diff = y - x;

@@ -124,6 +124,11 @@ pub struct DistanceCertificate {
     /// only when not finite). For nonconvex bodies (paper §IV-A) they may lie outside their body;
     /// when both are feasible and ‖x − y‖² meets the bound, the lower bound is tight.
     pub moment_witnesses: Option<(Point3, Point3)>,
+    /// Witness points from the kernel of the Gram matrix (paper §IV-A): the first Gram block has
+    /// basis (1, u, v), and at a minimizer the certificate σ vanishes, so (1, u*, v*) spans its
+    /// kernel; read off when that kernel is one-dimensional (`None` otherwise, e.g. for a pair with
+    /// several minimizers). Unfiltered: for nonconvex bodies they may lie outside their body.
+    pub kernel_witnesses: Option<(Point3, Point3)>,
     /// Clarabel's status (`"Solved"` or `"AlmostSolved"`; other statuses are errors).
     pub solver_status: String,
     /// Seconds inside Clarabel (both passes).
@@ -297,6 +302,7 @@ pub fn certify_distance_with_params(
     let witnesses = run.witnesses_normalized.map(|(u, v)| (world_point(a, pose_a, &u), world_point(b, pose_b, &v)));
     let moment_witnesses =
         run.moments_normalized.map(|(u, v)| (world_point(a, pose_a, &u), world_point(b, pose_b, &v)));
+    let kernel_witnesses = run.kernel_normalized.map(|(u, v)| (world_point(a, pose_a, &u), world_point(b, pose_b, &v)));
     Ok(DistanceCertificate {
         squared_distance: gamma,
         distance: gamma.max(0.0).sqrt(),
@@ -304,6 +310,7 @@ pub fn certify_distance_with_params(
         xi: sol.x[run.sol.multipliers[1]] * len2,
         witnesses,
         moment_witnesses,
+        kernel_witnesses,
         solver_status: format!("{:?}", sol.status),
         solve_seconds: seconds,
         iterations,
@@ -338,6 +345,9 @@ struct DistanceRun {
     witnesses_normalized: Option<(Vector3, Vector3)>,
     /// The same moments without the feasibility filter, if finite.
     moments_normalized: Option<(Vector3, Vector3)>,
+    /// Witnesses from the kernel of the first Gram block (paper §IV-A), unfiltered, if the kernel
+    /// is one-dimensional.
+    kernel_normalized: Option<(Vector3, Vector3)>,
 }
 
 /// Solves the distance program with body a's variables in `frames.0`, body b's in `frames.1`, and
@@ -405,7 +415,12 @@ fn solve_distance_in(
         a.polynomial().value(u) <= 1.0 + WITNESS_FEASIBILITY_TOLERANCE
             && b.polynomial().value(v) <= 1.0 + WITNESS_FEASIBILITY_TOLERANCE
     });
-    Ok(DistanceRun { blocks, objective, pa, pb, sol, witnesses_normalized, moments_normalized })
+    let kernel_normalized = kernel_point(&blocks[0], &sol, 6).map(|w| {
+        let u = fa.origin + Vector3::new(w[0], w[1], w[2]) * fa.scale;
+        let v = fb.origin + Vector3::new(w[3], w[4], w[5]) * fb.scale;
+        (u, v)
+    });
+    Ok(DistanceRun { blocks, objective, pa, pb, sol, witnesses_normalized, moments_normalized, kernel_normalized })
 }
 
 /// Certifies d(p₁‖p₂) for body `p1` under `pose1` and body `p2` under `pose2` (level-0 analogue
@@ -811,6 +826,37 @@ fn moments_first_order(gram: &GramStructure, level0: &Level0Solution, n: usize) 
     w.iter().all(|v| v.is_finite()).then_some(w)
 }
 
+/// Smallest-eigenvalue ratio λ₀/λ_max of a Gram block below which its eigenvector counts as a
+/// kernel vector, and the gap λ₁/λ_max the next eigenvalue must exceed for the kernel to be
+/// one-dimensional ([`kernel_point`]).
+const KERNEL_RELATIVE_EIGENVALUE: Real = 1e-5;
+
+/// The point w* recovered from the kernel of the first Gram block (paper §IV-A): the sos
+/// certificate `σ(w) = Σ_b z_b(w)ᵀ Q_b z_b(w)` vanishes at a minimizer, so each `Q_b z_b(w*) = 0`.
+/// The first block's basis starts `(1, w₁, …, wₙ)`, so a one-dimensional kernel spanned by v gives
+/// `w* = (v₁, …, vₙ)/v₀`. `None` when the smallest eigenvalue is not small relative to the largest,
+/// the kernel has dimension > 1 (no unique minimizer to read off), or v₀ ≈ 0.
+fn kernel_point(gram: &GramStructure, level0: &Level0Solution, n: usize) -> Option<Vec<Real>> {
+    let size = gram.size();
+    let row = *level0.psd_rows.first()?;
+    let q = crate::poly::gram::unpack_triangle(level0.sol.s.get(row..row + triangle_len(size))?, size);
+    let eig = nalgebra::SymmetricEigen::new(q);
+    let mut order: Vec<usize> = (0..size).collect();
+    order.sort_by(|&i, &j| eig.eigenvalues[i].total_cmp(&eig.eigenvalues[j]));
+    let top = eig.eigenvalues[order[size - 1]].abs().max(Real::MIN_POSITIVE);
+    let (l0, l1) = (eig.eigenvalues[order[0]], eig.eigenvalues.get(order.get(1).copied()?).copied()?);
+    if !(l0.abs() <= KERNEL_RELATIVE_EIGENVALUE * top && l1 > KERNEL_RELATIVE_EIGENVALUE * top) {
+        return None;
+    }
+    let v = eig.eigenvectors.column(order[0]);
+    let v0 = v[0];
+    if !(v0.abs() > 1e-8 && size > n) {
+        return None;
+    }
+    let w: Vec<Real> = (1..=n).map(|i| v[i] / v0).collect();
+    w.iter().all(|x| x.is_finite()).then_some(w)
+}
+
 /// World point of normalized coordinates `u` of `body` under `pose`.
 fn world_point(body: &Body, pose: &Isometry3, u: &Vector3) -> Point3 {
     pose * Point3::from(body.center() + u * body.scale())
@@ -955,6 +1001,10 @@ mod tests {
         let n = (c2 - c1).normalize();
         assert!((x.coords - (c1 + n * r1)).norm() < 1e-5, "x* = {x}");
         assert!((y.coords - (c2 - n * r2)).norm() < 1e-5, "y* = {y}");
+        // Paper §IV-A: the same witnesses from the kernel of the (1, u, v) Gram block.
+        let (xk, yk) = cert.kernel_witnesses.expect("one-dimensional Gram kernel");
+        assert!((xk.coords - (c1 + n * r1)).norm() < 1e-4, "kernel x* = {xk}");
+        assert!((yk.coords - (c2 - n * r2)).norm() < 1e-4, "kernel y* = {yk}");
     }
 
     #[test]
