@@ -49,8 +49,8 @@ use super::distance::{distance, DistanceResult, DistanceWarmStart};
 use super::growth::{growth, GrowthResult, GrowthWarmStart};
 use super::newton::{NewtonParams, SolveStatus};
 use super::sdp_certificate::{
-    certify_distance_with_params, certify_growth_with_params, CertificateParams, DistanceCertificate,
-    GrowthCertificate, WITNESS_FEASIBILITY_TOLERANCE,
+    certify_distance_with_params, certify_growth_with_params, certify_separation, CertificateParams,
+    DistanceCertificate, GrowthCertificate, WITNESS_FEASIBILITY_TOLERANCE,
 };
 use crate::body::Body;
 use crate::math::{Isometry3, Point3, Real, Vector3};
@@ -248,6 +248,13 @@ pub fn certified_distance(
         s.agrees = s.bound <= AGREEMENT_ABSOLUTE;
         s.relative_gap = 0.0;
     }
+    if newton_ok && !s.agrees && !newton.overlapping {
+        // The joint program disagrees with a converged separated answer: check Newton's witnesses
+        // by the separating-hyperplane certificate (one body per program, better conditioned).
+        if let Some(h) = separation_summary(a, pose_a, b, pose_b, &newton, cert, &s) {
+            return CertifiedDistance::newton(newton, Some(h), true);
+        }
+    }
     if newton_ok && (s.agrees || !s.verified) {
         // Agreement, or an unverified certificate that cannot overrule a converged KKT point.
         return CertifiedDistance::newton(newton, Some(s), true);
@@ -267,6 +274,40 @@ pub fn certified_distance(
         tight: false,
         converged,
     }
+}
+
+/// The separating-hyperplane certificate of Newton's separated answer
+/// ([`super::sdp_certificate::certify_separation`]) as a summary of the squared distance, when it
+/// is verified and agrees with Newton (its witnesses lie on their bodies, so ‖x − y‖ is also an
+/// upper bound); `None` otherwise. `joint` is the joint program's summary (its time is added).
+fn separation_summary(
+    a: &Body,
+    pose_a: &Isometry3,
+    b: &Body,
+    pose_b: &Isometry3,
+    newton: &DistanceResult,
+    cert: &CertificateParams,
+    joint: &CertificateSummary,
+) -> Option<CertificateSummary> {
+    let on_body = |body: &Body, pose: &Isometry3, p: &Point3| {
+        (body.value_at(&(pose.inverse() * p)) - 1.0).abs() <= WITNESS_FEASIBILITY_TOLERANCE
+    };
+    if !(on_body(a, pose_a, &newton.witness_a) && on_body(b, pose_b, &newton.witness_b)) {
+        return None;
+    }
+    let h = certify_separation(a, pose_a, b, pose_b, &newton.witness_a, &newton.witness_b, cert).ok()?;
+    let n2 = newton.distance * newton.distance;
+    let square = |d: Real| d.max(0.0) * d.max(0.0);
+    let mut s = summary(
+        square(h.lower_bound),
+        square(h.verified_lower_bound),
+        h.gram_min_eigenvalue,
+        joint.solve_seconds + h.solve_seconds,
+        &h.solver_status,
+        Some(n2),
+    );
+    s.solver_status = format!("{} (separating hyperplane)", h.solver_status);
+    (s.verified && s.agrees).then_some(s)
 }
 
 /// The distance answer carried by a certificate (value, moment witnesses, multipliers as warm start);
