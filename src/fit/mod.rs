@@ -363,7 +363,7 @@ fn clarabel_settings(settings: &FitSettings) -> clarabel::solver::DefaultSetting
     clarabel
 }
 
-fn spec_of(settings: &FitSettings) -> logdet_p::ProblemSpec {
+fn spec_of(settings: &FitSettings, trace_basis: logdet_p::TraceBasis) -> logdet_p::ProblemSpec {
     use logdet_p::{Objective, ObjectiveMatrix};
     let (objective, matrix) = match settings.method {
         FitMethod::TraceP => (Objective::Trace, ObjectiveMatrix::P),
@@ -376,6 +376,7 @@ fn spec_of(settings: &FitSettings) -> logdet_p::ProblemSpec {
         objective,
         matrix,
         convexity_relaxation: settings.convexity_relaxation,
+        trace_basis,
     }
 }
 
@@ -401,24 +402,54 @@ fn fit_impl(
     report(progress, FitStage::Hull, 0.0, format!("convex hull of {} points", points.len()));
     let cloud = hull::normalize_and_hull(points)?;
     let d = settings.degree / 2;
-    let solved = if settings.method == FitMethod::InverseMoment {
+    if settings.method == FitMethod::InverseMoment {
         report(progress, FitStage::Build, 0.05, format!("degree-{} moment matrix of {} points", 2 * d, points.len()));
-        inverse_moment::solve(d, &cloud.points)?
-    } else if rounds {
-        solve_in_rounds(&cloud, settings, progress)?
-    } else {
-        solve_on_hull(&cloud, settings, progress)?
+        let solved = inverse_moment::solve(d, &cloud.points)?;
+        return finish(start, points.len(), &cloud, solved, settings, progress);
+    }
+    let solve = |basis, progress: &mut dyn FnMut(&FitProgress)| {
+        if rounds {
+            solve_in_rounds(&cloud, settings, basis, progress)
+        } else {
+            solve_on_hull(&cloud, settings, basis, progress)
+        }
     };
-    finish(start, points.len(), &cloud, solved, settings, progress)
+    let body = finish(start, points.len(), &cloud, solve(logdet_p::TraceBasis::Plain, progress)?, settings, progress)?;
+    if !matches!(settings.method, FitMethod::TraceP | FitMethod::TraceH) {
+        return Ok(body);
+    }
+    // Trace objectives: also in the scaled basis, keep the smaller body (see `TraceBasis`).
+    let scaled = solve(logdet_p::TraceBasis::Scaled, progress)
+        .and_then(|solved| finish(start, points.len(), &cloud, solved, settings, progress));
+    let plain_volume = body.report.volume;
+    Ok(match scaled {
+        Ok(mut other) if other.report.volume < plain_volume => {
+            other.report.notes.push(format!(
+                "trace objective in the RMS-scaled monomial basis (volume {:.4}; plain basis {:.4})",
+                other.report.volume, plain_volume
+            ));
+            other
+        }
+        Ok(other) => {
+            let mut body = body;
+            body.report.notes.push(format!(
+                "trace objective in the plain monomial basis (volume {:.4}; scaled basis {:.4})",
+                plain_volume, other.report.volume
+            ));
+            body
+        }
+        Err(_) => body,
+    })
 }
 
 /// c = 0: one SDP with containment rows on the hull vertices.
 fn solve_on_hull(
     cloud: &hull::NormalizedCloud,
     settings: &FitSettings,
+    trace_basis: logdet_p::TraceBasis,
     progress: &mut dyn FnMut(&FitProgress),
 ) -> Result<Solved> {
-    let spec = spec_of(settings);
+    let spec = spec_of(settings, trace_basis);
     report(
         progress,
         FitStage::Build,
@@ -459,9 +490,10 @@ fn solve_on_hull(
 fn solve_in_rounds(
     cloud: &hull::NormalizedCloud,
     settings: &FitSettings,
+    trace_basis: logdet_p::TraceBasis,
     progress: &mut dyn FnMut(&FitProgress),
 ) -> Result<Solved> {
-    let spec = spec_of(settings);
+    let spec = spec_of(settings, trace_basis);
     report(
         progress,
         FitStage::Build,

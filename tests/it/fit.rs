@@ -268,6 +268,12 @@ fn ellipsoid_cloud_at_degree_2_logdet_h_gives_back_the_ellipsoid_and_trace_forms
         let r = &body.report;
         assert!((r.volume - v).abs() < 4.0 * r.volume_std_error, "{method:?}: MC {} vs exact {v}", r.volume);
         assert!(!r.nonconvex && r.convexity_margin.unwrap() > -1e-9);
+        // Both trace bases were solved and the smaller body kept: the note names both volumes.
+        let note = r.notes.iter().find(|n| n.starts_with("trace objective in the")).expect("basis note");
+        let vols: Vec<Real> =
+            note.split(|c: char| !(c.is_ascii_digit() || c == '.')).filter_map(|t| t.parse::<Real>().ok()).collect();
+        assert_eq!(vols.len(), 2, "{note}");
+        assert!(vols[0] <= vols[1] && (vols[0] - r.volume).abs() < 1e-4, "{note}");
     }
 }
 
