@@ -39,7 +39,7 @@
 //! body adds a 10 × 10 Gram and 35 equations; 2k = 2 raises its degree to 6 (20 × 20, 84 rows).
 
 use super::logdet_p::pair_index;
-use super::{volume, FitProgress, FitStage, KktSolver};
+use super::{report, volume, FitProgress, FitStage, KktSolver};
 use crate::body::{Body, FitReport};
 use crate::conic::{quiet_settings, ConicBuilder, Row};
 use crate::math::{Isometry3, Point3, Real, Vector3};
@@ -131,24 +131,8 @@ impl ContainmentSettings {
         if !MULTIPLIER_DEGREES.contains(&self.multiplier_degree) {
             return Err(Error::invalid("multiplier_degree", format!("must be 0 or 2, got {}", self.multiplier_degree)));
         }
-        if self.volume_samples == 0 || self.volume_samples > 1_000_000_000 {
-            return Err(Error::invalid("volume_samples", "must be between 1 and 1e9"));
-        }
-        if !(self.solver_tolerance.is_finite() && self.solver_tolerance > 0.0 && self.solver_tolerance < 1e-2) {
-            return Err(Error::invalid(
-                "solver_tolerance",
-                format!("must be in (0, 1e-2), got {}", self.solver_tolerance),
-            ));
-        }
-        if self.max_solver_iterations == 0 {
-            return Err(Error::invalid("max_solver_iterations", "must be at least 1"));
-        }
-        Ok(())
+        super::validate_solver_fields(self.volume_samples, self.solver_tolerance, self.max_solver_iterations)
     }
-}
-
-fn report(progress: &mut dyn FnMut(&FitProgress), stage: FitStage, fraction: Real, message: String) {
-    progress(&FitProgress { stage, fraction, message });
 }
 
 fn add3(a: [u8; 3], b: [u8; 3]) -> [u8; 3] {

@@ -228,18 +228,7 @@ impl FitSettings {
         if !crate::body::SUPPORTED_DEGREES.contains(&self.degree) {
             return Err(Error::invalid("degree", format!("must be one of 2, 4, 6, 8, got {}", self.degree)));
         }
-        if self.volume_samples == 0 || self.volume_samples > 1_000_000_000 {
-            return Err(Error::invalid("volume_samples", "must be between 1 and 1e9"));
-        }
-        if !(self.solver_tolerance.is_finite() && self.solver_tolerance > 0.0 && self.solver_tolerance < 1e-2) {
-            return Err(Error::invalid(
-                "solver_tolerance",
-                format!("must be in (0, 1e-2), got {}", self.solver_tolerance),
-            ));
-        }
-        if self.max_solver_iterations == 0 {
-            return Err(Error::invalid("max_solver_iterations", "must be at least 1"));
-        }
+        validate_solver_fields(self.volume_samples, self.solver_tolerance, self.max_solver_iterations)?;
         let c = self.convexity_relaxation;
         if !(c.is_finite() && c >= 0.0) {
             return Err(Error::invalid("convexity_relaxation", format!("must be finite and ≥ 0, got {c}")));
@@ -282,7 +271,26 @@ pub struct FitProgress {
     pub message: String,
 }
 
-fn report(progress: &mut dyn FnMut(&FitProgress), stage: FitStage, fraction: Real, message: String) {
+/// Checks the Monte Carlo and solver fields shared by every fit and containment job.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `volume_samples` (not in 1..=1e9), `solver_tolerance` (not in
+/// (0, 1e-2)) or `max_solver_iterations` (0).
+pub(crate) fn validate_solver_fields(volume_samples: usize, tolerance: Real, max_iterations: u32) -> Result<()> {
+    if volume_samples == 0 || volume_samples > 1_000_000_000 {
+        return Err(Error::invalid("volume_samples", "must be between 1 and 1e9"));
+    }
+    if !(tolerance.is_finite() && tolerance > 0.0 && tolerance < 1e-2) {
+        return Err(Error::invalid("solver_tolerance", format!("must be in (0, 1e-2), got {tolerance}")));
+    }
+    if max_iterations == 0 {
+        return Err(Error::invalid("max_solver_iterations", "must be at least 1"));
+    }
+    Ok(())
+}
+
+/// Sends one progress report.
+pub(crate) fn report(progress: &mut dyn FnMut(&FitProgress), stage: FitStage, fraction: Real, message: String) {
     progress(&FitProgress { stage, fraction, message });
 }
 

@@ -25,7 +25,8 @@
 use super::fast_eval::{solve_kkt8, FastPosed, PosedEval, CHORD_RESIDUAL};
 use super::growth::{solve_growth, GrowthWarmStart};
 use super::newton::{
-    boundary_on_segment_within, secant_coefficient, NewtonParams, SolveStatus, START_BOUNDARY_TOLERANCE,
+    boundary_on_segment_within, extrapolate_multiplier, secant_coefficient, NewtonParams, SolveStatus,
+    START_BOUNDARY_TOLERANCE,
 };
 use crate::body::{Body, PosedBody};
 use crate::math::{Isometry3, Matrix3, Point3, Real, Vector3};
@@ -112,10 +113,7 @@ impl DistanceWarmStart {
         if let Some(p) = self.previous {
             let sigma = secant_coefficient(&p.relative_pose, &self.relative_pose, rel, length);
             if sigma > 0.0 {
-                let lam = |i: usize| {
-                    let l = self.multipliers[i] + (self.multipliers[i] - p.multipliers[i]) * sigma;
-                    l.max(0.5 * self.multipliers[i])
-                };
+                let lam = |i: usize| extrapolate_multiplier(self.multipliers[i], p.multipliers[i], sigma);
                 return (
                     self.a_local + (self.a_local - p.a_local) * sigma,
                     self.b_local + (self.b_local - p.b_local) * sigma,

@@ -17,7 +17,8 @@
 
 use super::fast_eval::{solve_kkt4, FastPosed, PosedEval, CHORD_RESIDUAL};
 use super::newton::{
-    boundary_on_segment_within, secant_coefficient, NewtonParams, SolveStatus, START_BOUNDARY_TOLERANCE,
+    boundary_on_segment_within, extrapolate_multiplier, secant_coefficient, NewtonParams, SolveStatus,
+    START_BOUNDARY_TOLERANCE,
 };
 use crate::body::{Body, PosedBody};
 use crate::math::{Isometry3, Matrix3, Point3, Real, Vector3};
@@ -109,8 +110,8 @@ impl GrowthWarmStart {
         if let Some(p) = self.previous.filter(|p| p.multiplier > 0.0) {
             let sigma = secant_coefficient(&p.relative_pose, &self.relative_pose, rel, length);
             if sigma > 0.0 {
-                let mu = self.multiplier + (self.multiplier - p.multiplier) * sigma;
-                return (self.local + (self.local - p.local) * sigma, mu.max(0.5 * self.multiplier));
+                let mu = extrapolate_multiplier(self.multiplier, p.multiplier, sigma);
+                return (self.local + (self.local - p.local) * sigma, mu);
             }
         }
         (self.local, self.multiplier)

@@ -144,6 +144,12 @@ pub(crate) fn secant_coefficient(previous: &Isometry3, last: &Isometry3, current
     (c / n1).min(2.0)
 }
 
+/// Linear extrapolation `last + σ (last − previous)` of a warm-started multiplier, kept at or above
+/// half of `last` (a multiplier of an active constraint stays positive).
+pub(crate) fn extrapolate_multiplier(last: Real, previous: Real, sigma: Real) -> Real {
+    (last + (last - previous) * sigma).max(0.5 * last)
+}
+
 #[cfg(test)]
 mod secant_tests {
     use super::*;
