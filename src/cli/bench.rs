@@ -20,7 +20,7 @@ pub const PAPER_TABLE2_SECONDS: [(usize, Real); 4] = [(2, 0.08), (4, 0.083), (6,
 #[derive(clap::Args, Debug)]
 pub struct BenchArgs {
     /// Folder with chair_101.off and human_10.off (the paper's shapes).
-    #[arg(long, default_value = "../shared/data/psb")]
+    #[arg(long, default_value = "data/psb")]
     psb: std::path::PathBuf,
     /// Degrees 2d of the query benchmark, comma separated.
     #[arg(long, default_value = "2,4,6,8", value_delimiter = ',')]

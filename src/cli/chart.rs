@@ -40,7 +40,7 @@ enum ChartKind {
 #[derive(clap::Args, Debug)]
 struct CommonArgs {
     /// Folder with chair_101.off and human_10.off.
-    #[arg(long, default_value = "../shared/data/psb")]
+    #[arg(long, default_value = "data/psb")]
     psb: std::path::PathBuf,
     /// Folder of fitted bodies `{chair_101,human_10}.deg{2d}.json` (missing ones are fitted).
     #[arg(long, default_value = "tests/data")]

@@ -17,7 +17,7 @@ use sublevel::{Error, Result};
 #[derive(clap::Args, Debug)]
 pub struct FitTimeArgs {
     /// Mesh to fit.
-    #[arg(default_value = "../shared/data/psb/chair_101.off")]
+    #[arg(default_value = "data/psb/chair_101.off")]
     pub mesh: PathBuf,
     /// Total degrees 2d, comma separated.
     #[arg(long, default_value = "2,4,6,8", value_delimiter = ',')]

@@ -128,7 +128,7 @@ pub const QUICK_SHAPES: [&str; 2] = ["human_10", "chair_101"];
 pub struct Table1Args {
     /// Folder with the five meshes (human_10.off, chair_101.off, hand_181.off, vase_361.off,
     /// octopus_121.off).
-    #[arg(default_value = "../shared/data/psb")]
+    #[arg(default_value = "data/psb")]
     pub dir: PathBuf,
     /// CSV output, one line per (row, shape).
     #[arg(long)]

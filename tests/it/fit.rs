@@ -6,7 +6,7 @@ use sublevel::math::{Matrix3, Point3, Real, UnitQuaternion, Vector3};
 use sublevel::{Body, Error};
 
 fn psb(name: &str) -> std::path::PathBuf {
-    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/psb").join(name)
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/psb").join(name)
 }
 
 /// The chair at 2d = 4, fitted once and shared by the tests that inspect it.

@@ -15,7 +15,7 @@
 //! verified bound must not exceed the Newton value (a lower bound) by more than the tolerance.
 //!
 //! The real-mesh bodies are read from `tests/data/{chair_101,human_10}.deg{4,6}.json` (fits of
-//! ../shared/data/psb); when a file is absent the test prints why and passes without checking.
+//! data/psb); when a file is absent the test prints why and passes without checking.
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

@@ -517,7 +517,7 @@ async fn demo_seeding_is_idempotent_across_restarts() {
 async fn end_to_end_chair_slides_through_human() {
     use sublevel::query::sdp_certificate::{certify_distance, certify_growth};
     use sublevel::query::NewtonParams;
-    let psb = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/psb");
+    let psb = Path::new(env!("CARGO_MANIFEST_DIR")).join("data/psb");
     let dir = tempfile::tempdir().unwrap();
     let server = Server::start(config(dir.path())).await;
     let mut c = server.client().await;

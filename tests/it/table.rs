@@ -7,7 +7,7 @@ use sublevel::fit::{fit_points, mesh, FitSettings};
 use sublevel::math::{Point3, Real};
 
 fn psb_dir() -> std::path::PathBuf {
-    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/psb")
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/psb")
 }
 
 /// The 2d = 2 log det P fit of the chair is its minimum-volume enclosing ellipsoid: Khachiyan's
