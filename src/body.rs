@@ -14,7 +14,7 @@
 //! `scale` and the fit `report`.
 
 use crate::math::{Isometry3, Matrix3, Point3, Real, Vector3};
-use crate::poly::{Eval, FastPoly, Polynomial};
+use crate::poly::{Eval, FastPoly, Polynomial, RadialTable};
 use crate::{Error, Result};
 use serde::{Deserialize, Serialize};
 
@@ -111,6 +111,8 @@ pub struct Body {
     min_value: Real,
     /// Precomputed derivative tables of `polynomial` for the query hot path.
     fast: FastPoly,
+    /// Radial function of {p ≤ 1} about `interior_u`: the boundary points of cold starts.
+    radial: RadialTable,
     /// Fit report.
     pub report: FitReport,
 }
@@ -159,7 +161,8 @@ impl Body {
             ));
         }
         let fast = FastPoly::new(&polynomial);
-        Ok(Self { polynomial, center: Vector3::from(center), scale, interior_u, min_value, fast, report })
+        let radial = RadialTable::new(&fast, &interior_u);
+        Ok(Self { polynomial, center: Vector3::from(center), scale, interior_u, min_value, fast, radial, report })
     }
 
     /// Parses and validates a body from its JSON file form.
@@ -253,6 +256,12 @@ impl Body {
         self.polynomial.value(&((x.coords - self.center) / self.scale))
     }
 
+    /// The radial function of the body about its interior point (normalized units; built once in
+    /// [`Body::new`]).
+    pub fn radial_table(&self) -> &RadialTable {
+        &self.radial
+    }
+
     /// The body under a pose.
     pub fn posed(&self, pose: &Isometry3) -> PosedBody<'_> {
         PosedBody::new(self, pose)
@@ -313,6 +322,20 @@ impl<'a> PosedBody<'a> {
     /// The interior point (minimizer of p') in world coordinates.
     pub fn interior_point(&self) -> Vector3 {
         self.from_normalized(&self.body.interior_u)
+    }
+
+    /// The boundary point on the ray from the interior point towards `target` (world, meters), read
+    /// off the body's [`RadialTable`] (within a few percent of the boundary; a start for Newton,
+    /// not an answer), or `target` itself when the table puts it inside the body.
+    pub fn boundary_towards(&self, target: &Vector3) -> Vector3 {
+        let c = self.interior_point();
+        let d = target - c;
+        let du = self.a * d;
+        let n = du.norm();
+        if n.is_nan() || n <= 0.0 {
+            return c;
+        }
+        c + d * (self.body.radial.radius(&du) / n).min(1.0)
     }
 }
 

@@ -7,6 +7,8 @@
 //! - [`monomial`]: the graded-lex monomial basis z(x) and O(1) indexing;
 //! - [`polynomial`]: [`Polynomial`] with allocation-free value / gradient / Hessian;
 //! - [`fast`]: [`FastPoly`], precomputed derivative tables for the query hot path;
+//! - [`radial`]: [`RadialTable`], the radial function of a sublevel set about an interior point
+//!   (cold starts of the query solvers);
 //! - [`gram`]: Gram forms `z(x)ᵀ Q z(x)` in any number of variables, and Clarabel's packed-triangle
 //!   convention used by every SDP in the crate.
 
@@ -14,6 +16,8 @@ pub mod fast;
 pub mod gram;
 pub mod monomial;
 pub mod polynomial;
+pub mod radial;
 
 pub use fast::FastPoly;
 pub use polynomial::{Eval, Polynomial, MAX_DEGREE};
+pub use radial::RadialTable;

@@ -334,7 +334,7 @@ fn distance_from_certificate(
         valid: verified && !overlapping && c.tau > 0.0 && c.xi > 0.0,
         growth: GrowthWarmStart::default(),
         relative_pose: pose_a.inverse() * pose_b,
-        previous: None,
+        trail: Default::default(),
     };
     DistanceResult {
         distance: if overlapping { 0.0 } else { d },
@@ -494,7 +494,7 @@ pub fn certified_growth(
             multiplier: c.tau.max(0.0),
             valid: converged,
             relative_pose: pose2.inverse() * pose1,
-            previous: None,
+            trail: Default::default(),
         },
         ..newton
     };

@@ -14,19 +14,22 @@
 //! 2(x − y) + λ_a ∇p_a'(x) = 0,   −2(x − y) + λ_b ∇p_b'(y) = 0,   p_a'(x) = 1,   p_b'(y) = 1
 //! ```
 //!
-//! with exact Hessians, from the previous answer (warm start) or from a geometric cold start. Cold:
-//! when the segment between the interior points crosses both boundaries in order (A's exit before
-//! B's entry), Newton starts straight from those two crossings and a converged answer with positive
-//! multipliers needs no overlap test; otherwise (or when that run fails) the growth measure decides
-//! overlap and the growth minimizer on B with the matching boundary point of A is the start. A
-//! log-barrier path from the two interior points is the globally convergent fallback. A KKT point with λ_a, λ_b > 0 is the global
-//! minimizer of this convex program.
+//! with exact Hessians, from a warm or a cold start. Warm: the previous answers of the pair,
+//! extrapolated along the motion ([`MotionTrail`]); the run is capped at 8 iterations and
+//! gives up when a multiplier turns nonpositive (the bodies start to touch). Cold: when the segment
+//! between the interior points leaves A before it enters B, Newton starts from the boundary points
+//! of A towards B and of B towards A read off the bodies' radial tables
+//! ([`crate::poly::RadialTable`]), with least-squares multipliers, and a converged answer with
+//! positive multipliers needs no overlap test; otherwise (or when that run fails) the growth
+//! measure decides overlap and the growth minimizer on B with the exact boundary point of A towards
+//! it is the start. A log-barrier path from the two interior points is the globally convergent
+//! fallback. A KKT point with λ_a, λ_b > 0 is the global minimizer of this convex program.
 
-use super::fast_eval::{solve_kkt8, FastPosed, PosedEval, CHORD_RESIDUAL};
+use super::fast_eval::{abs_max, solve_kkt8, FastPosed, PosedEval, CHORD_RESIDUAL};
 use super::growth::{solve_growth, GrowthWarmStart};
 use super::newton::{
-    boundary_on_segment_within, extrapolate_multiplier, secant_coefficient, NewtonParams, SolveStatus,
-    START_BOUNDARY_TOLERANCE,
+    boundary_on_segment_within, pose_step, MotionTrail, NewtonParams, SolveStatus, START_BOUNDARY_TOLERANCE,
+    WARM_ITERATIONS,
 };
 use crate::body::{Body, PosedBody};
 use crate::math::{Isometry3, Matrix3, Point3, Real, Vector3};
@@ -72,23 +75,10 @@ pub struct DistanceWarmStart {
     pub growth: GrowthWarmStart,
     /// Relative pose pose_a⁻¹·pose_b at which the witnesses were solved.
     pub relative_pose: Isometry3,
-    /// The separated answer before this one (set when this answer was warm-started): the next
-    /// query extrapolates along the motion from the two (secant predictor).
-    pub previous: Option<DistancePrevious>,
-}
-
-/// An earlier separated distance answer of a pair, for the secant predictor of
-/// [`DistanceWarmStart`].
-#[derive(Clone, Copy, Debug)]
-pub struct DistancePrevious {
-    /// Witness on A in A's body frame (meters).
-    pub a_local: Vector3,
-    /// Witness on B in B's body frame (meters).
-    pub b_local: Vector3,
-    /// Multipliers (λ_a, λ_b).
-    pub multipliers: [Real; 2],
-    /// Relative pose pose_a⁻¹·pose_b of that answer.
-    pub relative_pose: Isometry3,
+    /// Earlier separated answers of the same pair along the motion: with them the next query
+    /// extrapolates along the motion ([`MotionTrail`]) instead of restarting from the last
+    /// witnesses. State layout: `[a_local (3), b_local (3), λ_a, λ_b]`.
+    pub trail: MotionTrail<8>,
 }
 
 impl Default for DistanceWarmStart {
@@ -100,28 +90,26 @@ impl Default for DistanceWarmStart {
             valid: false,
             growth: GrowthWarmStart::default(),
             relative_pose: Isometry3::identity(),
-            previous: None,
+            trail: MotionTrail::default(),
         }
     }
 }
 
 impl DistanceWarmStart {
-    /// Start (witness on A in A's frame, witness on B in B's frame, multipliers) for relative pose
-    /// `rel`: extrapolated along the motion when the previous answer is known and the pose keeps
-    /// moving the same way ([`secant_coefficient`]), else the last answer.
-    fn predict(&self, rel: &Isometry3, length: Real) -> (Vector3, Vector3, [Real; 2]) {
-        if let Some(p) = self.previous {
-            let sigma = secant_coefficient(&p.relative_pose, &self.relative_pose, rel, length);
-            if sigma > 0.0 {
-                let lam = |i: usize| extrapolate_multiplier(self.multipliers[i], p.multipliers[i], sigma);
-                return (
-                    self.a_local + (self.a_local - p.a_local) * sigma,
-                    self.b_local + (self.b_local - p.b_local) * sigma,
-                    [lam(0), lam(1)],
-                );
-            }
+    fn state(&self) -> [Real; 8] {
+        let (a, b, l) = (&self.a_local, &self.b_local, &self.multipliers);
+        [a.x, a.y, a.z, b.x, b.y, b.z, l[0], l[1]]
+    }
+
+    /// Start (witness on A in A's frame, witness on B in B's frame, multipliers) after the
+    /// relative-pose step `step` from this answer: extrapolated along the motion from the earlier
+    /// answers ([`MotionTrail::predict`]), else the last answer.
+    fn predict(&self, step: &[Real; 6]) -> (Vector3, Vector3, [Real; 2]) {
+        if self.trail.is_empty() {
+            return (self.a_local, self.b_local, self.multipliers);
         }
-        (self.a_local, self.b_local, self.multipliers)
+        let s = self.trail.predict(&self.state(), step, 6).0;
+        (Vector3::new(s[0], s[1], s[2]), Vector3::new(s[3], s[4], s[5]), [s[6], s[7]])
     }
 }
 
@@ -149,16 +137,17 @@ pub fn distance(
     let bb = PosedBody::new(b, &rel);
     let mut iterations = 0;
 
-    let previous = warm.filter(|w| w.valid).map(|w| DistancePrevious {
-        a_local: w.a_local,
-        b_local: w.b_local,
-        multipliers: w.multipliers,
-        relative_pose: w.relative_pose,
+    // The trail of this answer: the last separated answer and its own trail, with the step from it.
+    let length = a.scale() + b.scale();
+    let previous = warm.filter(|w| w.valid).map(|w| {
+        let step = pose_step(&w.relative_pose, &rel, length);
+        (step, MotionTrail::extend(&w.state(), &w.trail, step))
     });
-    if let Some(w) = warm.filter(|w| w.valid) {
-        let (a0, b0, lam0) = w.predict(&rel, a.scale() + b.scale());
+    if let (Some(w), Some((step, _))) = (warm.filter(|w| w.valid), &previous) {
+        let (a0, b0, lam0) = w.predict(step);
         let y0 = rel * Point3::from(b0);
-        let out = kkt_newton(&ba, &bb, a0, y0.coords, lam0, params);
+        let capped = NewtonParams { max_iterations: params.max_iterations.min(WARM_ITERATIONS), ..*params };
+        let out = kkt_newton(&ba, &bb, a0, y0.coords, Some(lam0), &capped, true);
         iterations += out.iterations;
         if out.status.converged() {
             return finish(pose_a, &rel, out, iterations, true, w.growth, previous);
@@ -172,14 +161,13 @@ pub fn distance(
         let (ca, cb) = (ba.interior_point(), bb.interior_point());
         let (fa, fb) = (FastPosed::new(&ba), FastPosed::new(&bb));
         if fb.value(&ca) > 1.0 && fa.value(&cb) > 1.0 {
-            let x0 = boundary_on_segment_within(&ba, &ca, &cb, START_BOUNDARY_TOLERANCE);
-            let y0 = boundary_on_segment_within(&bb, &cb, &ca, START_BOUNDARY_TOLERANCE);
+            let x0 = ba.boundary_towards(&cb);
+            let y0 = bb.boundary_towards(&ca);
             // Separated along the segment: A's crossing comes before B's.
             if (x0 - ca).norm_squared() < (y0 - ca).norm_squared() {
-                let lam0 = initial_multipliers(&ba, &bb, &x0, &y0);
                 let capped =
                     NewtonParams { max_iterations: params.max_iterations.min(SPECULATIVE_ITERATIONS), ..*params };
-                let out = kkt_newton(&ba, &bb, x0, y0, lam0, &capped);
+                let out = kkt_newton(&ba, &bb, x0, y0, None, &capped, false);
                 iterations += out.iterations;
                 // Near contact (x ≈ y) the multipliers lose meaning: let the growth test decide.
                 let clear = (out.y - out.x).norm() > 1e-6 * (a.scale() + b.scale());
@@ -191,9 +179,11 @@ pub fn distance(
     }
 
     // Overlap test by the growth measure.
-    let g = solve_growth(&ba, &bb, warm.map(|w| &w.growth), params);
+    let rel_ba = rel.inverse();
+    let start = warm.map(|w| w.growth.towards(&rel_ba, a.scale()));
+    let g = solve_growth(&ba, &bb, start, params);
     iterations += g.iterations;
-    let growth_warm = GrowthWarmStart::after(warm.map(|w| &w.growth), g.x, g.mu, g.status.converged(), rel.inverse());
+    let growth_warm = GrowthWarmStart::after(start, g.x, g.mu, g.status.converged(), rel_ba);
     let touching = |iterations: usize| {
         let p = pose_a * (rel * Point3::from(g.x));
         DistanceResult {
@@ -215,9 +205,9 @@ pub fn distance(
 
     // Separated: cold start from the growth minimizer on B.
     let y0 = (rel * Point3::from(g.x)).coords;
+    // Exact boundary point: near contact the radial table's estimate may lie past y0.
     let x0 = boundary_on_segment_within(&ba, &ba.interior_point(), &y0, START_BOUNDARY_TOLERANCE);
-    let lam0 = initial_multipliers(&ba, &bb, &x0, &y0);
-    let out = kkt_newton(&ba, &bb, x0, y0, lam0, params);
+    let out = kkt_newton(&ba, &bb, x0, y0, None, params, false);
     iterations += out.iterations;
     if out.status.converged() {
         return finish(pose_a, &rel, out, iterations, false, growth_warm, previous);
@@ -230,7 +220,7 @@ pub fn distance(
     }
     let (xb, yb, lamb, it_b) = barrier(&ba, &bb, params);
     iterations += it_b;
-    let out = kkt_newton(&ba, &bb, xb, yb, lamb, params);
+    let out = kkt_newton(&ba, &bb, xb, yb, Some(lamb), params, false);
     iterations += out.iterations;
     finish(pose_a, &rel, out, iterations, false, growth_warm, previous)
 }
@@ -242,7 +232,7 @@ fn finish(
     iterations: usize,
     warm_started: bool,
     growth: GrowthWarmStart,
-    previous: Option<DistancePrevious>,
+    trail: Option<([Real; 6], MotionTrail<8>)>,
 ) -> DistanceResult {
     let diff = out.y - out.x;
     let dist = diff.norm();
@@ -265,20 +255,19 @@ fn finish(
             valid: out.status.converged(),
             growth,
             relative_pose: *rel,
-            previous,
+            trail: trail.filter(|_| out.status.converged()).map(|t| t.1).unwrap_or_default(),
         },
     }
 }
 
-/// Least-squares multipliers at (x, y), clamped positive.
-fn initial_multipliers(ba: &PosedBody<'_>, bb: &PosedBody<'_>, x: &Vector3, y: &Vector3) -> [Real; 2] {
-    let ga = FastPosed::new(ba).value_gradient(x).1;
-    let gb = FastPosed::new(bb).value_gradient(y).1;
+/// Least-squares multipliers of `2(x − y) + λ_a ∇p_a' = 0`, `−2(x − y) + λ_b ∇p_b' = 0` for the
+/// gradients `ga` at x and `gb` at y, clamped positive.
+fn initial_multipliers(ga: &Vector3, gb: &Vector3, x: &Vector3, y: &Vector3) -> [Real; 2] {
     let d = y - x;
-    let la = 2.0 * d.dot(&ga) / ga.norm_squared().max(Real::MIN_POSITIVE);
-    let lb = -2.0 * d.dot(&gb) / gb.norm_squared().max(Real::MIN_POSITIVE);
+    let la = 2.0 * d.dot(ga) / ga.norm_squared().max(Real::MIN_POSITIVE);
+    let lb = -2.0 * d.dot(gb) / gb.norm_squared().max(Real::MIN_POSITIVE);
     let fix = |l: Real, g: &Vector3| if l.is_finite() && l > 0.0 { l } else { 2.0 * d.norm() / g.norm().max(1e-300) };
-    [fix(la, &ga), fix(lb, &gb)]
+    [fix(la, ga), fix(lb, gb)]
 }
 
 struct KktOut {
@@ -308,15 +297,21 @@ impl KktPoint {
     fn new(fa: &FastPosed<'_>, fb: &FastPosed<'_>, x: &Vector3, y: &Vector3, lam: [Real; 2], hessian: bool) -> Self {
         let ea = fa.eval(x, hessian);
         let eb = fb.eval(y, hessian);
-        let d = (x - y) * 2.0;
-        let ra = d + ea.gradient * lam[0];
-        let rb = -d + eb.gradient * lam[1];
         let (ca, cb) = (ea.value - 1.0, eb.value - 1.0);
-        Self { ea, eb, ra, rb, ca, cb }
+        let mut pt = Self { ea, eb, ra: Vector3::zeros(), rb: Vector3::zeros(), ca, cb };
+        pt.set_multipliers(x, y, lam);
+        pt
+    }
+
+    /// Recomputes the stationarity residuals for the multipliers `lam` (no new evaluation).
+    fn set_multipliers(&mut self, x: &Vector3, y: &Vector3, lam: [Real; 2]) {
+        let d = (x - y) * 2.0;
+        self.ra = d + self.ea.gradient * lam[0];
+        self.rb = -d + self.eb.gradient * lam[1];
     }
 
     fn norm_inf(&self) -> Real {
-        self.ra.amax().max(self.rb.amax()).max(self.ca.abs()).max(self.cb.abs())
+        abs_max(&self.ra).max(abs_max(&self.rb)).max(self.ca.abs()).max(self.cb.abs())
     }
 
     fn norm2(&self) -> Real {
@@ -348,7 +343,9 @@ fn newton_step(h: &(Matrix3, Matrix3), pt: &KktPoint, lam: [Real; 2]) -> Option<
     Some((Vector3::new(step[0], step[1], step[2]), Vector3::new(step[3], step[4], step[5]), [step[6], step[7]]))
 }
 
-/// Active-set Newton on the 8 × 8 KKT system, globalized by backtracking on ‖r‖₂. Every point is
+/// Active-set Newton on the 8 × 8 KKT system from (x0, y0) and the multipliers `lam0` (least
+/// squares at the start when `None`), globalized by backtracking on ‖r‖₂; a `warm` run gives up
+/// (Stalled) when a multiplier turns nonpositive. Every point is
 /// evaluated once; near the solution (residual below [`CHORD_RESIDUAL`]) trial points skip the
 /// Hessians and a further step reuses the last ones (chord step), refreshed when it stalls.
 fn kkt_newton(
@@ -356,12 +353,18 @@ fn kkt_newton(
     bb: &PosedBody<'_>,
     x0: Vector3,
     y0: Vector3,
-    lam0: [Real; 2],
+    lam0: Option<[Real; 2]>,
     params: &NewtonParams,
+    warm: bool,
 ) -> KktOut {
     let (fa, fb) = (FastPosed::new(ba), FastPosed::new(bb));
-    let (mut x, mut y, mut lam) = (x0, y0, lam0);
-    let mut pt = KktPoint::new(&fa, &fb, &x, &y, lam, true);
+    let (mut x, mut y) = (x0, y0);
+    let mut pt = KktPoint::new(&fa, &fb, &x, &y, lam0.unwrap_or_default(), true);
+    // Without a start for the multipliers: least squares from the first point's gradients.
+    let mut lam = lam0.unwrap_or_else(|| initial_multipliers(&pt.ea.gradient, &pt.eb.gradient, &x, &y));
+    if lam0.is_none() {
+        pt.set_multipliers(&x, &y, lam);
+    }
     let mut hess: Option<(Matrix3, Matrix3)> = None;
     let mut status = SolveStatus::MaxIterations;
     let mut it = 0;
@@ -421,6 +424,12 @@ fn kkt_newton(
                 pt = KktPoint::new(&fa, &fb, &x, &y, lam, true);
                 continue;
             }
+            status = SolveStatus::Stalled;
+            break;
+        }
+        // A warm run whose multipliers turn nonpositive is following bodies that start to touch:
+        // leave it to the growth test.
+        if warm && (lam[0] <= 0.0 || lam[1] <= 0.0) {
             status = SolveStatus::Stalled;
             break;
         }

@@ -16,6 +16,9 @@ pub(crate) struct FastPosed<'a> {
     a: Matrix3,
     at: Matrix3,
     b: Vector3,
+    /// 1/scale when A = I/scale (the body posed without rotation, as the frame body of every
+    /// query is): then ∇ₓ = ∇ᵤ/scale and ∇²ₓ = ∇²ᵤ/scale², with no matrix products.
+    unrotated: Option<Real>,
 }
 
 /// Value, world gradient and (when evaluated) the normalized-frame Hessian at one point (one
@@ -31,40 +34,76 @@ impl<'a> FastPosed<'a> {
     /// The evaluator of a posed body.
     pub fn new(pb: &PosedBody<'a>) -> Self {
         let a = *pb.linear();
-        Self { poly: pb.body.fast_polynomial(), a, at: a.transpose(), b: pb.to_normalized(&Vector3::zeros()) }
+        let q = pb.pose.rotation.quaternion();
+        let unrotated = (q.i == 0.0 && q.j == 0.0 && q.k == 0.0).then(|| 1.0 / pb.body.scale());
+        Self {
+            poly: pb.body.fast_polynomial(),
+            a,
+            at: a.transpose(),
+            b: pb.to_normalized(&Vector3::zeros()),
+            unrotated,
+        }
+    }
+
+    /// u = A x + b.
+    #[inline]
+    fn normalized(&self, x: &Vector3) -> Vector3 {
+        match self.unrotated {
+            Some(k) => x * k + self.b,
+            None => self.a * x + self.b,
+        }
+    }
+
+    /// ∇ₓ = Aᵀ∇ᵤ.
+    #[inline]
+    fn world_gradient(&self, g: &Vector3) -> Vector3 {
+        match self.unrotated {
+            Some(k) => g * k,
+            None => self.at * g,
+        }
     }
 
     /// p'(x).
     #[inline]
     pub fn value(&self, x: &Vector3) -> Real {
-        self.poly.value(&(self.a * x + self.b))
+        self.poly.value(&self.normalized(x))
     }
 
     /// p'(x) and ∇p'(x).
     #[inline]
     pub fn value_gradient(&self, x: &Vector3) -> (Real, Vector3) {
-        let (v, g) = self.poly.value_gradient(&(self.a * x + self.b));
-        (v, self.at * g)
+        let (v, g) = self.poly.value_gradient(&self.normalized(x));
+        (v, self.world_gradient(&g))
     }
 
     /// p'(x), ∇p'(x) and, when `hessian` is set, (deferred) ∇²p'(x), in one pass.
     #[inline]
     pub fn eval(&self, x: &Vector3, hessian: bool) -> PosedEval {
-        let u = self.a * x + self.b;
+        let u = self.normalized(x);
         if hessian {
             let e = self.poly.eval(&u);
-            PosedEval { value: e.value, gradient: self.at * e.gradient, hessian_u: Some(e.hessian) }
+            PosedEval { value: e.value, gradient: self.world_gradient(&e.gradient), hessian_u: Some(e.hessian) }
         } else {
             let (value, g) = self.poly.value_gradient(&u);
-            PosedEval { value, gradient: self.at * g, hessian_u: None }
+            PosedEval { value, gradient: self.world_gradient(&g), hessian_u: None }
         }
     }
 
     /// ∇²p'(x) from an evaluation of [`Self::eval`] at x that included the Hessian.
     #[inline]
     pub fn hessian(&self, e: &PosedEval) -> Option<Matrix3> {
-        e.hessian_u.map(|h| self.at * h * self.a)
+        let h = e.hessian_u?;
+        Some(match self.unrotated {
+            Some(k) => h * (k * k),
+            None => self.at * h * self.a,
+        })
     }
+}
+
+/// max |vᵢ| (plain comparisons; nalgebra's `amax` goes through generic SIMD traits on the hot path).
+#[inline]
+pub(crate) fn abs_max(v: &Vector3) -> Real {
+    v.x.abs().max(v.y.abs()).max(v.z.abs())
 }
 
 /// KKT residual (2-norm, relative to the solver's stationarity scale) below which the next trial
@@ -79,7 +118,7 @@ pub(crate) fn inverse3(m: &Matrix3) -> Option<Matrix3> {
     let c01 = m[(1, 2)] * m[(2, 0)] - m[(1, 0)] * m[(2, 2)];
     let c02 = m[(1, 0)] * m[(2, 1)] - m[(1, 1)] * m[(2, 0)];
     let det = m[(0, 0)] * c00 + m[(0, 1)] * c01 + m[(0, 2)] * c02;
-    let s = m.amax();
+    let s = m.iter().fold(0.0, |acc: Real, v| acc.max(v.abs()));
     if !(det.is_finite() && det.abs() > 1e-14 * s * s * s && s > 0.0) {
         return None;
     }

@@ -10,16 +10,15 @@
 //! 1. the unconstrained minimizer of p₁ (precomputed per body) satisfies p₂' ≤ 1: the constraint is
 //!    inactive and d = min p₁ (multiplier 0);
 //! 2. otherwise the constraint is active, and Newton's method solves the KKT system
-//!    `∇p₁' + μ∇p₂' = 0, p₂' = 1` (4 × 4, exact Hessians), from the previous answer (warm start) or from
-//!    the point where the segment between the two interior points leaves body 2 (cold start);
+//!    `∇p₁' + μ∇p₂' = 0, p₂' = 1` (4 × 4, exact Hessians), from the previous answers extrapolated
+//!    along the motion (warm start, [`MotionTrail`]; capped at 8 iterations, and case 1 is
+//!    checked first when the predicted μ falls fast) or from the boundary point of body 2 towards
+//!    p₁'s minimizer read off body 2's radial table (cold start, [`crate::poly::RadialTable`]);
 //! 3. if that fails, a log-barrier path `min p₁' − t·log(1 − p₂')` from body 2's interior point, then
 //!    the KKT polish.
 
-use super::fast_eval::{solve_kkt4, FastPosed, PosedEval, CHORD_RESIDUAL};
-use super::newton::{
-    boundary_on_segment_within, extrapolate_multiplier, secant_coefficient, NewtonParams, SolveStatus,
-    START_BOUNDARY_TOLERANCE,
-};
+use super::fast_eval::{abs_max, solve_kkt4, FastPosed, PosedEval, CHORD_RESIDUAL};
+use super::newton::{pose_step, MotionTrail, NewtonParams, SolveStatus, WARM_ITERATIONS};
 use crate::body::{Body, PosedBody};
 use crate::math::{Isometry3, Matrix3, Point3, Real, Vector3};
 
@@ -56,21 +55,10 @@ pub struct GrowthWarmStart {
     pub valid: bool,
     /// Relative pose pose₂⁻¹·pose₁ at which `local` was solved.
     pub relative_pose: Isometry3,
-    /// The answer before this one for the same pair (set when this answer was warm-started): with
-    /// it the next query extrapolates along the motion (secant predictor) instead of restarting
-    /// from `local`.
-    pub previous: Option<GrowthPrevious>,
-}
-
-/// An earlier growth answer of a pair, for the secant predictor of [`GrowthWarmStart`].
-#[derive(Clone, Copy, Debug)]
-pub struct GrowthPrevious {
-    /// Minimizer in body 2's frame (meters).
-    pub local: Vector3,
-    /// Multiplier μ.
-    pub multiplier: Real,
-    /// Relative pose pose₂⁻¹·pose₁ of that answer.
-    pub relative_pose: Isometry3,
+    /// Earlier answers of the same pair along the motion (kept while answers are warm-started):
+    /// with them the next query extrapolates along the motion ([`MotionTrail`]) instead of
+    /// restarting from `local`. State layout: `[local.x, local.y, local.z, multiplier]`.
+    pub trail: MotionTrail<4>,
 }
 
 impl Default for GrowthWarmStart {
@@ -80,41 +68,60 @@ impl Default for GrowthWarmStart {
             multiplier: 0.0,
             valid: false,
             relative_pose: Isometry3::identity(),
-            previous: None,
+            trail: MotionTrail::default(),
         }
     }
 }
 
+/// Predicted ratio μ_next/μ_last below which a warm start checks first whether the constraint has
+/// turned inactive (one evaluation of p₂' at p₁'s minimizer; a smooth motion changes μ far less
+/// per query).
+const FALLING_MULTIPLIER: Real = 0.75;
+
+/// A warm start with the relative-pose step ([`pose_step`]) from its answer to the current query.
+#[derive(Clone, Copy)]
+pub(crate) struct GrowthStart<'a> {
+    pub warm: &'a GrowthWarmStart,
+    pub step: [Real; 6],
+}
+
 impl GrowthWarmStart {
+    /// This warm start for a query at relative pose `rel`; `length` weighs rotations (meters).
+    pub(crate) fn towards(&self, rel: &Isometry3, length: Real) -> GrowthStart<'_> {
+        GrowthStart { warm: self, step: pose_step(&self.relative_pose, rel, length) }
+    }
+
     /// The state after an answer (`local`, `multiplier`, converged or not) at relative pose `rel`,
-    /// remembering the `warm` state it started from (if valid) for the secant predictor.
+    /// extending the trail of the warm start it started from (if that held an active-constraint
+    /// answer) for the predictor.
     pub(crate) fn after(
-        warm: Option<&GrowthWarmStart>,
+        start: Option<GrowthStart<'_>>,
         local: Vector3,
         multiplier: Real,
         valid: bool,
         rel: Isometry3,
     ) -> Self {
-        let previous = warm.filter(|w| w.valid && w.multiplier > 0.0).map(|w| GrowthPrevious {
-            local: w.local,
-            multiplier: w.multiplier,
-            relative_pose: w.relative_pose,
-        });
-        Self { local, multiplier, valid, relative_pose: rel, previous }
+        let trail = match start.filter(|s| s.warm.valid && s.warm.multiplier > 0.0 && valid && multiplier > 0.0) {
+            Some(s) => MotionTrail::extend(&s.warm.state(), &s.warm.trail, s.step),
+            None => MotionTrail::default(),
+        };
+        Self { local, multiplier, valid, relative_pose: rel, trail }
     }
 
-    /// Start (minimizer in body 2's frame, multiplier) for relative pose `rel`: extrapolated along
-    /// the motion when the previous answer is known and the pose keeps moving the same way
-    /// ([`secant_coefficient`]), else the last answer. `length` weighs rotations (meters).
-    pub(crate) fn predict(&self, rel: &Isometry3, length: Real) -> (Vector3, Real) {
-        if let Some(p) = self.previous.filter(|p| p.multiplier > 0.0) {
-            let sigma = secant_coefficient(&p.relative_pose, &self.relative_pose, rel, length);
-            if sigma > 0.0 {
-                let mu = extrapolate_multiplier(self.multiplier, p.multiplier, sigma);
-                return (self.local + (self.local - p.local) * sigma, mu);
-            }
+    fn state(&self) -> [Real; 4] {
+        [self.local.x, self.local.y, self.local.z, self.multiplier]
+    }
+
+    /// Start (minimizer in body 2's frame, multiplier) after the relative-pose step `step`:
+    /// extrapolated along the motion from the earlier answers ([`MotionTrail::predict`]), else the
+    /// last answer; the flag says the multiplier is falling fast (the constraint may be turning
+    /// inactive).
+    fn predict(&self, step: &[Real; 6]) -> (Vector3, Real, bool) {
+        if self.trail.is_empty() {
+            return (self.local, self.multiplier, false);
         }
-        (self.local, self.multiplier)
+        let (s, floored) = self.trail.predict(&self.state(), step, 3);
+        (Vector3::new(s[0], s[1], s[2]), s[3], floored || s[3] < FALLING_MULTIPLIER * self.multiplier)
     }
 }
 
@@ -133,7 +140,8 @@ pub fn growth(
     let rel = pose2.inverse() * pose1;
     let b1 = PosedBody::new(p1, &rel);
     let b2 = PosedBody::new(p2, &Isometry3::identity());
-    let core = solve_growth(&b1, &b2, warm, params);
+    let start = warm.map(|w| w.towards(&rel, p1.scale()));
+    let core = solve_growth(&b1, &b2, start, params);
     GrowthResult {
         value: core.value,
         minimizer: pose2 * Point3::from(core.x),
@@ -142,7 +150,7 @@ pub fn growth(
         iterations: core.iterations,
         kkt_residual: core.residual,
         warm_started: core.warm_started,
-        warm_start: GrowthWarmStart::after(warm, core.x, core.mu, core.status.converged(), rel),
+        warm_start: GrowthWarmStart::after(start, core.x, core.mu, core.status.converged(), rel),
     }
 }
 
@@ -158,11 +166,12 @@ pub(crate) struct GrowthCore {
     pub warm_started: bool,
 }
 
-/// Solves d(p₁‖p₂) with both bodies posed in one common frame; `warm.local` is in body 2's frame.
+/// Solves d(p₁‖p₂) with both bodies posed in one common frame, from the warm start `start` (its
+/// `local` is in body 2's frame) when given.
 pub(crate) fn solve_growth(
     b1: &PosedBody<'_>,
     b2: &PosedBody<'_>,
-    warm: Option<&GrowthWarmStart>,
+    start: Option<GrowthStart<'_>>,
     params: &NewtonParams,
 ) -> GrowthCore {
     // Case 1: the unconstrained minimizer of p₁ lies in body 2.
@@ -176,7 +185,7 @@ pub(crate) fn solve_growth(
                 mu: 0.0,
                 status: SolveStatus::Converged,
                 iterations,
-                residual: g1.amax(),
+                residual: abs_max(&g1),
                 warm_started: false,
             }
         })
@@ -191,11 +200,17 @@ pub(crate) fn solve_growth(
         }
     }
     let mut iterations = 0;
-    if let Some(w) = warm.filter(|w| w.valid && w.multiplier > 0.0) {
-        let rel = b2.pose.inverse() * b1.pose;
-        let (local, mu) = w.predict(&rel, b1.body.scale());
+    if let Some(s) = start.filter(|s| s.warm.valid && s.warm.multiplier > 0.0) {
+        let (local, mu, falling) = s.warm.predict(&s.step);
+        // A multiplier falling fast may reach 0: check the inactive case first then.
+        if convex && falling {
+            if let Some(core) = inactive(0) {
+                return core;
+            }
+        }
         let x0 = b2.pose * Point3::from(local);
-        let out = kkt_newton(b1, b2, x0.coords, mu, params);
+        let capped = NewtonParams { max_iterations: params.max_iterations.min(WARM_ITERATIONS), ..*params };
+        let out = kkt_newton(b1, b2, x0.coords, Some(mu), &capped, true);
         iterations += out.iterations;
         if out.status.converged() {
             return GrowthCore { iterations, warm_started: true, ..out.with_frame(b2) };
@@ -208,9 +223,8 @@ pub(crate) fn solve_growth(
     }
     // Case 2: active constraint, Newton on the KKT system from the cold start.
     let c2 = b2.interior_point();
-    let x0 = boundary_on_segment_within(b2, &c2, &c1, START_BOUNDARY_TOLERANCE);
-    let mu0 = initial_multiplier(b1, b2, &x0);
-    let out = kkt_newton(b1, b2, x0, mu0, params);
+    let x0 = b2.boundary_towards(&c1);
+    let out = kkt_newton(b1, b2, x0, None, params, false);
     iterations += out.iterations;
     if out.status.converged() {
         return GrowthCore { iterations, ..out.with_frame(b2) };
@@ -218,16 +232,15 @@ pub(crate) fn solve_growth(
     // Case 3: barrier path from body 2's interior, then the polish.
     let (xb, mub, it_b) = barrier(b1, b2, &c2, params);
     iterations += it_b;
-    let out = kkt_newton(b1, b2, xb, mub, params);
+    let out = kkt_newton(b1, b2, xb, Some(mub), params, false);
     iterations += out.iterations;
     GrowthCore { iterations, ..out.with_frame(b2) }
 }
 
-/// Least-squares multiplier for ∇f + μ∇g = 0 at x, clamped positive.
-fn initial_multiplier(b1: &PosedBody<'_>, b2: &PosedBody<'_>, x: &Vector3) -> Real {
-    let gf = FastPosed::new(b1).value_gradient(x).1;
-    let gg = FastPosed::new(b2).value_gradient(x).1;
-    let mu = -gf.dot(&gg) / gg.norm_squared().max(Real::MIN_POSITIVE);
+/// Least-squares multiplier of ∇f + μ∇g = 0 for the gradients `gf`, `gg` at one point, clamped
+/// positive.
+fn initial_multiplier(gf: &Vector3, gg: &Vector3) -> Real {
+    let mu = -gf.dot(gg) / gg.norm_squared().max(Real::MIN_POSITIVE);
     if mu.is_finite() && mu > 0.0 {
         mu
     } else {
@@ -295,7 +308,7 @@ impl KktPoint {
     }
 
     fn norm_inf(&self) -> Real {
-        self.r.amax().max(self.c.abs())
+        abs_max(&self.r).max(self.c.abs())
     }
 
     fn norm2(&self) -> Real {
@@ -319,18 +332,32 @@ fn newton_step(h: &(Matrix3, Matrix3), pt: &KktPoint, mu: Real) -> Option<(Vecto
     Some((Vector3::new(step[0], step[1], step[2]), step[3]))
 }
 
-/// Active-set Newton on `∇f + μ∇g = 0, g = 0`, globalized by backtracking on ‖r‖₂. Every point is
+/// Active-set Newton on `∇f + μ∇g = 0, g = 0` from x0 and the multiplier `mu0` (least squares at the
+/// start when `None`), globalized by backtracking on ‖r‖₂; a `warm` run gives up (Stalled) when μ
+/// turns nonpositive. Every point is
 /// evaluated once; near the solution (residual below [`CHORD_RESIDUAL`]) trial points skip the
 /// Hessians and a further step reuses the last ones (chord step), refreshed when it stalls.
-fn kkt_newton(b1: &PosedBody<'_>, b2: &PosedBody<'_>, x0: Vector3, mu0: Real, params: &NewtonParams) -> KktOut {
+fn kkt_newton(
+    b1: &PosedBody<'_>,
+    b2: &PosedBody<'_>,
+    x0: Vector3,
+    mu0: Option<Real>,
+    params: &NewtonParams,
+    warm: bool,
+) -> KktOut {
     let (f1, f2) = (FastPosed::new(b1), FastPosed::new(b2));
-    let (mut x, mut mu) = (x0, mu0);
-    let mut pt = KktPoint::new(&f1, &f2, &x, mu, true);
+    let mut x = x0;
+    let mut pt = KktPoint::new(&f1, &f2, &x, mu0.unwrap_or_default(), true);
+    // Without a start for the multiplier: least squares from the first point's gradients.
+    let mut mu = mu0.unwrap_or_else(|| initial_multiplier(&pt.e1.gradient, &pt.e2.gradient));
+    if mu0.is_none() {
+        pt.r = pt.e1.gradient + pt.e2.gradient * mu;
+    }
     let mut hess: Option<(Matrix3, Matrix3)> = None;
     let mut status = SolveStatus::MaxIterations;
     let mut it = 0;
     // Scale stationarity by the objective's gradient so far-apart bodies (large p₁) are judged fairly.
-    let scale = |pt: &KktPoint| 1.0 + pt.e1.gradient.amax();
+    let scale = |pt: &KktPoint| 1.0 + abs_max(&pt.e1.gradient);
     let converged = |pt: &KktPoint, mu: Real| pt.norm_inf() <= params.kkt_tolerance * scale(pt) && mu > 0.0;
     while it < params.max_iterations {
         if !pt.norm_inf().is_finite() {
@@ -384,6 +411,12 @@ fn kkt_newton(b1: &PosedBody<'_>, b2: &PosedBody<'_>, x0: Vector3, mu0: Real, pa
                 pt = KktPoint::new(&f1, &f2, &x, mu, true);
                 continue;
             }
+            status = SolveStatus::Stalled;
+            break;
+        }
+        // A warm run whose multiplier turns nonpositive is following a constraint that is turning
+        // inactive: leave it to the inactive check and the cold path.
+        if warm && mu <= 0.0 {
             status = SolveStatus::Stalled;
             break;
         }

@@ -81,7 +81,7 @@ pub struct GrowthReply {
 
 /// The answer of one query of a batch.
 ///
-/// The distance variant is larger (its warm start carries the previous answer for the secant
+/// The distance variant is larger (its warm start carries earlier answers for the motion
 /// predictor); answers are built once per query and moved, so boxing it would only add an
 /// allocation to every query.
 #[derive(Clone, Debug)]
