@@ -586,4 +586,40 @@ mod tests {
         assert!(r.status.converged());
         assert!((r.distance - 0.2).abs() < 1e-9, "{}", r.distance);
     }
+
+    #[test]
+    fn warm_starts_agree_with_cold_answers_through_contact_and_back() {
+        // Two ellipsoids on a smooth motion that approaches, passes through (overlap, touching,
+        // one inside the other's growth range) and separates again; the warm answers (cubic
+        // predictor, give-up on nonpositive multipliers) must equal the cold ones at every step.
+        let e1 = ellipsoid([0.0; 3], [0.9, 0.3, 0.5]).unwrap();
+        let e2 = ellipsoid([0.1, 0.0, 0.0], [0.4, 1.0, 0.2]).unwrap();
+        let params = NewtonParams::default();
+        let (mut wd, mut wg): (Option<DistanceWarmStart>, Option<GrowthWarmStart>) = (None, None);
+        let (mut warm_it, mut cold_it, mut overlapping) = (0, 0, 0);
+        for k in 0..120 {
+            let s = k as Real / 119.0;
+            let (sn, cs) = (0.6 * s).sin_cos();
+            let pose_b = pose_from_parts("b", [cs, 0.0, sn, 0.0], [3.0 - 6.0 * s, 0.3, 0.1 * (3.0 * s).sin()]).unwrap();
+            let id = Isometry3::identity();
+            let d = distance(&e1, &id, &e2, &pose_b, wd.as_ref(), &params);
+            let c = distance(&e1, &id, &e2, &pose_b, None, &params);
+            let g = super::super::growth::growth(&e1, &id, &e2, &pose_b, wg.as_ref(), &params);
+            let gc = super::super::growth::growth(&e1, &id, &e2, &pose_b, None, &params);
+            assert!(d.status.converged() && c.status.converged(), "k = {k}: {d:?}");
+            assert!(g.status.converged() && gc.status.converged(), "k = {k}: {g:?}");
+            assert!((d.distance - c.distance).abs() <= 1e-9, "k = {k}: {} vs {}", d.distance, c.distance);
+            assert_eq!(d.overlapping, c.overlapping, "k = {k}");
+            assert!((g.value - gc.value).abs() <= 1e-9 * gc.value.max(1.0), "k = {k}: {} vs {}", g.value, gc.value);
+            overlapping += usize::from(c.overlapping);
+            if k > 0 {
+                warm_it += d.iterations + g.iterations;
+                cold_it += c.iterations + gc.iterations;
+            }
+            wd = Some(d.warm_start);
+            wg = Some(g.warm_start);
+        }
+        assert!(overlapping > 10 && overlapping < 100, "the motion must pass through: {overlapping}");
+        assert!(2 * warm_it < cold_it, "warm {warm_it} vs cold {cold_it} iterations");
+    }
 }
