@@ -75,6 +75,10 @@ pub struct FitArgs {
     /// `FitSettings::iterative_refinement`).
     #[arg(long)]
     pub refinement: bool,
+    /// Frame the SDP is solved in: cube (default), principal_cube, principal_box or whitened
+    /// (`fit::hull::Normalization`; log det P / H give the same body in every frame).
+    #[arg(long, default_value = "cube")]
+    pub normalization: String,
     /// No progress on stderr.
     #[arg(long, short)]
     pub quiet: bool,
@@ -114,6 +118,7 @@ pub fn run(args: FitArgs) -> sublevel::Result<()> {
         linear_solver: args.linear_solver.parse()?,
         solver_threads: args.solver_threads,
         iterative_refinement: args.refinement,
+        normalization: args.normalization.parse()?,
     };
     let quiet = args.quiet;
     let mut stderr = std::io::stderr();
