@@ -66,6 +66,12 @@ pub struct FitReport {
     /// an SDP and for bodies read from files or the wire that do not carry it).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub solver_certificate: Option<SolverCertificate>,
+    /// When the fit solved several candidates and kept the smallest body (frame-dependent
+    /// objectives, see `fit::FitSettings::alternate_normalization`): each candidate as
+    /// (`"frame"` or `"frame/basis basis"`, volume in cubic mesh units), in solve order; the kept
+    /// body is the one of smallest volume. Empty for a single solve.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub candidate_volumes: Vec<(String, Real)>,
 }
 
 /// The primal and dual objective values of a fit's SDP at the solver's last iterate, stated for

@@ -79,6 +79,10 @@ pub struct FitArgs {
     /// (`fit::hull::Normalization`; log det P / H give the same body in every frame).
     #[arg(long, default_value = "cube")]
     pub normalization: String,
+    /// Second frame of the frame-dependent fits (trace objectives, --relaxation c > 0): solved there
+    /// too, the smaller body kept. principal_box (default), cube, principal_cube, whitened, or none.
+    #[arg(long, default_value = "principal_box")]
+    pub alternate_normalization: String,
     /// No progress on stderr.
     #[arg(long, short)]
     pub quiet: bool,
@@ -119,6 +123,7 @@ pub fn run(args: FitArgs) -> sublevel::Result<()> {
         solver_threads: args.solver_threads,
         iterative_refinement: args.refinement,
         normalization: args.normalization.parse()?,
+        alternate_normalization: sublevel::fit::hull::parse_optional_normalization(&args.alternate_normalization)?,
     };
     let quiet = args.quiet;
     let mut stderr = std::io::stderr();

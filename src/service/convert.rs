@@ -297,6 +297,7 @@ pub fn report_from_proto(r: &pb::FitReport) -> FitReport {
         }),
         // The wire format does not carry the solver certificate.
         solver_certificate: None,
+        candidate_volumes: Vec::new(),
     }
 }
 
