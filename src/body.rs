@@ -62,6 +62,45 @@ pub struct FitReport {
     /// Why this degree was chosen, when the fit chose it (`--degree auto`).
     #[serde(default)]
     pub degree_choice: Option<DegreeChoice>,
+    /// Clarabel's optimality certificate of the fit's SDP (the last solve; None for fits without
+    /// an SDP and for bodies read from files or the wire that do not carry it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub solver_certificate: Option<SolverCertificate>,
+    /// When the fit solved several candidates and kept the smallest body (frame-dependent
+    /// objectives, see `fit::FitSettings::alternate_normalization`): each candidate as
+    /// (`"frame"` or `"frame/basis basis"`, volume in cubic mesh units), in solve order; the kept
+    /// body is the one of smallest volume. Empty for a single solve.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub candidate_volumes: Vec<(String, Real)>,
+}
+
+/// The primal and dual objective values of a fit's SDP at the solver's last iterate, stated for
+/// the maximized objective: log det X' (X = P or H written in the scaled monomial basis, which
+/// shifts log det X by a constant, see `fit::logdet_p`) or −trace X⁻¹ (eq. "VAG.log.det",
+/// "Magnani.log.det").
+///
+/// By weak duality the dual objective bounds the program's optimum from above, so
+/// `dual_objective − primal_objective` (the absolute gap, in units of log det) bounds how far the
+/// returned body's objective is below the optimum, up to the stated residuals. The log det
+/// programs are strictly concave in the Gram matrix, so their optimum is unique: a small gap pins
+/// the body down.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct SolverCertificate {
+    /// Objective of the primal iterate (a lower bound of the optimum when it is feasible).
+    pub primal_objective: Real,
+    /// Objective of the dual iterate (an upper bound of the optimum when it is feasible).
+    pub dual_objective: Real,
+    /// Clarabel's relative primal residual (feasibility of the primal iterate).
+    pub primal_residual: Real,
+    /// Clarabel's relative dual residual.
+    pub dual_residual: Real,
+}
+
+impl SolverCertificate {
+    /// `|dual − primal|`, the absolute duality gap in units of the objective.
+    pub fn gap(&self) -> Real {
+        (self.dual_objective - self.primal_objective).abs()
+    }
 }
 
 /// How `--degree auto` chose a body's degree: the lowest degree whose volume is within

@@ -75,6 +75,14 @@ pub struct FitArgs {
     /// `FitSettings::iterative_refinement`).
     #[arg(long)]
     pub refinement: bool,
+    /// Frame the SDP is solved in: cube (default), principal_cube, principal_box or whitened
+    /// (`fit::hull::Normalization`; log det P / H give the same body in every frame).
+    #[arg(long, default_value = "cube")]
+    pub normalization: String,
+    /// Second frame of the frame-dependent fits (trace objectives, --relaxation c > 0): solved there
+    /// too, the smaller body kept. principal_box (default), cube, principal_cube, whitened, or none.
+    #[arg(long, default_value = "principal_box")]
+    pub alternate_normalization: String,
     /// No progress on stderr.
     #[arg(long, short)]
     pub quiet: bool,
@@ -114,6 +122,8 @@ pub fn run(args: FitArgs) -> sublevel::Result<()> {
         linear_solver: args.linear_solver.parse()?,
         solver_threads: args.solver_threads,
         iterative_refinement: args.refinement,
+        normalization: args.normalization.parse()?,
+        alternate_normalization: sublevel::fit::hull::parse_optional_normalization(&args.alternate_normalization)?,
     };
     let quiet = args.quiet;
     let mut stderr = std::io::stderr();

@@ -91,6 +91,7 @@ pub(crate) fn solve(half_degree: usize, points: &[Vector3]) -> Result<super::Sol
         convexity_gram: None,
         sos_gram: Some(inv / gamma),
         nonconvex: true,
+        certificate: None,
         notes: vec![format!(
             "inverse moment (Lasserre–Pauwels) over all {} points in normalized coordinates; level γ = {gamma:.6e}",
             points.len()

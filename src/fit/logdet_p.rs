@@ -621,6 +621,13 @@ impl LogDetProblem {
                     status: sol.status,
                     solve_seconds: sol.solve_time,
                     iterations: sol.iterations,
+                    // Clarabel minimizes qᵀx = −(the maximized objective).
+                    certificate: crate::body::SolverCertificate {
+                        primal_objective: -sol.obj_val,
+                        dual_objective: -sol.obj_val_dual,
+                        primal_residual: sol.r_prim,
+                        dual_residual: sol.r_dual,
+                    },
                 })
             });
             for (it, cost) in rx {
@@ -704,6 +711,8 @@ pub struct RawSolution {
     pub solve_seconds: Real,
     /// Interior-point iterations.
     pub iterations: u32,
+    /// Primal / dual objectives (maximized form) and residuals of the last iterate.
+    pub certificate: crate::body::SolverCertificate,
 }
 
 /// Maps every Clarabel status explicitly: `Solved` / `AlmostSolved` give a usable answer (its

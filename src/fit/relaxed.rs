@@ -62,6 +62,8 @@ pub struct RoundsOutcome {
     /// Set when a round after the first ended without a usable solution and the previous
     /// round's solution was kept (says which round and its status).
     pub failed_round: Option<String>,
+    /// Primal / dual objectives of the last round's solve.
+    pub certificate: crate::body::SolverCertificate,
 }
 
 /// Solves `spec` with containment rows added in rounds (see the module docs), calling
@@ -142,6 +144,7 @@ pub fn solve_in_rounds(
             rows_per_round: rows_per_round.clone(),
             converged: done,
             failed_round: None,
+            certificate: raw.certificate,
         };
         if done || round + 1 == MAX_ROUNDS {
             return Ok(outcome);

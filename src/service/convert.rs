@@ -295,6 +295,9 @@ pub fn report_from_proto(r: &pb::FitReport) -> FitReport {
             chosen: c.chosen as usize,
             reason: c.reason.clone(),
         }),
+        // The wire format does not carry the solver certificate.
+        solver_certificate: None,
+        candidate_volumes: Vec::new(),
     }
 }
 

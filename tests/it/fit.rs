@@ -106,6 +106,79 @@ fn chair_degree_4_is_the_same_with_either_kkt_solver() {
     assert!(ra.notes.iter().any(|n| n.contains("(faer)")) && rb.notes.iter().any(|n| n.contains("(qdldl)")));
 }
 
+/// Largest |p_a(x) − p_b(x)| over the chair's vertices and a grid of its bounding box (p_b ≤ 4,
+/// i.e. near the bodies), relative to max(1, p_a(x)).
+fn max_relative_difference(a: &Body, b: &Body, pts: &[Point3]) -> Real {
+    let (mut lo, mut hi) = (pts[0].coords, pts[0].coords);
+    for p in pts {
+        lo = lo.inf(&p.coords);
+        hi = hi.sup(&p.coords);
+    }
+    let mid = (lo + hi) * 0.5;
+    let half = (hi - lo) * 0.6;
+    let grid = (0..11 * 11 * 11).map(|k| {
+        let t = |i: usize| (i as Real) / 5.0 - 1.0;
+        Point3::from(mid + half.component_mul(&Vector3::new(t(k % 11), t(k / 11 % 11), t(k / 121))))
+    });
+    pts.iter()
+        .copied()
+        .chain(grid)
+        .map(|x| (a.value_at(&x), b.value_at(&x)))
+        .filter(|(pa, _)| *pa <= 4.0)
+        .map(|(pa, pb)| (pa - pb).abs() / pa.max(1.0))
+        .fold(0.0, Real::max)
+}
+
+/// Table 1's "reachable optimum" of the log det P rows, as a checked fact (paper eq.
+/// "VAG.log.det", 2d = 4, chair):
+/// - invariance: solved in three other frames (principal-axes cube, principal-axes box with
+///   anisotropic scaling, whitened hull — rotations, shifts and anisotropic scalings of the
+///   bounding cube), the body is the same: p agrees within 1e-3 on every vertex and on a grid
+///   around the chair, and the volumes within 3 combined Monte Carlo standard errors;
+/// - certificate: Clarabel's dual objective exceeds the primal one by at most its gap tolerance
+///   1e-6 relative (7.6e-6 in log det units at |objective| ≈ 20), and a 100× tighter tolerance
+///   (1e-8) moves p by less than 3e-4 (measured 6e-5) and the volume by less than one standard
+///   error.
+///
+/// The chair's paper value 1.19 is below ours (1.222 ± 0.004) beyond the error, like its proven
+/// 2d = 2 offset (MVEE 1.8425 vs 1.79).
+#[test]
+fn chair_degree_4_log_det_p_is_the_same_body_in_every_frame_and_at_a_tighter_gap() {
+    use sublevel::fit::hull::Normalization;
+    let (pts, body, _) = chair4();
+    let cert = body.report.solver_certificate.expect("an SDP fit records its certificate");
+    assert!(cert.dual_objective >= cert.primal_objective - 1e-9, "{cert:?}");
+    // Clarabel stops at an absolute or relative gap of 1e-6 (`solver_tolerance`).
+    assert!(cert.gap() <= 1e-6 * cert.primal_objective.abs().max(1.0), "{cert:?}");
+    let (v, se) = (body.report.volume, body.report.volume_std_error);
+    for norm in [Normalization::PrincipalCube, Normalization::PrincipalBox, Normalization::Whitened] {
+        let other =
+            fit_points(pts, &FitSettings::default().with_degree(4).with_normalization(norm), &mut |_| {}).unwrap();
+        let diff = max_relative_difference(body, &other, pts);
+        let (vo, seo) = (other.report.volume, other.report.volume_std_error);
+        eprintln!("{}: max |Δp| {diff:.2e}, volume {vo:.4} ± {seo:.4} vs {v:.4} ± {se:.4}", norm.name());
+        assert!(diff < 1e-3, "{}: max relative |Δp| = {diff:e}", norm.name());
+        assert!((vo - v).abs() <= 3.0 * (se * se + seo * seo).sqrt(), "{}: {vo} ± {seo} vs {v} ± {se}", norm.name());
+        let max = pts.iter().map(|x| other.value_at(x)).fold(Real::NEG_INFINITY, Real::max);
+        assert!(max <= 1.0, "{}: max p(xᵢ) = {max}", norm.name());
+        assert!(other.report.notes.iter().any(|n| n.contains(norm.name())), "{:?}", other.report.notes);
+    }
+    let tight =
+        fit_points(pts, &FitSettings::default().with_degree(4).with_solver_tolerance(1e-8), &mut |_| {}).unwrap();
+    let tight_cert = tight.report.solver_certificate.unwrap();
+    let diff = max_relative_difference(body, &tight, pts);
+    eprintln!(
+        "tol 1e-8: gap {:.2e} ({}), max |Δp| {diff:.2e}, volume {:.4}",
+        tight_cert.gap(),
+        tight.report.solver_status,
+        tight.report.volume
+    );
+    assert!(tight_cert.gap() <= cert.gap(), "{tight_cert:?} vs {cert:?}");
+    assert!(diff < 3e-4, "tolerance 1e-8: max relative |Δp| = {diff:e}");
+    assert!((tight.report.volume - v).abs() <= se, "{} vs {v} ± {se}", tight.report.volume);
+    assert!(v > 1.19 + 0.005 + 2.0 * se, "paper 1.19 vs ours {v} ± {se}");
+}
+
 #[test]
 fn chair_degree_4_is_sos_convex() {
     use rand::{Rng, SeedableRng};
@@ -268,12 +341,17 @@ fn ellipsoid_cloud_at_degree_2_logdet_h_gives_back_the_ellipsoid_and_trace_forms
         let r = &body.report;
         assert!((r.volume - v).abs() < 4.0 * r.volume_std_error, "{method:?}: MC {} vs exact {v}", r.volume);
         assert!(!r.nonconvex && r.convexity_margin.unwrap() > -1e-9);
-        // Both trace bases were solved and the smaller body kept: the note names both volumes.
-        let note = r.notes.iter().find(|n| n.starts_with("trace objective in the")).expect("basis note");
-        let vols: Vec<Real> =
-            note.split(|c: char| !(c.is_ascii_digit() || c == '.')).filter_map(|t| t.parse::<Real>().ok()).collect();
-        assert_eq!(vols.len(), 2, "{note}");
-        assert!(vols[0] <= vols[1] && (vols[0] - r.volume).abs() < 1e-4, "{note}");
+        // Both trace bases in both frames (bounding cube, principal box) were solved and the
+        // smallest body kept: the report lists the four candidates, the note names them.
+        let names: Vec<&str> = r.candidate_volumes.iter().map(|c| c.0.as_str()).collect();
+        assert_eq!(
+            names,
+            ["cube/plain basis", "cube/scaled basis", "principal_box/plain basis", "principal_box/scaled basis"]
+        );
+        let smallest = r.candidate_volumes.iter().map(|c| c.1).fold(Real::INFINITY, Real::min);
+        assert_eq!(smallest, r.volume);
+        assert!(r.candidate_volumes.iter().all(|c| c.1 >= exact * (1.0 - 0.01)), "{:?}", r.candidate_volumes);
+        assert!(r.notes.iter().any(|n| n.starts_with("kept the smallest of 4 solves")), "{:?}", r.notes);
     }
 }
 
@@ -284,6 +362,12 @@ fn magnani_log_det_h_is_looser_than_ours_on_the_chair() {
     let settings = FitSettings::default().with_degree(4).with_method(FitMethod::LogDetH).with_volume_samples(50_000);
     let magnani = fit_points(pts, &settings, &mut |_| {}).unwrap();
     let (a, b) = (&ours.report, &magnani.report);
+    // With `LOG_DET_H_STATIC_REGULARIZATION` the log det H program solves to full tolerance
+    // (Clarabel's default regularization ended it `AlmostSolved`, gap 1.8e-6).
+    assert_eq!(b.solver_status, "Solved");
+    assert!(
+        b.solver_certificate.unwrap().gap() <= 1e-6 * b.solver_certificate.unwrap().primal_objective.abs().max(1.0)
+    );
     assert!(
         a.volume + 3.0 * (a.volume_std_error + b.volume_std_error) < b.volume,
         "log det P {} ± {} vs log det H {} ± {}",
@@ -329,6 +413,14 @@ fn relaxed_convexity_contains_every_point_and_is_tighter() {
         c0.volume
     );
     assert!(r.volume_std_error < 0.01 * r.volume);
+    // The frame lever (c > 0 depends on the frame): solved in the bounding cube and in the
+    // principal box, the smaller body kept — here the principal box (Table 1: 0.789 → 0.707). The
+    // brute-force volume below checks the kept body, composed back into the cube frame.
+    let names: Vec<&str> = r.candidate_volumes.iter().map(|c| c.0.as_str()).collect();
+    assert_eq!(names, ["cube", "principal_box"]);
+    let (cube, principal) = (r.candidate_volumes[0].1, r.candidate_volumes[1].1);
+    assert!(principal < cube - 3.0 * r.volume_std_error && principal == r.volume, "{:?}", r.candidate_volumes);
+    assert!(r.notes.iter().any(|n| n.starts_with("SDP solved in the principal_box frame")), "{:?}", r.notes);
     let (vol, se) = brute_force_volume(body, 1.25, 400_000);
     assert!(
         (r.volume - vol).abs() < 4.0 * (se + r.volume_std_error),
