@@ -24,16 +24,16 @@
 //! kernels are compiled for those instructions; elsewhere they run the portable code.
 //!
 //! Cost at 2d = 6, measured with callgrind (instructions per evaluation, the previous kernel that
-//! summed table rows against the monomial vector in parentheses): value 151 (244), value + gradient
-//! 158 (410), value + gradient + Hessian 468 (574).
+//! summed table rows against the monomial vector in parentheses): value 140 (244), value + gradient
+//! 158 (410), value + gradient + Hessian 467 (574). The value reads lane 0 of the value + gradient
+//! rows (the unused lanes are dropped by the compiler).
 
 use super::monomial::{basis_len, index3};
 use super::polynomial::{Polynomial, MAX_DEGREE};
 use crate::math::{Matrix3, Real, Vector3};
 
-/// Rows of the value / gradient table: monomials of degree ≤ 8 in three variables (165), padded to
-/// a multiple of 4.
-pub const MAX_MONOMIALS: usize = 168;
+/// Rows of the value / gradient table: monomials of degree ≤ 8 in three variables.
+pub const MAX_MONOMIALS: usize = 165;
 
 /// Rows of the Hessian table: monomials of degree ≤ 6 (84), the Hessian of a degree-8 polynomial.
 const MAX_HESSIAN_MONOMIALS: usize = 84;
@@ -41,8 +41,6 @@ const MAX_HESSIAN_MONOMIALS: usize = 84;
 /// The per-body coefficient tables (see the module docs); rows beyond the body's basis are zero.
 #[derive(Clone, Debug, PartialEq)]
 struct Tables {
-    /// c_β (for value-only evaluations).
-    coef: [[Real; 1]; MAX_MONOMIALS],
     /// [c_β, coefficient of u^β in ∂ₓp, ∂ᵧp, ∂_zp].
     value_gradient: [[Real; 4]; MAX_MONOMIALS],
     /// Coefficients of u^β in [∂ₓₓp, ∂ₓᵧp, ∂ₓ_zp, ∂ᵧᵧp] (|β| ≤ 2d − 2).
@@ -122,7 +120,7 @@ macro_rules! horner_fn {
                 )*
                 step::<L, FMA>(&mut acc_x, u.x, &acc_y);
             )*
-            let _ = k;
+            let _ = k; // the last chain's increment is not read
             acc_x
         }
     };
@@ -165,7 +163,7 @@ fn gradient_kernel<const D: usize, const FMA: bool>(t: &Tables, u: &Vector3) -> 
 /// p(u).
 #[inline(always)]
 fn value_kernel<const D: usize, const FMA: bool>(t: &Tables, u: &Vector3) -> Real {
-    horner_of_degree!(D, 1, FMA, &t.coef, u)[0]
+    horner_of_degree!(D, 4, FMA, &t.value_gradient, u)[0]
 }
 
 /// p(u), ∇p(u) and ∇²p(u) (the Hessian's rows have degree D − 2; zero for D < 2).
@@ -251,7 +249,6 @@ impl FastPoly {
             f
         };
         let mut t = Tables {
-            coef: [[0.0; 1]; MAX_MONOMIALS],
             value_gradient: [[0.0; 4]; MAX_MONOMIALS],
             hessian: [[0.0; 4]; MAX_HESSIAN_MONOMIALS],
             hessian_yz_zz: [[0.0; 2]; MAX_HESSIAN_MONOMIALS],
@@ -261,7 +258,6 @@ impl FastPoly {
             for i in 0..3 {
                 row[i + 1] = (b[i] + 1) as Real * coef_of(plus(b, i, None));
             }
-            t.coef[k] = [row[0]];
             t.value_gradient[k] = row;
         }
         if degree >= 2 {
