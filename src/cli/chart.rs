@@ -308,6 +308,9 @@ fn plot_err(e: impl std::fmt::Display) -> Error {
     Error::invalid("--png", format!("plotting failed: {e}"))
 }
 
+/// Height of a label line in the scatter charts (pixels, 16 px font).
+const LABEL_LINE: i32 = 18;
+
 /// Log-x scatter of (name, x, y_mean, y_max): a filled dot at the mean, a ring at the max, a label.
 fn plot_points(
     path: &std::path::Path,
@@ -338,7 +341,32 @@ fn plot_points(
         .map_err(plot_err)?;
     chart.configure_mesh().x_desc(x_label).y_desc(y_label).draw().map_err(plot_err)?;
     let palette = [&BLUE, &RED, &GREEN, &MAGENTA, &CYAN, &BLACK];
-    for (i, (name, x, mean, max)) in pts.iter().enumerate() {
+    // Labels in pixels: each starts right of its ring (left of it at the right edge) and moves down
+    // by a line until it overlaps no label placed before it (close times and errors, e.g. sos
+    // 2d = 6 and 8, would collide).
+    let mut placed: Vec<(i32, i32, i32, i32)> = Vec::new();
+    let mut labels: Vec<(String, (i32, i32))> = Vec::new();
+    for (name, x, mean, max) in pts {
+        if !(finite(*x) && *x > 0.0) {
+            continue;
+        }
+        let y_text = if finite(*max) { *max } else { *mean };
+        let (mut px, mut py) = chart.backend_coord(&(*x * 1.08, y_text));
+        let width = 9 * name.chars().count() as i32;
+        // A label that would run off the right edge goes to the left of its point.
+        if px + width > root.dim_in_pixel().0 as i32 - 5 {
+            px = chart.backend_coord(&(*x, y_text)).0 - width - 10;
+        }
+        let overlaps = |py: i32, placed: &[(i32, i32, i32, i32)]| {
+            placed.iter().any(|&(x0, y0, x1, y1)| px < x1 && x0 < px + width && py < y1 && y0 < py + LABEL_LINE)
+        };
+        while overlaps(py, &placed) {
+            py += LABEL_LINE;
+        }
+        placed.push((px, py, px + width, py + LABEL_LINE));
+        labels.push((name.clone(), (px, py)));
+    }
+    for (i, (_, x, mean, max)) in pts.iter().enumerate() {
         if !(finite(*x) && *x > 0.0) {
             continue;
         }
@@ -352,10 +380,9 @@ fn plot_points(
                 .draw_series(std::iter::once(PathElement::new(vec![(*x, mean.max(0.0)), (*x, *max)], color)))
                 .map_err(plot_err)?;
         }
-        let y_text = if finite(*max) { *max } else { *mean };
-        chart
-            .draw_series(std::iter::once(Text::new(name.clone(), (*x * 1.08, y_text), ("sans-serif", 16).into_font())))
-            .map_err(plot_err)?;
+    }
+    for (name, at) in labels {
+        root.draw(&Text::new(name, at, ("sans-serif", 16).into_font())).map_err(plot_err)?;
     }
     chart
         .draw_series(std::iter::once(Text::new(

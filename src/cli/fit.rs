@@ -5,6 +5,7 @@
 
 use std::io::Write;
 use std::path::PathBuf;
+use sublevel::fit::logdet_p::TraceBasis;
 use sublevel::fit::{auto, fit_points, mesh, FitMethod, FitProgress, FitSettings, FitStage};
 
 /// `--degree`: a total degree 2d, or `auto`.
@@ -75,14 +76,18 @@ pub struct FitArgs {
     /// `FitSettings::iterative_refinement`).
     #[arg(long)]
     pub refinement: bool,
-    /// Frame the SDP is solved in: cube (default), principal_cube, principal_box or whitened
+    /// Frame the SDP is solved in: cube (default), principal_cube, principal_box, whitened or input
     /// (`fit::hull::Normalization`; log det P / H give the same body in every frame).
     #[arg(long, default_value = "cube")]
     pub normalization: String,
     /// Second frame of the frame-dependent fits (trace objectives, --relaxation c > 0): solved there
-    /// too, the smaller body kept. principal_box (default), cube, principal_cube, whitened, or none.
+    /// too, the smaller body kept. principal_box (default), cube, principal_cube, whitened, input, or none.
     #[arg(long, default_value = "principal_box")]
     pub alternate_normalization: String,
+    /// Monomial basis of the trace objectives: both (default: solve in each, keep the smaller
+    /// body), plain (the paper's monomials) or scaled (`fit::logdet_p::TraceBasis`).
+    #[arg(long, default_value = "both")]
+    pub trace_basis: String,
     /// No progress on stderr.
     #[arg(long, short)]
     pub quiet: bool,
@@ -124,6 +129,17 @@ pub fn run(args: FitArgs) -> sublevel::Result<()> {
         iterative_refinement: args.refinement,
         normalization: args.normalization.parse()?,
         alternate_normalization: sublevel::fit::hull::parse_optional_normalization(&args.alternate_normalization)?,
+        trace_basis: match args.trace_basis.as_str() {
+            "both" => None,
+            "plain" => Some(TraceBasis::Plain),
+            "scaled" => Some(TraceBasis::Scaled),
+            other => {
+                return Err(sublevel::Error::invalid(
+                    "trace_basis",
+                    format!("must be one of both, plain, scaled, got {other:?}"),
+                ))
+            }
+        },
     };
     let quiet = args.quiet;
     let mut stderr = std::io::stderr();

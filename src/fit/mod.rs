@@ -176,6 +176,11 @@ pub struct FitSettings {
     /// smaller of cube and principal box on 47 (all four frames: 48). Ignored for log det with
     /// c = 0, whose optimum is the same body in every frame, and for the inverse moment.
     pub alternate_normalization: Option<hull::Normalization>,
+    /// Monomial basis of the trace objectives (trace P⁻¹, trace H⁻¹; see
+    /// [`logdet_p::TraceBasis`]): None (the default) solves in both the plain and the scaled basis
+    /// and keeps the smaller body; `Some(Plain)` is the basis the paper writes its programs in.
+    /// Ignored by the log det objectives, which do not depend on it.
+    pub trace_basis: Option<logdet_p::TraceBasis>,
 }
 
 impl Default for FitSettings {
@@ -193,6 +198,7 @@ impl Default for FitSettings {
             iterative_refinement: false,
             normalization: hull::Normalization::BoundingCube,
             alternate_normalization: Some(hull::Normalization::PrincipalBox),
+            trace_basis: None,
         }
     }
 }
@@ -400,15 +406,18 @@ pub(crate) struct Solved {
 /// ended `AlmostSolved` once; 0.9 solved all ten in 20–28 iterations (chair 2d = 8: 21 vs 23).
 pub const FIT_STEP_FRACTION: Real = 0.9;
 
-/// Clarabel's `static_regularization_constant` for the log det H programs (Clarabel's default,
-/// kept for every other fit, is 1e-8). With 1e-8 the KKT solves of log det H lose accuracy near
-/// the optimum: the step length drops to 0 with the dual residual at ~4e-6 and the fit ends
-/// `AlmostSolved` (chair 2d = 4 and 6, hand and octopus 2d = 6; chair 2d = 8 `NumericalError`, then
-/// the retries). With 1e-7 all five Table 1 shapes end `Solved` at 2d = 6 in 17–23 iterations
-/// (chair: gap 1.2e-4 → 8.8e-7 in log det units, 17 → 20 iterations) and the chair at 2d = 4 and
-/// 8 too (2d = 8: 20 iterations, one solve instead of a failed one plus retries). Only the
-/// regularization of the linear solves changes; the stopping test is on the true residuals.
-pub const LOG_DET_H_STATIC_REGULARIZATION: Real = 1e-7;
+/// Clarabel's `static_regularization_constant` for the programs with the objective on the
+/// sos-convexity Gram matrix H (log det H, trace H⁻¹; Clarabel's default, kept for every other
+/// fit, is 1e-8). With 1e-8 the KKT solves lose accuracy near the optimum: the step length drops to
+/// 0 with the dual residual at ~4e-6 and the fit ends `AlmostSolved` (log det H: chair 2d = 4 and
+/// 6, hand and octopus 2d = 6, chair 2d = 8 `NumericalError`, then the retries; trace H⁻¹: chair,
+/// hand and octopus at 2d = 6, scaled basis). With 1e-7 all five Table 1 shapes end `Solved` at
+/// 2d = 6 in 17–23 iterations (log det H chair: gap 1.2e-4 → 8.8e-7 in log det units, 17 → 20
+/// iterations) and the chair at 2d = 4 and 8 too (2d = 8: 20 iterations, one solve instead of a
+/// failed one plus retries); the trace H⁻¹ fits at 2d = 6 keep their volumes (chair 1.529, hand
+/// 0.631, octopus 1.008). Only the regularization of the linear solves changes; the stopping test
+/// is on the true residuals.
+pub const HESSIAN_GRAM_STATIC_REGULARIZATION: Real = 1e-7;
 
 fn clarabel_settings(settings: &FitSettings) -> clarabel::solver::DefaultSettings<Real> {
     let mut clarabel = crate::conic::quiet_settings(settings.solver_tolerance, settings.max_solver_iterations);
@@ -416,8 +425,8 @@ fn clarabel_settings(settings: &FitSettings) -> clarabel::solver::DefaultSetting
     clarabel.direct_solve_method = settings.linear_solver.name().into();
     clarabel.max_threads = settings.solver_threads;
     clarabel.iterative_refinement_enable = settings.iterative_refinement;
-    if settings.method == FitMethod::LogDetH {
-        clarabel.static_regularization_constant = LOG_DET_H_STATIC_REGULARIZATION;
+    if matches!(settings.method, FitMethod::LogDetH | FitMethod::TraceH) {
+        clarabel.static_regularization_constant = HESSIAN_GRAM_STATIC_REGULARIZATION;
     }
     clarabel
 }
@@ -480,10 +489,11 @@ fn fit_impl(
             spaces.push((alt, alt_frame, alt_cloud));
         }
     }
-    let bases: &[logdet_p::TraceBasis] = if matches!(settings.method, FitMethod::TraceP | FitMethod::TraceH) {
-        &[logdet_p::TraceBasis::Plain, logdet_p::TraceBasis::Scaled]
-    } else {
-        &[logdet_p::TraceBasis::Plain]
+    let is_trace = matches!(settings.method, FitMethod::TraceP | FitMethod::TraceH);
+    let bases: &[logdet_p::TraceBasis] = match settings.trace_basis {
+        None if is_trace => &[logdet_p::TraceBasis::Plain, logdet_p::TraceBasis::Scaled],
+        Some(logdet_p::TraceBasis::Scaled) if is_trace => &[logdet_p::TraceBasis::Scaled],
+        _ => &[logdet_p::TraceBasis::Plain],
     };
     let mut best: Option<Body> = None;
     let mut first_error: Option<Error> = None;

@@ -262,6 +262,17 @@ pub fn report_to_proto(r: &FitReport) -> pb::FitReport {
             chosen: c.chosen as u32,
             reason: c.reason.clone(),
         }),
+        solver_certificate: r.solver_certificate.map(|c| pb::SolverCertificate {
+            primal_objective: c.primal_objective,
+            dual_objective: c.dual_objective,
+            primal_residual: c.primal_residual,
+            dual_residual: c.dual_residual,
+        }),
+        candidate_volumes: r
+            .candidate_volumes
+            .iter()
+            .map(|(name, volume)| pb::CandidateVolume { name: name.clone(), volume: *volume })
+            .collect(),
     }
 }
 
@@ -295,9 +306,13 @@ pub fn report_from_proto(r: &pb::FitReport) -> FitReport {
             chosen: c.chosen as usize,
             reason: c.reason.clone(),
         }),
-        // The wire format does not carry the solver certificate.
-        solver_certificate: None,
-        candidate_volumes: Vec::new(),
+        solver_certificate: r.solver_certificate.as_ref().map(|c| crate::body::SolverCertificate {
+            primal_objective: c.primal_objective,
+            dual_objective: c.dual_objective,
+            primal_residual: c.primal_residual,
+            dual_residual: c.dual_residual,
+        }),
+        candidate_volumes: r.candidate_volumes.iter().map(|c| (c.name.clone(), c.volume)).collect(),
     }
 }
 
@@ -572,6 +587,34 @@ pub fn pairs_from_proto(pairs: &[pb::QueryPair], max_pairs: usize) -> Result<Vec
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn fit_report_round_trips_through_the_wire_format_with_its_certificate() {
+        let report = FitReport {
+            method: "trace_p".into(),
+            solver_status: "Solved".into(),
+            volume: 0.303,
+            volume_std_error: 0.001,
+            convexity_relaxation: 10.0,
+            nonconvex: true,
+            notes: vec!["kept the smallest of 2 solves".into()],
+            solver_certificate: Some(crate::body::SolverCertificate {
+                primal_objective: -22.6269,
+                dual_objective: -22.6268,
+                primal_residual: 1.3e-8,
+                dual_residual: 1.8e-7,
+            }),
+            candidate_volumes: vec![("cube".into(), 0.449), ("principal_box".into(), 0.303)],
+            ..FitReport::default()
+        };
+        let wire = report_to_proto(&report);
+        assert_eq!(wire.candidate_volumes.len(), 2);
+        assert_eq!(wire.solver_certificate.as_ref().map(|c| c.dual_objective), Some(-22.6268));
+        assert_eq!(report_from_proto(&wire), report);
+        // A report without a certificate (inverse moment, uploaded) stays without one.
+        let plain = FitReport { method: "inverse_moment".into(), ..FitReport::default() };
+        assert_eq!(report_from_proto(&report_to_proto(&plain)), plain);
+    }
 
     #[test]
     fn errors_map_to_codes_and_keep_the_field() {

@@ -362,7 +362,7 @@ fn magnani_log_det_h_is_looser_than_ours_on_the_chair() {
     let settings = FitSettings::default().with_degree(4).with_method(FitMethod::LogDetH).with_volume_samples(50_000);
     let magnani = fit_points(pts, &settings, &mut |_| {}).unwrap();
     let (a, b) = (&ours.report, &magnani.report);
-    // With `LOG_DET_H_STATIC_REGULARIZATION` the log det H program solves to full tolerance
+    // With `HESSIAN_GRAM_STATIC_REGULARIZATION` the log det H program solves to full tolerance
     // (Clarabel's default regularization ended it `AlmostSolved`, gap 1.8e-6).
     assert_eq!(b.solver_status, "Solved");
     assert!(
@@ -428,6 +428,51 @@ fn relaxed_convexity_contains_every_point_and_is_tighter() {
         r.volume,
         r.volume_std_error
     );
+}
+
+/// `Normalization::Input` writes eq. "VAG.param.convex" literally in the data's coordinates: the
+/// relaxation term is c(Σ xᵢ²)ᵈ in x. Checked by the scaling law it implies: for the cloud
+/// y = s·x, p_y(y) = p_x(y/s) turns p_y + c‖y‖^(2d) sos-convex into p_x + c·s^(2d)‖x‖^(2d)
+/// sos-convex, and log det changes by a constant, so fitting 2x with c = 1 must give the same body
+/// (scaled) as fitting x with c = 2⁴ = 16 at 2d = 4 — while the bounding-cube frame, which
+/// normalizes the scale away, gives the same body for x and 2x at equal c.
+#[test]
+fn input_frame_writes_the_relaxation_in_the_data_coordinates() {
+    use sublevel::fit::hull::Normalization;
+    let pts = mesh::load_points(&psb("human_10.off")).unwrap();
+    let doubled: Vec<Point3> = pts.iter().map(|x| Point3::from(x.coords * 2.0)).collect();
+    let fit = |cloud: &[Point3], c: Real, norm: Normalization| {
+        let settings = FitSettings::default()
+            .with_degree(4)
+            .with_relaxation(c)
+            .with_volume_samples(50_000)
+            .with_normalization(norm)
+            .with_alternate_normalization(None);
+        fit_points(cloud, &settings, &mut |_| {}).unwrap()
+    };
+    let (x16, y1, x1) = (
+        fit(&pts, 16.0, Normalization::Input),
+        fit(&doubled, 1.0, Normalization::Input),
+        fit(&pts, 1.0, Normalization::Input),
+    );
+    // Same body: p_y(2x) = p_x(x) on the points and around them.
+    let diff =
+        pts.iter().map(|x| (y1.value_at(&Point3::from(x.coords * 2.0)) - x16.value_at(x)).abs()).fold(0.0, Real::max);
+    assert!(diff < 1e-4, "max |p_2x(2x) − p_x(x)| = {diff:e}");
+    // Two Monte Carlo estimates of the same body: within 3 combined standard errors.
+    let (v16, v1, se) = (x16.report.volume, y1.report.volume / 8.0, x16.report.volume_std_error);
+    let combined = (se * se + (y1.report.volume_std_error / 8.0).powi(2)).sqrt();
+    assert!((v16 - v1).abs() < 3.0 * combined, "x, c = 16: {v16}; 2x, c = 1 (÷ 8): {v1} ± {combined}");
+    // Not vacuous: c = 1 on x is a different, larger body.
+    assert!(x1.report.volume > v16 + 3.0 * (se + x1.report.volume_std_error), "{} vs {v16}", x1.report.volume);
+    // The cube frame normalizes the scale: x and 2x give the same body at the same c.
+    let (cx, cy) = (fit(&pts, 1.0, Normalization::BoundingCube), fit(&doubled, 1.0, Normalization::BoundingCube));
+    let diff =
+        pts.iter().map(|x| (cy.value_at(&Point3::from(x.coords * 2.0)) - cx.value_at(x)).abs()).fold(0.0, Real::max);
+    assert!(diff < 1e-4, "cube frame: max |Δp| = {diff:e}");
+    for body in [&x16, &y1, &x1] {
+        assert!(body.report.notes.iter().any(|n| n.contains("input")), "{:?}", body.report.notes);
+    }
 }
 
 #[test]
