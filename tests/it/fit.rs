@@ -362,7 +362,7 @@ fn magnani_log_det_h_is_looser_than_ours_on_the_chair() {
     let settings = FitSettings::default().with_degree(4).with_method(FitMethod::LogDetH).with_volume_samples(50_000);
     let magnani = fit_points(pts, &settings, &mut |_| {}).unwrap();
     let (a, b) = (&ours.report, &magnani.report);
-    // With `HESSIAN_GRAM_STATIC_REGULARIZATION` the log det H program solves to full tolerance
+    // With `FIT_STATIC_REGULARIZATION` the log det H program solves to full tolerance
     // (Clarabel's default regularization ended it `AlmostSolved`, gap 1.8e-6).
     assert_eq!(b.solver_status, "Solved");
     assert!(
