@@ -379,7 +379,7 @@ pub fn run(args: Table1Args) -> Result<()> {
         eprintln!("wrote {}", path.display());
     }
     if let Some(path) = &args.png {
-        match draw_chart(path, &rows, &shapes, &cells) {
+        match draw_chart(path, &rows, &shapes, &cells, &clouds) {
             Ok(()) => eprintln!("wrote {}", path.display()),
             Err(e) => eprintln!("could not draw {}: {e}", path.display()),
         }
@@ -680,34 +680,39 @@ fn cells_above_with_checks(
 ) -> (usize, Vec<String>) {
     let (mut checked, mut unchecked) = (0, Vec::new());
     for (ri, row) in rows.iter().enumerate() {
-        let RowKind::Fit { method, degree, .. } = row.kind else { continue };
-        if method == FitMethod::InverseMoment {
-            continue;
-        }
-        for (si, (col, s)) in shapes.iter().enumerate() {
-            let cell = &cells[ri][si];
-            let (Some(v), Some(p)) = (cell.volume, row.paper.map(|p| p[*col])) else { continue };
-            if v <= 1.02 * p {
-                continue;
-            }
-            let below = |optimum: Real, se: Real| p + 0.005 < optimum - 2.0 * se;
-            let ok = if is_log_det_row(row) {
-                if degree == 2 && method == FitMethod::LogDetP {
-                    clouds[si].2.is_some_and(|m| p + 0.005 < m.lower_bound)
-                } else {
-                    below(v, cell.std_error)
-                }
-            } else {
-                cell.stated.as_ref().is_some_and(|st| below(st.volume, st.std_error))
-            };
-            if ok {
-                checked += 1;
-            } else {
-                unchecked.push(format!("{} {} {}", row.label, row.objective, s.0));
+        for (si, (_, s)) in shapes.iter().enumerate() {
+            match certified_above(row, shapes[si].0, &cells[ri][si], clouds[si].2) {
+                Some(true) => checked += 1,
+                Some(false) => unchecked.push(format!("{} {} {}", row.label, row.objective, s.0)),
+                None => {}
             }
         }
     }
     (checked, unchecked)
+}
+
+/// For a fitted sos cell above 1.02 × the paper (column `col`): whether the paper's value lies below
+/// a certified optimum of the program it states (see [`cells_above_with_checks`]). None for other
+/// cells (within 1.02, baselines, inverse moment, no volume).
+fn certified_above(row: &Row, col: usize, cell: &Cell, mvee: Option<baselines::Mvee>) -> Option<bool> {
+    let RowKind::Fit { method, degree, .. } = row.kind else { return None };
+    if method == FitMethod::InverseMoment {
+        return None;
+    }
+    let (Some(v), Some(p)) = (cell.volume, row.paper.map(|p| p[col])) else { return None };
+    if v <= 1.02 * p {
+        return None;
+    }
+    let below = |optimum: Real, se: Real| p + 0.005 < optimum - 2.0 * se;
+    Some(if is_log_det_row(row) {
+        if degree == 2 && method == FitMethod::LogDetP {
+            mvee.is_some_and(|m| p + 0.005 < m.lower_bound)
+        } else {
+            below(v, cell.std_error)
+        }
+    } else {
+        cell.stated.as_ref().is_some_and(|st| below(st.volume, st.std_error))
+    })
 }
 
 /// Footnotes on the frame-dependent rows (trace objectives, c > 0): every cell above 1.02 × the
@@ -826,59 +831,92 @@ fn write_csv(path: &Path, rows: &[&Row], shapes: &[ShapeRef], cells: &[Vec<Cell>
     Ok(())
 }
 
+/// The ratio chart: one column per row, one dot per shape (filled: ≤ 1.02 × the paper or not
+/// checked; ring: above 1.02 × the paper with the paper's value below a certified optimum of its
+/// stated program), the lines ratio = 1 and 1.02, row keys below the axis.
 fn draw_chart(
     path: &Path,
     rows: &[&Row],
     shapes: &[ShapeRef],
     cells: &[Vec<Cell>],
+    clouds: &Clouds,
 ) -> std::result::Result<(), Box<dyn std::error::Error>> {
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir)?;
     }
-    let root = BitMapBackend::new(path, (1600, 800)).into_drawing_area();
+    let root = BitMapBackend::new(path, (1600, 900)).into_drawing_area();
     root.fill(&WHITE)?;
     let n = rows.len() as f64;
+    // (x, ratio, certified above) per shape.
+    let points: Vec<Vec<(f64, f64, bool)>> = (0..shapes.len())
+        .map(|si| {
+            let col = shapes[si].0;
+            let offset = (si as f64 - (shapes.len() as f64 - 1.0) / 2.0) * 0.12;
+            rows.iter()
+                .enumerate()
+                .filter_map(|(ri, row)| {
+                    let p = row.paper?[col];
+                    let cell = &cells[ri][si];
+                    let v = cell.volume?;
+                    let ring = certified_above(row, col, cell, clouds[si].2) == Some(true);
+                    (v > 0.0 && p > 0.0).then_some((ri as f64 + offset, v / p, ring))
+                })
+                .collect()
+        })
+        .collect();
+    let ratios = points.iter().flatten().map(|p| p.1);
+    let lo = ratios.clone().fold(1.0, f64::min).max(0.01) / 1.25;
+    let hi = ratios.fold(1.0, f64::max).min(100.0) * 1.25;
     let mut chart = ChartBuilder::on(&root)
         .caption("Table 1: our volume / the paper's, per row and shape", ("sans-serif", 26))
         .margin(20)
-        .x_label_area_size(200)
+        .x_label_area_size(190)
         .y_label_area_size(70)
-        .build_cartesian_2d(-0.5..n - 0.5, (0.1f64..10.0).log_scale())?;
-    let keys: Vec<&str> = rows.iter().map(|r| r.key).collect();
+        .build_cartesian_2d(-0.5..n - 0.5, (lo..hi).log_scale())?;
     chart
         .configure_mesh()
-        .x_labels(rows.len())
-        .x_label_formatter(&|x| {
-            let i = x.round();
-            if (x - i).abs() < 1e-6 && i >= 0.0 && (i as usize) < keys.len() {
-                keys[i as usize].to_string()
-            } else {
-                String::new()
-            }
-        })
-        .x_label_style(("sans-serif", 14).into_font().transform(FontTransform::Rotate90))
+        .x_labels(0)
+        .disable_x_mesh()
+        .y_labels(15)
+        .y_label_formatter(&|y| format!("{y:.2}"))
         .y_desc("ours / paper (log scale)")
         .draw()?;
     chart.draw_series(LineSeries::new([(-0.5, 1.0), (n - 0.5, 1.0)], BLACK.stroke_width(1)))?;
+    chart.draw_series(DashedLineSeries::new([(-0.5, 1.02), (n - 0.5, 1.02)], 6, 4, BLACK.mix(0.5).stroke_width(1)))?;
+    // Row keys, rotated, starting just below the axis.
+    let key_style = TextStyle::from(("sans-serif", 14).into_font()).transform(FontTransform::Rotate90).pos(
+        plotters::style::text_anchor::Pos::new(
+            plotters::style::text_anchor::HPos::Left,
+            plotters::style::text_anchor::VPos::Center,
+        ),
+    );
+    for (ri, row) in rows.iter().enumerate() {
+        let (x, y) = chart.backend_coord(&(ri as f64, lo));
+        root.draw(&Text::new(row.key.to_string(), (x, y + 8), key_style.clone()))?;
+    }
     let colors = [RED, BLUE, GREEN, MAGENTA, CYAN];
     for (si, (_, s)) in shapes.iter().enumerate() {
         let color = colors[si % colors.len()];
-        let offset = (si as f64 - (shapes.len() as f64 - 1.0) / 2.0) * 0.12;
-        let pts: Vec<(f64, f64)> = rows
-            .iter()
-            .enumerate()
-            .filter_map(|(ri, row)| {
-                let p = row.paper?[shapes[si].0];
-                let v = cells[ri][si].volume?;
-                (v > 0.0 && p > 0.0).then_some((ri as f64 + offset, (v / p).clamp(0.1, 10.0)))
-            })
-            .collect();
+        let pts = points[si].clone();
         chart
-            .draw_series(pts.into_iter().map(move |(x, y)| Circle::new((x, y), 5, color.filled())))?
+            .draw_series(pts.into_iter().map(move |(x, y, ring)| {
+                let style = if ring { color.stroke_width(2) } else { color.filled() };
+                Circle::new((x, y), 5, style)
+            }))?
             .label(s.1)
             .legend(move |(x, y)| Circle::new((x, y), 5, color.filled()));
     }
-    chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()?;
+    root.draw(&Text::new(
+        "dashed: 1.02 x paper; ring: above it, the paper's value below a certified optimum of its stated program",
+        (90, 870),
+        ("sans-serif", 15).into_font(),
+    ))?;
     root.present()?;
     Ok(())
 }
