@@ -173,8 +173,8 @@ pub struct Table1Args {
     /// A fast check: human and chair, the baselines and a few fitted rows, 50 000 samples.
     #[arg(long)]
     pub quick: bool,
-    /// Frame the fit SDPs are solved in: cube (default), principal_cube, principal_box or
-    /// whitened (see `fit::hull::Normalization`; the log det rows do not depend on it).
+    /// Frame the fit SDPs are solved in: cube (default), principal_cube, principal_box, whitened
+    /// or input (see `fit::hull::Normalization`; the log det rows do not depend on it).
     #[arg(long, default_value = "cube")]
     pub normalization: String,
     /// Second frame of the frame-dependent fits (trace objectives, --relaxation c > 0): solved there
@@ -238,6 +238,16 @@ pub fn stated_settings(settings: &FitSettings) -> FitSettings {
 }
 
 impl Cell {
+    /// Takes the body of `report` (solved in `frame`, containing every point) when it is smaller
+    /// than the cell's.
+    fn keep_if_smaller(&mut self, report: &sublevel::body::FitReport, frame: Normalization) {
+        if self.volume.is_none_or(|v| report.volume < v) {
+            self.volume = Some(report.volume);
+            self.std_error = report.volume_std_error;
+            self.frame = frame.name().into();
+        }
+    }
+
     /// A fitted cell from the body's report: the kept frame is that of the smallest candidate.
     fn of_fit(report: &sublevel::body::FitReport, primary: Normalization) -> Self {
         let frame_of = |name: &str| name.split('/').next().unwrap_or(name).to_string();
@@ -398,33 +408,21 @@ pub fn fit_cell(points: &[Point3], settings: &FitSettings, paper: Option<Real>) 
     };
     let above = matches!((cell.volume, paper), (Some(v), Some(p)) if v > 1.02 * p);
     if settings.depends_on_frame() && above {
-        // The other two frames (principal cube, whitened), each in both trace
-        // bases: the smallest body over every frame is kept.
-        let others = FitSettings {
-            normalization: Normalization::PrincipalCube,
-            alternate_normalization: Some(Normalization::Whitened),
-            ..settings.clone()
-        };
-        if let Ok(body) = fit_points(points, &others, &mut |_| {}) {
-            let other = Cell::of_fit(&body.report, Normalization::PrincipalCube);
-            if let (Some(v), Some(o)) = (cell.volume, other.volume) {
-                if o < v {
-                    cell.volume = Some(o);
-                    cell.std_error = other.std_error;
-                    cell.frame = other.frame;
-                }
+        // Every other frame, each in both trace bases, then the data's own coordinates as the
+        // stated program (plain basis): the smallest body over every frame is kept.
+        let solved = [Some(settings.normalization), settings.alternate_normalization, Some(Normalization::Input)];
+        let mut every_frame = true;
+        for frame in Normalization::ALL.into_iter().filter(|n| !solved.contains(&Some(*n))) {
+            let other = FitSettings { normalization: frame, alternate_normalization: None, ..settings.clone() };
+            match fit_points(points, &other, &mut |_| {}) {
+                Ok(body) => cell.keep_if_smaller(&body.report, frame),
+                Err(_) => every_frame = false,
             }
-            cell.every_frame = true;
         }
-        let stated = stated_settings(settings);
-        if let Ok(body) = fit_points(points, &stated, &mut |_| {}) {
+        cell.every_frame = every_frame;
+        if let Ok(body) = fit_points(points, &stated_settings(settings), &mut |_| {}) {
             let r = &body.report;
-            // Another body containing every point: kept if smaller.
-            if cell.volume.is_none_or(|v| r.volume < v) {
-                cell.volume = Some(r.volume);
-                cell.std_error = r.volume_std_error;
-                cell.frame = Normalization::Input.name().into();
-            }
+            cell.keep_if_smaller(r, Normalization::Input);
             cell.stated = Some(Stated {
                 volume: r.volume,
                 std_error: r.volume_std_error,
@@ -434,6 +432,15 @@ pub fn fit_cell(points: &[Point3], settings: &FitSettings, paper: Option<Real>) 
         }
     }
     cell
+}
+
+/// The paper's 2-decimal rounding: a paper value p may stand for anything below p + this.
+const PAPER_ROUNDING: Real = 0.005;
+
+/// True when the paper's value lies below `optimum` beyond its rounding and 2 standard errors
+/// (`std_error` of the optimum's volume; 0 for a bound).
+fn paper_below(paper: Real, optimum: Real, std_error: Real) -> bool {
+    paper + PAPER_ROUNDING < optimum - 2.0 * std_error
 }
 
 type Clouds = [(Vec<Point3>, Baselines, Option<baselines::Mvee>)];
@@ -507,7 +514,7 @@ fn print_table(rows: &[&Row], shapes: &[ShapeRef], cells: &[Vec<Cell>], clouds: 
                 if let (Some(m), Some(p)) = (clouds[si].2, row.paper.map(|p| p[*col])) {
                     // The paper rounds to 2 decimals: only a value below the bound by more than
                     // the rounding is unreachable.
-                    if p + 0.005 < m.lower_bound {
+                    if paper_below(p, m.lower_bound, 0.0) {
                         out.push_str(&format!(
                             "    {}: paper {p:.2} — MVEE (Khachiyan) = {:.4} (duality bound ≥ {:.4}): no ellipsoid containing every vertex is smaller\n",
                             s.0, m.volume, m.lower_bound
@@ -651,7 +658,7 @@ fn reachable_optimum_notes(rows: &[&Row], shapes: &[ShapeRef], cells: &[Vec<Cell
                 continue;
             }
             parts.push(format!("2d={degree} {name} {:.3}", v / p));
-            if p + 0.005 < v - 2.0 * cell.std_error {
+            if paper_below(p, v, cell.std_error) {
                 below.push(format!("2d={degree} {name} {p:.2} < {v:.3}±{:.3}", cell.std_error));
             }
         }
@@ -703,15 +710,14 @@ fn certified_above(row: &Row, col: usize, cell: &Cell, mvee: Option<baselines::M
     if v <= 1.02 * p {
         return None;
     }
-    let below = |optimum: Real, se: Real| p + 0.005 < optimum - 2.0 * se;
     Some(if is_log_det_row(row) {
         if degree == 2 && method == FitMethod::LogDetP {
-            mvee.is_some_and(|m| p + 0.005 < m.lower_bound)
+            mvee.is_some_and(|m| paper_below(p, m.lower_bound, 0.0))
         } else {
-            below(v, cell.std_error)
+            paper_below(p, v, cell.std_error)
         }
     } else {
-        cell.stated.as_ref().is_some_and(|st| below(st.volume, st.std_error))
+        cell.stated.as_ref().is_some_and(|st| paper_below(p, st.volume, st.std_error))
     })
 }
 
@@ -728,7 +734,7 @@ fn stated_program_notes(rows: &[&Row], shapes: &[ShapeRef], cells: &[Vec<Cell>])
             let (Some(v), Some(p)) = (cell.volume, row.paper.map(|p| p[*col])) else { continue };
             let Some(st) = &cell.stated else { continue };
             let name = format!("{} {} {}", row.label, row.objective, s.0);
-            if p + 0.005 < st.volume - 2.0 * st.std_error {
+            if paper_below(p, st.volume, st.std_error) {
                 let gap = st.certificate.map_or_else(|| "—".into(), |g| format!("{:.0e}", g.gap()));
                 below.push(format!(
                     "  {name}: paper {p:.2} < stated optimum {:.3}±{:.3} (gap {gap}, {}); ours {v:.3}",
