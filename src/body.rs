@@ -96,6 +96,78 @@ pub struct SolverCertificate {
     pub dual_residual: Real,
 }
 
+impl FitReport {
+    /// Every floating-point figure of the report with its field name (e.g. `volume`,
+    /// `degree_choice.candidates[1].volume`, `solver_certificate.dual_objective`).
+    fn numbers_mut(&mut self) -> Vec<(String, &mut Real)> {
+        let mut out: Vec<(String, &mut Real)> = vec![
+            ("solve_seconds".into(), &mut self.solve_seconds),
+            ("total_seconds".into(), &mut self.total_seconds),
+            ("volume".into(), &mut self.volume),
+            ("volume_std_error".into(), &mut self.volume_std_error),
+            ("hull_volume".into(), &mut self.hull_volume),
+            ("max_point_value".into(), &mut self.max_point_value),
+            ("containment_rescale".into(), &mut self.containment_rescale),
+            ("convexity_relaxation".into(), &mut self.convexity_relaxation),
+        ];
+        if let Some(m) = self.convexity_margin.as_mut() {
+            out.push(("convexity_margin".into(), m));
+        }
+        if let Some(c) = self.degree_choice.as_mut() {
+            out.push(("degree_choice.volume_tolerance".into(), &mut c.volume_tolerance));
+            for (k, (_, v, e)) in c.candidates.iter_mut().enumerate() {
+                out.push((format!("degree_choice.candidates[{k}].volume"), v));
+                out.push((format!("degree_choice.candidates[{k}].std_error"), e));
+            }
+        }
+        if let Some(c) = self.solver_certificate.as_mut() {
+            out.push(("solver_certificate.primal_objective".into(), &mut c.primal_objective));
+            out.push(("solver_certificate.dual_objective".into(), &mut c.dual_objective));
+            out.push(("solver_certificate.primal_residual".into(), &mut c.primal_residual));
+            out.push(("solver_certificate.dual_residual".into(), &mut c.dual_residual));
+        }
+        for (k, (_, v)) in self.candidate_volumes.iter_mut().enumerate() {
+            out.push((format!("candidate_volumes[{k}].volume"), v));
+        }
+        out
+    }
+
+    /// Checks that every figure of the report is a finite number (JSON has no NaN or infinity: a
+    /// stored one would come back as `null` and make the record unreadable).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `prefix.field` (e.g. `report.volume`) for the first
+    /// non-finite figure.
+    pub fn check_finite(&self, prefix: &str) -> Result<()> {
+        let mut copy = self.clone();
+        for (name, v) in copy.numbers_mut() {
+            if !v.is_finite() {
+                return Err(Error::invalid(format!("{prefix}.{name}"), format!("must be a finite number, got {v}")));
+            }
+        }
+        Ok(())
+    }
+
+    /// Replaces every non-finite figure by a representable one (±inf by ±`f64::MAX`, NaN by 0)
+    /// and says so in `notes`, one note per figure; returns how many were replaced. For derived
+    /// figures of a fit that overflowed (e.g. the volume of an enormous cloud), so the body can
+    /// still be stored and read back.
+    pub fn sanitize_non_finite(&mut self) -> usize {
+        let mut notes = Vec::new();
+        for (name, v) in self.numbers_mut() {
+            if v.is_finite() {
+                continue;
+            }
+            let was = *v;
+            *v = if v.is_nan() { 0.0 } else { Real::MAX.copysign(was) };
+            notes.push(format!("{name} was {was} (overflow or undefined); stored as {:e}", *v));
+        }
+        let n = notes.len();
+        self.notes.extend(notes);
+        n
+    }
+}
+
 impl SolverCertificate {
     /// `|dual − primal|`, the absolute duality gap in units of the objective.
     pub fn gap(&self) -> Real {
@@ -159,7 +231,8 @@ pub struct Body {
 impl Body {
     /// Validates and builds a body from a polynomial in normalized coordinates.
     ///
-    /// Checks: degree ∈ {2, 4, 6, 8}; center finite; scale finite and > 0; p has a minimizer with
+    /// Checks: degree ∈ {2, 4, 6, 8}; center finite and within ±[`crate::math::MAX_COORDINATE`];
+    /// scale in [`crate::math::SCALE_RANGE`]; coefficients finite; p has a minimizer with
     /// p < 1 there and a positive-definite Hessian (a bounded sublevel set with interior). For a
     /// body whose report says `nonconvex`, a strict local minimizer found by modified Newton from
     /// the best point of a grid over the normalized unit cube is accepted when Newton from the
@@ -175,8 +248,16 @@ impl Body {
         if center.iter().any(|v| !v.is_finite()) {
             return Err(Error::invalid("center", "must be three finite numbers"));
         }
+        crate::math::check_coordinates("center", &center)?;
+        let (lo, hi) = crate::math::SCALE_RANGE;
         if !(scale.is_finite() && scale > 0.0) {
             return Err(Error::invalid("scale", format!("must be finite and > 0, got {scale}")));
+        }
+        if !(lo..=hi).contains(&scale) {
+            return Err(Error::invalid("scale", format!("must lie in [{lo:e}, {hi:e}] meters, got {scale:e}")));
+        }
+        if let Some(i) = polynomial.coefficients().iter().position(|c| !c.is_finite()) {
+            return Err(Error::invalid("coefficients", format!("entry {i} is not finite")));
         }
         let found = minimize_convex(&polynomial).or_else(|| {
             // A nonconvex body (relaxed convexity, inverse moment): any strict local minimizer

@@ -48,10 +48,27 @@ impl Error {
         Error::InvalidArgument { field: field.into(), reason: reason.into() }
     }
 
-    /// Shorthand for [`Error::NotFound`].
+    /// Shorthand for [`Error::NotFound`]; an id longer than [`CLIP_BYTES`] is clipped (a client's
+    /// 16 KB id is never echoed back whole).
     pub fn not_found(kind: &'static str, id: impl Into<String>) -> Self {
-        Error::NotFound { kind, id: id.into() }
+        let id: String = id.into();
+        Error::NotFound { kind, id: clip(&id) }
     }
+}
+
+/// How many bytes of a client-supplied string an error message repeats.
+pub const CLIP_BYTES: usize = 64;
+
+/// `s` cut to at most [`CLIP_BYTES`] bytes (at a character boundary) with `…` appended when cut.
+pub fn clip(s: &str) -> String {
+    if s.len() <= CLIP_BYTES {
+        return s.to_owned();
+    }
+    let mut end = CLIP_BYTES;
+    while !s.is_char_boundary(end) {
+        end -= 1;
+    }
+    format!("{}…", &s[..end])
 }
 
 /// `Result` with the crate's [`Error`].

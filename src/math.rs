@@ -22,6 +22,38 @@ pub type UnitQuaternion = nalgebra::UnitQuaternion<Real>;
 /// quaternion" rather than silently renormalized (1e-6 absorbs f32 round trips of clients).
 pub const UNIT_QUATERNION_TOLERANCE: Real = 1e-6;
 
+/// Largest accepted magnitude of a coordinate or translation, in meters (1000 km).
+///
+/// Beyond it an f64 keeps fewer than ~10 fractional digits of a millimeter-scale body's
+/// normalized coordinates (ulp(1e6) ≈ 1.2e-10 m), and far beyond it (1e154 and up) squared
+/// distances overflow or the offset between two bodies is lost to rounding before any solver
+/// runs. Poses, point clouds and body centers outside `[-MAX_COORDINATE, MAX_COORDINATE]` are
+/// rejected as invalid arguments.
+pub const MAX_COORDINATE: Real = 1.0e6;
+
+/// Smallest and largest accepted body scale (the normalization length of a body file), in meters:
+/// from a micrometer to [`MAX_COORDINATE`].
+pub const SCALE_RANGE: (Real, Real) = (1.0e-6, MAX_COORDINATE);
+
+/// Checks that every coordinate is finite and within [`MAX_COORDINATE`] meters.
+///
+/// # Errors
+/// [`crate::Error::InvalidArgument`] naming `field`, saying which entry is wrong and why.
+pub fn check_coordinates(field: &str, values: &[Real]) -> crate::Result<()> {
+    for (k, v) in values.iter().enumerate() {
+        if !v.is_finite() {
+            return Err(crate::Error::invalid(field, format!("entry {k} is {v}, not a finite number")));
+        }
+        if v.abs() > MAX_COORDINATE {
+            return Err(crate::Error::invalid(
+                field,
+                format!("entry {k} is {v:e} m, beyond the supported range ±{MAX_COORDINATE:e} m"),
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Default KKT-residual tolerance of the Newton / active-set query solvers (absolute, in the
 /// units of the normalized problem).
 pub const NEWTON_KKT_TOLERANCE: Real = 1e-10;
@@ -32,11 +64,18 @@ pub const NEWTON_MAX_ITERATIONS: usize = 100;
 /// Builds a pose from a unit quaternion `(w, x, y, z)` and a translation `(tx, ty, tz)` in meters.
 ///
 /// # Errors
-/// [`crate::Error::InvalidArgument`] naming `field` when any entry is not finite or the quaternion's
-/// norm differs from 1 by more than [`UNIT_QUATERNION_TOLERANCE`].
+/// [`crate::Error::InvalidArgument`] naming `field` when any entry is not finite, a translation
+/// exceeds [`MAX_COORDINATE`] meters, or the quaternion's norm differs from 1 by more than
+/// [`UNIT_QUATERNION_TOLERANCE`].
 pub fn pose_from_parts(field: &str, q: [Real; 4], t: [Real; 3]) -> crate::Result<Isometry3> {
     if q.iter().chain(t.iter()).any(|v| !v.is_finite()) {
         return Err(crate::Error::invalid(field, "quaternion and translation must be finite numbers"));
+    }
+    if let Some(v) = t.iter().find(|v| v.abs() > MAX_COORDINATE) {
+        return Err(crate::Error::invalid(
+            field,
+            format!("translation {v:e} m is beyond the supported range ±{MAX_COORDINATE:e} m"),
+        ));
     }
     let norm = q.iter().map(|v| v * v).sum::<Real>().sqrt();
     if (norm - 1.0).abs() > UNIT_QUATERNION_TOLERANCE {
@@ -74,5 +113,10 @@ mod tests {
         let err = pose_from_parts("pose_a", [1.0, 1.0, 0.0, 0.0], [0.0; 3]).unwrap_err();
         assert!(err.to_string().contains("pose_a"));
         assert!(pose_from_parts("p", [f64::NAN, 0.0, 0.0, 0.0], [0.0; 3]).is_err());
+        // Beyond ±1e6 m the offset between two bodies is lost to rounding: refused.
+        let far = pose_from_parts("pose_b", [1.0, 0.0, 0.0, 0.0], [1e154, 0.0, 0.0]).unwrap_err();
+        assert!(far.to_string().contains("pose_b") && far.to_string().contains("range"), "{far}");
+        assert!(pose_from_parts("p", [1.0, 0.0, 0.0, 0.0], [-1e6, 1e6, 0.0]).is_ok());
+        assert!(check_coordinates("xyz", &[0.0, 1e6 + 1.0]).unwrap_err().to_string().contains("entry 1"));
     }
 }

@@ -43,7 +43,7 @@ pub fn run(args: ServeArgs) -> Result<()> {
     // Ignore the error of a second init (a subscriber already set by an embedding program).
     let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
     let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
-    runtime.block_on(async move {
+    let outcome = runtime.block_on(async move {
         let config = ServerConfig { data_dir: args.data_dir.clone(), ..ServerConfig::default() };
         let catalog = open_catalog(&config)?;
         if args.demo {
@@ -58,8 +58,15 @@ pub fn run(args: ServeArgs) -> Result<()> {
         // On stdout too, for scripts and tests that bind port 0.
         println!("listening on {addr}");
         serve_catalog(listener, catalog, config, shutdown_signal()).await
-    })
+    });
+    // In-flight requests have drained; a fit still solving on the blocking pool stores nothing
+    // now (its job is recorded as interrupted at the next start), so do not wait for it.
+    runtime.shutdown_timeout(SHUTDOWN_GRACE);
+    outcome
 }
+
+/// How long the process waits for blocking work (a running SDP) after the server stopped.
+const SHUTDOWN_GRACE: std::time::Duration = std::time::Duration::from_millis(500);
 
 /// Completes on Ctrl-C or (on Unix) SIGTERM, as sent by `docker stop` and Kubernetes.
 async fn shutdown_signal() {

@@ -33,6 +33,7 @@ pub mod inverse_moment;
 pub mod logdet_p;
 pub mod mesh;
 pub mod relaxed;
+pub mod sos_convexity;
 pub mod volume;
 
 /// Which formulation a fit uses (paper §III; the body file's `report.method`).
@@ -779,6 +780,9 @@ fn finish(
     fit_report.volume = est.volume * to_input_units;
     fit_report.volume_std_error = est.std_error * to_input_units;
     fit_report.total_seconds = start.elapsed().as_secs_f64();
+    // A derived figure that overflowed (e.g. the volume of an enormous cloud) is stored as a
+    // representable number with a note: JSON has no infinity, and the body file must read back.
+    fit_report.sanitize_non_finite();
     let mut body = body;
     body.report = fit_report;
     report(

@@ -2,7 +2,7 @@
 
 use super::cache::WarmStartCache;
 use super::store::Store;
-use super::{BodyRecord, InstanceRecord, SceneMeta, StoredPose};
+use super::{BodyRecord, InstanceRecord, JobRecord, JobRecordState, SceneMeta, StoredPose};
 use crate::body::Body;
 use crate::math::Isometry3;
 use crate::query::{
@@ -68,6 +68,8 @@ pub struct DistanceReply {
     /// (∂D/∂ξ_a, ∂D/∂ξ_b) when asked for and the answer is not a lower bound (twists, see
     /// [`crate::query::gradient`]).
     pub gradients: Option<(PoseGradient, PoseGradient)>,
+    /// The inputs limit the accuracy (see [`precision_limited`]).
+    pub precision_limited: bool,
 }
 
 /// A certified growth answer with optional pose gradients.
@@ -77,6 +79,28 @@ pub struct GrowthReply {
     pub answer: CertifiedGrowth,
     /// (∂d/∂ξ₁, ∂d/∂ξ₂) when asked for and the answer is not a lower bound.
     pub gradients: Option<(PoseGradient, PoseGradient)>,
+    /// The inputs limit the accuracy (see [`precision_limited`]).
+    pub precision_limited: bool,
+}
+
+/// Relative precision in a body's normalized coordinates below which an answer is flagged as
+/// limited by its inputs: 1e-9, ten times the Newton KKT tolerance's square root region.
+pub const PRECISION_LIMIT: crate::math::Real = 1e-9;
+
+/// True when one unit in the last place of the largest coordinate involved (the two poses'
+/// translations and the bodies' centers, meters) exceeds [`PRECISION_LIMIT`] of the smaller
+/// body's scale: the query's inputs already carry that error in normalized coordinates, before
+/// any solver runs (e.g. a 1 mm body 500 km from the origin).
+pub fn precision_limited(a: &Body, pose_a: &Isometry3, b: &Body, pose_b: &Isometry3) -> bool {
+    let mag = [
+        pose_a.translation.vector.amax(),
+        pose_b.translation.vector.amax(),
+        a.center().amax() + a.scale(),
+        b.center().amax() + b.scale(),
+    ]
+    .into_iter()
+    .fold(0.0, crate::math::Real::max);
+    mag * crate::math::Real::EPSILON > PRECISION_LIMIT * a.scale().min(b.scale())
 }
 
 /// The answer of one query of a batch.
@@ -142,8 +166,13 @@ pub struct Catalog {
     store: Box<dyn Store>,
     bodies: RwLock<BTreeMap<String, Arc<BodyEntry>>>,
     scenes: RwLock<BTreeMap<String, Arc<Mutex<SceneState>>>>,
+    jobs: RwLock<BTreeMap<String, JobRecord>>,
+    quarantined: usize,
     params: NewtonParams,
 }
+
+/// Most job records kept; beyond it the oldest finished ones are deleted.
+pub const MAX_JOB_RECORDS: usize = 1024;
 
 impl std::fmt::Debug for Catalog {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -176,10 +205,13 @@ fn check_name(field: &str, name: &str) -> Result<()> {
 }
 
 impl Catalog {
-    /// Loads every body and scene of `store` into memory.
+    /// Loads every body, scene and job record of `store` into memory.
     ///
-    /// A stored body that no longer validates, or an instance whose body is missing, is skipped
-    /// with a warning (and left in the store) rather than keeping the server from starting.
+    /// The store always opens: a stored body that no longer validates, or an instance whose pose
+    /// does not, is moved to the store's quarantine with the reason (see
+    /// [`super::store`]) and counted in [`Catalog::quarantined`]; an instance whose body is
+    /// missing is skipped with a warning (and kept). A job record still `running` was
+    /// interrupted by the previous stop and is marked `interrupted`.
     ///
     /// # Errors
     /// [`Error::Storage`] when the store cannot be read.
@@ -191,7 +223,10 @@ impl Catalog {
                     let entry = BodyEntry { id: id.clone(), name: rec.name, body: Arc::new(body) };
                     bodies.insert(id, Arc::new(entry));
                 }
-                Err(e) => tracing::warn!(body_id = %id, error = %e, "skipping stored body that does not validate"),
+                Err(e) => {
+                    tracing::warn!(body_id = %id, error = %e, "quarantining stored body that does not validate");
+                    store.quarantine("bodies", &id, &format!("does not validate: {e}"))?;
+                }
             }
         }
         let mut scenes = BTreeMap::new();
@@ -206,7 +241,10 @@ impl Catalog {
                     Ok(pose) => {
                         instances.insert(iid, Instance { body_id: inst.body_id, body: entry.body.clone(), pose });
                     }
-                    Err(e) => tracing::warn!(scene_id = %id, instance_id = %iid, error = %e, "skipping instance"),
+                    Err(e) => {
+                        tracing::warn!(scene_id = %id, instance_id = %iid, error = %e, "quarantining instance");
+                        store.quarantine("instances", &format!("{id}/{iid}"), &format!("does not validate: {e}"))?;
+                    }
                 }
             }
             let state = SceneState {
@@ -218,8 +256,68 @@ impl Catalog {
             };
             scenes.insert(id, Arc::new(Mutex::new(state)));
         }
-        tracing::info!(bodies = bodies.len(), scenes = scenes.len(), "catalog loaded");
-        Ok(Self { store, bodies: RwLock::new(bodies), scenes: RwLock::new(scenes), params })
+        let mut jobs = BTreeMap::new();
+        for (id, mut rec) in store.list_jobs()? {
+            if rec.state == JobRecordState::Running {
+                rec.state = JobRecordState::Interrupted;
+                rec.error =
+                    "interrupted: the server stopped while the job was queued or running; no body was stored".into();
+                store.put_job(&id, &rec)?;
+            }
+            jobs.insert(id, rec);
+        }
+        let quarantined = store.quarantined()?.len();
+        if quarantined > 0 {
+            tracing::warn!(records = quarantined, "the store's quarantine holds records that could not be loaded");
+        }
+        tracing::info!(bodies = bodies.len(), scenes = scenes.len(), jobs = jobs.len(), quarantined, "catalog loaded");
+        Ok(Self {
+            store,
+            bodies: RwLock::new(bodies),
+            scenes: RwLock::new(scenes),
+            jobs: RwLock::new(jobs),
+            quarantined,
+            params,
+        })
+    }
+
+    /// Number of records in the store's quarantine when the catalog was opened (unreadable or
+    /// invalid records kept aside; see [`super::store`]). Health reports them.
+    pub fn quarantined(&self) -> usize {
+        self.quarantined
+    }
+
+    /// Writes a job's record (and prunes the oldest finished records beyond
+    /// [`MAX_JOB_RECORDS`]).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] when the record does not survive its JSON round trip;
+    /// [`Error::Storage`].
+    pub fn record_job(&self, id: &str, record: &JobRecord) -> Result<()> {
+        self.store.put_job(id, record)?;
+        let mut jobs = write(&self.jobs);
+        jobs.insert(id.to_owned(), record.clone());
+        if jobs.len() > MAX_JOB_RECORDS {
+            let mut done: Vec<(u64, String)> = jobs
+                .iter()
+                .filter(|(_, r)| r.state != JobRecordState::Running)
+                .map(|(k, r)| (r.created_unix_ms, k.clone()))
+                .collect();
+            done.sort();
+            let excess = jobs.len() - MAX_JOB_RECORDS;
+            let old: Vec<String> = done.into_iter().take(excess).map(|(_, k)| k).collect();
+            let refs: Vec<&str> = old.iter().map(String::as_str).collect();
+            self.store.delete_jobs(&refs)?;
+            for k in &old {
+                jobs.remove(k);
+            }
+        }
+        Ok(())
+    }
+
+    /// A job's stored record, if any.
+    pub fn job(&self, id: &str) -> Option<JobRecord> {
+        read(&self.jobs).get(id).cloned()
     }
 
     /// The Newton parameters every query uses.
@@ -526,10 +624,11 @@ fn run_distance(
     let r = certified_distance(&ia.body, &ia.pose, &ib.body, &ib.pose, s.cache.distance(a, b), params, options.mode);
     let gradients =
         (options.with_gradient && r.source != AnswerSource::SdpLowerBound).then(|| distance_gradient(&r.result));
+    let precision_limited = precision_limited(&ia.body, &ia.pose, &ib.body, &ib.pose);
     if !r.lower_bound {
         s.cache.put_distance(a, b, r.result.warm_start);
     }
-    Ok(DistanceReply { answer: r, gradients })
+    Ok(DistanceReply { answer: r, gradients, precision_limited })
 }
 
 fn run_growth(
@@ -543,10 +642,11 @@ fn run_growth(
     let r = certified_growth(&i1.body, &i1.pose, &i2.body, &i2.pose, s.cache.growth(p1, p2), params, options.mode);
     let gradients = (options.with_gradient && r.source != AnswerSource::SdpLowerBound)
         .then(|| growth_gradient(&i1.body, &i1.pose, &r.result));
+    let precision_limited = precision_limited(&i1.body, &i1.pose, &i2.body, &i2.pose);
     if !r.lower_bound {
         s.cache.put_growth(p1, p2, r.result.warm_start);
     }
-    Ok(GrowthReply { answer: r, gradients })
+    Ok(GrowthReply { answer: r, gradients, precision_limited })
 }
 
 // --------------------------------------------------------------------------------------------

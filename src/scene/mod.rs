@@ -31,9 +31,10 @@ pub mod cache;
 mod catalog;
 pub mod store;
 
+pub use catalog::precision_limited;
 pub use catalog::{
     BodyEntry, Catalog, DistanceReply, GrowthReply, InstanceView, PosedInstance, QueryAnswer, QueryKind, QueryOptions,
-    QueryPair, SceneView, MAX_NAME_BYTES,
+    QueryPair, SceneView, MAX_JOB_RECORDS, MAX_NAME_BYTES, PRECISION_LIMIT,
 };
 
 use crate::body::BodyFile;
@@ -99,4 +100,41 @@ pub struct SceneRecord {
     pub meta: SceneMeta,
     /// Instances by id.
     pub instances: std::collections::BTreeMap<String, InstanceRecord>,
+}
+
+/// The lifecycle state of a stored job record.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum JobRecordState {
+    /// Queued or running (a record still in this state when the server starts was interrupted).
+    Running,
+    /// Finished; `body_id` names the stored body.
+    Succeeded,
+    /// Finished without a body; `error` says why.
+    Failed,
+    /// The server stopped (or crashed) while the job was queued or running; no body was stored.
+    Interrupted,
+}
+
+/// A fit or grouping job as stored, so that its outcome outlives the process that ran it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct JobRecord {
+    /// `fit` or `group`.
+    pub kind: String,
+    /// Name of the body the job stores.
+    pub name: String,
+    /// Lifecycle state.
+    pub state: JobRecordState,
+    /// Id of the stored body once `Succeeded`; empty before.
+    #[serde(default)]
+    pub body_id: String,
+    /// Why the job failed or was interrupted; empty otherwise.
+    #[serde(default)]
+    pub error: String,
+    /// Last progress or final message.
+    #[serde(default)]
+    pub message: String,
+    /// When the job was created, in milliseconds since the Unix epoch.
+    #[serde(default)]
+    pub created_unix_ms: u64,
 }

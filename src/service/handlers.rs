@@ -4,8 +4,9 @@ use super::convert::{self as cv, prefix_field, require_id};
 use super::jobs::{is_terminal, FitJobs, GroupJob};
 use super::pb::{self, sublevel_server::Sublevel};
 use super::ServerConfig;
-use crate::body::{Body, BodyFile};
+use crate::body::BodyFile;
 use crate::fit::mesh::parse_points;
+use crate::fit::sos_convexity::admit_uploaded;
 use crate::scene::Catalog;
 use crate::{Error, Result};
 use std::sync::Arc;
@@ -17,19 +18,19 @@ use tonic::{Request, Response, Status};
 pub struct SublevelService {
     catalog: Arc<Catalog>,
     config: ServerConfig,
-    jobs: FitJobs,
+    pub(crate) jobs: Arc<FitJobs>,
 }
 
 impl SublevelService {
     /// A service over `catalog` with `config`'s limits.
     pub fn new(catalog: Arc<Catalog>, config: ServerConfig) -> Self {
-        let jobs = FitJobs::new(config.max_concurrent_fits);
+        let jobs = Arc::new(FitJobs::new(catalog.clone(), config.max_concurrent_fits));
         Self { catalog, config, jobs }
     }
 }
 
-/// Runs blocking work (an fsync'd store write, mesh parsing) on tokio's blocking pool.
-async fn blocking<T: Send + 'static>(f: impl FnOnce() -> Result<T> + Send + 'static) -> Result<T, Status> {
+/// Runs blocking work (an fsync'd store write, mesh parsing, an SDP) on tokio's blocking pool.
+pub(crate) async fn blocking<T: Send + 'static>(f: impl FnOnce() -> Result<T> + Send + 'static) -> Result<T, Status> {
     match tokio::task::spawn_blocking(f).await {
         Ok(r) => r.map_err(Status::from),
         Err(e) => Err(Status::internal(format!("worker failed: {e}"))),
@@ -46,12 +47,20 @@ impl Sublevel for SublevelService {
         if req.name.len() > crate::scene::MAX_NAME_BYTES {
             return Err(Error::invalid("name", format!("at most {} bytes", crate::scene::MAX_NAME_BYTES)).into());
         }
+        // Every setting is checked before a job exists (a bad combination such as logdet_h with
+        // a relaxation is INVALID_ARGUMENT here, not a failed job).
+        let mut settings = self.config.fit.clone();
+        settings.degree = fit.degree;
+        settings.method = fit.method;
+        settings.convexity_relaxation = fit.convexity_relaxation;
+        settings.validate()?;
         let max = self.config.max_fit_points;
+        let top_degree = fit.auto.as_ref().and_then(|(d, _)| d.iter().max().copied()).unwrap_or(fit.degree);
         let points = match req.source {
             None => return Err(Error::invalid("source", "set `points` or `mesh`").into()),
             Some(pb::start_fit_job_request::Source::Points(cloud)) => {
                 let points = cv::points_from_proto(&cloud, max)?;
-                cv::check_cloud("points", &points)?;
+                cv::check_cloud("points", &points, top_degree)?;
                 points
             }
             Some(pb::start_fit_job_request::Source::Mesh(mesh)) => {
@@ -63,19 +72,15 @@ impl Sublevel for SublevelService {
                     return Err(Error::invalid("mesh.format", "must name the format (off, obj, stl, ply, xyz)").into());
                 }
                 blocking(move || {
-                    let points = parse_points(&mesh.data, &format)?;
+                    let points = parse_points(&mesh.data, &format)?; // SWITCH-TO-LIMITED
                     cv::check_point_count("mesh", points.len(), max)?;
-                    cv::check_cloud("mesh", &points)?;
+                    cv::check_cloud("mesh", &points, top_degree)?;
                     Ok(points)
                 })
                 .await?
             }
         };
-        let mut settings = self.config.fit.clone();
-        settings.degree = fit.degree;
-        settings.method = fit.method;
-        settings.convexity_relaxation = fit.convexity_relaxation;
-        let job_id = self.jobs.start(self.catalog.clone(), req.name, points, settings, fit.auto);
+        let job_id = self.jobs.start(req.name, points, settings, fit.auto).await?;
         Ok(Response::new(pb::StartFitJobResponse { job_id }))
     }
 
@@ -84,18 +89,31 @@ impl Sublevel for SublevelService {
     async fn watch_fit_job(&self, request: Request<pb::WatchFitJobRequest>) -> Reply<Self::WatchFitJobStream> {
         let job_id = request.into_inner().job_id;
         let mut rx = self.jobs.watch(require_id("job_id", &job_id)?)?;
+        let mut stop = self.jobs.stop_signal();
         let (tx, out) = tokio::sync::mpsc::channel(16);
         tokio::spawn(async move {
+            let shutting_down =
+                || Status::unavailable("server shutting down: the job is interrupted; no body will be stored");
             loop {
                 let update = rx.borrow_and_update().clone();
                 let done = is_terminal(&update);
                 if tx.send(Ok(update)).await.is_err() || done {
                     break;
                 }
-                if rx.changed().await.is_err() {
-                    // The job's task ended without a terminal update (runtime shutting down).
-                    let _ = tx.send(Err(Status::unavailable("fit job abandoned: server shutting down"))).await;
+                if *stop.borrow() {
+                    let _ = tx.send(Err(shutting_down())).await;
                     break;
+                }
+                tokio::select! {
+                    changed = rx.changed() => if changed.is_err() {
+                        // The job's task ended without a terminal update (runtime shutting down).
+                        let _ = tx.send(Err(shutting_down())).await;
+                        break;
+                    },
+                    _ = stop.changed() => {
+                        let _ = tx.send(Err(shutting_down())).await;
+                        break;
+                    }
                 }
             }
         });
@@ -116,10 +134,20 @@ impl Sublevel for SublevelService {
             }
             Some(pb::upload_body_request::Body::Data(data)) => (cv::body_file_from_proto(&data)?, "data"),
         };
-        let body = Body::from_file(file).map_err(|e| prefix_field(e, prefix))?;
+        if req.name.len() > crate::scene::MAX_NAME_BYTES {
+            return Err(Error::invalid("name", format!("at most {} bytes", crate::scene::MAX_NAME_BYTES)).into());
+        }
         let catalog = self.catalog.clone();
-        let body_id = blocking(move || catalog.add_body(&req.name, body)).await?;
-        Ok(Response::new(pb::UploadBodyResponse { body_id }))
+        // The sos-convexity certificate is an SDP: off the async workers, like the store write.
+        let (body_id, nonconvex, margin) = blocking(move || {
+            let admitted = admit_uploaded(file).map_err(|e| prefix_field(e, prefix))?;
+            let nonconvex = admitted.body.report.nonconvex;
+            let margin = admitted.certificate.as_ref().map_or(f64::NAN, |c| c.margin);
+            let id = catalog.add_body(&req.name, admitted.body)?;
+            Ok((id, nonconvex, margin))
+        })
+        .await?;
+        Ok(Response::new(pb::UploadBodyResponse { body_id, nonconvex, convexity_margin: margin }))
     }
 
     async fn get_body(&self, request: Request<pb::GetBodyRequest>) -> Reply<pb::GetBodyResponse> {
@@ -197,8 +225,10 @@ impl Sublevel for SublevelService {
         let req = request.into_inner();
         require_id("scene_id", &req.scene_id)?;
         let poses = cv::poses_from_proto(&req.poses, self.config.max_poses_per_call)?;
-        // Inline: pose updates commit without fsync (see `RedbStore`), so this is short.
-        let updated = self.catalog.set_poses(&req.scene_id, &poses)?;
+        // On the blocking pool: a pose commit is redb's eventual durability, which still writes
+        // (and may sync) the file, so it must not sit on an async worker.
+        let catalog = self.catalog.clone();
+        let updated = blocking(move || catalog.set_poses(&req.scene_id, &poses)).await?;
         Ok(Response::new(pb::SetPosesResponse { updated: u32::try_from(updated).unwrap_or(u32::MAX) }))
     }
 
@@ -299,7 +329,7 @@ impl Sublevel for SublevelService {
             return Err(too_many(instances.len()));
         }
         let job = GroupJob { scene_id: req.scene_id, instances, name: req.name, replace: req.replace, settings };
-        let job_id = self.jobs.start_group(self.catalog.clone(), job);
+        let job_id = self.jobs.start_group(job).await?;
         Ok(Response::new(pb::StartFitJobResponse { job_id }))
     }
 }

@@ -15,7 +15,15 @@
 //!   `tokio::sync::watch` channel per job that `WatchFitJob` streams from.
 //!
 //! The server also serves `grpc.health.v1` (tonic-health; `""` and `sublevel.v1.Sublevel` report
-//! SERVING) and server reflection v1 (tonic-reflection), so `grpcurl` works without the proto.
+//! SERVING until shutdown begins, then NOT_SERVING; [`STORE_HEALTH_NAME`] reports NOT_SERVING
+//! while the store's quarantine holds records, see [`crate::scene::store`]) and server reflection
+//! v1 and v1alpha (tonic-reflection), so `grpcurl`, evans, Postman and Python's
+//! grpcio-reflection work without the proto.
+//!
+//! Transport: every accepted socket has TCP_NODELAY (a small response is never held back by
+//! Nagle's algorithm waiting for the client's delayed ACK) and TCP keepalive; HTTP/2 keepalive
+//! pings close connections whose peer vanished ([`KEEPALIVE_INTERVAL`], [`KEEPALIVE_TIMEOUT`]).
+//! [`status_layer`] turns undecodable requests into INVALID_ARGUMENT and names unknown methods.
 //!
 //! # Adding an RPC
 //!
@@ -27,6 +35,7 @@
 pub mod convert;
 mod handlers;
 mod jobs;
+pub mod status_layer;
 
 use crate::fit::FitSettings;
 use crate::query::NewtonParams;
@@ -50,6 +59,16 @@ pub mod pb {
 
 /// Fully qualified gRPC name of the service (`sublevel.v1.Sublevel`).
 pub const SERVICE_NAME: &str = "sublevel.v1.Sublevel";
+
+/// Health-check name of the store: SERVING when every stored record loaded, NOT_SERVING while the
+/// quarantine holds records that could not be (the server still serves everything else).
+pub const STORE_HEALTH_NAME: &str = "sublevel.v1.Store";
+
+/// Interval of HTTP/2 keepalive pings and of TCP keepalive probes on every connection.
+pub const KEEPALIVE_INTERVAL: std::time::Duration = std::time::Duration::from_secs(30);
+
+/// How long an HTTP/2 keepalive ping may go unanswered before the connection is closed.
+pub const KEEPALIVE_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(10);
 
 /// Server settings and request limits.
 #[derive(Clone, Debug)]
@@ -117,6 +136,10 @@ pub async fn serve(
 
 /// Like [`serve`], with an already opened catalog (e.g. one the caller preloaded with demo data).
 ///
+/// When `shutdown` completes, health turns NOT_SERVING, fit jobs stop storing results (a running
+/// one is recorded as interrupted at the next start), the listener closes and in-flight requests
+/// finish before this returns.
+///
 /// # Errors
 /// [`Error::Io`] when reflection cannot be built or the transport fails.
 pub async fn serve_catalog(
@@ -126,24 +149,48 @@ pub async fn serve_catalog(
     shutdown: impl Future<Output = ()> + Send,
 ) -> Result<()> {
     use pb::sublevel_server::SublevelServer;
+    use tonic_health::ServingStatus;
     let (reporter, health) = tonic_health::server::health_reporter();
     reporter.set_serving::<SublevelServer<SublevelService>>().await;
+    let store_status = if catalog.quarantined() == 0 { ServingStatus::Serving } else { ServingStatus::NotServing };
+    reporter.set_service_status(STORE_HEALTH_NAME, store_status).await;
+    let reflection_error =
+        |e: tonic_reflection::server::Error| Error::Io(std::io::Error::other(format!("reflection: {e}")));
     let reflection = tonic_reflection::server::Builder::configure()
         .register_encoded_file_descriptor_set(pb::FILE_DESCRIPTOR_SET)
         .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
         .build_v1()
-        .map_err(|e| Error::Io(std::io::Error::other(format!("reflection: {e}"))))?;
+        .map_err(reflection_error)?;
+    let reflection_v1alpha = tonic_reflection::server::Builder::configure()
+        .register_encoded_file_descriptor_set(pb::FILE_DESCRIPTOR_SET)
+        .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
+        .build_v1alpha()
+        .map_err(reflection_error)?;
     let max = config.max_message_bytes;
-    let service = SublevelServer::new(SublevelService::new(catalog, config))
-        .max_decoding_message_size(max)
-        .max_encoding_message_size(max);
+    let handlers = SublevelService::new(catalog, config);
+    let jobs = handlers.jobs.clone();
+    let service = SublevelServer::new(handlers).max_decoding_message_size(max).max_encoding_message_size(max);
     let addr = listener.local_addr().ok();
     tracing::info!(?addr, "serving {SERVICE_NAME}");
+    let incoming = tonic::transport::server::TcpIncoming::from(listener)
+        .with_nodelay(Some(true))
+        .with_keepalive(Some(KEEPALIVE_INTERVAL));
+    let stopping = async move {
+        shutdown.await;
+        tracing::info!("shutting down: health NOT_SERVING, fits no longer store results, draining requests");
+        jobs.stop();
+        reporter.set_not_serving::<SublevelServer<SublevelService>>().await;
+        reporter.set_service_status("", ServingStatus::NotServing).await;
+    };
     tonic::transport::Server::builder()
+        .http2_keepalive_interval(Some(KEEPALIVE_INTERVAL))
+        .http2_keepalive_timeout(Some(KEEPALIVE_TIMEOUT))
+        .layer(status_layer::StatusLayer)
         .add_service(health)
         .add_service(reflection)
+        .add_service(reflection_v1alpha)
         .add_service(service)
-        .serve_with_incoming_shutdown(tokio_stream::wrappers::TcpListenerStream::new(listener), shutdown)
+        .serve_with_incoming_shutdown(incoming, stopping)
         .await
         .map_err(|e| Error::Io(std::io::Error::other(format!("transport: {e}"))))?;
     tracing::info!("server stopped");

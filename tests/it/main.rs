@@ -3,7 +3,9 @@
 mod fit;
 mod gradient;
 mod group;
+mod hardening;
 mod query;
 mod service;
 mod stability;
 mod table;
+mod transport;

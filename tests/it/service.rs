@@ -9,14 +9,14 @@ use sublevel::service::{serve, ServerConfig};
 use tonic::transport::Channel;
 use tonic::Code;
 
-struct Server {
+pub(crate) struct Server {
     addr: std::net::SocketAddr,
     shutdown: tokio::sync::oneshot::Sender<()>,
     handle: tokio::task::JoinHandle<sublevel::Result<()>>,
 }
 
 impl Server {
-    async fn start(config: ServerConfig) -> Server {
+    pub(crate) async fn start(config: ServerConfig) -> Server {
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
         let addr = listener.local_addr().unwrap();
         let (shutdown, rx) = tokio::sync::oneshot::channel::<()>();
@@ -26,33 +26,33 @@ impl Server {
         Server { addr, shutdown, handle }
     }
 
-    async fn client(&self) -> SublevelClient<Channel> {
+    pub(crate) async fn client(&self) -> SublevelClient<Channel> {
         let channel = Channel::from_shared(format!("http://{}", self.addr)).unwrap().connect().await.unwrap();
         SublevelClient::new(channel).max_decoding_message_size(usize::MAX)
     }
 
-    async fn channel(&self) -> Channel {
+    pub(crate) async fn channel(&self) -> Channel {
         Channel::from_shared(format!("http://{}", self.addr)).unwrap().connect().await.unwrap()
     }
 
-    async fn stop(self) {
+    pub(crate) async fn stop(self) {
         self.shutdown.send(()).unwrap();
         self.handle.await.unwrap().unwrap();
     }
 }
 
-fn config(dir: &Path) -> ServerConfig {
+pub(crate) fn config(dir: &Path) -> ServerConfig {
     ServerConfig { data_dir: dir.to_path_buf(), ..ServerConfig::default() }
 }
 
-fn pose(q: [f64; 4], t: [f64; 3]) -> pb::Pose {
+pub(crate) fn pose(q: [f64; 4], t: [f64; 3]) -> pb::Pose {
     pb::Pose {
         rotation: Some(pb::Quaternion { w: q[0], x: q[1], y: q[2], z: q[3] }),
         translation: Some(pb::Vec3 { x: t[0], y: t[1], z: t[2] }),
     }
 }
 
-fn at(t: [f64; 3]) -> pb::Pose {
+pub(crate) fn at(t: [f64; 3]) -> pb::Pose {
     pose([1.0, 0.0, 0.0, 0.0], t)
 }
 
@@ -61,18 +61,18 @@ fn v(p: &Option<pb::Vec3>) -> Vector3 {
     Vector3::new(p.x, p.y, p.z)
 }
 
-async fn upload_sphere(c: &mut SublevelClient<Channel>, name: &str, center: [f64; 3], r: f64) -> String {
+pub(crate) async fn upload_sphere(c: &mut SublevelClient<Channel>, name: &str, center: [f64; 3], r: f64) -> String {
     let json = serde_json::to_string(&ellipsoid(center, [r; 3]).unwrap().to_file()).unwrap();
     let req = pb::UploadBodyRequest { name: name.into(), body: Some(pb::upload_body_request::Body::BodyJson(json)) };
     c.upload_body(req).await.unwrap().into_inner().body_id
 }
 
-async fn add(c: &mut SublevelClient<Channel>, scene: &str, body: &str, p: pb::Pose) -> String {
+pub(crate) async fn add(c: &mut SublevelClient<Channel>, scene: &str, body: &str, p: pb::Pose) -> String {
     let req = pb::AddInstanceRequest { scene_id: scene.into(), body_id: body.into(), pose: Some(p) };
     c.add_instance(req).await.unwrap().into_inner().instance_id
 }
 
-async fn distance(c: &mut SublevelClient<Channel>, scene: &str, a: &str, b: &str) -> pb::DistanceAnswer {
+pub(crate) async fn distance(c: &mut SublevelClient<Channel>, scene: &str, a: &str, b: &str) -> pb::DistanceAnswer {
     let req = pb::DistanceRequest {
         scene_id: scene.into(),
         instance_a: a.into(),
@@ -242,7 +242,7 @@ async fn bodies_scenes_and_poses_survive_a_restart() {
     server.stop().await;
 }
 
-fn assert_status(r: Result<impl std::fmt::Debug, tonic::Status>, code: Code, needle: &str) {
+pub(crate) fn assert_status(r: Result<impl std::fmt::Debug, tonic::Status>, code: Code, needle: &str) {
     let e = r.expect_err("request should fail");
     assert_eq!(e.code(), code, "{e:?}");
     assert!(e.message().contains(needle), "`{}` should mention `{needle}`", e.message());
@@ -405,7 +405,7 @@ async fn health_is_serving_and_reflection_lists_the_service() {
 }
 
 /// Points on a sphere of radius r around c (Fibonacci lattice).
-fn sphere_points(c: [f64; 3], r: f64, n: usize) -> Vec<f64> {
+pub(crate) fn sphere_points(c: [f64; 3], r: f64, n: usize) -> Vec<f64> {
     let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
     (0..n)
         .flat_map(|i| {
@@ -599,13 +599,13 @@ async fn end_to_end_chair_slides_through_human() {
 }
 
 /// Uploads a body given as a `Body` (its JSON file form) and returns its id.
-async fn upload_body(c: &mut SublevelClient<Channel>, name: &str, body: &sublevel::Body) -> String {
+pub(crate) async fn upload_body(c: &mut SublevelClient<Channel>, name: &str, body: &sublevel::Body) -> String {
     let json = serde_json::to_string(&body.to_file()).unwrap();
     let req = pb::UploadBodyRequest { name: name.into(), body: Some(pb::upload_body_request::Body::BodyJson(json)) };
     c.upload_body(req).await.unwrap().into_inner().body_id
 }
 
-fn demo_bodies() -> (sublevel::Body, sublevel::Body) {
+pub(crate) fn demo_bodies() -> (sublevel::Body, sublevel::Body) {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("data/demo");
     (
         sublevel::Body::load(&dir.join("chair_101.json")).unwrap(),
