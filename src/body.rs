@@ -224,6 +224,9 @@ pub struct Body {
     fast: FastPoly,
     /// Radial function of {p ≤ 1} about `interior_u`: the boundary points of cold starts.
     radial: RadialTable,
+    /// A box containing {p ≤ 1} in normalized coordinates (`fit::volume::bounding_box`, from
+    /// supporting halfspaces; `None` for a nonconvex body, whose halfspaces prove nothing).
+    bounding_box_u: Option<(Vector3, Vector3)>,
     /// Fit report.
     pub report: FitReport,
 }
@@ -282,7 +285,19 @@ impl Body {
         }
         let fast = FastPoly::new(&polynomial);
         let radial = RadialTable::new(&fast, &interior_u);
-        Ok(Self { polynomial, center: Vector3::from(center), scale, interior_u, min_value, fast, radial, report })
+        let bounding_box_u =
+            if report.nonconvex { None } else { crate::fit::volume::bounding_box(&polynomial, &interior_u).ok() };
+        Ok(Self {
+            polynomial,
+            center: Vector3::from(center),
+            scale,
+            interior_u,
+            min_value,
+            fast,
+            radial,
+            bounding_box_u,
+            report,
+        })
     }
 
     /// Parses and validates a body from its JSON file form.
@@ -385,6 +400,31 @@ impl Body {
     /// The body under a pose.
     pub fn posed(&self, pose: &Isometry3) -> PosedBody<'_> {
         PosedBody::new(self, pose)
+    }
+
+    /// A sphere containing the body, in the body frame: (center, radius) in meters — the center
+    /// of its bounding box and the box's half diagonal. `None` for a nonconvex body (no proven
+    /// bound). Broad phases and collide-with-margin queries test these before any solve.
+    pub fn bounding_sphere(&self) -> Option<(Point3, Real)> {
+        let (lo, hi) = self.bounding_box_u?;
+        let c = (lo + hi) * 0.5;
+        Some((Point3::from(self.center + c * self.scale), 0.5 * (hi - lo).norm() * self.scale))
+    }
+
+    /// The axis-aligned world box of the body under `pose` (the 8 corners of its body-frame
+    /// bounding box, posed), `None` for a nonconvex body.
+    pub fn world_aabb(&self, pose: &Isometry3) -> Option<(Vector3, Vector3)> {
+        let (lo, hi) = self.bounding_box_u?;
+        let posed = self.posed(pose);
+        let mut wlo = Vector3::repeat(Real::INFINITY);
+        let mut whi = Vector3::repeat(Real::NEG_INFINITY);
+        for corner in 0..8 {
+            let u = Vector3::from_fn(|k, _| if (corner >> k) & 1 == 0 { lo[k] } else { hi[k] });
+            let x = posed.from_normalized(&u);
+            wlo = wlo.inf(&x);
+            whi = whi.sup(&x);
+        }
+        Some((wlo, whi))
     }
 }
 

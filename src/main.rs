@@ -32,6 +32,8 @@ enum Command {
     FitTime(cli::fit_time::FitTimeArgs),
     /// Charts: speed against accuracy per model, Newton tolerance against time and error.
     Chart(cli::chart::ChartArgs),
+    /// Load-test a running server over gRPC: latency histograms, throughput, errors by status.
+    Loadtest(cli::loadtest::LoadtestArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -46,6 +48,7 @@ fn main() -> std::process::ExitCode {
         Command::Table1(a) => cli::table1::run(a),
         Command::FitTime(a) => cli::fit_time::run(a),
         Command::Chart(a) => cli::chart::run(a),
+        Command::Loadtest(a) => cli::loadtest::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -5,6 +5,7 @@ pub mod chart;
 pub mod fit;
 pub mod fit_time;
 pub mod group;
+pub mod loadtest;
 pub mod query;
 pub mod serve;
 pub mod stability;

@@ -455,18 +455,7 @@ pub fn boundary_points(body: &Body, pose: &Isometry3, n: usize) -> Result<Vec<Po
 /// World-frame axis-aligned box containing a posed body: the body-frame box of
 /// [`volume::bounding_box`] with its 8 corners mapped by the pose.
 fn world_box(body: &Body, pose: &Isometry3) -> Result<(Vector3, Vector3)> {
-    let u0 = (body.interior_point().coords - body.center()) / body.scale();
-    let (lo, hi) = volume::bounding_box(body.polynomial(), &u0)?;
-    let posed = body.posed(pose);
-    let mut wlo = Vector3::repeat(Real::INFINITY);
-    let mut whi = Vector3::repeat(Real::NEG_INFINITY);
-    for corner in 0..8 {
-        let u = Vector3::from_fn(|k, _| if (corner >> k) & 1 == 0 { lo[k] } else { hi[k] });
-        let x = posed.from_normalized(&u);
-        wlo = wlo.inf(&x);
-        whi = whi.sup(&x);
-    }
-    Ok((wlo, whi))
+    body.world_aabb(pose).ok_or_else(|| Error::Numerical("no bounding box for a nonconvex body".into()))
 }
 
 /// Finds one sos-convex body `{x : p((x − c)/s) ≤ 1}` of degree 2d containing every posed body

@@ -8,6 +8,7 @@ pub(crate) mod fast_eval;
 pub mod gradient;
 pub mod growth;
 pub mod newton;
+pub mod penetration;
 pub mod sdp_certificate;
 pub mod stability;
 

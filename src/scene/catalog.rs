@@ -6,8 +6,8 @@ use super::{BodyRecord, InstanceRecord, JobRecord, JobRecordState, SceneMeta, St
 use crate::body::Body;
 use crate::math::Isometry3;
 use crate::query::{
-    certified_distance, certified_growth, distance_gradient, growth_gradient, AnswerSource, CertifiedDistance,
-    CertifiedGrowth, CertifyMode, CertifyParams, DistanceResult, GrowthResult, NewtonParams, PoseGradient,
+    CertifiedDistance, CertifiedGrowth, CertifyMode, CertifyParams, DistanceResult, GrowthResult, NewtonParams,
+    PoseGradient,
 };
 use crate::{Error, Result};
 use std::collections::BTreeMap;
@@ -34,6 +34,9 @@ pub enum QueryKind {
     Distance,
     /// Growth measure d(first ‖ second) (eq. "overlap").
     Growth,
+    /// Collide-with-margin: is the distance below [`QueryPair::margin`]? (see
+    /// [`super::planner::answer_pair`]).
+    Collide,
 }
 
 /// Per-query options: certification mode and pose gradients.
@@ -45,6 +48,11 @@ pub struct QueryOptions {
     /// Also return the gradients of the value with respect to both poses
     /// ([`crate::query::gradient`]).
     pub with_gradient: bool,
+    /// Solve cold: ignore the pair's warm start and leave none behind.
+    pub cold: bool,
+    /// Distance queries: also the penetration depth when overlapping (signed distance,
+    /// [`crate::query::penetration`]).
+    pub signed: bool,
 }
 
 /// One query of a batch: a kind, an ordered pair of instance ids and its options.
@@ -58,6 +66,8 @@ pub struct QueryPair {
     pub second: String,
     /// Certification and gradient options.
     pub options: QueryOptions,
+    /// For [`QueryKind::Collide`]: the margin in meters (≥ 0); ignored otherwise.
+    pub margin: crate::math::Real,
 }
 
 /// A certified distance answer with optional pose gradients.
@@ -70,6 +80,10 @@ pub struct DistanceReply {
     pub gradients: Option<(PoseGradient, PoseGradient)>,
     /// The inputs limit the accuracy (see [`precision_limited`]).
     pub precision_limited: bool,
+    /// The signed distance was asked for ([`QueryOptions::signed`]).
+    pub signed: bool,
+    /// With [`QueryOptions::signed`] on an overlapping answer of convex bodies: the penetration.
+    pub penetration: Option<crate::query::penetration::Penetration>,
 }
 
 /// A certified growth answer with optional pose gradients.
@@ -115,6 +129,8 @@ pub enum QueryAnswer {
     Distance(DistanceReply),
     /// A growth answer.
     Growth(GrowthReply),
+    /// A collide-with-margin answer.
+    Collide(super::planner::CollideReply),
 }
 
 /// An instance as seen from outside: its body and pose.
@@ -564,7 +580,8 @@ impl Catalog {
         self.with_scene(scene_id, |s| run_growth(s, p1, p2, &params, options))
     }
 
-    fn certify_params(&self) -> CertifyParams {
+    /// The certification parameters of every query (the catalog's Newton parameters).
+    pub(crate) fn certify_params(&self) -> CertifyParams {
         CertifyParams { newton: self.params, ..CertifyParams::default() }
     }
 
@@ -582,17 +599,14 @@ impl Catalog {
                 }
             }
             let params = self.certify_params();
-            pairs
+            let answers = pairs
                 .iter()
-                .map(|p| match p.kind {
-                    QueryKind::Distance => {
-                        run_distance(s, &p.first, &p.second, &params, &p.options).map(QueryAnswer::Distance)
-                    }
-                    QueryKind::Growth => {
-                        run_growth(s, &p.first, &p.second, &params, &p.options).map(QueryAnswer::Growth)
-                    }
+                .map(|p| {
+                    let (a, b) = (posed(s, &p.first)?, posed(s, &p.second)?);
+                    Ok(super::planner::answer_pair(p, &a, &b, &mut s.cache, &params))
                 })
-                .collect()
+                .collect();
+            answers
         })
     }
 }
@@ -613,6 +627,11 @@ fn instance<'a>(s: &'a SceneState, id: &str) -> Result<&'a Instance> {
     s.instances.get(id).ok_or_else(|| Error::not_found("instance", id))
 }
 
+fn posed(s: &SceneState, id: &str) -> Result<super::planner::Posed> {
+    let inst = instance(s, id)?;
+    Ok(super::planner::Posed { body: inst.body.clone(), pose: inst.pose })
+}
+
 fn run_distance(
     s: &mut SceneState,
     a: &str,
@@ -620,15 +639,13 @@ fn run_distance(
     params: &CertifyParams,
     options: &QueryOptions,
 ) -> Result<DistanceReply> {
-    let (ia, ib) = (instance(s, a)?, instance(s, b)?);
-    let r = certified_distance(&ia.body, &ia.pose, &ib.body, &ib.pose, s.cache.distance(a, b), params, options.mode);
-    let gradients =
-        (options.with_gradient && r.source != AnswerSource::SdpLowerBound).then(|| distance_gradient(&r.result));
-    let precision_limited = precision_limited(&ia.body, &ia.pose, &ib.body, &ib.pose);
-    if !r.lower_bound {
-        s.cache.put_distance(a, b, r.result.warm_start);
+    let pair =
+        QueryPair { kind: QueryKind::Distance, first: a.into(), second: b.into(), options: *options, margin: 0.0 };
+    let (pa, pb) = (posed(s, a)?, posed(s, b)?);
+    match super::planner::answer_pair(&pair, &pa, &pb, &mut s.cache, params) {
+        QueryAnswer::Distance(d) => Ok(d),
+        _ => Err(Error::Numerical("a distance query answered with another kind".into())),
     }
-    Ok(DistanceReply { answer: r, gradients, precision_limited })
 }
 
 fn run_growth(
@@ -638,15 +655,13 @@ fn run_growth(
     params: &CertifyParams,
     options: &QueryOptions,
 ) -> Result<GrowthReply> {
-    let (i1, i2) = (instance(s, p1)?, instance(s, p2)?);
-    let r = certified_growth(&i1.body, &i1.pose, &i2.body, &i2.pose, s.cache.growth(p1, p2), params, options.mode);
-    let gradients = (options.with_gradient && r.source != AnswerSource::SdpLowerBound)
-        .then(|| growth_gradient(&i1.body, &i1.pose, &r.result));
-    let precision_limited = precision_limited(&i1.body, &i1.pose, &i2.body, &i2.pose);
-    if !r.lower_bound {
-        s.cache.put_growth(p1, p2, r.result.warm_start);
+    let pair =
+        QueryPair { kind: QueryKind::Growth, first: p1.into(), second: p2.into(), options: *options, margin: 0.0 };
+    let (pa, pb) = (posed(s, p1)?, posed(s, p2)?);
+    match super::planner::answer_pair(&pair, &pa, &pb, &mut s.cache, params) {
+        QueryAnswer::Growth(g) => Ok(g),
+        _ => Err(Error::Numerical("a growth query answered with another kind".into())),
     }
-    Ok(GrowthReply { answer: r, gradients, precision_limited })
 }
 
 // --------------------------------------------------------------------------------------------

@@ -29,6 +29,7 @@
 
 pub mod cache;
 mod catalog;
+pub mod planner;
 pub mod store;
 
 pub use catalog::precision_limited;

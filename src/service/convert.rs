@@ -562,6 +562,25 @@ pub fn distance_reply_to_proto(r: &DistanceReply) -> pb::DistanceAnswer {
         out.gradient_a = Some(gradient_to_proto(ga));
         out.gradient_b = Some(gradient_to_proto(gb));
     }
+    if r.signed && !c.lower_bound {
+        match &r.penetration {
+            Some(p) => {
+                out.signed_distance = -p.depth;
+                out.penetration_depth = p.depth;
+                out.penetration_normal = Some(vector_to_proto(&p.normal));
+                if r.gradients.is_some() {
+                    let (ga, gb) = crate::query::penetration::penetration_gradient(p);
+                    out.signed_gradient_a = Some(gradient_to_proto(&ga));
+                    out.signed_gradient_b = Some(gradient_to_proto(&gb));
+                }
+            }
+            None => {
+                out.signed_distance = c.result.distance;
+                out.signed_gradient_a = out.gradient_a;
+                out.signed_gradient_b = out.gradient_b;
+            }
+        }
+    }
     out
 }
 
@@ -586,7 +605,12 @@ pub fn growth_reply_to_proto(r: &GrowthReply) -> pb::GrowthAnswer {
 
 /// The query options of a request's `certify` / `with_gradient` flags.
 pub fn query_options(certify: bool, with_gradient: bool) -> QueryOptions {
-    QueryOptions { mode: if certify { CertifyMode::Certify } else { CertifyMode::Newton }, with_gradient }
+    QueryOptions {
+        mode: if certify { CertifyMode::Certify } else { CertifyMode::Newton },
+        with_gradient,
+        cold: false,
+        signed: false,
+    }
 }
 
 /// A batch answer as the proto message.
@@ -594,6 +618,13 @@ pub fn answer_to_proto(a: &QueryAnswer) -> pb::QueryAnswer {
     let answer = match a {
         QueryAnswer::Distance(d) => pb::query_answer::Answer::Distance(distance_reply_to_proto(d)),
         QueryAnswer::Growth(g) => pb::query_answer::Answer::Growth(growth_reply_to_proto(g)),
+        QueryAnswer::Collide(c) => pb::query_answer::Answer::Collide(pb::CollideAnswer {
+            collides: c.collides,
+            distance: c.distance,
+            decided_by_bounds: c.decided_by_bounds,
+            solve: c.solve.as_ref().and_then(|d| distance_reply_to_proto(d).solve),
+            margin: c.margin,
+        }),
     };
     pb::QueryAnswer { answer: Some(answer) }
 }
@@ -625,10 +656,123 @@ pub fn pairs_from_proto(pairs: &[pb::QueryPair], max_pairs: usize) -> Result<Vec
                 kind,
                 first: p.first.clone(),
                 second: p.second.clone(),
-                options: query_options(p.certify, p.with_gradient),
+                options: QueryOptions { signed: p.signed, ..query_options(p.certify, p.with_gradient) },
+                margin: 0.0,
             })
         })
         .collect()
+}
+
+// ---------------------------------------------------------------------------------------------
+// Planner requests (Query, QueryStream, CheckScene)
+// ---------------------------------------------------------------------------------------------
+
+/// Validates a planner request: its poses (`poses[k]`), candidate states
+/// (`states[s].poses[k]`) and queries (`queries[k].kind` / `.first` / `.second` / `.margin`).
+/// `max_answers` bounds queries × max(1, states).
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming the field; [`Error::ResourceExhausted`] above `max_answers`
+/// answers or `max_poses` poses in all.
+pub fn planner_request_from_proto(
+    req: &pb::QueryRequest,
+    max_answers: usize,
+    max_poses: usize,
+) -> Result<crate::scene::planner::PlannerRequest> {
+    let answers = req.queries.len().saturating_mul(req.states.len().max(1));
+    if answers > max_answers {
+        return Err(Error::ResourceExhausted(format!(
+            "`queries` × `states`: {} × {} = {answers} answers exceed the limit of {max_answers}",
+            req.queries.len(),
+            req.states.len().max(1)
+        )));
+    }
+    let total_poses = req.poses.len() + req.states.iter().map(|s| s.poses.len()).sum::<usize>();
+    if total_poses > max_poses {
+        return Err(Error::ResourceExhausted(format!("{total_poses} poses in all exceed the limit of {max_poses}")));
+    }
+    let poses = poses_from_proto(&req.poses, max_poses)?;
+    let states = req
+        .states
+        .iter()
+        .enumerate()
+        .map(|(s, st)| poses_from_proto(&st.poses, max_poses).map_err(|e| prefix_field(e, &format!("states[{s}]"))))
+        .collect::<Result<Vec<_>>>()?;
+    let queries = req
+        .queries
+        .iter()
+        .enumerate()
+        .map(|(k, q)| {
+            let kind = match pb::QueryKind::try_from(q.kind) {
+                Ok(pb::QueryKind::Distance) => QueryKind::Distance,
+                Ok(pb::QueryKind::Growth) => QueryKind::Growth,
+                Ok(pb::QueryKind::Collide) => QueryKind::Collide,
+                _ => return Err(Error::invalid(format!("queries[{k}].kind"), "must be DISTANCE, GROWTH or COLLIDE")),
+            };
+            require_id(&format!("queries[{k}].first"), &q.first)?;
+            require_id(&format!("queries[{k}].second"), &q.second)?;
+            if !(q.margin.is_finite() && q.margin >= 0.0) {
+                return Err(Error::invalid(
+                    format!("queries[{k}].margin"),
+                    format!("must be finite and >= 0 meters, got {}", q.margin),
+                ));
+            }
+            let mut options = query_options(q.certify, q.with_gradient);
+            options.cold = q.cold;
+            options.signed = q.signed;
+            Ok(crate::scene::QueryPair {
+                kind,
+                first: q.first.clone(),
+                second: q.second.clone(),
+                options,
+                margin: q.margin,
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok(crate::scene::planner::PlannerRequest { poses, queries, states })
+}
+
+/// The answers of a planner request as the proto response.
+pub fn planner_answers_to_proto(
+    answers: &crate::scene::planner::PlannerAnswers,
+    request_id: u64,
+    server_seconds: f64,
+) -> pb::QueryResponse {
+    use crate::scene::planner::PlannerAnswers;
+    let mut out = pb::QueryResponse { request_id, server_seconds, ..Default::default() };
+    match answers {
+        PlannerAnswers::Single(a) => out.answers = a.iter().map(answer_to_proto).collect(),
+        PlannerAnswers::PerState(states) => {
+            out.states = states
+                .iter()
+                .map(|a| pb::StateAnswers {
+                    any_collision: a.iter().any(|x| matches!(x, QueryAnswer::Collide(c) if c.collides)),
+                    answers: a.iter().map(answer_to_proto).collect(),
+                })
+                .collect();
+        }
+    }
+    out
+}
+
+/// A scene check as the proto response.
+pub fn scene_check_to_proto(c: &crate::scene::planner::SceneCheck, server_seconds: f64) -> pb::CheckSceneResponse {
+    pb::CheckSceneResponse {
+        pairs: c
+            .pairs
+            .iter()
+            .map(|p| pb::ScenePair {
+                first: p.first.clone(),
+                second: p.second.clone(),
+                distance: Some(distance_reply_to_proto(&p.distance)),
+            })
+            .collect(),
+        instances: u32::try_from(c.instances).unwrap_or(u32::MAX),
+        candidate_pairs: c.candidate_pairs,
+        narrow_phase_solves: c.narrow_phase_solves,
+        all_pairs: c.all_pairs,
+        server_seconds,
+    }
 }
 
 #[cfg(test)]

@@ -5,8 +5,9 @@ use super::jobs::{is_terminal, FitJobs, GroupJob};
 use super::pb::{self, sublevel_server::Sublevel};
 use super::ServerConfig;
 use crate::body::BodyFile;
-use crate::fit::mesh::parse_points;
+use crate::fit::mesh::parse_points_limited;
 use crate::fit::sos_convexity::admit_uploaded;
+use crate::scene::planner::{PlannerAnswers, PlannerRequest, QueryView};
 use crate::scene::Catalog;
 use crate::{Error, Result};
 use std::sync::Arc;
@@ -26,6 +27,31 @@ impl SublevelService {
     pub fn new(catalog: Arc<Catalog>, config: ServerConfig) -> Self {
         let jobs = Arc::new(FitJobs::new(catalog.clone(), config.max_concurrent_fits));
         Self { catalog, config, jobs }
+    }
+}
+
+/// Answers a planner request on a view: inline on the async worker when it holds only Newton
+/// queries (microseconds each), on the blocking pool when one asks for a certificate (an SDP).
+/// Returns the view (moved back out of the blocking pool) with the outcome.
+async fn run_view(
+    catalog: Arc<Catalog>,
+    mut view: QueryView,
+    request: PlannerRequest,
+) -> (QueryView, Result<PlannerAnswers, Status>) {
+    let certify = request.queries.iter().any(|q| q.options.mode == crate::query::CertifyMode::Certify);
+    if !certify {
+        let out = view.run(&catalog, &request).map_err(Status::from);
+        return (view, out);
+    }
+    let scene = view.scene_id().to_owned();
+    match tokio::task::spawn_blocking(move || {
+        let out = view.run(&catalog, &request);
+        (view, out)
+    })
+    .await
+    {
+        Ok((view, out)) => (view, out.map_err(Status::from)),
+        Err(e) => (QueryView::new(&scene), Err(Status::internal(format!("worker failed: {e}")))),
     }
 }
 
@@ -72,7 +98,7 @@ impl Sublevel for SublevelService {
                     return Err(Error::invalid("mesh.format", "must name the format (off, obj, stl, ply, xyz)").into());
                 }
                 blocking(move || {
-                    let points = parse_points(&mesh.data, &format)?; // SWITCH-TO-LIMITED
+                    let points = parse_points_limited(&mesh.data, &format, max)?;
                     cv::check_point_count("mesh", points.len(), max)?;
                     cv::check_cloud("mesh", &points, top_degree)?;
                     Ok(points)
@@ -246,7 +272,8 @@ impl Sublevel for SublevelService {
         require_id("scene_id", &req.scene_id)?;
         require_id("instance_a", &req.instance_a)?;
         require_id("instance_b", &req.instance_b)?;
-        let options = cv::query_options(req.certify, req.with_gradient);
+        let options =
+            crate::scene::QueryOptions { signed: req.signed, ..cv::query_options(req.certify, req.with_gradient) };
         let r = if req.certify {
             // The SDP takes milliseconds to seconds: off the async workers.
             let catalog = self.catalog.clone();
@@ -331,5 +358,92 @@ impl Sublevel for SublevelService {
         let job = GroupJob { scene_id: req.scene_id, instances, name: req.name, replace: req.replace, settings };
         let job_id = self.jobs.start_group(job).await?;
         Ok(Response::new(pb::StartFitJobResponse { job_id }))
+    }
+
+    async fn query(&self, request: Request<pb::QueryRequest>) -> Reply<pb::QueryResponse> {
+        let start = std::time::Instant::now();
+        let req = request.into_inner();
+        require_id("scene_id", &req.scene_id)?;
+        let planner =
+            cv::planner_request_from_proto(&req, self.config.max_batch_pairs, self.config.max_poses_per_call)?;
+        let view = QueryView::new(&req.scene_id);
+        let (_, answers) = run_view(self.catalog.clone(), view, planner).await;
+        let answers = answers?;
+        Ok(Response::new(cv::planner_answers_to_proto(&answers, req.request_id, start.elapsed().as_secs_f64())))
+    }
+
+    type QueryStreamStream = ReceiverStream<Result<pb::QueryResponse, Status>>;
+
+    async fn query_stream(
+        &self,
+        request: Request<tonic::Streaming<pb::QueryRequest>>,
+    ) -> Reply<Self::QueryStreamStream> {
+        let mut inbound = request.into_inner();
+        let catalog = self.catalog.clone();
+        let (max_answers, max_poses) = (self.config.max_batch_pairs, self.config.max_poses_per_call);
+        let (tx, out) = tokio::sync::mpsc::channel(16);
+        tokio::spawn(async move {
+            let mut view: Option<QueryView> = None;
+            loop {
+                let req = match inbound.message().await {
+                    Ok(Some(req)) => req,
+                    Ok(None) => break,
+                    Err(status) => {
+                        let _ = tx.send(Err(status)).await;
+                        break;
+                    }
+                };
+                let start = std::time::Instant::now();
+                let checked = (|| -> Result<_, Status> {
+                    let planner = cv::planner_request_from_proto(&req, max_answers, max_poses)?;
+                    let current = match view.take() {
+                        None => QueryView::new(require_id("scene_id", &req.scene_id)?),
+                        Some(v) if req.scene_id.is_empty() || req.scene_id == v.scene_id() => v,
+                        Some(v) => {
+                            return Err(Error::invalid(
+                                "scene_id",
+                                format!(
+                                    "a stream answers one scene: `{}` after `{}`",
+                                    crate::error::clip(&req.scene_id),
+                                    v.scene_id()
+                                ),
+                            )
+                            .into())
+                        }
+                    };
+                    Ok((planner, current))
+                })();
+                let reply = match checked {
+                    Ok((planner, current)) => {
+                        let (back, answers) = run_view(catalog.clone(), current, planner).await;
+                        view = Some(back);
+                        answers.map(|a| cv::planner_answers_to_proto(&a, req.request_id, start.elapsed().as_secs_f64()))
+                    }
+                    Err(status) => Err(status),
+                };
+                let failed = reply.is_err();
+                if tx.send(reply).await.is_err() || failed {
+                    break;
+                }
+            }
+        });
+        Ok(Response::new(ReceiverStream::new(out)))
+    }
+
+    async fn check_scene(&self, request: Request<pb::CheckSceneRequest>) -> Reply<pb::CheckSceneResponse> {
+        let start = std::time::Instant::now();
+        let req = request.into_inner();
+        require_id("scene_id", &req.scene_id)?;
+        for (k, id) in req.instance_ids.iter().enumerate() {
+            require_id(&format!("instance_ids[{k}]"), id)?;
+        }
+        let overrides = cv::poses_from_proto(&req.poses, self.config.max_poses_per_call)?;
+        let catalog = self.catalog.clone();
+        // Up to n(n−1)/2 solves: off the async workers.
+        let check = blocking(move || {
+            crate::scene::planner::check_scene(&catalog, &req.scene_id, req.margin, &req.instance_ids, &overrides)
+        })
+        .await?;
+        Ok(Response::new(cv::scene_check_to_proto(&check, start.elapsed().as_secs_f64())))
     }
 }

@@ -125,7 +125,6 @@ async fn repro_1_non_finite_reports_are_refused_and_the_store_reopens() {
 /// Repro 2: a 64-byte PLY whose header promises 10¹⁵ vertices is refused at once (it used to grow
 /// memory until the process aborted), ASCII and binary; the server keeps answering.
 #[tokio::test]
-#[ignore = "enabled with the mesh parser limits (next commit)"]
 async fn repro_2_a_lying_ply_header_is_refused_before_allocation() {
     let dir = tempfile::tempdir().unwrap();
     let server = Server::start(config(dir.path())).await;
@@ -196,6 +195,7 @@ async fn repro_3_uploaded_bodies_are_certified_or_stored_as_nonconvex() {
             instance_b: i_ball.clone(),
             certify,
             with_gradient: false,
+            signed: false,
         };
         let d = c.distance(req).await.unwrap().into_inner().answer.unwrap();
         assert_eq!(d.source, pb::AnswerSource::SdpLowerBound as i32, "{d:?}");

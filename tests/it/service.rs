@@ -651,6 +651,7 @@ async fn certified_queries_and_gradients_on_the_demo_scene() {
             instance_b: i_human.clone(),
             certify: true,
             with_gradient: true,
+            signed: false,
         };
         let d = c.distance(req).await.unwrap().into_inner().answer.unwrap();
         assert_eq!(d.source, pb::AnswerSource::Newton as i32, "{d:?}");
@@ -718,6 +719,7 @@ async fn certified_queries_and_gradients_on_the_demo_scene() {
             second: i_human.clone(),
             certify: true,
             with_gradient: true,
+            signed: false,
         };
         let req = pb::BatchQueryRequest {
             scene_id: scene.clone(),
@@ -762,6 +764,7 @@ async fn nonconvex_body_answers_with_an_sdp_lower_bound() {
         instance_b: i_ball.clone(),
         certify: false,
         with_gradient: true,
+        signed: false,
     };
     let d = c.distance(req).await.unwrap().into_inner().answer.unwrap();
     assert_eq!(d.source, pb::AnswerSource::SdpLowerBound as i32, "{d:?}");

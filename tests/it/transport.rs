@@ -63,11 +63,12 @@ async fn batch_round_trips_cost_no_stall() {
     let per_pair = t.elapsed() / 1000;
 
     let pair = |k: usize| pb::QueryPair {
-        kind: if k % 2 == 0 { pb::QueryKind::Distance } else { pb::QueryKind::Growth } as i32,
+        kind: if k.is_multiple_of(2) { pb::QueryKind::Distance } else { pb::QueryKind::Growth } as i32,
         first: i_chair.clone(),
         second: i_human.clone(),
         certify: false,
         with_gradient: false,
+        signed: false,
     };
     let mut report = vec![format!("unary Distance median {unary:?}, in-process pair {per_pair:?}")];
     for n in [1usize, 5, 19, 100, 1000] {
@@ -86,6 +87,41 @@ async fn batch_round_trips_cost_no_stall() {
         report.push(format!("BatchQuery {n:>4} pairs: median {m:?} (budget {budget:?})"));
         assert!(m <= budget, "{}", report.join("\n"));
     }
+    // A QueryStream message: move the chair in the stream's own view, 19 distance queries.
+    let (tx, rx) = tokio::sync::mpsc::channel(4);
+    let mut answers = c.query_stream(tokio_stream::wrappers::ReceiverStream::new(rx)).await.unwrap().into_inner();
+    let stream_queries: Vec<pb::PlannerQuery> = (0..19)
+        .map(|_| pb::PlannerQuery {
+            kind: pb::QueryKind::Distance as i32,
+            first: i_chair.clone(),
+            second: i_human.clone(),
+            ..Default::default()
+        })
+        .collect();
+    let mut times = Vec::new();
+    for k in 0..60 {
+        let t = Instant::now();
+        let req = pb::QueryRequest {
+            scene_id: scene.clone(),
+            poses: vec![pb::InstancePose {
+                instance_id: i_chair.clone(),
+                pose: Some(at([0.005 * k as f64, 0.0, 0.0])),
+            }],
+            queries: stream_queries.clone(),
+            request_id: k,
+            ..Default::default()
+        };
+        tx.send(req).await.unwrap();
+        let r = answers.message().await.unwrap().unwrap();
+        times.push(t.elapsed());
+        assert_eq!((r.request_id, r.answers.len()), (k, 19));
+    }
+    let m = median(times[10..].to_vec());
+    let budget = unary * 10 + per_pair * (5 * 19);
+    report.push(format!("QueryStream message, 19 pairs: median {m:?} (budget {budget:?})"));
+    assert!(m <= budget, "{}", report.join("\n"));
+    drop(tx);
+
     // A planner's state check: move one instance, query 19 pairs.
     let req = pb::BatchQueryRequest { scene_id: scene.clone(), pairs: (0..19).map(pair).collect() };
     let mut times = Vec::new();

@@ -1,0 +1,482 @@
+"""The typed client: :class:`Client` (unary calls) and :class:`PlannerStream` (one QueryStream).
+
+Units everywhere: meters for lengths, unit quaternions ``(w, x, y, z)`` for rotations; a pose maps
+body-frame points to world points, ``x_world = R x_body + t``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import queue
+import threading
+from dataclasses import dataclass
+from typing import Any, Iterable, Iterator, List, Mapping, Optional, Sequence, Tuple, Union
+
+import grpc
+
+from ._pb.sublevel.v1 import sublevel_pb2 as pb
+from ._pb.sublevel.v1 import sublevel_pb2_grpc as pb_grpc
+from .errors import SublevelError
+from .poses import Pose, as_pose
+from .types import (
+    Answer,
+    BodySummary,
+    DistanceAnswer,
+    GrowthAnswer,
+    Instance,
+    QueryResult,
+    Scene,
+    SceneCheck,
+    SceneSummary,
+    StateAnswers,
+    UploadedBody,
+    answer_from_proto,
+)
+
+__all__ = ["Client", "PlannerStream", "Query", "DEFAULT_ADDR"]
+
+#: The demo server's address (``cargo run --release -- serve --demo``).
+DEFAULT_ADDR = "127.0.0.1:50051"
+
+_KINDS = {
+    "distance": pb.QUERY_KIND_DISTANCE,
+    "growth": pb.QUERY_KIND_GROWTH,
+    "collide": pb.QUERY_KIND_COLLIDE,
+}
+
+PosesLike = Union[Mapping[str, Any], Iterable[Tuple[str, Any]], None]
+
+
+@dataclass(frozen=True)
+class Query:
+    """One query between two instances of a scene.
+
+    Attributes:
+        kind: "distance" (Euclidean distance, meters), "growth" (d(first || second),
+            dimensionless) or "collide" (closer than ``margin`` meters, or overlapping?).
+        first, second: instance ids (A and B; p1 and p2 for growth).
+        margin: for "collide": the margin in meters (>= 0; 0 asks "do they overlap?").
+        certify: also solve the level-0 SDP certificate (milliseconds to seconds).
+        with_gradient: also return pose gradients (distance and growth).
+        cold: on a stream: ignore this pair's warm start and leave none behind.
+    """
+
+    kind: str
+    first: str
+    second: str
+    margin: float = 0.0
+    certify: bool = False
+    with_gradient: bool = False
+    cold: bool = False
+
+    @classmethod
+    def distance(cls, a: str, b: str, *, certify: bool = False, with_gradient: bool = False, cold: bool = False) -> "Query":
+        """Euclidean distance between instances ``a`` and ``b`` (meters)."""
+        return cls("distance", a, b, certify=certify, with_gradient=with_gradient, cold=cold)
+
+    @classmethod
+    def growth(cls, p1: str, p2: str, *, certify: bool = False, with_gradient: bool = False, cold: bool = False) -> "Query":
+        """Growth measure d(p1 || p2) = min p1(x) s.t. p2(x) <= 1 (> 1 iff separated)."""
+        return cls("growth", p1, p2, certify=certify, with_gradient=with_gradient, cold=cold)
+
+    @classmethod
+    def collide(cls, a: str, b: str, margin: float = 0.0, *, cold: bool = False) -> "Query":
+        """Are ``a`` and ``b`` closer than ``margin`` meters (or overlapping)?"""
+        return cls("collide", a, b, margin=margin, cold=cold)
+
+
+def as_query(q: Any, name: str = "query") -> Query:
+    """A :class:`Query`, or a tuple ``(kind, first, second)`` / ``(kind, first, second, margin)``."""
+    if isinstance(q, Query):
+        out = q
+    elif isinstance(q, (tuple, list)) and len(q) in (3, 4):
+        out = Query(str(q[0]), q[1], q[2], float(q[3]) if len(q) == 4 else 0.0)
+    else:
+        raise ValueError(f"`{name}`: expected a Query or a tuple (kind, first, second[, margin]), got {q!r}")
+    if out.kind not in _KINDS:
+        raise ValueError(f"`{name}.kind`: expected one of {sorted(_KINDS)}, got {out.kind!r}")
+    if not isinstance(out.first, str) or not isinstance(out.second, str):
+        raise ValueError(f"`{name}`: instance ids must be strings, got {out.first!r}, {out.second!r}")
+    return out
+
+
+def _pose_pb(pose: Any, name: str) -> pb.Pose:
+    p = as_pose(pose, name)
+    w, x, y, z = p.quat
+    return pb.Pose(rotation=pb.Quaternion(w=w, x=x, y=y, z=z), translation=pb.Vec3(x=p.t[0], y=p.t[1], z=p.t[2]))
+
+
+def _instance_poses(poses: PosesLike, name: str) -> List[pb.InstancePose]:
+    if poses is None:
+        return []
+    items = poses.items() if isinstance(poses, Mapping) else poses
+    out = []
+    for item in items:
+        try:
+            instance_id, pose = item
+        except (TypeError, ValueError):
+            raise ValueError(f"`{name}`: expected a mapping {{instance_id: pose}} or (instance_id, pose) pairs") from None
+        if not isinstance(instance_id, str):
+            raise ValueError(f"`{name}`: instance ids must be strings, got {instance_id!r}")
+        out.append(pb.InstancePose(instance_id=instance_id, pose=_pose_pb(pose, f"{name}[{instance_id}]")))
+    return out
+
+
+def _planner_queries(queries: Iterable[Any]) -> List[pb.PlannerQuery]:
+    if isinstance(queries, (Query, str)):
+        raise ValueError("`queries`: expected a list of queries")
+    out = []
+    for k, q in enumerate(queries):
+        q = as_query(q, f"queries[{k}]")
+        out.append(
+            pb.PlannerQuery(
+                kind=_KINDS[q.kind],
+                first=q.first,
+                second=q.second,
+                certify=q.certify,
+                with_gradient=q.with_gradient,
+                margin=float(q.margin),
+                cold=q.cold,
+            )
+        )
+    return out
+
+
+def _states(states: Optional[Iterable[PosesLike]]) -> List[pb.CandidateState]:
+    if states is None:
+        return []
+    return [pb.CandidateState(poses=_instance_poses(s, f"states[{k}]")) for k, s in enumerate(states)]
+
+
+def _body_json(body: Any) -> str:
+    if isinstance(body, Mapping):
+        return json.dumps(body)
+    if isinstance(body, bytes):
+        return body.decode("utf-8")
+    if isinstance(body, os.PathLike):
+        with open(body, encoding="utf-8") as f:
+            return f.read()
+    if isinstance(body, str):
+        if body.lstrip().startswith("{"):
+            return body
+        if os.path.isfile(body):
+            with open(body, encoding="utf-8") as f:
+                return f.read()
+        raise ValueError(f"`body`: neither JSON text nor an existing file: {body[:80]!r}")
+    raise ValueError(f"`body`: expected JSON text, a path or a dict, got {type(body).__name__}")
+
+
+class Client:
+    """A connection to a Sublevel server.
+
+    >>> c = Client("127.0.0.1:50051")                          # doctest: +SKIP
+    >>> scene = c.create_scene("table")                        # doctest: +SKIP
+    >>> a = c.add_instance(scene, body_id, Pose(t=(0, 0, 0)))  # doctest: +SKIP
+
+    Every call raises :class:`SublevelError` (code, message, field) when the server refuses it, and
+    ValueError naming the argument when a pose or query is malformed before anything is sent.
+
+    Args:
+        addr: ``host:port`` of the server (insecure channel).
+        timeout: deadline in seconds of each unary call (None: no deadline).
+        channel: use this channel instead of opening one (``addr`` is then ignored).
+        options: extra gRPC channel options.
+    """
+
+    def __init__(
+        self,
+        addr: str = DEFAULT_ADDR,
+        *,
+        timeout: Optional[float] = 60.0,
+        channel: Optional[grpc.Channel] = None,
+        options: Sequence[Tuple[str, Any]] = (),
+    ):
+        self.addr = addr
+        self.timeout = timeout
+        opts = [("grpc.max_receive_message_length", 256 << 20), ("grpc.max_send_message_length", 256 << 20)]
+        opts += list(options)
+        self._own_channel = channel is None
+        self.channel = channel if channel is not None else grpc.insecure_channel(addr, options=opts)
+        self.stub = pb_grpc.SublevelStub(self.channel)
+
+    # -- plumbing -----------------------------------------------------------------------------
+    def __enter__(self) -> "Client":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Closes the channel (when this client opened it)."""
+        if self._own_channel:
+            self.channel.close()
+
+    def wait_ready(self, timeout: float = 10.0) -> None:
+        """Blocks until the channel is connected; raises SublevelError(UNAVAILABLE) after
+        ``timeout`` seconds."""
+        try:
+            grpc.channel_ready_future(self.channel).result(timeout=timeout)
+        except grpc.FutureTimeoutError:
+            raise SublevelError(grpc.StatusCode.UNAVAILABLE, f"no server at {self.addr} after {timeout} s") from None
+
+    def _call(self, method: str, request: Any, timeout: Optional[float] = None) -> Any:
+        try:
+            return getattr(self.stub, method)(request, timeout=self.timeout if timeout is None else timeout)
+        except grpc.RpcError as e:
+            raise SublevelError.from_rpc_error(e) from None
+
+    # -- bodies -------------------------------------------------------------------------------
+    def upload(self, name: str, body: Any) -> UploadedBody:
+        """Stores a body; like :meth:`upload_body` but returns the whole response (id, nonconvex,
+        certified convexity margin)."""
+        r = self._call("UploadBody", pb.UploadBodyRequest(name=name, body_json=_body_json(body)))
+        return UploadedBody(body_id=r.body_id, nonconvex=r.nonconvex, convexity_margin=r.convexity_margin)
+
+    def upload_body(self, name: str, body: Any) -> str:
+        """Stores a body and returns its id.
+
+        Args:
+            name: a human-readable name (need not be unique).
+            body: the JSON body file (``degree``, ``exponents``, ``coefficients``, ``center`` and
+                ``scale`` in meters, optional ``report``) as JSON text, a path to such a file, or
+                a dict (see :func:`sublevel_client.sphere_body`).
+        """
+        return self.upload(name, body).body_id
+
+    def list_bodies(self) -> List[BodySummary]:
+        """All stored bodies (summaries), ordered by id."""
+        r = self._call("ListBodies", pb.ListBodiesRequest())
+        return [BodySummary(b.body_id, b.name, b.degree, b.method, b.volume) for b in r.bodies]
+
+    def get_body_json(self, body_id: str) -> str:
+        """A stored body as its JSON body file."""
+        return self._call("GetBody", pb.GetBodyRequest(body_id=body_id)).body_json
+
+    def delete_body(self, body_id: str) -> None:
+        """Deletes a body (INVALID_ARGUMENT while an instance uses it)."""
+        self._call("DeleteBody", pb.DeleteBodyRequest(body_id=body_id))
+
+    # -- scenes -------------------------------------------------------------------------------
+    def create_scene(self, name: str) -> str:
+        """Creates an empty scene; returns its id."""
+        return self._call("CreateScene", pb.CreateSceneRequest(name=name)).scene_id
+
+    def get_scene(self, scene_id: str) -> Scene:
+        """A scene with its instances and their poses."""
+        r = self._call("GetScene", pb.GetSceneRequest(scene_id=scene_id))
+        return Scene(scene_id=r.scene_id, name=r.name, instances=[Instance.from_proto(i) for i in r.instances])
+
+    def list_scenes(self) -> List[SceneSummary]:
+        """All scenes (summaries), ordered by id."""
+        r = self._call("ListScenes", pb.ListScenesRequest())
+        return [SceneSummary(s.scene_id, s.name, s.num_instances) for s in r.scenes]
+
+    def find_scene(self, name: str) -> str:
+        """The id of the first scene (by id) named ``name``; KeyError if none."""
+        for s in self.list_scenes():
+            if s.name == name:
+                return s.scene_id
+        raise KeyError(f"no scene named {name!r}")
+
+    def delete_scene(self, scene_id: str) -> None:
+        """Deletes a scene with its instances (the bodies stay)."""
+        self._call("DeleteScene", pb.DeleteSceneRequest(scene_id=scene_id))
+
+    def add_instance(self, scene: str, body: str, pose: Any = None) -> str:
+        """Adds an instance of body ``body`` to scene ``scene`` under ``pose`` (a :class:`Pose`,
+        a 7-vector ``[w, x, y, z, tx, ty, tz]`` or a 4x4 matrix; meters; None: identity).
+        Returns the instance id."""
+        req = pb.AddInstanceRequest(scene_id=scene, body_id=body, pose=_pose_pb(pose, "pose"))
+        return self._call("AddInstance", req).instance_id
+
+    def remove_instance(self, scene: str, instance: str) -> None:
+        """Removes an instance (and its warm starts)."""
+        self._call("RemoveInstance", pb.RemoveInstanceRequest(scene_id=scene, instance_id=instance))
+
+    def set_poses(self, scene: str, poses: PosesLike) -> int:
+        """Sets the stored poses of many instances at once (all or nothing).
+
+        Args:
+            poses: ``{instance_id: pose}`` (or ``(instance_id, pose)`` pairs), each pose a
+                :class:`Pose`, a 7-vector or a 4x4 matrix (meters, unit quaternion w, x, y, z).
+        Returns the number of instances updated.
+        """
+        req = pb.SetPosesRequest(scene_id=scene, poses=_instance_poses(poses, "poses"))
+        return self._call("SetPoses", req).updated
+
+    # -- queries ------------------------------------------------------------------------------
+    def distance(self, scene: str, a: str, b: str, certify: bool = False, with_gradient: bool = False) -> DistanceAnswer:
+        """Euclidean distance (meters) between instances ``a`` and ``b`` at their stored poses, with
+        witness points (world frame, meters), the normal from A to B, solver diagnostics, and
+        (``with_gradient``) the gradients as (6,) twists; ``certify`` also solves the SDP."""
+        req = pb.DistanceRequest(scene_id=scene, instance_a=a, instance_b=b, certify=certify, with_gradient=with_gradient)
+        return DistanceAnswer.from_proto(self._call("Distance", req).answer)
+
+    def growth(self, scene: str, p1: str, p2: str, certify: bool = False, with_gradient: bool = False) -> GrowthAnswer:
+        """Growth measure d(p1 || p2) = min p1(x) s.t. p2(x) <= 1 (dimensionless; <= 1 iff the
+        instances overlap) with its minimizer (world frame, meters)."""
+        req = pb.GrowthRequest(scene_id=scene, instance_1=p1, instance_2=p2, certify=certify, with_gradient=with_gradient)
+        return GrowthAnswer.from_proto(self._call("Growth", req).answer)
+
+    def batch(self, scene: str, queries: Iterable[Any]) -> List[Answer]:
+        """Many DISTANCE / GROWTH queries (:class:`Query` or ``(kind, first, second)`` tuples) at
+        the stored poses in one call; answers in order."""
+        pairs = []
+        for k, q in enumerate(queries):
+            q = as_query(q, f"queries[{k}]")
+            if q.kind == "collide":
+                raise ValueError(f"`queries[{k}].kind`: BatchQuery answers distance and growth only; use query()")
+            pairs.append(
+                pb.QueryPair(kind=_KINDS[q.kind], first=q.first, second=q.second, certify=q.certify, with_gradient=q.with_gradient)
+            )
+        r = self._call("BatchQuery", pb.BatchQueryRequest(scene_id=scene, pairs=pairs))
+        return [answer_from_proto(a) for a in r.answers]
+
+    def query(
+        self,
+        scene: str,
+        poses: PosesLike = None,
+        queries: Iterable[Any] = (),
+        states: Optional[Iterable[PosesLike]] = None,
+    ) -> QueryResult:
+        """A planner request on a private view of the scene (stored poses, then ``poses``; nothing
+        is written, answers are cold).
+
+        Args:
+            poses: pose overrides ``{instance_id: pose}`` for this request only.
+            queries: :class:`Query` objects or ``(kind, first, second[, margin])`` tuples.
+            states: candidate states, each ``{instance_id: pose}``; when given, every query is
+                answered once per state (``result.states``), else once (``result.answers``).
+        """
+        req = pb.QueryRequest(scene_id=scene, poses=_instance_poses(poses, "poses"), queries=_planner_queries(queries), states=_states(states))
+        return QueryResult.from_proto(self._call("Query", req))
+
+    def check_scene(
+        self,
+        scene: str,
+        margin: float = 0.0,
+        instances: Optional[Iterable[str]] = None,
+        poses: PosesLike = None,
+    ) -> SceneCheck:
+        """Every pair of the scene that overlaps or lies within ``margin`` meters (or only pairs
+        involving ``instances``), with distances and witnesses; ``poses`` override stored poses
+        for this check only."""
+        req = pb.CheckSceneRequest(
+            scene_id=scene, margin=float(margin), instance_ids=list(instances or []), poses=_instance_poses(poses, "poses")
+        )
+        return SceneCheck.from_proto(self._call("CheckScene", req))
+
+    def stream(self, scene: str, timeout: Optional[float] = None) -> "PlannerStream":
+        """Opens a QueryStream on ``scene`` for a planner loop (see :class:`PlannerStream`)."""
+        return PlannerStream(self, scene, timeout=timeout)
+
+
+_CLOSE = object()
+
+
+class PlannerStream:
+    """One bidirectional QueryStream kept open: one request per call, answers in order.
+
+    The stream keeps its own view of the scene: poses sent with a request stay in the stream's
+    view for later requests (they are never written to the store nor seen by other streams), and
+    warm starts are kept per stream and ordered pair, so consecutive nearby states solve fast.
+
+    >>> with client.stream(scene) as s:                                        # doctest: +SKIP
+    ...     answers = s.check(poses={robot: pose}, queries=[Query.collide(robot, wall, 0.05)])
+
+    Thread-safe: calls from several threads are serialized (one request in flight). A request the
+    server refuses ends the stream on the server side: the call raises :class:`SublevelError` and
+    every later call raises it again; open a new stream.
+    """
+
+    def __init__(self, client: Client, scene: str, timeout: Optional[float] = None):
+        self.scene = scene
+        self._requests: "queue.Queue[Any]" = queue.Queue()
+        self._lock = threading.Lock()
+        self._next_id = 1
+        self._error: Optional[BaseException] = None
+        self._closed = False
+        try:
+            self._responses = client.stub.QueryStream(self._request_iterator(), timeout=timeout)
+        except grpc.RpcError as e:  # pragma: no cover (the call starts lazily)
+            raise SublevelError.from_rpc_error(e) from None
+
+    def _request_iterator(self) -> Iterator[pb.QueryRequest]:
+        while True:
+            r = self._requests.get()
+            if r is _CLOSE:
+                return
+            yield r
+
+    def __enter__(self) -> "PlannerStream":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Half-closes the stream and waits for the server to end it."""
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+            self._requests.put(_CLOSE)
+            if self._error is None:
+                try:
+                    for _ in self._responses:
+                        pass
+                except grpc.RpcError:
+                    pass
+            else:
+                self._responses.cancel()
+
+    def request(
+        self,
+        poses: PosesLike = None,
+        queries: Iterable[Any] = (),
+        states: Optional[Iterable[PosesLike]] = None,
+    ) -> QueryResult:
+        """Sends one request (pose updates of the stream's view, queries, optional candidate
+        states) and returns the whole response (answers, states, server seconds)."""
+        req = pb.QueryRequest(
+            scene_id=self.scene,
+            poses=_instance_poses(poses, "poses"),
+            queries=_planner_queries(queries),
+            states=_states(states),
+        )
+        with self._lock:
+            if self._error is not None:
+                raise self._error
+            if self._closed:
+                raise RuntimeError("the stream is closed")
+            req.request_id = self._next_id
+            self._next_id += 1
+            self._requests.put(req)
+            try:
+                resp = next(self._responses)
+            except grpc.RpcError as e:
+                self._error = SublevelError.from_rpc_error(e)
+                raise self._error from None
+            except StopIteration:
+                self._error = SublevelError(grpc.StatusCode.UNAVAILABLE, "the server ended the stream")
+                raise self._error from None
+        if resp.request_id != req.request_id:
+            raise RuntimeError(f"stream out of order: sent request {req.request_id}, got {resp.request_id}")
+        return QueryResult.from_proto(resp)
+
+    def check(self, poses: PosesLike = None, queries: Iterable[Any] = ()) -> List[Answer]:
+        """Applies ``poses`` ``{instance_id: pose}`` to the stream's view, then answers
+        ``queries`` in order (one answer per query)."""
+        return self.request(poses=poses, queries=queries).answers
+
+    def check_states(
+        self, states: Iterable[PosesLike], queries: Iterable[Any] = (), poses: PosesLike = None
+    ) -> List[StateAnswers]:
+        """Answers ``queries`` once per candidate state (each state ``{instance_id: pose}``
+        applied on top of the view and dropped afterwards) in one request; one
+        :class:`StateAnswers` per state, in order (``.any_collision`` per state)."""
+        states = list(states)
+        if not states:
+            return []
+        return self.request(poses=poses, queries=queries, states=states).states

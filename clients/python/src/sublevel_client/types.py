@@ -1,0 +1,448 @@
+"""Answer types: plain dataclasses with numpy arrays, parsed from the service's messages.
+
+Units: points, witnesses, distances and translations in meters; squared distances (certificates
+of distance queries) in m²; growth values d(p1 || p2) dimensionless (> 1 separated, <= 1
+overlapping). Gradients are twists ``[vx, vy, vz, wx, wy, wz]`` of the pose perturbed on the left
+in the world frame (value units per meter for v, per radian for w).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Dict, List, Optional, Union
+
+import numpy as np
+
+from .poses import Pose
+
+__all__ = [
+    "SolveInfo",
+    "Certificate",
+    "DistanceAnswer",
+    "GrowthAnswer",
+    "CollideAnswer",
+    "Answer",
+    "StateAnswers",
+    "QueryResult",
+    "ScenePair",
+    "SceneCheck",
+    "BodySummary",
+    "SceneSummary",
+    "Instance",
+    "Scene",
+    "UploadedBody",
+]
+
+
+def _v3(m) -> np.ndarray:
+    return np.array([m.x, m.y, m.z], dtype=float)
+
+
+def _twist(msg, has: bool) -> Optional[np.ndarray]:
+    if not has:
+        return None
+    return np.concatenate([_v3(msg.linear), _v3(msg.angular)])
+
+
+def _pose(m, has: bool) -> Pose:
+    if not has:
+        return Pose()
+    q = (m.rotation.w, m.rotation.x, m.rotation.y, m.rotation.z) if m.HasField("rotation") else (1.0, 0.0, 0.0, 0.0)
+    t = (m.translation.x, m.translation.y, m.translation.z) if m.HasField("translation") else (0.0, 0.0, 0.0)
+    return Pose(quat=q, t=t)
+
+
+def _enum_name(enum_type, value: int, prefix: str) -> str:
+    try:
+        name = enum_type.Name(value)
+    except ValueError:
+        return str(value)
+    return name[len(prefix):] if name.startswith(prefix) else name
+
+
+@dataclass
+class SolveInfo:
+    """Solver diagnostics of one answer.
+
+    Attributes:
+        converged: the answer is a certified optimum (converged Newton, or verified SDP).
+        status: "CONVERGED", "MAX_ITERATIONS", "STALLED" or "UNSPECIFIED".
+        iterations: Newton iterations over all phases.
+        kkt_residual: final infinity-norm of the KKT residual.
+        warm_started: the solve started from the cached warm start of this pair.
+        precision_limited: the inputs (very large translations) limit the accuracy.
+    """
+
+    converged: bool
+    status: str
+    iterations: int
+    kkt_residual: float
+    warm_started: bool
+    precision_limited: bool
+
+    @classmethod
+    def from_proto(cls, m) -> "SolveInfo":
+        from ._pb.sublevel.v1 import sublevel_pb2 as pb
+
+        return cls(
+            converged=m.converged,
+            status=_enum_name(pb.SolveStatus, m.status, "SOLVE_STATUS_"),
+            iterations=m.iterations,
+            kkt_residual=m.kkt_residual,
+            warm_started=m.warm_started,
+            precision_limited=m.precision_limited,
+        )
+
+
+@dataclass
+class Certificate:
+    """The level-0 sos certificate (an SDP) of a query, in the objective's units (m² for distance,
+    dimensionless for growth). See the proto's ``Certificate``."""
+
+    bound: float
+    verified_bound: float
+    agrees: bool
+    relative_gap: float
+    gram_min_eigenvalue: float
+    solve_seconds: float
+    verified: bool
+    newton_value: float
+
+    @classmethod
+    def from_proto(cls, m) -> "Certificate":
+        return cls(
+            bound=m.bound,
+            verified_bound=m.verified_bound,
+            agrees=m.agrees,
+            relative_gap=m.relative_gap,
+            gram_min_eigenvalue=m.gram_min_eigenvalue,
+            solve_seconds=m.solve_seconds,
+            verified=m.verified,
+            newton_value=m.newton_value,
+        )
+
+
+@dataclass
+class DistanceAnswer:
+    """Euclidean distance between two posed bodies.
+
+    Attributes:
+        distance: meters; 0 when the bodies overlap or touch.
+        witness_a, witness_b: closest points of A and B in world coordinates, shape (3,), meters.
+        normal: unit normal from A towards B, shape (3,); zero when overlapping.
+        overlapping: the bodies overlap or touch (for lower bounds: not proven separated).
+        converged, iterations, kkt_residual: solver diagnostics (also in ``solve``).
+        source: "NEWTON", "SDP_FALLBACK" or "SDP_LOWER_BOUND".
+        lower_bound: ``distance`` is only a lower bound (a nonconvex body).
+        tight: lower bounds only: the bound is attained, hence exact.
+        gradient_a, gradient_b: d distance / d pose as twists ``[v, w]`` shape (6,) (with_gradient),
+            else None.
+        certificate: the SDP certificate on the squared distance (m²) when one was solved.
+        solve: all solver diagnostics.
+    """
+
+    distance: float
+    witness_a: np.ndarray
+    witness_b: np.ndarray
+    normal: np.ndarray
+    overlapping: bool
+    converged: bool
+    iterations: int
+    kkt_residual: float
+    source: str
+    lower_bound: bool
+    tight: bool
+    gradient_a: Optional[np.ndarray]
+    gradient_b: Optional[np.ndarray]
+    certificate: Optional[Certificate]
+    solve: SolveInfo
+
+    @property
+    def warm_started(self) -> bool:
+        """Whether the solve started from a cached warm start."""
+        return self.solve.warm_started
+
+    @classmethod
+    def from_proto(cls, m) -> "DistanceAnswer":
+        from ._pb.sublevel.v1 import sublevel_pb2 as pb
+
+        solve = SolveInfo.from_proto(m.solve)
+        return cls(
+            distance=m.distance,
+            witness_a=_v3(m.witness_a),
+            witness_b=_v3(m.witness_b),
+            normal=_v3(m.normal),
+            overlapping=m.overlapping,
+            converged=solve.converged,
+            iterations=solve.iterations,
+            kkt_residual=solve.kkt_residual,
+            source=_enum_name(pb.AnswerSource, m.source, "ANSWER_SOURCE_"),
+            lower_bound=m.lower_bound,
+            tight=m.tight,
+            gradient_a=_twist(m.gradient_a, m.HasField("gradient_a")),
+            gradient_b=_twist(m.gradient_b, m.HasField("gradient_b")),
+            certificate=Certificate.from_proto(m.certificate) if m.HasField("certificate") else None,
+            solve=solve,
+        )
+
+
+@dataclass
+class GrowthAnswer:
+    """Growth measure d(p1 || p2) = min p1(x) s.t. p2(x) <= 1 (dimensionless).
+
+    Attributes:
+        value: d(p1 || p2); <= 1 iff the bodies overlap.
+        minimizer: the minimizer x* in world coordinates, shape (3,), meters.
+        multiplier: multiplier of the constraint p2 <= 1 (0 when inactive).
+        separated: value > 1 (for lower bounds: proven disjoint).
+        converged, iterations, kkt_residual, source, lower_bound, tight, certificate, solve: as in
+            :class:`DistanceAnswer`.
+        gradient_1, gradient_2: d value / d pose of p1 / p2 as twists shape (6,), else None.
+    """
+
+    value: float
+    minimizer: np.ndarray
+    multiplier: float
+    separated: bool
+    converged: bool
+    iterations: int
+    kkt_residual: float
+    source: str
+    lower_bound: bool
+    tight: bool
+    gradient_1: Optional[np.ndarray]
+    gradient_2: Optional[np.ndarray]
+    certificate: Optional[Certificate]
+    solve: SolveInfo
+
+    @property
+    def warm_started(self) -> bool:
+        """Whether the solve started from a cached warm start."""
+        return self.solve.warm_started
+
+    @classmethod
+    def from_proto(cls, m) -> "GrowthAnswer":
+        from ._pb.sublevel.v1 import sublevel_pb2 as pb
+
+        solve = SolveInfo.from_proto(m.solve)
+        return cls(
+            value=m.value,
+            minimizer=_v3(m.minimizer),
+            multiplier=m.multiplier,
+            separated=m.separated,
+            converged=solve.converged,
+            iterations=solve.iterations,
+            kkt_residual=solve.kkt_residual,
+            source=_enum_name(pb.AnswerSource, m.source, "ANSWER_SOURCE_"),
+            lower_bound=m.lower_bound,
+            tight=m.tight,
+            gradient_1=_twist(m.gradient_1, m.HasField("gradient_1")),
+            gradient_2=_twist(m.gradient_2, m.HasField("gradient_2")),
+            certificate=Certificate.from_proto(m.certificate) if m.HasField("certificate") else None,
+            solve=solve,
+        )
+
+
+@dataclass
+class CollideAnswer:
+    """Collide-with-margin: are the bodies closer than ``margin`` meters (or overlapping)?
+
+    Attributes:
+        collides: overlapping, or distance below the margin.
+        distance: meters: the solved distance, or (decided_by_bounds) a lower bound from the
+            bounding spheres.
+        decided_by_bounds: the bounding spheres alone decided (no solve ran).
+        margin: the margin asked for, meters.
+        solve: the distance solve's diagnostics when one ran, else None.
+    """
+
+    collides: bool
+    distance: float
+    decided_by_bounds: bool
+    margin: float
+    solve: Optional[SolveInfo]
+
+    @property
+    def warm_started(self) -> bool:
+        """Whether the distance solve (if any) started from a cached warm start."""
+        return bool(self.solve and self.solve.warm_started)
+
+    @classmethod
+    def from_proto(cls, m) -> "CollideAnswer":
+        return cls(
+            collides=m.collides,
+            distance=m.distance,
+            decided_by_bounds=m.decided_by_bounds,
+            margin=m.margin,
+            solve=SolveInfo.from_proto(m.solve) if m.HasField("solve") else None,
+        )
+
+
+Answer = Union[DistanceAnswer, GrowthAnswer, CollideAnswer]
+
+
+def answer_from_proto(m) -> Answer:
+    """One ``QueryAnswer`` as the dataclass of its kind."""
+    which = m.WhichOneof("answer")
+    if which == "distance":
+        return DistanceAnswer.from_proto(m.distance)
+    if which == "growth":
+        return GrowthAnswer.from_proto(m.growth)
+    if which == "collide":
+        return CollideAnswer.from_proto(m.collide)
+    raise ValueError(f"empty QueryAnswer from the server: {m!r}")
+
+
+@dataclass
+class StateAnswers:
+    """The answers of one candidate state, one per query in order.
+
+    Attributes:
+        answers: one answer per query.
+        any_collision: any COLLIDE query of this state collides.
+    """
+
+    answers: List[Answer]
+    any_collision: bool
+
+    @classmethod
+    def from_proto(cls, m) -> "StateAnswers":
+        return cls(answers=[answer_from_proto(a) for a in m.answers], any_collision=m.any_collision)
+
+
+@dataclass
+class QueryResult:
+    """The response of a planner request (Query, one QueryStream message).
+
+    Attributes:
+        answers: one answer per query (requests without states).
+        states: one :class:`StateAnswers` per candidate state (requests with states).
+        server_seconds: seconds the server spent (not the transport).
+        request_id: the request's id, echoed.
+    """
+
+    answers: List[Answer]
+    states: List[StateAnswers]
+    server_seconds: float
+    request_id: int
+
+    @classmethod
+    def from_proto(cls, m) -> "QueryResult":
+        return cls(
+            answers=[answer_from_proto(a) for a in m.answers],
+            states=[StateAnswers.from_proto(s) for s in m.states],
+            server_seconds=m.server_seconds,
+            request_id=m.request_id,
+        )
+
+
+@dataclass
+class ScenePair:
+    """A pair found by CheckScene: ``first`` < ``second`` (by id) and their distance answer."""
+
+    first: str
+    second: str
+    distance: DistanceAnswer
+
+    @classmethod
+    def from_proto(cls, m) -> "ScenePair":
+        return cls(first=m.first, second=m.second, distance=DistanceAnswer.from_proto(m.distance))
+
+
+@dataclass
+class SceneCheck:
+    """The response of CheckScene.
+
+    Attributes:
+        pairs: pairs that overlap or lie within the margin, ordered by distance.
+        instances: instances checked.
+        candidate_pairs: pairs passing the broad phase (posed boxes grown by the margin).
+        narrow_phase_solves: distance solves run.
+        all_pairs: pairs a brute-force check would have examined.
+        server_seconds: seconds the server spent.
+    """
+
+    pairs: List[ScenePair]
+    instances: int
+    candidate_pairs: int
+    narrow_phase_solves: int
+    all_pairs: int
+    server_seconds: float
+
+    @classmethod
+    def from_proto(cls, m) -> "SceneCheck":
+        return cls(
+            pairs=[ScenePair.from_proto(p) for p in m.pairs],
+            instances=m.instances,
+            candidate_pairs=m.candidate_pairs,
+            narrow_phase_solves=m.narrow_phase_solves,
+            all_pairs=m.all_pairs,
+            server_seconds=m.server_seconds,
+        )
+
+
+@dataclass
+class UploadedBody:
+    """The response of UploadBody: the body's id, whether it is stored as nonconvex, and its
+    certified sos-convexity margin (NaN when not checked)."""
+
+    body_id: str
+    nonconvex: bool
+    convexity_margin: float
+
+
+@dataclass
+class BodySummary:
+    """A stored body without its coefficients (volume in m³; 0 when unknown)."""
+
+    body_id: str
+    name: str
+    degree: int
+    method: str
+    volume: float
+
+
+@dataclass
+class SceneSummary:
+    """A stored scene without its instances."""
+
+    scene_id: str
+    name: str
+    num_instances: int
+
+
+@dataclass
+class Instance:
+    """An instance of a body in a scene under a pose."""
+
+    instance_id: str
+    body_id: str
+    pose: Pose
+
+    @classmethod
+    def from_proto(cls, m) -> "Instance":
+        return cls(instance_id=m.instance_id, body_id=m.body_id, pose=_pose(m.pose, m.HasField("pose")))
+
+
+@dataclass
+class Scene:
+    """A scene with its instances (ordered by id)."""
+
+    scene_id: str
+    name: str
+    instances: List[Instance] = field(default_factory=list)
+
+    def instance(self, instance_id: str) -> Instance:
+        """The instance with this id (KeyError if absent)."""
+        for i in self.instances:
+            if i.instance_id == instance_id:
+                return i
+        raise KeyError(instance_id)
+
+    def by_body(self) -> Dict[str, List[str]]:
+        """Instance ids grouped by body id."""
+        out: Dict[str, List[str]] = {}
+        for i in self.instances:
+            out.setdefault(i.body_id, []).append(i.instance_id)
+        return out

@@ -1,0 +1,400 @@
+//! What a motion planner asks of a scene: queries on a private view of it, many candidate states
+//! per call, collide-with-margin tests decided as cheaply as possible, and scene-wide checks with
+//! a broad phase.
+//!
+//! ```text
+//! QueryView      the stored scene + this client's pose overrides + this client's warm starts
+//!   run(request) = apply its pose updates (all or nothing), then answer its queries — once, or
+//!                  once per candidate state (the state's poses on top, dropped afterwards)
+//! collide(a, b, m) = bounding spheres farther apart than m → false, no solve (a few ns)
+//!                    otherwise the distance solve (warm-started): distance < m or overlapping
+//! check_scene    posed bounding boxes grown by m/2 → BVH (parry) → candidate pairs
+//!                → bounding spheres → distance solves → pairs closer than m, by distance
+//! ```
+//!
+//! Nothing here takes a scene's lock while solving: the instances a request names are read (a
+//! body `Arc` and a pose each) under the lock, then every solve runs on that snapshot.
+
+use super::cache::WarmStartCache;
+use super::catalog::{Catalog, DistanceReply, GrowthReply, QueryAnswer, QueryKind, QueryOptions, QueryPair};
+use crate::body::Body;
+use crate::math::{Isometry3, Real};
+use crate::query::{
+    certified_distance, certified_growth, distance_gradient, growth_gradient, AnswerSource, CertifyParams,
+};
+use crate::{Error, Result};
+use std::collections::HashMap;
+use std::sync::Arc;
+
+/// The answer of a collide-with-margin query.
+#[derive(Clone, Debug)]
+pub struct CollideReply {
+    /// True when the bodies overlap or their distance is below `margin`.
+    pub collides: bool,
+    /// The solved distance (meters), or with `decided_by_bounds` a lower bound from the bounding
+    /// spheres.
+    pub distance: Real,
+    /// The bounding spheres decided: no solve ran.
+    pub decided_by_bounds: bool,
+    /// The distance solve, when one ran.
+    pub solve: Option<DistanceReply>,
+    /// The margin asked for (meters).
+    pub margin: Real,
+}
+
+/// A posed instance of a request's snapshot: its body and its pose in this view.
+#[derive(Clone, Debug)]
+pub struct Posed {
+    /// The body (shared with the catalog).
+    pub body: Arc<Body>,
+    /// The pose in this view (body frame → world).
+    pub pose: Isometry3,
+}
+
+/// Lower bound of the distance between two posed bodies from their bounding spheres (0 when the
+/// spheres overlap), or `None` when a body has no proven bound (nonconvex).
+pub fn sphere_lower_bound(a: &Body, pose_a: &Isometry3, b: &Body, pose_b: &Isometry3) -> Option<Real> {
+    let (ca, ra) = a.bounding_sphere()?;
+    let (cb, rb) = b.bounding_sphere()?;
+    Some(((pose_a * ca) - (pose_b * cb)).norm() - ra - rb).map(|d| d.max(0.0))
+}
+
+/// Answers one query between two posed instances with the given warm-start cache (ids key it);
+/// `options.cold` ignores and leaves no warm start. The core of [`Catalog::batch`] and of
+/// [`QueryView::run`].
+pub fn answer_pair(
+    pair: &QueryPair,
+    a: &Posed,
+    b: &Posed,
+    cache: &mut WarmStartCache,
+    params: &CertifyParams,
+) -> QueryAnswer {
+    match pair.kind {
+        QueryKind::Distance => QueryAnswer::Distance(distance_reply(pair, a, b, cache, params)),
+        QueryKind::Growth => QueryAnswer::Growth(growth_reply(pair, a, b, cache, params)),
+        QueryKind::Collide => {
+            if let Some(lower) = sphere_lower_bound(&a.body, &a.pose, &b.body, &b.pose) {
+                if lower > pair.margin {
+                    return QueryAnswer::Collide(CollideReply {
+                        collides: false,
+                        distance: lower,
+                        decided_by_bounds: true,
+                        solve: None,
+                        margin: pair.margin,
+                    });
+                }
+            }
+            let d = distance_reply(pair, a, b, cache, params);
+            let r = &d.answer.result;
+            let collides = r.overlapping || r.distance < pair.margin;
+            QueryAnswer::Collide(CollideReply {
+                collides,
+                distance: r.distance,
+                decided_by_bounds: false,
+                margin: pair.margin,
+                solve: Some(d),
+            })
+        }
+    }
+}
+
+fn distance_reply(
+    pair: &QueryPair,
+    a: &Posed,
+    b: &Posed,
+    cache: &mut WarmStartCache,
+    params: &CertifyParams,
+) -> DistanceReply {
+    let o = &pair.options;
+    let warm = if o.cold { None } else { cache.distance(&pair.first, &pair.second) };
+    let r = certified_distance(&a.body, &a.pose, &b.body, &b.pose, warm, params, o.mode);
+    let gradients = (o.with_gradient && r.source != AnswerSource::SdpLowerBound).then(|| distance_gradient(&r.result));
+    let precision_limited = super::catalog::precision_limited(&a.body, &a.pose, &b.body, &b.pose);
+    let penetration = (o.signed && r.result.overlapping && !r.lower_bound)
+        .then(|| crate::query::penetration::penetration(&a.body, &a.pose, &b.body, &b.pose).ok())
+        .flatten();
+    if !r.lower_bound && !o.cold {
+        cache.put_distance(&pair.first, &pair.second, r.result.warm_start);
+    }
+    DistanceReply { answer: r, gradients, precision_limited, signed: o.signed, penetration }
+}
+
+fn growth_reply(
+    pair: &QueryPair,
+    a: &Posed,
+    b: &Posed,
+    cache: &mut WarmStartCache,
+    params: &CertifyParams,
+) -> GrowthReply {
+    let o = &pair.options;
+    let warm = if o.cold { None } else { cache.growth(&pair.first, &pair.second) };
+    let r = certified_growth(&a.body, &a.pose, &b.body, &b.pose, warm, params, o.mode);
+    let gradients = (o.with_gradient && r.source != AnswerSource::SdpLowerBound)
+        .then(|| growth_gradient(&a.body, &a.pose, &r.result));
+    let precision_limited = super::catalog::precision_limited(&a.body, &a.pose, &b.body, &b.pose);
+    if !r.lower_bound && !o.cold {
+        cache.put_growth(&pair.first, &pair.second, r.result.warm_start);
+    }
+    GrowthReply { answer: r, gradients, precision_limited }
+}
+
+/// A planner request on a [`QueryView`] (see the module docs).
+#[derive(Clone, Debug, Default)]
+pub struct PlannerRequest {
+    /// Pose updates of the view, applied before the queries (validated: unknown or repeated
+    /// instances reject the whole request).
+    pub poses: Vec<(String, Isometry3)>,
+    /// The queries, answered in order.
+    pub queries: Vec<QueryPair>,
+    /// Candidate states: when non-empty, the queries are answered once per state, with the
+    /// state's poses on top of the view.
+    pub states: Vec<Vec<(String, Isometry3)>>,
+}
+
+/// The answers of a [`PlannerRequest`]: one list of answers, or one per candidate state.
+#[derive(Clone, Debug)]
+pub enum PlannerAnswers {
+    /// Answers of a request without states.
+    Single(Vec<QueryAnswer>),
+    /// Answers per candidate state.
+    PerState(Vec<Vec<QueryAnswer>>),
+}
+
+/// A client's private view of a scene: pose overrides and warm starts of its own (see the module
+/// docs). A QueryStream holds one for its lifetime; a unary Query uses a fresh one.
+#[derive(Debug)]
+pub struct QueryView {
+    scene_id: String,
+    overrides: HashMap<String, Isometry3>,
+    cache: WarmStartCache,
+}
+
+fn check_unique(field: &str, poses: &[(String, Isometry3)]) -> Result<()> {
+    let mut seen = std::collections::HashSet::new();
+    for (k, (id, _)) in poses.iter().enumerate() {
+        if !seen.insert(id.as_str()) {
+            return Err(Error::invalid(format!("{field}[{k}].instance_id"), format!("instance `{id}` appears twice")));
+        }
+    }
+    Ok(())
+}
+
+impl QueryView {
+    /// An empty view of `scene_id` (stored poses, no warm starts).
+    pub fn new(scene_id: &str) -> Self {
+        Self { scene_id: scene_id.to_owned(), overrides: HashMap::new(), cache: WarmStartCache::default() }
+    }
+
+    /// The scene this view looks at.
+    pub fn scene_id(&self) -> &str {
+        &self.scene_id
+    }
+
+    /// Number of warm starts this view holds.
+    pub fn warm_starts(&self) -> usize {
+        self.cache.len()
+    }
+
+    /// Applies `request.poses`, then answers its queries (see the module docs).
+    ///
+    /// # Errors
+    /// [`Error::NotFound`] for the scene or an instance a query names; [`Error::InvalidArgument`]
+    /// naming `poses[k].instance_id` / `states[s].poses[k].instance_id` for an unknown or repeated
+    /// instance (the view is then unchanged).
+    pub fn run(&mut self, catalog: &Catalog, request: &PlannerRequest) -> Result<PlannerAnswers> {
+        check_unique("poses", &request.poses)?;
+        for (s, state) in request.states.iter().enumerate() {
+            check_unique(&format!("states[{s}].poses"), state)?;
+        }
+        let mut ids: Vec<String> = request.poses.iter().map(|(id, _)| id.clone()).collect();
+        ids.extend(request.states.iter().flatten().map(|(id, _)| id.clone()));
+        ids.extend(request.queries.iter().flat_map(|q| [q.first.clone(), q.second.clone()]));
+        ids.sort();
+        ids.dedup();
+        let stored = catalog.posed_instances(&self.scene_id, &ids).map_err(|e| match e {
+            Error::NotFound { kind: "instance", id } => {
+                let field = request
+                    .poses
+                    .iter()
+                    .position(|(p, _)| *p == id)
+                    .map(|k| format!("poses[{k}].instance_id"))
+                    .or_else(|| {
+                        request.states.iter().enumerate().find_map(|(s, st)| {
+                            st.iter().position(|(p, _)| *p == id).map(|k| format!("states[{s}].poses[{k}].instance_id"))
+                        })
+                    });
+                match field {
+                    Some(f) => Error::invalid(f, format!("no instance `{id}` in scene `{}`", self.scene_id)),
+                    None => Error::NotFound { kind: "instance", id },
+                }
+            }
+            other => other,
+        })?;
+        for (id, pose) in &request.poses {
+            self.overrides.insert(id.clone(), *pose);
+        }
+        let mut posed: HashMap<String, Posed> = stored
+            .into_iter()
+            .map(|i| {
+                let pose = self.overrides.get(&i.id).copied().unwrap_or(i.pose);
+                (i.id, Posed { body: i.body, pose })
+            })
+            .collect();
+        let params = catalog.certify_params();
+        if request.states.is_empty() {
+            return Ok(PlannerAnswers::Single(self.answer_all(&request.queries, &posed, &params)));
+        }
+        let mut out = Vec::with_capacity(request.states.len());
+        for state in &request.states {
+            let saved: Vec<(String, Isometry3)> = state
+                .iter()
+                .filter_map(|(id, pose)| posed.get_mut(id).map(|p| (id.clone(), std::mem::replace(&mut p.pose, *pose))))
+                .collect();
+            out.push(self.answer_all(&request.queries, &posed, &params));
+            for (id, pose) in saved {
+                if let Some(p) = posed.get_mut(&id) {
+                    p.pose = pose;
+                }
+            }
+        }
+        Ok(PlannerAnswers::PerState(out))
+    }
+
+    fn answer_all(
+        &mut self,
+        queries: &[QueryPair],
+        posed: &HashMap<String, Posed>,
+        params: &CertifyParams,
+    ) -> Vec<QueryAnswer> {
+        queries
+            .iter()
+            .filter_map(|q| {
+                let (a, b) = (posed.get(&q.first)?, posed.get(&q.second)?);
+                Some(answer_pair(q, a, b, &mut self.cache, params))
+            })
+            .collect()
+    }
+}
+
+/// A pair found by [`check_scene`].
+#[derive(Clone, Debug)]
+pub struct ScenePair {
+    /// First instance (the smaller id).
+    pub first: String,
+    /// Second instance.
+    pub second: String,
+    /// Their distance answer.
+    pub distance: DistanceReply,
+}
+
+/// The outcome of [`check_scene`], with its cost.
+#[derive(Clone, Debug, Default)]
+pub struct SceneCheck {
+    /// Pairs that overlap or lie within the margin, by increasing distance.
+    pub pairs: Vec<ScenePair>,
+    /// Instances checked.
+    pub instances: usize,
+    /// Pairs whose grown bounding boxes intersect (the BVH's output).
+    pub candidate_pairs: u64,
+    /// Distance solves run.
+    pub narrow_phase_solves: u64,
+    /// Pairs a brute-force check examines.
+    pub all_pairs: u64,
+}
+
+/// Every pair of a scene (or of `focus` against the rest) that overlaps or lies closer than
+/// `margin` meters, with `overrides` applied to the stored poses (not stored). Broad phase: a BVH
+/// (parry's) over the posed bounding boxes grown by `margin / 2`; then the bounding spheres; then
+/// cold distance solves on what remains. A nonconvex body (no proven bound) is a candidate for
+/// every pair.
+///
+/// # Errors
+/// [`Error::NotFound`] for the scene or a `focus` / override instance; [`Error::InvalidArgument`]
+/// naming `margin` (negative or not finite) or a repeated override.
+pub fn check_scene(
+    catalog: &Catalog,
+    scene_id: &str,
+    margin: Real,
+    focus: &[String],
+    overrides: &[(String, Isometry3)],
+) -> Result<SceneCheck> {
+    use parry3d_f64::bounding_volume::{Aabb, BoundingVolume};
+    use parry3d_f64::partitioning::{Bvh, BvhBuildStrategy};
+    if !(margin.is_finite() && margin >= 0.0) {
+        return Err(Error::invalid("margin", format!("must be finite and >= 0 meters, got {margin}")));
+    }
+    check_unique("poses", overrides)?;
+    let mut all = catalog.posed_instances(scene_id, &[])?;
+    let index: HashMap<String, usize> = all.iter().enumerate().map(|(k, i)| (i.id.clone(), k)).collect();
+    for (k, (id, pose)) in overrides.iter().enumerate() {
+        let at = *index.get(id).ok_or_else(|| {
+            Error::invalid(format!("poses[{k}].instance_id"), format!("no instance `{id}` in scene `{scene_id}`"))
+        })?;
+        all[at].pose = *pose;
+    }
+    let mut is_focus = vec![focus.is_empty(); all.len()];
+    for (k, id) in focus.iter().enumerate() {
+        let at = *index.get(id).ok_or_else(|| Error::not_found("instance", id.as_str())).map_err(|e| {
+            if let Error::NotFound { .. } = e {
+                Error::invalid(format!("instance_ids[{k}]"), format!("no instance `{id}` in scene `{scene_id}`"))
+            } else {
+                e
+            }
+        })?;
+        is_focus[at] = true;
+    }
+    let n = all.len();
+    let k = is_focus.iter().filter(|f| **f).count();
+    let all_pairs = if focus.is_empty() {
+        (n * n.saturating_sub(1) / 2) as u64
+    } else {
+        (k * (n - k) + k * k.saturating_sub(1) / 2) as u64
+    };
+    let half = 0.5 * margin;
+    let far = crate::math::MAX_COORDINATE * 4.0;
+    let boxes: Vec<Aabb> = all
+        .iter()
+        .map(|i| match i.body.world_aabb(&i.pose) {
+            Some((lo, hi)) => {
+                let (lo, hi) = (lo.add_scalar(-half), hi.add_scalar(half));
+                Aabb::new([lo.x, lo.y, lo.z].into(), [hi.x, hi.y, hi.z].into())
+            }
+            None => Aabb::new([-far; 3].into(), [far; 3].into()),
+        })
+        .collect();
+    let mut out = SceneCheck { instances: n, all_pairs, ..SceneCheck::default() };
+    if n < 2 {
+        return Ok(out);
+    }
+    let bvh = Bvh::from_leaves(BvhBuildStrategy::Binned, &boxes);
+    let mut candidates: Vec<(usize, usize)> = bvh
+        .leaf_pairs(&bvh, |x, y| x.aabb().intersects(&y.aabb()))
+        .map(|(i, j)| (i as usize, j as usize))
+        .filter(|&(i, j)| i < j && (is_focus[i] || is_focus[j]))
+        .collect();
+    candidates.sort_unstable();
+    candidates.dedup();
+    out.candidate_pairs = candidates.len() as u64;
+    let params = catalog.certify_params();
+    let options = QueryOptions { cold: true, ..QueryOptions::default() };
+    let mut scratch = WarmStartCache::default();
+    for (i, j) in candidates {
+        let (a, b) = (&all[i], &all[j]);
+        if let Some(lower) = sphere_lower_bound(&a.body, &a.pose, &b.body, &b.pose) {
+            if lower > margin {
+                continue;
+            }
+        }
+        out.narrow_phase_solves += 1;
+        let pair = QueryPair { kind: QueryKind::Distance, first: a.id.clone(), second: b.id.clone(), options, margin };
+        let pa = Posed { body: a.body.clone(), pose: a.pose };
+        let pb = Posed { body: b.body.clone(), pose: b.pose };
+        let d = distance_reply(&pair, &pa, &pb, &mut scratch, &params);
+        let r = &d.answer.result;
+        if r.overlapping || r.distance < margin {
+            out.pairs.push(ScenePair { first: a.id.clone(), second: b.id.clone(), distance: d });
+        }
+    }
+    out.pairs.sort_by(|x, y| x.distance.answer.result.distance.total_cmp(&y.distance.answer.result.distance));
+    Ok(out)
+}

@@ -1,0 +1,283 @@
+//! Integration tests: the planner API (Query, QueryStream, CheckScene) against closed forms for
+//! spheres and brute force over all pairs.
+
+use crate::service::{add, assert_status, at, config, upload_sphere, Server};
+use sublevel::service::pb::{self, sublevel_client::SublevelClient};
+use tonic::transport::Channel;
+use tonic::Code;
+
+fn q(kind: pb::QueryKind, a: &str, b: &str) -> pb::PlannerQuery {
+    pb::PlannerQuery { kind: kind as i32, first: a.into(), second: b.into(), ..Default::default() }
+}
+
+fn collide(a: &str, b: &str, margin: f64) -> pb::PlannerQuery {
+    pb::PlannerQuery { margin, ..q(pb::QueryKind::Collide, a, b) }
+}
+
+fn pose_of(id: &str, t: [f64; 3]) -> pb::InstancePose {
+    pb::InstancePose { instance_id: id.into(), pose: Some(at(t)) }
+}
+
+fn distance_of(a: &pb::QueryAnswer) -> &pb::DistanceAnswer {
+    match &a.answer {
+        Some(pb::query_answer::Answer::Distance(d)) => d,
+        other => panic!("expected a distance answer, got {other:?}"),
+    }
+}
+
+fn collide_of(a: &pb::QueryAnswer) -> &pb::CollideAnswer {
+    match &a.answer {
+        Some(pb::query_answer::Answer::Collide(c)) => c,
+        other => panic!("expected a collide answer, got {other:?}"),
+    }
+}
+
+/// Two spheres r = 0.5 and 0.25 at 0 and 2 m on x, in their own scene.
+async fn two_spheres(c: &mut SublevelClient<Channel>) -> (String, String, String) {
+    let b1 = upload_sphere(c, "r05", [0.0; 3], 0.5).await;
+    let b2 = upload_sphere(c, "r025", [0.0; 3], 0.25).await;
+    let scene = c.create_scene(pb::CreateSceneRequest { name: "p".into() }).await.unwrap().into_inner().scene_id;
+    let i1 = add(c, &scene, &b1, at([0.0; 3])).await;
+    let i2 = add(c, &scene, &b2, at([2.0, 0.0, 0.0])).await;
+    (scene, i1, i2)
+}
+
+/// A stream's poses are its own: answers follow them (closed form ‖c₁ − c₂‖ − r₁ − r₂), warm
+/// starts kick in from the second request, the stored scene and a second stream never see them;
+/// candidate states are answered per state and leave the view as it was.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn query_stream_keeps_a_private_view_with_warm_starts() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(config(dir.path())).await;
+    let mut c = server.client().await;
+    let (scene, i1, i2) = two_spheres(&mut c).await;
+
+    let (tx, rx) = tokio::sync::mpsc::channel(4);
+    let mut answers = c.query_stream(tokio_stream::wrappers::ReceiverStream::new(rx)).await.unwrap().into_inner();
+    let mut other_c = server.client().await;
+    let (tx2, rx2) = tokio::sync::mpsc::channel(4);
+    let mut other = other_c.query_stream(tokio_stream::wrappers::ReceiverStream::new(rx2)).await.unwrap().into_inner();
+    for (k, x) in [3.0, 3.1, 3.2, 3.3].into_iter().enumerate() {
+        let req = pb::QueryRequest {
+            scene_id: if k == 0 { scene.clone() } else { String::new() },
+            poses: vec![pose_of(&i2, [x, 0.0, 0.0])],
+            queries: vec![q(pb::QueryKind::Distance, &i1, &i2), q(pb::QueryKind::Growth, &i1, &i2)],
+            request_id: 100 + k as u64,
+            ..Default::default()
+        };
+        tx.send(req).await.unwrap();
+        let r = answers.message().await.unwrap().unwrap();
+        assert_eq!(r.request_id, 100 + k as u64);
+        let d = distance_of(&r.answers[0]);
+        assert!((d.distance - (x - 0.75)).abs() < 1e-9, "{d:?}");
+        assert_eq!(d.solve.as_ref().unwrap().warm_started, k > 0, "{d:?}");
+        let Some(pb::query_answer::Answer::Growth(g)) = &r.answers[1].answer else { panic!() };
+        assert!((g.value - ((x - 0.25) / 0.5f64).powi(2)).abs() < 1e-8, "{g:?}");
+        // The other stream (no pose updates) sees the stored pose: 2 − 0.75.
+        let req = pb::QueryRequest {
+            scene_id: scene.clone(),
+            queries: vec![q(pb::QueryKind::Distance, &i1, &i2)],
+            ..Default::default()
+        };
+        tx2.send(req).await.unwrap();
+        let r2 = other.message().await.unwrap().unwrap();
+        assert!((distance_of(&r2.answers[0]).distance - 1.25).abs() < 1e-9);
+    }
+    // Candidate states: i2 at 1, 4 and 1.5 m; answered per state; the view keeps x = 3.3.
+    let req = pb::QueryRequest {
+        queries: vec![q(pb::QueryKind::Distance, &i1, &i2), collide(&i1, &i2, 0.5)],
+        states: [1.0, 4.0, 1.5]
+            .iter()
+            .map(|&x| pb::CandidateState { poses: vec![pose_of(&i2, [x, 0.0, 0.0])] })
+            .collect(),
+        ..Default::default()
+    };
+    tx.send(req).await.unwrap();
+    let r = answers.message().await.unwrap().unwrap();
+    assert_eq!(r.states.len(), 3);
+    for (st, x) in r.states.iter().zip([1.0, 4.0, 1.5]) {
+        assert!((distance_of(&st.answers[0]).distance - (x - 0.75)).abs() < 1e-9);
+        assert_eq!(st.any_collision, x - 0.75 < 0.5, "x = {x}");
+        assert_eq!(collide_of(&st.answers[1]).collides, x - 0.75 < 0.5);
+    }
+    let req = pb::QueryRequest { queries: vec![q(pb::QueryKind::Distance, &i1, &i2)], ..Default::default() };
+    tx.send(req).await.unwrap();
+    let r = answers.message().await.unwrap().unwrap();
+    assert!((distance_of(&r.answers[0]).distance - (3.3 - 0.75)).abs() < 1e-9, "states must not move the view");
+    // Nothing was written: the stored pose is still x = 2.
+    let view = c.get_scene(pb::GetSceneRequest { scene_id: scene.clone() }).await.unwrap().into_inner();
+    let stored = view.instances.iter().find(|i| i.instance_id == i2).unwrap();
+    assert_eq!(stored.pose.as_ref().unwrap().translation.as_ref().unwrap().x, 2.0);
+
+    // A bad request ends the stream with a status naming the field.
+    let req = pb::QueryRequest { poses: vec![pose_of("i-nope", [0.0; 3])], ..Default::default() };
+    tx.send(req).await.unwrap();
+    let e = answers.message().await.unwrap_err();
+    assert_eq!(e.code(), Code::InvalidArgument, "{e:?}");
+    assert!(e.message().contains("poses[0].instance_id"), "{e:?}");
+    drop(tx);
+    drop(tx2);
+    server.stop().await;
+}
+
+/// Collide-with-margin on spheres 1.25 m apart (gap between surfaces): a small margin is decided
+/// by the bounding spheres alone, a margin near the gap by the solve, a larger one collides;
+/// unary Query answers cold; bad margins and kinds are refused naming the field.
+#[tokio::test]
+async fn collide_with_margin_and_unary_query() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(config(dir.path())).await;
+    let mut c = server.client().await;
+    let (scene, i1, i2) = two_spheres(&mut c).await;
+    let req = pb::QueryRequest {
+        scene_id: scene.clone(),
+        queries: vec![collide(&i1, &i2, 0.05), collide(&i1, &i2, 1.2), collide(&i1, &i2, 1.3), collide(&i1, &i2, 0.0)],
+        ..Default::default()
+    };
+    let r = c.query(req.clone()).await.unwrap().into_inner();
+    let got: Vec<_> = r.answers.iter().map(collide_of).collect();
+    assert!(
+        !got[0].collides && got[0].decided_by_bounds && got[0].distance <= 1.25 && got[0].solve.is_none(),
+        "{:?}",
+        got[0]
+    );
+    assert!(!got[1].collides && !got[1].decided_by_bounds && (got[1].distance - 1.25).abs() < 1e-9, "{:?}", got[1]);
+    assert!(got[2].collides && (got[2].distance - 1.25).abs() < 1e-9, "{:?}", got[2]);
+    assert!(!got[3].collides);
+    // Unary answers are cold every time.
+    let r = c.query(pb::QueryRequest { queries: vec![q(pb::QueryKind::Distance, &i1, &i2)], ..req.clone() }).await;
+    let d = *distance_of(&r.unwrap().into_inner().answers[0]);
+    assert!(!d.solve.unwrap().warm_started);
+    // Overlap: move i2 onto i1 in the request.
+    let r = c
+        .query(pb::QueryRequest {
+            poses: vec![pose_of(&i2, [0.5, 0.0, 0.0])],
+            queries: vec![collide(&i1, &i2, 0.0)],
+            ..req.clone()
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    assert!(collide_of(&r.answers[0]).collides);
+
+    // Signed distance: spheres r = 0.5, 0.25 with centers 0.6 m apart overlap by 0.15 m; the
+    // penetration normal is the center line; the gradient is (∓n, …) as the separated formula.
+    let signed = pb::PlannerQuery { signed: true, with_gradient: true, ..q(pb::QueryKind::Distance, &i1, &i2) };
+    for (x, expected) in [(0.6, -0.15), (2.0, 1.25)] {
+        let r = c
+            .query(pb::QueryRequest {
+                poses: vec![pose_of(&i2, [x, 0.0, 0.0])],
+                queries: vec![signed.clone()],
+                ..req.clone()
+            })
+            .await
+            .unwrap()
+            .into_inner();
+        let d = distance_of(&r.answers[0]);
+        assert!((d.signed_distance - expected).abs() < 1e-8, "x = {x}: {d:?}");
+        let g = d.signed_gradient_b.as_ref().unwrap().linear.as_ref().unwrap();
+        assert!((g.x - 1.0).abs() < 1e-6 && g.y.abs() < 1e-6, "moving B away along +x increases it: {g:?}");
+        if expected < 0.0 {
+            assert!((d.penetration_depth + expected).abs() < 1e-8);
+            assert!((d.penetration_normal.as_ref().unwrap().x - 1.0).abs() < 1e-6, "{d:?}");
+        }
+    }
+
+    let bad = pb::QueryRequest { queries: vec![collide(&i1, &i2, -1.0)], ..req.clone() };
+    assert_status(c.query(bad).await, Code::InvalidArgument, "queries[0].margin");
+    let bad = pb::QueryRequest { queries: vec![q(pb::QueryKind::Unspecified, &i1, &i2)], ..req.clone() };
+    assert_status(c.query(bad).await, Code::InvalidArgument, "queries[0].kind");
+    let bad = pb::QueryRequest { queries: vec![q(pb::QueryKind::Distance, &i1, "i-nope")], ..req.clone() };
+    assert_status(c.query(bad).await, Code::NotFound, "i-nope");
+    let bad = pb::QueryRequest {
+        states: vec![pb::CandidateState { poses: vec![pose_of(&i2, [f64::NAN, 0.0, 0.0])] }],
+        ..req.clone()
+    };
+    assert_status(c.query(bad).await, Code::InvalidArgument, "states[0].poses[0].pose.translation");
+    server.stop().await;
+}
+
+/// CheckScene on a 10 × 10 grid of spheres (r = 0.2, spacing 1 m, so neighbors are 0.6 m apart
+/// and diagonal ones 1.014 m) plus one sphere overlapping a corner: every pair within the margin,
+/// exactly as brute force over all pairs finds them, with far fewer narrow-phase solves.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn check_scene_finds_what_brute_force_finds() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(config(dir.path())).await;
+    let mut c = server.client().await;
+    let ball = upload_sphere(&mut c, "ball", [0.0; 3], 0.2).await;
+    let scene = c.create_scene(pb::CreateSceneRequest { name: "grid".into() }).await.unwrap().into_inner().scene_id;
+    let mut centers = Vec::new();
+    for i in 0..10 {
+        for j in 0..10 {
+            centers.push([i as f64, j as f64, 0.0]);
+        }
+    }
+    centers.push([0.1, 0.05, 0.0]);
+    let mut ids = Vec::new();
+    for c0 in &centers {
+        ids.push(add(&mut c, &scene, &ball, at(*c0)).await);
+    }
+    for margin in [0.0, 0.7] {
+        let r = c
+            .check_scene(pb::CheckSceneRequest { scene_id: scene.clone(), margin, ..Default::default() })
+            .await
+            .unwrap()
+            .into_inner();
+        let mut expected = Vec::new();
+        for a in 0..centers.len() {
+            for b in a + 1..centers.len() {
+                let d =
+                    ((centers[a][0] - centers[b][0]).powi(2) + (centers[a][1] - centers[b][1]).powi(2)).sqrt() - 0.4;
+                if d < margin || d <= 0.0 {
+                    let (x, y) = if ids[a] < ids[b] { (&ids[a], &ids[b]) } else { (&ids[b], &ids[a]) };
+                    expected.push((x.clone(), y.clone(), d.max(0.0)));
+                }
+            }
+        }
+        let mut got: Vec<_> = r
+            .pairs
+            .iter()
+            .map(|p| {
+                let (x, y) = if p.first < p.second { (&p.first, &p.second) } else { (&p.second, &p.first) };
+                (x.clone(), y.clone(), p.distance.as_ref().unwrap().distance)
+            })
+            .collect();
+        got.sort_by(|a, b| a.partial_cmp(b).unwrap());
+        expected.sort_by(|a, b| a.partial_cmp(b).unwrap());
+        assert_eq!(got.len(), expected.len(), "margin {margin}");
+        for (g, e) in got.iter().zip(&expected) {
+            assert_eq!((&g.0, &g.1), (&e.0, &e.1));
+            assert!((g.2 - e.2).abs() < 1e-8, "{g:?} vs {e:?}");
+        }
+        assert_eq!(r.instances, 101);
+        assert_eq!(r.all_pairs, 101 * 100 / 2);
+        assert!(r.narrow_phase_solves <= r.candidate_pairs && r.candidate_pairs < r.all_pairs / 10, "{r:?}");
+        eprintln!(
+            "CheckScene margin {margin}: {} pairs found, {} candidates, {} solves of {} pairs",
+            r.pairs.len(),
+            r.candidate_pairs,
+            r.narrow_phase_solves,
+            r.all_pairs
+        );
+    }
+    // One instance against the rest, with a pose override that moves it next to (5, 5).
+    let r = c
+        .check_scene(pb::CheckSceneRequest {
+            scene_id: scene.clone(),
+            margin: 0.15,
+            instance_ids: vec![ids[100].clone()],
+            poses: vec![pose_of(&ids[100], [5.5, 5.0, 0.0])],
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    assert_eq!(r.all_pairs, 100);
+    let mut names: Vec<_> =
+        r.pairs.iter().map(|p| if p.first == ids[100] { p.second.clone() } else { p.first.clone() }).collect();
+    names.sort();
+    let mut want = vec![ids[55].clone(), ids[65].clone()];
+    want.sort();
+    assert_eq!(names, want, "the moved sphere is 0.1 m from (5,5) and (6,5) and more than 0.7 m from every other");
+    server.stop().await;
+}
