@@ -39,5 +39,9 @@ if [ -z "${SUBLEVEL_BIN:-}" ] && [ ! -x target/release/sublevel ] && [ ! -x targ
   cargo build --locked --bin sublevel
 fi
 
+if [ -n "${SUBLEVEL_BIN:-}" ]; then
+  SUBLEVEL_BIN="$(realpath "$SUBLEVEL_BIN")"
+  export SUBLEVEL_BIN
+fi
 cd "$ROOT/clients/python"
 exec "$PY" -m pytest -p no:cacheprovider -q tests "$@"

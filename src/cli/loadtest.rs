@@ -329,7 +329,16 @@ fn io_error(what: &str, e: impl std::fmt::Display) -> Error {
 }
 
 async fn connect(endpoint: &Endpoint) -> Result<Channel> {
-    endpoint.connect().await.map_err(|e| io_error(&format!("cannot connect to {}", endpoint.uri()), e))
+    endpoint.connect().await.map_err(|e| {
+        // tonic's transport error says only "transport error": append its causes.
+        let mut text = e.to_string();
+        let mut cause = std::error::Error::source(&e);
+        while let Some(c) = cause {
+            text.push_str(&format!(": {c}"));
+            cause = c.source();
+        }
+        io_error(&format!("cannot connect to {}", endpoint.uri()), text)
+    })
 }
 
 async fn call<T>(

@@ -9,9 +9,12 @@ Needs a running server (``cargo run --release -- serve --demo``) and
 
 What it does:
 
-* uploads the chair (``data/demo/chair_101.json``) as the robot and the fitted PSB bodies of
-  ``data/demo/*.json`` and ``tests/data/*.json`` (chair and human, degrees 2 to 8) as obstacles,
-  into a fresh scene (deleted at the end unless ``--keep``). The bodies stand upright (their y
+* loads the chair (``data/demo/chair_101.json``) as the robot and the fitted PSB bodies of
+  ``data/demo/*.json`` and ``tests/data/*.json`` (chair and human, degrees 2 to 8) as obstacles
+  into a fresh scene (deleted at the end unless ``--keep``). Bodies are uploaded under names
+  ``plan_ompl/...``; a later run reuses a stored body of the same name and identical polynomial
+  (an upload certifies sos-convexity with an SDP: ~40 s for degree 8), ``--delete-bodies``
+  removes the ones it uploaded. The bodies stand upright (their y
   axis turned to world z) in two walls across the x axis with gaps on opposite sides, so the
   path from x = -3.2 m to x = +3.2 m must slalom around them; the robot's height is bounded so
   it cannot pass over or under a wall.
@@ -184,7 +187,8 @@ def main(argv=None) -> int:
     ap.add_argument("--resolution", type=float, default=0.05, help="motion-check step in OMPL's SE(3) distance (m + rad)")
     ap.add_argument("--time", type=float, default=60.0, help="planning time limit, seconds")
     ap.add_argument("--seed", type=int, default=1, help="OMPL's random seed")
-    ap.add_argument("--keep", action="store_true", help="keep the scene and bodies on the server")
+    ap.add_argument("--keep", action="store_true", help="keep the scene on the server")
+    ap.add_argument("--delete-bodies", action="store_true", help="delete the bodies this run uploaded at the end")
     args = ap.parse_args(argv)
 
     from ompl import util as ou
@@ -192,7 +196,7 @@ def main(argv=None) -> int:
     ou.setLogLevel(ou.LOG_WARN)
     ou.RNG.setSeed(args.seed)
 
-    # Uploads certify sos-convexity with a small SDP (up to seconds for degree 8 on a debug build).
+    # An upload certifies sos-convexity with an SDP: ~40 s for a degree-8 body on a release build.
     client = Client(args.addr, timeout=600.0)
     client.wait_ready(10.0)
 
@@ -201,14 +205,31 @@ def main(argv=None) -> int:
     try:
         return run(args, client, scene, bodies)
     finally:
-        if not args.keep:
-            try:
+        try:
+            if not args.keep:
                 client.delete_scene(scene)
-                for b in bodies:
-                    client.delete_body(b)
-            except Exception as e:  # noqa: BLE001 (cleanup must not hide the run's error)
-                print(f"cleanup failed: {e}", file=sys.stderr)
+                if args.delete_bodies:
+                    for b in bodies:
+                        client.delete_body(b)
+        except Exception as e:  # noqa: BLE001 (cleanup must not hide the run's error)
+            print(f"cleanup failed: {e}", file=sys.stderr)
         client.close()
+
+
+_BODY_KEYS = ("degree", "exponents", "coefficients", "center", "scale")
+
+
+def load_body(client, name, body, stored, uploaded):
+    """The id of a stored body named ``name`` with exactly this polynomial, else of a new upload
+    (appended to ``uploaded``). Returns (id, reused)."""
+    want = {k: body[k] for k in _BODY_KEYS}
+    for body_id in stored.get(name, []):
+        have = json.loads(client.get_body_json(body_id))
+        if {k: have.get(k) for k in _BODY_KEYS} == want:
+            return body_id, True
+    body_id = client.upload_body(name, body)
+    uploaded.append(body_id)
+    return body_id, False
 
 
 def run(args, client, scene, bodies) -> int:
@@ -221,20 +242,18 @@ def run(args, client, scene, bodies) -> int:
     robot_json = json.loads(robot_file.read_text())
     files = obstacle_files()
     t0 = time.perf_counter()
-    robot_body = client.upload_body("plan_ompl/robot chair_101", robot_json)
-    bodies.append(robot_body)
+    stored = {}
+    for b in client.list_bodies():
+        stored.setdefault(b.name, []).append(b.body_id)
+    robot_body, _ = load_body(client, "plan_ompl/robot chair_101", robot_json, stored, bodies)
     robot = client.add_instance(scene, robot_body, Pose(quat=UPRIGHT, t=START))
     obstacles, drawn = [], []
     for (name, path), pose in zip(files, wall_layout(len(files))):
         body = json.loads(path.read_text())
         t1 = time.perf_counter()
-        body_id = client.upload_body("plan_ompl/" + name, body)
-        print(
-            f"  obstacle {name:<30} degree {body['degree']} at ({pose.t[0]:+.2f}, {pose.t[1]:+.2f}) m: "
-            f"{body_id} ({time.perf_counter() - t1:.2f} s)",
-            flush=True,
-        )
-        bodies.append(body_id)
+        body_id, reused = load_body(client, "plan_ompl/" + name, body, stored, bodies)
+        how = "reused" if reused else f"uploaded in {time.perf_counter() - t1:.2f} s"
+        print(f"  obstacle {name:<30} degree {body['degree']} at ({pose.t[0]:+.2f}, {pose.t[1]:+.2f}) m: {body_id} ({how})", flush=True)
         obstacles.append(client.add_instance(scene, body_id, pose))
         drawn.append((name, body["degree"], pose.apply(boundary_points(body))))
     print(f"scene {scene} on {args.addr}: robot chair_101 and {len(obstacles)} obstacles, loaded in {time.perf_counter() - t0:.2f} s")

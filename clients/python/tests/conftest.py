@@ -30,6 +30,8 @@ def find_binary() -> Path:
     env = os.environ.get("SUBLEVEL_BIN")
     if env:
         p = Path(env)
+        if not p.is_absolute() and not p.is_file():
+            p = REPO / p  # relative to the repository root, as run-tests.sh is
         if not p.is_file():
             raise FileNotFoundError(f"SUBLEVEL_BIN={env} is not a file")
         return p

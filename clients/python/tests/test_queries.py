@@ -181,3 +181,28 @@ def test_client_side_validation_names_the_argument(client, spheres):
         client.set_poses(scene, {b: np.eye(3)})
     with pytest.raises(ValueError, match=r"`body`"):
         client.upload_body("x", "/no/such/file.json")
+
+
+def test_signed_distance_of_spheres(client, spheres):
+    """Penetration depth of two balls = r1 + r2 − ‖c1 − c2‖, along the line of centers."""
+    scene, a, b, _, _ = spheres
+    c1, c2 = np.array([0.2, -0.1, 0.3]), np.array([0.6, 0.3, 0.1])  # 0.6 m apart < 0.8
+    client.set_poses(scene, {a: Pose(quat=quat_from_axis_angle((1, 1, 0), 0.4), t=c1), b: Pose(t=c2)})
+    d = np.linalg.norm(c2 - c1)
+    n = (c2 - c1) / d
+    ans = client.distance(scene, a, b, signed=True, with_gradient=True)
+    assert ans.overlapping and ans.distance == 0.0
+    assert abs(ans.penetration_depth - (R1 + R2 - d)) < 1e-7
+    assert abs(ans.signed_distance - (d - R1 - R2)) < 1e-7
+    np.testing.assert_allclose(ans.penetration_normal, n, atol=1e-6)
+    # d signed / d pose: the same twists as the distance of separated balls.
+    np.testing.assert_allclose(ans.signed_gradient_a, np.concatenate([-n, -np.cross(c1, n)]), atol=1e-5)
+    np.testing.assert_allclose(ans.signed_gradient_b, np.concatenate([n, np.cross(c2, n)]), atol=1e-5)
+    # Separated: the signed distance is the distance; in a batch and in a planner query too.
+    client.set_poses(scene, {b: Pose(t=(2.0, 0.0, 0.0)), a: Pose()})
+    (x,) = client.batch(scene, [Query.distance(a, b, signed=True)])
+    assert abs(x.signed_distance - (2.0 - R1 - R2)) < 1e-8 and x.penetration_depth == 0.0
+    (y,) = client.query(scene, poses={b: Pose(t=(0.5, 0, 0))}, queries=[Query.distance(a, b, signed=True)]).answers
+    assert abs(y.signed_distance - (0.5 - R1 - R2)) < 1e-7
+    with pytest.raises(ValueError, match=r"`queries\[0\]\.signed`"):
+        client.batch(scene, [Query("growth", a, b, signed=True)])

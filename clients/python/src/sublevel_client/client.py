@@ -60,6 +60,7 @@ class Query:
         certify: also solve the level-0 SDP certificate (milliseconds to seconds).
         with_gradient: also return pose gradients (distance and growth).
         cold: on a stream: ignore this pair's warm start and leave none behind.
+        signed: "distance" only: also the signed distance (penetration depth when overlapping).
     """
 
     kind: str
@@ -69,11 +70,15 @@ class Query:
     certify: bool = False
     with_gradient: bool = False
     cold: bool = False
+    signed: bool = False
 
     @classmethod
-    def distance(cls, a: str, b: str, *, certify: bool = False, with_gradient: bool = False, cold: bool = False) -> "Query":
-        """Euclidean distance between instances ``a`` and ``b`` (meters)."""
-        return cls("distance", a, b, certify=certify, with_gradient=with_gradient, cold=cold)
+    def distance(
+        cls, a: str, b: str, *, certify: bool = False, with_gradient: bool = False, cold: bool = False, signed: bool = False
+    ) -> "Query":
+        """Euclidean distance between instances ``a`` and ``b`` (meters); ``signed`` also asks
+        for the signed distance (minus the penetration depth when overlapping)."""
+        return cls("distance", a, b, certify=certify, with_gradient=with_gradient, cold=cold, signed=signed)
 
     @classmethod
     def growth(cls, p1: str, p2: str, *, certify: bool = False, with_gradient: bool = False, cold: bool = False) -> "Query":
@@ -96,6 +101,8 @@ def as_query(q: Any, name: str = "query") -> Query:
         raise ValueError(f"`{name}`: expected a Query or a tuple (kind, first, second[, margin]), got {q!r}")
     if out.kind not in _KINDS:
         raise ValueError(f"`{name}.kind`: expected one of {sorted(_KINDS)}, got {out.kind!r}")
+    if out.signed and out.kind != "distance":
+        raise ValueError(f"`{name}.signed`: only distance queries have a signed distance")
     if not isinstance(out.first, str) or not isinstance(out.second, str):
         raise ValueError(f"`{name}`: instance ids must be strings, got {out.first!r}, {out.second!r}")
     return out
@@ -138,6 +145,7 @@ def _planner_queries(queries: Iterable[Any]) -> List[pb.PlannerQuery]:
                 with_gradient=q.with_gradient,
                 margin=float(q.margin),
                 cold=q.cold,
+                signed=q.signed,
             )
         )
     return out
@@ -306,11 +314,17 @@ class Client:
         return self._call("SetPoses", req).updated
 
     # -- queries ------------------------------------------------------------------------------
-    def distance(self, scene: str, a: str, b: str, certify: bool = False, with_gradient: bool = False) -> DistanceAnswer:
+    def distance(
+        self, scene: str, a: str, b: str, certify: bool = False, with_gradient: bool = False, signed: bool = False
+    ) -> DistanceAnswer:
         """Euclidean distance (meters) between instances ``a`` and ``b`` at their stored poses, with
         witness points (world frame, meters), the normal from A to B, solver diagnostics, and
-        (``with_gradient``) the gradients as (6,) twists; ``certify`` also solves the SDP."""
-        req = pb.DistanceRequest(scene_id=scene, instance_a=a, instance_b=b, certify=certify, with_gradient=with_gradient)
+        (``with_gradient``) the gradients as (6,) twists; ``certify`` also solves the SDP;
+        ``signed`` also returns the signed distance (minus the penetration depth when the bodies
+        overlap) with the penetration normal."""
+        req = pb.DistanceRequest(
+            scene_id=scene, instance_a=a, instance_b=b, certify=certify, with_gradient=with_gradient, signed=signed
+        )
         return DistanceAnswer.from_proto(self._call("Distance", req).answer)
 
     def growth(self, scene: str, p1: str, p2: str, certify: bool = False, with_gradient: bool = False) -> GrowthAnswer:
@@ -328,7 +342,14 @@ class Client:
             if q.kind == "collide":
                 raise ValueError(f"`queries[{k}].kind`: BatchQuery answers distance and growth only; use query()")
             pairs.append(
-                pb.QueryPair(kind=_KINDS[q.kind], first=q.first, second=q.second, certify=q.certify, with_gradient=q.with_gradient)
+                pb.QueryPair(
+                    kind=_KINDS[q.kind],
+                    first=q.first,
+                    second=q.second,
+                    certify=q.certify,
+                    with_gradient=q.with_gradient,
+                    signed=q.signed,
+                )
             )
         r = self._call("BatchQuery", pb.BatchQueryRequest(scene_id=scene, pairs=pairs))
         return [answer_from_proto(a) for a in r.answers]

@@ -140,6 +140,14 @@ class DistanceAnswer:
             else None.
         certificate: the SDP certificate on the squared distance (m²) when one was solved.
         solve: all solver diagnostics.
+        signed_distance: with ``signed`` asked: meters, the distance when separated, minus the
+            penetration depth when overlapping (0 when not asked, or for lower bounds).
+        penetration_depth: with ``signed`` and overlapping: the minimum translation distance
+            (meters, >= 0), the length of the shortest translation of B separating the bodies.
+        penetration_normal: with ``signed`` and overlapping: the unit direction, shape (3,), from A
+            to B along which translating B by penetration_depth separates them (else zero).
+        signed_gradient_a, signed_gradient_b: with ``signed`` and ``with_gradient``: gradients of
+            signed_distance as twists shape (6,), else None.
     """
 
     distance: float
@@ -157,6 +165,11 @@ class DistanceAnswer:
     gradient_b: Optional[np.ndarray]
     certificate: Optional[Certificate]
     solve: SolveInfo
+    signed_distance: float = 0.0
+    penetration_depth: float = 0.0
+    penetration_normal: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    signed_gradient_a: Optional[np.ndarray] = None
+    signed_gradient_b: Optional[np.ndarray] = None
 
     @property
     def warm_started(self) -> bool:
@@ -184,6 +197,11 @@ class DistanceAnswer:
             gradient_b=_twist(m.gradient_b, m.HasField("gradient_b")),
             certificate=Certificate.from_proto(m.certificate) if m.HasField("certificate") else None,
             solve=solve,
+            signed_distance=m.signed_distance,
+            penetration_depth=m.penetration_depth,
+            penetration_normal=_v3(m.penetration_normal),
+            signed_gradient_a=_twist(m.signed_gradient_a, m.HasField("signed_gradient_a")),
+            signed_gradient_b=_twist(m.signed_gradient_b, m.HasField("signed_gradient_b")),
         )
 
 
