@@ -5,7 +5,7 @@
 //! ```text
 //! off   "OFF" header line (also "OFF nV nF nE" on one line), then "nV nF nE", nV lines "x y z",
 //!       faces ignored; '#' comments and blank lines skipped             (parsed here)
-//! obj   `v x y z` lines of every object                                  (tobj)
+//! obj   `v x y z [w]` lines of every object; faces and the rest skipped (parsed here)
 //! stl   ASCII or binary; shared vertices merged by stl_io               (stl_io)
 //! ply   the `vertex` element's x, y, z properties (any numeric type),   (parsed here)
 //!       ascii, binary_little_endian or binary_big_endian; other elements are checked and skipped
@@ -28,12 +28,17 @@
 //!   naming `mesh`; the parsed vertex count is checked again afterwards (STL merges vertices).
 //!
 //! The PLY header is bounded ([`MAX_PLY_HEADER_BYTES`], at most 64 elements of at most 256
-//! properties each); list properties are skipped, never stored. PLY is read here rather than by
-//! ply-rs, which trusts the header (it stores every declared item as a map with cloned property
-//! names, and panics on a count beyond `u64`) and reports `Debug` text. Error messages are
-//! plain sentences with the line number where there is one, and repeat at most a few dozen
-//! bytes of the client's text. The third-party parsers (tobj, stl_io) run under `catch_unwind`,
-//! so malformed bytes never panic the server.
+//! properties each); list properties are skipped, never stored.
+//!
+//! PLY and OBJ are read here, not by ply-rs and tobj: ply-rs trusts the header (it stores every
+//! declared item as a map with cloned property names, and panics on a count beyond `u64`) and
+//! reports `Debug` text; tobj stores every face before returning positions, returns none for a
+//! point cloud without faces, and panics (overflow) on some relative normal indices (found by
+//! fuzzing, `fuzz/regressions/mesh_obj`). stl_io, given only counts checked above, runs under
+//! `catch_unwind`, so malformed bytes never panic the server.
+//!
+//! Error messages are plain sentences with the line number where there is one, and repeat at
+//! most a few dozen bytes of the client's text.
 
 use crate::math::{Point3, Real};
 use crate::{Error, Result};
@@ -91,10 +96,7 @@ pub fn parse_points_limited(bytes: &[u8], format: &str, max_points: usize) -> Re
     let points = match fmt.as_str() {
         "off" => parse_off(bytes, max_points)?,
         "xyz" | "txt" | "pts" => parse_xyz(bytes, max_points)?,
-        "obj" => {
-            check_obj_count(bytes, max_points)?;
-            guarded("obj", || parse_obj(bytes))?
-        }
+        "obj" => parse_obj(bytes, max_points)?,
         "stl" => {
             check_stl_counts(bytes, max_points)?;
             guarded("stl", || parse_stl(bytes))?
@@ -282,31 +284,38 @@ fn parse_xyz(bytes: &[u8], max_points: usize) -> Result<Vec<Point3>> {
 // OBJ
 // ---------------------------------------------------------------------------------------------
 
-/// Counts the `v` lines (as tobj splits them: first whitespace-separated word `v`) and rejects
-/// more than `max_points`.
-fn check_obj_count(bytes: &[u8], max_points: usize) -> Result<()> {
-    let n = bytes
-        .split(|&b| b == b'\n')
-        .filter(|l| std::str::from_utf8(l).ok().and_then(|s| s.split_whitespace().next()) == Some("v"))
-        .count();
+/// `v x y z [w]` lines (a 4th value divides, more values, e.g. colors, are ignored); every other
+/// statement (faces, normals, texture coordinates, groups, materials) is skipped unread, so a
+/// point-cloud OBJ without faces gives its points and no face is stored.
+fn parse_obj(bytes: &[u8], max_points: usize) -> Result<Vec<Point3>> {
+    let s = text(bytes, "obj")?;
+    // (line number, the values after `v`)
+    let vertex_lines = || {
+        s.lines().enumerate().filter_map(|(i, line)| {
+            let mut toks = line.split('#').next().unwrap_or("").split_whitespace();
+            (toks.next() == Some("v")).then_some((i + 1, toks))
+        })
+    };
+    let n = vertex_lines().count();
     if n > max_points {
         return Err(exhausted(format!(
             "the obj file has {n} `v` lines, which exceeds the limit of {max_points} points"
         )));
     }
-    Ok(())
-}
-
-fn parse_obj(bytes: &[u8]) -> Result<Vec<Point3>> {
-    let mut reader = std::io::BufReader::new(bytes);
-    let opts = tobj::LoadOptions { single_index: false, triangulate: false, ..Default::default() };
-    let (models, _) = tobj::load_obj_buf(&mut reader, &opts, |_| Err(tobj::LoadError::OpenFileFailed))
-        .map_err(|e| invalid(format!("malformed obj file: {}", foreign_message(&e.to_string()))))?;
-    let mut pts = Vec::new();
-    for m in models {
-        for v in m.mesh.positions.chunks_exact(3) {
-            pts.push(Point3::new(v[0] as Real, v[1] as Real, v[2] as Real));
+    let mut pts = Vec::with_capacity(n);
+    for (line, mut toks) in vertex_lines() {
+        let x = parse_coord(toks.next(), line, "obj")?;
+        let y = parse_coord(toks.next(), line, "obj")?;
+        let z = parse_coord(toks.next(), line, "obj")?;
+        let mut p = Point3::new(x, y, z);
+        if let (Some(w), None) = (toks.next(), toks.next()) {
+            let w = parse_coord(Some(w), line, "obj")?;
+            if w == 0.0 {
+                return Err(invalid(format!("obj line {line}: the weight w is 0")));
+            }
+            p /= w;
         }
+        pts.push(p);
     }
     Ok(pts)
 }
@@ -1304,8 +1313,8 @@ mod tests {
                 "malformed stl file: expected `outer loop`, got `outer lop`",
             ),
             (b"solid x\nfacet normal 0 0 1\nouter loop\nvertex 1 2 q\n", "stl", "malformed stl file: invalid float"),
-            (b"v 1 2 zz\n", "obj", "malformed obj file: position parse error"),
-            (b"v 1 2 3\nf 1 7 -9\n", "obj", "malformed obj file: face"),
+            (b"v 1 2 3\nv 1 2 zz\n", "obj", "obj line 2: `zz` is not a number"),
+            (b"v 1 2 3\nv 1 2 3 0\n", "obj", "obj line 2: the weight w is 0"),
         ];
         for (bytes, fmt, needle) in cases {
             let r = parse_points(bytes, fmt);
@@ -1349,5 +1358,29 @@ mod tests {
             }
         }
         assert!(n >= 10, "{n} seeds");
+    }
+
+    #[test]
+    fn obj_reads_every_v_line_and_skips_the_rest() {
+        // A point cloud without faces (tobj returned no positions for it).
+        let cloud = b"v 0 0 0\nv 1 0 0\r\nv 0 1 0 # comment\n\tv 0 0 2 2\nv 1 1 1 0.5 0.5 0.5\n";
+        assert_eq!(
+            parse_points(cloud, "obj").unwrap(),
+            vec![
+                Point3::new(0.0, 0.0, 0.0),
+                Point3::new(1.0, 0.0, 0.0),
+                Point3::new(0.0, 1.0, 0.0),
+                Point3::new(0.0, 0.0, 1.0),
+                Point3::new(1.0, 1.0, 1.0)
+            ]
+        );
+        // Faces, normals and texture coordinates are not read: out-of-range or overflowing
+        // relative indices (a tobj panic found by fuzzing, fuzz/regressions/mesh_obj) do no harm.
+        let faces = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvn 0 0 1\nf 1/1/-9223372036854775807 2/-6/1 3//-4\nf 1 7 -9\n";
+        assert_eq!(parse_points(faces, "obj").unwrap().len(), 3);
+        let crash = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("fuzz/regressions/mesh_obj/tobj-normal-index-overflow.obj");
+        let _ = parse_points_limited(&std::fs::read(crash).unwrap(), "obj", 100_000);
+        expect_mesh_error(parse_points(b"vt 0 0\nf 1 2 3\n", "obj"), "the obj file has no vertices");
     }
 }
