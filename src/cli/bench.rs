@@ -7,6 +7,7 @@
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use std::sync::Arc;
 use std::time::Instant;
 use sublevel::fit::{fit_points, mesh::load_points, FitSettings};
 use sublevel::math::{Isometry3, Real, UnitQuaternion, Vector3};
@@ -308,11 +309,11 @@ fn bench_queries(
         total += 2;
     }
     let (mut dw, mut gw) = (Vec::new(), Vec::new());
-    let mut wd: Option<DistanceWarmStart> = None;
-    let mut wg: Option<GrowthWarmStart> = None;
+    let mut wd: Option<Arc<DistanceWarmStart>> = None;
+    let mut wg: Option<Arc<GrowthWarmStart>> = None;
     for (k, pose) in motion.iter().enumerate() {
-        let (us, d) = time_us(args.repeats, || distance(chair, pose, human, &human_pose, wd.as_ref(), params));
-        let (usg, g) = time_us(args.repeats, || growth(chair, pose, human, &human_pose, wg.as_ref(), params));
+        let (us, d) = time_us(args.repeats, || distance(chair, pose, human, &human_pose, wd.as_deref(), params));
+        let (usg, g) = time_us(args.repeats, || growth(chair, pose, human, &human_pose, wg.as_deref(), params));
         if k > 0 {
             dw.push(us);
             gw.push(usg);

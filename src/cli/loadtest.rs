@@ -22,7 +22,9 @@
 //! # Scenarios
 //!
 //! - `unary`: one `Distance` call per request (one pair, cycling through the K pairs).
-//! - `batch`: one `BatchQuery` of the K DISTANCE pairs per request (stored poses).
+//! - `batch`: one `BatchQuery` of the K DISTANCE pairs per request (stored poses); with
+//!   `--columns` in columns (`PairColumns` → `AnswerColumns`: no message per pair; the stream
+//!   scenario too).
 //! - `stream`: planner-like. Each client task holds one `QueryStream`; each request is one planner
 //!   state: it moves the chair a small step (≈ 0.5 mm and ≤ 0.5 mrad) along a smooth closed path
 //!   (a Lissajous figure of 0.3 m amplitude, turning ±0.3 rad about z) through `QueryRequest.poses`
@@ -62,7 +64,7 @@
 //! thread). `--json PATH` writes the same figures: `scenario`, `p50_us`, `p90_us`, `p99_us`,
 //! `p999_us`, `max_us`, `mean_us`, `requests`, `requests_per_s`, `pair_queries`,
 //! `pair_queries_per_s`, `errors` (status code → count), `concurrency`, `duration_s` (measured),
-//! `pairs_per_request`, `rate` (null: closed loop), `shared_channel`, `stream_query`,
+//! `pairs_per_request`, `rate` (null: closed loop), `shared_channel`, `columns`, `stream_query`,
 //! `in_process_pair_queries_per_s`, `grpc_over_in_process`, and for the open loop `send_lag_p50_us`,
 //! `send_lag_p99_us`, `unsent`; for `mixed` also `by_operation` (the same latency and count fields
 //! per kind).
@@ -171,6 +173,10 @@ pub struct LoadtestArgs {
     /// All client tasks share one channel (one HTTP/2 connection).
     #[arg(long)]
     pub shared_channel: bool,
+    /// Batch and stream requests in columns (`BatchQueryRequest.columns`,
+    /// `QueryRequest.columns`, answered in `AnswerColumns`) instead of one message per pair.
+    #[arg(long)]
+    pub columns: bool,
     /// Seconds of the single-threaded in-process comparison run (0 skips it).
     #[arg(long, default_value_t = 1.0)]
     pub in_process_seconds: f64,
@@ -498,6 +504,7 @@ struct Plan {
     stream_query: StreamQuery,
     margin: f64,
     record: bool,
+    columns: bool,
     scene: String,
     chair: String,
     /// The second instance of every pair.
@@ -620,6 +627,10 @@ struct Task<'a> {
     picker: OpPicker,
     /// The K DISTANCE pairs of a batch.
     batch: Vec<pb::QueryPair>,
+    /// The same K pairs in columns.
+    columns: pb::PairColumns,
+    /// The K planner queries in columns.
+    stream_columns: pb::PairColumns,
     /// The K planner queries of a stream step.
     queries: Vec<pb::PlannerQuery>,
 }
@@ -650,6 +661,27 @@ impl<'a> Task<'a> {
                 ..Default::default()
             })
             .collect();
+        // Columns: instance 0 is the chair, then each distinct second instance once.
+        let mut instance_ids = vec![plan.chair.clone()];
+        let mut second = Vec::with_capacity(plan.seconds.len());
+        for h in &plan.seconds {
+            let index = match instance_ids.iter().position(|id| id == h) {
+                Some(i) => i,
+                None => {
+                    instance_ids.push(h.clone());
+                    instance_ids.len() - 1
+                }
+            };
+            second.push(index as u32);
+        }
+        let columns = pb::PairColumns {
+            kind: pb::QueryKind::Distance as i32,
+            instance_ids,
+            first: vec![0; second.len()],
+            second,
+            margin: 0.0,
+        };
+        let stream_columns = pb::PairColumns { kind: kind as i32, margin, ..columns.clone() };
         let queries = plan
             .seconds
             .iter()
@@ -667,6 +699,8 @@ impl<'a> Task<'a> {
             stream: None,
             picker: OpPicker::new(plan.scenario, task),
             batch,
+            columns,
+            stream_columns,
             queries,
         }
     }
@@ -692,7 +726,17 @@ impl<'a> Task<'a> {
                 Ok(1)
             }
             Op::Batch => {
-                let req = pb::BatchQueryRequest { scene_id: plan.scene.clone(), pairs: self.batch.clone() };
+                if plan.columns {
+                    let req = pb::BatchQueryRequest {
+                        scene_id: plan.scene.clone(),
+                        pairs: Vec::new(),
+                        columns: Some(self.columns.clone()),
+                    };
+                    let c = self.client.batch_query(req).await?.into_inner().columns.ok_or(Failure::BadResponse)?;
+                    return self.check_columns(&c, record);
+                }
+                let req =
+                    pb::BatchQueryRequest { scene_id: plan.scene.clone(), pairs: self.batch.clone(), columns: None };
                 let answers = self.client.batch_query(req).await?.into_inner().answers;
                 self.check(&answers, record)
             }
@@ -702,9 +746,10 @@ impl<'a> Task<'a> {
                 let req = pb::QueryRequest {
                     scene_id: plan.scene.clone(),
                     poses: vec![pb::InstancePose { instance_id: plan.chair.clone(), pose: Some(proto_pose(&chair)) }],
-                    queries: self.queries.clone(),
+                    queries: if plan.columns { Vec::new() } else { self.queries.clone() },
                     states: Vec::new(),
                     request_id: step,
+                    columns: plan.columns.then(|| self.stream_columns.clone()),
                 };
                 let resp = self.stream_step(req).await?;
                 if resp.request_id != step || !resp.states.is_empty() {
@@ -713,6 +758,9 @@ impl<'a> Task<'a> {
                 let mut record = record;
                 if let Some(r) = record.as_mut() {
                     r.chair = Some(chair);
+                }
+                if plan.columns {
+                    return self.check_columns(resp.columns.as_ref().ok_or(Failure::BadResponse)?, record);
                 }
                 self.check(&resp.answers, record)
             }
@@ -731,6 +779,21 @@ impl<'a> Task<'a> {
             }
         }
         Ok(answers.len())
+    }
+
+    /// Checks that every column has one entry per pair, every answer converged (and records the
+    /// distances).
+    fn check_columns(&self, c: &pb::AnswerColumns, record: Option<&mut Record>) -> std::result::Result<usize, Failure> {
+        let k = self.plan.pairs;
+        let lengths = [c.value.len(), c.converged.len(), c.overlapping.len(), c.lower_bound.len()];
+        if lengths.iter().any(|&n| n != k) || c.point_a.len() != 3 * k || c.point_b.len() != 3 * k {
+            return Err(Failure::BadResponse);
+        }
+        if let Some(r) = record {
+            r.pairs.extend(0..k);
+            r.distances.extend_from_slice(&c.value);
+        }
+        Ok(k)
     }
 
     /// Sends one request on the task's stream (opening it first if needed) and waits for its
@@ -879,6 +942,7 @@ struct Report {
     pairs_per_request: usize,
     rate: Option<f64>,
     stream_query: StreamQuery,
+    columns: bool,
     duration_s: f64,
     overall: Figures,
     /// Requests of each kind (mixed), in [`OPS`] order.
@@ -930,10 +994,14 @@ impl Report {
             Some(r) => format!("open loop at {r} requests/s"),
             None => "closed loop".to_owned(),
         };
-        let kind = match (self.scenario, self.stream_query) {
+        let mut kind = match (self.scenario, self.stream_query) {
             (Scenario::Stream | Scenario::Mixed, StreamQuery::Collide) => ", stream queries COLLIDE",
             _ => "",
-        };
+        }
+        .to_owned();
+        if self.columns && self.scenario != Scenario::Unary {
+            kind.push_str(", in columns");
+        }
         let _ = writeln!(
             s,
             "loadtest {}: {}, concurrency {} ({lane}), {} pairs/request{kind}, {:.2} s, {}",
@@ -1010,6 +1078,7 @@ impl Report {
         o.insert("histogram_count".into(), self.histogram_count.into());
         o.insert("rate".into(), self.rate.into());
         o.insert("shared_channel".into(), self.shared_channel.into());
+        o.insert("columns".into(), self.columns.into());
         o.insert(
             "stream_query".into(),
             match self.stream_query {
@@ -1092,6 +1161,7 @@ fn execute(args: &LoadtestArgs, record: bool) -> Result<Outcome> {
         pairs_per_request: args.pairs,
         rate: args.rate,
         stream_query: args.stream_query,
+        columns: args.columns,
         duration_s,
         overall: Figures::new(&tally.all, requests, pair_queries),
         by_op,
@@ -1127,6 +1197,7 @@ fn load(
         stream_query: args.stream_query,
         margin: args.margin,
         record,
+        columns: args.columns,
         scene: remote.scene.clone().unwrap_or_default(),
         chair: remote.chair.clone(),
         seconds: layout.pair_humans.iter().map(|&h| remote.humans[h].clone()).collect(),
@@ -1241,6 +1312,9 @@ fn in_process(args: &LoadtestArgs, layout: &Layout, seconds: Duration) -> Result
         StreamQuery::Collide => (QueryKind::Collide, args.margin),
     };
     let queries: Vec<QueryPair> = (0..k).map(|j| local.pair(layout, j, kind, margin)).collect();
+    // The columns form (distinct ids, repeats allowed: the in-process cost does not depend on it).
+    let column_ids: Vec<String> =
+        std::iter::once(batch[0].first.clone()).chain(batch.iter().map(|q| q.second.clone())).collect();
     let mut view = QueryView::new(&local.scene);
     let mut picker = OpPicker::new(args.scenario, 0);
     let mut pairs = 0u64;
@@ -1252,6 +1326,18 @@ fn in_process(args: &LoadtestArgs, layout: &Layout, seconds: Duration) -> Result
                 let q = &batch[j];
                 catalog.distance(&local.scene, &q.first, &q.second)?;
                 pairs += 1;
+            }
+            Op::Batch if args.columns => {
+                let (first, second): (Vec<u32>, Vec<u32>) = (0..k as u32).map(|j| (0, j + 1)).unzip();
+                let answers = catalog.batch_columns(
+                    &local.scene,
+                    &column_ids,
+                    (&first, &second),
+                    QueryKind::Distance,
+                    Default::default(),
+                    0.0,
+                )?;
+                pairs += answers.len() as u64;
             }
             Op::Batch => pairs += catalog.batch(&local.scene, &batch)?.len() as u64,
             Op::Stream => {
@@ -1290,6 +1376,7 @@ mod tests {
             stream_query: StreamQuery::Distance,
             margin: 0.05,
             shared_channel: false,
+            columns: false,
             in_process_seconds: 0.1,
             json: None,
         }

@@ -342,7 +342,7 @@ fn distance_from_certificate(
         witness_b: y,
         normal,
         overlapping,
-        warm_start,
+        warm_start: std::sync::Arc::new(warm_start),
         ..newton
     }
 }
@@ -397,7 +397,7 @@ fn distance_lower_bound(
         iterations: 0,
         kkt_residual: Real::NAN,
         warm_started: false,
-        warm_start: DistanceWarmStart::default(),
+        warm_start: Default::default(),
     };
     let Ok(c) = certify_distance_with_params(a, pose_a, b, pose_b, cert) else {
         // Distance 0 is a (trivial) valid lower bound.
@@ -489,13 +489,13 @@ pub fn certified_growth(
         value: c.value,
         minimizer: x,
         multiplier: c.tau.max(0.0),
-        warm_start: GrowthWarmStart {
+        warm_start: std::sync::Arc::new(GrowthWarmStart {
             local: (pose2.inverse() * x).coords,
             multiplier: c.tau.max(0.0),
             valid: converged,
             relative_pose: pose2.inverse() * pose1,
             trail: Default::default(),
-        },
+        }),
         ..newton
     };
     CertifiedGrowth {
@@ -523,7 +523,7 @@ fn growth_lower_bound(
         iterations: 0,
         kkt_residual: Real::NAN,
         warm_started: false,
-        warm_start: GrowthWarmStart::default(),
+        warm_start: Default::default(),
     };
     let Ok(c) = certify_growth_with_params(p1, pose1, p2, pose2, cert) else {
         // p₁ ≥ 0 is not guaranteed for every body, so no trivial bound: report unconverged.

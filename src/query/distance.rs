@@ -57,7 +57,7 @@ pub struct DistanceResult {
     /// Whether the answer came from the warm start.
     pub warm_started: bool,
     /// State for warm-starting the next query of the same pair.
-    pub warm_start: DistanceWarmStart,
+    pub warm_start: std::sync::Arc<DistanceWarmStart>,
 }
 
 /// Solver state carried between queries of one pair, in body frames so it follows the poses.
@@ -196,7 +196,7 @@ pub fn distance(
             iterations,
             kkt_residual: g.residual,
             warm_started: g.warm_started,
-            warm_start: DistanceWarmStart { growth: growth_warm, ..Default::default() },
+            warm_start: std::sync::Arc::new(DistanceWarmStart { growth: growth_warm, ..Default::default() }),
         }
     };
     if g.value <= 1.0 {
@@ -248,7 +248,7 @@ fn finish(
         iterations,
         kkt_residual: out.residual,
         warm_started,
-        warm_start: DistanceWarmStart {
+        warm_start: std::sync::Arc::new(DistanceWarmStart {
             a_local: out.x,
             b_local: b_local.coords,
             multipliers: out.lam,
@@ -256,7 +256,7 @@ fn finish(
             growth,
             relative_pose: *rel,
             trail: trail.filter(|_| out.status.converged()).map(|t| t.1).unwrap_or_default(),
-        },
+        }),
     }
 }
 
@@ -542,7 +542,7 @@ mod tests {
                     warm_it += r.iterations;
                 }
             }
-            warm = Some(r.warm_start);
+            warm = Some(*r.warm_start);
         }
         // Spheres: the cold start on the line of centers is already optimal.
         assert_eq!(cold_it, 0);
@@ -570,7 +570,7 @@ mod tests {
                 cold_it += cold.iterations;
                 warm_it += w.iterations;
             }
-            warm = Some(w.warm_start);
+            warm = Some(*w.warm_start);
         }
         assert!(warm_it < cold_it, "warm {warm_it} vs cold {cold_it}");
     }
@@ -616,8 +616,8 @@ mod tests {
                 warm_it += d.iterations + g.iterations;
                 cold_it += c.iterations + gc.iterations;
             }
-            wd = Some(d.warm_start);
-            wg = Some(g.warm_start);
+            wd = Some(*d.warm_start);
+            wg = Some(*g.warm_start);
         }
         assert!(overlapping > 10 && overlapping < 100, "the motion must pass through: {overlapping}");
         assert!(2 * warm_it < cold_it, "warm {warm_it} vs cold {cold_it} iterations");

@@ -40,7 +40,7 @@ pub struct GrowthResult {
     /// Whether the solve started from a warm start and converged from it.
     pub warm_started: bool,
     /// State for warm-starting the next query of the same pair.
-    pub warm_start: GrowthWarmStart,
+    pub warm_start: std::sync::Arc<GrowthWarmStart>,
 }
 
 /// Growth solver state carried between queries of one pair, in body 2's own frame so that it
@@ -150,7 +150,7 @@ pub fn growth(
         iterations: core.iterations,
         kkt_residual: core.residual,
         warm_started: core.warm_started,
-        warm_start: GrowthWarmStart::after(start, core.x, core.mu, core.status.converged(), rel),
+        warm_start: std::sync::Arc::new(GrowthWarmStart::after(start, core.x, core.mu, core.status.converged(), rel)),
     }
 }
 
@@ -508,7 +508,7 @@ mod tests {
                 cold_iters += cold.iterations;
                 warm_iters += r.iterations;
             }
-            warm = Some(r.warm_start);
+            warm = Some(*r.warm_start);
         }
         // Spheres: the cold start (boundary point on the line of centers) is already optimal.
         assert_eq!(cold_iters, 0);
@@ -539,7 +539,7 @@ mod tests {
                 cold_iters += cold.iterations;
                 warm_iters += w.iterations;
             }
-            warm = Some(w.warm_start);
+            warm = Some(*w.warm_start);
         }
         assert!(warm_iters < cold_iters, "warm {warm_iters} vs cold {cold_iters}");
     }

@@ -200,8 +200,8 @@ pub fn stability_cases(
                 let np = Default::default();
                 let d = distance(&near.a, &near.pose_a, &near.b, &far_b, None, &np);
                 let g = growth(&near.a, &near.pose_a, &near.b, &far_b, None, &np);
-                near.warm_distance = Some(d.warm_start);
-                near.warm_growth = Some(g.warm_start);
+                near.warm_distance = Some(*d.warm_start);
+                near.warm_growth = Some(*g.warm_start);
                 near
             })
             .collect(),

@@ -8,6 +8,7 @@
 
 use crate::query::{DistanceWarmStart, GrowthWarmStart};
 use std::collections::HashMap;
+use std::sync::Arc;
 
 /// Which query a warm start belongs to.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -30,52 +31,90 @@ pub struct PairKey {
     pub second: String,
 }
 
-/// Warm starts of one scene.
+/// Hasher of the cache's maps: foldhash (fast, non-cryptographic). The keys are instance ids of
+/// one scene; a client choosing ids to collide only slows its own scene's queries.
+type Fast = foldhash::fast::RandomState;
+
+/// One kind's warm starts: first instance → second instance → state. Two levels so a lookup by
+/// `(&str, &str)` allocates nothing (a lookup is on the hot path of every query).
+type PairMap<W> = HashMap<String, HashMap<String, W, Fast>, Fast>;
+
+/// Warm starts of one scene. States are shared (`Arc`) with the answers that produced them: a
+/// distance warm start with its motion trail is about 1 KB, and an answer hands its new one over
+/// without copying it.
 #[derive(Debug, Default)]
 pub struct WarmStartCache {
-    distance: HashMap<(String, String), DistanceWarmStart>,
-    growth: HashMap<(String, String), GrowthWarmStart>,
+    distance: PairMap<Arc<DistanceWarmStart>>,
+    growth: PairMap<Arc<GrowthWarmStart>>,
+}
+
+fn get<'a, W>(map: &'a PairMap<W>, a: &str, b: &str) -> Option<&'a W> {
+    map.get(a)?.get(b)
+}
+
+fn put<W>(map: &mut PairMap<W>, a: &str, b: &str, warm: W) {
+    let inner = match map.get_mut(a) {
+        Some(inner) => inner,
+        None => map.entry(a.to_owned()).or_default(),
+    };
+    match inner.get_mut(b) {
+        Some(slot) => *slot = warm,
+        None => {
+            inner.insert(b.to_owned(), warm);
+        }
+    }
+}
+
+fn count<W>(map: &PairMap<W>) -> usize {
+    map.values().map(HashMap::len).sum()
+}
+
+fn drop_instance<W>(map: &mut PairMap<W>, id: &str) {
+    map.remove(id);
+    map.retain(|_, inner| {
+        inner.remove(id);
+        !inner.is_empty()
+    });
 }
 
 impl WarmStartCache {
     /// The stored distance warm start of the ordered pair (a, b), if any.
     pub fn distance(&self, a: &str, b: &str) -> Option<&DistanceWarmStart> {
-        self.distance.get(&(a.to_owned(), b.to_owned()))
+        get(&self.distance, a, b).map(|w| &**w)
     }
 
     /// Stores the distance warm start of (a, b), replacing the previous one.
-    pub fn put_distance(&mut self, a: &str, b: &str, warm: DistanceWarmStart) {
-        self.distance.insert((a.to_owned(), b.to_owned()), warm);
+    pub fn put_distance(&mut self, a: &str, b: &str, warm: Arc<DistanceWarmStart>) {
+        put(&mut self.distance, a, b, warm);
     }
 
     /// The stored growth warm start of the ordered pair (p₁, p₂), if any.
     pub fn growth(&self, p1: &str, p2: &str) -> Option<&GrowthWarmStart> {
-        self.growth.get(&(p1.to_owned(), p2.to_owned()))
+        get(&self.growth, p1, p2).map(|w| &**w)
     }
 
     /// Stores the growth warm start of (p₁, p₂), replacing the previous one.
-    pub fn put_growth(&mut self, p1: &str, p2: &str, warm: GrowthWarmStart) {
-        self.growth.insert((p1.to_owned(), p2.to_owned()), warm);
+    pub fn put_growth(&mut self, p1: &str, p2: &str, warm: Arc<GrowthWarmStart>) {
+        put(&mut self.growth, p1, p2, warm);
     }
 
     /// Whether a warm start is stored for `key`.
     pub fn contains(&self, key: &PairKey) -> bool {
-        let k = (key.first.clone(), key.second.clone());
         match key.kind {
-            WarmKind::Distance => self.distance.contains_key(&k),
-            WarmKind::Growth => self.growth.contains_key(&k),
+            WarmKind::Distance => get(&self.distance, &key.first, &key.second).is_some(),
+            WarmKind::Growth => get(&self.growth, &key.first, &key.second).is_some(),
         }
     }
 
     /// Drops every warm start involving `instance_id` (on either side, both kinds).
     pub fn invalidate_instance(&mut self, instance_id: &str) {
-        self.distance.retain(|(a, b), _| a != instance_id && b != instance_id);
-        self.growth.retain(|(a, b), _| a != instance_id && b != instance_id);
+        drop_instance(&mut self.distance, instance_id);
+        drop_instance(&mut self.growth, instance_id);
     }
 
     /// Number of stored warm starts (both kinds).
     pub fn len(&self) -> usize {
-        self.distance.len() + self.growth.len()
+        count(&self.distance) + count(&self.growth)
     }
 
     /// True when nothing is stored.
@@ -92,10 +131,10 @@ mod tests {
     fn invalidation_drops_exactly_the_pairs_of_an_instance() {
         let mut c = WarmStartCache::default();
         let g = GrowthWarmStart { valid: true, multiplier: 2.0, ..Default::default() };
-        c.put_growth("a", "b", g);
-        c.put_growth("b", "c", g);
-        c.put_distance("c", "a", DistanceWarmStart::default());
-        c.put_distance("b", "c", DistanceWarmStart::default());
+        c.put_growth("a", "b", Arc::new(g));
+        c.put_growth("b", "c", Arc::new(g));
+        c.put_distance("c", "a", Arc::default());
+        c.put_distance("b", "c", Arc::default());
         assert_eq!(c.len(), 4);
         assert_eq!(c.growth("a", "b").map(|w| w.multiplier), Some(2.0));
         assert!(c.growth("b", "a").is_none(), "pairs are ordered");

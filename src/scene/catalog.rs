@@ -10,7 +10,7 @@ use crate::query::{
     PoseGradient,
 };
 use crate::{Error, Result};
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 use std::sync::{Arc, Mutex, MutexGuard, RwLock, RwLockReadGuard, RwLockWriteGuard};
 
 /// Longest accepted body or scene name, in bytes.
@@ -64,6 +64,36 @@ pub struct QueryPair {
     pub first: String,
     /// Second instance (B, or p₂).
     pub second: String,
+    /// Certification and gradient options.
+    pub options: QueryOptions,
+    /// For [`QueryKind::Collide`]: the margin in meters (≥ 0); ignored otherwise.
+    pub margin: crate::math::Real,
+}
+
+impl QueryPair {
+    /// This query by reference ([`PairRef`]).
+    pub fn view(&self) -> PairRef<'_> {
+        PairRef {
+            kind: self.kind,
+            first: &self.first,
+            second: &self.second,
+            options: self.options,
+            margin: self.margin,
+        }
+    }
+}
+
+/// One query with borrowed instance ids: what [`super::planner::answer_pair`] needs (the ids key
+/// the warm starts). Built from a [`QueryPair`] ([`QueryPair::view`]) or from columns
+/// ([`Catalog::batch_columns`]) without allocating.
+#[derive(Clone, Copy, Debug)]
+pub struct PairRef<'a> {
+    /// Which query.
+    pub kind: QueryKind,
+    /// First instance (A, or p₁).
+    pub first: &'a str,
+    /// Second instance (B, or p₂).
+    pub second: &'a str,
     /// Certification and gradient options.
     pub options: QueryOptions,
     /// For [`QueryKind::Collide`]: the margin in meters (≥ 0); ignored otherwise.
@@ -591,22 +621,67 @@ impl Catalog {
     /// [`Error::NotFound`] for the scene or any instance (checked before any query runs).
     pub fn batch(&self, scene_id: &str, pairs: &[QueryPair]) -> Result<Vec<QueryAnswer>> {
         self.with_scene(scene_id, |s| {
+            // Each instance is looked up once per batch (ids repeat across pairs).
+            let mut posed_by_id: HashMap<&str, super::planner::Posed, foldhash::fast::RandomState> = HashMap::default();
             for p in pairs {
                 for id in [&p.first, &p.second] {
-                    if !s.instances.contains_key(id) {
-                        return Err(Error::not_found("instance", id.as_str()));
+                    if !posed_by_id.contains_key(id.as_str()) {
+                        posed_by_id.insert(id, posed(s, id)?);
                     }
                 }
             }
             let params = self.certify_params();
-            let answers = pairs
-                .iter()
-                .map(|p| {
-                    let (a, b) = (posed(s, &p.first)?, posed(s, &p.second)?);
-                    Ok(super::planner::answer_pair(p, &a, &b, &mut s.cache, &params))
-                })
-                .collect();
-            answers
+            let mut answers = Vec::with_capacity(pairs.len());
+            for p in pairs {
+                let (a, b) = (&posed_by_id[p.first.as_str()], &posed_by_id[p.second.as_str()]);
+                answers.push(super::planner::answer_pair(p.view(), a, b, &mut s.cache, &params));
+            }
+            Ok(answers)
+        })
+    }
+
+    /// Queries of one kind given in columns: pair k asks about `ids[first[k]]` and
+    /// `ids[second[k]]` (the form of `BatchQueryRequest.columns`), under one lock like
+    /// [`Catalog::batch`]; answers in order. Each id is looked up once.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] for `first` and `second` of different lengths or an index
+    /// outside `ids`; [`Error::NotFound`] for the scene or an instance (checked before any query
+    /// runs).
+    pub fn batch_columns(
+        &self,
+        scene_id: &str,
+        ids: &[String],
+        (first, second): (&[u32], &[u32]),
+        kind: QueryKind,
+        options: QueryOptions,
+        margin: crate::math::Real,
+    ) -> Result<Vec<QueryAnswer>> {
+        if first.len() != second.len() {
+            return Err(Error::invalid(
+                "columns.second",
+                format!("has {} entries, `first` has {}", second.len(), first.len()),
+            ));
+        }
+        for (field, column) in [("columns.first", first), ("columns.second", second)] {
+            if let Some((k, i)) = column.iter().enumerate().find(|(_, &i)| i as usize >= ids.len()) {
+                return Err(Error::invalid(
+                    format!("{field}[{k}]"),
+                    format!("index {i} is outside instance_ids (length {})", ids.len()),
+                ));
+            }
+        }
+        self.with_scene(scene_id, |s| {
+            let posed_by_index = ids.iter().map(|id| posed(s, id)).collect::<Result<Vec<_>>>()?;
+            let params = self.certify_params();
+            let mut answers = Vec::with_capacity(first.len());
+            for (&i, &j) in first.iter().zip(second) {
+                let (i, j) = (i as usize, j as usize);
+                let pair = PairRef { kind, first: &ids[i], second: &ids[j], options, margin };
+                let (a, b) = (&posed_by_index[i], &posed_by_index[j]);
+                answers.push(super::planner::answer_pair(pair, a, b, &mut s.cache, &params));
+            }
+            Ok(answers)
         })
     }
 }
@@ -642,7 +717,7 @@ fn run_distance(
     let pair =
         QueryPair { kind: QueryKind::Distance, first: a.into(), second: b.into(), options: *options, margin: 0.0 };
     let (pa, pb) = (posed(s, a)?, posed(s, b)?);
-    match super::planner::answer_pair(&pair, &pa, &pb, &mut s.cache, params) {
+    match super::planner::answer_pair(pair.view(), &pa, &pb, &mut s.cache, params) {
         QueryAnswer::Distance(d) => Ok(d),
         _ => Err(Error::Numerical("a distance query answered with another kind".into())),
     }
@@ -658,7 +733,7 @@ fn run_growth(
     let pair =
         QueryPair { kind: QueryKind::Growth, first: p1.into(), second: p2.into(), options: *options, margin: 0.0 };
     let (pa, pb) = (posed(s, p1)?, posed(s, p2)?);
-    match super::planner::answer_pair(&pair, &pa, &pb, &mut s.cache, params) {
+    match super::planner::answer_pair(pair.view(), &pa, &pb, &mut s.cache, params) {
         QueryAnswer::Growth(g) => Ok(g),
         _ => Err(Error::Numerical("a growth query answered with another kind".into())),
     }
@@ -682,6 +757,16 @@ pub struct PosedInstance {
 }
 
 impl Catalog {
+    /// The posed bodies (body and stored pose) of instances of a scene, in the order of `ids`,
+    /// read under the scene's lock so all poses are of one moment; nothing is copied but the
+    /// poses (the bodies are shared).
+    ///
+    /// # Errors
+    /// [`Error::NotFound`] for the scene or an instance.
+    pub fn posed_by_ids(&self, scene_id: &str, ids: &[&str]) -> Result<Vec<super::planner::Posed>> {
+        self.with_scene(scene_id, |s| ids.iter().map(|id| posed(s, id)).collect())
+    }
+
     /// The bodies and poses of instances of a scene, in the order asked (`ids` empty: every
     /// instance, ordered by id), read under the scene's lock so all poses are of one moment.
     ///

@@ -34,8 +34,8 @@ pub mod store;
 
 pub use catalog::precision_limited;
 pub use catalog::{
-    BodyEntry, Catalog, DistanceReply, GrowthReply, InstanceView, PosedInstance, QueryAnswer, QueryKind, QueryOptions,
-    QueryPair, SceneView, MAX_JOB_RECORDS, MAX_NAME_BYTES, PRECISION_LIMIT,
+    BodyEntry, Catalog, DistanceReply, GrowthReply, InstanceView, PairRef, PosedInstance, QueryAnswer, QueryKind,
+    QueryOptions, QueryPair, SceneView, MAX_JOB_RECORDS, MAX_NAME_BYTES, PRECISION_LIMIT,
 };
 
 use crate::body::BodyFile;

@@ -16,7 +16,7 @@
 //! body `Arc` and a pose each) under the lock, then every solve runs on that snapshot.
 
 use super::cache::WarmStartCache;
-use super::catalog::{Catalog, DistanceReply, GrowthReply, QueryAnswer, QueryKind, QueryOptions, QueryPair};
+use super::catalog::{Catalog, DistanceReply, GrowthReply, PairRef, QueryAnswer, QueryKind, QueryOptions, QueryPair};
 use crate::body::Body;
 use crate::math::{Isometry3, Real};
 use crate::query::{
@@ -63,7 +63,7 @@ pub fn sphere_lower_bound(a: &Body, pose_a: &Isometry3, b: &Body, pose_b: &Isome
 /// `options.cold` ignores and leaves no warm start. The core of [`Catalog::batch`] and of
 /// [`QueryView::run`].
 pub fn answer_pair(
-    pair: &QueryPair,
+    pair: PairRef<'_>,
     a: &Posed,
     b: &Posed,
     cache: &mut WarmStartCache,
@@ -99,14 +99,14 @@ pub fn answer_pair(
 }
 
 fn distance_reply(
-    pair: &QueryPair,
+    pair: PairRef<'_>,
     a: &Posed,
     b: &Posed,
     cache: &mut WarmStartCache,
     params: &CertifyParams,
 ) -> DistanceReply {
     let o = &pair.options;
-    let warm = if o.cold { None } else { cache.distance(&pair.first, &pair.second) };
+    let warm = if o.cold { None } else { cache.distance(pair.first, pair.second) };
     let r = certified_distance(&a.body, &a.pose, &b.body, &b.pose, warm, params, o.mode);
     let gradients = (o.with_gradient && r.source != AnswerSource::SdpLowerBound).then(|| distance_gradient(&r.result));
     let precision_limited = super::catalog::precision_limited(&a.body, &a.pose, &b.body, &b.pose);
@@ -114,26 +114,26 @@ fn distance_reply(
         .then(|| crate::query::penetration::penetration(&a.body, &a.pose, &b.body, &b.pose).ok())
         .flatten();
     if !r.lower_bound && !o.cold {
-        cache.put_distance(&pair.first, &pair.second, r.result.warm_start);
+        cache.put_distance(pair.first, pair.second, r.result.warm_start.clone());
     }
     DistanceReply { answer: r, gradients, precision_limited, signed: o.signed, penetration }
 }
 
 fn growth_reply(
-    pair: &QueryPair,
+    pair: PairRef<'_>,
     a: &Posed,
     b: &Posed,
     cache: &mut WarmStartCache,
     params: &CertifyParams,
 ) -> GrowthReply {
     let o = &pair.options;
-    let warm = if o.cold { None } else { cache.growth(&pair.first, &pair.second) };
+    let warm = if o.cold { None } else { cache.growth(pair.first, pair.second) };
     let r = certified_growth(&a.body, &a.pose, &b.body, &b.pose, warm, params, o.mode);
     let gradients = (o.with_gradient && r.source != AnswerSource::SdpLowerBound)
         .then(|| growth_gradient(&a.body, &a.pose, &r.result));
     let precision_limited = super::catalog::precision_limited(&a.body, &a.pose, &b.body, &b.pose);
     if !r.lower_bound && !o.cold {
-        cache.put_growth(&pair.first, &pair.second, r.result.warm_start);
+        cache.put_growth(pair.first, pair.second, r.result.warm_start.clone());
     }
     GrowthReply { answer: r, gradients, precision_limited }
 }
@@ -160,12 +160,15 @@ pub enum PlannerAnswers {
     PerState(Vec<Vec<QueryAnswer>>),
 }
 
+/// The posed instances of one request, by id.
+type PosedMap<'a> = HashMap<&'a str, Posed, foldhash::fast::RandomState>;
+
 /// A client's private view of a scene: pose overrides and warm starts of its own (see the module
 /// docs). A QueryStream holds one for its lifetime; a unary Query uses a fresh one.
 #[derive(Debug)]
 pub struct QueryView {
     scene_id: String,
-    overrides: HashMap<String, Isometry3>,
+    overrides: HashMap<String, Isometry3, foldhash::fast::RandomState>,
     cache: WarmStartCache,
 }
 
@@ -182,7 +185,7 @@ fn check_unique(field: &str, poses: &[(String, Isometry3)]) -> Result<()> {
 impl QueryView {
     /// An empty view of `scene_id` (stored poses, no warm starts).
     pub fn new(scene_id: &str) -> Self {
-        Self { scene_id: scene_id.to_owned(), overrides: HashMap::new(), cache: WarmStartCache::default() }
+        Self { scene_id: scene_id.to_owned(), overrides: HashMap::default(), cache: WarmStartCache::default() }
     }
 
     /// The scene this view looks at.
@@ -206,12 +209,12 @@ impl QueryView {
         for (s, state) in request.states.iter().enumerate() {
             check_unique(&format!("states[{s}].poses"), state)?;
         }
-        let mut ids: Vec<String> = request.poses.iter().map(|(id, _)| id.clone()).collect();
-        ids.extend(request.states.iter().flatten().map(|(id, _)| id.clone()));
-        ids.extend(request.queries.iter().flat_map(|q| [q.first.clone(), q.second.clone()]));
-        ids.sort();
+        let mut ids: Vec<&str> = request.poses.iter().map(|(id, _)| id.as_str()).collect();
+        ids.extend(request.states.iter().flatten().map(|(id, _)| id.as_str()));
+        ids.extend(request.queries.iter().flat_map(|q| [q.first.as_str(), q.second.as_str()]));
+        ids.sort_unstable();
         ids.dedup();
-        let stored = catalog.posed_instances(&self.scene_id, &ids).map_err(|e| match e {
+        let stored = catalog.posed_by_ids(&self.scene_id, &ids).map_err(|e| match e {
             Error::NotFound { kind: "instance", id } => {
                 let field = request
                     .poses
@@ -231,28 +234,35 @@ impl QueryView {
             other => other,
         })?;
         for (id, pose) in &request.poses {
-            self.overrides.insert(id.clone(), *pose);
+            match self.overrides.get_mut(id) {
+                Some(p) => *p = *pose,
+                None => {
+                    self.overrides.insert(id.clone(), *pose);
+                }
+            }
         }
-        let mut posed: HashMap<String, Posed> = stored
-            .into_iter()
-            .map(|i| {
-                let pose = self.overrides.get(&i.id).copied().unwrap_or(i.pose);
-                (i.id, Posed { body: i.body, pose })
-            })
-            .collect();
+        let mut posed: PosedMap<'_> = HashMap::with_capacity_and_hasher(ids.len(), Default::default());
+        for (id, mut p) in ids.into_iter().zip(stored) {
+            if let Some(pose) = self.overrides.get(id) {
+                p.pose = *pose;
+            }
+            posed.insert(id, p);
+        }
         let params = catalog.certify_params();
         if request.states.is_empty() {
             return Ok(PlannerAnswers::Single(self.answer_all(&request.queries, &posed, &params)));
         }
         let mut out = Vec::with_capacity(request.states.len());
         for state in &request.states {
-            let saved: Vec<(String, Isometry3)> = state
+            let saved: Vec<(&str, Isometry3)> = state
                 .iter()
-                .filter_map(|(id, pose)| posed.get_mut(id).map(|p| (id.clone(), std::mem::replace(&mut p.pose, *pose))))
+                .filter_map(|(id, pose)| {
+                    posed.get_mut(id.as_str()).map(|p| (id.as_str(), std::mem::replace(&mut p.pose, *pose)))
+                })
                 .collect();
             out.push(self.answer_all(&request.queries, &posed, &params));
             for (id, pose) in saved {
-                if let Some(p) = posed.get_mut(&id) {
+                if let Some(p) = posed.get_mut(id) {
                     p.pose = pose;
                 }
             }
@@ -260,17 +270,12 @@ impl QueryView {
         Ok(PlannerAnswers::PerState(out))
     }
 
-    fn answer_all(
-        &mut self,
-        queries: &[QueryPair],
-        posed: &HashMap<String, Posed>,
-        params: &CertifyParams,
-    ) -> Vec<QueryAnswer> {
+    fn answer_all(&mut self, queries: &[QueryPair], posed: &PosedMap<'_>, params: &CertifyParams) -> Vec<QueryAnswer> {
         queries
             .iter()
             .filter_map(|q| {
-                let (a, b) = (posed.get(&q.first)?, posed.get(&q.second)?);
-                Some(answer_pair(q, a, b, &mut self.cache, params))
+                let (a, b) = (posed.get(q.first.as_str())?, posed.get(q.second.as_str())?);
+                Some(answer_pair(q.view(), a, b, &mut self.cache, params))
             })
             .collect()
     }
@@ -389,7 +394,7 @@ pub fn check_scene(
         let pair = QueryPair { kind: QueryKind::Distance, first: a.id.clone(), second: b.id.clone(), options, margin };
         let pa = Posed { body: a.body.clone(), pose: a.pose };
         let pb = Posed { body: b.body.clone(), pose: b.pose };
-        let d = distance_reply(&pair, &pa, &pb, &mut scratch, &params);
+        let d = distance_reply(pair.view(), &pa, &pb, &mut scratch, &params);
         let r = &d.answer.result;
         if r.overlapping || r.distance < margin {
             out.pairs.push(ScenePair { first: a.id.clone(), second: b.id.clone(), distance: d });

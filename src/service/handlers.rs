@@ -8,10 +8,11 @@ use crate::body::BodyFile;
 use crate::fit::mesh::parse_points_limited;
 use crate::fit::sos_convexity::admit_uploaded;
 use crate::scene::planner::{PlannerAnswers, PlannerRequest, QueryView};
-use crate::scene::Catalog;
+use crate::scene::{Catalog, QueryOptions};
 use crate::{Error, Result};
 use std::sync::Arc;
 use tokio_stream::wrappers::ReceiverStream;
+use tokio_stream::Stream;
 use tonic::{Request, Response, Status};
 
 /// The service state shared by all requests.
@@ -64,6 +65,42 @@ pub(crate) async fn blocking<T: Send + 'static>(f: impl FnOnce() -> Result<T> + 
 }
 
 type Reply<T> = Result<Response<T>, Status>;
+
+/// One QueryStream: its requests, its private view of the scene (from the first request on).
+struct QueryStreamState {
+    inbound: tonic::Streaming<pb::QueryRequest>,
+    catalog: Arc<Catalog>,
+    view: Option<QueryView>,
+    /// (most answers, most poses) of one request.
+    limits: (usize, usize),
+    done: bool,
+}
+
+impl QueryStreamState {
+    /// Answers one request of the stream on its view (created by the first request; later ones
+    /// may repeat its scene id or leave it empty).
+    async fn answer(&mut self, req: pb::QueryRequest) -> Result<pb::QueryResponse, Status> {
+        let start = std::time::Instant::now();
+        let planner = cv::planner_request_from_proto(&req, self.limits.0, self.limits.1)?;
+        let current = match self.view.take() {
+            None => QueryView::new(require_id("scene_id", &req.scene_id)?),
+            Some(v) if req.scene_id.is_empty() || req.scene_id == v.scene_id() => v,
+            Some(v) => {
+                let message = format!(
+                    "a stream answers one scene: `{}` after `{}`",
+                    crate::error::clip(&req.scene_id),
+                    v.scene_id()
+                );
+                self.view = Some(v);
+                return Err(Error::invalid("scene_id", message).into());
+            }
+        };
+        let (back, answers) = run_view(self.catalog.clone(), current, planner).await;
+        self.view = Some(back);
+        let columns = cv::columns_kind(&req);
+        answers.map(|a| cv::planner_answers_to_proto(&a, req.request_id, start.elapsed().as_secs_f64(), columns))
+    }
+}
 
 #[tonic::async_trait]
 impl Sublevel for SublevelService {
@@ -302,6 +339,22 @@ impl Sublevel for SublevelService {
     async fn batch_query(&self, request: Request<pb::BatchQueryRequest>) -> Reply<pb::BatchQueryResponse> {
         let req = request.into_inner();
         require_id("scene_id", &req.scene_id)?;
+        if let Some(columns) = req.columns {
+            if !req.pairs.is_empty() {
+                return Err(Error::invalid("columns", "set either `pairs` or `columns`, not both").into());
+            }
+            let c = cv::pair_columns_from_proto(&columns, self.config.max_batch_pairs)?;
+            let answers = self.catalog.batch_columns(
+                &req.scene_id,
+                &c.instance_ids,
+                (&c.first, &c.second),
+                c.kind,
+                QueryOptions::default(),
+                c.margin,
+            )?;
+            let columns = Some(cv::answers_to_columns(c.kind, &answers));
+            return Ok(Response::new(pb::BatchQueryResponse { answers: Vec::new(), columns }));
+        }
         let pairs = cv::pairs_from_proto(&req.pairs, self.config.max_batch_pairs)?;
         let answers = if pairs.iter().any(|p| p.options.mode == crate::query::CertifyMode::Certify) {
             let catalog = self.catalog.clone();
@@ -309,7 +362,8 @@ impl Sublevel for SublevelService {
         } else {
             self.catalog.batch(&req.scene_id, &pairs)?
         };
-        Ok(Response::new(pb::BatchQueryResponse { answers: answers.iter().map(cv::answer_to_proto).collect() }))
+        let answers = answers.iter().map(cv::answer_to_proto).collect();
+        Ok(Response::new(pb::BatchQueryResponse { answers, columns: None }))
     }
 
     async fn start_group_job(&self, request: Request<pb::StartGroupJobRequest>) -> Reply<pb::StartFitJobResponse> {
@@ -369,65 +423,44 @@ impl Sublevel for SublevelService {
         let view = QueryView::new(&req.scene_id);
         let (_, answers) = run_view(self.catalog.clone(), view, planner).await;
         let answers = answers?;
-        Ok(Response::new(cv::planner_answers_to_proto(&answers, req.request_id, start.elapsed().as_secs_f64())))
+        let columns = cv::columns_kind(&req);
+        Ok(Response::new(cv::planner_answers_to_proto(
+            &answers,
+            req.request_id,
+            start.elapsed().as_secs_f64(),
+            columns,
+        )))
     }
 
-    type QueryStreamStream = ReceiverStream<Result<pb::QueryResponse, Status>>;
+    type QueryStreamStream = std::pin::Pin<Box<dyn Stream<Item = Result<pb::QueryResponse, Status>> + Send>>;
 
     async fn query_stream(
         &self,
         request: Request<tonic::Streaming<pb::QueryRequest>>,
     ) -> Reply<Self::QueryStreamStream> {
-        let mut inbound = request.into_inner();
-        let catalog = self.catalog.clone();
-        let (max_answers, max_poses) = (self.config.max_batch_pairs, self.config.max_poses_per_call);
-        let (tx, out) = tokio::sync::mpsc::channel(16);
-        tokio::spawn(async move {
-            let mut view: Option<QueryView> = None;
-            loop {
-                let req = match inbound.message().await {
-                    Ok(Some(req)) => req,
-                    Ok(None) => break,
-                    Err(status) => {
-                        let _ = tx.send(Err(status)).await;
-                        break;
-                    }
-                };
-                let start = std::time::Instant::now();
-                let checked = (|| -> Result<_, Status> {
-                    let planner = cv::planner_request_from_proto(&req, max_answers, max_poses)?;
-                    let current = match view.take() {
-                        None => QueryView::new(require_id("scene_id", &req.scene_id)?),
-                        Some(v) if req.scene_id.is_empty() || req.scene_id == v.scene_id() => v,
-                        Some(v) => {
-                            return Err(Error::invalid(
-                                "scene_id",
-                                format!(
-                                    "a stream answers one scene: `{}` after `{}`",
-                                    crate::error::clip(&req.scene_id),
-                                    v.scene_id()
-                                ),
-                            )
-                            .into())
-                        }
-                    };
-                    Ok((planner, current))
-                })();
-                let reply = match checked {
-                    Ok((planner, current)) => {
-                        let (back, answers) = run_view(catalog.clone(), current, planner).await;
-                        view = Some(back);
-                        answers.map(|a| cv::planner_answers_to_proto(&a, req.request_id, start.elapsed().as_secs_f64()))
-                    }
-                    Err(status) => Err(status),
-                };
-                let failed = reply.is_err();
-                if tx.send(reply).await.is_err() || failed {
-                    break;
-                }
+        // The response stream is driven by the connection itself: each poll reads the next
+        // request and answers it (no task and channel between them, so a planner step costs no
+        // thread hand-over). It ends after the client's last request or the first error.
+        let state = QueryStreamState {
+            inbound: request.into_inner(),
+            catalog: self.catalog.clone(),
+            view: None,
+            limits: (self.config.max_batch_pairs, self.config.max_poses_per_call),
+            done: false,
+        };
+        let out = futures_util::stream::unfold(state, |mut st| async move {
+            if st.done {
+                return None;
             }
+            let reply = match st.inbound.message().await {
+                Ok(Some(req)) => st.answer(req).await,
+                Ok(None) => return None,
+                Err(status) => Err(status),
+            };
+            st.done = reply.is_err();
+            Some((reply, st))
         });
-        Ok(Response::new(ReceiverStream::new(out)))
+        Ok(Response::new(Box::pin(out)))
     }
 
     async fn check_scene(&self, request: Request<pb::CheckSceneRequest>) -> Reply<pb::CheckSceneResponse> {

@@ -281,3 +281,122 @@ async fn check_scene_finds_what_brute_force_finds() {
     assert_eq!(names, want, "the moved sphere is 0.1 m from (5,5) and (6,5) and more than 0.7 m from every other");
     server.stop().await;
 }
+
+/// Queries in columns (BatchQuery and QueryStream) give the same answers as one message per pair:
+/// three spheres against closed forms ‖c₁ − c₂‖ − r₁ − r₂ (witnesses on the line of centers), the
+/// growth d(p₁‖p₂) = ((‖c₁ − c₂‖ − r₂)/r₁)², COLLIDE decided by bounds with NaN points, per-state
+/// columns; bad columns are refused naming the field.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn columns_answer_like_pairs_and_name_bad_fields() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(config(dir.path())).await;
+    let mut c = server.client().await;
+    let (scene, i1, i2) = two_spheres(&mut c).await;
+    let b3 = upload_sphere(&mut c, "r01", [0.0; 3], 0.1).await;
+    let i3 = add(&mut c, &scene, &b3, at([0.0, 5.0, 0.0])).await;
+    let ids = vec![i1.clone(), i2.clone(), i3.clone()];
+    let columns = |kind: pb::QueryKind, first: Vec<u32>, second: Vec<u32>, margin: f64| pb::PairColumns {
+        kind: kind as i32,
+        instance_ids: ids.clone(),
+        first,
+        second,
+        margin,
+    };
+    let batch = |cols: pb::PairColumns| pb::BatchQueryRequest {
+        scene_id: scene.clone(),
+        pairs: Vec::new(),
+        columns: Some(cols),
+    };
+    // (i1, i2): centers 2 m apart, radii 0.5 + 0.25; (i1, i3): 5 m, 0.5 + 0.1; (i3, i2): √29 m.
+    let expected = [2.0 - 0.75, 5.0 - 0.6, 29f64.sqrt() - 0.35];
+    let (first, second) = (vec![0, 0, 2], vec![1, 2, 1]);
+    let r = c
+        .batch_query(batch(columns(pb::QueryKind::Distance, first.clone(), second.clone(), 0.0)))
+        .await
+        .unwrap()
+        .into_inner();
+    assert!(r.answers.is_empty());
+    let col = r.columns.unwrap();
+    assert_eq!(col.kind, pb::QueryKind::Distance as i32);
+    assert_eq!((col.value.len(), col.point_a.len(), col.point_b.len()), (3, 9, 9));
+    for k in 0..3 {
+        assert!((col.value[k] - expected[k]).abs() < 1e-9, "pair {k}: {} vs {}", col.value[k], expected[k]);
+        let gap: f64 = (0..3).map(|j| (col.point_a[3 * k + j] - col.point_b[3 * k + j]).powi(2)).sum::<f64>().sqrt();
+        assert!((gap - expected[k]).abs() < 1e-9, "witnesses {k} are {gap} apart");
+        assert!(col.converged[k] && !col.overlapping[k] && !col.lower_bound[k]);
+    }
+    assert!(col.decided_by_bounds.is_empty());
+    // Pair 0's witness on the r = 0.5 sphere at the origin, towards i2 at (2, 0, 0).
+    assert!((col.point_a[0] - 0.5).abs() < 1e-9 && col.point_a[1].abs() < 1e-9);
+
+    // The same pairs as messages: the same values.
+    let pairs = first
+        .iter()
+        .zip(&second)
+        .map(|(&i, &j)| pb::QueryPair {
+            kind: pb::QueryKind::Distance as i32,
+            first: ids[i as usize].clone(),
+            second: ids[j as usize].clone(),
+            ..Default::default()
+        })
+        .collect();
+    let r = c.batch_query(pb::BatchQueryRequest { scene_id: scene.clone(), pairs, columns: None }).await.unwrap();
+    for (k, a) in r.into_inner().answers.iter().enumerate() {
+        assert!((distance_of(a).distance - col.value[k]).abs() < 1e-12);
+    }
+
+    // Growth d(i1 ‖ i2) = ((2 − 0.25)/0.5)² = 12.25.
+    let r = c.batch_query(batch(columns(pb::QueryKind::Growth, vec![0], vec![1], 0.0))).await.unwrap();
+    let g = r.into_inner().columns.unwrap();
+    assert!((g.value[0] - 12.25).abs() < 1e-7, "{g:?}");
+
+    // COLLIDE with a 0.5 m margin: (i1, i2) 1.25 m apart is decided by the bounding spheres.
+    let r = c.batch_query(batch(columns(pb::QueryKind::Collide, vec![0], vec![1], 0.5))).await.unwrap();
+    let k = r.into_inner().columns.unwrap();
+    assert_eq!(k.decided_by_bounds, vec![true]);
+    assert!(!k.overlapping[0] && k.converged[0] && k.point_a.iter().all(|v| v.is_nan()));
+    assert!(k.value[0] <= 1.25 + 1e-9 && k.value[0] > 0.5, "a lower bound above the margin: {}", k.value[0]);
+
+    // Bad columns.
+    let r = c.batch_query(batch(columns(pb::QueryKind::Distance, vec![0, 3], vec![1, 1], 0.0))).await;
+    assert_status(r, Code::InvalidArgument, "columns.first[1]");
+    let r = c.batch_query(batch(columns(pb::QueryKind::Distance, vec![0, 1], vec![1], 0.0))).await;
+    assert_status(r, Code::InvalidArgument, "columns.second");
+    let r = c.batch_query(batch(columns(pb::QueryKind::Collide, vec![0], vec![1], -1.0))).await;
+    assert_status(r, Code::InvalidArgument, "columns.margin");
+    let r = c.batch_query(batch(columns(pb::QueryKind::Unspecified, vec![0], vec![1], 0.0))).await;
+    assert_status(r, Code::InvalidArgument, "columns.kind");
+    let mut both = batch(columns(pb::QueryKind::Distance, vec![0], vec![1], 0.0));
+    both.pairs.push(pb::QueryPair::default());
+    assert_status(c.batch_query(both).await, Code::InvalidArgument, "columns");
+    let mut unknown = columns(pb::QueryKind::Distance, vec![0], vec![1], 0.0);
+    unknown.instance_ids[1] = "i-nope".into();
+    let r = c
+        .batch_query(pb::BatchQueryRequest { scene_id: scene.clone(), pairs: Vec::new(), columns: Some(unknown) })
+        .await;
+    assert_status(r, Code::NotFound, "i-nope");
+
+    // A stream in columns: the view's pose moves i2 to x = 3; candidate states answer per state.
+    let (tx, rx) = tokio::sync::mpsc::channel(4);
+    let mut answers = c.query_stream(tokio_stream::wrappers::ReceiverStream::new(rx)).await.unwrap().into_inner();
+    let req = pb::QueryRequest {
+        scene_id: scene.clone(),
+        poses: vec![pose_of(&i2, [3.0, 0.0, 0.0])],
+        columns: Some(columns(pb::QueryKind::Distance, vec![0], vec![1], 0.0)),
+        ..Default::default()
+    };
+    tx.send(req).await.unwrap();
+    let r = answers.message().await.unwrap().unwrap();
+    assert!(r.answers.is_empty());
+    assert!((r.columns.unwrap().value[0] - 2.25).abs() < 1e-9);
+    let req = pb::QueryRequest {
+        columns: Some(columns(pb::QueryKind::Collide, vec![0], vec![1], 0.5)),
+        states: [1.0, 4.0].iter().map(|&x| pb::CandidateState { poses: vec![pose_of(&i2, [x, 0.0, 0.0])] }).collect(),
+        ..Default::default()
+    };
+    tx.send(req).await.unwrap();
+    let r = answers.message().await.unwrap().unwrap();
+    let verdicts: Vec<bool> = r.states.iter().map(|s| s.columns.as_ref().unwrap().overlapping[0]).collect();
+    assert_eq!(verdicts, vec![true, false], "0.25 m < 0.5 m collides, 3.25 m does not");
+    assert_eq!(r.states.iter().map(|s| s.any_collision).collect::<Vec<_>>(), vec![true, false]);
+}

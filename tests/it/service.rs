@@ -161,8 +161,12 @@ async fn round_trip_spheres_match_closed_forms_and_warm_start() {
         pair(pb::QueryKind::Growth, &i2, &i1),
         pair(pb::QueryKind::Distance, &i2, &i1),
     ];
-    let answers =
-        c.batch_query(pb::BatchQueryRequest { scene_id: scene.clone(), pairs }).await.unwrap().into_inner().answers;
+    let answers = c
+        .batch_query(pb::BatchQueryRequest { scene_id: scene.clone(), pairs, columns: None })
+        .await
+        .unwrap()
+        .into_inner()
+        .answers;
     assert_eq!(answers.len(), 3);
     let dist = (c2 - c1).norm();
     match (&answers[0].answer, &answers[1].answer, &answers[2].answer) {
@@ -311,9 +315,9 @@ async fn bad_input_gets_the_right_code_naming_the_field() {
 
     // Batches.
     let pair = |kind: i32| pb::QueryPair { kind, first: i1.clone(), second: i2.clone(), ..Default::default() };
-    let req = pb::BatchQueryRequest { scene_id: scene.clone(), pairs: vec![pair(1), pair(0)] };
+    let req = pb::BatchQueryRequest { scene_id: scene.clone(), pairs: vec![pair(1), pair(0)], columns: None };
     assert_status(c.batch_query(req).await, Code::InvalidArgument, "pairs[1].kind");
-    let req = pb::BatchQueryRequest { scene_id: scene.clone(), pairs: vec![pair(1); 5] };
+    let req = pb::BatchQueryRequest { scene_id: scene.clone(), pairs: vec![pair(1); 5], columns: None };
     assert_status(c.batch_query(req).await, Code::ResourceExhausted, "pairs");
 
     // Uploads.
@@ -724,6 +728,7 @@ async fn certified_queries_and_gradients_on_the_demo_scene() {
         let req = pb::BatchQueryRequest {
             scene_id: scene.clone(),
             pairs: vec![pair(pb::QueryKind::Distance), pair(pb::QueryKind::Growth)],
+            columns: None,
         };
         let answers = c.batch_query(req).await.unwrap().into_inner().answers;
         let Some(pb::query_answer::Answer::Distance(bd)) = &answers[0].answer else { panic!("{answers:?}") };

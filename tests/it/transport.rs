@@ -72,7 +72,7 @@ async fn batch_round_trips_cost_no_stall() {
     };
     let mut report = vec![format!("unary Distance median {unary:?}, in-process pair {per_pair:?}")];
     for n in [1usize, 5, 19, 100, 1000] {
-        let req = pb::BatchQueryRequest { scene_id: scene.clone(), pairs: (0..n).map(pair).collect() };
+        let req = pb::BatchQueryRequest { scene_id: scene.clone(), pairs: (0..n).map(pair).collect(), columns: None };
         c.batch_query(req.clone()).await.unwrap();
         let rounds = if n >= 1000 { 15 } else { 40 };
         let mut times = Vec::new();
@@ -123,7 +123,7 @@ async fn batch_round_trips_cost_no_stall() {
     drop(tx);
 
     // A planner's state check: move one instance, query 19 pairs.
-    let req = pb::BatchQueryRequest { scene_id: scene.clone(), pairs: (0..19).map(pair).collect() };
+    let req = pb::BatchQueryRequest { scene_id: scene.clone(), pairs: (0..19).map(pair).collect(), columns: None };
     let mut times = Vec::new();
     for k in 0..40 {
         let t = Instant::now();

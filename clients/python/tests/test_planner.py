@@ -175,3 +175,20 @@ def test_check_scene(client):
     assert r2.all_pairs == 3 and len(r2.pairs) == 3
     assert {p.first for p in r2.pairs} | {p.second for p in r2.pairs} == set(ids)
     assert client.get_scene(scene).instance(ids[3]).pose.t == (10.0, 0.0, 0.0)
+
+
+def test_stream_columns_follow_the_view_and_states(client, balls):
+    """The stream in columns: distances of the view's poses (closed form), per-state verdicts."""
+    scene, a, b = balls
+    with client.stream(scene) as s:
+        cols = s.check_columns("distance", [a], [b], poses={b: Pose(t=(2.5, 0, 0))})
+        np.testing.assert_allclose(cols.value, [2.5 - R1 - R2], atol=1e-8)
+        np.testing.assert_allclose(cols.point_a[0], [R1, 0, 0], atol=1e-7)
+        per_state = s.check_columns(
+            "collide", [a], [b], margin=0.1, states=[{b: Pose(t=(x, 0, 0))} for x in (0.85, 0.95, 3.0)]
+        )
+        # Gaps 0.05 (collides), 0.15 (clear), 2.2 (clear, decided by the bounding spheres).
+        assert [bool(c.overlapping[0]) for c in per_state] == [True, False, False]
+        assert bool(per_state[2].decided_by_bounds[0])
+        # The view still holds x = 2.5.
+        assert abs(s.check_columns("distance", [a], [b]).value[0] - (2.5 - R1 - R2)) < 1e-8

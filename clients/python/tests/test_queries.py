@@ -206,3 +206,37 @@ def test_signed_distance_of_spheres(client, spheres):
     assert abs(y.signed_distance - (0.5 - R1 - R2)) < 1e-7
     with pytest.raises(ValueError, match=r"`queries\[0\]\.signed`"):
         client.batch(scene, [Query("growth", a, b, signed=True)])
+
+
+def test_batch_columns_match_closed_forms_and_pairs(client, spheres):
+    """Columns both ways: numpy arrays equal to the closed form and to the per-pair answers."""
+    scene, a, b, _, _ = spheres
+    c1, c2 = np.array([0.1, 0.2, 0.3]), np.array([1.9, -0.4, 0.8])
+    client.set_poses(scene, {a: Pose(t=c1), b: Pose(t=c2)})
+    cols = client.batch_columns(scene, "distance", [a, b, a], [b, a, b])
+    assert cols.kind == "distance" and len(cols) == 3
+    assert cols.point_a.shape == cols.point_b.shape == (3, 3)
+    dist, wa, wb, _ = expected_distance(c1, c2)
+    np.testing.assert_allclose(cols.value, [dist, dist, dist], atol=1e-8)
+    np.testing.assert_allclose(cols.point_a[0], wa, atol=1e-7)
+    np.testing.assert_allclose(cols.point_b[0], wb, atol=1e-7)
+    np.testing.assert_allclose(cols.point_a[1], wb, atol=1e-7)  # (b, a): the witness on b first
+    assert cols.converged.all() and not cols.overlapping.any() and not cols.lower_bound.any()
+    per_pair = client.batch(scene, [Query.distance(a, b)])
+    assert abs(per_pair[0].distance - cols.value[0]) < 1e-12
+    # Collide far beyond the margin: decided by the bounding spheres, points NaN.
+    far = client.batch_columns(scene, "collide", [a], [b], margin=0.01)
+    assert far.decided_by_bounds.tolist() == [True] and not far.overlapping[0]
+    assert np.isnan(far.point_a).all() and 0.01 < far.value[0] <= dist + 1e-9
+
+
+def test_batch_columns_errors_name_the_field(client, spheres):
+    scene, a, b, _, _ = spheres
+    with pytest.raises(SublevelError) as e:
+        client.batch_columns(scene, "collide", [a], [b], margin=-1.0)
+    assert e.value.code == grpc.StatusCode.INVALID_ARGUMENT and e.value.field == "columns.margin"
+    with pytest.raises(SublevelError) as e:
+        client.batch_columns(scene, "distance", [a], ["i-nope"])
+    assert e.value.code == grpc.StatusCode.NOT_FOUND
+    with pytest.raises(ValueError):
+        client.batch_columns(scene, "distance", [a, b], [b])

@@ -26,6 +26,7 @@ from .client import DEFAULT_ADDR, Client, PlannerStream, Query
 from .errors import SublevelError
 from .poses import Pose, as_pose, matrix_to_quat, quat_from_axis_angle, quat_multiply, quat_to_matrix
 from .types import (
+    AnswerColumns,
     BodySummary,
     Certificate,
     CollideAnswer,
@@ -58,6 +59,7 @@ __all__ = [
     "quat_from_axis_angle",
     "sphere_body",
     "ellipsoid_body",
+    "AnswerColumns",
     "BodySummary",
     "Certificate",
     "CollideAnswer",

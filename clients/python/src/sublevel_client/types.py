@@ -24,6 +24,7 @@ __all__ = [
     "CollideAnswer",
     "Answer",
     "StateAnswers",
+    "AnswerColumns",
     "QueryResult",
     "ScenePair",
     "SceneCheck",
@@ -319,14 +320,69 @@ class StateAnswers:
     Attributes:
         answers: one answer per query.
         any_collision: any COLLIDE query of this state collides.
+        columns: the answers in columns (requests in columns).
     """
 
     answers: List[Answer]
     any_collision: bool
+    columns: Optional["AnswerColumns"] = None
 
     @classmethod
     def from_proto(cls, m) -> "StateAnswers":
-        return cls(answers=[answer_from_proto(a) for a in m.answers], any_collision=m.any_collision)
+        return cls(
+            answers=[answer_from_proto(a) for a in m.answers],
+            any_collision=m.any_collision,
+            columns=AnswerColumns.from_proto(m.columns) if m.HasField("columns") else None,
+        )
+
+
+@dataclass
+class AnswerColumns:
+    """Answers in columns (``BatchQueryResponse.columns``, ``QueryResponse.columns``): row k is
+    pair k of the request.
+
+    Attributes:
+        kind: ``"distance"``, ``"growth"`` or ``"collide"``.
+        value: shape (n,). Distance: meters (0 when overlapping). Growth: d(p1 || p2).
+            Collide: the distance in meters, or the bounding spheres' lower bound when
+            ``decided_by_bounds``.
+        point_a: shape (n, 3), meters, world frame: the witness on the first body (growth: the
+            minimizer); NaN when no solve ran (collide decided by bounds).
+        point_b: shape (n, 3): the witness on the second body (growth: the minimizer again).
+        converged: shape (n,), bool: a converged Newton answer or a verified SDP answer.
+        overlapping: shape (n,), bool: the bodies overlap (collide: the verdict, closer than the
+            margin or overlapping).
+        lower_bound: shape (n,), bool: the value is only a lower bound (nonconvex body).
+        decided_by_bounds: shape (n,), bool for collide (the bounding spheres alone decided);
+            empty for other kinds.
+    """
+
+    kind: str
+    value: np.ndarray
+    point_a: np.ndarray
+    point_b: np.ndarray
+    converged: np.ndarray
+    overlapping: np.ndarray
+    lower_bound: np.ndarray
+    decided_by_bounds: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.value)
+
+    @classmethod
+    def from_proto(cls, m) -> "AnswerColumns":
+        from ._pb.sublevel.v1 import sublevel_pb2 as pb
+
+        return cls(
+            kind=_enum_name(pb.QueryKind, m.kind, "QUERY_KIND_").lower(),
+            value=np.asarray(m.value, dtype=float),
+            point_a=np.asarray(m.point_a, dtype=float).reshape(-1, 3),
+            point_b=np.asarray(m.point_b, dtype=float).reshape(-1, 3),
+            converged=np.asarray(m.converged, dtype=bool),
+            overlapping=np.asarray(m.overlapping, dtype=bool),
+            lower_bound=np.asarray(m.lower_bound, dtype=bool),
+            decided_by_bounds=np.asarray(m.decided_by_bounds, dtype=bool),
+        )
 
 
 @dataclass
@@ -338,18 +394,21 @@ class QueryResult:
         states: one :class:`StateAnswers` per candidate state (requests with states).
         server_seconds: seconds the server spent (not the transport).
         request_id: the request's id, echoed.
+        columns: the answers in columns (requests in columns without states).
     """
 
     answers: List[Answer]
     states: List[StateAnswers]
     server_seconds: float
     request_id: int
+    columns: Optional["AnswerColumns"] = None
 
     @classmethod
     def from_proto(cls, m) -> "QueryResult":
         return cls(
             answers=[answer_from_proto(a) for a in m.answers],
             states=[StateAnswers.from_proto(s) for s in m.states],
+            columns=AnswerColumns.from_proto(m.columns) if m.HasField("columns") else None,
             server_seconds=m.server_seconds,
             request_id=m.request_id,
         )
