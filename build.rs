@@ -2,9 +2,14 @@
 //! tonic-prost-build, and writes the encoded descriptor set for server reflection to
 //! `$OUT_DIR/sublevel_descriptor.bin`.
 
-use protox::prost::Message;
+//! Without the `server` feature (the math core alone) there is nothing to generate.
 
+#[cfg(not(feature = "server"))]
+fn main() {}
+
+#[cfg(feature = "server")]
 fn main() -> Result<(), Box<dyn std::error::Error>> {
+    use protox::prost::Message;
     let proto = "proto/sublevel/v1/sublevel.proto";
     println!("cargo:rerun-if-changed=proto");
     let fds = protox::compile([proto], ["proto"])?;

@@ -29,6 +29,7 @@ pub mod math;
 pub mod poly;
 pub mod query;
 pub mod scene;
+#[cfg(feature = "server")]
 pub mod service;
 
 pub use body::{Body, PosedBody};

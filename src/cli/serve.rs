@@ -44,6 +44,7 @@ pub fn run(args: ServeArgs) -> Result<()> {
     let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
     let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
     let outcome = runtime.block_on(async move {
+        let shutdown = shutdown_signal()?;
         let config = ServerConfig { data_dir: args.data_dir.clone(), ..ServerConfig::default() };
         let catalog = open_catalog(&config)?;
         if args.demo {
@@ -57,7 +58,7 @@ pub fn run(args: ServeArgs) -> Result<()> {
         tracing::info!(%addr, data_dir = %args.data_dir.display(), "listening");
         // On stdout too, for scripts and tests that bind port 0.
         println!("listening on {addr}");
-        serve_catalog(listener, catalog, config, shutdown_signal()).await
+        serve_catalog(listener, catalog, config, shutdown).await
     });
     // In-flight requests have drained; a fit still solving on the blocking pool stores nothing
     // now (its job is recorded as interrupted at the next start), so do not wait for it.
@@ -68,33 +69,29 @@ pub fn run(args: ServeArgs) -> Result<()> {
 /// How long the process waits for blocking work (a running SDP) after the server stopped.
 const SHUTDOWN_GRACE: std::time::Duration = std::time::Duration::from_millis(500);
 
-/// Completes on Ctrl-C or (on Unix) SIGTERM, as sent by `docker stop` and Kubernetes.
-async fn shutdown_signal() {
-    let ctrl_c = async {
+/// A future that completes on Ctrl-C or (on Unix) SIGTERM, as sent by `docker stop` and
+/// Kubernetes. The handlers are installed now, before the server announces its address, so a
+/// signal that arrives at any later moment stops the server gracefully (a handler installed on
+/// first poll would leave a window in which SIGTERM kills the process outright).
+fn shutdown_signal() -> Result<impl std::future::Future<Output = ()>> {
+    #[cfg(unix)]
+    let (mut interrupt, mut term) = {
+        use tokio::signal::unix::{signal, SignalKind};
+        (signal(SignalKind::interrupt())?, signal(SignalKind::terminate())?)
+    };
+    Ok(async move {
+        #[cfg(unix)]
+        tokio::select! {
+            _ = interrupt.recv() => {},
+            _ = term.recv() => {},
+        }
+        #[cfg(not(unix))]
         if let Err(e) = tokio::signal::ctrl_c().await {
             tracing::error!(error = %e, "cannot listen for Ctrl-C");
             std::future::pending::<()>().await;
         }
-    };
-    #[cfg(unix)]
-    let term = async {
-        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
-            Ok(mut s) => {
-                s.recv().await;
-            }
-            Err(e) => {
-                tracing::error!(error = %e, "cannot listen for SIGTERM");
-                std::future::pending::<()>().await;
-            }
-        }
-    };
-    #[cfg(not(unix))]
-    let term = std::future::pending::<()>();
-    tokio::select! {
-        () = ctrl_c => {},
-        () = term => {},
-    }
-    tracing::info!("shutdown requested");
+        tracing::info!("shutdown requested");
+    })
 }
 
 /// Ids of the demo data.

@@ -106,6 +106,42 @@ impl WarmStartCache {
         }
     }
 
+    /// Copies the warm start of `kind` for the ordered pair (a, b), if any and not already there,
+    /// into `into` (the state is shared, not copied).
+    pub fn copy_pair(&self, into: &mut WarmStartCache, kind: WarmKind, a: &str, b: &str) {
+        match kind {
+            WarmKind::Distance => {
+                if let (Some(w), None) = (get(&self.distance, a, b), get(&into.distance, a, b)) {
+                    put(&mut into.distance, a, b, w.clone());
+                }
+            }
+            WarmKind::Growth => {
+                if let (Some(w), None) = (get(&self.growth, a, b), get(&into.growth, a, b)) {
+                    put(&mut into.growth, a, b, w.clone());
+                }
+            }
+        }
+    }
+
+    /// Moves every warm start of `other` whose two instances pass `keep` into this cache,
+    /// replacing what is stored for the same pair.
+    pub fn merge(&mut self, other: WarmStartCache, keep: impl Fn(&str) -> bool) {
+        fn merge_map<W>(into: &mut PairMap<W>, from: PairMap<W>, keep: &impl Fn(&str) -> bool) {
+            for (a, inner) in from {
+                if !keep(&a) {
+                    continue;
+                }
+                for (b, w) in inner {
+                    if keep(&b) {
+                        put(into, &a, &b, w);
+                    }
+                }
+            }
+        }
+        merge_map(&mut self.distance, other.distance, &keep);
+        merge_map(&mut self.growth, other.growth, &keep);
+    }
+
     /// Drops every warm start involving `instance_id` (on either side, both kinds).
     pub fn invalidate_instance(&mut self, instance_id: &str) {
         drop_instance(&mut self.distance, instance_id);
@@ -145,5 +181,25 @@ mod tests {
         assert!(!c.contains(&key(WarmKind::Distance, "c", "a")));
         assert!(c.contains(&key(WarmKind::Growth, "b", "c")));
         assert!(c.contains(&key(WarmKind::Distance, "b", "c")));
+    }
+
+    #[test]
+    fn copy_and_merge_share_states_and_drop_removed_instances() {
+        let mut scene = WarmStartCache::default();
+        let g = GrowthWarmStart { valid: true, multiplier: 3.0, ..Default::default() };
+        scene.put_growth("a", "b", Arc::new(g));
+        let mut scratch = WarmStartCache::default();
+        scene.copy_pair(&mut scratch, WarmKind::Growth, "a", "b");
+        scene.copy_pair(&mut scratch, WarmKind::Distance, "a", "b"); // none stored: nothing copied
+        assert_eq!(scratch.len(), 1);
+        assert!(Arc::ptr_eq(&scene.growth["a"]["b"], &scratch.growth["a"]["b"]), "shared, not copied");
+        // New states in the scratch: one for a live pair, one involving a removed instance `x`.
+        let newer = GrowthWarmStart { valid: true, multiplier: 4.0, ..Default::default() };
+        scratch.put_growth("a", "b", Arc::new(newer));
+        scratch.put_distance("b", "x", Arc::default());
+        scene.merge(scratch, |id| id != "x");
+        assert_eq!(scene.growth("a", "b").map(|w| w.multiplier), Some(4.0));
+        assert!(scene.distance("b", "x").is_none());
+        assert_eq!(scene.len(), 1);
     }
 }

@@ -591,14 +591,18 @@ impl Catalog {
     }
 
     /// [`Catalog::distance`] with options: the certified answer ([`certified_distance`]) and, on
-    /// request, its pose gradients. Runs under the scene's lock (a certificate takes milliseconds
-    /// to seconds, so [`CertifyMode::Certify`] is for checking, not for the control loop).
+    /// request, its pose gradients. Solves outside the scene's lock ([`Catalog::batch`]), so a
+    /// certificate (milliseconds to seconds with [`CertifyMode::Certify`]) holds up no other
+    /// request of the scene.
     ///
     /// # Errors
     /// [`Error::NotFound`] for the scene or an instance.
     pub fn distance_with(&self, scene_id: &str, a: &str, b: &str, options: &QueryOptions) -> Result<DistanceReply> {
-        let params = self.certify_params();
-        self.with_scene(scene_id, |s| run_distance(s, a, b, &params, options))
+        let pair = PairRef { kind: QueryKind::Distance, first: a, second: b, options: *options, margin: 0.0 };
+        match self.answer_snapshot(scene_id, &[pair])?.pop() {
+            Some(QueryAnswer::Distance(d)) => Ok(d),
+            _ => Err(Error::Numerical("a distance query answered with another kind".into())),
+        }
     }
 
     /// [`Catalog::growth`] with options, like [`Catalog::distance_with`].
@@ -606,8 +610,11 @@ impl Catalog {
     /// # Errors
     /// [`Error::NotFound`] for the scene or an instance.
     pub fn growth_with(&self, scene_id: &str, p1: &str, p2: &str, options: &QueryOptions) -> Result<GrowthReply> {
-        let params = self.certify_params();
-        self.with_scene(scene_id, |s| run_growth(s, p1, p2, &params, options))
+        let pair = PairRef { kind: QueryKind::Growth, first: p1, second: p2, options: *options, margin: 0.0 };
+        match self.answer_snapshot(scene_id, &[pair])?.pop() {
+            Some(QueryAnswer::Growth(g)) => Ok(g),
+            _ => Err(Error::Numerical("a growth query answered with another kind".into())),
+        }
     }
 
     /// The certification parameters of every query (the catalog's Newton parameters).
@@ -615,34 +622,19 @@ impl Catalog {
         CertifyParams { newton: self.params, ..CertifyParams::default() }
     }
 
-    /// Many queries of one scene under one lock (so all see the same poses); answers in order.
+    /// Many queries of one scene, all at the poses of one moment; answers in order. Each instance
+    /// is looked up once; the solves run outside the scene's lock (see
+    /// [`Catalog::answer_snapshot`]), so batches of one scene run in parallel.
     ///
     /// # Errors
     /// [`Error::NotFound`] for the scene or any instance (checked before any query runs).
     pub fn batch(&self, scene_id: &str, pairs: &[QueryPair]) -> Result<Vec<QueryAnswer>> {
-        self.with_scene(scene_id, |s| {
-            // Each instance is looked up once per batch (ids repeat across pairs).
-            let mut posed_by_id: HashMap<&str, super::planner::Posed, foldhash::fast::RandomState> = HashMap::default();
-            for p in pairs {
-                for id in [&p.first, &p.second] {
-                    if !posed_by_id.contains_key(id.as_str()) {
-                        posed_by_id.insert(id, posed(s, id)?);
-                    }
-                }
-            }
-            let params = self.certify_params();
-            let mut answers = Vec::with_capacity(pairs.len());
-            for p in pairs {
-                let (a, b) = (&posed_by_id[p.first.as_str()], &posed_by_id[p.second.as_str()]);
-                answers.push(super::planner::answer_pair(p.view(), a, b, &mut s.cache, &params));
-            }
-            Ok(answers)
-        })
+        let views: Vec<PairRef<'_>> = pairs.iter().map(QueryPair::view).collect();
+        self.answer_snapshot(scene_id, &views)
     }
 
     /// Queries of one kind given in columns: pair k asks about `ids[first[k]]` and
-    /// `ids[second[k]]` (the form of `BatchQueryRequest.columns`), under one lock like
-    /// [`Catalog::batch`]; answers in order. Each id is looked up once.
+    /// `ids[second[k]]` (the form of `BatchQueryRequest.columns`), like [`Catalog::batch`].
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] for `first` and `second` of different lengths or an index
@@ -671,18 +663,73 @@ impl Catalog {
                 ));
             }
         }
-        self.with_scene(scene_id, |s| {
-            let posed_by_index = ids.iter().map(|id| posed(s, id)).collect::<Result<Vec<_>>>()?;
-            let params = self.certify_params();
-            let mut answers = Vec::with_capacity(first.len());
-            for (&i, &j) in first.iter().zip(second) {
-                let (i, j) = (i as usize, j as usize);
-                let pair = PairRef { kind, first: &ids[i], second: &ids[j], options, margin };
-                let (a, b) = (&posed_by_index[i], &posed_by_index[j]);
-                answers.push(super::planner::answer_pair(pair, a, b, &mut s.cache, &params));
+        let views: Vec<PairRef<'_>> = first
+            .iter()
+            .zip(second)
+            .map(|(&i, &j)| PairRef { kind, first: &ids[i as usize], second: &ids[j as usize], options, margin })
+            .collect();
+        self.answer_snapshot(scene_id, &views)
+    }
+
+    /// Answers `pairs` on a snapshot of the scene, solving outside its lock:
+    ///
+    /// ```text
+    /// lock:    posed instances (body Arc + pose) of every id, warm starts of every pair → scratch
+    /// unlock:  solve every pair in order with the scratch warm starts (repeated pairs warm-start
+    ///          each other as before)
+    /// lock:    write the new warm starts back (those of instances still in the scene)
+    /// ```
+    ///
+    /// Two requests of one scene solve in parallel; a concurrent pose change is seen by the next
+    /// request, never halfway through this one. Warm starts are copied as `Arc`s (no 1 KB copies).
+    ///
+    /// # Errors
+    /// [`Error::NotFound`] for the scene or an instance.
+    fn answer_snapshot(&self, scene_id: &str, pairs: &[PairRef<'_>]) -> Result<Vec<QueryAnswer>> {
+        let scene = self.scene(scene_id)?;
+        let (posed_by_id, mut scratch) = {
+            let s = lock(&scene);
+            if s.deleted {
+                return Err(Error::not_found("scene", scene_id));
             }
-            Ok(answers)
-        })
+            let mut posed_by_id: HashMap<&str, super::planner::Posed, foldhash::fast::RandomState> = HashMap::default();
+            let mut scratch = WarmStartCache::default();
+            for p in pairs {
+                for id in [p.first, p.second] {
+                    if !posed_by_id.contains_key(id) {
+                        posed_by_id.insert(id, posed(&s, id)?);
+                    }
+                }
+                if !p.options.cold {
+                    s.cache.copy_pair(&mut scratch, warm_kind(p.kind), p.first, p.second);
+                }
+            }
+            (posed_by_id, scratch)
+        };
+        let params = self.certify_params();
+        let answers = pairs
+            .iter()
+            .map(|p| {
+                let (a, b) = (&posed_by_id[p.first], &posed_by_id[p.second]);
+                super::planner::answer_pair(*p, a, b, &mut scratch, &params)
+            })
+            .collect();
+        if !scratch.is_empty() {
+            let mut s = lock(&scene);
+            if !s.deleted {
+                let SceneState { instances, cache, .. } = &mut *s;
+                cache.merge(scratch, |id| instances.contains_key(id));
+            }
+        }
+        Ok(answers)
+    }
+}
+
+/// The warm-start table a query kind uses (collide queries solve distances).
+fn warm_kind(kind: QueryKind) -> super::cache::WarmKind {
+    match kind {
+        QueryKind::Distance | QueryKind::Collide => super::cache::WarmKind::Distance,
+        QueryKind::Growth => super::cache::WarmKind::Growth,
     }
 }
 
@@ -705,38 +752,6 @@ fn instance<'a>(s: &'a SceneState, id: &str) -> Result<&'a Instance> {
 fn posed(s: &SceneState, id: &str) -> Result<super::planner::Posed> {
     let inst = instance(s, id)?;
     Ok(super::planner::Posed { body: inst.body.clone(), pose: inst.pose })
-}
-
-fn run_distance(
-    s: &mut SceneState,
-    a: &str,
-    b: &str,
-    params: &CertifyParams,
-    options: &QueryOptions,
-) -> Result<DistanceReply> {
-    let pair =
-        QueryPair { kind: QueryKind::Distance, first: a.into(), second: b.into(), options: *options, margin: 0.0 };
-    let (pa, pb) = (posed(s, a)?, posed(s, b)?);
-    match super::planner::answer_pair(pair.view(), &pa, &pb, &mut s.cache, params) {
-        QueryAnswer::Distance(d) => Ok(d),
-        _ => Err(Error::Numerical("a distance query answered with another kind".into())),
-    }
-}
-
-fn run_growth(
-    s: &mut SceneState,
-    p1: &str,
-    p2: &str,
-    params: &CertifyParams,
-    options: &QueryOptions,
-) -> Result<GrowthReply> {
-    let pair =
-        QueryPair { kind: QueryKind::Growth, first: p1.into(), second: p2.into(), options: *options, margin: 0.0 };
-    let (pa, pb) = (posed(s, p1)?, posed(s, p2)?);
-    match super::planner::answer_pair(pair.view(), &pa, &pb, &mut s.cache, params) {
-        QueryAnswer::Growth(g) => Ok(g),
-        _ => Err(Error::Numerical("a growth query answered with another kind".into())),
-    }
 }
 
 // --------------------------------------------------------------------------------------------
@@ -821,7 +836,7 @@ impl Catalog {
     }
 }
 
-#[cfg(test)]
+#[cfg(all(test, feature = "store"))]
 mod tests {
     use super::*;
     use crate::body::ellipsoid;

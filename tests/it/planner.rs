@@ -319,10 +319,10 @@ async fn columns_answer_like_pairs_and_name_bad_fields() {
     let col = r.columns.unwrap();
     assert_eq!(col.kind, pb::QueryKind::Distance as i32);
     assert_eq!((col.value.len(), col.point_a.len(), col.point_b.len()), (3, 9, 9));
-    for k in 0..3 {
-        assert!((col.value[k] - expected[k]).abs() < 1e-9, "pair {k}: {} vs {}", col.value[k], expected[k]);
+    for (k, want) in expected.iter().enumerate() {
+        assert!((col.value[k] - want).abs() < 1e-9, "pair {k}: {} vs {want}", col.value[k]);
         let gap: f64 = (0..3).map(|j| (col.point_a[3 * k + j] - col.point_b[3 * k + j]).powi(2)).sum::<f64>().sqrt();
-        assert!((gap - expected[k]).abs() < 1e-9, "witnesses {k} are {gap} apart");
+        assert!((gap - want).abs() < 1e-9, "witnesses {k} are {gap} apart");
         assert!(col.converged[k] && !col.overlapping[k] && !col.lower_bound[k]);
     }
     assert!(col.decided_by_bounds.is_empty());

@@ -508,7 +508,8 @@ async fn demo_seeding_is_idempotent_across_restarts() {
         // Graceful stop by SIGTERM to the child we started.
         let status = std::process::Command::new("kill").args(["-TERM", &child.id().to_string()]).status().unwrap();
         assert!(status.success());
-        assert!(child.wait().unwrap().success());
+        let exit = child.wait().unwrap();
+        assert!(exit.success(), "the server must exit 0 on SIGTERM: {exit:?}");
     }
     assert_eq!(seen[0], seen[1], "a restart must report the same ids");
     assert!(seen[0].iter().any(|l| l.contains("chair_101")));
