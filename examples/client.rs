@@ -21,11 +21,11 @@ async fn main() -> Result<(), Box<dyn std::error::Error>> {
     let addr = std::env::var("SUBLEVEL_ADDR").unwrap_or_else(|_| "127.0.0.1:50051".into());
     let mut client = SublevelClient::connect(format!("http://{addr}")).await?;
 
-    let bodies = client.list_bodies(pb::ListBodiesRequest {}).await?.into_inner().bodies;
+    let bodies = client.list_bodies(pb::ListBodiesRequest::default()).await?.into_inner().bodies;
     for b in &bodies {
         println!("body {:<10} {} degree {} volume {:.3}", b.name, b.body_id, b.degree, b.volume);
     }
-    let scenes = client.list_scenes(pb::ListScenesRequest {}).await?.into_inner().scenes;
+    let scenes = client.list_scenes(pb::ListScenesRequest::default()).await?.into_inner().scenes;
     let Some(demo) = scenes.iter().find(|s| s.name == "demo") else {
         return Err("no scene named `demo`: start the server with `sublevel serve --demo`".into());
     };

@@ -24,6 +24,10 @@ pub enum Error {
         /// The id that was looked up.
         id: String,
     },
+    /// The request is valid but the state of a resource forbids it now (e.g. deleting a body
+    /// that instances still use); the message says what to change first.
+    #[error("failed precondition: {0}")]
+    FailedPrecondition(String),
     /// A request exceeds a configured size limit.
     #[error("resource exhausted: {0}")]
     ResourceExhausted(String),

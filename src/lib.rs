@@ -2,7 +2,8 @@
 //!
 //! Real-time collision queries between bodies modeled as 1-sublevel sets of sos-convex
 //! polynomials, `{x ∈ ℝ³ : p(x) ≤ 1}`, following Ahmadi, Hall, Makadia and Sindhwani,
-//! *Geometry of 3D Environments and Sum of Squares Polynomials* (RSS 2017; `../shared/paper`).
+//! *Geometry of 3D Environments and Sum of Squares Polynomials*, Robotics: Science and Systems XIII
+//! (RSS 2017); equation labels in the docs are those of the paper's LaTeX source (version 7).
 //!
 //! # Layout
 //!

@@ -1497,8 +1497,8 @@ mod tests {
         // Nothing of the load test is left on the server.
         let left = server.block_on(async {
             let mut c = SublevelClient::connect(format!("http://{addr}")).await.unwrap();
-            let scenes = c.list_scenes(pb::ListScenesRequest {}).await.unwrap().into_inner().scenes.len();
-            let bodies = c.list_bodies(pb::ListBodiesRequest {}).await.unwrap().into_inner().bodies.len();
+            let scenes = c.list_scenes(pb::ListScenesRequest::default()).await.unwrap().into_inner().scenes.len();
+            let bodies = c.list_bodies(pb::ListBodiesRequest::default()).await.unwrap().into_inner().bodies.len();
             (scenes, bodies)
         });
         assert_eq!(left, (0, 0));

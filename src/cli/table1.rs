@@ -100,7 +100,8 @@ const fn fit(method: FitMethod, degree: usize, c: Real) -> RowKind {
 
 use FitMethod::{InverseMoment as IM, LogDetH as LDH, LogDetP as LDP, TraceH as TRH, TraceP as TRP};
 
-/// The paper's Table 1, row by row, with the source line in `../shared/paper/sos_geom_v7.tex`.
+/// The paper's Table 1, row by row, with the line of the paper's LaTeX source (version 7,
+/// `sos_geom_v7.tex`) it comes from.
 #[rustfmt::skip]
 pub const ROWS: [Row; 25] = [
     Row { key: "hull", label: "Convex-Hull", objective: "", kind: RowKind::Hull, paper: Some([0.29, 0.66, 0.36, 0.91, 0.5]), source_line: 223 },
@@ -577,7 +578,7 @@ fn print_table(rows: &[&Row], shapes: &[ShapeRef], cells: &[Vec<Cell>], clouds: 
     let lines: Vec<usize> = rows.iter().map(|r| r.source_line).filter(|l| *l > 0).collect();
     if let (Some(lo), Some(hi)) = (lines.iter().min(), lines.iter().max()) {
         out.push_str(&format!(
-            "paper values: ../shared/paper/sos_geom_v7.tex lines {lo}–{hi} (tab:bounding.volumes)\n"
+            "paper values: the paper's LaTeX source (sos_geom_v7.tex) lines {lo}–{hi} (tab:bounding.volumes)\n"
         ));
     }
     out.push_str(&format!(

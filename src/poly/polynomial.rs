@@ -20,7 +20,11 @@ use serde::{Deserialize, Serialize};
 pub const MAX_DEGREE: usize = 8;
 
 /// A trivariate polynomial of total degree ≤ `degree`, dense in the graded-lex basis.
+///
+/// Serialized as `{degree, coefficients}`; deserializing goes through
+/// [`Polynomial::from_coefficients`], so a read polynomial is validated and has its exponent table.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "PolynomialData")]
 pub struct Polynomial {
     degree: usize,
     /// Coefficients in graded-lex order; length `C(degree + 3, 3)`.
@@ -28,6 +32,21 @@ pub struct Polynomial {
     /// Exponents of the basis, cached so evaluation does not recompute them.
     #[serde(skip, default)]
     exponents: Vec<[u8; 3]>,
+}
+
+/// The serialized fields of a [`Polynomial`], validated on the way in.
+#[derive(Deserialize)]
+struct PolynomialData {
+    degree: usize,
+    coefficients: Vec<Real>,
+}
+
+impl TryFrom<PolynomialData> for Polynomial {
+    type Error = crate::Error;
+
+    fn try_from(d: PolynomialData) -> crate::Result<Self> {
+        Polynomial::from_coefficients(d.degree, d.coefficients)
+    }
 }
 
 /// Value, gradient and Hessian of a polynomial at one point.
@@ -282,6 +301,19 @@ fn ddpowers(p: &[Real; MAX_DEGREE + 1], d: usize) -> [Real; MAX_DEGREE + 1] {
 
 #[cfg(test)]
 mod tests {
+    /// A deserialized polynomial is validated and evaluates like the original (its exponent
+    /// table is rebuilt, not left empty); a wrong coefficient count is refused.
+    #[test]
+    fn deserialized_polynomial_is_validated_and_evaluates() {
+        let p = Polynomial::from_coefficients(2, (0..10).map(|k| k as Real * 0.5 - 1.0).collect()).unwrap();
+        let back: Polynomial = serde_json::from_str(&serde_json::to_string(&p).unwrap()).unwrap();
+        assert_eq!(back, p);
+        let u = Vector3::new(0.3, -0.7, 1.1);
+        assert_eq!(back.value(&u), p.value(&u));
+        let short = r#"{"degree":2,"coefficients":[1.0,2.0]}"#;
+        assert!(serde_json::from_str::<Polynomial>(short).is_err());
+    }
+
     use super::*;
 
     fn sample() -> Polynomial {

@@ -404,7 +404,7 @@ impl Catalog {
     /// Deletes a body that no instance uses.
     ///
     /// # Errors
-    /// [`Error::NotFound`]; [`Error::InvalidArgument`] naming `body_id` while an instance uses it;
+    /// [`Error::NotFound`]; [`Error::FailedPrecondition`] while an instance uses it;
     /// [`Error::Storage`].
     pub fn delete_body(&self, id: &str) -> Result<()> {
         let mut bodies = write(&self.bodies);
@@ -414,10 +414,10 @@ impl Catalog {
         for scene in read(&self.scenes).values() {
             let s = lock(scene);
             if let Some((iid, _)) = s.instances.iter().find(|(_, inst)| inst.body_id == id) {
-                return Err(Error::invalid(
-                    "body_id",
-                    format!("body `{id}` is used by instance `{iid}` of scene `{}`; remove it first", s.id),
-                ));
+                return Err(Error::FailedPrecondition(format!(
+                    "body `{id}` is used by instance `{iid}` of scene `{}`; remove the instance first",
+                    s.id
+                )));
             }
         }
         self.store.delete_body(id)?;
@@ -879,7 +879,9 @@ mod tests {
             assert!(err.to_string().contains("poses[1].instance_id"), "{err}");
             assert!(matches!(c.distance(&scene, &i1, "i-nope"), Err(Error::NotFound { .. })));
             // The body is in use.
-            assert!(c.delete_body(&b1).unwrap_err().to_string().contains("body_id"));
+            assert!(
+                matches!(c.delete_body(&b1), Err(Error::FailedPrecondition(m)) if m.contains("remove the instance first"))
+            );
         }
         let c = open(dir.path());
         let v = c.get_scene(&scene).unwrap();

@@ -6,6 +6,7 @@
 //! | `InvalidArgument`    | INVALID_ARGUMENT     |
 //! | `NotFound`           | NOT_FOUND            |
 //! | `ResourceExhausted`  | RESOURCE_EXHAUSTED   |
+//! | `FailedPrecondition` | FAILED_PRECONDITION  |
 //! | `Numerical`          | INTERNAL             |
 //! | `Storage`, `Io`      | UNAVAILABLE          |
 //! | `Json`               | INVALID_ARGUMENT (only request JSON is parsed in handlers) |
@@ -32,6 +33,7 @@ impl From<Error> for Status {
             Error::InvalidArgument { .. } | Error::Json(_) => Code::InvalidArgument,
             Error::NotFound { .. } => Code::NotFound,
             Error::ResourceExhausted(_) => Code::ResourceExhausted,
+            Error::FailedPrecondition(_) => Code::FailedPrecondition,
             Error::Numerical(_) => Code::Internal,
             Error::Storage(_) | Error::Io(_) => Code::Unavailable,
         };
@@ -74,9 +76,28 @@ pub fn require_id<'a>(field: &str, id: &'a str) -> Result<&'a str> {
 // Geometry
 // ---------------------------------------------------------------------------------------------
 
-/// A proto point as a core point.
-pub fn point_from_proto(v: &pb::Vec3) -> Point3 {
-    Point3::new(v.x, v.y, v.z)
+/// Default and largest page of a List call.
+pub const MAX_PAGE_SIZE: usize = 1000;
+
+/// One page of `items` (ordered by id): those after `page_token` (the last id of the previous
+/// page; empty: from the start), at most `page_size` (0: [`MAX_PAGE_SIZE`]; capped there), and
+/// the token of the next page (empty after the last).
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `page_token` when it is longer than an id can be.
+pub fn page<T>(items: Vec<T>, id: impl Fn(&T) -> &str, page_size: u32, page_token: &str) -> Result<(Vec<T>, String)> {
+    if page_token.len() > MAX_ID_BYTES {
+        return Err(Error::invalid("page_token", format!("at most {MAX_ID_BYTES} bytes (a `next_page_token`)")));
+    }
+    let size = match page_size as usize {
+        0 => MAX_PAGE_SIZE,
+        n => n.min(MAX_PAGE_SIZE),
+    };
+    let mut page: Vec<T> = items.into_iter().filter(|t| page_token.is_empty() || id(t) > page_token).collect();
+    let more = page.len() > size;
+    page.truncate(size);
+    let next = if more { page.last().map(|t| id(t).to_owned()).unwrap_or_default() } else { String::new() };
+    Ok((page, next))
 }
 
 /// A core point as a proto point.

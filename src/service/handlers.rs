@@ -226,9 +226,12 @@ impl Sublevel for SublevelService {
         }))
     }
 
-    async fn list_bodies(&self, _request: Request<pb::ListBodiesRequest>) -> Reply<pb::ListBodiesResponse> {
-        let bodies = self.catalog.bodies().iter().map(|e| cv::body_summary(e)).collect();
-        Ok(Response::new(pb::ListBodiesResponse { bodies }))
+    async fn list_bodies(&self, request: Request<pb::ListBodiesRequest>) -> Reply<pb::ListBodiesResponse> {
+        let req = request.into_inner();
+        let (page, next_page_token) =
+            cv::page(self.catalog.bodies(), |e| e.id.as_str(), req.page_size, &req.page_token)?;
+        let bodies = page.iter().map(|e| cv::body_summary(e)).collect();
+        Ok(Response::new(pb::ListBodiesResponse { bodies, next_page_token }))
     }
 
     async fn delete_body(&self, request: Request<pb::DeleteBodyRequest>) -> Reply<pb::DeleteBodyResponse> {
@@ -252,10 +255,11 @@ impl Sublevel for SublevelService {
         Ok(Response::new(cv::scene_to_proto(&scene)))
     }
 
-    async fn list_scenes(&self, _request: Request<pb::ListScenesRequest>) -> Reply<pb::ListScenesResponse> {
-        let scenes = self
-            .catalog
-            .scenes()
+    async fn list_scenes(&self, request: Request<pb::ListScenesRequest>) -> Reply<pb::ListScenesResponse> {
+        let req = request.into_inner();
+        let (page, next_page_token) =
+            cv::page(self.catalog.scenes(), |s| s.id.as_str(), req.page_size, &req.page_token)?;
+        let scenes = page
             .into_iter()
             .map(|s| pb::SceneSummary {
                 scene_id: s.id,
@@ -263,7 +267,7 @@ impl Sublevel for SublevelService {
                 num_instances: u32::try_from(s.instances.len()).unwrap_or(u32::MAX),
             })
             .collect();
-        Ok(Response::new(pb::ListScenesResponse { scenes }))
+        Ok(Response::new(pb::ListScenesResponse { scenes, next_page_token }))
     }
 
     async fn delete_scene(&self, request: Request<pb::DeleteSceneRequest>) -> Reply<pb::DeleteSceneResponse> {
@@ -366,7 +370,7 @@ impl Sublevel for SublevelService {
         Ok(Response::new(pb::BatchQueryResponse { answers, columns: None }))
     }
 
-    async fn start_group_job(&self, request: Request<pb::StartGroupJobRequest>) -> Reply<pb::StartFitJobResponse> {
+    async fn start_group_job(&self, request: Request<pb::StartGroupJobRequest>) -> Reply<pb::StartGroupJobResponse> {
         use crate::fit::containment::{ContainmentSettings, CONTAINMENT_DEGREES, MAX_CONTAINED_BODIES};
         let req = request.into_inner();
         require_id("scene_id", &req.scene_id)?;
@@ -411,7 +415,7 @@ impl Sublevel for SublevelService {
         }
         let job = GroupJob { scene_id: req.scene_id, instances, name: req.name, replace: req.replace, settings };
         let job_id = self.jobs.start_group(job).await?;
-        Ok(Response::new(pb::StartFitJobResponse { job_id }))
+        Ok(Response::new(pb::StartGroupJobResponse { job_id }))
     }
 
     async fn query(&self, request: Request<pb::QueryRequest>) -> Reply<pb::QueryResponse> {

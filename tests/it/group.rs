@@ -250,7 +250,7 @@ async fn group_job_stores_the_body_and_replaces_the_instances() {
     let body = Body::from_file(serde_json::from_str(&got.body_json).unwrap()).unwrap();
     let want = two_ball_spheroid_volume(1.0, 0.5);
     assert!(((quadric_volume(&body) - want) / want).abs() < 1e-3, "{} vs {want}", quadric_volume(&body));
-    let listed = c.list_bodies(pb::ListBodiesRequest {}).await.unwrap().into_inner().bodies;
+    let listed = c.list_bodies(pb::ListBodiesRequest::default()).await.unwrap().into_inner().bodies;
     assert!(listed.iter().any(|b| b.body_id == last.body_id), "new body listed");
     let sc = c.get_scene(pb::GetSceneRequest { scene_id: scene.clone() }).await.unwrap().into_inner();
     assert_eq!(sc.instances.len(), 2);

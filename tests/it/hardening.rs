@@ -117,7 +117,7 @@ async fn repro_1_non_finite_reports_are_refused_and_the_store_reopens() {
 
     let server = Server::start(config(dir.path())).await;
     let mut c = server.client().await;
-    let bodies = c.list_bodies(pb::ListBodiesRequest {}).await.unwrap().into_inner().bodies;
+    let bodies = c.list_bodies(pb::ListBodiesRequest::default()).await.unwrap().into_inner().bodies;
     assert_eq!(bodies.len(), 2, "{bodies:?}");
     server.stop().await;
 }
@@ -367,7 +367,7 @@ async fn unreadable_records_are_quarantined_and_the_store_opens() {
 
     let server = Server::start(config(dir.path())).await;
     let mut c = server.client().await;
-    let bodies = c.list_bodies(pb::ListBodiesRequest {}).await.unwrap().into_inner().bodies;
+    let bodies = c.list_bodies(pb::ListBodiesRequest::default()).await.unwrap().into_inner().bodies;
     assert_eq!(bodies.iter().map(|b| b.body_id.as_str()).collect::<Vec<_>>(), [keep.as_str()]);
     let mut health = HealthClient::new(server.channel().await);
     let check = |s: &str| HealthCheckRequest { service: s.into() };
@@ -456,7 +456,7 @@ async fn kill_9_during_acknowledged_writes_loses_nothing() {
     }
     let server = ChildServer::spawn(dir.path());
     let mut c = server.client().await;
-    let bodies = c.list_bodies(pb::ListBodiesRequest {}).await.unwrap().into_inner().bodies;
+    let bodies = c.list_bodies(pb::ListBodiesRequest::default()).await.unwrap().into_inner().bodies;
     for (body, ..) in &acked {
         assert!(bodies.iter().any(|b| &b.body_id == body), "acknowledged body {body} lost");
     }
@@ -511,7 +511,7 @@ async fn sigterm_during_a_fit_exits_promptly_and_the_job_reads_interrupted() {
     assert_eq!(u.state, pb::JobState::Interrupted as i32, "{u:?}");
     assert!(u.error.contains("interrupted"), "{u:?}");
     assert!(stream.message().await.unwrap().is_none());
-    let bodies = c.list_bodies(pb::ListBodiesRequest {}).await.unwrap().into_inner().bodies;
+    let bodies = c.list_bodies(pb::ListBodiesRequest::default()).await.unwrap().into_inner().bodies;
     assert!(bodies.iter().all(|b| b.name != "chair8"), "{bodies:?}");
     let e = c.watch_fit_job(pb::WatchFitJobRequest { job_id: "j-never".into() }).await.unwrap_err();
     assert_eq!(e.code(), Code::NotFound);

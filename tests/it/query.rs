@@ -205,13 +205,10 @@ fn data_path(file: &str) -> PathBuf {
 }
 
 /// Loads a fitted body, or explains on stderr why the test is skipped.
-fn load_or_skip(file: &str) -> Option<Body> {
+/// A bundled fitted body of `tests/data/` (a missing file fails the test: nothing is skipped).
+fn load_bundled(file: &str) -> Body {
     let path = data_path(file);
-    if !path.exists() {
-        eprintln!("SKIPPED: {} not found (fitted bodies are committed later); nothing checked", path.display());
-        return None;
-    }
-    Some(Body::load(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display())))
+    Body::load(&path).unwrap_or_else(|e| panic!("{} (bundled in tests/data/, see SOURCE.md): {e}", path.display()))
 }
 
 const ALL_KINDS: [PairKind; 3] = [PairKind::Random, PairKind::Overlapping, PairKind::NearTouching];
@@ -221,9 +218,7 @@ const ALL_KINDS: [PairKind; 3] = [PairKind::Random, PairKind::Overlapping, PairK
 /// both orders of the growth measure.
 #[test]
 fn newton_matches_certificates_on_real_meshes_deg4() {
-    let (Some(chair), Some(human)) = (load_or_skip("chair_101.deg4.json"), load_or_skip("human_10.deg4.json")) else {
-        return;
-    };
+    let (chair, human) = (load_bundled("chair_101.deg4.json"), load_bundled("human_10.deg4.json"));
     assert_eq!((chair.degree(), human.degree()), (4, 4));
     let mut tally = run_harness(&chair, &human, &ALL_KINDS, 90, 7, "chair/human deg4");
     tally.merge(&run_harness(&human, &chair, &ALL_KINDS, 30, 8, "human/chair deg4"));
@@ -235,9 +230,7 @@ fn newton_matches_certificates_on_real_meshes_deg4() {
 /// The same check on a handful of pairs of the degree-6 bodies (84 × 84 Gram matrices).
 #[test]
 fn newton_matches_certificates_on_real_meshes_deg6() {
-    let (Some(chair), Some(human)) = (load_or_skip("chair_101.deg6.json"), load_or_skip("human_10.deg6.json")) else {
-        return;
-    };
+    let (chair, human) = (load_bundled("chair_101.deg6.json"), load_bundled("human_10.deg6.json"));
     assert_eq!((chair.degree(), human.degree()), (6, 6));
     let tally = run_harness(&chair, &human, &ALL_KINDS, 6, 11, "chair/human deg6");
     eprintln!("deg6 real meshes: {tally:?}");

@@ -110,8 +110,19 @@ async fn round_trip_spheres_match_closed_forms_and_warm_start() {
     let got = c.get_body(pb::GetBodyRequest { body_id: b2.clone() }).await.unwrap().into_inner();
     assert_eq!(got.name, "two");
     assert_eq!(got.data.unwrap().coefficients, file2.coefficients);
-    let listed = c.list_bodies(pb::ListBodiesRequest {}).await.unwrap().into_inner().bodies;
-    assert_eq!(listed.len(), 2);
+    let listed = c.list_bodies(pb::ListBodiesRequest::default()).await.unwrap().into_inner();
+    assert_eq!((listed.bodies.len(), listed.next_page_token.as_str()), (2, ""));
+    // Pages of one: the first body, a token, then the second body and no token.
+    let first = c.list_bodies(pb::ListBodiesRequest { page_size: 1, ..Default::default() }).await.unwrap().into_inner();
+    assert_eq!(first.bodies.len(), 1);
+    assert_eq!(first.next_page_token, first.bodies[0].body_id);
+    let req = pb::ListBodiesRequest { page_size: 1, page_token: first.next_page_token.clone() };
+    let second = c.list_bodies(req).await.unwrap().into_inner();
+    assert_eq!(second.bodies.len(), 1);
+    assert!(second.bodies[0].body_id > first.bodies[0].body_id, "ordered by id");
+    assert_eq!(second.next_page_token, "");
+    let long = pb::ListBodiesRequest { page_size: 1, page_token: "x".repeat(200) };
+    assert_status(c.list_bodies(long).await, Code::InvalidArgument, "page_token");
 
     let scene = c.create_scene(pb::CreateSceneRequest { name: "s".into() }).await.unwrap().into_inner().scene_id;
     // Instance 1: rotated 90° about z and moved; its sphere center (0.1, 0, 0) lands at (1, 2.1, 0).
@@ -223,13 +234,13 @@ async fn bodies_scenes_and_poses_survive_a_restart() {
 
     let server = Server::start(config(dir.path())).await;
     let mut c = server.client().await;
-    let bodies = c.list_bodies(pb::ListBodiesRequest {}).await.unwrap().into_inner().bodies;
+    let bodies = c.list_bodies(pb::ListBodiesRequest::default()).await.unwrap().into_inner().bodies;
     let mut names: Vec<_> = bodies.iter().map(|b| b.name.as_str()).collect();
     names.sort();
     assert_eq!(names, ["big", "small"]);
     let err = c.get_body(pb::GetBodyRequest { body_id: doomed }).await.unwrap_err();
     assert_eq!(err.code(), Code::NotFound);
-    let scenes = c.list_scenes(pb::ListScenesRequest {}).await.unwrap().into_inner().scenes;
+    let scenes = c.list_scenes(pb::ListScenesRequest::default()).await.unwrap().into_inner().scenes;
     assert_eq!(scenes.len(), 1);
     assert_eq!((scenes[0].scene_id.as_str(), scenes[0].num_instances), (scene.as_str(), 2));
     let view = c.get_scene(pb::GetSceneRequest { scene_id: scene.clone() }).await.unwrap().into_inner();
@@ -311,7 +322,11 @@ async fn bad_input_gets_the_right_code_naming_the_field() {
     };
     assert_status(c.growth(req).await, Code::InvalidArgument, "instance_1");
     assert_status(c.watch_fit_job(pb::WatchFitJobRequest { job_id: "j-nope".into() }).await, Code::NotFound, "j-nope");
-    assert_status(c.delete_body(pb::DeleteBodyRequest { body_id: b.clone() }).await, Code::InvalidArgument, "body_id");
+    assert_status(
+        c.delete_body(pb::DeleteBodyRequest { body_id: b.clone() }).await,
+        Code::FailedPrecondition,
+        "remove the instance first",
+    );
 
     // Batches.
     let pair = |kind: i32| pb::QueryPair { kind, first: i1.clone(), second: i2.clone(), ..Default::default() };
@@ -491,11 +506,11 @@ async fn demo_seeding_is_idempotent_across_restarts() {
         };
         let channel = Channel::from_shared(format!("http://{addr}")).unwrap().connect().await.unwrap();
         let mut c = SublevelClient::new(channel);
-        let bodies = c.list_bodies(pb::ListBodiesRequest {}).await.unwrap().into_inner().bodies;
+        let bodies = c.list_bodies(pb::ListBodiesRequest::default()).await.unwrap().into_inner().bodies;
         let mut names: Vec<_> = bodies.iter().map(|b| b.name.clone()).collect();
         names.sort();
         assert_eq!(names, ["chair_101", "human_10"]);
-        let scenes = c.list_scenes(pb::ListScenesRequest {}).await.unwrap().into_inner().scenes;
+        let scenes = c.list_scenes(pb::ListScenesRequest::default()).await.unwrap().into_inner().scenes;
         assert_eq!(scenes.len(), 1);
         assert_eq!((scenes[0].name.as_str(), scenes[0].num_instances), ("demo", 2));
         // The demo pair starts apart.

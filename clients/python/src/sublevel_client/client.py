@@ -273,16 +273,21 @@ class Client:
         return self.upload(name, body).body_id
 
     def list_bodies(self) -> List[BodySummary]:
-        """All stored bodies (summaries), ordered by id."""
-        r = self._call("ListBodies", pb.ListBodiesRequest())
-        return [BodySummary(b.body_id, b.name, b.degree, b.method, b.volume) for b in r.bodies]
+        """All stored bodies (summaries), ordered by id (every page of ListBodies)."""
+        out, token = [], ""
+        while True:
+            r = self._call("ListBodies", pb.ListBodiesRequest(page_token=token))
+            out += [BodySummary(b.body_id, b.name, b.degree, b.method, b.volume) for b in r.bodies]
+            token = r.next_page_token
+            if not token:
+                return out
 
     def get_body_json(self, body_id: str) -> str:
         """A stored body as its JSON body file."""
         return self._call("GetBody", pb.GetBodyRequest(body_id=body_id)).body_json
 
     def delete_body(self, body_id: str) -> None:
-        """Deletes a body (INVALID_ARGUMENT while an instance uses it)."""
+        """Deletes a body (FAILED_PRECONDITION while an instance uses it)."""
         self._call("DeleteBody", pb.DeleteBodyRequest(body_id=body_id))
 
     # -- scenes -------------------------------------------------------------------------------
@@ -296,9 +301,14 @@ class Client:
         return Scene(scene_id=r.scene_id, name=r.name, instances=[Instance.from_proto(i) for i in r.instances])
 
     def list_scenes(self) -> List[SceneSummary]:
-        """All scenes (summaries), ordered by id."""
-        r = self._call("ListScenes", pb.ListScenesRequest())
-        return [SceneSummary(s.scene_id, s.name, s.num_instances) for s in r.scenes]
+        """All scenes (summaries), ordered by id (every page of ListScenes)."""
+        out, token = [], ""
+        while True:
+            r = self._call("ListScenes", pb.ListScenesRequest(page_token=token))
+            out += [SceneSummary(s.scene_id, s.name, s.num_instances) for s in r.scenes]
+            token = r.next_page_token
+            if not token:
+                return out
 
     def find_scene(self, name: str) -> str:
         """The id of the first scene (by id) named ``name``; KeyError if none."""
