@@ -475,6 +475,13 @@ impl Catalog {
         read(&self.scenes).values().map(|s| view(&lock(s))).collect()
     }
 
+    /// Whether any instance of the scene is a nonconvex body, whose queries solve an SDP lower
+    /// bound (milliseconds): the service runs such queries off its async workers. False for an
+    /// unknown scene (the query itself then reports it).
+    pub fn has_nonconvex(&self, scene_id: &str) -> bool {
+        self.scene(scene_id).map(|sc| lock(&sc).instances.values().any(|i| i.body.report.nonconvex)).unwrap_or(false)
+    }
+
     /// Deletes a scene with its instances and warm starts.
     ///
     /// # Errors

@@ -40,7 +40,8 @@ async fn run_view(
     request: PlannerRequest,
 ) -> (QueryView, Result<PlannerAnswers, Status>) {
     let certify = request.queries.iter().any(|q| q.options.mode == crate::query::CertifyMode::Certify);
-    if !certify {
+    let answers = request.queries.len() * request.states.len().max(1);
+    if !off_workers(&catalog, view.scene_id(), certify, answers) {
         let out = view.run(&catalog, &request).map_err(Status::from);
         return (view, out);
     }
@@ -53,6 +54,34 @@ async fn run_view(
     {
         Ok((view, out)) => (view, out.map_err(Status::from)),
         Err(e) => (QueryView::new(&scene), Err(Status::internal(format!("worker failed: {e}")))),
+    }
+}
+
+/// Most answers a query request computes inline on an async worker (about 1 µs each); larger
+/// requests run on the blocking pool so they never hold up other connections.
+const INLINE_ANSWERS: usize = 256;
+
+/// Whether a query request is slow work, to run off the async workers: it asks for certificates
+/// (an SDP each), its scene holds a nonconvex body (SDP lower bounds), or it has more than
+/// [`INLINE_ANSWERS`] answers.
+fn off_workers(catalog: &Catalog, scene_id: &str, certify: bool, answers: usize) -> bool {
+    certify || answers > INLINE_ANSWERS || catalog.has_nonconvex(scene_id)
+}
+
+/// Runs query work `f` inline when it is microseconds, else on the blocking pool (see
+/// [`off_workers`]).
+async fn query_work<T: Send + 'static>(
+    catalog: &Arc<Catalog>,
+    scene_id: &str,
+    certify: bool,
+    answers: usize,
+    f: impl FnOnce(&Catalog) -> Result<T> + Send + 'static,
+) -> Result<T, Status> {
+    if off_workers(catalog, scene_id, certify, answers) {
+        let catalog = catalog.clone();
+        blocking(move || f(&catalog)).await
+    } else {
+        f(catalog).map_err(Status::from)
     }
 }
 
@@ -315,13 +344,11 @@ impl Sublevel for SublevelService {
         require_id("instance_b", &req.instance_b)?;
         let options =
             crate::scene::QueryOptions { signed: req.signed, ..cv::query_options(req.certify, req.with_gradient) };
-        let r = if req.certify {
-            // The SDP takes milliseconds to seconds: off the async workers.
-            let catalog = self.catalog.clone();
-            blocking(move || catalog.distance_with(&req.scene_id, &req.instance_a, &req.instance_b, &options)).await?
-        } else {
-            self.catalog.distance_with(&req.scene_id, &req.instance_a, &req.instance_b, &options)?
-        };
+        let scene = req.scene_id.clone();
+        let r = query_work(&self.catalog, &scene, req.certify, 1, move |c| {
+            c.distance_with(&req.scene_id, &req.instance_a, &req.instance_b, &options)
+        })
+        .await?;
         Ok(Response::new(pb::DistanceResponse { answer: Some(cv::distance_reply_to_proto(&r)) }))
     }
 
@@ -331,12 +358,11 @@ impl Sublevel for SublevelService {
         require_id("instance_1", &req.instance_1)?;
         require_id("instance_2", &req.instance_2)?;
         let options = cv::query_options(req.certify, req.with_gradient);
-        let r = if req.certify {
-            let catalog = self.catalog.clone();
-            blocking(move || catalog.growth_with(&req.scene_id, &req.instance_1, &req.instance_2, &options)).await?
-        } else {
-            self.catalog.growth_with(&req.scene_id, &req.instance_1, &req.instance_2, &options)?
-        };
+        let scene = req.scene_id.clone();
+        let r = query_work(&self.catalog, &scene, req.certify, 1, move |c| {
+            c.growth_with(&req.scene_id, &req.instance_1, &req.instance_2, &options)
+        })
+        .await?;
         Ok(Response::new(pb::GrowthResponse { answer: Some(cv::growth_reply_to_proto(&r)) }))
     }
 
@@ -348,24 +374,25 @@ impl Sublevel for SublevelService {
                 return Err(Error::invalid("columns", "set either `pairs` or `columns`, not both").into());
             }
             let c = cv::pair_columns_from_proto(&columns, self.config.max_batch_pairs)?;
-            let answers = self.catalog.batch_columns(
-                &req.scene_id,
-                &c.instance_ids,
-                (&c.first, &c.second),
-                c.kind,
-                QueryOptions::default(),
-                c.margin,
-            )?;
-            let columns = Some(cv::answers_to_columns(c.kind, &answers));
+            let (scene, n, kind) = (req.scene_id.clone(), c.first.len(), c.kind);
+            let answers = query_work(&self.catalog, &scene, false, n, move |catalog| {
+                catalog.batch_columns(
+                    &req.scene_id,
+                    &c.instance_ids,
+                    (&c.first, &c.second),
+                    c.kind,
+                    QueryOptions::default(),
+                    c.margin,
+                )
+            })
+            .await?;
+            let columns = Some(cv::answers_to_columns(kind, &answers));
             return Ok(Response::new(pb::BatchQueryResponse { answers: Vec::new(), columns }));
         }
         let pairs = cv::pairs_from_proto(&req.pairs, self.config.max_batch_pairs)?;
-        let answers = if pairs.iter().any(|p| p.options.mode == crate::query::CertifyMode::Certify) {
-            let catalog = self.catalog.clone();
-            blocking(move || catalog.batch(&req.scene_id, &pairs)).await?
-        } else {
-            self.catalog.batch(&req.scene_id, &pairs)?
-        };
+        let certify = pairs.iter().any(|p| p.options.mode == crate::query::CertifyMode::Certify);
+        let (scene, n) = (req.scene_id.clone(), pairs.len());
+        let answers = query_work(&self.catalog, &scene, certify, n, move |c| c.batch(&req.scene_id, &pairs)).await?;
         let answers = answers.iter().map(cv::answer_to_proto).collect();
         Ok(Response::new(pb::BatchQueryResponse { answers, columns: None }))
     }
