@@ -1,5 +1,5 @@
 //! Request messages of the service as they arrive off the wire, through the public validators of
-//! `sublevel::service::convert`. The first byte picks the message type (mod 5), the rest is its
+//! `sublevel::service::convert`. The first byte picks the message type (mod 6), the rest is its
 //! protobuf encoding. Ok or Err, never a panic.
 #![no_main]
 
@@ -42,7 +42,7 @@ fn upload_body(req: pb::UploadBodyRequest) {
 
 fuzz_target!(|data: &[u8]| {
     let Some((&which, bytes)) = data.split_first() else { return };
-    match which % 5 {
+    match which % 6 {
         0 => {
             if let Ok(req) = pb::StartFitJobRequest::decode(bytes) {
                 start_fit_job(req);
@@ -63,6 +63,14 @@ fuzz_target!(|data: &[u8]| {
             if let Ok(req) = pb::BatchQueryRequest::decode(bytes) {
                 let _ = cv::require_id("scene_id", &req.scene_id);
                 let _ = cv::pairs_from_proto(&req.pairs, MAX_PAIRS);
+                if let Some(columns) = &req.columns {
+                    let _ = cv::pair_columns_from_proto(columns, MAX_PAIRS);
+                }
+            }
+        }
+        5 => {
+            if let Ok(req) = pb::QueryRequest::decode(bytes) {
+                let _ = cv::planner_request_from_proto(&req, MAX_PAIRS, MAX_POSES);
             }
         }
         _ => {
