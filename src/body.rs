@@ -26,8 +26,10 @@ pub const SUPPORTED_DEGREES: [usize; 4] = [2, 4, 6, 8];
 pub struct FitReport {
     /// Formulation, e.g. `"logdet_p"` (eq. "VAG.log.det"); `"uploaded"` for bodies sent as-is.
     pub method: String,
-    /// The SDP solver's final status (`"Solved"`, `"AlmostSolved"`, …).
-    pub solver_status: String,
+    /// The SDP solver's final status (text form `"Solved"`, `"AlmostSolved"`, …, `"closed_form"`
+    /// for the inverse moment; see [`crate::conic::SdpStatus`]).
+    #[serde(default)]
+    pub solver_status: crate::conic::SdpStatus,
     /// Seconds spent inside Clarabel.
     pub solve_seconds: Real,
     /// Seconds for the whole fit (hull, problem build, solve, checks, volume).

@@ -19,6 +19,142 @@ use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SolverStatus, S
 /// One sparse row: `(column, value)` pairs.
 pub type Row = Vec<(usize, f64)>;
 
+/// Final status of an SDP (a fit, a containment, a certificate), carried as a value through the
+/// core and turned into text only at the edges (JSON, proto, CLI): Clarabel's `SolverStatus`
+/// mirrored variant for variant, plus the outcomes of answers that ran no SDP.
+///
+/// Text form ([`SdpStatus::as_str`], also its serde form): Clarabel's variant names
+/// (`"Solved"`, `"AlmostSolved"`, …), `"closed_form"` and `"NotRun"`; any other text reads back as
+/// [`SdpStatus::Unknown`] (a body file or upload from another writer never fails to load over it).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+pub enum SdpStatus {
+    /// Solved to the requested tolerance.
+    Solved,
+    /// Solved to Clarabel's reduced tolerances.
+    AlmostSolved,
+    /// The solver did not run.
+    Unsolved,
+    /// Certificate of primal infeasibility.
+    PrimalInfeasible,
+    /// Certificate of dual infeasibility (an unbounded objective).
+    DualInfeasible,
+    /// Primal infeasibility to reduced tolerances.
+    AlmostPrimalInfeasible,
+    /// Dual infeasibility to reduced tolerances.
+    AlmostDualInfeasible,
+    /// The iteration cap was reached.
+    MaxIterations,
+    /// The time limit was reached.
+    MaxTime,
+    /// A numerical failure (e.g. a KKT factorization).
+    NumericalError,
+    /// The iterates stopped making progress.
+    InsufficientProgress,
+    /// A callback stopped the solve.
+    CallbackTerminated,
+    /// No SDP: the answer has a closed form (the inverse moment fit, paper §III-B-1).
+    ClosedForm,
+    /// No SDP was run (nothing to solve, or a report that predates the field).
+    #[default]
+    NotRun,
+    /// A status text this version does not know (kept readable, never an error).
+    Unknown,
+}
+
+impl SdpStatus {
+    /// Every status, in declaration order.
+    pub const ALL: [SdpStatus; 15] = [
+        SdpStatus::Solved,
+        SdpStatus::AlmostSolved,
+        SdpStatus::Unsolved,
+        SdpStatus::PrimalInfeasible,
+        SdpStatus::DualInfeasible,
+        SdpStatus::AlmostPrimalInfeasible,
+        SdpStatus::AlmostDualInfeasible,
+        SdpStatus::MaxIterations,
+        SdpStatus::MaxTime,
+        SdpStatus::NumericalError,
+        SdpStatus::InsufficientProgress,
+        SdpStatus::CallbackTerminated,
+        SdpStatus::ClosedForm,
+        SdpStatus::NotRun,
+        SdpStatus::Unknown,
+    ];
+
+    /// The text form (Clarabel's variant name, `"closed_form"`, `"NotRun"`, `"Unknown"`).
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            SdpStatus::Solved => "Solved",
+            SdpStatus::AlmostSolved => "AlmostSolved",
+            SdpStatus::Unsolved => "Unsolved",
+            SdpStatus::PrimalInfeasible => "PrimalInfeasible",
+            SdpStatus::DualInfeasible => "DualInfeasible",
+            SdpStatus::AlmostPrimalInfeasible => "AlmostPrimalInfeasible",
+            SdpStatus::AlmostDualInfeasible => "AlmostDualInfeasible",
+            SdpStatus::MaxIterations => "MaxIterations",
+            SdpStatus::MaxTime => "MaxTime",
+            SdpStatus::NumericalError => "NumericalError",
+            SdpStatus::InsufficientProgress => "InsufficientProgress",
+            SdpStatus::CallbackTerminated => "CallbackTerminated",
+            SdpStatus::ClosedForm => "closed_form",
+            SdpStatus::NotRun => "NotRun",
+            SdpStatus::Unknown => "Unknown",
+        }
+    }
+
+    /// Reads the text form; unknown text (and the empty string of old reports: [`SdpStatus::NotRun`])
+    /// never fails.
+    pub fn parse(s: &str) -> Self {
+        if s.is_empty() {
+            return SdpStatus::NotRun;
+        }
+        SdpStatus::ALL.into_iter().find(|v| v.as_str() == s).unwrap_or(SdpStatus::Unknown)
+    }
+
+    /// True for `Solved` and `AlmostSolved`: the solver's answer may be used.
+    pub fn is_usable(&self) -> bool {
+        matches!(self, SdpStatus::Solved | SdpStatus::AlmostSolved)
+    }
+}
+
+impl std::fmt::Display for SdpStatus {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl From<SolverStatus> for SdpStatus {
+    fn from(s: SolverStatus) -> Self {
+        match s {
+            SolverStatus::Solved => SdpStatus::Solved,
+            SolverStatus::AlmostSolved => SdpStatus::AlmostSolved,
+            SolverStatus::Unsolved => SdpStatus::Unsolved,
+            SolverStatus::PrimalInfeasible => SdpStatus::PrimalInfeasible,
+            SolverStatus::DualInfeasible => SdpStatus::DualInfeasible,
+            SolverStatus::AlmostPrimalInfeasible => SdpStatus::AlmostPrimalInfeasible,
+            SolverStatus::AlmostDualInfeasible => SdpStatus::AlmostDualInfeasible,
+            SolverStatus::MaxIterations => SdpStatus::MaxIterations,
+            SolverStatus::MaxTime => SdpStatus::MaxTime,
+            SolverStatus::NumericalError => SdpStatus::NumericalError,
+            SolverStatus::InsufficientProgress => SdpStatus::InsufficientProgress,
+            SolverStatus::CallbackTerminated => SdpStatus::CallbackTerminated,
+        }
+    }
+}
+
+impl serde::Serialize for SdpStatus {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> std::result::Result<S::Ok, S::Error> {
+        serializer.serialize_str(self.as_str())
+    }
+}
+
+impl<'de> serde::Deserialize<'de> for SdpStatus {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> std::result::Result<Self, D::Error> {
+        let s = <std::borrow::Cow<'de, str>>::deserialize(deserializer)?;
+        Ok(SdpStatus::parse(&s))
+    }
+}
+
 /// Accumulates a cone program for Clarabel.
 #[derive(Default, Debug)]
 pub struct ConicBuilder {

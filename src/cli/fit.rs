@@ -5,7 +5,7 @@
 
 use std::io::Write;
 use std::path::PathBuf;
-use sublevel::fit::logdet_p::TraceBasis;
+use sublevel::fit::sdp::TraceBasis;
 use sublevel::fit::{auto, fit_points, mesh, FitMethod, FitProgress, FitSettings, FitStage};
 
 /// `--degree`: a total degree 2d, or `auto`.
@@ -85,7 +85,7 @@ pub struct FitArgs {
     #[arg(long, default_value = "principal_box")]
     pub alternate_normalization: String,
     /// Monomial basis of the trace objectives: both (default: solve in each, keep the smaller
-    /// body), plain (the paper's monomials) or scaled (`fit::logdet_p::TraceBasis`).
+    /// body), plain (the paper's monomials) or scaled (`fit::sdp::TraceBasis`).
     #[arg(long, default_value = "both")]
     pub trace_basis: String,
     /// No progress on stderr.
@@ -129,6 +129,7 @@ pub fn run(args: FitArgs) -> sublevel::Result<()> {
         iterative_refinement: args.refinement,
         normalization: args.normalization.parse()?,
         alternate_normalization: sublevel::fit::hull::parse_optional_normalization(&args.alternate_normalization)?,
+        rows_in_rounds: false,
         trace_basis: match args.trace_basis.as_str() {
             "both" => None,
             "plain" => Some(TraceBasis::Plain),

@@ -95,7 +95,7 @@ pub fn run(args: FitTimeArgs) -> Result<()> {
                         solve: b.report.solve_seconds,
                         total: b.report.total_seconds,
                         volume: b.report.volume,
-                        status: b.report.solver_status.clone(),
+                        status: b.report.solver_status.to_string(),
                     },
                     Err(e) => Sample {
                         method,

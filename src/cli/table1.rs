@@ -233,7 +233,7 @@ pub fn stated_settings(settings: &FitSettings) -> FitSettings {
     FitSettings {
         normalization: Normalization::Input,
         alternate_normalization: None,
-        trace_basis: Some(sublevel::fit::logdet_p::TraceBasis::Plain),
+        trace_basis: Some(sublevel::fit::sdp::TraceBasis::Plain),
         ..settings.clone()
     }
 }
@@ -267,7 +267,7 @@ impl Cell {
             volume: Some(report.volume),
             std_error: report.volume_std_error,
             seconds: report.total_seconds,
-            status: report.solver_status.clone(),
+            status: report.solver_status.to_string(),
             certificate: report.solver_certificate,
             frame: kept,
             primary_volume,
@@ -428,7 +428,7 @@ pub fn fit_cell(points: &[Point3], settings: &FitSettings, paper: Option<Real>) 
                 volume: r.volume,
                 std_error: r.volume_std_error,
                 certificate: r.solver_certificate,
-                status: r.solver_status.clone(),
+                status: r.solver_status.to_string(),
             });
         }
     }

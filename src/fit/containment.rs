@@ -24,8 +24,10 @@
 //! c_γ(p) + c_γ(τᵢ · (1 − gᵢ)) + Σ_{a ≤ b, z_a z_b = x^γ} (2 − δ_ab) Qᵢ,ab = [γ = 0]
 //! ```
 //!
-//! `log det P` and sos-convexity are written exactly as in [`super::logdet_p`] (big block
-//! `[[P, Z], [Zᵀ, diag Z]] ⪰ 0`, exponential cones `Zᵢᵢ ≥ exp(tᵢ)`; `yᵀ∇²p y = wᵀ G w`, `G ⪰ 0`).
+//! The program is the fits' own ([`super::sdp::GramProgram`] with [`Containment::Bodies`]):
+//! `log det P`, sos-convexity, scaled monomial bases, the convexity floor, Clarabel's settings and
+//! retries, and the exact rescale after the solve are shared with the point-cloud fits, so a fix
+//! to any of them reaches both.
 //!
 //! World coordinates are first normalized, `v = (x − c)/s` with c the midpoint of the union of the
 //! bodies' bounding boxes and s half its diagonal (so every body lies in the unit ball); the
@@ -38,16 +40,12 @@
 //! Sizes (per body, with the same degree for every body): at 2d = 4 and deg g = 4, 2k = 0, each
 //! body adds a 10 × 10 Gram and 35 equations; 2k = 2 raises its degree to 6 (20 × 20, 84 rows).
 
-use super::logdet_p::pair_index;
+use super::sdp::{rescale_to_contain, usable_status, Containment, GramProgram, ProblemSpec, SolverSettings};
 use super::{report, volume, FitProgress, FitStage, KktSolver};
 use crate::body::{Body, FitReport};
-use crate::conic::{quiet_settings, ConicBuilder, Row};
 use crate::math::{Isometry3, Point3, Real, Vector3};
-use crate::poly::gram::{gram_weight, triangle_index, triangle_len, unpack_triangle};
-use crate::poly::monomial::{basis_len, graded_exponents3, index3};
 use crate::poly::Polynomial;
 use crate::{Error, Result};
-use clarabel::solver::{SolverStatus, SupportedConeT};
 
 /// Degrees 2d the containing polynomial may have.
 pub const CONTAINMENT_DEGREES: [usize; 3] = [2, 4, 6];
@@ -119,6 +117,17 @@ impl ContainmentSettings {
         self
     }
 
+    /// Clarabel's settings of the containment SDP (one thread; see [`SolverSettings`]).
+    pub fn solver_settings(&self) -> SolverSettings {
+        SolverSettings {
+            tolerance: self.solver_tolerance,
+            max_iterations: self.max_solver_iterations,
+            linear_solver: self.linear_solver,
+            threads: 1,
+            iterative_refinement: false,
+        }
+    }
+
     /// Checks every field.
     ///
     /// # Errors
@@ -133,271 +142,6 @@ impl ContainmentSettings {
         }
         super::validate_solver_fields(self.volume_samples, self.solver_tolerance, self.max_solver_iterations)
     }
-}
-
-fn add3(a: [u8; 3], b: [u8; 3]) -> [u8; 3] {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
-}
-
-fn degree3(e: [u8; 3]) -> usize {
-    e.iter().map(|&v| v as usize).sum()
-}
-
-/// The containment program of paper §V in normalized coordinates, built with [`ConicBuilder`].
-#[derive(Debug)]
-pub struct ContainmentProblem {
-    /// Half degree d of p.
-    pub half_degree: usize,
-    /// Side N of the Gram matrix P.
-    pub gram_size: usize,
-    /// Side M of the sos-convexity Gram matrix G.
-    pub convexity_gram_size: usize,
-    /// First column of svec(P).
-    pub col_p: usize,
-    /// First column of svec(G).
-    pub col_g: usize,
-    /// First column of the coefficients of p (graded lex, degree ≤ 2d).
-    pub col_c: usize,
-    /// Per body: first column of its multiplier (the scalar τᵢ, or svec(Tᵢ) for 2k = 2).
-    pub col_tau: Vec<usize>,
-    /// Per body: degree Dᵢ of its s.procedure polynomial.
-    pub sprocedure_degrees: Vec<usize>,
-    builder: ConicBuilder,
-}
-
-impl ContainmentProblem {
-    /// Builds the program for half degree `d ∈ 1..=3`, multiplier degree `2k ∈ {0, 2}` and the
-    /// bodies' polynomials `g` (normalized coordinates; each of degree ≥ 2).
-    ///
-    /// # Errors
-    /// [`Error::InvalidArgument`] naming `degree`, `multiplier_degree` or `bodies` (empty).
-    pub fn build(d: usize, multiplier_degree: usize, g: &[Polynomial]) -> Result<Self> {
-        if !(1..=3).contains(&d) {
-            return Err(Error::invalid("degree", format!("must be one of 2, 4, 6, got {}", 2 * d)));
-        }
-        if !MULTIPLIER_DEGREES.contains(&multiplier_degree) {
-            return Err(Error::invalid("multiplier_degree", format!("must be 0 or 2, got {multiplier_degree}")));
-        }
-        if g.is_empty() {
-            return Err(Error::invalid("bodies", "need at least one body to contain"));
-        }
-        let half = graded_exponents3(d);
-        let n = half.len();
-        let low = graded_exponents3(d - 1);
-        let nl = low.len();
-        let m = 3 * nl;
-        let full = graded_exponents3(2 * d);
-        let l = full.len();
-        let mut b = ConicBuilder::new();
-
-        // Columns: P | Z (lower triangle, packed as the upper triangle of Zᵀ) | t | c | G.
-        let col_p = b.add_variables(triangle_len(n));
-        let col_z = b.add_variables(triangle_len(n));
-        let col_t = b.add_variables(n);
-        let col_c = b.add_variables(l);
-        let col_g = b.add_psd_variable(m);
-        let z_col = |i: usize, j: usize| col_z + triangle_index(j, i); // Z(i, j), i ≥ j
-        for i in 0..n {
-            b.set_objective(col_t + i, -1.0);
-        }
-
-        // (1) c_α = Σ_{zᵢzⱼ = x^α} (2 − δᵢⱼ) Pᵢⱼ.
-        let mut rows: Vec<Row> = (0..l).map(|k| vec![(col_c + k, 1.0)]).collect();
-        for j in 0..n {
-            for i in 0..=j {
-                rows[index3(add3(half[i], half[j]))].push((col_p + triangle_index(i, j), -gram_weight(i, j)));
-            }
-        }
-        b.add_equalities(rows, vec![0.0; l]);
-
-        // (2) sos-convexity: yᵀ∇²p y = wᵀ G w, one row per (y-pair k ≤ l, x-monomial of degree ≤ 2d − 2).
-        let lb = basis_len(3, 2 * d - 2);
-        let mut rows: Vec<Row> = vec![Vec::new(); 6 * lb];
-        for (ci, alpha) in full.iter().enumerate() {
-            for k in 0..3 {
-                for kk in k..3 {
-                    let (ak, al) = (alpha[k] as usize, alpha[kk] as usize);
-                    let f = if k == kk { (ak * ak.saturating_sub(1)) as Real } else { 2.0 * (ak * al) as Real };
-                    if f == 0.0 {
-                        continue;
-                    }
-                    let mut beta = *alpha;
-                    beta[k] -= 1;
-                    beta[kk] -= 1;
-                    rows[pair_index(k, kk) * lb + index3(beta)].push((col_c + ci, f));
-                }
-            }
-        }
-        for bcol in 0..m {
-            for acol in 0..=bcol {
-                let (ka, ia) = (acol / nl, acol % nl);
-                let (kb, ib) = (bcol / nl, bcol % nl);
-                let row = pair_index(ka, kb) * lb + index3(add3(low[ia], low[ib]));
-                rows[row].push((col_g + triangle_index(acol, bcol), -gram_weight(acol, bcol)));
-            }
-        }
-        b.add_equalities(rows, vec![0.0; 6 * lb]);
-
-        // (3) [[P, Z], [Zᵀ, diag Z]] ⪰ 0 (it implies P ⪰ 0).
-        let nn = 2 * n;
-        let s2 = std::f64::consts::SQRT_2;
-        let mut rows: Vec<Row> = vec![Vec::new(); triangle_len(nn)];
-        for j in 0..nn {
-            for i in 0..=j {
-                let row = &mut rows[triangle_index(i, j)];
-                if j < n {
-                    row.push((col_p + triangle_index(i, j), -1.0));
-                } else if i < n {
-                    let jz = j - n;
-                    if i >= jz {
-                        row.push((z_col(i, jz), -s2));
-                    }
-                } else if i == j {
-                    row.push((z_col(i - n, i - n), -1.0));
-                }
-            }
-        }
-        b.add_rows(rows, vec![0.0; triangle_len(nn)], SupportedConeT::PSDTriangleConeT(nn));
-
-        // (4) (tᵢ, 1, Zᵢᵢ) ∈ K_exp: Zᵢᵢ ≥ exp(tᵢ).
-        for i in 0..n {
-            b.add_rows(
-                vec![vec![(col_t + i, -1.0)], Vec::new(), vec![(z_col(i, i), -1.0)]],
-                vec![0.0, 1.0, 0.0],
-                SupportedConeT::ExponentialConeT(),
-            );
-        }
-
-        // (5) per body: τᵢ sos, and p + τᵢ(1 − gᵢ) + z_sᵀ Qᵢ z_s = 1 coefficient by coefficient.
-        let z1 = graded_exponents3(1);
-        let mut col_tau = Vec::with_capacity(g.len());
-        let mut sprocedure_degrees = Vec::with_capacity(g.len());
-        for gi in g {
-            let deg_g = gi.degree();
-            let dd = (2 * d).max(multiplier_degree + deg_g);
-            let dd = dd + dd % 2;
-            let zs = graded_exponents3(dd / 2);
-            let ns = zs.len();
-            let tau = if multiplier_degree == 0 {
-                let col = b.add_variables(1);
-                b.add_inequalities(vec![vec![(col, -1.0)]], vec![0.0]);
-                col
-            } else {
-                b.add_psd_variable(z1.len())
-            };
-            let col_q = b.add_psd_variable(ns);
-            let rows_len = basis_len(3, dd);
-            let mut rows: Vec<Row> = vec![Vec::new(); rows_len];
-            for (k, alpha) in full.iter().enumerate() {
-                rows[index3(*alpha)].push((col_c + k, 1.0));
-            }
-            // h = 1 − gᵢ.
-            let h: Vec<([u8; 3], Real)> = gi
-                .exponents()
-                .iter()
-                .zip(gi.coefficients())
-                .map(|(e, &c)| (*e, if degree3(*e) == 0 { 1.0 - c } else { -c }))
-                .filter(|(_, c)| *c != 0.0)
-                .collect();
-            if multiplier_degree == 0 {
-                for (e, hc) in &h {
-                    rows[index3(*e)].push((tau, *hc));
-                }
-            } else {
-                for bj in 0..z1.len() {
-                    for ai in 0..=bj {
-                        let w = gram_weight(ai, bj);
-                        let mono = add3(z1[ai], z1[bj]);
-                        for (e, hc) in &h {
-                            rows[index3(add3(mono, *e))].push((tau + triangle_index(ai, bj), w * hc));
-                        }
-                    }
-                }
-            }
-            for bj in 0..ns {
-                for ai in 0..=bj {
-                    rows[index3(add3(zs[ai], zs[bj]))].push((col_q + triangle_index(ai, bj), gram_weight(ai, bj)));
-                }
-            }
-            let mut rhs = vec![0.0; rows_len];
-            rhs[0] = 1.0;
-            b.add_equalities(rows, rhs);
-            col_tau.push(tau);
-            sprocedure_degrees.push(dd);
-        }
-
-        Ok(Self {
-            half_degree: d,
-            gram_size: n,
-            convexity_gram_size: m,
-            col_p,
-            col_g,
-            col_c,
-            col_tau,
-            sprocedure_degrees,
-            builder: b,
-        })
-    }
-
-    /// Number of variables.
-    pub fn num_variables(&self) -> usize {
-        self.builder.num_variables()
-    }
-
-    /// Number of constraint rows.
-    pub fn num_rows(&self) -> usize {
-        self.builder.num_rows()
-    }
-
-    /// Solves with Clarabel.
-    ///
-    /// # Errors
-    /// [`Error::Numerical`] when Clarabel rejects the data; a non-`Solved` status is in the answer.
-    pub fn solve(&self, settings: clarabel::solver::DefaultSettings<Real>) -> Result<crate::conic::ConicSolution> {
-        self.builder.solve(settings)
-    }
-
-    /// p = z(x)ᵀ P z(x) from a solution, in the graded-lex basis of degree 2d.
-    ///
-    /// # Errors
-    /// [`Error::Numerical`] when a coefficient is not finite.
-    pub fn polynomial(&self, x: &[Real]) -> Result<Polynomial> {
-        let p = unpack_triangle(&x[self.col_p..self.col_p + triangle_len(self.gram_size)], self.gram_size);
-        let half = graded_exponents3(self.half_degree);
-        let mut c = vec![0.0; basis_len(3, 2 * self.half_degree)];
-        for j in 0..half.len() {
-            for i in 0..=j {
-                c[index3(add3(half[i], half[j]))] += if i == j { 1.0 } else { 2.0 } * p[(i, j)];
-            }
-        }
-        Polynomial::from_coefficients(2 * self.half_degree, c)
-            .map_err(|e| Error::Numerical(format!("the solver returned an unusable Gram matrix: {e}")))
-    }
-
-    /// The sos-convexity Gram matrix G (M × M) from a solution.
-    pub fn convexity_gram(&self, x: &[Real]) -> nalgebra::DMatrix<Real> {
-        let len = triangle_len(self.convexity_gram_size);
-        unpack_triangle(&x[self.col_g..self.col_g + len], self.convexity_gram_size)
-    }
-}
-
-/// Maps every Clarabel status explicitly (as the point fit does).
-fn usable_status(status: SolverStatus) -> Result<&'static str> {
-    let why = match status {
-        SolverStatus::Solved => return Ok("Solved"),
-        SolverStatus::AlmostSolved => return Ok("AlmostSolved"),
-        SolverStatus::Unsolved => "Unsolved (the solver did not run)",
-        SolverStatus::PrimalInfeasible => "PrimalInfeasible (no p of this degree passes the S-procedure)",
-        SolverStatus::DualInfeasible => "DualInfeasible (log det unbounded)",
-        SolverStatus::AlmostPrimalInfeasible => "AlmostPrimalInfeasible",
-        SolverStatus::AlmostDualInfeasible => "AlmostDualInfeasible",
-        SolverStatus::MaxIterations => "MaxIterations (raise max_solver_iterations)",
-        SolverStatus::MaxTime => "MaxTime",
-        SolverStatus::NumericalError => "NumericalError",
-        SolverStatus::InsufficientProgress => "InsufficientProgress",
-        SolverStatus::CallbackTerminated => "CallbackTerminated",
-    };
-    Err(Error::Numerical(format!("the containment SDP ended with status {why}")))
 }
 
 /// `n` unit directions, well spread (a Fibonacci spiral).
@@ -547,21 +291,32 @@ pub fn contain_bodies(
             settings.multiplier_degree
         ),
     );
-    let problem = ContainmentProblem::build(d, settings.multiplier_degree, &g)?;
+    // The boundary samples every result is checked on (normalized coordinates); they also set
+    // the monomial basis scales of the program.
+    let samples = BOUNDARY_SAMPLES_PER_BODY;
+    let mut checks = Vec::with_capacity(samples * bodies.len());
+    for (body, pose) in bodies {
+        for x in boundary_points(body, pose, samples)? {
+            checks.push((x.coords - center) / scale);
+        }
+    }
+    let problem = GramProgram::build(
+        &ProblemSpec::log_det_p(d),
+        Containment::Bodies { polynomials: &g, multiplier_degree: settings.multiplier_degree, samples: &checks },
+    )?;
 
     report(
         progress,
         FitStage::Solve,
         0.1,
-        format!("Clarabel: {} variables, {} rows", problem.num_variables(), problem.num_rows()),
+        format!("Clarabel: {} variables, {} rows", problem.num_vars, problem.num_rows()),
     );
-    let mut clarabel = quiet_settings(settings.solver_tolerance, settings.max_solver_iterations);
-    clarabel.direct_solve_method = settings.linear_solver.name().into();
-    clarabel.max_threads = 1;
-    let sol = problem.solve(clarabel)?;
-    let status = usable_status(sol.status)?;
+    let sol = problem.solve_with_retry(&settings.solver_settings(), None, &mut |it, cost| {
+        let frac = 0.1 + 0.7 * (it as Real / 40.0).min(1.0);
+        report(progress, FitStage::Solve, frac, format!("Clarabel iteration {it}, log det P ≈ {:.6}", -cost));
+    })?;
+    let status = usable_status(sol.status, "containment")?;
 
-    let samples = BOUNDARY_SAMPLES_PER_BODY;
     report(
         progress,
         FitStage::Verify,
@@ -571,30 +326,8 @@ pub fn contain_bodies(
             sol.iterations
         ),
     );
-    let mut poly = problem.polynomial(&sol.x)?;
-    let mut checks = Vec::with_capacity(samples * bodies.len());
-    for (body, pose) in bodies {
-        for x in boundary_points(body, pose, samples)? {
-            checks.push((x.coords - center) / scale);
-        }
-    }
-    let max_on = |p: &Polynomial| checks.iter().map(|v| p.value(v)).fold(Real::NEG_INFINITY, Real::max);
-    let mut max_value = max_on(&poly);
-    if !max_value.is_finite() || max_value <= 0.0 {
-        return Err(Error::Numerical(format!("the containing polynomial has max value {max_value} on the bodies")));
-    }
-    let mut rescale = 1.0;
-    for _ in 0..4 {
-        if max_value <= 1.0 {
-            break;
-        }
-        poly.scale(1.0 / max_value);
-        rescale *= max_value;
-        max_value = max_on(&poly);
-    }
-    if max_value > 1.0 {
-        return Err(Error::Numerical(format!("could not rescale p to contain the bodies (max {max_value})")));
-    }
+    let mut poly = problem.polynomial_of_gram(&problem.gram(&sol.x))?;
+    let (max_value, rescale) = rescale_to_contain(&mut poly, &checks)?;
     let margin = (problem.convexity_gram(&sol.x) / rescale)
         .symmetric_eigenvalues()
         .iter()
@@ -603,8 +336,9 @@ pub fn contain_bodies(
 
     let mut fit_report = FitReport {
         method: "containment".into(),
-        solver_status: status.into(),
+        solver_status: status,
         solve_seconds: sol.solve_seconds,
+        solver_certificate: Some(sol.certificate),
         num_points: checks.len(),
         max_point_value: max_value,
         containment_rescale: rescale,

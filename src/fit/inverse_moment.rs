@@ -75,18 +75,18 @@ pub fn inverse_moment_gram(half_degree: usize, points: &[Vector3]) -> Result<DMa
 ///
 /// # Errors
 /// As [`inverse_moment_gram`]; [`Error::Numerical`] for a non-finite result.
-pub(crate) fn solve(half_degree: usize, points: &[Vector3]) -> Result<super::Solved> {
+pub(crate) fn solve(half_degree: usize, points: &[Vector3]) -> Result<super::pipeline::Solved> {
     let start = std::time::Instant::now();
     let inv = inverse_moment_gram(half_degree, points)?;
-    let mut poly = super::logdet_p::polynomial_of_gram(half_degree, &inv)?;
+    let mut poly = super::sdp::polynomial_of_gram(half_degree, &inv)?;
     let gamma = points.iter().map(|u| poly.value(u)).fold(Real::NEG_INFINITY, Real::max);
     if !(gamma.is_finite() && gamma > 0.0) {
         return Err(Error::Numerical(format!("inverse moment polynomial has max {gamma} on the cloud")));
     }
     poly.scale(1.0 / gamma);
-    Ok(super::Solved {
+    Ok(super::pipeline::Solved {
         poly,
-        solver_status: "closed_form".into(),
+        solver_status: crate::conic::SdpStatus::ClosedForm,
         solve_seconds: start.elapsed().as_secs_f64(),
         convexity_gram: None,
         sos_gram: Some(inv / gamma),

@@ -20,11 +20,11 @@
 //! never dropped.
 
 use super::hull::NormalizedCloud;
-use super::logdet_p::{usable_status, LogDetProblem, ProblemSpec};
+use super::sdp::{usable_status, Containment, GramProgram, ProblemSpec, SolverSettings};
+use crate::conic::SdpStatus;
 use crate::math::{Real, Vector3};
 use crate::poly::Polynomial;
 use crate::Result;
-use clarabel::solver::DefaultSettings;
 
 /// Points of the subsample added to the hull vertices in the first round.
 pub const INITIAL_SAMPLE: usize = 64;
@@ -50,7 +50,7 @@ pub struct RoundsOutcome {
     /// Sos-convexity Gram matrix of p + c(‖u‖²)ᵈ (M × M).
     pub convexity_gram: nalgebra::DMatrix<Real>,
     /// Clarabel's status of the last round.
-    pub status: &'static str,
+    pub status: SdpStatus,
     /// Seconds inside Clarabel, all rounds.
     pub solve_seconds: Real,
     /// Interior-point iterations, all rounds.
@@ -71,17 +71,17 @@ pub struct RoundsOutcome {
 ///
 /// Clarabel's default step fraction 0.99 stalls (`InsufficientProgress` after ~8 iterations) on
 /// the chair with a few hundred redundant containment rows beyond the hull; the rounds therefore
-/// use [`ROUND_STEP_FRACTION`] (and [`LogDetProblem::solve_with_retry`] shortens it further if
+/// use [`ROUND_STEP_FRACTION`] (and [`GramProgram::solve_with_retry`] shortens it further if
 /// needed).
 ///
 /// # Errors
-/// Whatever [`LogDetProblem::build_spec`] or [`LogDetProblem::solve`] return, and
+/// Whatever [`GramProgram::build`] or [`GramProgram::solve`] return, and
 /// [`crate::Error::Numerical`] for an unusable solver status in the first round (a later failed
 /// round keeps the previous round's solution, see [`RoundsOutcome::failed_round`]).
 pub fn solve_in_rounds(
     cloud: &NormalizedCloud,
     spec: &ProblemSpec,
-    settings: &DefaultSettings<Real>,
+    settings: &SolverSettings,
     progress: &mut dyn FnMut(usize, u32, Real),
 ) -> Result<RoundsOutcome> {
     let n = cloud.points.len();
@@ -98,19 +98,17 @@ pub fn solve_in_rounds(
             rows.push(cloud.points[i]);
         }
     }
-    let mut settings = settings.clone();
-    settings.max_step_fraction = settings.max_step_fraction.min(ROUND_STEP_FRACTION);
-    let settings = &settings;
     let mut rows_per_round = Vec::new();
     let mut last: Option<RoundsOutcome> = None;
     let (mut solve_seconds, mut iterations) = (0.0, 0);
     for round in 0..MAX_ROUNDS {
         rows_per_round.push(rows.len());
-        let problem = LogDetProblem::build_spec(spec, &rows)?;
-        let raw = problem.solve_with_retry(settings, &mut |it, cost| progress(round, it, cost))?;
+        let problem = GramProgram::build(spec, Containment::Points(&rows))?;
+        let raw =
+            problem.solve_with_retry(settings, Some(ROUND_STEP_FRACTION), &mut |it, cost| progress(round, it, cost))?;
         solve_seconds += raw.solve_seconds;
         iterations += raw.iterations;
-        let status = match (usable_status(raw.status), last.take()) {
+        let status = match (usable_status(raw.status, "fit"), last.take()) {
             (Ok(s), _) => s,
             (Err(e), None) => return Err(e),
             // A later round failed: keep the previous round's solution (the caller's rescale
@@ -119,7 +117,7 @@ pub fn solve_in_rounds(
                 prev.solve_seconds = solve_seconds;
                 prev.iterations = iterations;
                 prev.rows_per_round = rows_per_round;
-                prev.failed_round = Some(format!("round {} ended with status {:?}", round + 1, raw.status));
+                prev.failed_round = Some(format!("round {} ended with status {}", round + 1, raw.status));
                 return Ok(prev);
             }
         };

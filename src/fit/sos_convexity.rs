@@ -21,8 +21,9 @@
 //! identities into G's affine image; doing the same here is the next step). Callers run it off the
 //! async workers; fit jobs never pay it (their bodies carry the certificate of their own SDP).
 
-use super::logdet_p::pair_index;
-use crate::conic::{quiet_settings, ConicBuilder, Row};
+use super::sdp::identities::add3;
+use super::sdp::pair_index;
+use crate::conic::{ConicBuilder, Row, SdpStatus};
 use crate::math::Real;
 use crate::poly::gram::{gram_weight, triangle_index};
 use crate::poly::monomial::{basis_len, graded_exponents3, index3};
@@ -42,14 +43,10 @@ pub struct SosConvexity {
     pub hessian_scale: Real,
     /// True when `margin ≥ −SOS_CONVEXITY_TOLERANCE × hessian_scale` and the solve succeeded.
     pub certified: bool,
-    /// Clarabel's final status, e.g. `Solved`.
-    pub solver_status: String,
+    /// Clarabel's final status (`NotRun` when p has no quadratic part to certify).
+    pub solver_status: SdpStatus,
     /// Seconds inside Clarabel.
     pub solve_seconds: Real,
-}
-
-fn add3(a: [u8; 3], b: [u8; 3]) -> [u8; 3] {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
 }
 
 /// Solves the program of the module docs for `p` (degree 2d ∈ {2, 4, 6, 8}, normalized
@@ -98,7 +95,7 @@ pub fn sos_convexity_margin(p: &Polynomial) -> Result<SosConvexity> {
             margin: 0.0,
             hessian_scale,
             certified: false,
-            solver_status: "NotSolved (p has no quadratic part)".into(),
+            solver_status: SdpStatus::NotRun,
             solve_seconds: 0.0,
         });
     }
@@ -127,18 +124,20 @@ pub fn sos_convexity_margin(p: &Polynomial) -> Result<SosConvexity> {
     b.add_equalities(rows, rhs.iter().map(|v| v * inv).collect());
     // The fits' solver choices (faer's supernodal LDLᵀ for the dense G block, static
     // regularization, step fraction): QDLDL took 2.2 s at 2d = 6 and 122 s at 2d = 8 here.
-    let mut settings = quiet_settings(1e-8, 100);
-    settings.direct_solve_method = super::KktSolver::Faer.name().into();
-    settings.static_regularization_constant = super::FIT_STATIC_REGULARIZATION;
-    settings.max_step_fraction = super::FIT_STEP_FRACTION;
-    let sol = b.solve(settings)?;
+    let settings = super::SolverSettings {
+        tolerance: 1e-8,
+        max_iterations: 100,
+        iterative_refinement: true,
+        ..Default::default()
+    };
+    let sol = b.solve(settings.clarabel())?;
     let margin = sol.x[col_t] * hessian_scale;
     let usable = sol.usable() && margin.is_finite();
     Ok(SosConvexity {
         margin,
         hessian_scale,
         certified: usable && margin >= -SOS_CONVEXITY_TOLERANCE * hessian_scale,
-        solver_status: format!("{:?}", sol.status),
+        solver_status: sol.status.into(),
         solve_seconds: sol.solve_seconds,
     })
 }

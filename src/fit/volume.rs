@@ -537,7 +537,7 @@ mod tests {
         }
         let lambda = gram.symmetric_eigenvalues().min();
         assert!(lambda > 0.0);
-        let p = crate::fit::logdet_p::polynomial_of_gram(d, &gram).unwrap();
+        let p = crate::fit::sdp::polynomial_of_gram(d, &gram).unwrap();
         // Nonconvex: the Hessian at the origin has a negative eigenvalue.
         assert!(p.eval(&Vector3::zeros()).hessian.symmetric_eigenvalues().min() < 0.0);
         let est = monte_carlo_volume_sos(&p, lambda, 100_000, 9).unwrap();

@@ -306,7 +306,7 @@ pub fn fit_stage_to_proto(stage: FitStage) -> pb::FitStage {
 pub fn report_to_proto(r: &FitReport) -> pb::FitReport {
     pb::FitReport {
         method: r.method.clone(),
-        solver_status: r.solver_status.clone(),
+        solver_status: r.solver_status.to_string(),
         solve_seconds: r.solve_seconds,
         total_seconds: r.total_seconds,
         num_points: r.num_points as u64,
@@ -346,7 +346,7 @@ pub fn report_to_proto(r: &FitReport) -> pb::FitReport {
 pub fn report_from_proto(r: &pb::FitReport) -> FitReport {
     FitReport {
         method: r.method.clone(),
-        solver_status: r.solver_status.clone(),
+        solver_status: crate::conic::SdpStatus::parse(&r.solver_status),
         solve_seconds: r.solve_seconds,
         total_seconds: r.total_seconds,
         num_points: r.num_points as usize,
@@ -974,7 +974,7 @@ mod tests {
     fn fit_report_round_trips_through_the_wire_format_with_its_certificate() {
         let report = FitReport {
             method: "trace_p".into(),
-            solver_status: "Solved".into(),
+            solver_status: crate::conic::SdpStatus::Solved,
             volume: 0.303,
             volume_std_error: 0.001,
             convexity_relaxation: 10.0,
