@@ -32,6 +32,7 @@
 //! it. The closing summary counts the cells above 1.02 × the paper whose paper value lies below a
 //! certified optimum of its stated program, and names any cell without such a check.
 
+use super::csv_file::CsvFile;
 use plotters::prelude::*;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -775,19 +776,35 @@ fn stated_program_notes(rows: &[&Row], shapes: &[ShapeRef], cells: &[Vec<Cell>])
     out
 }
 
-fn csv_field(s: &str) -> String {
-    if s.contains(',') || s.contains('"') || s.contains('\n') {
-        format!("\"{}\"", s.replace('"', "\"\""))
-    } else {
-        s.to_string()
-    }
-}
+/// Columns of `table1 --csv`, one record per (row, shape): the row key, the formulation's name,
+/// 2d and c (empty for baselines), the shape's file stem, our volume and its standard error, the
+/// paper's value and ours / paper, the cell's seconds, status and kept frame, Clarabel's primal /
+/// dual objectives and gap, the primary-frame volume, and the stated-program check (volume, std
+/// error, gap).
+pub const CSV_COLUMNS: [&str; 19] = [
+    "row",
+    "objective",
+    "degree",
+    "c",
+    "shape",
+    "volume",
+    "std_error",
+    "paper",
+    "ratio",
+    "fit_seconds",
+    "status",
+    "frame",
+    "primal_objective",
+    "dual_objective",
+    "gap",
+    "primary_frame_volume",
+    "stated_volume",
+    "stated_std_error",
+    "stated_gap",
+];
 
 fn write_csv(path: &Path, rows: &[&Row], shapes: &[ShapeRef], cells: &[Vec<Cell>]) -> Result<()> {
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir)?;
-    }
-    let mut out = String::from("row,objective,degree,c,shape,volume,std_error,paper,ratio,fit_seconds,status,frame,primal_objective,dual_objective,gap,primary_frame_volume,stated_volume,stated_std_error,stated_gap\n");
+    let mut csv = CsvFile::create(path, &CSV_COLUMNS)?;
     for (ri, row) in rows.iter().enumerate() {
         let (degree, c) = match row.kind {
             RowKind::Fit { degree, c, .. } => (degree.to_string(), c.to_string()),
@@ -816,25 +833,30 @@ fn write_csv(path: &Path, rows: &[&Row], shapes: &[ShapeRef], cells: &[Vec<Cell>
                     (format!("{}", st.volume), format!("{}", st.std_error), gap)
                 },
             );
-            out.push_str(&format!(
-                "{},{},{},{},{},{},{},{},{},{:.3},{},{},{primal},{dual},{gap},{},{stated_volume},{stated_se},{stated_gap}\n",
-                row.key,
-                objective,
-                degree,
-                c,
-                s.0,
+            csv.record([
+                row.key.to_string(),
+                objective.to_string(),
+                degree.clone(),
+                c.clone(),
+                s.0.to_string(),
                 opt(cell.volume),
                 if cell.volume.is_some() { format!("{}", cell.std_error) } else { String::new() },
                 opt(paper),
                 opt(ratio),
-                cell.seconds,
-                csv_field(&cell.status),
-                cell.frame,
-                opt(cell.primary_volume)
-            ));
+                format!("{:.3}", cell.seconds),
+                cell.status.clone(),
+                cell.frame.clone(),
+                primal,
+                dual,
+                gap,
+                opt(cell.primary_volume),
+                stated_volume,
+                stated_se,
+                stated_gap,
+            ])?;
         }
     }
-    std::fs::write(path, out)?;
+    csv.finish()?;
     Ok(())
 }
 
