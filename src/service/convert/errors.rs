@@ -1,8 +1,18 @@
 //! The crate's single `Error → tonic::Status` mapping, and field re-labelling for errors of core
 //! validation.
+//!
+//! The status message is the error's text (`invalid argument `poses[3].pose.rotation`: …`); an
+//! [`Error::InvalidArgument`] also carries machine-readable details in the status's
+//! `grpc-status-details-bin` (a `google.rpc.Status`): one `google.rpc.BadRequest` with one field
+//! violation, `field` the path of the offending field in the request's vocabulary (dot-separated,
+//! with indices: `poses[3].pose.rotation`, `queries[0].margin`, `data.coefficients`) and
+//! `description` the reason alone. Clients read it with any gRPC library's rich-error support,
+//! e.g. tonic-types' `StatusExt::get_details_bad_request()` or Python's
+//! `grpc_status.rpc_status.from_call`.
 
 use crate::Error;
 use tonic::{Code, Status};
+use tonic_types::{ErrorDetails, StatusExt};
 
 impl From<Error> for Status {
     fn from(e: Error) -> Self {
@@ -14,7 +24,14 @@ impl From<Error> for Status {
             Error::Numerical(_) => Code::Internal,
             Error::Storage(_) | Error::Io(_) => Code::Unavailable,
         };
-        Status::new(code, e.to_string())
+        match &e {
+            Error::InvalidArgument { field, reason } if !field.is_empty() => Status::with_error_details(
+                code,
+                e.to_string(),
+                ErrorDetails::with_bad_request_violation(field.as_str(), reason.as_str()),
+            ),
+            _ => Status::new(code, e.to_string()),
+        }
     }
 }
 
@@ -42,5 +59,21 @@ mod tests {
         assert_eq!(Status::from(Error::ResourceExhausted("x".into())).code(), Code::ResourceExhausted);
         assert_eq!(Status::from(Error::Numerical("x".into())).code(), Code::Internal);
         assert_eq!(Status::from(Error::Storage("x".into())).code(), Code::Unavailable);
+    }
+
+    /// An invalid argument carries one BadRequest field violation (field path, reason) beside the
+    /// unchanged message; other errors carry no details.
+    #[test]
+    fn invalid_arguments_carry_a_bad_request_field_violation() {
+        let e = Error::invalid("poses[3].pose.rotation", "must be a unit quaternion");
+        let message = e.to_string();
+        let s = Status::from(e);
+        assert_eq!(s.message(), message);
+        let bad = s.get_details_bad_request().expect("BadRequest details");
+        assert_eq!(bad.field_violations.len(), 1);
+        assert_eq!(bad.field_violations[0].field, "poses[3].pose.rotation");
+        assert_eq!(bad.field_violations[0].description, "must be a unit quaternion");
+        let s = Status::from(Error::not_found("scene", "s-1"));
+        assert!(s.get_details_bad_request().is_none() && s.details().is_empty());
     }
 }

@@ -3,7 +3,7 @@
 //!
 //! | [`Error`]            | gRPC code            |
 //! |----------------------|----------------------|
-//! | `InvalidArgument`    | INVALID_ARGUMENT     |
+//! | `InvalidArgument`    | INVALID_ARGUMENT, with a `google.rpc.BadRequest` field violation |
 //! | `NotFound`           | NOT_FOUND            |
 //! | `ResourceExhausted`  | RESOURCE_EXHAUSTED   |
 //! | `FailedPrecondition` | FAILED_PRECONDITION  |
@@ -18,7 +18,7 @@
 //!
 //! | file          | area                                                              |
 //! |---------------|-------------------------------------------------------------------|
-//! | `errors.rs`   | `Error → Status`, field re-labelling                              |
+//! | `errors.rs`   | `Error → Status` (google.rpc BadRequest details), field labels    |
 //! | `bodies.rs`   | fit options, point clouds and their checks, reports, body files   |
 //! | `scenes.rs`   | points, vectors, poses, instances, scenes, `SetPoses` entries     |
 //! | `queries.rs`  | answers, certificates, gradients, query options, batch pairs      |
