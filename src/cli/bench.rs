@@ -5,6 +5,7 @@
 //! Query times are medians over poses of the mean of `--repeats` back-to-back calls on the same
 //! input (a warm call reuses the previous pose's warm start, so repeating it is the same work).
 
+use super::csv_file::CsvFile;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::sync::Arc;
@@ -13,6 +14,31 @@ use sublevel::fit::{fit_points, mesh::load_points, FitSettings};
 use sublevel::math::{Isometry3, Real, UnitQuaternion, Vector3};
 use sublevel::query::{distance, growth, DistanceWarmStart, GrowthWarmStart, NewtonParams};
 use sublevel::{Body, Error, Result};
+
+/// Columns of `bench --csv`, one record per degree (times in µs unless named `_s`; errors in
+/// meters against the exact mesh–mesh distance).
+pub const CSV_COLUMNS: [&str; 20] = [
+    "degree",
+    "fit_chair_s",
+    "distance_cold_us",
+    "distance_warm_us",
+    "growth_cold_us",
+    "growth_warm_us",
+    "paper_s",
+    "speedup_cold",
+    "speedup_warm",
+    "converged",
+    "total",
+    "parry_hull_cold_us",
+    "parry_hull_warm_us",
+    "parry_mesh_us",
+    "hull_over_ours_cold",
+    "hull_over_ours_warm",
+    "err_mean_m",
+    "err_max_m",
+    "hull_err_mean_m",
+    "hull_err_max_m",
+];
 
 /// The paper's Table 2: distance query times (seconds, MATLAB fmincon) at 2d = 2, 4, 6, 8.
 pub const PAPER_TABLE2_SECONDS: [(usize, Real); 4] = [(2, 0.08), (4, 0.083), (6, 0.13), (8, 0.34)];
@@ -197,41 +223,33 @@ pub fn run(args: BenchArgs) -> Result<()> {
     }
     print_table(&rows, &peer);
     if let Some(path) = &args.csv {
-        let mut text = String::from(
-            "degree,fit_chair_s,distance_cold_us,distance_warm_us,growth_cold_us,growth_warm_us,paper_s,speedup_cold,speedup_warm,converged,total,\
-parry_hull_cold_us,parry_hull_warm_us,parry_mesh_us,hull_over_ours_cold,hull_over_ours_warm,err_mean_m,err_max_m,hull_err_mean_m,hull_err_max_m\n",
-        );
+        let mut csv = CsvFile::create(path, &CSV_COLUMNS)?;
         for r in &rows {
             let v = r.values();
-            text.push_str(&format!(
-                "{},{:.4},{:.3},{:.3},{:.3},{:.3},{},{:.0},{:.0},{},{},{:.3},{:.3},{:.1},{:.3},{:.3},{:.5},{:.5},{:.5},{:.5}\n",
-                r.degree,
-                v[0],
-                v[1],
-                v[2],
-                v[3],
-                v[4],
-                v[5],
-                v[6],
-                v[7],
-                r.converged,
-                r.total,
-                peer.hull_cold,
-                peer.hull_warm,
-                peer.mesh,
-                peer.hull_cold / r.dist_cold,
-                peer.hull_warm / r.dist_warm,
-                r.err.0,
-                r.err.1,
-                peer.hull_err.0,
-                peer.hull_err.1
-            ));
+            csv.record([
+                r.degree.to_string(),
+                format!("{:.4}", v[0]),
+                format!("{:.3}", v[1]),
+                format!("{:.3}", v[2]),
+                format!("{:.3}", v[3]),
+                format!("{:.3}", v[4]),
+                format!("{}", v[5]),
+                format!("{:.0}", v[6]),
+                format!("{:.0}", v[7]),
+                r.converged.to_string(),
+                r.total.to_string(),
+                format!("{:.3}", peer.hull_cold),
+                format!("{:.3}", peer.hull_warm),
+                format!("{:.1}", peer.mesh),
+                format!("{:.3}", peer.hull_cold / r.dist_cold),
+                format!("{:.3}", peer.hull_warm / r.dist_warm),
+                format!("{:.5}", r.err.0),
+                format!("{:.5}", r.err.1),
+                format!("{:.5}", peer.hull_err.0),
+                format!("{:.5}", peer.hull_err.1),
+            ])?;
         }
-        if let Some(dir) = path.parent() {
-            std::fs::create_dir_all(dir)?;
-        }
-        std::fs::write(path, text)?;
-        eprintln!("wrote {}", path.display());
+        eprintln!("wrote {}", csv.finish()?.display());
     }
     Ok(())
 }

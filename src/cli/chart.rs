@@ -13,6 +13,7 @@
 //! [`extra_model_rows`], which holds the sphere, oriented-box and relaxed-convexity models).
 
 use super::bench::{cold_poses, error_stats, load_off_mesh, load_or_fit_pair, median, time_us, PeerShapes};
+use super::csv_file::CsvFile;
 use plotters::prelude::*;
 use sublevel::fit::mesh::load_points;
 use sublevel::math::{Isometry3, Real};
@@ -228,11 +229,16 @@ fn speed_accuracy(a: &CommonArgs) -> Result<()> {
         println!("{:>18} {:>12.2} {:>14.5} {:>14.5}", r.name, r.time_us, r.err_mean, r.err_max);
     }
     if let Some(path) = &a.csv {
-        let mut text = String::from("model,median_us,err_mean_m,err_max_m\n");
+        let mut csv = CsvFile::create(path, &["model", "median_us", "err_mean_m", "err_max_m"])?;
         for r in &rows {
-            text.push_str(&format!("{},{:.4},{:.6},{:.6}\n", r.name, r.time_us, r.err_mean, r.err_max));
+            csv.record([
+                r.name.clone(),
+                format!("{:.4}", r.time_us),
+                format!("{:.6}", r.err_mean),
+                format!("{:.6}", r.err_max),
+            ])?;
         }
-        write(path, text.as_bytes())?;
+        eprintln!("wrote {}", csv.finish()?.display());
     }
     if let Some(path) = &a.png {
         let pts: Vec<(String, Real, Real, Real)> =
@@ -283,24 +289,21 @@ fn tolerance(a: &CommonArgs) -> Result<()> {
         println!("{:>3} {:>9.0e} {:>11.2} {:>14.3e} {:>14.3e}", r.0, r.1, r.2, r.3, r.4);
     }
     if let Some(path) = &a.csv {
-        let mut text = String::from("degree,kkt_tolerance,median_us,err_mean_m,err_max_m\n");
+        let mut csv = CsvFile::create(path, &["degree", "kkt_tolerance", "median_us", "err_mean_m", "err_max_m"])?;
         for r in &rows {
-            text.push_str(&format!("{},{:e},{:.4},{:e},{:e}\n", r.0, r.1, r.2, r.3, r.4));
+            csv.record([
+                r.0.to_string(),
+                format!("{:e}", r.1),
+                format!("{:.4}", r.2),
+                format!("{:e}", r.3),
+                format!("{:e}", r.4),
+            ])?;
         }
-        write(path, text.as_bytes())?;
+        eprintln!("wrote {}", csv.finish()?.display());
     }
     if let Some(path) = &a.png {
         plot_tolerance(path, &rows)?;
     }
-    Ok(())
-}
-
-fn write(path: &std::path::Path, bytes: &[u8]) -> Result<()> {
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir)?;
-    }
-    std::fs::write(path, bytes)?;
-    eprintln!("wrote {}", path.display());
     Ok(())
 }
 

@@ -7,6 +7,7 @@
 //! for 2d ≤ 4, one run for higher degrees, which take seconds each). Reported: Clarabel's solve
 //! time (the paper's SDP time) and the whole fit's time, and the ratio H/P of the solve medians.
 
+use super::csv_file::CsvFile;
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
 use sublevel::fit::{fit_points, mesh::load_points, FitMethod, FitSettings};
@@ -158,29 +159,22 @@ pub fn run(args: FitTimeArgs) -> Result<()> {
     }
 
     if let Some(path) = &args.csv {
-        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            std::fs::create_dir_all(dir)?;
-        }
-        let mut out = String::from("method,degree,repeat,solve_seconds,total_seconds,volume,status\n");
+        let mut csv = CsvFile::create(
+            path,
+            &["method", "degree", "repeat", "solve_seconds", "total_seconds", "volume", "status"],
+        )?;
         for s in &samples {
-            let status = if s.status.contains(',') {
-                format!("\"{}\"", s.status.replace('"', "\"\""))
-            } else {
-                s.status.clone()
-            };
-            out.push_str(&format!(
-                "{},{},{},{},{},{},{}\n",
-                s.method.name(),
-                s.degree,
-                s.repeat,
-                s.solve,
-                s.total,
-                s.volume,
-                status
-            ));
+            csv.record([
+                s.method.name().to_string(),
+                s.degree.to_string(),
+                s.repeat.to_string(),
+                s.solve.to_string(),
+                s.total.to_string(),
+                s.volume.to_string(),
+                s.status.clone(),
+            ])?;
         }
-        std::fs::write(path, out)?;
-        eprintln!("wrote {}", path.display());
+        eprintln!("wrote {}", csv.finish()?.display());
     }
     if let Some(path) = &args.png {
         let series: Vec<(String, Vec<(f64, f64)>)> = methods

@@ -3,10 +3,23 @@
 //! certified (Newton agrees with the level-0 SDP) and flagged (answered by a verified SDP fallback),
 //! the median Newton iterations and the largest error of Newton against the SDP.
 
-use std::io::Write;
+use super::csv_file::CsvFile;
 use sublevel::query::stability::{run_case, stability_cases};
 use sublevel::query::CertifyParams;
 use sublevel::{Body, Error, Result};
+
+/// Columns of `stability --csv`, one record per case.
+pub const CSV_COLUMNS: [&str; 9] = [
+    "case",
+    "n",
+    "certified_percent",
+    "flagged_percent",
+    "unresolved",
+    "median_iterations",
+    "max_relative_error",
+    "max_abs_error_near_zero",
+    "seconds",
+];
 
 /// Arguments of `sublevel stability`.
 #[derive(clap::Args, Debug)]
@@ -62,12 +75,11 @@ pub fn run(args: StabilityArgs) -> Result<()> {
     }
     let cases = stability_cases(&bodies, &extra, args.pairs, args.seed)?;
     let params = CertifyParams::default();
-    let header = "case,n,certified_percent,flagged_percent,unresolved,median_iterations,max_relative_error,max_abs_error_near_zero,seconds";
     println!(
         "{:<38} {:>4} {:>10} {:>10} {:>10} {:>8} {:>12} {:>12} {:>8}",
         "case", "n", "certified", "flagged", "unresolved", "med.it", "max rel err", "max abs ≈0", "s"
     );
-    let mut rows = vec![header.to_string()];
+    let mut rows: Vec<[String; 9]> = Vec::new();
     let mut details = Vec::new();
     let (mut total, mut good) = (0, 0);
     for case in &cases {
@@ -86,18 +98,17 @@ pub fn run(args: StabilityArgs) -> Result<()> {
             r.max_absolute_error_near_zero,
             secs
         );
-        rows.push(format!(
-            "{},{},{:.2},{:.2},{},{},{:e},{:e},{:.3}",
-            r.name,
-            r.n,
-            r.certified_percent(),
-            r.flagged_percent(),
-            r.unresolved,
-            r.median_iterations,
-            r.max_relative_error,
-            r.max_absolute_error_near_zero,
-            secs
-        ));
+        rows.push([
+            r.name.to_string(),
+            r.n.to_string(),
+            format!("{:.2}", r.certified_percent()),
+            format!("{:.2}", r.flagged_percent()),
+            r.unresolved.to_string(),
+            r.median_iterations.to_string(),
+            format!("{:e}", r.max_relative_error),
+            format!("{:e}", r.max_absolute_error_near_zero),
+            format!("{secs:.3}"),
+        ]);
         total += r.n;
         good += r.certified + r.flagged;
         details.extend(r.failures);
@@ -109,13 +120,11 @@ pub fn run(args: StabilityArgs) -> Result<()> {
         }
     }
     if let Some(path) = &args.csv {
-        if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
-            std::fs::create_dir_all(parent)?;
-        }
-        let mut f = std::fs::File::create(path)?;
+        let mut csv = CsvFile::create(path, &CSV_COLUMNS)?;
         for r in &rows {
-            writeln!(f, "{r}")?;
+            csv.record(r)?;
         }
+        csv.finish()?;
     }
     Ok(())
 }

@@ -30,7 +30,7 @@
 //! 1. declare it with commented messages in `proto/sublevel/v1/sublevel.proto`;
 //! 2. add its conversions (and field validation) to [`convert`];
 //! 3. implement it in `handlers.rs` as validate → core call → convert;
-//! 4. add a round-trip and an error test to `tests/it/service.rs`.
+//! 4. add a round-trip and an error test to `tests/it/service.rs` (server harness: `tests/it/util.rs`).
 
 pub mod convert;
 mod handlers;

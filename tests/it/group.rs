@@ -1,13 +1,13 @@
 //! Integration tests: containment of sublevel sets (paper §V, eqs. "p.sosconvex", "s.procedure",
 //! "tau.sos") and the StartGroupJob service.
 
+use crate::util::{add, at, config, upload_sphere, Server};
 use rand::{Rng, SeedableRng};
 use std::f64::consts::PI;
 use sublevel::body::ellipsoid;
 use sublevel::fit::containment::{contain_bodies, ContainmentSettings};
 use sublevel::math::{pose_from_parts, Isometry3, Matrix3, Real, UnitQuaternion, Vector3};
 use sublevel::service::pb::{self, sublevel_client::SublevelClient};
-use sublevel::service::{serve, ServerConfig};
 use sublevel::Body;
 use tonic::Code;
 
@@ -190,33 +190,6 @@ fn chair_and_human_at_degree_4_contain_both_and_beat_degree_2() {
 // Service
 // ---------------------------------------------------------------------------------------------
 
-async fn start_server(dir: &std::path::Path) -> (std::net::SocketAddr, tokio::sync::oneshot::Sender<()>) {
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-    let addr = listener.local_addr().unwrap();
-    let (shutdown, rx) = tokio::sync::oneshot::channel::<()>();
-    let mut config = ServerConfig { data_dir: dir.to_path_buf(), ..ServerConfig::default() };
-    config.fit.volume_samples = 20_000;
-    tokio::spawn(serve(listener, config, async move {
-        let _ = rx.await;
-    }));
-    (addr, shutdown)
-}
-
-async fn upload_sphere(c: &mut SublevelClient<tonic::transport::Channel>, r: f64) -> String {
-    let json = serde_json::to_string(&ellipsoid([0.0; 3], [r; 3]).unwrap().to_file()).unwrap();
-    let req = pb::UploadBodyRequest { name: "ball".into(), body: Some(pb::upload_body_request::Body::BodyJson(json)) };
-    c.upload_body(req).await.unwrap().into_inner().body_id
-}
-
-async fn add_at(c: &mut SublevelClient<tonic::transport::Channel>, scene: &str, body: &str, x: f64) -> String {
-    let pose = pb::Pose {
-        rotation: Some(pb::Quaternion { w: 1.0, x: 0.0, y: 0.0, z: 0.0 }),
-        translation: Some(pb::Vec3 { x, y: 0.0, z: 0.0 }),
-    };
-    let req = pb::AddInstanceRequest { scene_id: scene.into(), body_id: body.into(), pose: Some(pose) };
-    c.add_instance(req).await.unwrap().into_inner().instance_id
-}
-
 async fn watch_to_end(c: &mut SublevelClient<tonic::transport::Channel>, job_id: String) -> Vec<pb::FitJobUpdate> {
     let mut stream = c.watch_fit_job(pb::WatchFitJobRequest { job_id }).await.unwrap().into_inner();
     let mut out = Vec::new();
@@ -229,13 +202,14 @@ async fn watch_to_end(c: &mut SublevelClient<tonic::transport::Channel>, job_id:
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn group_job_stores_the_body_and_replaces_the_instances() {
     let dir = tempfile::tempdir().unwrap();
-    let (addr, shutdown) = start_server(dir.path()).await;
-    let channel = tonic::transport::Channel::from_shared(format!("http://{addr}")).unwrap().connect().await.unwrap();
-    let mut c = SublevelClient::new(channel);
-    let ball = upload_sphere(&mut c, 0.5).await;
+    let mut config = config(dir.path());
+    config.fit.volume_samples = 20_000;
+    let server = Server::start(config).await;
+    let mut c = server.client().await;
+    let ball = upload_sphere(&mut c, "ball", [0.0; 3], 0.5).await;
     let scene = c.create_scene(pb::CreateSceneRequest { name: "g".into() }).await.unwrap().into_inner().scene_id;
-    let i1 = add_at(&mut c, &scene, &ball, -1.0).await;
-    let i2 = add_at(&mut c, &scene, &ball, 1.0).await;
+    let i1 = add(&mut c, &scene, &ball, at([-1.0, 0.0, 0.0])).await;
+    let i2 = add(&mut c, &scene, &ball, at([1.0, 0.0, 0.0])).await;
 
     let req = |ids: Vec<String>, degree: u32, replace: bool| pb::StartGroupJobRequest {
         scene_id: scene.clone(),
@@ -290,5 +264,5 @@ async fn group_job_stores_the_body_and_replaces_the_instances() {
     let err = c.start_group_job(pb::StartGroupJobRequest { scene_id: empty, ..req(vec![], 2, false) }).await;
     let err = err.unwrap_err();
     assert!(err.code() == Code::InvalidArgument && err.message().contains("instance_ids"), "{err:?}");
-    let _ = shutdown.send(());
+    server.stop().await;
 }

@@ -2,58 +2,14 @@
 //! the issue is a test here; plus the store's quarantine, status codes of malformed requests, a
 //! kill -9 test and a SIGTERM-during-fit test on a child server process (loopback, bounded).
 
-use crate::service::{add, assert_status, at, config, demo_bodies, sphere_points, upload_body, upload_sphere, Server};
-use std::io::BufRead;
+use crate::util::{
+    add, assert_status, at, config, demo_bodies, sphere_points, upload_body, upload_sphere, ChildServer, Server,
+};
 use std::path::Path;
 use std::time::{Duration, Instant};
-use sublevel::service::pb::{self, sublevel_client::SublevelClient};
+use sublevel::service::pb;
 use tonic::transport::Channel;
 use tonic::Code;
-
-/// A `sublevel serve` child process on 127.0.0.1:0 over a data directory.
-struct ChildServer {
-    child: std::process::Child,
-    addr: String,
-}
-
-impl ChildServer {
-    fn spawn(dir: &Path) -> ChildServer {
-        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_sublevel"))
-            .args(["serve", "--addr", "127.0.0.1:0", "--data-dir"])
-            .arg(dir)
-            .env("RUST_LOG", "warn")
-            .env("OPENBLAS_NUM_THREADS", "1")
-            .stdout(std::process::Stdio::piped())
-            .stderr(std::process::Stdio::null())
-            .spawn()
-            .unwrap();
-        let mut lines = std::io::BufReader::new(child.stdout.take().unwrap()).lines();
-        let addr = loop {
-            let line = lines.next().expect("server exited before listening").unwrap();
-            if let Some(a) = line.strip_prefix("listening on ") {
-                break a.to_owned();
-            }
-        };
-        ChildServer { child, addr }
-    }
-
-    async fn client(&self) -> SublevelClient<Channel> {
-        let channel = Channel::from_shared(format!("http://{}", self.addr)).unwrap().connect().await.unwrap();
-        SublevelClient::new(channel)
-    }
-
-    fn signal(&self, sig: &str) {
-        let status = std::process::Command::new("kill").args([sig, &self.child.id().to_string()]).status().unwrap();
-        assert!(status.success(), "kill {sig}");
-    }
-}
-
-impl Drop for ChildServer {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
 
 fn upload_data(name: &str, data: pb::BodyData) -> pb::UploadBodyRequest {
     pb::UploadBodyRequest { name: name.into(), body: Some(pb::upload_body_request::Body::Data(data)) }
@@ -227,14 +183,14 @@ async fn repro_4_absurd_coordinates_are_refused_and_precision_is_flagged() {
         Code::InvalidArgument,
         "poses[0].pose.translation",
     );
-    let d = crate::service::distance(&mut c, &scene, &a, &b).await;
+    let d = crate::util::distance(&mut c, &scene, &a, &b).await;
     // Two 1 mm spheres 1 cm apart: 8 mm, to the precision the inputs allow (ulp(5e5) ≈ 1.2e-10 m).
     assert!((d.distance - 0.008).abs() < 1e-6, "{d:?}");
     assert!(d.solve.as_ref().unwrap().precision_limited, "{d:?}");
     let scene2 = c.create_scene(pb::CreateSceneRequest { name: "near".into() }).await.unwrap().into_inner().scene_id;
     let a = add(&mut c, &scene2, &tiny, at([0.0; 3])).await;
     let b = add(&mut c, &scene2, &tiny, at([0.01, 0.0, 0.0])).await;
-    let d = crate::service::distance(&mut c, &scene2, &a, &b).await;
+    let d = crate::util::distance(&mut c, &scene2, &a, &b).await;
     assert!(!d.solve.as_ref().unwrap().precision_limited && (d.distance - 0.008).abs() < 1e-9, "{d:?}");
     server.stop().await;
 }

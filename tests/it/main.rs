@@ -7,6 +7,8 @@ mod hardening;
 mod planner;
 mod query;
 mod service;
+mod service_jobs;
 mod stability;
 mod table;
 mod transport;
+mod util;

@@ -1,7 +1,7 @@
 //! Integration tests: the planner API (Query, QueryStream, CheckScene) against closed forms for
 //! spheres and brute force over all pairs.
 
-use crate::service::{add, assert_status, at, config, upload_sphere, Server};
+use crate::util::{add, assert_status, at, config, upload_sphere, Server};
 use sublevel::service::pb::{self, sublevel_client::SublevelClient};
 use tonic::transport::Channel;
 use tonic::Code;

@@ -1,98 +1,17 @@
 //! Integration tests: service. A real server on 127.0.0.1:0 with a shutdown channel, a real
-//! client, a throwaway data directory.
+//! client, a throwaway data directory (the fixture is `crate::util::Server`): bodies, scenes,
+//! poses and queries round-trip, survive a restart, and bad input gets the right code naming the
+//! field. Fit jobs and the end-to-end runs are in `service_jobs.rs`.
 
-use std::path::Path;
+use crate::util::{
+    add, assert_status, at, config, demo_bodies, distance, growth, pose, set_pose, upload_body, upload_sphere, v,
+    Server,
+};
 use sublevel::body::ellipsoid;
-use sublevel::math::{pose_from_parts, Isometry3, Point3, Vector3};
-use sublevel::service::pb::{self, sublevel_client::SublevelClient};
-use sublevel::service::{serve, ServerConfig};
-use tonic::transport::Channel;
+use sublevel::math::{pose_from_parts, Isometry3, Vector3};
+use sublevel::service::pb;
+use sublevel::service::ServerConfig;
 use tonic::Code;
-
-pub(crate) struct Server {
-    addr: std::net::SocketAddr,
-    shutdown: tokio::sync::oneshot::Sender<()>,
-    handle: tokio::task::JoinHandle<sublevel::Result<()>>,
-}
-
-impl Server {
-    pub(crate) async fn start(config: ServerConfig) -> Server {
-        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-        let addr = listener.local_addr().unwrap();
-        let (shutdown, rx) = tokio::sync::oneshot::channel::<()>();
-        let handle = tokio::spawn(serve(listener, config, async move {
-            let _ = rx.await;
-        }));
-        Server { addr, shutdown, handle }
-    }
-
-    pub(crate) async fn client(&self) -> SublevelClient<Channel> {
-        let channel = Channel::from_shared(format!("http://{}", self.addr)).unwrap().connect().await.unwrap();
-        SublevelClient::new(channel).max_decoding_message_size(usize::MAX)
-    }
-
-    pub(crate) async fn channel(&self) -> Channel {
-        Channel::from_shared(format!("http://{}", self.addr)).unwrap().connect().await.unwrap()
-    }
-
-    pub(crate) async fn stop(self) {
-        self.shutdown.send(()).unwrap();
-        self.handle.await.unwrap().unwrap();
-    }
-}
-
-pub(crate) fn config(dir: &Path) -> ServerConfig {
-    ServerConfig { data_dir: dir.to_path_buf(), ..ServerConfig::default() }
-}
-
-pub(crate) fn pose(q: [f64; 4], t: [f64; 3]) -> pb::Pose {
-    pb::Pose {
-        rotation: Some(pb::Quaternion { w: q[0], x: q[1], y: q[2], z: q[3] }),
-        translation: Some(pb::Vec3 { x: t[0], y: t[1], z: t[2] }),
-    }
-}
-
-pub(crate) fn at(t: [f64; 3]) -> pb::Pose {
-    pose([1.0, 0.0, 0.0, 0.0], t)
-}
-
-fn v(p: &Option<pb::Vec3>) -> Vector3 {
-    let p = p.as_ref().unwrap();
-    Vector3::new(p.x, p.y, p.z)
-}
-
-pub(crate) async fn upload_sphere(c: &mut SublevelClient<Channel>, name: &str, center: [f64; 3], r: f64) -> String {
-    let json = serde_json::to_string(&ellipsoid(center, [r; 3]).unwrap().to_file()).unwrap();
-    let req = pb::UploadBodyRequest { name: name.into(), body: Some(pb::upload_body_request::Body::BodyJson(json)) };
-    c.upload_body(req).await.unwrap().into_inner().body_id
-}
-
-pub(crate) async fn add(c: &mut SublevelClient<Channel>, scene: &str, body: &str, p: pb::Pose) -> String {
-    let req = pb::AddInstanceRequest { scene_id: scene.into(), body_id: body.into(), pose: Some(p) };
-    c.add_instance(req).await.unwrap().into_inner().instance_id
-}
-
-pub(crate) async fn distance(c: &mut SublevelClient<Channel>, scene: &str, a: &str, b: &str) -> pb::DistanceAnswer {
-    let req = pb::DistanceRequest {
-        scene_id: scene.into(),
-        instance_a: a.into(),
-        instance_b: b.into(),
-        ..Default::default()
-    };
-    c.distance(req).await.unwrap().into_inner().answer.unwrap()
-}
-
-async fn growth(c: &mut SublevelClient<Channel>, scene: &str, a: &str, b: &str) -> pb::GrowthAnswer {
-    let req =
-        pb::GrowthRequest { scene_id: scene.into(), instance_1: a.into(), instance_2: b.into(), ..Default::default() };
-    c.growth(req).await.unwrap().into_inner().answer.unwrap()
-}
-
-async fn set_pose(c: &mut SublevelClient<Channel>, scene: &str, inst: &str, p: pb::Pose) {
-    let poses = vec![pb::InstancePose { instance_id: inst.into(), pose: Some(p) }];
-    let r = c.set_poses(pb::SetPosesRequest { scene_id: scene.into(), poses }).await.unwrap();
-    assert_eq!(r.into_inner().updated, 1);
-}
 
 /// Spheres: distance = ‖c₁ − c₂‖ − r₁ − r₂ (closed form); growth d(p₁‖p₂) = (‖c₁ − c₂‖ − r₂)² / r₁².
 #[tokio::test]
@@ -257,12 +176,6 @@ async fn bodies_scenes_and_poses_survive_a_restart() {
     server.stop().await;
 }
 
-pub(crate) fn assert_status(r: Result<impl std::fmt::Debug, tonic::Status>, code: Code, needle: &str) {
-    let e = r.expect_err("request should fail");
-    assert_eq!(e.code(), code, "{e:?}");
-    assert!(e.message().contains(needle), "`{}` should mention `{needle}`", e.message());
-}
-
 #[tokio::test]
 async fn bad_input_gets_the_right_code_naming_the_field() {
     let dir = tempfile::tempdir().unwrap();
@@ -392,6 +305,52 @@ async fn bad_input_gets_the_right_code_naming_the_field() {
     server.stop().await;
 }
 
+/// Invalid arguments carry machine-readable details: a `google.rpc.BadRequest` with the offending
+/// field's path and the reason, decoded here with tonic-types (any gRPC client's rich-error
+/// support reads the same `grpc-status-details-bin`); the human-readable message is unchanged.
+#[tokio::test]
+async fn invalid_arguments_carry_bad_request_details_naming_the_field() {
+    use tonic_types::StatusExt;
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(config(dir.path())).await;
+    let mut c = server.client().await;
+    let b = upload_sphere(&mut c, "s", [0.0; 3], 0.5).await;
+    let scene = c.create_scene(pb::CreateSceneRequest { name: "s".into() }).await.unwrap().into_inner().scene_id;
+    let i1 = add(&mut c, &scene, &b, at([0.0; 3])).await;
+
+    // SetPoses: the second entry's quaternion has norm √2.
+    let poses = vec![
+        pb::InstancePose { instance_id: i1.clone(), pose: Some(at([1.0, 0.0, 0.0])) },
+        pb::InstancePose { instance_id: i1.clone(), pose: Some(pose([1.0, 1.0, 0.0, 0.0], [0.0; 3])) },
+    ];
+    let e = c.set_poses(pb::SetPosesRequest { scene_id: scene.clone(), poses }).await.unwrap_err();
+    assert_eq!(e.code(), Code::InvalidArgument);
+    let bad = e.get_details_bad_request().expect("BadRequest details");
+    assert_eq!(bad.field_violations.len(), 1, "{bad:?}");
+    let violation = &bad.field_violations[0];
+    assert_eq!(violation.field, "poses[1].pose.rotation");
+    assert!(violation.description.contains("unit norm"), "{violation:?}");
+    // The message is the error's text as before: field and reason.
+    assert_eq!(e.message(), format!("invalid argument `{}`: {}", violation.field, violation.description));
+
+    // AddInstance: the same check on its `pose`.
+    let req = pb::AddInstanceRequest {
+        scene_id: scene.clone(),
+        body_id: b.clone(),
+        pose: Some(pose([0.5, 0.5, 0.5, 0.0], [0.0; 3])),
+    };
+    let e = c.add_instance(req).await.unwrap_err();
+    let bad = e.get_details_bad_request().expect("BadRequest details");
+    assert_eq!(bad.field_violations[0].field, "pose.rotation", "{bad:?}");
+    assert!(bad.field_violations[0].description.contains("unit norm"), "{bad:?}");
+
+    // A NOT_FOUND carries no BadRequest.
+    let e = c.get_scene(pb::GetSceneRequest { scene_id: "s-nope".into() }).await.unwrap_err();
+    assert_eq!(e.code(), Code::NotFound);
+    assert!(e.get_details_bad_request().is_none());
+    server.stop().await;
+}
+
 #[tokio::test]
 async fn health_is_serving_and_reflection_lists_the_service() {
     use tonic_health::pb::{health_check_response::ServingStatus, health_client::HealthClient, HealthCheckRequest};
@@ -421,216 +380,6 @@ async fn health_is_serving_and_reflection_lists_the_service() {
     assert!(names.contains(&"sublevel.v1.Sublevel"), "{names:?}");
     assert!(names.contains(&"grpc.health.v1.Health"), "{names:?}");
     server.stop().await;
-}
-
-/// Points on a sphere of radius r around c (Fibonacci lattice).
-pub(crate) fn sphere_points(c: [f64; 3], r: f64, n: usize) -> Vec<f64> {
-    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
-    (0..n)
-        .flat_map(|i| {
-            let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
-            let rho = (1.0 - z * z).sqrt();
-            let th = golden * i as f64;
-            [c[0] + r * rho * th.cos(), c[1] + r * rho * th.sin(), c[2] + r * z]
-        })
-        .collect()
-}
-
-/// A fit job's updates are well formed and end in a terminal state; a successful fit stores a
-/// body that contains every input point (p ≤ 1), retrievable by the reported id.
-#[tokio::test]
-async fn fit_job_streams_progress_to_a_terminal_state() {
-    let dir = tempfile::tempdir().unwrap();
-    let server = Server::start(config(dir.path())).await;
-    let mut c = server.client().await;
-    let xyz = sphere_points([0.2, -0.1, 0.3], 0.5, 300);
-    let req = pb::StartFitJobRequest {
-        name: "ball".into(),
-        degree: 2,
-        source: Some(pb::start_fit_job_request::Source::Points(pb::PointCloud { xyz: xyz.clone() })),
-        ..Default::default()
-    };
-    let job_id = c.start_fit_job(req).await.unwrap().into_inner().job_id;
-    let mut stream = c.watch_fit_job(pb::WatchFitJobRequest { job_id: job_id.clone() }).await.unwrap().into_inner();
-    let mut updates = Vec::new();
-    while let Some(u) = stream.message().await.unwrap() {
-        updates.push(u);
-    }
-    let last = updates.last().unwrap().clone();
-    assert!(updates.iter().all(|u| u.job_id == job_id && (0.0..=1.0).contains(&u.fraction)));
-    assert!(updates[..updates.len() - 1].iter().all(|u| u.state == pb::JobState::Running as i32));
-    assert_eq!(last.stage, pb::FitStage::Done as i32);
-    assert_eq!(last.state, pb::JobState::Succeeded as i32, "{last:?}");
-    let got = c.get_body(pb::GetBodyRequest { body_id: last.body_id.clone() }).await.unwrap().into_inner();
-    assert_eq!(got.name, "ball");
-    let body = sublevel::Body::from_file(serde_json::from_str(&got.body_json).unwrap()).unwrap();
-    // Containment on every input point, and (2d = 2, points on a sphere) the fit is that sphere:
-    // p = 1 on every point to the solver's accuracy.
-    for p in xyz.chunks(3) {
-        let val = body.value_at(&Point3::new(p[0], p[1], p[2]));
-        assert!(val <= 1.0 + 1e-9, "point {p:?} outside: p = {val}");
-        assert!(val >= 1.0 - 1e-4, "point {p:?} not on the fitted sphere: p = {val}");
-    }
-    // Watching a finished job replays its terminal update.
-    let mut again = c.watch_fit_job(pb::WatchFitJobRequest { job_id }).await.unwrap().into_inner();
-    assert_eq!(again.message().await.unwrap().unwrap(), last);
-    assert!(again.message().await.unwrap().is_none());
-    server.stop().await;
-}
-
-/// `sublevel serve --demo` seeds the demo bodies and scene once, across restarts.
-///
-/// Multi-threaded: the test blocks a thread on the child process while the client's connection
-/// task must stay alive to answer the server's graceful-shutdown GOAWAY.
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn demo_seeding_is_idempotent_across_restarts() {
-    use std::io::BufRead;
-    let dir = tempfile::tempdir().unwrap();
-    let mut seen = Vec::new();
-    for _ in 0..2 {
-        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_sublevel"))
-            .args(["serve", "--addr", "127.0.0.1:0", "--demo", "--data-dir"])
-            .arg(dir.path())
-            .env("RUST_LOG", "warn")
-            .stdout(std::process::Stdio::piped())
-            .spawn()
-            .unwrap();
-        let mut lines = std::io::BufReader::new(child.stdout.take().unwrap()).lines();
-        let mut out = Vec::new();
-        let addr = loop {
-            let line = lines.next().expect("server exited early").unwrap();
-            if let Some(a) = line.strip_prefix("listening on ") {
-                break a.to_owned();
-            }
-            out.push(line);
-        };
-        let channel = Channel::from_shared(format!("http://{addr}")).unwrap().connect().await.unwrap();
-        let mut c = SublevelClient::new(channel);
-        let bodies = c.list_bodies(pb::ListBodiesRequest::default()).await.unwrap().into_inner().bodies;
-        let mut names: Vec<_> = bodies.iter().map(|b| b.name.clone()).collect();
-        names.sort();
-        assert_eq!(names, ["chair_101", "human_10"]);
-        let scenes = c.list_scenes(pb::ListScenesRequest::default()).await.unwrap().into_inner().scenes;
-        assert_eq!(scenes.len(), 1);
-        assert_eq!((scenes[0].name.as_str(), scenes[0].num_instances), ("demo", 2));
-        // The demo pair starts apart.
-        let view =
-            c.get_scene(pb::GetSceneRequest { scene_id: scenes[0].scene_id.clone() }).await.unwrap().into_inner();
-        let d = distance(&mut c, &view.scene_id, &view.instances[0].instance_id, &view.instances[1].instance_id).await;
-        assert!(d.distance > 0.0 && !d.overlapping, "{d:?}");
-        seen.push(out);
-        drop(c);
-        // Graceful stop by SIGTERM to the child we started.
-        let status = std::process::Command::new("kill").args(["-TERM", &child.id().to_string()]).status().unwrap();
-        assert!(status.success());
-        let exit = child.wait().unwrap();
-        assert!(exit.success(), "the server must exit 0 on SIGTERM: {exit:?}");
-    }
-    assert_eq!(seen[0], seen[1], "a restart must report the same ids");
-    assert!(seen[0].iter().any(|l| l.contains("chair_101")));
-}
-
-/// The point 6: fit the paper's chair and human at degree 4 through the service, slide
-/// the chair through the human, check every answer against the level-0 sos certificate, and check
-/// that warm starts save Newton iterations.
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn end_to_end_chair_slides_through_human() {
-    use sublevel::query::sdp_certificate::{certify_distance, certify_growth};
-    use sublevel::query::NewtonParams;
-    let psb = Path::new(env!("CARGO_MANIFEST_DIR")).join("data/psb");
-    let dir = tempfile::tempdir().unwrap();
-    let server = Server::start(config(dir.path())).await;
-    let mut c = server.client().await;
-
-    let mut bodies = Vec::new();
-    for name in ["chair_101", "human_10"] {
-        let data = std::fs::read(psb.join(format!("{name}.off"))).unwrap();
-        let req = pb::StartFitJobRequest {
-            name: name.into(),
-            degree: 4,
-            source: Some(pb::start_fit_job_request::Source::Mesh(pb::Mesh { data, format: "off".into() })),
-            ..Default::default()
-        };
-        let job_id = c.start_fit_job(req).await.unwrap().into_inner().job_id;
-        let mut stream = c.watch_fit_job(pb::WatchFitJobRequest { job_id }).await.unwrap().into_inner();
-        let mut last = None;
-        while let Some(u) = stream.message().await.unwrap() {
-            last = Some(u);
-        }
-        let last = last.unwrap();
-        assert_eq!(last.state, pb::JobState::Succeeded as i32, "{last:?}");
-        let got = c.get_body(pb::GetBodyRequest { body_id: last.body_id.clone() }).await.unwrap().into_inner();
-        let body = sublevel::Body::from_file(serde_json::from_str(&got.body_json).unwrap()).unwrap();
-        assert_eq!(body.degree(), 4);
-        bodies.push((last.body_id, body));
-    }
-    let scene = c.create_scene(pb::CreateSceneRequest { name: "slide".into() }).await.unwrap().into_inner().scene_id;
-    let human_pose = Isometry3::identity();
-    let i_human = add(&mut c, &scene, &bodies[1].0, at([0.0; 3])).await;
-    let slide = |k: usize| -> Isometry3 {
-        let s = k as f64 / 23.0;
-        let ang = 0.3 * s;
-        pose_from_parts("slide", [(ang / 2.0).cos(), 0.0, 0.0, (ang / 2.0).sin()], [-1.6 + 3.2 * s, 0.1, 0.05]).unwrap()
-    };
-    let proto_pose = |p: &Isometry3| sublevel::service::convert::pose_to_proto(p);
-    let i_chair = add(&mut c, &scene, &bodies[0].0, proto_pose(&slide(0))).await;
-    let (chair, human) = (&bodies[0].1, &bodies[1].1);
-    let (mut warm_iters, mut cold_iters) = (0usize, 0usize);
-    let (mut overlapping, mut separated, mut warm_answers) = (0, 0, 0);
-    for k in 0..24 {
-        let pose_chair = slide(k);
-        set_pose(&mut c, &scene, &i_chair, proto_pose(&pose_chair)).await;
-        let d = distance(&mut c, &scene, &i_chair, &i_human).await;
-        let g = growth(&mut c, &scene, &i_chair, &i_human).await;
-        let (ds, gs) = (d.solve.unwrap(), g.solve.unwrap());
-        assert!(ds.converged && gs.converged, "k = {k}: {d:?} {g:?}");
-        let cd = certify_distance(chair, &pose_chair, human, &human_pose).unwrap();
-        let sq = d.distance * d.distance;
-        assert!(
-            (cd.squared_distance.max(0.0) - sq).abs() <= 1e-6 * sq.max(1.0),
-            "k = {k}: {} vs {}",
-            cd.squared_distance,
-            sq
-        );
-        let cg = certify_growth(chair, &pose_chair, human, &human_pose).unwrap();
-        assert!((cg.value - g.value).abs() <= 1e-6 * cg.value.abs().max(1.0), "k = {k}: {} vs {}", cg.value, g.value);
-        if d.overlapping {
-            overlapping += 1;
-        } else {
-            separated += 1;
-        }
-        if k > 0 {
-            warm_answers += usize::from(ds.warm_started) + usize::from(gs.warm_started);
-            warm_iters += (ds.iterations + gs.iterations) as usize;
-            let params = NewtonParams::default();
-            let cold_d = sublevel::query::distance(chair, &pose_chair, human, &human_pose, None, &params);
-            let cold_g = sublevel::query::growth(chair, &pose_chair, human, &human_pose, None, &params);
-            assert!((cold_d.distance - d.distance).abs() <= 1e-8 * d.distance.max(1.0));
-            cold_iters += cold_d.iterations + cold_g.iterations;
-        }
-    }
-    eprintln!(
-        "end-to-end: {overlapping} overlapping / {separated} separated poses; Newton iterations over 23 moves: warm {warm_iters} vs cold {cold_iters}"
-    );
-    assert!(overlapping > 0 && separated > 0, "the slide must pass through: {overlapping} / {separated}");
-    assert!(warm_answers >= 23, "only {warm_answers} of 46 answers were warm-started");
-    assert!(warm_iters < cold_iters, "warm {warm_iters} vs cold {cold_iters}");
-    server.stop().await;
-}
-
-/// Uploads a body given as a `Body` (its JSON file form) and returns its id.
-pub(crate) async fn upload_body(c: &mut SublevelClient<Channel>, name: &str, body: &sublevel::Body) -> String {
-    let json = serde_json::to_string(&body.to_file()).unwrap();
-    let req = pb::UploadBodyRequest { name: name.into(), body: Some(pb::upload_body_request::Body::BodyJson(json)) };
-    c.upload_body(req).await.unwrap().into_inner().body_id
-}
-
-pub(crate) fn demo_bodies() -> (sublevel::Body, sublevel::Body) {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("data/demo");
-    (
-        sublevel::Body::load(&dir.join("chair_101.json")).unwrap(),
-        sublevel::Body::load(&dir.join("human_10.json")).unwrap(),
-    )
 }
 
 fn twist(g: &Option<pb::PoseGradient>) -> [f64; 6] {
@@ -807,61 +556,5 @@ async fn nonconvex_body_answers_with_an_sdp_lower_bound() {
     let g = growth(&mut c, &scene, &i_ball, &i_jack).await;
     assert_eq!(g.source, pb::AnswerSource::SdpLowerBound as i32);
     assert!(g.lower_bound);
-    server.stop().await;
-}
-
-/// A fit job with `auto_degree` fits 2 then 4 on an ellipsoid cloud and keeps 2d = 2 (degree 4
-/// is not smaller), recording the choice in the body's report; bad fit options are refused
-/// before a job exists, naming the field.
-#[tokio::test]
-async fn fit_job_with_auto_degree_and_validated_options() {
-    let dir = tempfile::tempdir().unwrap();
-    let server = Server::start(config(dir.path())).await;
-    let mut c = server.client().await;
-    // Points on an ellipsoid with radii 0.5, 0.3, 0.2 (a stretched sphere cloud).
-    let xyz: Vec<f64> = sphere_points([0.0; 3], 1.0, 400)
-        .chunks(3)
-        .flat_map(|p| [0.1 + 0.5 * p[0], -0.2 + 0.3 * p[1], 0.2 * p[2]])
-        .collect();
-    let req = |method: &str, c: f64, tol: f64| pb::StartFitJobRequest {
-        name: "auto".into(),
-        degree: 4,
-        source: Some(pb::start_fit_job_request::Source::Points(pb::PointCloud { xyz: xyz.clone() })),
-        method: method.into(),
-        convexity_relaxation: c,
-        auto_degree: true,
-        volume_tolerance: tol,
-    };
-    assert_status(c.start_fit_job(req("simplex", 0.0, 0.05)).await, Code::InvalidArgument, "method");
-    assert_status(c.start_fit_job(req("", -1.0, 0.05)).await, Code::InvalidArgument, "convexity_relaxation");
-    assert_status(c.start_fit_job(req("", f64::NAN, 0.05)).await, Code::InvalidArgument, "convexity_relaxation");
-    assert_status(c.start_fit_job(req("", 0.0, 1.5)).await, Code::InvalidArgument, "volume_tolerance");
-    let mut bad_degree = req("", 0.0, 0.05);
-    bad_degree.degree = 5;
-    assert_status(c.start_fit_job(bad_degree).await, Code::InvalidArgument, "degree");
-
-    let job_id = c.start_fit_job(req("logdet_p", 0.0, 0.05)).await.unwrap().into_inner().job_id;
-    let mut stream = c.watch_fit_job(pb::WatchFitJobRequest { job_id }).await.unwrap().into_inner();
-    let mut last = None;
-    while let Some(u) = stream.message().await.unwrap() {
-        if u.state == pb::JobState::Running as i32 && u.stage != pb::FitStage::Queued as i32 {
-            assert!(u.message.starts_with("degree 2: ") || u.message.starts_with("degree 4: "), "{}", u.message);
-        }
-        last = Some(u);
-    }
-    let last = last.unwrap();
-    assert_eq!(last.state, pb::JobState::Succeeded as i32, "{last:?}");
-    let got = c.get_body(pb::GetBodyRequest { body_id: last.body_id }).await.unwrap().into_inner();
-    let body = sublevel::Body::from_file(serde_json::from_str(&got.body_json).unwrap()).unwrap();
-    assert_eq!(body.degree(), 2);
-    let choice = body.report.degree_choice.clone().expect("degree choice recorded");
-    assert_eq!(choice.chosen, 2);
-    assert_eq!(choice.volume_tolerance, 0.05);
-    assert_eq!(choice.candidates.iter().map(|c| c.0).collect::<Vec<_>>(), vec![2, 4]);
-    assert!(choice.reason.starts_with("degree 2 was kept because degree 4"), "{}", choice.reason);
-    // The 2d = 2 candidate is the ellipsoid itself: volume 4/3 π · 0.5 · 0.3 · 0.2 within 3 std errors.
-    let exact = 4.0 / 3.0 * std::f64::consts::PI * 0.5 * 0.3 * 0.2;
-    let (_, v2, e2) = choice.candidates[0];
-    assert!((v2 - exact).abs() <= 3.0 * e2 + 1e-3 * exact, "{v2} ± {e2} vs {exact}");
     server.stop().await;
 }

@@ -77,19 +77,23 @@ const SOURCE_AABB: [(&str, Real); 5] =
 #[test]
 fn table1_baselines_match_the_paper() {
     let dir = tempfile::tempdir().unwrap();
-    let csv = dir.path().join("t1.csv");
+    let csv_path = dir.path().join("t1.csv");
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_sublevel"))
         .arg("table1")
         .arg(psb_dir())
         .args(["--rows", "hull,sphere,obb,aabb", "--csv"])
-        .arg(&csv)
+        .arg(&csv_path)
         .output()
         .unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(stdout.contains("Chair (101)") && stdout.contains("8499/320"), "{stdout}");
-    let text = std::fs::read_to_string(&csv).unwrap();
-    let lines: Vec<Vec<&str>> = text.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    let text = std::fs::read_to_string(&csv_path).unwrap();
+    let mut reader = csv::Reader::from_path(&csv_path).unwrap();
+    let header: Vec<String> = reader.headers().unwrap().iter().map(String::from).collect();
+    assert_eq!(&header[..9], ["row", "objective", "degree", "c", "shape", "volume", "std_error", "paper", "ratio"]);
+    let records: Vec<csv::StringRecord> = reader.records().map(|r| r.unwrap()).collect();
+    let lines: Vec<Vec<&str>> = records.iter().map(|r| r.iter().collect()).collect();
     assert_eq!(lines.len(), 4 * 5);
     for l in &lines {
         let (row, shape, volume) = (l[0], l[4], l[5].parse::<Real>().unwrap());

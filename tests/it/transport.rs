@@ -2,7 +2,7 @@
 //! round trip plus the work, never a Nagle / delayed-ACK stall (~40 ms, 100× a unary call), which
 //! is what accepted sockets without TCP_NODELAY gave BatchQuery replies of a few kilobytes.
 
-use crate::service::{add, at, config, demo_bodies, upload_body, Server};
+use crate::util::{add, at, config, demo_bodies, upload_body, Server};
 use std::time::{Duration, Instant};
 use sublevel::service::pb;
 

@@ -1,0 +1,368 @@
+//! Bodies and fits: fit options and point clouds of `StartFitJob` (with the cloud checks that keep
+//! the SDP numerically sound), fit stages and reports, body files as structured proto fields, body
+//! summaries.
+
+use crate::body::{BodyFile, FitReport, SUPPORTED_DEGREES};
+use crate::fit::FitStage;
+use crate::math::{Point3, Real, Vector3};
+use crate::scene::BodyEntry;
+use crate::service::pb;
+use crate::{Error, Result};
+
+/// Checks a requested fit degree.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `degree` unless it is 2, 4, 6 or 8.
+pub fn fit_degree(degree: u32) -> Result<usize> {
+    let d = degree as usize;
+    if !SUPPORTED_DEGREES.contains(&d) {
+        return Err(Error::invalid("degree", format!("must be one of 2, 4, 6, 8, got {degree}")));
+    }
+    Ok(d)
+}
+
+/// The fit options of a `StartFitJobRequest` (everything but the points and the name).
+#[derive(Clone, Debug, PartialEq)]
+pub struct FitOptions {
+    /// Total degree 2d (with `auto`: the lowest candidate).
+    pub degree: usize,
+    /// Formulation.
+    pub method: crate::fit::FitMethod,
+    /// Relaxed-convexity parameter c ≥ 0 (eq. "VAG.param.convex").
+    pub convexity_relaxation: Real,
+    /// With `auto_degree`: the candidate degrees and the relative volume tolerance.
+    pub auto: Option<(Vec<usize>, Real)>,
+}
+
+/// Validates the fit options of a request: `degree` (2, 4, 6, 8; with `auto_degree` 0 or one of
+/// them, the highest candidate), `method` (empty means logdet_p), `convexity_relaxation` (finite,
+/// ≥ 0) and `volume_tolerance` (finite, in [0, 1); 0 means 0.05 with `auto_degree`).
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `degree`, `method`, `convexity_relaxation` or
+/// `volume_tolerance`.
+pub fn fit_options(req: &pb::StartFitJobRequest) -> Result<FitOptions> {
+    let method = if req.method.trim().is_empty() {
+        crate::fit::FitMethod::LogDetP
+    } else {
+        req.method.trim().parse::<crate::fit::FitMethod>()?
+    };
+    let c = req.convexity_relaxation;
+    if !(c.is_finite() && c >= 0.0) {
+        return Err(Error::invalid("convexity_relaxation", format!("must be finite and >= 0, got {c}")));
+    }
+    let tol = req.volume_tolerance;
+    if !(tol.is_finite() && (0.0..1.0).contains(&tol)) {
+        return Err(Error::invalid("volume_tolerance", format!("must be in [0, 1), got {tol}")));
+    }
+    if !req.auto_degree {
+        return Ok(FitOptions { degree: fit_degree(req.degree)?, method, convexity_relaxation: c, auto: None });
+    }
+    let top = if req.degree == 0 { 8 } else { fit_degree(req.degree)? };
+    let degrees: Vec<usize> = SUPPORTED_DEGREES.iter().copied().filter(|d| *d <= top).collect();
+    let tol = if req.volume_tolerance == 0.0 { 0.05 } else { req.volume_tolerance };
+    crate::fit::auto::validate_auto(&degrees, tol)?;
+    Ok(FitOptions { degree: degrees[0], method, convexity_relaxation: c, auto: Some((degrees, tol)) })
+}
+
+/// Unpacks a point cloud `x0, y0, z0, x1, …`.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `points.xyz` for a length that is not a multiple of 3 or a
+/// non-finite coordinate or one beyond [`crate::math::MAX_COORDINATE`]; [`Error::ResourceExhausted`] above `max_points` points.
+pub fn points_from_proto(cloud: &pb::PointCloud, max_points: usize) -> Result<Vec<Point3>> {
+    let xyz = &cloud.xyz;
+    if !xyz.len().is_multiple_of(3) {
+        return Err(Error::invalid("points.xyz", format!("length {} is not a multiple of 3", xyz.len())));
+    }
+    check_point_count("points.xyz", xyz.len() / 3, max_points)?;
+    if let Some(i) = xyz.iter().position(|v| !v.is_finite()) {
+        return Err(Error::invalid("points.xyz", format!("coordinate {i} is not finite")));
+    }
+    crate::math::check_coordinates("points.xyz", xyz)?;
+    Ok(xyz.chunks_exact(3).map(|c| Point3::new(c[0], c[1], c[2])).collect())
+}
+
+/// Fails with [`Error::ResourceExhausted`] naming `field` when `n > max_points`.
+///
+/// # Errors
+/// As described.
+pub fn check_point_count(field: &str, n: usize, max_points: usize) -> Result<()> {
+    if n > max_points {
+        return Err(Error::ResourceExhausted(format!(
+            "`{field}`: {n} points exceed the limit of {max_points} per fit"
+        )));
+    }
+    Ok(())
+}
+
+/// Smallest accepted ratio of a cloud's thinnest to its longest principal extent (square root of
+/// the covariance eigenvalue ratio) for a fit of degree `degree`.
+///
+/// Measured on this project's machine (300 points, uniform in a box of sides 1 × ε × ε or
+/// 1 × 1 × ε): at 2d ≥ 4 Clarabel ends `NumericalError` / `InsufficientProgress` at ε = 1e-3 and
+/// solves at ε = 3e-3; at 2d = 2 it fails at ε = 1e-5 and solves at 1e-4. The limits leave a
+/// factor of ~1.5–2 of margin.
+pub fn min_thickness(degree: usize) -> Real {
+    if degree <= 2 {
+        5e-5
+    } else {
+        2e-3
+    }
+}
+
+/// Checks that a cloud can enclose a body with interior: at least 4 finite points within
+/// ±[`crate::math::MAX_COORDINATE`], not all on one plane or line (the smallest eigenvalue of
+/// their covariance is not negligible), and not thinner than [`min_thickness`] of `degree`
+/// (the highest degree the fit will try).
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `field`.
+pub fn check_cloud(field: &str, points: &[Point3], degree: usize) -> Result<()> {
+    if points.len() < 4 {
+        return Err(Error::invalid(field, format!("need at least 4 points, got {}", points.len())));
+    }
+    if points.iter().any(|p| !p.coords.iter().all(|v| v.is_finite())) {
+        return Err(Error::invalid(field, "every coordinate must be finite"));
+    }
+    for (k, p) in points.iter().enumerate() {
+        crate::math::check_coordinates(&format!("{field}[{k}]"), p.coords.as_slice())?;
+    }
+    let n = points.len() as Real;
+    let mean = points.iter().fold(Vector3::zeros(), |a, p| a + p.coords) / n;
+    let cov = points.iter().fold(crate::math::Matrix3::zeros(), |a, p| {
+        let d = p.coords - mean;
+        a + d * d.transpose()
+    }) / n;
+    let eig = cov.symmetric_eigenvalues();
+    let (lo, hi) = (eig.min(), eig.max());
+    if hi.is_nan() || hi <= 0.0 || lo <= 1e-12 * hi {
+        return Err(Error::invalid(
+            field,
+            format!("degenerate cloud: the points lie on a plane, a line or one point (covariance eigenvalues {lo:.3e} … {hi:.3e})"),
+        ));
+    }
+    let thickness = (lo / hi).sqrt();
+    let min = min_thickness(degree);
+    if thickness < min {
+        return Err(Error::invalid(
+            field,
+            format!(
+                "degenerate cloud for a degree-{degree} fit: its thinnest principal extent is {thickness:.1e} of its \
+                 longest, below {min:.0e} (a needle or a nearly flat sheet; the SDP is numerically unreliable there; \
+                 thicken the cloud{})",
+                if degree > 2 { " or fit degree 2" } else { "" }
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// A core fit stage as the proto enum.
+pub fn fit_stage_to_proto(stage: FitStage) -> pb::FitStage {
+    match stage {
+        FitStage::Hull => pb::FitStage::Hull,
+        FitStage::Build => pb::FitStage::Build,
+        FitStage::Solve => pb::FitStage::Solve,
+        FitStage::Verify => pb::FitStage::Verify,
+        FitStage::Volume => pb::FitStage::Volume,
+        FitStage::Done => pb::FitStage::Done,
+    }
+}
+
+/// A fit report as the proto message.
+pub fn report_to_proto(r: &FitReport) -> pb::FitReport {
+    pb::FitReport {
+        method: r.method.clone(),
+        solver_status: r.solver_status.to_string(),
+        solve_seconds: r.solve_seconds,
+        total_seconds: r.total_seconds,
+        num_points: r.num_points as u64,
+        num_hull_vertices: r.num_hull_vertices as u64,
+        volume: r.volume,
+        volume_std_error: r.volume_std_error,
+        hull_volume: r.hull_volume,
+        max_point_value: r.max_point_value,
+        containment_rescale: r.containment_rescale,
+        convexity_margin: r.convexity_margin,
+        notes: r.notes.clone(),
+        convexity_relaxation: r.convexity_relaxation,
+        nonconvex: r.nonconvex,
+        degree_choice: r.degree_choice.as_ref().map(|c| pb::DegreeChoice {
+            volume_tolerance: c.volume_tolerance,
+            degrees: c.candidates.iter().map(|k| k.0 as u32).collect(),
+            volumes: c.candidates.iter().map(|k| k.1).collect(),
+            volume_std_errors: c.candidates.iter().map(|k| k.2).collect(),
+            chosen: c.chosen as u32,
+            reason: c.reason.clone(),
+        }),
+        solver_certificate: r.solver_certificate.map(|c| pb::SolverCertificate {
+            primal_objective: c.primal_objective,
+            dual_objective: c.dual_objective,
+            primal_residual: c.primal_residual,
+            dual_residual: c.dual_residual,
+        }),
+        candidate_volumes: r
+            .candidate_volumes
+            .iter()
+            .map(|(name, volume)| pb::CandidateVolume { name: name.clone(), volume: *volume })
+            .collect(),
+    }
+}
+
+/// A proto fit report as the core one.
+pub fn report_from_proto(r: &pb::FitReport) -> FitReport {
+    FitReport {
+        method: r.method.clone(),
+        solver_status: crate::conic::SdpStatus::parse(&r.solver_status),
+        solve_seconds: r.solve_seconds,
+        total_seconds: r.total_seconds,
+        num_points: r.num_points as usize,
+        num_hull_vertices: r.num_hull_vertices as usize,
+        volume: r.volume,
+        volume_std_error: r.volume_std_error,
+        hull_volume: r.hull_volume,
+        max_point_value: r.max_point_value,
+        containment_rescale: r.containment_rescale,
+        convexity_margin: r.convexity_margin,
+        notes: r.notes.clone(),
+        convexity_relaxation: r.convexity_relaxation,
+        nonconvex: r.nonconvex,
+        degree_choice: r.degree_choice.as_ref().map(|c| crate::body::DegreeChoice {
+            volume_tolerance: c.volume_tolerance,
+            candidates: c
+                .degrees
+                .iter()
+                .zip(&c.volumes)
+                .zip(&c.volume_std_errors)
+                .map(|((&d, &v), &e)| (d as usize, v, e))
+                .collect(),
+            chosen: c.chosen as usize,
+            reason: c.reason.clone(),
+        }),
+        solver_certificate: r.solver_certificate.as_ref().map(|c| crate::body::SolverCertificate {
+            primal_objective: c.primal_objective,
+            dual_objective: c.dual_objective,
+            primal_residual: c.primal_residual,
+            dual_residual: c.dual_residual,
+        }),
+        candidate_volumes: r.candidate_volumes.iter().map(|c| (c.name.clone(), c.volume)).collect(),
+    }
+}
+
+/// A body file as structured proto fields.
+pub fn body_file_to_proto(f: &BodyFile) -> pb::BodyData {
+    pb::BodyData {
+        degree: f.degree as u32,
+        exponents: f.exponents.iter().flat_map(|e| e.iter().map(|&v| u32::from(v))).collect(),
+        coefficients: f.coefficients.clone(),
+        center: Some(pb::Vec3 { x: f.center[0], y: f.center[1], z: f.center[2] }),
+        scale: f.scale,
+        report: Some(report_to_proto(&f.report)),
+    }
+}
+
+/// Structured proto fields as a body file (not yet validated as a body: see
+/// [`crate::Body::from_file`]). An absent report becomes method `"uploaded"`.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `data.exponents` for a length that is not 3 × the number of
+/// coefficients or an exponent above 8.
+pub fn body_file_from_proto(d: &pb::BodyData) -> Result<BodyFile> {
+    if d.exponents.len() != 3 * d.coefficients.len() {
+        return Err(Error::invalid(
+            "data.exponents",
+            format!(
+                "{} entries for {} coefficients; expected 3 per coefficient",
+                d.exponents.len(),
+                d.coefficients.len()
+            ),
+        ));
+    }
+    let exponents = d
+        .exponents
+        .chunks_exact(3)
+        .enumerate()
+        .map(|(k, c)| {
+            let e = |v: u32| u8::try_from(v).ok().filter(|&v| v <= 8);
+            match (e(c[0]), e(c[1]), e(c[2])) {
+                (Some(a), Some(b), Some(cc)) => Ok([a, b, cc]),
+                _ => Err(Error::invalid(format!("data.exponents[{k}]"), format!("exponent {c:?} exceeds 8"))),
+            }
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let report = d.report.as_ref().map_or_else(uploaded_report, report_from_proto);
+    Ok(BodyFile {
+        degree: d.degree as usize,
+        exponents,
+        coefficients: d.coefficients.clone(),
+        center: d.center.as_ref().map_or([0.0; 3], |c| [c.x, c.y, c.z]),
+        scale: d.scale,
+        report,
+    })
+}
+
+/// The report of a body uploaded without one.
+pub fn uploaded_report() -> FitReport {
+    FitReport { method: "uploaded".into(), containment_rescale: 1.0, ..Default::default() }
+}
+
+/// A body entry as the proto summary.
+pub fn body_summary(e: &BodyEntry) -> pb::BodySummary {
+    pb::BodySummary {
+        body_id: e.id.clone(),
+        name: e.name.clone(),
+        degree: e.body.degree() as u32,
+        method: e.body.report.method.clone(),
+        volume: e.body.report.volume,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fit_report_round_trips_through_the_wire_format_with_its_certificate() {
+        let report = FitReport {
+            method: "trace_p".into(),
+            solver_status: crate::conic::SdpStatus::Solved,
+            volume: 0.303,
+            volume_std_error: 0.001,
+            convexity_relaxation: 10.0,
+            nonconvex: true,
+            notes: vec!["kept the smallest of 2 solves".into()],
+            solver_certificate: Some(crate::body::SolverCertificate {
+                primal_objective: -22.6269,
+                dual_objective: -22.6268,
+                primal_residual: 1.3e-8,
+                dual_residual: 1.8e-7,
+            }),
+            candidate_volumes: vec![("cube".into(), 0.449), ("principal_box".into(), 0.303)],
+            ..FitReport::default()
+        };
+        let wire = report_to_proto(&report);
+        assert_eq!(wire.candidate_volumes.len(), 2);
+        assert_eq!(wire.solver_certificate.as_ref().map(|c| c.dual_objective), Some(-22.6268));
+        assert_eq!(report_from_proto(&wire), report);
+        // A report without a certificate (inverse moment, uploaded) stays without one.
+        let plain = FitReport { method: "inverse_moment".into(), ..FitReport::default() };
+        assert_eq!(report_from_proto(&report_to_proto(&plain)), plain);
+    }
+
+    #[test]
+    fn degenerate_clouds_are_rejected() {
+        let cube: Vec<Point3> =
+            (0..8).map(|i| Point3::new((i & 1) as Real, ((i >> 1) & 1) as Real, ((i >> 2) & 1) as Real)).collect();
+        assert!(check_cloud("points", &cube, 8).is_ok());
+        let plane: Vec<Point3> = cube.iter().map(|p| Point3::new(p.x, p.y, 0.0)).collect();
+        let e = check_cloud("mesh", &plane, 2).unwrap_err();
+        assert!(e.to_string().contains("`mesh`") && e.to_string().contains("degenerate"), "{e}");
+        assert!(check_cloud("points", &cube[..3], 2).is_err());
+        // A sheet 1 × 1 × 1e-3: fine at 2d = 2, refused at 2d ≥ 4 (where the SDP fails).
+        let sheet: Vec<Point3> = cube.iter().map(|p| Point3::new(p.x, p.y, 1e-3 * p.z)).collect();
+        assert!(check_cloud("points", &sheet, 2).is_ok());
+        let e = check_cloud("points", &sheet, 4).unwrap_err();
+        assert!(e.to_string().contains("degree-4") && e.to_string().contains("1.0e-3"), "{e}");
+    }
+}

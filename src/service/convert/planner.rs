@@ -1,0 +1,285 @@
+//! Columns and planner requests: `PairColumns` → validated columns, answers → `AnswerColumns`, and
+//! the requests and answers of `Query`, `QueryStream` and `CheckScene`.
+
+use super::queries::{answer_to_proto, distance_reply_to_proto, query_options};
+use super::scenes::poses_from_proto;
+use super::{prefix_field, require_id, MAX_ID_BYTES};
+use crate::math::Real;
+use crate::scene::{QueryAnswer, QueryKind, QueryOptions};
+use crate::service::pb;
+use crate::{Error, Result};
+
+/// The queries of a `BatchQuery` in columns (`BatchQueryRequest.columns`), validated.
+#[derive(Clone, Debug)]
+pub struct PairColumns {
+    /// The kind of every pair.
+    pub kind: QueryKind,
+    /// The instances the pairs index.
+    pub instance_ids: Vec<String>,
+    /// Index of each pair's first instance.
+    pub first: Vec<u32>,
+    /// Index of each pair's second instance.
+    pub second: Vec<u32>,
+    /// COLLIDE: the margin in meters.
+    pub margin: Real,
+}
+
+/// Validates `BatchQueryRequest.columns`.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `columns.kind`, `columns.instance_ids[k]`, `columns.second`
+/// (length), `columns.first[k]` / `columns.second[k]` (index out of range) or `columns.margin`;
+/// [`Error::ResourceExhausted`] above `max_pairs` pairs or instance ids.
+pub fn pair_columns_from_proto(c: &pb::PairColumns, max_pairs: usize) -> Result<PairColumns> {
+    let kind = match pb::QueryKind::try_from(c.kind) {
+        Ok(pb::QueryKind::Distance) => QueryKind::Distance,
+        Ok(pb::QueryKind::Growth) => QueryKind::Growth,
+        Ok(pb::QueryKind::Collide) => QueryKind::Collide,
+        _ => return Err(Error::invalid("columns.kind", "must be DISTANCE, GROWTH or COLLIDE")),
+    };
+    for (field, n) in [("columns.first", c.first.len()), ("columns.instance_ids", c.instance_ids.len())] {
+        if n > max_pairs {
+            return Err(Error::ResourceExhausted(format!("`{field}`: {n} entries exceed the limit of {max_pairs}")));
+        }
+    }
+    if c.first.len() != c.second.len() {
+        return Err(Error::invalid(
+            "columns.second",
+            format!("has {} entries, `columns.first` has {}", c.second.len(), c.first.len()),
+        ));
+    }
+    for (k, id) in c.instance_ids.iter().enumerate() {
+        require_id("id", id).map_err(|_| {
+            Error::invalid(format!("columns.instance_ids[{k}]"), format!("must be 1 to {MAX_ID_BYTES} bytes"))
+        })?;
+    }
+    for (field, column) in [("columns.first", &c.first), ("columns.second", &c.second)] {
+        if let Some((k, i)) = column.iter().enumerate().find(|(_, &i)| i as usize >= c.instance_ids.len()) {
+            return Err(Error::invalid(
+                format!("{field}[{k}]"),
+                format!("index {i} is outside columns.instance_ids (length {})", c.instance_ids.len()),
+            ));
+        }
+    }
+    if kind == QueryKind::Collide && !(c.margin.is_finite() && c.margin >= 0.0) {
+        return Err(Error::invalid("columns.margin", format!("must be finite and >= 0 meters, got {}", c.margin)));
+    }
+    Ok(PairColumns {
+        kind,
+        instance_ids: c.instance_ids.clone(),
+        first: c.first.clone(),
+        second: c.second.clone(),
+        margin: c.margin,
+    })
+}
+
+/// Answers of a columns request as `AnswerColumns`: one entry per answer in every column (three
+/// for points), `decided_by_bounds` for COLLIDE only.
+pub fn answers_to_columns(kind: QueryKind, answers: &[QueryAnswer]) -> pb::AnswerColumns {
+    let n = answers.len();
+    let mut c = pb::AnswerColumns {
+        kind: match kind {
+            QueryKind::Distance => pb::QueryKind::Distance,
+            QueryKind::Growth => pb::QueryKind::Growth,
+            QueryKind::Collide => pb::QueryKind::Collide,
+        } as i32,
+        value: Vec::with_capacity(n),
+        point_a: Vec::with_capacity(3 * n),
+        point_b: Vec::with_capacity(3 * n),
+        converged: Vec::with_capacity(n),
+        overlapping: Vec::with_capacity(n),
+        lower_bound: Vec::with_capacity(n),
+        decided_by_bounds: Vec::with_capacity(if kind == QueryKind::Collide { n } else { 0 }),
+    };
+    let nan = [Real::NAN; 3];
+    for a in answers {
+        let (value, pa, pb_, converged, overlapping, lower_bound) = match a {
+            QueryAnswer::Distance(d) => {
+                let (r, w) = (&d.answer.result, &d.answer);
+                (
+                    r.distance,
+                    r.witness_a.coords.into(),
+                    r.witness_b.coords.into(),
+                    w.converged,
+                    r.overlapping,
+                    w.lower_bound,
+                )
+            }
+            QueryAnswer::Growth(g) => {
+                let (r, w) = (&g.answer.result, &g.answer);
+                let x: [Real; 3] = r.minimizer.coords.into();
+                (r.value, x, x, w.converged, r.value <= 1.0, w.lower_bound)
+            }
+            QueryAnswer::Collide(col) => {
+                c.decided_by_bounds.push(col.decided_by_bounds);
+                match &col.solve {
+                    Some(d) => {
+                        let r = &d.answer.result;
+                        let (wa, wb) = (r.witness_a.coords.into(), r.witness_b.coords.into());
+                        (col.distance, wa, wb, d.answer.converged, col.collides, d.answer.lower_bound)
+                    }
+                    None => (col.distance, nan, nan, true, col.collides, false),
+                }
+            }
+        };
+        c.value.push(value);
+        c.point_a.extend_from_slice(&pa);
+        c.point_b.extend_from_slice(&pb_);
+        c.converged.push(converged);
+        c.overlapping.push(overlapping);
+        c.lower_bound.push(lower_bound);
+    }
+    c
+}
+
+/// Validates a planner request: its poses (`poses[k]`), candidate states
+/// (`states[s].poses[k]`) and queries (`queries[k].kind` / `.first` / `.second` / `.margin`).
+/// `max_answers` bounds queries × max(1, states).
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming the field; [`Error::ResourceExhausted`] above `max_answers`
+/// answers or `max_poses` poses in all.
+pub fn planner_request_from_proto(
+    req: &pb::QueryRequest,
+    max_answers: usize,
+    max_poses: usize,
+) -> Result<crate::scene::planner::PlannerRequest> {
+    let answers = req.queries.len().saturating_mul(req.states.len().max(1));
+    if answers > max_answers {
+        return Err(Error::ResourceExhausted(format!(
+            "`queries` × `states`: {} × {} = {answers} answers exceed the limit of {max_answers}",
+            req.queries.len(),
+            req.states.len().max(1)
+        )));
+    }
+    let total_poses = req.poses.len() + req.states.iter().map(|s| s.poses.len()).sum::<usize>();
+    if total_poses > max_poses {
+        return Err(Error::ResourceExhausted(format!("{total_poses} poses in all exceed the limit of {max_poses}")));
+    }
+    let poses = poses_from_proto(&req.poses, max_poses)?;
+    let states = req
+        .states
+        .iter()
+        .enumerate()
+        .map(|(s, st)| poses_from_proto(&st.poses, max_poses).map_err(|e| prefix_field(e, &format!("states[{s}]"))))
+        .collect::<Result<Vec<_>>>()?;
+    if let Some(columns) = &req.columns {
+        if !req.queries.is_empty() {
+            return Err(Error::invalid("columns", "set either `queries` or `columns`, not both"));
+        }
+        let c = pair_columns_from_proto(columns, max_answers)?;
+        if c.first.len().saturating_mul(req.states.len().max(1)) > max_answers {
+            return Err(Error::ResourceExhausted(format!(
+                "`columns` × `states`: {} × {} answers exceed the limit of {max_answers}",
+                c.first.len(),
+                req.states.len().max(1)
+            )));
+        }
+        let queries = c
+            .first
+            .iter()
+            .zip(&c.second)
+            .map(|(&i, &j)| crate::scene::QueryPair {
+                kind: c.kind,
+                first: c.instance_ids[i as usize].clone(),
+                second: c.instance_ids[j as usize].clone(),
+                options: QueryOptions::default(),
+                margin: c.margin,
+            })
+            .collect();
+        return Ok(crate::scene::planner::PlannerRequest { poses, queries, states });
+    }
+    let queries = req
+        .queries
+        .iter()
+        .enumerate()
+        .map(|(k, q)| {
+            let kind = match pb::QueryKind::try_from(q.kind) {
+                Ok(pb::QueryKind::Distance) => QueryKind::Distance,
+                Ok(pb::QueryKind::Growth) => QueryKind::Growth,
+                Ok(pb::QueryKind::Collide) => QueryKind::Collide,
+                _ => return Err(Error::invalid(format!("queries[{k}].kind"), "must be DISTANCE, GROWTH or COLLIDE")),
+            };
+            let at = |e| prefix_field(e, &format!("queries[{k}]"));
+            require_id("first", &q.first).map_err(at)?;
+            require_id("second", &q.second).map_err(at)?;
+            if !(q.margin.is_finite() && q.margin >= 0.0) {
+                return Err(Error::invalid(
+                    format!("queries[{k}].margin"),
+                    format!("must be finite and >= 0 meters, got {}", q.margin),
+                ));
+            }
+            let mut options = query_options(q.certify, q.with_gradient);
+            options.cold = q.cold;
+            options.signed = q.signed;
+            Ok(crate::scene::QueryPair {
+                kind,
+                first: q.first.clone(),
+                second: q.second.clone(),
+                options,
+                margin: q.margin,
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok(crate::scene::planner::PlannerRequest { poses, queries, states })
+}
+
+/// The answers of a planner request as the proto response.
+///
+/// `columns`: the request asked in columns (`QueryRequest.columns`) of this kind, so the answers
+/// go in `columns` rather than one message each.
+pub fn planner_answers_to_proto(
+    answers: &crate::scene::planner::PlannerAnswers,
+    request_id: u64,
+    server_seconds: f64,
+    columns: Option<QueryKind>,
+) -> pb::QueryResponse {
+    use crate::scene::planner::PlannerAnswers;
+    let mut out = pb::QueryResponse { request_id, server_seconds, ..Default::default() };
+    match (answers, columns) {
+        (PlannerAnswers::Single(a), None) => out.answers = a.iter().map(answer_to_proto).collect(),
+        (PlannerAnswers::Single(a), Some(kind)) => out.columns = Some(answers_to_columns(kind, a)),
+        (PlannerAnswers::PerState(states), _) => {
+            out.states = states
+                .iter()
+                .map(|a| pb::StateAnswers {
+                    any_collision: a.iter().any(|x| matches!(x, QueryAnswer::Collide(c) if c.collides)),
+                    answers: if columns.is_none() { a.iter().map(answer_to_proto).collect() } else { Vec::new() },
+                    columns: columns.map(|kind| answers_to_columns(kind, a)),
+                })
+                .collect();
+        }
+    }
+    out
+}
+
+/// The kind of a planner request asked in columns (`QueryRequest.columns`), if it is.
+pub fn columns_kind(req: &pb::QueryRequest) -> Option<QueryKind> {
+    let c = req.columns.as_ref()?;
+    match pb::QueryKind::try_from(c.kind) {
+        Ok(pb::QueryKind::Distance) => Some(QueryKind::Distance),
+        Ok(pb::QueryKind::Growth) => Some(QueryKind::Growth),
+        Ok(pb::QueryKind::Collide) => Some(QueryKind::Collide),
+        _ => None,
+    }
+}
+
+/// A scene check as the proto response.
+pub fn scene_check_to_proto(c: &crate::scene::planner::SceneCheck, server_seconds: f64) -> pb::CheckSceneResponse {
+    pb::CheckSceneResponse {
+        pairs: c
+            .pairs
+            .iter()
+            .map(|p| pb::ScenePair {
+                first: p.first.clone(),
+                second: p.second.clone(),
+                distance: Some(distance_reply_to_proto(&p.distance)),
+            })
+            .collect(),
+        instances: u32::try_from(c.instances).unwrap_or(u32::MAX),
+        candidate_pairs: c.candidate_pairs,
+        narrow_phase_solves: c.narrow_phase_solves,
+        all_pairs: c.all_pairs,
+        server_seconds,
+    }
+}
