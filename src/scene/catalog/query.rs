@@ -172,7 +172,7 @@ impl Catalog {
         Ok(self.growth_with(scene_id, p1, p2, &QueryOptions::default())?.answer.result)
     }
 
-    /// [`Catalog::distance`] with options: the certified answer ([`certified_distance`]) and, on
+    /// [`Catalog::distance`] with options: the certified answer ([`crate::query::certified_distance`]) and, on
     /// request, its pose gradients. Solves outside the scene's lock ([`Catalog::batch`]), so a
     /// certificate (milliseconds to seconds with [`CertifyMode::Certify`]) holds up no other
     /// request of the scene.
