@@ -419,42 +419,19 @@ pub struct OffMesh {
     pub triangles: Vec<[u32; 3]>,
 }
 
-/// Reads an OFF mesh with its faces (polygons are split into fans).
+/// Reads an OFF mesh with its faces (polygons are split into fans) with the fit's OFF parser
+/// ([`sublevel::fit::mesh::parse_off_mesh`]: the same header and limit checks).
 ///
 /// # Errors
-/// [`Error::Io`] when unreadable; [`Error::InvalidArgument`] naming `mesh` for malformed text.
+/// [`Error::Io`] when unreadable; [`Error::InvalidArgument`] naming `mesh` (with the path) for
+/// malformed text; [`Error::ResourceExhausted`] beyond the default vertex limit.
 pub fn load_off_mesh(path: &std::path::Path) -> Result<OffMesh> {
-    let text = std::fs::read_to_string(path)?;
-    let bad = |what: &str| Error::invalid("mesh", format!("{}: {what}", path.display()));
-    let mut tokens = text
-        .lines()
-        .map(|l| l.split('#').next().unwrap_or(""))
-        .flat_map(|l| l.split_whitespace())
-        .filter(|t| !t.is_empty());
-    if tokens.next() != Some("OFF") {
-        return Err(bad("missing OFF header"));
-    }
-    let mut num =
-        |what: &str| -> Result<Real> { tokens.next().and_then(|t| t.parse::<Real>().ok()).ok_or_else(|| bad(what)) };
-    let nv = num("vertex count")? as usize;
-    let nf = num("face count")? as usize;
-    let _ne = num("edge count")?;
-    let mut vertices = Vec::with_capacity(nv);
-    for _ in 0..nv {
-        vertices.push(sublevel::math::Point3::new(num("vertex")?, num("vertex")?, num("vertex")?));
-    }
-    let mut triangles = Vec::with_capacity(nf);
-    for _ in 0..nf {
-        let k = num("face size")? as usize;
-        let idx: Vec<u32> = (0..k).map(|_| num("face index").map(|v| v as u32)).collect::<Result<_>>()?;
-        if idx.iter().any(|&i| i as usize >= nv) {
-            return Err(bad("face index out of range"));
-        }
-        for j in 1..k.saturating_sub(1) {
-            triangles.push([idx[0], idx[j], idx[j + 1]]);
-        }
-    }
-    Ok(OffMesh { vertices, triangles })
+    use sublevel::fit::mesh::{parse_off_mesh, DEFAULT_MAX_MESH_POINTS};
+    let mesh = parse_off_mesh(&std::fs::read(path)?, DEFAULT_MAX_MESH_POINTS).map_err(|e| match e {
+        Error::InvalidArgument { field, reason } => Error::invalid(field, format!("{}: {reason}", path.display())),
+        other => other,
+    })?;
+    Ok(OffMesh { vertices: mesh.vertices, triangles: mesh.triangles })
 }
 
 fn parry_vec(p: &sublevel::math::Point3) -> parry3d_f64::math::Vector {

@@ -1,0 +1,479 @@
+//! The in-memory catalog of bodies and scenes, written through to a [`Store`].
+//!
+//! ```text
+//! mod.rs        the catalog's state and locks; opening a store; jobs, bodies, scenes, instances
+//! query.rs      queries between two instances: kinds, options, replies, batches on a snapshot
+//! grouping.rs   reading a scene's posed bodies and replacing instances by their container (§V)
+//! ```
+
+mod grouping;
+mod query;
+#[cfg(all(test, feature = "store"))]
+mod tests;
+
+pub use grouping::PosedInstance;
+pub use query::{
+    precision_limited, DistanceReply, GrowthReply, PairRef, QueryAnswer, QueryKind, QueryOptions, QueryPair,
+    PRECISION_LIMIT,
+};
+
+use super::cache::WarmStartCache;
+use super::store::Store;
+use super::{BodyRecord, InstanceRecord, JobRecord, JobRecordState, SceneMeta, StoredPose};
+use crate::body::Body;
+use crate::math::Isometry3;
+use crate::query::NewtonParams;
+use crate::{Error, Result};
+use std::collections::BTreeMap;
+use std::sync::{Arc, Mutex, MutexGuard, RwLock, RwLockReadGuard, RwLockWriteGuard};
+
+/// Longest accepted body or scene name, in bytes.
+pub const MAX_NAME_BYTES: usize = 256;
+
+/// A stored body, parsed once and shared with every query that uses it.
+#[derive(Debug)]
+pub struct BodyEntry {
+    /// The body's id.
+    pub id: String,
+    /// Its name.
+    pub name: String,
+    /// The validated body.
+    pub body: Arc<Body>,
+}
+
+/// An instance as seen from outside: its body and pose.
+#[derive(Clone, Debug)]
+pub struct InstanceView {
+    /// The instance's id.
+    pub id: String,
+    /// The instantiated body's id.
+    pub body_id: String,
+    /// Its pose.
+    pub pose: Isometry3,
+}
+
+/// A scene as seen from outside.
+#[derive(Clone, Debug)]
+pub struct SceneView {
+    /// The scene's id.
+    pub id: String,
+    /// Its name.
+    pub name: String,
+    /// Its instances, ordered by id.
+    pub instances: Vec<InstanceView>,
+}
+
+#[derive(Debug)]
+struct Instance {
+    body_id: String,
+    body: Arc<Body>,
+    pose: Isometry3,
+}
+
+#[derive(Debug)]
+struct SceneState {
+    id: String,
+    name: String,
+    instances: BTreeMap<String, Instance>,
+    cache: WarmStartCache,
+    /// Set (under this scene's lock) when the scene is deleted, so a request that fetched the
+    /// scene just before cannot write it back to the store.
+    deleted: bool,
+}
+
+/// Bodies and scenes in memory, written through to a [`Store`].
+///
+/// Locks are std locks, not async ones: every critical section is short (a map lookup, a
+/// microsecond query, or one store transaction) and never awaits. Lock order, to rule out
+/// deadlocks: `bodies` → `scenes` → one scene's mutex.
+pub struct Catalog {
+    store: Box<dyn Store>,
+    bodies: RwLock<BTreeMap<String, Arc<BodyEntry>>>,
+    scenes: RwLock<BTreeMap<String, Arc<Mutex<SceneState>>>>,
+    jobs: RwLock<BTreeMap<String, JobRecord>>,
+    quarantined: usize,
+    params: NewtonParams,
+}
+
+/// Most job records kept; beyond it the oldest finished ones are deleted.
+pub const MAX_JOB_RECORDS: usize = 1024;
+
+impl std::fmt::Debug for Catalog {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Catalog").field("params", &self.params).finish_non_exhaustive()
+    }
+}
+
+// A panic while holding a lock cannot leave these maps half-updated (every update is a single
+// insert/remove after the store committed), so a poisoned lock is safe to keep using.
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
+}
+fn read<T>(m: &RwLock<T>) -> RwLockReadGuard<'_, T> {
+    m.read().unwrap_or_else(|e| e.into_inner())
+}
+fn write<T>(m: &RwLock<T>) -> RwLockWriteGuard<'_, T> {
+    m.write().unwrap_or_else(|e| e.into_inner())
+}
+
+/// A fresh random id with a kind prefix, e.g. `b-3f29c0d1a4e5b6c7`. Ids never contain `/`.
+pub(crate) fn new_id(prefix: &str) -> String {
+    format!("{prefix}-{:016x}", rand::random::<u64>())
+}
+
+/// Rejects a body or scene name longer than [`MAX_NAME_BYTES`].
+fn check_name(field: &str, name: &str) -> Result<()> {
+    if name.len() > MAX_NAME_BYTES {
+        return Err(Error::invalid(field, format!("at most {MAX_NAME_BYTES} bytes, got {}", name.len())));
+    }
+    Ok(())
+}
+
+impl Catalog {
+    /// Loads every body, scene and job record of `store` into memory.
+    ///
+    /// The store always opens: a stored body that no longer validates, or an instance whose pose
+    /// does not, is moved to the store's quarantine with the reason (see
+    /// [`super::store`]) and counted in [`Catalog::quarantined`]; an instance whose body is
+    /// missing is skipped with a warning (and kept). A job record still `running` was
+    /// interrupted by the previous stop and is marked `interrupted`.
+    ///
+    /// # Errors
+    /// [`Error::Storage`] when the store cannot be read.
+    pub fn open(store: Box<dyn Store>, params: NewtonParams) -> Result<Self> {
+        let mut bodies = BTreeMap::new();
+        for (id, rec) in store.list_bodies()? {
+            match Body::from_file(rec.body) {
+                Ok(body) => {
+                    let entry = BodyEntry { id: id.clone(), name: rec.name, body: Arc::new(body) };
+                    bodies.insert(id, Arc::new(entry));
+                }
+                Err(e) => {
+                    tracing::warn!(body_id = %id, error = %e, "quarantining stored body that does not validate");
+                    store.quarantine("bodies", &id, &format!("does not validate: {e}"))?;
+                }
+            }
+        }
+        let mut scenes = BTreeMap::new();
+        for (id, rec) in store.list_scenes()? {
+            let mut instances = BTreeMap::new();
+            for (iid, inst) in rec.instances {
+                let Some(entry) = bodies.get(&inst.body_id) else {
+                    tracing::warn!(scene_id = %id, instance_id = %iid, body_id = %inst.body_id, "skipping instance of missing body");
+                    continue;
+                };
+                match inst.pose.to_isometry("pose") {
+                    Ok(pose) => {
+                        instances.insert(iid, Instance { body_id: inst.body_id, body: entry.body.clone(), pose });
+                    }
+                    Err(e) => {
+                        tracing::warn!(scene_id = %id, instance_id = %iid, error = %e, "quarantining instance");
+                        store.quarantine("instances", &format!("{id}/{iid}"), &format!("does not validate: {e}"))?;
+                    }
+                }
+            }
+            let state = SceneState {
+                id: id.clone(),
+                name: rec.meta.name,
+                instances,
+                cache: WarmStartCache::default(),
+                deleted: false,
+            };
+            scenes.insert(id, Arc::new(Mutex::new(state)));
+        }
+        let mut jobs = BTreeMap::new();
+        for (id, mut rec) in store.list_jobs()? {
+            if rec.state == JobRecordState::Running {
+                rec.state = JobRecordState::Interrupted;
+                rec.error =
+                    "interrupted: the server stopped while the job was queued or running; no body was stored".into();
+                store.put_job(&id, &rec)?;
+            }
+            jobs.insert(id, rec);
+        }
+        let quarantined = store.quarantined()?.len();
+        if quarantined > 0 {
+            tracing::warn!(records = quarantined, "the store's quarantine holds records that could not be loaded");
+        }
+        tracing::info!(bodies = bodies.len(), scenes = scenes.len(), jobs = jobs.len(), quarantined, "catalog loaded");
+        Ok(Self {
+            store,
+            bodies: RwLock::new(bodies),
+            scenes: RwLock::new(scenes),
+            jobs: RwLock::new(jobs),
+            quarantined,
+            params,
+        })
+    }
+
+    /// Number of records in the store's quarantine when the catalog was opened (unreadable or
+    /// invalid records kept aside; see [`super::store`]). Health reports them.
+    pub fn quarantined(&self) -> usize {
+        self.quarantined
+    }
+
+    /// Writes a job's record (and prunes the oldest finished records beyond
+    /// [`MAX_JOB_RECORDS`]).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] when the record does not survive its JSON round trip;
+    /// [`Error::Storage`].
+    pub fn record_job(&self, id: &str, record: &JobRecord) -> Result<()> {
+        self.store.put_job(id, record)?;
+        let mut jobs = write(&self.jobs);
+        jobs.insert(id.to_owned(), record.clone());
+        if jobs.len() > MAX_JOB_RECORDS {
+            let mut done: Vec<(u64, String)> = jobs
+                .iter()
+                .filter(|(_, r)| r.state != JobRecordState::Running)
+                .map(|(k, r)| (r.created_unix_ms, k.clone()))
+                .collect();
+            done.sort();
+            let excess = jobs.len() - MAX_JOB_RECORDS;
+            let old: Vec<String> = done.into_iter().take(excess).map(|(_, k)| k).collect();
+            let refs: Vec<&str> = old.iter().map(String::as_str).collect();
+            self.store.delete_jobs(&refs)?;
+            for k in &old {
+                jobs.remove(k);
+            }
+        }
+        Ok(())
+    }
+
+    /// A job's stored record, if any.
+    pub fn job(&self, id: &str) -> Option<JobRecord> {
+        read(&self.jobs).get(id).cloned()
+    }
+
+    /// The Newton parameters every query uses.
+    pub fn params(&self) -> &NewtonParams {
+        &self.params
+    }
+
+    // ----------------------------------------------------------------------------------------
+    // Bodies
+    // ----------------------------------------------------------------------------------------
+
+    /// Stores a validated body under a fresh id and returns the id.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `name` for an over-long name; [`Error::Storage`].
+    pub fn add_body(&self, name: &str, body: Body) -> Result<String> {
+        check_name("name", name)?;
+        let id = new_id("b");
+        self.store.put_body(&id, &BodyRecord { name: name.to_owned(), body: body.to_file() })?;
+        let entry = BodyEntry { id: id.clone(), name: name.to_owned(), body: Arc::new(body) };
+        write(&self.bodies).insert(id.clone(), Arc::new(entry));
+        Ok(id)
+    }
+
+    /// The body with id `id`.
+    ///
+    /// # Errors
+    /// [`Error::NotFound`] (kind `body`).
+    pub fn body(&self, id: &str) -> Result<Arc<BodyEntry>> {
+        read(&self.bodies).get(id).cloned().ok_or_else(|| Error::not_found("body", id))
+    }
+
+    /// All bodies, ordered by id.
+    pub fn bodies(&self) -> Vec<Arc<BodyEntry>> {
+        read(&self.bodies).values().cloned().collect()
+    }
+
+    /// Deletes a body that no instance uses.
+    ///
+    /// # Errors
+    /// [`Error::NotFound`]; [`Error::FailedPrecondition`] while an instance uses it;
+    /// [`Error::Storage`].
+    pub fn delete_body(&self, id: &str) -> Result<()> {
+        let mut bodies = write(&self.bodies);
+        if !bodies.contains_key(id) {
+            return Err(Error::not_found("body", id));
+        }
+        for scene in read(&self.scenes).values() {
+            let s = lock(scene);
+            if let Some((iid, _)) = s.instances.iter().find(|(_, inst)| inst.body_id == id) {
+                return Err(Error::FailedPrecondition(format!(
+                    "body `{id}` is used by instance `{iid}` of scene `{}`; remove the instance first",
+                    s.id
+                )));
+            }
+        }
+        self.store.delete_body(id)?;
+        bodies.remove(id);
+        Ok(())
+    }
+
+    // ----------------------------------------------------------------------------------------
+    // Scenes
+    // ----------------------------------------------------------------------------------------
+
+    /// Creates an empty scene and returns its id.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `name` for an over-long name; [`Error::Storage`].
+    pub fn create_scene(&self, name: &str) -> Result<String> {
+        check_name("name", name)?;
+        let id = new_id("s");
+        self.store.put_scene(&id, &SceneMeta { name: name.to_owned() })?;
+        let state = SceneState {
+            id: id.clone(),
+            name: name.to_owned(),
+            instances: BTreeMap::new(),
+            cache: WarmStartCache::default(),
+            deleted: false,
+        };
+        write(&self.scenes).insert(id.clone(), Arc::new(Mutex::new(state)));
+        Ok(id)
+    }
+
+    /// The scene `id` (its lock not taken; see [`Catalog::with_scene`]).
+    fn scene(&self, id: &str) -> Result<Arc<Mutex<SceneState>>> {
+        read(&self.scenes).get(id).cloned().ok_or_else(|| Error::not_found("scene", id))
+    }
+
+    /// Locks a live scene (one that was not deleted meanwhile).
+    fn with_scene<T>(&self, id: &str, f: impl FnOnce(&mut SceneState) -> Result<T>) -> Result<T> {
+        let scene = self.scene(id)?;
+        let mut s = lock(&scene);
+        if s.deleted {
+            return Err(Error::not_found("scene", id));
+        }
+        f(&mut s)
+    }
+
+    /// A scene with its instances.
+    ///
+    /// # Errors
+    /// [`Error::NotFound`] (kind `scene`).
+    pub fn get_scene(&self, id: &str) -> Result<SceneView> {
+        self.with_scene(id, |s| Ok(view(s)))
+    }
+
+    /// All scenes, ordered by id.
+    pub fn scenes(&self) -> Vec<SceneView> {
+        read(&self.scenes).values().map(|s| view(&lock(s))).collect()
+    }
+
+    /// Whether any instance of the scene is a nonconvex body, whose queries solve an SDP lower
+    /// bound (milliseconds): the service runs such queries off its async workers. False for an
+    /// unknown scene (the query itself then reports it).
+    pub fn has_nonconvex(&self, scene_id: &str) -> bool {
+        self.scene(scene_id).map(|sc| lock(&sc).instances.values().any(|i| i.body.report.nonconvex)).unwrap_or(false)
+    }
+
+    /// Deletes a scene with its instances and warm starts.
+    ///
+    /// # Errors
+    /// [`Error::NotFound`]; [`Error::Storage`].
+    pub fn delete_scene(&self, id: &str) -> Result<()> {
+        let mut scenes = write(&self.scenes);
+        let scene = scenes.get(id).cloned().ok_or_else(|| Error::not_found("scene", id))?;
+        let mut s = lock(&scene);
+        self.store.delete_scene(id)?;
+        s.deleted = true;
+        drop(s);
+        scenes.remove(id);
+        Ok(())
+    }
+
+    /// Adds an instance of body `body_id` to scene `scene_id` under `pose`; returns its id.
+    ///
+    /// # Errors
+    /// [`Error::NotFound`] for the scene or the body; [`Error::Storage`].
+    pub fn add_instance(&self, scene_id: &str, body_id: &str, pose: Isometry3) -> Result<String> {
+        // Hold the bodies lock so the body cannot be deleted between the check and the insert.
+        let bodies = read(&self.bodies);
+        let body = bodies.get(body_id).ok_or_else(|| Error::not_found("body", body_id))?.body.clone();
+        self.with_scene(scene_id, |s| {
+            let id = new_id("i");
+            let rec = InstanceRecord { body_id: body_id.to_owned(), pose: StoredPose::from_isometry(&pose) };
+            self.store.put_instances(scene_id, &[(&id, &rec)], false)?;
+            s.instances.insert(id.clone(), Instance { body_id: body_id.to_owned(), body, pose });
+            Ok(id)
+        })
+    }
+
+    /// Sets the poses of many instances of one scene: all or nothing.
+    ///
+    /// Poses must already be validated (see [`crate::math::pose_from_parts`]); `poses[k].0` is
+    /// the instance id. Returns the number of instances updated.
+    ///
+    /// # Errors
+    /// [`Error::NotFound`] for the scene; [`Error::InvalidArgument`] naming `poses[k].instance_id`
+    /// for an unknown or repeated instance (nothing changes then); [`Error::Storage`].
+    pub fn set_poses(&self, scene_id: &str, poses: &[(String, Isometry3)]) -> Result<usize> {
+        self.with_scene(scene_id, |s| {
+            let mut seen = std::collections::HashSet::new();
+            let mut records = Vec::with_capacity(poses.len());
+            for (k, (iid, pose)) in poses.iter().enumerate() {
+                let field = format!("poses[{k}].instance_id");
+                let inst = s
+                    .instances
+                    .get(iid)
+                    .ok_or_else(|| Error::invalid(&field, format!("no instance `{iid}` in scene `{scene_id}`")))?;
+                if !seen.insert(iid.as_str()) {
+                    return Err(Error::invalid(field, format!("instance `{iid}` appears twice")));
+                }
+                records.push(InstanceRecord { body_id: inst.body_id.clone(), pose: StoredPose::from_isometry(pose) });
+            }
+            let rows: Vec<(&str, &InstanceRecord)> =
+                poses.iter().zip(records.iter()).map(|((iid, _), rec)| (iid.as_str(), rec)).collect();
+            self.store.put_instances(scene_id, &rows, true)?;
+            for (iid, pose) in poses {
+                if let Some(inst) = s.instances.get_mut(iid) {
+                    inst.pose = *pose;
+                }
+            }
+            Ok(poses.len())
+        })
+    }
+
+    /// Removes an instance and every warm start involving it.
+    ///
+    /// # Errors
+    /// [`Error::NotFound`] for the scene or the instance; [`Error::Storage`].
+    pub fn remove_instance(&self, scene_id: &str, instance_id: &str) -> Result<()> {
+        self.with_scene(scene_id, |s| {
+            if !s.instances.contains_key(instance_id) {
+                return Err(Error::not_found("instance", instance_id));
+            }
+            self.store.delete_instance(scene_id, instance_id)?;
+            s.instances.remove(instance_id);
+            s.cache.invalidate_instance(instance_id);
+            Ok(())
+        })
+    }
+
+    /// Number of warm starts cached for a scene (for monitoring and tests).
+    ///
+    /// # Errors
+    /// [`Error::NotFound`] for the scene.
+    pub fn cached_warm_starts(&self, scene_id: &str) -> Result<usize> {
+        self.with_scene(scene_id, |s| Ok(s.cache.len()))
+    }
+}
+
+/// A scene as seen from outside (ids, names, poses).
+fn view(s: &SceneState) -> SceneView {
+    SceneView {
+        id: s.id.clone(),
+        name: s.name.clone(),
+        instances: s
+            .instances
+            .iter()
+            .map(|(id, i)| InstanceView { id: id.clone(), body_id: i.body_id.clone(), pose: i.pose })
+            .collect(),
+    }
+}
+
+/// The instance `id` of a locked scene.
+fn instance<'a>(s: &'a SceneState, id: &str) -> Result<&'a Instance> {
+    s.instances.get(id).ok_or_else(|| Error::not_found("instance", id))
+}
+
+/// The instance `id` of a locked scene as a posed body (the body shared, the pose copied).
+fn posed(s: &SceneState, id: &str) -> Result<super::planner::Posed> {
+    let inst = instance(s, id)?;
+    Ok(super::planner::Posed { body: inst.body.clone(), pose: inst.pose })
+}
