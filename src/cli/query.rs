@@ -70,7 +70,7 @@ fn certificate_json(c: &Option<CertificateSummary>) -> serde_json::Value {
         Some(c) => json!({
             "bound": c.bound, "verified_bound": c.verified_bound, "agrees": c.agrees,
             "relative_gap": c.relative_gap, "gram_min_eigenvalue": c.gram_min_eigenvalue,
-            "solve_seconds": c.solve_seconds, "solver_status": c.solver_status, "verified": c.verified,
+            "solve_seconds": c.solve_seconds, "solver_status": c.solver_status, "kind": c.kind.as_str(), "verified": c.verified,
             "newton_value": c.newton_value,
         }),
     }

@@ -53,6 +53,7 @@ use super::sdp_certificate::{
     DistanceCertificate, GrowthCertificate, WITNESS_FEASIBILITY_TOLERANCE,
 };
 use crate::body::Body;
+use crate::conic::SdpStatus;
 use crate::math::{Isometry3, Point3, Real, Vector3};
 
 /// Relative tolerance of the agreement rule (module docs).
@@ -87,6 +88,26 @@ pub enum AnswerSource {
     SdpLowerBound,
 }
 
+/// Which certificate a [`CertificateSummary`] holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CertificateKind {
+    /// The level-0 sos relaxation of the query (paper §IV-A).
+    Level0,
+    /// A separating hyperplane through Newton's witness points, each body's support excess
+    /// bounded by a small SDP (separated distance queries).
+    SeparatingHyperplane,
+}
+
+impl CertificateKind {
+    /// The text form (`"level0"`, `"separating_hyperplane"`).
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            CertificateKind::Level0 => "level0",
+            CertificateKind::SeparatingHyperplane => "separating_hyperplane",
+        }
+    }
+}
+
 /// The level-0 certificate of one query, in the answer's units.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CertificateSummary {
@@ -103,8 +124,11 @@ pub struct CertificateSummary {
     pub gram_min_eigenvalue: Real,
     /// Seconds inside Clarabel.
     pub solve_seconds: Real,
-    /// Clarabel's final status (`"Solved"` or `"AlmostSolved"`).
-    pub solver_status: String,
+    /// Clarabel's final status (`Solved` or `AlmostSolved` for a verified certificate).
+    pub solver_status: SdpStatus,
+    /// Which certificate: the level-0 sos relaxation of the query, or a separating hyperplane
+    /// through Newton's witness points (cheaper; tried first for separated distance queries).
+    pub kind: CertificateKind,
     /// Whether the certificate is verified (module docs, "Verified SDP").
     pub verified: bool,
     /// Newton's value that was compared (squared distance or d(p₁‖p₂)), when Newton ran; kept even
@@ -170,10 +194,10 @@ fn summary(
     verified_bound: Real,
     eig: Real,
     seconds: Real,
-    status: &str,
+    status: SdpStatus,
     newton: Option<Real>,
 ) -> CertificateSummary {
-    let verified = values_agree(verified_bound, bound) && (status == "Solved" || status == "AlmostSolved");
+    let verified = values_agree(verified_bound, bound) && status.is_usable();
     CertificateSummary {
         bound,
         verified_bound,
@@ -181,7 +205,8 @@ fn summary(
         relative_gap: newton.map_or(0.0, |n| relative_gap(n, bound)),
         gram_min_eigenvalue: eig,
         solve_seconds: seconds,
-        solver_status: status.to_string(),
+        solver_status: status,
+        kind: CertificateKind::Level0,
         verified,
         newton_value: newton,
     }
@@ -193,13 +218,13 @@ fn distance_summary(c: &DistanceCertificate, newton: Option<Real>) -> Certificat
         c.verified_squared_distance,
         c.gram_min_eigenvalue,
         c.solve_seconds,
-        &c.solver_status,
+        c.solver_status,
         newton,
     )
 }
 
 fn growth_summary(c: &GrowthCertificate, newton: Option<Real>) -> CertificateSummary {
-    summary(c.value, c.verified_value, c.gram_min_eigenvalue, c.solve_seconds, &c.solver_status, newton)
+    summary(c.value, c.verified_value, c.gram_min_eigenvalue, c.solve_seconds, c.solver_status, newton)
 }
 
 /// Whether `x` (world frame) lies in both posed bodies up to [`OVERLAP_POINT_TOLERANCE`]: a primal
@@ -303,10 +328,10 @@ fn separation_summary(
         square(h.verified_lower_bound),
         h.gram_min_eigenvalue,
         joint.solve_seconds + h.solve_seconds,
-        &h.solver_status,
+        h.solver_status,
         Some(n2),
     );
-    s.solver_status = format!("{} (separating hyperplane)", h.solver_status);
+    s.kind = CertificateKind::SeparatingHyperplane;
     (s.verified && s.agrees).then_some(s)
 }
 

@@ -10,11 +10,10 @@ pub mod growth;
 pub mod newton;
 pub mod penetration;
 pub mod sdp_certificate;
-pub mod stability;
 
 pub use certified::{
-    certified_distance, certified_growth, AnswerSource, CertificateSummary, Certified, CertifiedDistance,
-    CertifiedGrowth, CertifyMode, CertifyParams,
+    certified_distance, certified_growth, AnswerSource, CertificateKind, CertificateSummary, Certified,
+    CertifiedDistance, CertifiedGrowth, CertifyMode, CertifyParams,
 };
 pub use distance::{distance, DistanceResult, DistanceWarmStart};
 pub use gradient::{distance_gradient, growth_gradient, PoseGradient};

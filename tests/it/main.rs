@@ -8,7 +8,6 @@ mod planner;
 mod query;
 mod service;
 mod service_jobs;
-mod stability;
 mod table;
 mod transport;
 mod util;

@@ -21,6 +21,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::path::PathBuf;
 use sublevel::body::ellipsoid;
+use sublevel::conic::SdpStatus;
 use sublevel::math::{pose_from_parts, Isometry3, Point3, Real, Vector3};
 use sublevel::query::sdp_certificate::{certify_distance, certify_growth};
 use sublevel::query::{distance, growth, NewtonParams};
@@ -66,9 +67,9 @@ impl Tally {
 
 /// Accepts a certificate's status: `Solved`, or `AlmostSolved` when its a-posteriori check passed
 /// (coefficient residual and γ − verified bound both ≤ `REL_TOL · scale`).
-fn certificate_trusted(status: &str, residual: Real, value: Real, verified: Real, scale: Real) -> bool {
-    status == "Solved"
-        || (status == "AlmostSolved" && residual <= REL_TOL * scale && value - verified <= REL_TOL * scale)
+fn certificate_trusted(status: SdpStatus, residual: Real, value: Real, verified: Real, scale: Real) -> bool {
+    status == SdpStatus::Solved
+        || (status == SdpStatus::AlmostSolved && residual <= REL_TOL * scale && value - verified <= REL_TOL * scale)
 }
 
 fn random_rotation(rng: &mut ChaCha8Rng) -> [Real; 4] {
@@ -139,7 +140,7 @@ fn check_pair(a: &Body, pa: &Isometry3, b: &Body, pb: &Isometry3, label: &str, t
     let (dn2, gamma) = (newton.distance * newton.distance, cert.squared_distance);
     let scale = gamma.max(1.0);
     assert!(
-        certificate_trusted(&cert.solver_status, cert.residual, gamma, cert.verified_squared_distance, scale),
+        certificate_trusted(cert.solver_status, cert.residual, gamma, cert.verified_squared_distance, scale),
         "{label}: distance certificate not trusted: {cert:?}"
     );
     assert!(cert.verified_squared_distance <= dn2 + REL_TOL * scale, "{label}: verified bound above Newton: {cert:?}");
@@ -160,7 +161,7 @@ fn check_pair(a: &Body, pa: &Isometry3, b: &Body, pb: &Isometry3, label: &str, t
         assert!(gn.status.converged(), "{label}: Newton growth {which} did not converge: {gn:?}");
         let scale = gc.value.abs().max(1.0);
         assert!(
-            certificate_trusted(&gc.solver_status, gc.residual, gc.value, gc.verified_value, scale),
+            certificate_trusted(gc.solver_status, gc.residual, gc.value, gc.verified_value, scale),
             "{label}: growth {which} certificate not trusted: {gc:?}"
         );
         assert!(gc.verified_value <= gn.value + REL_TOL * scale, "{label}: growth {which} verified bound above Newton");

@@ -39,8 +39,8 @@ pub struct DistanceCertificate {
     /// kernel; read off when that kernel is one-dimensional (`None` otherwise, e.g. for a pair with
     /// several minimizers). Unfiltered: for nonconvex bodies they may lie outside their body.
     pub kernel_witnesses: Option<(Point3, Point3)>,
-    /// Clarabel's status (`"Solved"` or `"AlmostSolved"`; other statuses are errors).
-    pub solver_status: String,
+    /// Clarabel's final status (`Solved` or `AlmostSolved`; other statuses are errors).
+    pub solver_status: crate::conic::SdpStatus,
     /// Seconds inside Clarabel (both passes).
     pub solve_seconds: Real,
     /// Interior-point iterations (both passes).
@@ -145,7 +145,7 @@ pub fn certify_distance_with_params(
         witnesses,
         moment_witnesses,
         kernel_witnesses,
-        solver_status: format!("{:?}", sol.status),
+        solver_status: sol.status.into(),
         solve_seconds: seconds,
         iterations,
         gram_sizes: run.blocks.iter().map(GramStructure::size).collect(),

@@ -26,8 +26,8 @@ pub struct GrowthCertificate {
     /// The same first-order moments mapped to a world point without the feasibility filter (`None`
     /// only when not finite); for nonconvex bodies it may lie outside body 2.
     pub moment_minimizer: Option<Point3>,
-    /// Clarabel's status (`"Solved"` or `"AlmostSolved"`; other statuses are errors).
-    pub solver_status: String,
+    /// Clarabel's final status (`Solved` or `AlmostSolved`; other statuses are errors).
+    pub solver_status: crate::conic::SdpStatus,
     /// Seconds inside Clarabel (both passes).
     pub solve_seconds: Real,
     /// Interior-point iterations (both passes).
@@ -109,7 +109,7 @@ pub fn certify_growth_with_params(
         tau: sol.x[run.sol.multipliers[0]],
         minimizer: run.minimizer.map(Point3::from),
         moment_minimizer: run.moment_minimizer.map(Point3::from),
-        solver_status: format!("{:?}", sol.status),
+        solver_status: sol.status.into(),
         solve_seconds: seconds,
         iterations,
         gram_size: run.blocks[0].size(),

@@ -15,7 +15,6 @@ use crate::math::Real;
 use crate::poly::gram::{gram_weight, triangle_index, GramStructure};
 use crate::poly::Polynomial;
 use crate::{Error, Result};
-use clarabel::solver::SolverStatus;
 
 /// Columns and dual positions of a solved level-0 program.
 pub(super) struct Level0Solution {
@@ -89,23 +88,16 @@ pub(super) fn solve_level0(
     builder.add_inequalities(multipliers.iter().map(|&c| vec![(c, -1.0)]).collect(), vec![0.0; multipliers.len()]);
 
     let sol = builder.solve(quiet_settings(params.tolerance, params.max_iterations))?;
-    match sol.status {
-        SolverStatus::Solved | SolverStatus::AlmostSolved => {
-            Ok(Level0Solution { sol, gamma, multipliers, psd_rows, row_of })
-        }
-        SolverStatus::Unsolved
-        | SolverStatus::PrimalInfeasible
-        | SolverStatus::DualInfeasible
-        | SolverStatus::AlmostPrimalInfeasible
-        | SolverStatus::AlmostDualInfeasible
-        | SolverStatus::MaxIterations
-        | SolverStatus::MaxTime
-        | SolverStatus::NumericalError
-        | SolverStatus::InsufficientProgress
-        | SolverStatus::CallbackTerminated => Err(Error::Numerical(format!(
-            "level-0 sos certificate: Clarabel ended with status {:?} after {} iterations",
-            sol.status, sol.iterations
-        ))),
+    // Every status is mapped by `SdpStatus::from` (Clarabel's, variant for variant); only
+    // Solved / AlmostSolved give a usable certificate.
+    let status = crate::conic::SdpStatus::from(sol.status);
+    if status.is_usable() {
+        Ok(Level0Solution { sol, gamma, multipliers, psd_rows, row_of })
+    } else {
+        Err(Error::Numerical(format!(
+            "level-0 sos certificate: Clarabel ended with status {status} after {} iterations",
+            sol.iterations
+        )))
     }
 }
 

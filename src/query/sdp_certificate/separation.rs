@@ -36,7 +36,7 @@ pub struct SeparationCertificate {
     /// Smallest eigenvalue over both corrected Gram matrices (meters).
     pub gram_min_eigenvalue: Real,
     /// The worse of the two Clarabel statuses (`"Solved"` unless one is `"AlmostSolved"`).
-    pub solver_status: String,
+    pub solver_status: crate::conic::SdpStatus,
     /// Seconds inside Clarabel (both programs).
     pub solve_seconds: Real,
 }
@@ -64,7 +64,7 @@ pub fn certify_separation(
     let n = gap / len;
     let ea = support_excess(a, pose_a, &x.coords, &n, params)?;
     let eb = support_excess(b, pose_b, &y.coords, &-n, params)?;
-    let worse = if ea.solver_status == "Solved" { eb.solver_status.clone() } else { ea.solver_status.clone() };
+    let worse = if ea.solver_status == crate::conic::SdpStatus::Solved { eb.solver_status } else { ea.solver_status };
     Ok(SeparationCertificate {
         lower_bound: len - ea.excess - eb.excess,
         verified_lower_bound: len - ea.verified_excess - eb.verified_excess,
@@ -88,7 +88,7 @@ struct SupportExcess {
     /// Smallest eigenvalue of the corrected Gram matrix (meters; ≥ 0 means an exact certificate).
     gram_min_eigenvalue: Real,
     /// Clarabel's status (`"Solved"` or `"AlmostSolved"`; other statuses are errors).
-    solver_status: String,
+    solver_status: crate::conic::SdpStatus,
     /// Seconds inside Clarabel.
     solve_seconds: Real,
 }
@@ -124,7 +124,7 @@ fn support_excess(
         excess: -gamma,
         verified_excess: -check.bound,
         gram_min_eigenvalue: check.min_eigenvalue,
-        solver_status: format!("{:?}", sol.sol.status),
+        solver_status: sol.sol.status.into(),
         solve_seconds: sol.sol.solve_seconds,
     })
 }

@@ -123,7 +123,7 @@ fn sphere_distance_matches_closed_form_with_witnesses() {
     assert!((cert.distance - expected).abs() < 1e-6, "{} vs {expected}", cert.distance);
     assert!((cert.squared_distance - expected * expected).abs() < 1e-6);
     assert_eq!(cert.gram_sizes, vec![7, 4, 4]);
-    assert_eq!(cert.solver_status, "Solved");
+    assert_eq!(cert.solver_status, crate::conic::SdpStatus::Solved);
     assert!(cert.residual < 1e-8, "residual {}", cert.residual);
     let verified = cert.verified_squared_distance;
     assert!(verified <= expected * expected + 1e-9 && verified > expected * expected - 1e-7, "{cert:?}");
@@ -190,7 +190,7 @@ fn sphere_growth_matches_closed_form() {
         let expected = ((c1 - c2).norm() - 0.8).max(0.0).powi(2) / 0.25;
         assert!((cert.value - expected).abs() < 1e-7 * expected.max(1.0), "case {k}: {} vs {expected}", cert.value);
         // The a-posteriori check: exact identity up to a tiny residual, bound below the truth.
-        assert_eq!(cert.solver_status, "Solved", "case {k}");
+        assert_eq!(cert.solver_status, crate::conic::SdpStatus::Solved, "case {k}");
         assert!(cert.residual < 1e-8 * expected.max(1.0), "case {k}: residual {}", cert.residual);
         assert!(cert.verified_value <= expected + 1e-9 * expected.max(1.0), "case {k}: {cert:?}");
         assert!(cert.value - cert.verified_value < 1e-7 * expected.max(1.0), "case {k}: {cert:?}");

@@ -7,24 +7,24 @@
 //! # Classification of one query
 //!
 //! - **certified**: Newton converged and agrees with the SDP (agreement rule of
-//!   [`super::certified`]: |n − s| ≤ 1e-6·|s| or ≤ 1e-9 absolute, on the squared distance in m² and on
+//!   [`sublevel::query::certified`]: |n − s| ≤ 1e-6·|s| or ≤ 1e-9 absolute, on the squared distance in m² and on
 //!   d(p₁‖p₂));
 //! - **flagged**: the answer was replaced by the SDP fallback (`source = SdpFallback`) and that
 //!   answer is verified (`converged`);
 //! - **unresolved**: anything else (the target is none).
 //!
-//! Used by `tests/it/stability.rs` and the `sublevel stability` report command.
+//! Used by the `sublevel stability` report command and its test (`cli::stability::tests`).
 
-use super::certified::{
-    certified_distance, certified_growth, AnswerSource, CertifyMode, CertifyParams, AGREEMENT_ABSOLUTE,
-};
-use super::distance::{distance, DistanceWarmStart};
-use super::growth::{growth, GrowthWarmStart};
-use crate::body::{ellipsoid, Body};
-use crate::math::{Isometry3, Real, UnitQuaternion, Vector3};
-use crate::Result;
 use nalgebra::{Translation3, Unit};
 use rand::{Rng, SeedableRng};
+use sublevel::body::{ellipsoid, Body};
+use sublevel::math::{Isometry3, Real, UnitQuaternion, Vector3};
+use sublevel::query::distance::{distance, DistanceWarmStart};
+use sublevel::query::growth::{growth, GrowthWarmStart};
+use sublevel::query::{
+    certified::AGREEMENT_ABSOLUTE, certified_distance, certified_growth, AnswerSource, CertifyMode, CertifyParams,
+};
+use sublevel::Result;
 
 /// One configuration: two posed bodies and optional warm starts.
 #[derive(Clone, Debug)]
@@ -95,7 +95,7 @@ pub const GAPS: [Real; 5] = [1e-9, 1e-7, 1e-5, 1e-3, 1e-1];
 /// rotations. `extra` bodies (e.g. degree 8) give one more case, "degree 8 gaps", when non-empty.
 ///
 /// # Errors
-/// [`crate::Error::InvalidArgument`] naming `bodies` when fewer than one is given.
+/// [`sublevel::Error::InvalidArgument`] naming `bodies` when fewer than one is given.
 pub fn stability_cases(
     bodies: &[Body],
     extra: &[Body],
@@ -103,7 +103,7 @@ pub fn stability_cases(
     seed: u64,
 ) -> Result<Vec<StabilityCase>> {
     if bodies.is_empty() {
-        return Err(crate::Error::invalid("bodies", "at least one body is needed"));
+        return Err(sublevel::Error::invalid("bodies", "at least one body is needed"));
     }
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let pick = |k: usize| (&bodies[k % bodies.len()], &bodies[(k + 1) % bodies.len()]);

@@ -1,10 +1,14 @@
 //! `sublevel stability [--data tests/data] [--pairs 4] [--csv out/stability.csv]`: the stability
-//! suite of [`sublevel::query::stability`] as a report: per case the number of queries, the share
+//! suite of [`suite`] as a report: per case the number of queries, the share
 //! certified (Newton agrees with the level-0 SDP) and flagged (answered by a verified SDP fallback),
 //! the median Newton iterations and the largest error of Newton against the SDP.
 
 use super::csv_file::CsvFile;
-use sublevel::query::stability::{run_case, stability_cases};
+use suite::{run_case, stability_cases};
+
+pub mod suite;
+#[cfg(test)]
+mod tests;
 use sublevel::query::CertifyParams;
 use sublevel::{Body, Error, Result};
 

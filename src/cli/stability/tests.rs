@@ -1,4 +1,4 @@
-//! Integration tests: the stability suite (`query::stability`) on the bundled chair / human fits
+//! The stability suite (`sublevel stability`) on the bundled chair / human fits
 //! at 2d = 2 and 4 (degree 6 and 8 only in `sublevel stability`, to keep this test a few seconds).
 //!
 //! Every query of every case (tiny gaps 1e-9 … 1e-1, tangency, deep and concentric overlap,
@@ -7,8 +7,8 @@
 //! with the level-0 SDP: |n − s| ≤ 1e-6·|s| or ≤ 1e-9 absolute, on the squared distance in m² and
 //! on d(p₁‖p₂)) or **flagged** (answered by a verified SDP fallback).
 
+use super::suite::{run_case, stability_cases};
 use std::path::PathBuf;
-use sublevel::query::stability::{run_case, stability_cases};
 use sublevel::query::CertifyParams;
 use sublevel::Body;
 
