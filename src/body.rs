@@ -74,6 +74,34 @@ pub struct FitReport {
     /// body is the one of smallest volume. Empty for a single solve.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub candidate_volumes: Vec<(String, Real)>,
+    /// How the kept SDP was solved, as values (the notes say the same in prose). None for bodies
+    /// without an SDP fit and for files written before this field.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub solve: Option<SolveDetails>,
+}
+
+/// How a fit's SDP was solved (structured; see [`FitReport::solve`]).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct SolveDetails {
+    /// Interior-point iterations of the kept solve, all attempts and containment rounds.
+    pub iterations: u32,
+    /// Clarabel's KKT solver (`faer` or `qdldl`); None when unknown.
+    #[serde(default, with = "crate::fit::settings::named_option")]
+    pub linear_solver: Option<crate::fit::KktSolver>,
+    /// The frame the SDP was solved in (`cube`, `principal_box`, …; paper-frame `input`); None
+    /// for containment (its own normalization: the bodies' bounding boxes).
+    #[serde(default, with = "crate::fit::settings::named_option")]
+    pub frame: Option<crate::fit::hull::Normalization>,
+    /// Containment rows of each round, for fits whose rows were added in rounds (c > 0 or
+    /// `rows_in_rounds`); empty for one solve.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub rows_per_round: Vec<usize>,
+    /// Bodies contained (paper §V containment); 0 for point fits.
+    #[serde(default)]
+    pub contained_bodies: usize,
+    /// Degree 2k of the S-procedure multipliers (containment only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub multiplier_degree: Option<usize>,
 }
 
 /// The primal and dual objective values of a fit's SDP at the solver's last iterate, stated for
@@ -596,6 +624,28 @@ pub fn ellipsoid(center: [Real; 3], radii: [Real; 3]) -> Result<Body> {
 mod tests {
     use super::*;
     use crate::math::pose_from_parts;
+
+    #[test]
+    fn solve_details_round_trip_and_unknown_names_read_as_none() {
+        use crate::fit::hull::Normalization;
+        use crate::fit::KktSolver;
+        let d = SolveDetails {
+            iterations: 23,
+            linear_solver: Some(KktSolver::Qdldl),
+            frame: Some(Normalization::PrincipalBox),
+            rows_per_round: vec![384, 684],
+            contained_bodies: 0,
+            multiplier_degree: None,
+        };
+        let json = serde_json::to_value(&d).unwrap();
+        assert_eq!(json["linear_solver"], "qdldl");
+        assert_eq!(json["frame"], "principal_box");
+        assert_eq!(serde_json::from_value::<SolveDetails>(json).unwrap(), d);
+        // Another writer's names never make a body file unreadable.
+        let other: SolveDetails =
+            serde_json::from_str(r#"{"iterations": 3, "linear_solver": "pardiso", "frame": "custom"}"#).unwrap();
+        assert_eq!((other.iterations, other.linear_solver, other.frame), (3, None, None));
+    }
 
     #[test]
     fn ellipsoid_membership_and_pose() {

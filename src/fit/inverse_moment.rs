@@ -96,5 +96,6 @@ pub(crate) fn solve(half_degree: usize, points: &[Vector3]) -> Result<super::pip
             "inverse moment (Lasserre–Pauwels) over all {} points in normalized coordinates; level γ = {gamma:.6e}",
             points.len()
         )],
+        details: None,
     })
 }

@@ -10,7 +10,7 @@ use super::sdp::{
 use super::settings::report;
 use super::volume;
 use super::{FitMethod, FitProgress, FitSettings, FitStage};
-use crate::body::{Body, FitReport};
+use crate::body::{Body, FitReport, SolveDetails};
 use crate::conic::SdpStatus;
 use crate::math::{Point3, Real};
 use crate::poly::Polynomial;
@@ -30,6 +30,8 @@ pub(crate) struct Solved {
     /// Primal / dual objectives of the (last) SDP solve, if there was one.
     pub(crate) certificate: Option<crate::body::SolverCertificate>,
     pub(crate) notes: Vec<String>,
+    /// How the SDP was solved (None without an SDP).
+    pub(crate) details: Option<SolveDetails>,
 }
 
 fn spec_of(settings: &FitSettings, trace_basis: TraceBasis) -> ProblemSpec {
@@ -175,6 +177,12 @@ fn solve_on_hull(
             raw.iterations,
             settings.linear_solver.name()
         )],
+        details: Some(SolveDetails {
+            iterations: raw.iterations,
+            linear_solver: Some(settings.linear_solver),
+            frame: Some(settings.normalization),
+            ..Default::default()
+        }),
     })
 }
 
@@ -243,6 +251,13 @@ fn solve_in_rounds(
         nonconvex: settings.convexity_relaxation > 0.0,
         certificate: Some(out.certificate),
         notes,
+        details: Some(SolveDetails {
+            iterations: out.iterations,
+            linear_solver: Some(settings.linear_solver),
+            frame: Some(settings.normalization),
+            rows_per_round: out.rows_per_round.clone(),
+            ..Default::default()
+        }),
     })
 }
 
@@ -310,6 +325,7 @@ fn finish(
         convexity_relaxation: settings.convexity_relaxation,
         nonconvex: solved.nonconvex,
         solver_certificate: solved.certificate,
+        solve: solved.details,
         ..Default::default()
     };
     let center = [cloud.center.x, cloud.center.y, cloud.center.z];

@@ -293,3 +293,41 @@ pub(crate) fn validate_solver_fields(volume_samples: usize, tolerance: Real, max
 pub(crate) fn report(progress: &mut dyn FnMut(&FitProgress), stage: FitStage, fraction: Real, message: String) {
     progress(&FitProgress { stage, fraction, message });
 }
+
+/// A named option (a type with a `name()` text form and `FromStr`) as its name in JSON, read
+/// back leniently: an unknown name reads as None, so a file from another writer still loads.
+pub(crate) mod named_option {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    /// Types with a stable text name.
+    pub(crate) trait Named: Sized + std::str::FromStr {
+        /// The text form.
+        fn text(&self) -> &'static str;
+    }
+
+    impl Named for crate::fit::KktSolver {
+        fn text(&self) -> &'static str {
+            self.name()
+        }
+    }
+
+    impl Named for crate::fit::hull::Normalization {
+        fn text(&self) -> &'static str {
+            self.name()
+        }
+    }
+
+    /// Writes the name (or null).
+    pub(crate) fn serialize<T: Named, S: Serializer>(value: &Option<T>, s: S) -> Result<S::Ok, S::Error> {
+        match value {
+            Some(v) => s.serialize_str(v.text()),
+            None => s.serialize_none(),
+        }
+    }
+
+    /// Reads a name; unknown names and null read as None.
+    pub(crate) fn deserialize<'de, T: Named, D: Deserializer<'de>>(d: D) -> Result<Option<T>, D::Error> {
+        let text: Option<String> = Option::deserialize(d)?;
+        Ok(text.and_then(|t| t.parse().ok()))
+    }
+}

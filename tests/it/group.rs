@@ -124,7 +124,9 @@ fn one_ellipsoid_at_degree_2_is_that_ellipsoid() {
         rep.volume,
         rep.volume_std_error
     );
-    assert!(rep.notes[0].contains("m = 1") && rep.notes[0].contains("2d = 2") && rep.notes[0].contains("2k = 0"));
+    let solve = rep.solve.as_ref().expect("solve details");
+    assert_eq!((solve.contained_bodies, solve.multiplier_degree, body.degree()), (1, Some(0), 2), "{solve:?}");
+    assert!(solve.iterations > 0 && solve.frame.is_none());
 }
 
 #[test]

@@ -172,7 +172,8 @@ mod tests {
         let body = fit_points(&points, &stated_settings(&settings), &mut |_| {}).unwrap();
         let max = points.iter().map(|x| body.value_at(x)).fold(Real::NEG_INFINITY, Real::max);
         assert!(max <= 1.0 + 1e-12, "max p(xᵢ) = {max}");
-        assert!(body.report.notes.iter().any(|n| n.contains("input frame")), "{:?}", body.report.notes);
+        let frame = body.report.solve.as_ref().and_then(|s| s.frame);
+        assert_eq!(frame, Some(sublevel::fit::hull::Normalization::Input), "{:?}", body.report.solve);
         assert!((body.report.volume - stated.volume).abs() <= 1e-12 * stated.volume);
         // A cell within 1.02 × paper gets no extra solves.
         let within = fit_cell(&points, &settings, Some(v));

@@ -247,6 +247,8 @@ pub fn report_from_proto(r: &pb::FitReport) -> FitReport {
             dual_residual: c.dual_residual,
         }),
         candidate_volumes: r.candidate_volumes.iter().map(|c| (c.name.clone(), c.volume)).collect(),
+        // The wire report does not carry the structured solve details (the notes do, in prose).
+        solve: None,
     }
 }
 
