@@ -21,7 +21,7 @@
 //! identities into G's affine image; doing the same here is the next step). Callers run it off the
 //! async workers; fit jobs never pay it (their bodies carry the certificate of their own SDP).
 
-use super::sdp::identities::add3;
+use super::sdp::identities::{add3, for_each_hessian_term};
 use super::sdp::pair_index;
 use crate::conic::{ConicBuilder, Row, SdpStatus};
 use crate::math::Real;
@@ -62,7 +62,6 @@ pub fn sos_convexity_margin(p: &Polynomial) -> Result<SosConvexity> {
         return Err(Error::invalid("degree", format!("must be one of 2, 4, 6, 8, got {degree}")));
     }
     let d = degree / 2;
-    let full = graded_exponents3(degree);
     let low = graded_exponents3(d - 1);
     let nl = low.len();
     let m = 3 * nl;
@@ -70,24 +69,8 @@ pub fn sos_convexity_margin(p: &Polynomial) -> Result<SosConvexity> {
 
     // Right-hand side: the coefficients of yᵀ∇²p y, by (y-pair, x-monomial of degree ≤ 2d − 2).
     let mut rhs = vec![0.0; 6 * lb];
-    for (alpha, &c) in full.iter().zip(p.coefficients()) {
-        if c == 0.0 {
-            continue;
-        }
-        for k in 0..3 {
-            for l in k..3 {
-                let (ak, al) = (alpha[k] as usize, alpha[l] as usize);
-                let f = if k == l { (ak * ak.saturating_sub(1)) as Real } else { 2.0 * (ak * al) as Real };
-                if f == 0.0 {
-                    continue;
-                }
-                let mut beta = *alpha;
-                beta[k] -= 1;
-                beta[l] -= 1;
-                rhs[pair_index(k, l) * lb + index3(beta)] += f * c;
-            }
-        }
-    }
+    let coefficients = p.coefficients();
+    for_each_hessian_term(d, |row, ci, f| rhs[row] += f * coefficients[ci]);
     let hessian_scale = rhs.iter().fold(0.0, |a: Real, v| a.max(v.abs()));
     if hessian_scale == 0.0 {
         // p is affine: no Hessian, not a body (its sublevel sets are half-spaces).

@@ -171,12 +171,25 @@ pub(crate) fn hessian_identities(
     scale_c: &[Real],
     relaxation: Real,
 ) -> (Vec<Vec<(usize, Real)>>, Vec<Real>) {
-    let full = graded_exponents3(2 * d);
     let lb = basis_len(3, 2 * d - 2);
     let mut constant = vec![0.0; 6 * lb];
     let mut terms: Vec<Vec<(usize, Real)>> = vec![Vec::new(); 6 * lb];
-    let q = if relaxation > 0.0 { norm_power_coefficients(d) } else { vec![0.0; full.len()] };
-    for (ci, alpha) in full.iter().enumerate() {
+    let q = if relaxation > 0.0 { norm_power_coefficients(d) } else { vec![0.0; basis_len(3, 2 * d)] };
+    for_each_hessian_term(d, |row, ci, f| {
+        terms[row].push((col_c + ci, f / scale_c[ci]));
+        constant[row] -= relaxation * f * q[ci];
+    });
+    (terms, constant)
+}
+
+/// The derivative formula of yᵀ∇²p y for p of degree 2d in the graded-lex basis: calls
+/// `term(row, α, f)` for every coefficient index α and identity row (y-pair k ≤ l, monomial
+/// β = α − eₖ − eₗ of degree ≤ 2d − 2, row = pair·C(2d+1, 3) + index(β)) to which c_α contributes
+/// f·c_α (f = αₖ(αₖ − 1) for k = l, 2αₖαₗ otherwise). Shared by the fits' identities and the
+/// sos-convexity certificate of uploaded bodies.
+pub(crate) fn for_each_hessian_term(d: usize, mut term: impl FnMut(usize, usize, Real)) {
+    let lb = basis_len(3, 2 * d - 2);
+    for (ci, alpha) in graded_exponents3(2 * d).iter().enumerate() {
         for k in 0..3 {
             for l in k..3 {
                 let (ak, al) = (alpha[k] as usize, alpha[l] as usize);
@@ -187,13 +200,10 @@ pub(crate) fn hessian_identities(
                 let mut beta = *alpha;
                 beta[k] -= 1;
                 beta[l] -= 1;
-                let row = pair_index(k, l) * lb + index3(beta);
-                terms[row].push((col_c + ci, f / scale_c[ci]));
-                constant[row] -= relaxation * f * q[ci];
+                term(pair_index(k, l) * lb + index3(beta), ci, f);
             }
         }
     }
-    (terms, constant)
 }
 
 /// Size of svec(G) minus the free entries: the number of sos-convexity identities at half
