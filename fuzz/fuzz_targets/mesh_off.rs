@@ -8,7 +8,7 @@ use libfuzzer_sys::fuzz_target;
 const MAX_POINTS: usize = 100_000;
 
 fuzz_target!(|data: &[u8]| {
-    if let Ok(points) = sublevel::fit::mesh::parse_points_limited(data, "off", MAX_POINTS) {
+    if let Ok(points) = sublevel::fit::mesh::parse_points_limited(data, sublevel::fit::mesh::MeshFormat::Off, MAX_POINTS) {
         assert!(!points.is_empty() && points.len() <= MAX_POINTS, "{} points", points.len());
         assert!(points.iter().all(|p| p.coords.iter().all(|c| c.is_finite())), "a non-finite coordinate");
     }

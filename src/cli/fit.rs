@@ -99,7 +99,7 @@ pub struct FitArgs {
 /// Whatever loading, fitting or writing returns (see [`sublevel::fit::fit_points`]).
 pub fn run(args: FitArgs) -> sublevel::Result<()> {
     let points = match &args.format {
-        Some(f) => mesh::parse_points(&std::fs::read(&args.mesh)?, f)?,
+        Some(f) => mesh::parse_points(&std::fs::read(&args.mesh)?, f.parse()?)?,
         None => mesh::load_points(&args.mesh)?,
     };
     let method: FitMethod = args.method.parse()?;

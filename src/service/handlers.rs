@@ -164,7 +164,7 @@ impl Sublevel for SublevelService {
                     return Err(Error::invalid("mesh.format", "must name the format (off, obj, stl, ply, xyz)").into());
                 }
                 blocking(move || {
-                    let points = parse_points_limited(&mesh.data, &format, max)?;
+                    let points = parse_points_limited(&mesh.data, format.parse()?, max)?;
                     cv::check_point_count("mesh", points.len(), max)?;
                     cv::check_cloud("mesh", &points, top_degree)?;
                     Ok(points)

@@ -260,7 +260,7 @@ fn psb_meshes_load_with_their_vertex_counts() {
         }
         other => panic!("{other:?}"),
     }
-    let same = mesh::parse_points(&std::fs::read(psb("chair_101.off")).unwrap(), "OFF").unwrap();
+    let same = mesh::parse_points(&std::fs::read(psb("chair_101.off")).unwrap(), "OFF".parse().unwrap()).unwrap();
     assert_eq!(same.len(), 8499);
 }
 

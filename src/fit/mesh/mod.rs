@@ -64,47 +64,103 @@ use limits::{echo, exhausted, guarded, invalid};
 /// The `max_points` of [`parse_points`] and [`load_points`].
 pub const DEFAULT_MAX_MESH_POINTS: usize = 10_000_000;
 
+/// A mesh or point-cloud file format.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum MeshFormat {
+    /// Object File Format (Princeton Shape Benchmark): `OFF`, counts, vertices, faces.
+    Off,
+    /// Wavefront OBJ: `v x y z` lines (faces optional).
+    Obj,
+    /// STL, binary or ASCII.
+    Stl,
+    /// PLY, ASCII or binary.
+    Ply,
+    /// One `x y z` line per point (also `.txt`, `.pts`).
+    Xyz,
+}
+
+impl MeshFormat {
+    /// Every format.
+    pub const ALL: [MeshFormat; 5] =
+        [MeshFormat::Off, MeshFormat::Obj, MeshFormat::Stl, MeshFormat::Ply, MeshFormat::Xyz];
+
+    /// The lower-case name (`"off"`, `"obj"`, `"stl"`, `"ply"`, `"xyz"`).
+    pub fn name(&self) -> &'static str {
+        match self {
+            MeshFormat::Off => "off",
+            MeshFormat::Obj => "obj",
+            MeshFormat::Stl => "stl",
+            MeshFormat::Ply => "ply",
+            MeshFormat::Xyz => "xyz",
+        }
+    }
+
+    /// The format of a file name's extension (case-insensitive; `txt` and `pts` are `xyz`).
+    ///
+    /// # Errors
+    /// As [`MeshFormat::from_str`](std::str::FromStr) for an unknown or missing extension.
+    pub fn of_path(path: &std::path::Path) -> Result<Self> {
+        path.extension().and_then(|e| e.to_str()).unwrap_or("").parse()
+    }
+}
+
+impl std::str::FromStr for MeshFormat {
+    type Err = crate::Error;
+
+    /// Parses a format name: `off`, `obj`, `stl`, `ply`, or `xyz` / `txt` / `pts`
+    /// (case-insensitive, a leading dot is ignored).
+    ///
+    /// # Errors
+    /// [`crate::Error::InvalidArgument`] naming `mesh` for any other name.
+    fn from_str(s: &str) -> Result<Self> {
+        match s.trim().trim_start_matches('.').to_ascii_lowercase().as_str() {
+            "off" => Ok(MeshFormat::Off),
+            "obj" => Ok(MeshFormat::Obj),
+            "stl" => Ok(MeshFormat::Stl),
+            "ply" => Ok(MeshFormat::Ply),
+            "xyz" | "txt" | "pts" => Ok(MeshFormat::Xyz),
+            other => Err(invalid(format!("unknown format `{}`; expected one of off, obj, stl, ply, xyz", echo(other)))),
+        }
+    }
+}
+
 /// Reads the vertices of a mesh file; the format follows the extension (case-insensitive).
 ///
 /// # Errors
 /// [`crate::Error::Io`] when the file cannot be read; otherwise as [`parse_points`].
 pub fn load_points(path: &std::path::Path) -> Result<Vec<Point3>> {
+    let format = MeshFormat::of_path(path)?;
     let bytes = std::fs::read(path)?;
-    parse_points(&bytes, path.extension().and_then(|e| e.to_str()).unwrap_or(""))
+    parse_points(&bytes, format)
 }
 
 /// [`parse_points_limited`] with [`DEFAULT_MAX_MESH_POINTS`].
 ///
 /// # Errors
 /// As [`parse_points_limited`].
-pub fn parse_points(bytes: &[u8], format: &str) -> Result<Vec<Point3>> {
+pub fn parse_points(bytes: &[u8], format: MeshFormat) -> Result<Vec<Point3>> {
     parse_points_limited(bytes, format, DEFAULT_MAX_MESH_POINTS)
 }
 
-/// Parses mesh bytes in the given format (`off`, `obj`, `stl`, `ply`, or `xyz` / `txt` / `pts` for
-/// "x y z" lines; case-insensitive, a leading dot is ignored), returning at most `max_points`
-/// vertices. Declared counts are checked against `max_points` and against the size of `bytes`
+/// Parses mesh bytes in the given format, returning at most `max_points` vertices. Declared counts are checked against `max_points` and against the size of `bytes`
 /// before anything is allocated (see the module documentation).
 ///
 /// # Errors
-/// [`crate::Error::InvalidArgument`] naming `mesh` for an unknown format, unparsable bytes, a header
+/// [`crate::Error::InvalidArgument`] naming `mesh` for unparsable bytes, a header
 /// that declares more than the bytes can hold, a non-finite coordinate, or a file without
 /// vertices; [`crate::Error::ResourceExhausted`] naming `mesh` when the file declares or holds more than
 /// `max_points` vertices.
-pub fn parse_points_limited(bytes: &[u8], format: &str, max_points: usize) -> Result<Vec<Point3>> {
-    let fmt = format.trim_start_matches('.').to_ascii_lowercase();
-    let points = match fmt.as_str() {
-        "off" => off::read_off(bytes, max_points, false)?.vertices,
-        "xyz" | "txt" | "pts" => xyz::parse_xyz(bytes, max_points)?,
-        "obj" => obj::parse_obj(bytes, max_points)?,
-        "stl" => {
+pub fn parse_points_limited(bytes: &[u8], format: MeshFormat, max_points: usize) -> Result<Vec<Point3>> {
+    let fmt = format.name();
+    let points = match format {
+        MeshFormat::Off => off::read_off(bytes, max_points, false)?.vertices,
+        MeshFormat::Xyz => xyz::parse_xyz(bytes, max_points)?,
+        MeshFormat::Obj => obj::parse_obj(bytes, max_points)?,
+        MeshFormat::Stl => {
             stl::check_stl_counts(bytes, max_points)?;
             guarded("stl", || stl::parse_stl(bytes))?
         }
-        "ply" => ply::parse_ply(bytes, max_points)?,
-        other => {
-            return Err(invalid(format!("unknown format `{}`; expected one of off, obj, stl, ply, xyz", echo(other))))
-        }
+        MeshFormat::Ply => ply::parse_ply(bytes, max_points)?,
     };
     if points.is_empty() {
         return Err(invalid(format!("the {fmt} file has no vertices")));

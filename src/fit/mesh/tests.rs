@@ -6,6 +6,27 @@ use super::ply::{MAX_PLY_ELEMENTS, MAX_PLY_PROPERTIES};
 use super::*;
 use crate::Error;
 
+/// The format by name (the text the CLI and the wire send), then [`super::parse_points`].
+fn parse_points(bytes: &[u8], format: &str) -> Result<Vec<Point3>> {
+    super::parse_points(bytes, format.parse()?)
+}
+
+/// The format by name, then [`super::parse_points_limited`].
+fn parse_points_limited(bytes: &[u8], format: &str, max_points: usize) -> Result<Vec<Point3>> {
+    super::parse_points_limited(bytes, format.parse()?, max_points)
+}
+
+#[test]
+fn format_names_round_trip() {
+    for f in MeshFormat::ALL {
+        assert_eq!(f.name().parse::<MeshFormat>().unwrap(), f);
+        assert_eq!(f.name().to_uppercase().parse::<MeshFormat>().unwrap(), f);
+    }
+    assert_eq!(".PTS".parse::<MeshFormat>().unwrap(), MeshFormat::Xyz);
+    assert_eq!(MeshFormat::of_path(std::path::Path::new("a/chair.Off")).unwrap(), MeshFormat::Off);
+    assert!(MeshFormat::of_path(std::path::Path::new("no_extension")).is_err());
+}
+
 fn expect_mesh_error(r: Result<Vec<Point3>>, needle: &str) {
     match r {
         Err(Error::InvalidArgument { field, reason }) => {
