@@ -35,6 +35,7 @@
 pub mod convert;
 mod handlers;
 mod jobs;
+mod shutdown;
 pub mod status_layer;
 
 use crate::fit::FitSettings;
@@ -47,6 +48,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 pub use handlers::SublevelService;
+pub use shutdown::DEFAULT_SHUTDOWN_GRACE;
 
 /// Code generated from `proto/sublevel/v1/sublevel.proto` (messages, client and server).
 #[allow(missing_docs, clippy::all, clippy::pedantic)]
@@ -90,6 +92,9 @@ pub struct ServerConfig {
     pub newton: NewtonParams,
     /// Settings of every fit (the degree comes from each request).
     pub fit: FitSettings,
+    /// After the shutdown signal, how long the server waits for in-flight requests and for
+    /// cancelled fit jobs to record their end before it returns anyway (`--shutdown-grace`).
+    pub shutdown_grace: std::time::Duration,
 }
 
 impl Default for ServerConfig {
@@ -103,6 +108,7 @@ impl Default for ServerConfig {
             max_concurrent_fits: 1,
             newton: NewtonParams::default(),
             fit: FitSettings::default(),
+            shutdown_grace: DEFAULT_SHUTDOWN_GRACE,
         }
     }
 }
@@ -121,7 +127,7 @@ pub fn open_catalog(config: &ServerConfig) -> Result<Arc<Catalog>> {
 /// catalog stored in `config.data_dir`.
 ///
 /// Tests pass a throwaway `127.0.0.1:0` listener and a oneshot receiver; the binary passes
-/// Ctrl-C. In-flight requests finish before this returns; running fit jobs are abandoned.
+/// Ctrl-C. See [`serve_catalog`] for what shutdown does.
 ///
 /// # Errors
 /// Those of [`open_catalog`]; [`Error::Io`] when the transport fails.
@@ -136,9 +142,11 @@ pub async fn serve(
 
 /// Like [`serve`], with an already opened catalog (e.g. one the caller preloaded with demo data).
 ///
-/// When `shutdown` completes, health turns NOT_SERVING, fit jobs stop storing results (a running
-/// one is recorded as interrupted at the next start), the listener closes and in-flight requests
-/// finish before this returns.
+/// When `shutdown` completes, health turns NOT_SERVING, every queued and running fit job is
+/// cancelled (a running SDP stops at its next Clarabel iteration and the job is recorded
+/// CANCELLED, no body stored), the listener closes, and this returns once in-flight requests
+/// have finished and every job recorded its end, or when [`ServerConfig::shutdown_grace`] has
+/// passed, whichever comes first.
 ///
 /// # Errors
 /// [`Error::Io`] when reflection cannot be built or the transport fails.
@@ -167,8 +175,11 @@ pub async fn serve_catalog(
         .build_v1alpha()
         .map_err(reflection_error)?;
     let max = config.max_message_bytes;
+    let grace = config.shutdown_grace;
     let handlers = SublevelService::new(catalog, config);
     let jobs = handlers.jobs.clone();
+    let jobs_idle = handlers.jobs.clone();
+    let (shutdown, deadline) = shutdown::graced(shutdown, grace);
     let service = SublevelServer::new(handlers).max_decoding_message_size(max).max_encoding_message_size(max);
     let addr = listener.local_addr().ok();
     tracing::info!(?addr, "serving {SERVICE_NAME}");
@@ -177,12 +188,12 @@ pub async fn serve_catalog(
         .with_keepalive(Some(KEEPALIVE_INTERVAL));
     let stopping = async move {
         shutdown.await;
-        tracing::info!("shutting down: health NOT_SERVING, fits no longer store results, draining requests");
+        tracing::info!(?grace, "shutting down: health NOT_SERVING, fit jobs cancelled, draining requests");
         jobs.stop();
         reporter.set_not_serving::<SublevelServer<SublevelService>>().await;
         reporter.set_service_status("", ServingStatus::NotServing).await;
     };
-    tonic::transport::Server::builder()
+    let serving = tonic::transport::Server::builder()
         .http2_keepalive_interval(Some(KEEPALIVE_INTERVAL))
         .http2_keepalive_timeout(Some(KEEPALIVE_TIMEOUT))
         .layer(status_layer::StatusLayer)
@@ -190,9 +201,13 @@ pub async fn serve_catalog(
         .add_service(reflection)
         .add_service(reflection_v1alpha)
         .add_service(service)
-        .serve_with_incoming_shutdown(incoming, stopping)
-        .await
-        .map_err(|e| Error::Io(std::io::Error::other(format!("transport: {e}"))))?;
+        .serve_with_incoming_shutdown(incoming, stopping);
+    let serving = async move {
+        serving.await.map_err(|e| Error::Io(std::io::Error::other(format!("transport: {e}"))))?;
+        jobs_idle.wait_idle().await;
+        Ok(())
+    };
+    shutdown::within(serving, deadline, grace).await?;
     tracing::info!("server stopped");
     Ok(())
 }
