@@ -1,7 +1,11 @@
 //! The operational flags of `sublevel serve` (shutdown grace, TLS, authentication), flattened
 //! into [`super::serve::ServeArgs`] and applied to a [`ServerConfig`] by [`OpsArgs::apply`].
 
+use std::path::PathBuf;
+use std::sync::Arc;
 use std::time::Duration;
+use sublevel::service::auth::AuthTokens;
+use sublevel::service::tls::TlsConfig;
 use sublevel::service::ServerConfig;
 use sublevel::{Error, Result};
 
@@ -13,15 +17,38 @@ pub struct OpsArgs {
     /// seconds).
     #[arg(long, env = "SUBLEVEL_SHUTDOWN_GRACE", default_value = "10s", value_parser = parse_duration)]
     pub shutdown_grace: Duration,
+    /// Serve TLS with this certificate chain (PEM; needs --tls-key). Default: plaintext.
+    #[arg(long, env = "SUBLEVEL_TLS_CERT", requires = "tls_key")]
+    pub tls_cert: Option<PathBuf>,
+    /// The private key of --tls-cert (PEM: PKCS#8, PKCS#1 or SEC1).
+    #[arg(long, env = "SUBLEVEL_TLS_KEY", requires = "tls_cert")]
+    pub tls_key: Option<PathBuf>,
+    /// mTLS: require every client to present a certificate signed by this CA (PEM; needs
+    /// --tls-cert).
+    #[arg(long, env = "SUBLEVEL_TLS_CLIENT_CA", requires = "tls_cert")]
+    pub tls_client_ca: Option<PathBuf>,
+    /// Require bearer tokens from this file: lines `admin TOKEN` or `read TOKEN` (`#` comments;
+    /// tokens of at least 16 characters). Admin tokens may write and delete; read tokens may
+    /// read and query. Health and reflection stay open. Default: no authentication.
+    #[arg(long, env = "SUBLEVEL_AUTH_TOKENS")]
+    pub auth_tokens: Option<PathBuf>,
 }
 
 impl OpsArgs {
-    /// Copies the flags into `config`.
+    /// Copies the flags into `config`, reading the TLS files and the token file.
     ///
     /// # Errors
-    /// None yet; kept fallible for the flags that read files.
+    /// Those of [`TlsConfig::load`] and [`AuthTokens::load`].
     pub fn apply(&self, config: &mut ServerConfig) -> Result<()> {
         config.shutdown_grace = self.shutdown_grace;
+        if let (Some(cert), Some(key)) = (&self.tls_cert, &self.tls_key) {
+            config.tls = Some(TlsConfig::load(cert, key, self.tls_client_ca.as_deref())?);
+        }
+        if let Some(path) = &self.auth_tokens {
+            let tokens = AuthTokens::load(path)?;
+            tracing::info!(?tokens, file = %path.display(), "bearer-token authentication on");
+            config.auth = Some(Arc::new(tokens));
+        }
         Ok(())
     }
 }

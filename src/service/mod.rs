@@ -25,6 +25,10 @@
 //! pings close connections whose peer vanished ([`KEEPALIVE_INTERVAL`], [`KEEPALIVE_TIMEOUT`]).
 //! [`status_layer`] turns undecodable requests into INVALID_ARGUMENT and names unknown methods.
 //!
+//! Security (both off by default): TLS, optionally mutual, from PEM files ([`tls`]); bearer
+//! tokens with a read and an admin role ([`auth`]), checked by a tower layer before any handler
+//! runs; health and reflection stay open without a token.
+//!
 //! # Adding an RPC
 //!
 //! 1. declare it with commented messages in `proto/sublevel/v1/sublevel.proto`;
@@ -32,11 +36,13 @@
 //! 3. implement it in `handlers.rs` as validate → core call → convert;
 //! 4. add a round-trip and an error test to `tests/it/service.rs` (server harness: `tests/it/util.rs`).
 
+pub mod auth;
 pub mod convert;
 mod handlers;
 mod jobs;
 mod shutdown;
 pub mod status_layer;
+pub mod tls;
 
 use crate::fit::FitSettings;
 use crate::query::NewtonParams;
@@ -95,6 +101,12 @@ pub struct ServerConfig {
     /// After the shutdown signal, how long the server waits for in-flight requests and for
     /// cancelled fit jobs to record their end before it returns anyway (`--shutdown-grace`).
     pub shutdown_grace: std::time::Duration,
+    /// Bearer tokens every `sublevel.v1` call must carry (`--auth-tokens`; see [`auth`]); `None`
+    /// serves without authentication.
+    pub auth: Option<std::sync::Arc<auth::AuthTokens>>,
+    /// TLS certificate, key and optional client CA (`--tls-cert`, `--tls-key`,
+    /// `--tls-client-ca`; see [`tls`]); `None` serves plaintext.
+    pub tls: Option<tls::TlsConfig>,
 }
 
 impl Default for ServerConfig {
@@ -109,6 +121,8 @@ impl Default for ServerConfig {
             newton: NewtonParams::default(),
             fit: FitSettings::default(),
             shutdown_grace: DEFAULT_SHUTDOWN_GRACE,
+            auth: None,
+            tls: None,
         }
     }
 }
@@ -176,13 +190,26 @@ pub async fn serve_catalog(
         .map_err(reflection_error)?;
     let max = config.max_message_bytes;
     let grace = config.shutdown_grace;
+    let tls_mode = match &config.tls {
+        None => "off",
+        Some(t) if t.mutual() => "mutual",
+        Some(_) => "on",
+    };
+    let auth_on = config.auth.is_some();
+    let auth = auth::AuthLayer::new(config.auth.clone());
+    let builder = match &config.tls {
+        None => tonic::transport::Server::builder(),
+        Some(tls) => tonic::transport::Server::builder()
+            .tls_config(tls.server_tls())
+            .map_err(|e| Error::invalid("tls", format!("unusable certificate, key or client CA: {e}")))?,
+    };
     let handlers = SublevelService::new(catalog, config);
     let jobs = handlers.jobs.clone();
     let jobs_idle = handlers.jobs.clone();
     let (shutdown, deadline) = shutdown::graced(shutdown, grace);
     let service = SublevelServer::new(handlers).max_decoding_message_size(max).max_encoding_message_size(max);
     let addr = listener.local_addr().ok();
-    tracing::info!(?addr, "serving {SERVICE_NAME}");
+    tracing::info!(?addr, tls = tls_mode, auth = auth_on, "serving {SERVICE_NAME}");
     let incoming = tonic::transport::server::TcpIncoming::from(listener)
         .with_nodelay(Some(true))
         .with_keepalive(Some(KEEPALIVE_INTERVAL));
@@ -193,10 +220,11 @@ pub async fn serve_catalog(
         reporter.set_not_serving::<SublevelServer<SublevelService>>().await;
         reporter.set_service_status("", ServingStatus::NotServing).await;
     };
-    let serving = tonic::transport::Server::builder()
+    let serving = builder
         .http2_keepalive_interval(Some(KEEPALIVE_INTERVAL))
         .http2_keepalive_timeout(Some(KEEPALIVE_TIMEOUT))
         .layer(status_layer::StatusLayer)
+        .layer(auth)
         .add_service(health)
         .add_service(reflection)
         .add_service(reflection_v1alpha)

@@ -7,6 +7,7 @@ mod hardening;
 mod jobs_api;
 mod planner;
 mod query;
+mod security;
 mod service;
 mod service_jobs;
 mod stability;
