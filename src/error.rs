@@ -35,6 +35,10 @@ pub enum Error {
     /// returned no usable solution).
     #[error("numerical failure: {0}")]
     Numerical(String),
+    /// Work was stopped on request before it finished (a cancelled fit: see
+    /// [`crate::fit::cancel`]); nothing was produced.
+    #[error("cancelled: {0}")]
+    Cancelled(String),
     /// The persistent store failed.
     #[error("storage: {0}")]
     Storage(String),

@@ -41,6 +41,9 @@ pub struct ServeArgs {
     /// benchmark").
     #[arg(long, env = "SUBLEVEL_ASYNC_WORKERS")]
     async_workers: Option<usize>,
+    /// Shutdown grace, TLS and authentication (`cli::serve_ops`).
+    #[command(flatten)]
+    ops: super::serve_ops::OpsArgs,
 }
 
 /// The default number of async workers: CPUs − 1, at least 1.
@@ -61,7 +64,8 @@ pub fn run(args: ServeArgs) -> Result<()> {
     let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(workers).enable_all().build()?;
     let outcome = runtime.block_on(async move {
         let shutdown = shutdown_signal()?;
-        let config = ServerConfig { data_dir: args.data_dir.clone(), ..ServerConfig::default() };
+        let mut config = ServerConfig { data_dir: args.data_dir.clone(), ..ServerConfig::default() };
+        args.ops.apply(&mut config)?;
         let catalog = open_catalog(&config)?;
         if args.demo {
             let demo = seed_demo(&catalog)?;
@@ -76,14 +80,11 @@ pub fn run(args: ServeArgs) -> Result<()> {
         println!("listening on {addr}");
         serve_catalog(listener, catalog, config, shutdown).await
     });
-    // In-flight requests have drained; a fit still solving on the blocking pool stores nothing
-    // now (its job is recorded as interrupted at the next start), so do not wait for it.
-    runtime.shutdown_timeout(SHUTDOWN_GRACE);
+    // The server waited (within --shutdown-grace) for requests to drain and cancelled jobs to
+    // record their end; whatever still runs on the blocking pool now is abandoned.
+    runtime.shutdown_background();
     outcome
 }
-
-/// How long the process waits for blocking work (a running SDP) after the server stopped.
-const SHUTDOWN_GRACE: std::time::Duration = std::time::Duration::from_millis(500);
 
 /// A future that completes on Ctrl-C or (on Unix) SIGTERM, as sent by `docker stop` and
 /// Kubernetes. The handlers are installed now, before the server announces its address, so a

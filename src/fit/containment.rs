@@ -317,6 +317,7 @@ pub fn contain_bodies(
     })?;
     let status = usable_status(sol.status, "containment")?;
 
+    super::cancel::check()?;
     report(
         progress,
         FitStage::Verify,
@@ -368,6 +369,7 @@ pub fn contain_bodies(
     let body = Body::new(poly, [center.x, center.y, center.z], scale, fit_report.clone())
         .map_err(|e| Error::Numerical(format!("the containing polynomial is not a bounded convex body: {e}")))?;
 
+    super::cancel::check()?;
     report(progress, FitStage::Volume, 0.85, format!("Monte Carlo volume, {} samples", settings.volume_samples));
     let interior = (body.interior_point().coords - center) / scale;
     let est = volume::monte_carlo_volume(body.polynomial(), &interior, settings.volume_samples, settings.seed)?;

@@ -26,6 +26,7 @@ use crate::Result;
 
 pub mod auto;
 pub mod baselines;
+pub mod cancel;
 pub mod containment;
 pub mod hull;
 pub mod inverse_moment;

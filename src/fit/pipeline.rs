@@ -282,6 +282,7 @@ fn finish(
     settings: &FitSettings,
     progress: &mut dyn FnMut(&FitProgress),
 ) -> Result<Body> {
+    super::cancel::check()?;
     report(progress, FitStage::Verify, 0.8, format!("checking p ≤ 1 on all {} points", num_points));
     let mut poly_fit = solved.poly;
     let (mut max_value, mut rescale) = rescale_to_contain(&mut poly_fit, &frames.fit.points)?;
@@ -332,6 +333,7 @@ fn finish(
     let body = Body::new(poly, center, cloud.scale, fit_report.clone())
         .map_err(|e| Error::Numerical(format!("the fitted polynomial is not a bounded body: {e}")))?;
 
+    super::cancel::check()?;
     report(progress, FitStage::Volume, 0.85, format!("Monte Carlo volume, {} samples", settings.volume_samples));
     let est = if solved.nonconvex {
         let gram = solved

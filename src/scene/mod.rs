@@ -115,6 +115,8 @@ pub enum JobRecordState {
     Failed,
     /// The server stopped (or crashed) while the job was queued or running; no body was stored.
     Interrupted,
+    /// Cancelled (by a client, or by a server shutting down) before it stored a body.
+    Cancelled,
 }
 
 /// A fit or grouping job as stored, so that its outcome outlives the process that ran it.
@@ -138,4 +140,7 @@ pub struct JobRecord {
     /// When the job was created, in milliseconds since the Unix epoch.
     #[serde(default)]
     pub created_unix_ms: u64,
+    /// When the job finished, in milliseconds since the Unix epoch; 0 while it runs.
+    #[serde(default)]
+    pub finished_unix_ms: u64,
 }

@@ -212,6 +212,25 @@ impl Sublevel for SublevelService {
         Ok(Response::new(ReceiverStream::new(out)))
     }
 
+    async fn get_fit_job(&self, request: Request<pb::GetFitJobRequest>) -> Reply<pb::GetFitJobResponse> {
+        let job_id = request.into_inner().job_id;
+        let job = self.jobs.get(require_id("job_id", &job_id)?)?;
+        Ok(Response::new(pb::GetFitJobResponse { job: Some(job) }))
+    }
+
+    async fn list_fit_jobs(&self, request: Request<pb::ListFitJobsRequest>) -> Reply<pb::ListFitJobsResponse> {
+        let req = request.into_inner();
+        let (jobs, next_page_token) =
+            cv::page(self.jobs.list(), |j| j.job_id.as_str(), req.page_size, &req.page_token)?;
+        Ok(Response::new(pb::ListFitJobsResponse { jobs, next_page_token }))
+    }
+
+    async fn cancel_fit_job(&self, request: Request<pb::CancelFitJobRequest>) -> Reply<pb::CancelFitJobResponse> {
+        let job_id = request.into_inner().job_id;
+        let job = self.jobs.cancel(require_id("job_id", &job_id)?).await?;
+        Ok(Response::new(pb::CancelFitJobResponse { job: Some(job) }))
+    }
+
     async fn upload_body(&self, request: Request<pb::UploadBodyRequest>) -> Reply<pb::UploadBodyResponse> {
         let req = request.into_inner();
         let (file, prefix): (BodyFile, &str) = match req.body {

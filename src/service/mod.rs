@@ -25,6 +25,10 @@
 //! pings close connections whose peer vanished ([`KEEPALIVE_INTERVAL`], [`KEEPALIVE_TIMEOUT`]).
 //! [`status_layer`] turns undecodable requests into INVALID_ARGUMENT and names unknown methods.
 //!
+//! Security (both off by default): TLS, optionally mutual, from PEM files ([`tls`]); bearer
+//! tokens with a read and an admin role ([`auth`]), checked by a tower layer before any handler
+//! runs; health and reflection stay open without a token.
+//!
 //! # Adding an RPC
 //!
 //! 1. declare it with commented messages in `proto/sublevel/v1/sublevel.proto`;
@@ -32,10 +36,13 @@
 //! 3. implement it in `handlers.rs` as validate → core call → convert;
 //! 4. add a round-trip and an error test to `tests/it/service.rs` (server harness: `tests/it/util.rs`).
 
+pub mod auth;
 pub mod convert;
 mod handlers;
 mod jobs;
+mod shutdown;
 pub mod status_layer;
+pub mod tls;
 
 use crate::fit::FitSettings;
 use crate::query::NewtonParams;
@@ -47,6 +54,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 pub use handlers::SublevelService;
+pub use shutdown::DEFAULT_SHUTDOWN_GRACE;
 
 /// Code generated from `proto/sublevel/v1/sublevel.proto` (messages, client and server).
 #[allow(missing_docs, clippy::all, clippy::pedantic)]
@@ -90,6 +98,15 @@ pub struct ServerConfig {
     pub newton: NewtonParams,
     /// Settings of every fit (the degree comes from each request).
     pub fit: FitSettings,
+    /// After the shutdown signal, how long the server waits for in-flight requests and for
+    /// cancelled fit jobs to record their end before it returns anyway (`--shutdown-grace`).
+    pub shutdown_grace: std::time::Duration,
+    /// Bearer tokens every `sublevel.v1` call must carry (`--auth-tokens`; see [`auth`]); `None`
+    /// serves without authentication.
+    pub auth: Option<std::sync::Arc<auth::AuthTokens>>,
+    /// TLS certificate, key and optional client CA (`--tls-cert`, `--tls-key`,
+    /// `--tls-client-ca`; see [`tls`]); `None` serves plaintext.
+    pub tls: Option<tls::TlsConfig>,
 }
 
 impl Default for ServerConfig {
@@ -103,6 +120,9 @@ impl Default for ServerConfig {
             max_concurrent_fits: 1,
             newton: NewtonParams::default(),
             fit: FitSettings::default(),
+            shutdown_grace: DEFAULT_SHUTDOWN_GRACE,
+            auth: None,
+            tls: None,
         }
     }
 }
@@ -121,7 +141,7 @@ pub fn open_catalog(config: &ServerConfig) -> Result<Arc<Catalog>> {
 /// catalog stored in `config.data_dir`.
 ///
 /// Tests pass a throwaway `127.0.0.1:0` listener and a oneshot receiver; the binary passes
-/// Ctrl-C. In-flight requests finish before this returns; running fit jobs are abandoned.
+/// Ctrl-C. See [`serve_catalog`] for what shutdown does.
 ///
 /// # Errors
 /// Those of [`open_catalog`]; [`Error::Io`] when the transport fails.
@@ -136,9 +156,11 @@ pub async fn serve(
 
 /// Like [`serve`], with an already opened catalog (e.g. one the caller preloaded with demo data).
 ///
-/// When `shutdown` completes, health turns NOT_SERVING, fit jobs stop storing results (a running
-/// one is recorded as interrupted at the next start), the listener closes and in-flight requests
-/// finish before this returns.
+/// When `shutdown` completes, health turns NOT_SERVING, every queued and running fit job is
+/// cancelled (a running SDP stops at its next Clarabel iteration and the job is recorded
+/// CANCELLED, no body stored), the listener closes, and this returns once in-flight requests
+/// have finished and every job recorded its end, or when [`ServerConfig::shutdown_grace`] has
+/// passed, whichever comes first.
 ///
 /// # Errors
 /// [`Error::Io`] when reflection cannot be built or the transport fails.
@@ -167,32 +189,53 @@ pub async fn serve_catalog(
         .build_v1alpha()
         .map_err(reflection_error)?;
     let max = config.max_message_bytes;
+    let grace = config.shutdown_grace;
+    let tls_mode = match &config.tls {
+        None => "off",
+        Some(t) if t.mutual() => "mutual",
+        Some(_) => "on",
+    };
+    let auth_on = config.auth.is_some();
+    let auth = auth::AuthLayer::new(config.auth.clone());
+    let builder = match &config.tls {
+        None => tonic::transport::Server::builder(),
+        Some(tls) => tonic::transport::Server::builder()
+            .tls_config(tls.server_tls())
+            .map_err(|e| Error::invalid("tls", format!("unusable certificate, key or client CA: {e}")))?,
+    };
     let handlers = SublevelService::new(catalog, config);
     let jobs = handlers.jobs.clone();
+    let jobs_idle = handlers.jobs.clone();
+    let (shutdown, deadline) = shutdown::graced(shutdown, grace);
     let service = SublevelServer::new(handlers).max_decoding_message_size(max).max_encoding_message_size(max);
     let addr = listener.local_addr().ok();
-    tracing::info!(?addr, "serving {SERVICE_NAME}");
+    tracing::info!(?addr, tls = tls_mode, auth = auth_on, "serving {SERVICE_NAME}");
     let incoming = tonic::transport::server::TcpIncoming::from(listener)
         .with_nodelay(Some(true))
         .with_keepalive(Some(KEEPALIVE_INTERVAL));
     let stopping = async move {
         shutdown.await;
-        tracing::info!("shutting down: health NOT_SERVING, fits no longer store results, draining requests");
+        tracing::info!(?grace, "shutting down: health NOT_SERVING, fit jobs cancelled, draining requests");
         jobs.stop();
         reporter.set_not_serving::<SublevelServer<SublevelService>>().await;
         reporter.set_service_status("", ServingStatus::NotServing).await;
     };
-    tonic::transport::Server::builder()
+    let serving = builder
         .http2_keepalive_interval(Some(KEEPALIVE_INTERVAL))
         .http2_keepalive_timeout(Some(KEEPALIVE_TIMEOUT))
         .layer(status_layer::StatusLayer)
+        .layer(auth)
         .add_service(health)
         .add_service(reflection)
         .add_service(reflection_v1alpha)
         .add_service(service)
-        .serve_with_incoming_shutdown(incoming, stopping)
-        .await
-        .map_err(|e| Error::Io(std::io::Error::other(format!("transport: {e}"))))?;
+        .serve_with_incoming_shutdown(incoming, stopping);
+    let serving = async move {
+        serving.await.map_err(|e| Error::Io(std::io::Error::other(format!("transport: {e}"))))?;
+        jobs_idle.wait_idle().await;
+        Ok(())
+    };
+    shutdown::within(serving, deadline, grace).await?;
     tracing::info!("server stopped");
     Ok(())
 }

@@ -1,11 +1,11 @@
 //! Integration tests: one request never takes the service down (issue 11). Each numbered repro of
 //! the issue is a test here; plus the store's quarantine, status codes of malformed requests, a
-//! kill -9 test and a SIGTERM-during-fit test on a child server process (loopback, bounded).
+//! kill -9 test on a child server process (loopback, bounded); the SIGTERM-during-fit test is in
+//! `jobs_api.rs`.
 
 use crate::util::{
     add, assert_status, at, config, demo_bodies, sphere_points, upload_body, upload_sphere, ChildServer, Server,
 };
-use std::path::Path;
 use std::time::{Duration, Instant};
 use sublevel::service::pb;
 use tonic::transport::Channel;
@@ -416,62 +416,6 @@ async fn kill_9_during_acknowledged_writes_loses_nothing() {
     for (body, ..) in &acked {
         assert!(bodies.iter().any(|b| &b.body_id == body), "acknowledged body {body} lost");
     }
-}
-
-/// SIGTERM during a 2d = 8 fit: health and the job's stream say so at once, the process exits
-/// within seconds (not when the SDP ends), no body is stored, and after a restart the job answers
-/// JOB_STATE_INTERRUPTED instead of NOT_FOUND.
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn sigterm_during_a_fit_exits_promptly_and_the_job_reads_interrupted() {
-    let dir = tempfile::tempdir().unwrap();
-    let mut server = ChildServer::spawn(dir.path());
-    let mut c = server.client().await;
-    let off = std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("data/psb/chair_101.off")).unwrap();
-    let req = pb::StartFitJobRequest {
-        name: "chair8".into(),
-        degree: 8,
-        source: Some(pb::start_fit_job_request::Source::Mesh(pb::Mesh { format: "off".into(), data: off })),
-        ..Default::default()
-    };
-    let job_id = c.start_fit_job(req).await.unwrap().into_inner().job_id;
-    let mut stream = c.watch_fit_job(pb::WatchFitJobRequest { job_id: job_id.clone() }).await.unwrap().into_inner();
-    // Wait until the SDP is being solved.
-    loop {
-        let u = stream.message().await.unwrap().expect("stream ended before the solve");
-        assert_eq!(u.state, pb::JobState::Running as i32, "{u:?}");
-        if u.stage == pb::FitStage::Solve as i32 {
-            break;
-        }
-    }
-    let t = Instant::now();
-    server.signal("-TERM");
-    let end = stream.message().await;
-    assert!(matches!(&end, Err(s) if s.code() == Code::Unavailable), "{end:?}");
-    let status = loop {
-        if let Some(s) = server.child.try_wait().unwrap() {
-            break s;
-        }
-        assert!(t.elapsed() < Duration::from_secs(10), "no exit 10 s after SIGTERM");
-        tokio::time::sleep(Duration::from_millis(20)).await;
-    };
-    let exit = t.elapsed();
-    assert!(status.success(), "{status:?}");
-    assert!(exit < Duration::from_secs(5), "exit took {exit:?}");
-    drop(c);
-    drop(server);
-
-    let server = ChildServer::spawn(dir.path());
-    let mut c = server.client().await;
-    let mut stream = c.watch_fit_job(pb::WatchFitJobRequest { job_id: job_id.clone() }).await.unwrap().into_inner();
-    let u = stream.message().await.unwrap().unwrap();
-    assert_eq!(u.state, pb::JobState::Interrupted as i32, "{u:?}");
-    assert!(u.error.contains("interrupted"), "{u:?}");
-    assert!(stream.message().await.unwrap().is_none());
-    let bodies = c.list_bodies(pb::ListBodiesRequest::default()).await.unwrap().into_inner().bodies;
-    assert!(bodies.iter().all(|b| b.name != "chair8"), "{bodies:?}");
-    let e = c.watch_fit_job(pb::WatchFitJobRequest { job_id: "j-never".into() }).await.unwrap_err();
-    assert_eq!(e.code(), Code::NotFound);
-    eprintln!("SIGTERM during a 2d = 8 fit: exit after {exit:?}");
 }
 
 /// The demo bodies still upload (their certificates pass) — a guard against the sos-convexity

@@ -30,6 +30,11 @@ impl Server {
         Server { addr, shutdown, handle }
     }
 
+    /// The address it listens on.
+    pub(crate) fn addr(&self) -> std::net::SocketAddr {
+        self.addr
+    }
+
     /// A client on its own connection, without a decoding size limit.
     pub(crate) async fn client(&self) -> SublevelClient<Channel> {
         SublevelClient::new(self.channel().await).max_decoding_message_size(usize::MAX)

@@ -136,19 +136,26 @@ impl GramProgram {
     /// iteration (Clarabel's termination callback, forwarded over a channel from a scoped solver
     /// thread because the callback must be `Send + Sync + 'static`).
     ///
+    /// Inside a [`crate::fit::cancel::cancellable`] scope the callback returns true once the
+    /// scope's flag is set, so the solve stops at the end of the current iteration.
+    ///
     /// # Errors
+    /// [`Error::Cancelled`] when the scope's flag was set before or during the solve;
     /// [`Error::Numerical`] when Clarabel rejects the data or the solver thread panics. A status
     /// other than `Solved` is returned in the solution, not as an error (see [`usable_status`]).
     pub fn solve(&self, settings: DefaultSettings<Real>, progress: &mut dyn FnMut(u32, Real)) -> Result<RawSolution> {
+        // Read on the calling thread: the scope is thread-local and the solve runs on its own.
+        crate::fit::cancel::check()?;
+        let cancel = crate::fit::cancel::current();
         let (tx, rx) = std::sync::mpsc::channel::<(u32, Real)>();
-        std::thread::scope(|scope| {
+        let raw = std::thread::scope(|scope| {
             let handle = scope.spawn(move || -> Result<RawSolution> {
                 let p = CscMatrix::zeros((self.num_vars, self.num_vars));
                 let mut solver = DefaultSolver::new(&p, &self.q, &self.a, &self.b, &self.cones, settings)
                     .map_err(|e| Error::Numerical(format!("Clarabel rejected the fit problem: {e}")))?;
                 solver.set_termination_callback(move |info: &DefaultInfo<Real>| {
                     let _ = tx.send((info.iterations, info.cost_primal));
-                    false
+                    cancel.as_ref().is_some_and(|c| c.load(std::sync::atomic::Ordering::Relaxed))
                 });
                 solver.solve();
                 let sol = &solver.solution;
@@ -170,7 +177,11 @@ impl GramProgram {
                 progress(it, cost);
             }
             handle.join().map_err(|_| Error::Numerical("the Clarabel solver thread panicked".into()))?
-        })
+        })?;
+        if raw.status == SdpStatus::CallbackTerminated {
+            return Err(Error::Cancelled(format!("the fit was cancelled at Clarabel iteration {}", raw.iterations)));
+        }
+        Ok(raw)
     }
 
     /// [`GramProgram::solve`] with `settings`, re-solved with a shorter interior-point step

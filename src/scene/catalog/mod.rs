@@ -245,6 +245,11 @@ impl Catalog {
         read(&self.jobs).get(id).cloned()
     }
 
+    /// Every stored job record with its id, ordered by id (at most [`MAX_JOB_RECORDS`]).
+    pub fn jobs(&self) -> Vec<(String, JobRecord)> {
+        read(&self.jobs).iter().map(|(id, r)| (id.clone(), r.clone())).collect()
+    }
+
     /// The Newton parameters every query uses.
     pub fn params(&self) -> &NewtonParams {
         &self.params

@@ -22,6 +22,7 @@ impl From<Error> for Status {
             Error::ResourceExhausted(_) => Code::ResourceExhausted,
             Error::FailedPrecondition(_) => Code::FailedPrecondition,
             Error::Numerical(_) => Code::Internal,
+            Error::Cancelled(_) => Code::Cancelled,
             Error::Storage(_) | Error::Io(_) => Code::Unavailable,
         };
         match &e {
