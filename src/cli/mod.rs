@@ -9,5 +9,6 @@ pub mod group;
 pub mod loadtest;
 pub mod query;
 pub mod serve;
+pub mod serve_config;
 pub mod stability;
 pub mod table1;

@@ -41,6 +41,9 @@ pub struct ServeArgs {
     /// benchmark").
     #[arg(long, env = "SUBLEVEL_ASYNC_WORKERS")]
     async_workers: Option<usize>,
+    /// Limits, metrics, log format and the config file (`cli::serve_config`).
+    #[command(flatten)]
+    pub ops: super::serve_config::OpsArgs,
 }
 
 /// The default number of async workers: CPUs − 1, at least 1.
@@ -50,10 +53,7 @@ fn default_async_workers() -> usize {
 
 /// Runs `sublevel serve`.
 pub fn run(args: ServeArgs) -> Result<()> {
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
-    // Ignore the error of a second init (a subscriber already set by an embedding program).
-    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
+    super::serve_config::init_logging(args.ops.log_format);
     let workers = args.async_workers.unwrap_or_else(default_async_workers);
     if workers == 0 {
         return Err(Error::invalid("--async-workers", "must be at least 1"));
@@ -61,7 +61,9 @@ pub fn run(args: ServeArgs) -> Result<()> {
     let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(workers).enable_all().build()?;
     let outcome = runtime.block_on(async move {
         let shutdown = shutdown_signal()?;
-        let config = ServerConfig { data_dir: args.data_dir.clone(), ..ServerConfig::default() };
+        let mut config = ServerConfig { data_dir: args.data_dir.clone(), ..ServerConfig::default() };
+        args.ops.apply(&mut config)?;
+        super::serve_config::start_metrics(&args.ops).await?;
         let catalog = open_catalog(&config)?;
         if args.demo {
             let demo = seed_demo(&catalog)?;

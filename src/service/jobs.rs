@@ -15,7 +15,7 @@ use crate::math::{Point3, Real};
 use crate::scene::{Catalog, JobRecord, JobRecordState};
 use crate::{Error, Result};
 use std::collections::HashMap;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use tokio::sync::{watch, Semaphore};
 use tonic::Status;
@@ -31,6 +31,10 @@ pub(crate) struct FitJobs {
     jobs: Mutex<HashMap<String, watch::Receiver<pb::FitJobUpdate>>>,
     /// Fitting slots: fits are CPU-heavy SDP solves, so only a few may run at once.
     slots: Arc<Semaphore>,
+    /// Jobs queued or running (`sublevel_fit_queue_depth`); at most `max_queue`.
+    pending: Arc<AtomicUsize>,
+    /// `ServerConfig::max_fit_queue`.
+    max_queue: usize,
     /// Where bodies and job records go.
     catalog: Arc<Catalog>,
     /// Set by [`FitJobs::stop`]: finishing jobs store nothing.
@@ -105,10 +109,12 @@ pub(crate) struct GroupJob {
 type Outcome = Result<(String, String)>;
 
 impl FitJobs {
-    pub(crate) fn new(catalog: Arc<Catalog>, max_concurrent: usize) -> Self {
+    pub(crate) fn new(catalog: Arc<Catalog>, max_concurrent: usize, max_queue: usize) -> Self {
         Self {
             jobs: Mutex::new(HashMap::new()),
             slots: Arc::new(Semaphore::new(max_concurrent.max(1))),
+            pending: Arc::new(AtomicUsize::new(0)),
+            max_queue,
             catalog,
             stopping: Arc::new(AtomicBool::new(false)),
             stop_signal: watch::channel(false).0,
@@ -129,8 +135,33 @@ impl FitJobs {
     }
 
     /// Registers a new job (its record is written to the store before the id is returned) and
-    /// returns its id, the body name and the progress sender.
+    /// returns its id, the body name and the progress sender. The job counts against the queue
+    /// depth from here until [`FitJobs::spawn`]'s task ends.
+    ///
+    /// # Errors
+    /// RESOURCE_EXHAUSTED when `max_queue` jobs are queued or running; UNAVAILABLE when the
+    /// record cannot be written.
     async fn register(
+        &self,
+        kind: &str,
+        name: String,
+    ) -> Result<(String, String, watch::Sender<pb::FitJobUpdate>), Status> {
+        let taken =
+            self.pending.fetch_update(Ordering::SeqCst, Ordering::SeqCst, |n| (n < self.max_queue).then_some(n + 1));
+        if let Err(n) = taken {
+            return Err(super::limits::exhausted(super::limits::FIT_QUEUE, n, self.max_queue).into());
+        }
+        super::metrics::fit_queue_depth(self.pending.load(Ordering::SeqCst));
+        let registered = self.register_record(kind, name).await;
+        if registered.is_err() {
+            let left = self.pending.fetch_sub(1, Ordering::SeqCst).saturating_sub(1);
+            super::metrics::fit_queue_depth(left);
+        }
+        registered
+    }
+
+    /// The body of [`FitJobs::register`] after the queue admitted the job.
+    async fn register_record(
         &self,
         kind: &str,
         name: String,
@@ -178,9 +209,11 @@ impl FitJobs {
         let slots = self.slots.clone();
         let catalog = self.catalog.clone();
         let stopping = self.stopping.clone();
+        let pending = self.pending.clone();
         tokio::spawn(async move {
             let permit = slots.acquire_owned().await;
             tracing::info!(job_id = %job_id, kind, "job started");
+            let started = std::time::Instant::now();
             let tx = Arc::new(tx);
             let tx_work = tx.clone();
             let id_work = job_id.clone();
@@ -195,6 +228,8 @@ impl FitJobs {
                 work(&mut progress, &stop_work)
             })
             .await;
+            let left = pending.fetch_sub(1, Ordering::SeqCst).saturating_sub(1);
+            super::metrics::fit_queue_depth(left);
             let (last, state) = match outcome {
                 Ok(Ok((body_id, message))) => {
                     tracing::info!(job_id = %job_id, %body_id, "job succeeded");
@@ -210,6 +245,7 @@ impl FitJobs {
                 Ok(Err(e)) => (failed(&job_id, &e.to_string()), JobRecordState::Failed),
                 Err(join) => (failed(&job_id, &format!("{kind} aborted: {join}")), JobRecordState::Failed),
             };
+            super::metrics::fit_finished(kind, state, started.elapsed());
             let record = JobRecord {
                 kind: kind.to_owned(),
                 name,

@@ -4,6 +4,7 @@ mod fit;
 mod gradient;
 mod group;
 mod hardening;
+mod ops;
 mod planner;
 mod query;
 mod service;
