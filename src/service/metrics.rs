@@ -195,7 +195,11 @@ impl Pending {
         let code = code_name(code);
         metrics::counter!(RPC_REQUESTS, "method" => self.method.clone(), "code" => code).increment(1);
         metrics::histogram!(RPC_DURATION, "method" => self.method).record(elapsed.as_secs_f64());
-        self.span.in_scope(|| tracing::debug!(code, elapsed_us = elapsed.as_micros(), "rpc finished"));
+        self.span.in_scope(|| {
+            // u64, not u128: tracing records u128 as a string (JSON logs would quote it).
+            let elapsed_us = u64::try_from(elapsed.as_micros()).unwrap_or(u64::MAX);
+            tracing::debug!(code, elapsed_us, "rpc finished");
+        });
     }
 }
 
