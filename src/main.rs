@@ -2,7 +2,7 @@
 
 mod cli;
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 
 /// Sublevel: collision queries between sos-convex polynomial bodies.
 #[derive(Parser)]
@@ -37,9 +37,12 @@ enum Command {
 }
 
 fn main() -> std::process::ExitCode {
-    let cli = Cli::parse();
+    // Parsed through the matches, so that `serve --config` can tell a flag or variable from a default.
+    let matches = Cli::command().get_matches();
+    let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
     let result = match cli.command {
-        Command::Serve(a) => cli::serve::run(a),
+        Command::Serve(a) => cli::serve_config::prepare(a, matches.subcommand_matches("serve"))
+            .and_then(|a| a.map_or(Ok(()), cli::serve::run)),
         Command::Fit(a) => cli::fit::run(a),
         Command::Group(a) => cli::group::run(a),
         Command::Query(a) => cli::query::run(a),
@@ -56,5 +59,18 @@ fn main() -> std::process::ExitCode {
             eprintln!("error: {e}");
             std::process::ExitCode::FAILURE
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Cli;
+    use clap::CommandFactory;
+
+    /// Every subcommand's arguments are well formed (unique names, groups, env vars): clap checks
+    /// this only when a command is built, i.e. at the first run of that subcommand.
+    #[test]
+    fn every_command_line_is_well_formed() {
+        Cli::command().debug_assert();
     }
 }

@@ -9,6 +9,7 @@ pub mod group;
 pub mod loadtest;
 pub mod query;
 pub mod serve;
+pub mod serve_config;
 pub mod serve_ops;
 pub mod stability;
 pub mod table1;

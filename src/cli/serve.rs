@@ -43,7 +43,10 @@ pub struct ServeArgs {
     async_workers: Option<usize>,
     /// Shutdown grace, TLS and authentication (`cli::serve_ops`).
     #[command(flatten)]
-    ops: super::serve_ops::OpsArgs,
+    security: super::serve_ops::SecurityArgs,
+    /// Limits, metrics, log format and the config file (`cli::serve_config`).
+    #[command(flatten)]
+    pub ops: super::serve_config::OpsArgs,
 }
 
 /// The default number of async workers: CPUs − 1, at least 1.
@@ -53,10 +56,7 @@ fn default_async_workers() -> usize {
 
 /// Runs `sublevel serve`.
 pub fn run(args: ServeArgs) -> Result<()> {
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
-    // Ignore the error of a second init (a subscriber already set by an embedding program).
-    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
+    super::serve_config::init_logging(args.ops.log_format);
     let workers = args.async_workers.unwrap_or_else(default_async_workers);
     if workers == 0 {
         return Err(Error::invalid("--async-workers", "must be at least 1"));
@@ -66,6 +66,8 @@ pub fn run(args: ServeArgs) -> Result<()> {
         let shutdown = shutdown_signal()?;
         let mut config = ServerConfig { data_dir: args.data_dir.clone(), ..ServerConfig::default() };
         args.ops.apply(&mut config)?;
+        args.security.apply(&mut config)?;
+        super::serve_config::start_metrics(&args.ops).await?;
         let catalog = open_catalog(&config)?;
         if args.demo {
             let demo = seed_demo(&catalog)?;

@@ -1,5 +1,5 @@
 //! The operational flags of `sublevel serve` (shutdown grace, TLS, authentication), flattened
-//! into [`super::serve::ServeArgs`] and applied to a [`ServerConfig`] by [`OpsArgs::apply`].
+//! into [`super::serve::ServeArgs`] and applied to a [`ServerConfig`] by [`SecurityArgs::apply`].
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -11,7 +11,7 @@ use sublevel::{Error, Result};
 
 /// Operational flags of `sublevel serve`.
 #[derive(clap::Args, Debug)]
-pub struct OpsArgs {
+pub struct SecurityArgs {
     /// After SIGTERM / Ctrl-C: how long to wait for in-flight requests and for cancelled fit jobs
     /// to record their end before exiting anyway (e.g. `10s`, `500ms`, `2m`; a bare number is
     /// seconds).
@@ -34,7 +34,7 @@ pub struct OpsArgs {
     pub auth_tokens: Option<PathBuf>,
 }
 
-impl OpsArgs {
+impl SecurityArgs {
     /// Copies the flags into `config`, reading the TLS files and the token file.
     ///
     /// # Errors

@@ -2,6 +2,7 @@
 
 use super::convert::{self as cv, prefix_field, require_id};
 use super::jobs::{is_terminal, FitJobs, GroupJob};
+use super::limits::{self, check_room, SdpSlots};
 use super::pb::{self, sublevel_server::Sublevel};
 use super::ServerConfig;
 use crate::body::BodyFile;
@@ -21,13 +22,16 @@ pub struct SublevelService {
     catalog: Arc<Catalog>,
     config: ServerConfig,
     pub(crate) jobs: Arc<FitJobs>,
+    /// Slots of blocking SDP query work (`ServerConfig::max_concurrent_sdp`).
+    sdp: SdpSlots,
 }
 
 impl SublevelService {
     /// A service over `catalog` with `config`'s limits.
     pub fn new(catalog: Arc<Catalog>, config: ServerConfig) -> Self {
-        let jobs = Arc::new(FitJobs::new(catalog.clone(), config.max_concurrent_fits));
-        Self { catalog, config, jobs }
+        let jobs = Arc::new(FitJobs::new(catalog.clone(), config.max_concurrent_fits, config.max_fit_queue));
+        let sdp = SdpSlots::new(config.max_concurrent_sdp);
+        Self { catalog, config, jobs, sdp }
     }
 }
 
@@ -36,6 +40,7 @@ impl SublevelService {
 /// Returns the view (moved back out of the blocking pool) with the outcome.
 async fn run_view(
     catalog: Arc<Catalog>,
+    sdp: &SdpSlots,
     mut view: QueryView,
     request: PlannerRequest,
 ) -> (QueryView, Result<PlannerAnswers, Status>) {
@@ -46,14 +51,15 @@ async fn run_view(
         return (view, out);
     }
     let scene = view.scene_id().to_owned();
-    match tokio::task::spawn_blocking(move || {
-        let out = view.run(&catalog, &request);
-        (view, out)
-    })
-    .await
+    match sdp
+        .run(move || {
+            let out = view.run(&catalog, &request);
+            Ok((view, out))
+        })
+        .await
     {
         Ok((view, out)) => (view, out.map_err(Status::from)),
-        Err(e) => (QueryView::new(&scene), Err(Status::internal(format!("worker failed: {e}")))),
+        Err(e) => (QueryView::new(&scene), Err(e)),
     }
 }
 
@@ -72,6 +78,7 @@ fn off_workers(catalog: &Catalog, scene_id: &str, certify: bool, answers: usize)
 /// [`off_workers`]).
 async fn query_work<T: Send + 'static>(
     catalog: &Arc<Catalog>,
+    sdp: &SdpSlots,
     scene_id: &str,
     certify: bool,
     answers: usize,
@@ -79,7 +86,7 @@ async fn query_work<T: Send + 'static>(
 ) -> Result<T, Status> {
     if off_workers(catalog, scene_id, certify, answers) {
         let catalog = catalog.clone();
-        blocking(move || f(&catalog)).await
+        sdp.run(move || f(&catalog)).await
     } else {
         f(catalog).map_err(Status::from)
     }
@@ -99,6 +106,7 @@ type Reply<T> = Result<Response<T>, Status>;
 struct QueryStreamState {
     inbound: tonic::Streaming<pb::QueryRequest>,
     catalog: Arc<Catalog>,
+    sdp: SdpSlots,
     view: Option<QueryView>,
     /// (most answers, most poses) of one request.
     limits: (usize, usize),
@@ -124,7 +132,7 @@ impl QueryStreamState {
                 return Err(Error::invalid("scene_id", message).into());
             }
         };
-        let (back, answers) = run_view(self.catalog.clone(), current, planner).await;
+        let (back, answers) = run_view(self.catalog.clone(), &self.sdp, current, planner).await;
         self.view = Some(back);
         let columns = cv::columns_kind(&req);
         answers.map(|a| cv::planner_answers_to_proto(&a, req.request_id, start.elapsed().as_secs_f64(), columns))
@@ -146,6 +154,7 @@ impl Sublevel for SublevelService {
         settings.method = fit.method;
         settings.convexity_relaxation = fit.convexity_relaxation;
         settings.validate()?;
+        check_room(limits::BODIES, self.catalog.bodies().len(), self.config.max_bodies)?;
         let max = self.config.max_fit_points;
         let top_degree = fit.auto.as_ref().and_then(|(d, _)| d.iter().max().copied()).unwrap_or(fit.degree);
         let points = match req.source {
@@ -248,6 +257,7 @@ impl Sublevel for SublevelService {
         if req.name.len() > crate::scene::MAX_NAME_BYTES {
             return Err(Error::invalid("name", format!("at most {} bytes", crate::scene::MAX_NAME_BYTES)).into());
         }
+        check_room(limits::BODIES, self.catalog.bodies().len(), self.config.max_bodies)?;
         let catalog = self.catalog.clone();
         // The sos-convexity certificate is an SDP: off the async workers, like the store write.
         let (body_id, nonconvex, margin) = blocking(move || {
@@ -292,6 +302,7 @@ impl Sublevel for SublevelService {
 
     async fn create_scene(&self, request: Request<pb::CreateSceneRequest>) -> Reply<pb::CreateSceneResponse> {
         let name = request.into_inner().name;
+        check_room(limits::SCENES, self.catalog.scenes().len(), self.config.max_scenes)?;
         let catalog = self.catalog.clone();
         let scene_id = blocking(move || catalog.create_scene(&name)).await?;
         Ok(Response::new(pb::CreateSceneResponse { scene_id }))
@@ -331,6 +342,8 @@ impl Sublevel for SublevelService {
         require_id("scene_id", &req.scene_id)?;
         require_id("body_id", &req.body_id)?;
         let pose = cv::pose_from_proto("pose", req.pose.as_ref())?;
+        let held = self.catalog.get_scene(&req.scene_id)?.instances.len();
+        check_room(limits::INSTANCES, held, self.config.max_instances_per_scene)?;
         let catalog = self.catalog.clone();
         let instance_id = blocking(move || catalog.add_instance(&req.scene_id, &req.body_id, pose)).await?;
         Ok(Response::new(pb::AddInstanceResponse { instance_id }))
@@ -364,11 +377,13 @@ impl Sublevel for SublevelService {
         let options =
             crate::scene::QueryOptions { signed: req.signed, ..cv::query_options(req.certify, req.with_gradient) };
         let scene = req.scene_id.clone();
-        let r = query_work(&self.catalog, &scene, req.certify, 1, move |c| {
+        let r = query_work(&self.catalog, &self.sdp, &scene, req.certify, 1, move |c| {
             c.distance_with(&req.scene_id, &req.instance_a, &req.instance_b, &options)
         })
         .await?;
-        Ok(Response::new(pb::DistanceResponse { answer: Some(cv::distance_reply_to_proto(&r)) }))
+        let answer = cv::distance_reply_to_proto(&r);
+        super::metrics::query_answer("distance", answer.solve.as_ref(), answer.source);
+        Ok(Response::new(pb::DistanceResponse { answer: Some(answer) }))
     }
 
     async fn growth(&self, request: Request<pb::GrowthRequest>) -> Reply<pb::GrowthResponse> {
@@ -378,11 +393,13 @@ impl Sublevel for SublevelService {
         require_id("instance_2", &req.instance_2)?;
         let options = cv::query_options(req.certify, req.with_gradient);
         let scene = req.scene_id.clone();
-        let r = query_work(&self.catalog, &scene, req.certify, 1, move |c| {
+        let r = query_work(&self.catalog, &self.sdp, &scene, req.certify, 1, move |c| {
             c.growth_with(&req.scene_id, &req.instance_1, &req.instance_2, &options)
         })
         .await?;
-        Ok(Response::new(pb::GrowthResponse { answer: Some(cv::growth_reply_to_proto(&r)) }))
+        let answer = cv::growth_reply_to_proto(&r);
+        super::metrics::query_answer("growth", answer.solve.as_ref(), answer.source);
+        Ok(Response::new(pb::GrowthResponse { answer: Some(answer) }))
     }
 
     async fn batch_query(&self, request: Request<pb::BatchQueryRequest>) -> Reply<pb::BatchQueryResponse> {
@@ -394,7 +411,7 @@ impl Sublevel for SublevelService {
             }
             let c = cv::pair_columns_from_proto(&columns, self.config.max_batch_pairs)?;
             let (scene, n, kind) = (req.scene_id.clone(), c.first.len(), c.kind);
-            let answers = query_work(&self.catalog, &scene, false, n, move |catalog| {
+            let answers = query_work(&self.catalog, &self.sdp, &scene, false, n, move |catalog| {
                 catalog.batch_columns(
                     &req.scene_id,
                     &c.instance_ids,
@@ -411,8 +428,10 @@ impl Sublevel for SublevelService {
         let pairs = cv::pairs_from_proto(&req.pairs, self.config.max_batch_pairs)?;
         let certify = pairs.iter().any(|p| p.options.mode == crate::query::CertifyMode::Certify);
         let (scene, n) = (req.scene_id.clone(), pairs.len());
-        let answers = query_work(&self.catalog, &scene, certify, n, move |c| c.batch(&req.scene_id, &pairs)).await?;
-        let answers = answers.iter().map(cv::answer_to_proto).collect();
+        let answers =
+            query_work(&self.catalog, &self.sdp, &scene, certify, n, move |c| c.batch(&req.scene_id, &pairs)).await?;
+        let answers: Vec<pb::QueryAnswer> = answers.iter().map(cv::answer_to_proto).collect();
+        super::metrics::batch_answers(&answers);
         Ok(Response::new(pb::BatchQueryResponse { answers, columns: None }))
     }
 
@@ -471,7 +490,7 @@ impl Sublevel for SublevelService {
         let planner =
             cv::planner_request_from_proto(&req, self.config.max_batch_pairs, self.config.max_poses_per_call)?;
         let view = QueryView::new(&req.scene_id);
-        let (_, answers) = run_view(self.catalog.clone(), view, planner).await;
+        let (_, answers) = run_view(self.catalog.clone(), &self.sdp, view, planner).await;
         let answers = answers?;
         let columns = cv::columns_kind(&req);
         Ok(Response::new(cv::planner_answers_to_proto(
@@ -494,6 +513,7 @@ impl Sublevel for SublevelService {
         let state = QueryStreamState {
             inbound: request.into_inner(),
             catalog: self.catalog.clone(),
+            sdp: self.sdp.clone(),
             view: None,
             limits: (self.config.max_batch_pairs, self.config.max_poses_per_call),
             done: false,

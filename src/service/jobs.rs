@@ -22,7 +22,7 @@ use crate::math::{Point3, Real};
 use crate::scene::{Catalog, JobRecord, JobRecordState};
 use crate::{Error, Result};
 use std::collections::HashMap;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use tokio::sync::{watch, Notify, Semaphore};
 use tonic::Status;
@@ -63,6 +63,10 @@ pub(crate) struct FitJobs {
     jobs: Mutex<HashMap<String, LiveJob>>,
     /// Fitting slots: fits are CPU-heavy SDP solves, so only a few may run at once.
     slots: Arc<Semaphore>,
+    /// Jobs queued or running (`sublevel_fit_queue_depth`); at most `max_queue`.
+    pending: Arc<AtomicUsize>,
+    /// `ServerConfig::max_fit_queue`.
+    max_queue: usize,
     /// Where bodies and job records go.
     catalog: Arc<Catalog>,
     /// Set by [`FitJobs::stop`]: cancelled jobs say the server shut down.
@@ -184,10 +188,12 @@ pub(crate) struct GroupJob {
 type Outcome = Result<(String, String)>;
 
 impl FitJobs {
-    pub(crate) fn new(catalog: Arc<Catalog>, max_concurrent: usize) -> Self {
+    pub(crate) fn new(catalog: Arc<Catalog>, max_concurrent: usize, max_queue: usize) -> Self {
         Self {
             jobs: Mutex::new(HashMap::new()),
             slots: Arc::new(Semaphore::new(max_concurrent.max(1))),
+            pending: Arc::new(AtomicUsize::new(0)),
+            max_queue,
             catalog,
             stopping: Arc::new(AtomicBool::new(false)),
             stop_signal: watch::channel(false).0,
@@ -219,11 +225,32 @@ impl FitJobs {
     }
 
     /// Registers a new job (its record is written to the store before the id is returned) and
-    /// returns its id, the body name, the progress sender, its cancellation flag and wake-up.
+    /// returns its id, the body name, the progress sender, its cancellation flag and wake-up. The
+    /// job counts against the queue depth from here until [`FitJobs::spawn`]'s task ends.
+    ///
+    /// # Errors
+    /// UNAVAILABLE while the server stops or when the record cannot be written;
+    /// RESOURCE_EXHAUSTED when `max_queue` jobs are queued or running.
     async fn register(&self, kind: &'static str, name: String) -> Result<Registered, Status> {
         if self.stopping.load(Ordering::SeqCst) {
             return Err(Status::unavailable("server shutting down: no new jobs"));
         }
+        let taken =
+            self.pending.fetch_update(Ordering::SeqCst, Ordering::SeqCst, |n| (n < self.max_queue).then_some(n + 1));
+        if let Err(n) = taken {
+            return Err(super::limits::exhausted(super::limits::FIT_QUEUE, n, self.max_queue).into());
+        }
+        super::metrics::fit_queue_depth(self.pending.load(Ordering::SeqCst));
+        let registered = self.register_record(kind, name).await;
+        if registered.is_err() {
+            let left = self.pending.fetch_sub(1, Ordering::SeqCst).saturating_sub(1);
+            super::metrics::fit_queue_depth(left);
+        }
+        registered
+    }
+
+    /// The body of [`FitJobs::register`] after the queue admitted the job.
+    async fn register_record(&self, kind: &'static str, name: String) -> Result<Registered, Status> {
         let job_id = format!("j-{:016x}", rand::random::<u64>());
         let name = if name.is_empty() { job_id.clone() } else { name };
         let created_unix_ms = now_ms();
@@ -279,6 +306,7 @@ impl FitJobs {
         let catalog = self.catalog.clone();
         let stopping = self.stopping.clone();
         let active = self.active.clone();
+        let pending = self.pending.clone();
         let Registered { job_id, name, created_unix_ms, tx, cancel, wake } = job;
         tokio::spawn(async move {
             let permit = tokio::select! {
@@ -286,6 +314,7 @@ impl FitJobs {
                 () = wake.notified() => None,
                 p = slots.acquire_owned() => p.ok(),
             };
+            let started = std::time::Instant::now();
             let tx = Arc::new(tx);
             let outcome = match permit {
                 Some(permit) if !cancel.load(Ordering::SeqCst) => {
@@ -307,6 +336,8 @@ impl FitJobs {
                 }
                 _ => Ok(Err(Error::Cancelled("before it started".into()))),
             };
+            let left = pending.fetch_sub(1, Ordering::SeqCst).saturating_sub(1);
+            super::metrics::fit_queue_depth(left);
             let (last, state) = match outcome {
                 Ok(Ok((body_id, message))) => {
                     tracing::info!(job_id = %job_id, %body_id, "job succeeded");
@@ -328,6 +359,7 @@ impl FitJobs {
                 Ok(Err(e)) => (failed(&job_id, &e.to_string()), JobRecordState::Failed),
                 Err(join) => (failed(&job_id, &format!("{kind} aborted: {join}")), JobRecordState::Failed),
             };
+            super::metrics::fit_finished(kind, state, started.elapsed());
             let record = JobRecord {
                 kind: kind.to_owned(),
                 name,

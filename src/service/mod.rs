@@ -29,6 +29,10 @@
 //! tokens with a read and an admin role ([`auth`]), checked by a tower layer before any handler
 //! runs; health and reflection stay open without a token.
 //!
+//! Operations: the operator's limits ([`ServerConfig`]; counts answer RESOURCE_EXHAUSTED naming
+//! their `serve` flag, blocking query solves wait for one of `max_concurrent_sdp` slots) and
+//! [`metrics`] (Prometheus counters and histograms, a span and an `x-request-id` per RPC).
+//!
 //! # Adding an RPC
 //!
 //! 1. declare it with commented messages in `proto/sublevel/v1/sublevel.proto`;
@@ -40,6 +44,8 @@ pub mod auth;
 pub mod convert;
 mod handlers;
 mod jobs;
+mod limits;
+pub mod metrics;
 mod shutdown;
 pub mod status_layer;
 pub mod tls;
@@ -94,6 +100,18 @@ pub struct ServerConfig {
     pub max_poses_per_call: usize,
     /// Fits running at the same time (each is CPU-heavy; the rest queue).
     pub max_concurrent_fits: usize,
+    /// Most fit and group jobs queued or running at once; one more is RESOURCE_EXHAUSTED.
+    pub max_fit_queue: usize,
+    /// Most scenes the server holds; creating one more is RESOURCE_EXHAUSTED.
+    pub max_scenes: usize,
+    /// Most bodies the server holds; uploading (or starting a fit of) one more is
+    /// RESOURCE_EXHAUSTED.
+    pub max_bodies: usize,
+    /// Most instances in one scene; adding one more is RESOURCE_EXHAUSTED.
+    pub max_instances_per_scene: usize,
+    /// Blocking SDP solves of queries (certificates, nonconvex scenes) running at once; the rest
+    /// wait for a slot.
+    pub max_concurrent_sdp: usize,
     /// Tolerances of every query.
     pub newton: NewtonParams,
     /// Settings of every fit (the degree comes from each request).
@@ -118,6 +136,11 @@ impl Default for ServerConfig {
             max_batch_pairs: 10_000,
             max_poses_per_call: 100_000,
             max_concurrent_fits: 1,
+            max_fit_queue: 16,
+            max_scenes: 10_000,
+            max_bodies: 10_000,
+            max_instances_per_scene: 100_000,
+            max_concurrent_sdp: 2,
             newton: NewtonParams::default(),
             fit: FitSettings::default(),
             shutdown_grace: DEFAULT_SHUTDOWN_GRACE,
@@ -134,6 +157,7 @@ impl Default for ServerConfig {
 /// holds it).
 pub fn open_catalog(config: &ServerConfig) -> Result<Arc<Catalog>> {
     let store = RedbStore::open_dir(&config.data_dir)?;
+    let store = metrics::TimedStore::new(Box::new(store));
     Ok(Arc::new(Catalog::open(Box::new(store), config.newton)?))
 }
 
@@ -223,6 +247,7 @@ pub async fn serve_catalog(
     let serving = builder
         .http2_keepalive_interval(Some(KEEPALIVE_INTERVAL))
         .http2_keepalive_timeout(Some(KEEPALIVE_TIMEOUT))
+        .layer(metrics::RpcLayer)
         .layer(status_layer::StatusLayer)
         .layer(auth)
         .add_service(health)

@@ -5,6 +5,7 @@ mod gradient;
 mod group;
 mod hardening;
 mod jobs_api;
+mod ops;
 mod planner;
 mod query;
 mod security;
