@@ -18,7 +18,7 @@ fn start_fit_job(req: pb::StartFitJobRequest) {
     let points = match &req.source {
         Some(pb::start_fit_job_request::Source::Points(cloud)) => cv::points_from_proto(cloud, MAX_POINTS),
         Some(pb::start_fit_job_request::Source::Mesh(mesh)) => {
-            mesh.format.parse().and_then(|format| sublevel::fit::mesh::parse_points_limited(&mesh.data, format, MAX_POINTS))
+            cv::mesh_format_from_proto(mesh).and_then(|format| sublevel::fit::mesh::parse_points_limited(&mesh.data, format, MAX_POINTS))
         }
         None => return,
     };

@@ -168,12 +168,9 @@ impl Sublevel for SublevelService {
                 if mesh.data.is_empty() {
                     return Err(Error::invalid("mesh.data", "must not be empty").into());
                 }
-                let format = mesh.format.trim().to_ascii_lowercase();
-                if format.is_empty() {
-                    return Err(Error::invalid("mesh.format", "must name the format (off, obj, stl, ply, xyz)").into());
-                }
+                let format = cv::mesh_format_from_proto(&mesh)?;
                 blocking(move || {
-                    let points = parse_points_limited(&mesh.data, format.parse()?, max)?;
+                    let points = parse_points_limited(&mesh.data, format, max)?;
                     cv::check_point_count("mesh", points.len(), max)?;
                     cv::check_cloud("mesh", &points, top_degree)?;
                     Ok(points)

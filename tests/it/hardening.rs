@@ -90,7 +90,11 @@ async fn repro_2_a_lying_ply_header_is_refused_before_allocation() {
         let req = pb::StartFitJobRequest {
             name: "ply".into(),
             degree: 2,
-            source: Some(pb::start_fit_job_request::Source::Mesh(pb::Mesh { format: "ply".into(), data })),
+            source: Some(pb::start_fit_job_request::Source::Mesh(pb::Mesh {
+                mesh_format: pb::MeshFormat::Ply as i32,
+                data,
+                ..Default::default()
+            })),
             ..Default::default()
         };
         let t = Instant::now();

@@ -14,7 +14,11 @@ pub(crate) fn chair8(name: &str) -> pb::StartFitJobRequest {
     pb::StartFitJobRequest {
         name: name.into(),
         degree: 8,
-        source: Some(pb::start_fit_job_request::Source::Mesh(pb::Mesh { format: "off".into(), data: off })),
+        source: Some(pb::start_fit_job_request::Source::Mesh(pb::Mesh {
+            mesh_format: pb::MeshFormat::Off as i32,
+            data: off,
+            ..Default::default()
+        })),
         ..Default::default()
     }
 }

@@ -284,7 +284,13 @@ async fn bad_input_gets_the_right_code_naming_the_field() {
     let mesh = |data: &[u8], format: &str| pb::StartFitJobRequest {
         name: "m".into(),
         degree: 4,
-        source: Some(pb::start_fit_job_request::Source::Mesh(pb::Mesh { data: data.to_vec(), format: format.into() })),
+        // The text form (deprecated beside `mesh_format`, still accepted): what older clients send.
+        #[allow(deprecated)]
+        source: Some(pb::start_fit_job_request::Source::Mesh(pb::Mesh {
+            data: data.to_vec(),
+            format: format.into(),
+            ..Default::default()
+        })),
         ..Default::default()
     };
     assert_status(c.start_fit_job(mesh(b"OFF\nthis is not a mesh", "off")).await, Code::InvalidArgument, "mesh");

@@ -71,6 +71,7 @@ async fn fit_job_with_auto_degree_and_validated_options() {
         convexity_relaxation: c,
         auto_degree: true,
         volume_tolerance: tol,
+        ..Default::default()
     };
     assert_status(c.start_fit_job(req("simplex", 0.0, 0.05)).await, Code::InvalidArgument, "method");
     assert_status(c.start_fit_job(req("", -1.0, 0.05)).await, Code::InvalidArgument, "convexity_relaxation");
@@ -158,7 +159,11 @@ async fn end_to_end_chair_slides_through_human() {
         let req = pb::StartFitJobRequest {
             name: name.into(),
             degree: 4,
-            source: Some(pb::start_fit_job_request::Source::Mesh(pb::Mesh { data, format: "off".into() })),
+            source: Some(pb::start_fit_job_request::Source::Mesh(pb::Mesh {
+                data,
+                mesh_format: pb::MeshFormat::Off as i32,
+                ..Default::default()
+            })),
             ..Default::default()
         };
         let job_id = c.start_fit_job(req).await.unwrap().into_inner().job_id;

@@ -3,7 +3,9 @@
 //! summaries.
 
 use crate::body::{BodyFile, FitReport, SUPPORTED_DEGREES};
-use crate::fit::FitStage;
+use crate::conic::SdpStatus;
+use crate::fit::mesh::MeshFormat;
+use crate::fit::{FitMethod, FitStage};
 use crate::math::{Point3, Real, Vector3};
 use crate::scene::BodyEntry;
 use crate::service::pb;
@@ -42,10 +44,16 @@ pub struct FitOptions {
 /// [`Error::InvalidArgument`] naming `degree`, `method`, `convexity_relaxation` or
 /// `volume_tolerance`.
 pub fn fit_options(req: &pb::StartFitJobRequest) -> Result<FitOptions> {
-    let method = if req.method.trim().is_empty() {
-        crate::fit::FitMethod::LogDetP
-    } else {
-        req.method.trim().parse::<crate::fit::FitMethod>()?
+    let named = if req.method.trim().is_empty() { None } else { Some(req.method.trim().parse::<FitMethod>()?) };
+    let method = match (fit_method_from_proto(req.fit_method)?, named) {
+        (Some(v), Some(n)) if v != n => {
+            return Err(Error::invalid(
+                "fit_method",
+                format!("names {} but `method` names {}; set one of them", v.name(), n.name()),
+            ))
+        }
+        (Some(m), _) | (None, Some(m)) => m,
+        (None, None) => FitMethod::LogDetP,
     };
     let c = req.convexity_relaxation;
     if !(c.is_finite() && c >= 0.0) {
@@ -175,6 +183,7 @@ pub fn report_to_proto(r: &FitReport) -> pb::FitReport {
     pb::FitReport {
         method: r.method.clone(),
         solver_status: r.solver_status.to_string(),
+        status: sdp_status_to_proto(r.solver_status) as i32,
         solve_seconds: r.solve_seconds,
         total_seconds: r.total_seconds,
         num_points: r.num_points as u64,
@@ -366,5 +375,128 @@ mod tests {
         assert!(check_cloud("points", &sheet, 2).is_ok());
         let e = check_cloud("points", &sheet, 4).unwrap_err();
         assert!(e.to_string().contains("degree-4") && e.to_string().contains("1.0e-3"), "{e}");
+    }
+}
+
+/// The `fit_method` enum field as the core's method (None when unset).
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `fit_method` for an undefined enum value.
+pub fn fit_method_from_proto(value: i32) -> Result<Option<FitMethod>> {
+    Ok(match pb::FitMethod::try_from(value) {
+        Ok(pb::FitMethod::Unspecified) => None,
+        Ok(pb::FitMethod::LogdetP) => Some(FitMethod::LogDetP),
+        Ok(pb::FitMethod::TraceP) => Some(FitMethod::TraceP),
+        Ok(pb::FitMethod::LogdetH) => Some(FitMethod::LogDetH),
+        Ok(pb::FitMethod::TraceH) => Some(FitMethod::TraceH),
+        Ok(pb::FitMethod::InverseMoment) => Some(FitMethod::InverseMoment),
+        Err(_) => return Err(Error::invalid("fit_method", format!("undefined value {value}"))),
+    })
+}
+
+/// The format of a mesh message: the `mesh_format` enum when set, else the `format` text.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `mesh.format` when neither names a format, a name is
+/// unknown, or the two disagree; `mesh.mesh_format` for an undefined enum value.
+pub fn mesh_format_from_proto(mesh: &pb::Mesh) -> Result<MeshFormat> {
+    let value = match pb::MeshFormat::try_from(mesh.mesh_format) {
+        Ok(pb::MeshFormat::Unspecified) => None,
+        Ok(pb::MeshFormat::Off) => Some(MeshFormat::Off),
+        Ok(pb::MeshFormat::Obj) => Some(MeshFormat::Obj),
+        Ok(pb::MeshFormat::Stl) => Some(MeshFormat::Stl),
+        Ok(pb::MeshFormat::Ply) => Some(MeshFormat::Ply),
+        Ok(pb::MeshFormat::Xyz) => Some(MeshFormat::Xyz),
+        Err(_) => return Err(Error::invalid("mesh.mesh_format", format!("undefined value {}", mesh.mesh_format))),
+    };
+    #[allow(deprecated)]
+    let text = mesh.format.trim();
+    let named = if text.is_empty() {
+        None
+    } else {
+        Some(text.parse::<MeshFormat>().map_err(|e| Error::invalid("mesh.format", e.to_string()))?)
+    };
+    match (value, named) {
+        (Some(v), Some(n)) if v != n => Err(Error::invalid(
+            "mesh.format",
+            format!("names {} but `mesh_format` is {}; set one of them", n.name(), v.name()),
+        )),
+        (Some(f), _) | (None, Some(f)) => Ok(f),
+        (None, None) => Err(Error::invalid("mesh.format", "must name the format (off, obj, stl, ply, xyz)")),
+    }
+}
+
+/// An SDP status as the proto enum (the value behind `FitReport.status` and
+/// `Certificate.solver_status`).
+pub fn sdp_status_to_proto(s: SdpStatus) -> pb::SolverStatus {
+    match s {
+        SdpStatus::Solved => pb::SolverStatus::Solved,
+        SdpStatus::AlmostSolved => pb::SolverStatus::AlmostSolved,
+        SdpStatus::Unsolved => pb::SolverStatus::Unsolved,
+        SdpStatus::PrimalInfeasible => pb::SolverStatus::PrimalInfeasible,
+        SdpStatus::DualInfeasible => pb::SolverStatus::DualInfeasible,
+        SdpStatus::AlmostPrimalInfeasible => pb::SolverStatus::AlmostPrimalInfeasible,
+        SdpStatus::AlmostDualInfeasible => pb::SolverStatus::AlmostDualInfeasible,
+        SdpStatus::MaxIterations => pb::SolverStatus::MaxIterations,
+        SdpStatus::MaxTime => pb::SolverStatus::MaxTime,
+        SdpStatus::NumericalError => pb::SolverStatus::NumericalError,
+        SdpStatus::InsufficientProgress => pb::SolverStatus::InsufficientProgress,
+        SdpStatus::CallbackTerminated => pb::SolverStatus::CallbackTerminated,
+        SdpStatus::ClosedForm => pb::SolverStatus::ClosedForm,
+        SdpStatus::NotRun => pb::SolverStatus::NotRun,
+        SdpStatus::Unknown => pb::SolverStatus::Unknown,
+    }
+}
+
+#[cfg(test)]
+mod enum_tests {
+    use super::*;
+
+    #[test]
+    fn enum_fields_win_and_must_agree_with_the_text() {
+        let mesh = |text: &str, value: pb::MeshFormat| {
+            #[allow(deprecated)]
+            pb::Mesh { data: Vec::new(), format: text.into(), mesh_format: value as i32 }
+        };
+        assert_eq!(mesh_format_from_proto(&mesh("", pb::MeshFormat::Ply)).unwrap(), MeshFormat::Ply);
+        assert_eq!(mesh_format_from_proto(&mesh("OFF", pb::MeshFormat::Unspecified)).unwrap(), MeshFormat::Off);
+        assert_eq!(mesh_format_from_proto(&mesh("stl", pb::MeshFormat::Stl)).unwrap(), MeshFormat::Stl);
+        for bad in [
+            mesh("off", pb::MeshFormat::Obj),
+            mesh("", pb::MeshFormat::Unspecified),
+            mesh("vtk", pb::MeshFormat::Unspecified),
+        ] {
+            assert!(
+                matches!(mesh_format_from_proto(&bad), Err(Error::InvalidArgument { field, .. }) if field == "mesh.format")
+            );
+        }
+        let undefined = pb::Mesh { mesh_format: 99, ..mesh("", pb::MeshFormat::Unspecified) };
+        assert!(
+            matches!(mesh_format_from_proto(&undefined), Err(Error::InvalidArgument { field, .. }) if field == "mesh.mesh_format")
+        );
+
+        let req = |text: &str, value: pb::FitMethod| pb::StartFitJobRequest {
+            degree: 4,
+            method: text.into(),
+            fit_method: value as i32,
+            ..Default::default()
+        };
+        assert_eq!(fit_options(&req("", pb::FitMethod::TraceH)).unwrap().method, FitMethod::TraceH);
+        assert_eq!(fit_options(&req("logdet_h", pb::FitMethod::Unspecified)).unwrap().method, FitMethod::LogDetH);
+        assert_eq!(fit_options(&req("", pb::FitMethod::Unspecified)).unwrap().method, FitMethod::LogDetP);
+        assert!(matches!(
+            fit_options(&req("trace_p", pb::FitMethod::LogdetP)),
+            Err(Error::InvalidArgument { field, .. }) if field == "fit_method"
+        ));
+        // Every core status has its own proto value, and the text form travels beside it.
+        let values: std::collections::HashSet<i32> =
+            SdpStatus::ALL.iter().map(|s| sdp_status_to_proto(*s) as i32).collect();
+        assert_eq!(values.len(), SdpStatus::ALL.len());
+        assert!(!values.contains(&(pb::SolverStatus::Unspecified as i32)));
+        let report = report_to_proto(&FitReport { solver_status: SdpStatus::AlmostSolved, ..Default::default() });
+        assert_eq!(
+            (report.status, report.solver_status.as_str()),
+            (pb::SolverStatus::AlmostSolved as i32, "AlmostSolved")
+        );
     }
 }

@@ -37,9 +37,9 @@ mod queries;
 mod scenes;
 
 pub use bodies::{
-    body_file_from_proto, body_file_to_proto, body_summary, check_cloud, check_point_count, fit_degree, fit_options,
-    fit_stage_to_proto, min_thickness, points_from_proto, report_from_proto, report_to_proto, uploaded_report,
-    FitOptions,
+    body_file_from_proto, body_file_to_proto, body_summary, check_cloud, check_point_count, fit_degree,
+    fit_method_from_proto, fit_options, fit_stage_to_proto, mesh_format_from_proto, min_thickness, points_from_proto,
+    report_from_proto, report_to_proto, sdp_status_to_proto, uploaded_report, FitOptions,
 };
 pub use errors::prefix_field;
 pub use planner::{

@@ -76,6 +76,7 @@ pub fn certificate_to_proto(c: &CertificateSummary) -> pb::Certificate {
         solve_seconds: c.solve_seconds,
         verified: c.verified,
         newton_value: c.newton_value.unwrap_or(Real::NAN),
+        solver_status: super::sdp_status_to_proto(c.solver_status) as i32,
     }
 }
 
