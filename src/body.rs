@@ -14,7 +14,7 @@
 //! `scale` and the fit `report`.
 
 use crate::math::{Isometry3, Matrix3, Point3, Real, Vector3};
-use crate::poly::{Eval, FastPoly, Polynomial, RadialTable};
+use crate::poly::{Eval, FastPoly, Polynomial, RadialTable, SupportTable};
 use crate::{Error, Result};
 use serde::{Deserialize, Serialize};
 
@@ -254,6 +254,8 @@ pub struct Body {
     fast: FastPoly,
     /// Radial function of {p ≤ 1} about `interior_u`: the boundary points of cold starts.
     radial: RadialTable,
+    /// Support map of {p ≤ 1} (normalized units): the facing points of cold distance starts.
+    support: SupportTable,
     /// A box containing {p ≤ 1} in normalized coordinates (`fit::volume::bounding_box`, from
     /// supporting halfspaces; `None` for a nonconvex body, whose halfspaces prove nothing).
     bounding_box_u: Option<(Vector3, Vector3)>,
@@ -315,6 +317,7 @@ impl Body {
         }
         let fast = FastPoly::new(&polynomial);
         let radial = RadialTable::new(&fast, &interior_u);
+        let support = SupportTable::new(&fast, &radial, &interior_u);
         let bounding_box_u =
             if report.nonconvex { None } else { crate::fit::volume::bounding_box(&polynomial, &interior_u).ok() };
         Ok(Self {
@@ -325,6 +328,7 @@ impl Body {
             min_value,
             fast,
             radial,
+            support,
             bounding_box_u,
             report,
         })
@@ -526,6 +530,15 @@ impl<'a> PosedBody<'a> {
             return c;
         }
         c + d * (self.body.radial.radius(&du) / n).min(1.0)
+    }
+
+    /// The body's support point in the world direction `n` (any nonzero length): the point of the
+    /// body maximizing n·x, read off its [`SupportTable`] (interpolated between tabulated
+    /// directions: a start for Newton, not an answer). `None` for a zero or non-finite `n`.
+    #[inline]
+    pub fn support(&self, n: &Vector3) -> Option<Vector3> {
+        // n·x = scale·(Rᵀn)·u + const, and A n = Rᵀn/scale points the same way.
+        Some(self.from_normalized(&self.body.support.support(&(self.a * n))?))
     }
 }
 

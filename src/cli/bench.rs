@@ -5,6 +5,7 @@
 //! Query times are medians over poses of the mean of `--repeats` back-to-back calls on the same
 //! input (a warm call reuses the previous pose's warm start, so repeating it is the same work).
 
+use super::coal_peer::CoalFigures;
 use super::csv_file::CsvFile;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -17,7 +18,9 @@ use sublevel::{Body, Error, Result};
 
 /// Columns of `bench --csv`, one record per degree (times in µs unless named `_s`; errors in
 /// meters against the exact mesh–mesh distance).
-pub const CSV_COLUMNS: [&str; 20] = [
+/// The `coal_*` and `*_over_coal` columns come from `--peer` (empty without it): coal's medians and
+/// ours / coal's GJK on the hulls (cold over cold, warm over warm; below 1 is faster than coal).
+pub const CSV_COLUMNS: [&str; 29] = [
     "degree",
     "fit_chair_s",
     "distance_cold_us",
@@ -38,6 +41,15 @@ pub const CSV_COLUMNS: [&str; 20] = [
     "err_max_m",
     "hull_err_mean_m",
     "hull_err_max_m",
+    "coal_gjk_cold_us",
+    "coal_gjk_warm_us",
+    "coal_nesterov_cold_us",
+    "coal_nesterov_warm_us",
+    "coal_mesh_us",
+    "distance_cold_over_coal",
+    "distance_warm_over_coal",
+    "growth_cold_over_coal",
+    "growth_warm_over_coal",
 ];
 
 /// The paper's Table 2: distance query times (seconds, MATLAB fmincon) at 2d = 2, 4, 6, 8.
@@ -78,6 +90,11 @@ pub struct BenchArgs {
     /// Optional CSV output of the summary table.
     #[arg(long)]
     csv: Option<std::path::PathBuf>,
+    /// Output of the coal peer script (`bash ../shared/peers/coal/run.sh > coal.txt`, run just
+    /// before in the same session): its figures and the ratios ours / coal are printed beside ours
+    /// and fill the `coal_*` / `*_over_coal` CSV columns.
+    #[arg(long)]
+    peer: Option<std::path::PathBuf>,
 }
 
 /// Median of a sample (NaN for an empty one).
@@ -197,6 +214,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
     if args.repeats == 0 {
         return Err(Error::invalid("--repeats", "must be at least 1"));
     }
+    let coal = args.peer.as_deref().map(CoalFigures::load).transpose()?;
     let params = NewtonParams::default();
     let mut fit_times = Vec::new();
     for &degree in &args.fit_degrees {
@@ -222,6 +240,9 @@ pub fn run(args: BenchArgs) -> Result<()> {
         rows.push(bench_queries(&args, degree, &chair_body, &human_body, fit_s, &params, &cold, &motion, &peer.exact));
     }
     print_table(&rows, &peer);
+    if let Some(c) = &coal {
+        print_coal(&rows, c);
+    }
     if let Some(path) = &args.csv {
         let mut csv = CsvFile::create(path, &CSV_COLUMNS)?;
         for r in &rows {
@@ -247,6 +268,15 @@ pub fn run(args: BenchArgs) -> Result<()> {
                 format!("{:.5}", r.err.1),
                 format!("{:.5}", peer.hull_err.0),
                 format!("{:.5}", peer.hull_err.1),
+                opt(coal.map(|c| c.gjk_cold_us), 3),
+                opt(coal.map(|c| c.gjk_warm_us), 3),
+                opt(coal.map(|c| c.nesterov_cold_us), 3),
+                opt(coal.map(|c| c.nesterov_warm_us), 3),
+                opt(coal.map(|c| c.mesh_us), 1),
+                opt(coal.map(|c| r.dist_cold / c.gjk_cold_us), 3),
+                opt(coal.map(|c| r.dist_warm / c.gjk_warm_us), 3),
+                opt(coal.map(|c| r.growth_cold / c.gjk_cold_us), 3),
+                opt(coal.map(|c| r.growth_warm / c.gjk_warm_us), 3),
             ])?;
         }
         eprintln!("wrote {}", csv.finish()?.display());
@@ -403,6 +433,44 @@ fn print_table(rows: &[Row], peer: &PeerRow) {
     println!(
         "errors: |model − exact mesh–mesh distance| over the {n_sep} separated poses of the first {} cold poses.",
         peer.exact.len()
+    );
+}
+
+/// A CSV field: the value with `digits` decimals, empty when absent or not finite.
+fn opt(v: Option<Real>, digits: usize) -> String {
+    v.filter(|v| v.is_finite()).map(|v| format!("{v:.digits$}")).unwrap_or_default()
+}
+
+/// coal's figures (from `--peer`) and the ratios ours / coal's GJK on the hulls, per degree.
+fn print_coal(rows: &[Row], c: &CoalFigures) {
+    println!();
+    println!(
+        "coal 3.0.3 (--peer; hulls of {} / {} vertices): GJK cold {:.2} µs, warm {:.2} µs; Nesterov GJK cold {:.2} µs, \
+         warm {:.2} µs; exact mesh–mesh (BVH) {:.1} µs",
+        c.hull_vertices[0], c.hull_vertices[1], c.gjk_cold_us, c.gjk_warm_us, c.nesterov_cold_us, c.nesterov_warm_us, c.mesh_us
+    );
+    println!(
+        "{:>8} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}",
+        "model", "dist cold", "/coal", "dist warm", "/coal", "grow cold", "/coal", "grow warm", "/coal"
+    );
+    for r in rows {
+        println!(
+            "{:>8} {:>10.2} {:>9.2}x {:>10.2} {:>9.2}x {:>10.2} {:>9.2}x {:>10.2} {:>9.2}x",
+            format!("sos 2d={}", r.degree),
+            r.dist_cold,
+            r.dist_cold / c.gjk_cold_us,
+            r.dist_warm,
+            r.dist_warm / c.gjk_warm_us,
+            r.growth_cold,
+            r.growth_cold / c.gjk_cold_us,
+            r.growth_warm,
+            r.growth_warm / c.gjk_warm_us
+        );
+    }
+    println!("{:>8} {:>10.2} {:>10} {:>10.2} {:>10}", "coal GJK", c.gjk_cold_us, "1.00x", c.gjk_warm_us, "1.00x");
+    println!(
+        "/coal: our median over coal's median GJK on the hulls (cold over cold, warm over warm); below 1 is faster. \
+         Issue 15's targets: 2d = 6 cold ≤ 0.6x, warm ≤ 0.3x; 2d = 8 cold ≤ 1x."
     );
 }
 

@@ -2,6 +2,7 @@
 
 pub mod bench;
 pub mod chart;
+pub mod coal_peer;
 pub mod csv_file;
 pub mod fit;
 pub mod fit_time;

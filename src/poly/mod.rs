@@ -9,6 +9,7 @@
 //! - [`fast`]: [`FastPoly`], precomputed derivative tables for the query hot path;
 //! - [`radial`]: [`RadialTable`], the radial function of a sublevel set about an interior point
 //!   (cold starts of the query solvers);
+//! - [`support`]: [`SupportTable`], the support map of a sublevel set (cold distance starts);
 //! - [`gram`]: Gram forms `z(x)ᵀ Q z(x)` in any number of variables, and Clarabel's packed-triangle
 //!   convention used by every SDP in the crate.
 
@@ -17,7 +18,9 @@ pub mod gram;
 pub mod monomial;
 pub mod polynomial;
 pub mod radial;
+pub mod support;
 
 pub use fast::FastPoly;
 pub use polynomial::{Eval, Polynomial, MAX_DEGREE};
 pub use radial::RadialTable;
+pub use support::SupportTable;

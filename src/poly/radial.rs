@@ -41,7 +41,7 @@ pub struct RadialTable {
 /// Face and face coordinates (a, b) ∈ [−1, 1]² of a direction: faces +x, −x, +y, −y, +z, −z; the
 /// face coordinates are the other two components (in cyclic order) over the largest one's modulus.
 #[inline]
-fn face_coordinates(v: &Vector3) -> (usize, Real, Real) {
+pub(super) fn face_coordinates(v: &Vector3) -> (usize, Real, Real) {
     let (ax, ay, az) = (v.x.abs(), v.y.abs(), v.z.abs());
     if ax >= ay && ax >= az {
         (usize::from(v.x < 0.0), v.y / ax, v.z / ax)
@@ -54,7 +54,7 @@ fn face_coordinates(v: &Vector3) -> (usize, Real, Real) {
 
 /// The (unnormalized) direction of face coordinates (a, b) on `face`; inverse of
 /// [`face_coordinates`] up to a positive factor.
-fn face_direction(face: usize, a: Real, b: Real) -> Vector3 {
+pub(super) fn face_direction(face: usize, a: Real, b: Real) -> Vector3 {
     let s = if face.is_multiple_of(2) { 1.0 } else { -1.0 };
     match face / 2 {
         0 => Vector3::new(s, a, b),

@@ -165,6 +165,7 @@ pub fn distance(
             let y0 = bb.boundary_towards(&ca);
             // Separated along the segment: A's crossing comes before B's.
             if (x0 - ca).norm_squared() < (y0 - ca).norm_squared() {
+                let (x0, y0) = support_start(&ba, &bb, x0, y0, &(cb - ca));
                 let capped =
                     NewtonParams { max_iterations: params.max_iterations.min(SPECULATIVE_ITERATIONS), ..*params };
                 let out = kkt_newton(&ba, &bb, x0, y0, None, &capped, false);
@@ -257,6 +258,30 @@ fn finish(
             relative_pose: *rel,
             trail: trail.filter(|_| out.status.converged()).map(|t| t.1).unwrap_or_default(),
         }),
+    }
+}
+
+/// The cold start of a pair separated along the segment between its interior points: the support
+/// points x = h_A(n), y = h_B(−n) for n = `axis` (the direction from A's interior point to B's),
+/// read off the bodies' support tables ([`PosedBody::support`]), when they are closer to each other
+/// than the radial start (`x0`, `y0`), else the radial start.
+///
+/// Measured on the chair / human cold poses of `sublevel bench` (2d = 6, 278 separated of 300):
+/// 6.21 Newton iterations per separated query against 7.21 from the radial start; further
+/// alternations n ← y − x made it worse (10.4 iterations after 2 or 3 rounds: the interpolated
+/// support map overshoots), so there is one look-up per body.
+fn support_start(
+    ba: &PosedBody<'_>,
+    bb: &PosedBody<'_>,
+    x0: Vector3,
+    y0: Vector3,
+    axis: &Vector3,
+) -> (Vector3, Vector3) {
+    match (ba.support(axis), bb.support(&-axis)) {
+        // Both starts are (nearly) feasible pairs: keep the closer one (the radial start is exact
+        // for spheres, whose witnesses lie on the line of centers).
+        (Some(x), Some(y)) if (y - x).norm_squared() < (y0 - x0).norm_squared() => (x, y),
+        _ => (x0, y0),
     }
 }
 

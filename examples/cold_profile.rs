@@ -1,0 +1,82 @@
+//! Profiling driver for cold queries (issue 15): the chair_101 / human_10 bodies at one degree, the
+//! cold poses of `sublevel bench` (t ~ U[−2.5, 2.5]³, q = normalize(U[−1, 1]⁴), seed 7), each
+//! distance and growth query repeated; prints the median time per query and the iteration
+//! breakdown (separated vs overlapping answers). Run under `perf record -g` for the profile:
+//!
+//! ```text
+//! cargo build --release --example cold_profile
+//! target/release/examples/cold_profile 6 [repeats=200] [distance|growth|both]
+//! perf record -g target/release/examples/cold_profile 6 400 distance && perf report
+//! ```
+
+use rand::{Rng, SeedableRng};
+use std::time::Instant;
+use sublevel::math::{Isometry3, Real, UnitQuaternion, Vector3};
+use sublevel::query::{distance, growth, NewtonParams};
+use sublevel::Body;
+
+fn main() -> sublevel::Result<()> {
+    let args: Vec<String> = std::env::args().collect();
+    let degree: usize = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(6);
+    let repeats: usize = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(200);
+    let which = args.get(3).map(String::as_str).unwrap_or("both");
+    let dir = std::path::Path::new("tests/data");
+    let chair = Body::load(&dir.join(format!("chair_101.deg{degree}.json")))?;
+    let human = Body::load(&dir.join(format!("human_10.deg{degree}.json")))?;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    let poses: Vec<Isometry3> = (0..300)
+        .map(|_| {
+            let t = Vector3::new(rng.random_range(-2.5..2.5), rng.random_range(-2.5..2.5), rng.random_range(-2.5..2.5));
+            let q = nalgebra::Quaternion::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            );
+            Isometry3::from_parts(t.into(), UnitQuaternion::new_normalize(q))
+        })
+        .collect();
+    let id = Isometry3::identity();
+    let params = NewtonParams::default();
+    let (mut sep, mut ovl, mut it_sep, mut it_ovl, mut conv) = (0usize, 0usize, 0usize, 0usize, 0usize);
+    let mut hist = [0usize; 12];
+    let (mut td, mut tg) = (Vec::new(), Vec::new());
+    for p in &poses {
+        if which != "growth" {
+            let t = Instant::now();
+            let mut d = distance(&chair, p, &human, &id, None, &params);
+            for _ in 1..repeats {
+                d = std::hint::black_box(distance(&chair, p, &human, &id, None, &params));
+            }
+            td.push(t.elapsed().as_secs_f64() * 1e6 / repeats as Real);
+            conv += usize::from(d.status.converged());
+            hist[d.iterations.min(11)] += 1;
+            if d.overlapping {
+                ovl += 1;
+                it_ovl += d.iterations;
+            } else {
+                sep += 1;
+                it_sep += d.iterations;
+            }
+        }
+        if which != "distance" {
+            let t = Instant::now();
+            for _ in 0..repeats {
+                std::hint::black_box(growth(&chair, p, &human, &id, None, &params));
+            }
+            tg.push(t.elapsed().as_secs_f64() * 1e6 / repeats as Real);
+        }
+    }
+    let median = |mut v: Vec<Real>| {
+        v.sort_by(|a, b| a.total_cmp(b));
+        v.get(v.len() / 2).copied().unwrap_or(Real::NAN)
+    };
+    println!("2d = {degree}: distance cold median {:.3} µs, growth cold median {:.3} µs", median(td), median(tg));
+    println!(
+        "distance: {sep} separated ({:.2} it/query), {ovl} overlapping ({:.2} it/query), converged {conv}",
+        it_sep as Real / sep.max(1) as Real,
+        it_ovl as Real / ovl.max(1) as Real
+    );
+    println!("iterations histogram (0..=10, 11+): {hist:?}");
+    Ok(())
+}
