@@ -33,6 +33,10 @@
 //! their `serve` flag, blocking query solves wait for one of `max_concurrent_sdp` slots) and
 //! [`metrics`] (Prometheus counters and histograms, a span and an `x-request-id` per RPC).
 //!
+//! Deadlines: a call past the client's `grpc-timeout` (or the operator's `--max-request-ms`)
+//! answers DEADLINE_EXCEEDED, and the blocking query work it waited for is cancelled at the next
+//! Clarabel iteration or batch pair, freeing its SDP slot ([`deadline`]).
+//!
 //! # Adding an RPC
 //!
 //! 1. declare it with commented messages in `proto/sublevel/v1/sublevel.proto`;
@@ -42,6 +46,7 @@
 
 pub mod auth;
 pub mod convert;
+pub mod deadline;
 mod handlers;
 mod jobs;
 mod limits;
@@ -112,6 +117,10 @@ pub struct ServerConfig {
     /// Blocking SDP solves of queries (certificates, nonconvex scenes) running at once; the rest
     /// wait for a slot.
     pub max_concurrent_sdp: usize,
+    /// Longest time a `sublevel.v1` call may take (`--max-request-ms`); the shorter of it and the
+    /// client's `grpc-timeout` applies, and a call past it answers DEADLINE_EXCEEDED with its
+    /// blocking query work cancelled ([`deadline`]). `None`: only client deadlines apply.
+    pub max_request_time: Option<std::time::Duration>,
     /// Tolerances of every query.
     pub newton: NewtonParams,
     /// Settings of every fit (the degree comes from each request).
@@ -141,6 +150,7 @@ impl Default for ServerConfig {
             max_bodies: 10_000,
             max_instances_per_scene: 100_000,
             max_concurrent_sdp: 2,
+            max_request_time: None,
             newton: NewtonParams::default(),
             fit: FitSettings::default(),
             shutdown_grace: DEFAULT_SHUTDOWN_GRACE,
@@ -221,6 +231,7 @@ pub async fn serve_catalog(
     };
     let auth_on = config.auth.is_some();
     let auth = auth::AuthLayer::new(config.auth.clone());
+    let deadlines = deadline::DeadlineLayer::new(config.max_request_time);
     let builder = match &config.tls {
         None => tonic::transport::Server::builder(),
         Some(tls) => tonic::transport::Server::builder()
@@ -250,6 +261,7 @@ pub async fn serve_catalog(
         .layer(metrics::RpcLayer)
         .layer(status_layer::StatusLayer)
         .layer(auth)
+        .layer(deadlines)
         .add_service(health)
         .add_service(reflection)
         .add_service(reflection_v1alpha)
