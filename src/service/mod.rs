@@ -92,8 +92,11 @@ pub const KEEPALIVE_TIMEOUT: std::time::Duration = std::time::Duration::from_sec
 /// Server settings and request limits.
 #[derive(Clone, Debug)]
 pub struct ServerConfig {
-    /// Directory of the redb database (created if missing).
+    /// Directory of the redb database (created if missing); unused with [`Self::store_url`].
     pub data_dir: PathBuf,
+    /// `postgres://…` URL of a PostgreSQL store shared by several replicas (`--store`, feature
+    /// `postgres`; see `deploy/SCALING.md`); `None` keeps the embedded redb store in `data_dir`.
+    pub store_url: Option<String>,
     /// Largest encoded request or response, in bytes (tonic rejects larger messages with
     /// OUT_OF_RANGE before a handler runs).
     pub max_message_bytes: usize,
@@ -140,6 +143,7 @@ impl Default for ServerConfig {
     fn default() -> Self {
         Self {
             data_dir: PathBuf::from("./sublevel-data"),
+            store_url: None,
             max_message_bytes: 64 * 1024 * 1024,
             max_fit_points: 2_000_000,
             max_batch_pairs: 10_000,
@@ -160,14 +164,22 @@ impl Default for ServerConfig {
     }
 }
 
-/// Opens the catalog stored in `config.data_dir` (redb), creating it if missing.
+/// Opens the catalog stored in `config.data_dir` (redb), creating it if missing, or in the
+/// PostgreSQL database of `config.store_url`.
 ///
 /// # Errors
 /// [`Error::Io`] / [`Error::Storage`] when the database cannot be opened (e.g. another server
-/// holds it).
+/// holds it, PostgreSQL is unreachable); [`Error::InvalidArgument`] naming `--store` for a bad
+/// URL or a build without the `postgres` feature.
 pub fn open_catalog(config: &ServerConfig) -> Result<Arc<Catalog>> {
-    let store = RedbStore::open_dir(&config.data_dir)?;
-    let store = metrics::TimedStore::new(Box::new(store));
+    let store: Box<dyn crate::scene::store::Store> = match &config.store_url {
+        None => Box::new(RedbStore::open_dir(&config.data_dir)?),
+        #[cfg(feature = "postgres")]
+        Some(url) => Box::new(crate::scene::store::PostgresStore::connect(url)?),
+        #[cfg(not(feature = "postgres"))]
+        Some(_) => return Err(Error::invalid("--store", "this build has no PostgreSQL store (feature `postgres`)")),
+    };
+    let store = metrics::TimedStore::new(store);
     Ok(Arc::new(Catalog::open(Box::new(store), config.newton)?))
 }
 
