@@ -257,6 +257,10 @@ impl ConicBuilder {
 
     /// Solves with Clarabel (P = 0: every program here has a linear objective).
     ///
+    /// Inside a [`crate::fit::cancel::cancellable`] scope the solve stops at the end of the
+    /// interior-point iteration during which the scope's flag was set (status
+    /// `CallbackTerminated`, an unusable solution).
+    ///
     /// # Errors
     /// [`Error::Numerical`] when Clarabel rejects the problem data or settings. A solve that ends
     /// with a non-`Solved` status is not an error: the status is in the returned solution.
@@ -277,6 +281,11 @@ impl ConicBuilder {
         let p = CscMatrix::zeros((n, n));
         let mut solver = DefaultSolver::new(&p, &self.q, &a, &self.b, &self.cones, settings)
             .map_err(|e| Error::Numerical(format!("Clarabel rejected the problem: {e}")))?;
+        if let Some(flag) = crate::fit::cancel::current() {
+            // Inside a cancellation scope (a request whose deadline may pass): stop at the end of
+            // the current interior-point iteration once the flag is set (CallbackTerminated).
+            solver.set_termination_callback(move |_| flag.load(std::sync::atomic::Ordering::Relaxed));
+        }
         solver.solve();
         let sol = &solver.solution;
         Ok(ConicSolution {

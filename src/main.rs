@@ -34,6 +34,10 @@ enum Command {
     Chart(cli::chart::ChartArgs),
     /// Load-test a running server over gRPC: latency histograms, throughput, errors by status.
     Loadtest(cli::loadtest::LoadtestArgs),
+    /// Check a server's gRPC health (exit 0 when SERVING), for container healthchecks.
+    Health(cli::health::HealthArgs),
+    /// Scale-out test client: set up, route, move, check and load scenes through a sharding proxy.
+    ShardProbe(cli::shard_probe::ShardProbeArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -52,6 +56,8 @@ fn main() -> std::process::ExitCode {
         Command::FitTime(a) => cli::fit_time::run(a),
         Command::Chart(a) => cli::chart::run(a),
         Command::Loadtest(a) => cli::loadtest::run(a),
+        Command::Health(a) => cli::health::run(a),
+        Command::ShardProbe(a) => cli::shard_probe::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -79,6 +79,14 @@ pub struct OpsArgs {
     /// Blocking query solves (certificates, nonconvex scenes, large batches) running at once.
     #[arg(long, env = "SUBLEVEL_MAX_CONCURRENT_SDP", default_value_t = defaults().max_concurrent_sdp)]
     pub max_concurrent_sdp: usize,
+    /// Longest time of one call in milliseconds, whatever the client's deadline (past it:
+    /// DEADLINE_EXCEEDED, its query solves cancelled); 0 = only client deadlines apply.
+    #[arg(long, env = "SUBLEVEL_MAX_REQUEST_MS", default_value_t = 0)]
+    pub max_request_ms: u64,
+    /// Store: unset keeps the embedded redb database in --data-dir; `postgres://USER@HOST:PORT/DB`
+    /// shares bodies, scenes and jobs with other replicas (deploy/SCALING.md).
+    #[arg(long, env = "SUBLEVEL_STORE")]
+    pub store: Option<String>,
 }
 
 impl OpsArgs {
@@ -112,6 +120,9 @@ impl OpsArgs {
         config.max_concurrent_fits = self.max_concurrent_fits;
         config.max_fit_queue = self.max_fit_queue;
         config.max_concurrent_sdp = self.max_concurrent_sdp;
+        config.store_url = self.store.clone();
+        config.max_request_time =
+            (self.max_request_ms > 0).then(|| std::time::Duration::from_millis(self.max_request_ms));
         Ok(())
     }
 }

@@ -390,6 +390,8 @@ pub fn check_scene(
                 continue;
             }
         }
+        // An abandoned request (deadline passed) stops here, see `Catalog::batch`.
+        crate::fit::cancel::check()?;
         out.narrow_phase_solves += 1;
         let pair = QueryPair { kind: QueryKind::Distance, first: a.id.clone(), second: b.id.clone(), options, margin };
         let pa = Posed { body: a.body.clone(), pose: a.pose };

@@ -539,8 +539,8 @@ impl Sublevel for SublevelService {
         }
         let overrides = cv::poses_from_proto(&req.poses, self.config.max_poses_per_call)?;
         let catalog = self.catalog.clone();
-        // Up to n(n−1)/2 solves: off the async workers.
-        let check = blocking(move || {
+        // Up to n(n−1)/2 solves: off the async workers, cancelled with the request.
+        let check = limits::cancellable_blocking(move || {
             crate::scene::planner::check_scene(&catalog, &req.scene_id, req.margin, &req.instance_ids, &overrides)
         })
         .await?;

@@ -13,6 +13,7 @@
 //! of the blocking pool.
 
 use crate::{Error, Result};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use tokio::sync::Semaphore;
 use tonic::Status;
@@ -77,6 +78,12 @@ impl SdpSlots {
 
     /// Runs `f` on the blocking pool once a slot is free; the slot is held until `f` returns.
     ///
+    /// `f` runs in a [`crate::fit::cancel::cancellable`] scope whose flag is set when the returned
+    /// future is dropped before `f` finished (the request's deadline passed, the client went
+    /// away): Clarabel solves inside stop at their next iteration and batches before their next
+    /// pair (see [`super::deadline`]), so an abandoned request frees its slot at once instead of
+    /// finishing work nobody reads.
+    ///
     /// # Errors
     /// `f`'s error as a status; INTERNAL when the worker panicked.
     pub(crate) async fn run<T: Send + 'static>(
@@ -85,18 +92,50 @@ impl SdpSlots {
     ) -> Result<T, Status> {
         let permit =
             self.slots.clone().acquire_owned().await.map_err(|_| Status::unavailable("the server is shutting down"))?;
-        super::handlers::blocking(move || {
+        cancellable_blocking(move || {
             let _permit = permit;
             f()
         })
         .await
     }
+
+    /// Slots free right now (for tests and metrics).
+    #[cfg(test)]
+    pub(crate) fn available(&self) -> usize {
+        self.slots.available_permits()
+    }
+}
+
+/// Sets its flag when dropped (the future awaiting the work went away), unless disarmed.
+struct CancelOnDrop(Option<Arc<AtomicBool>>);
+
+impl Drop for CancelOnDrop {
+    fn drop(&mut self) {
+        if let Some(flag) = self.0.take() {
+            flag.store(true, Ordering::Relaxed);
+        }
+    }
+}
+
+/// Runs `f` on tokio's blocking pool inside a cancellation scope that is cancelled when the
+/// returned future is dropped before `f` returned (see [`SdpSlots::run`]).
+///
+/// # Errors
+/// `f`'s error as a status; INTERNAL when the worker panicked.
+pub(crate) async fn cancellable_blocking<T: Send + 'static>(
+    f: impl FnOnce() -> Result<T> + Send + 'static,
+) -> Result<T, Status> {
+    let flag = Arc::new(AtomicBool::new(false));
+    let mut guard = CancelOnDrop(Some(flag.clone()));
+    let out = super::handlers::blocking(move || crate::fit::cancel::cancellable(flag, f)).await;
+    guard.0 = None;
+    out
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::sync::atomic::{AtomicUsize, Ordering};
+    use std::sync::atomic::AtomicUsize;
 
     #[test]
     fn a_full_limit_names_its_flag_and_variable() {
@@ -134,5 +173,39 @@ mod tests {
             t.await.unwrap().unwrap();
         }
         assert_eq!(peak.load(Ordering::SeqCst), 2);
+    }
+
+    /// A dropped caller cancels its blocking work: the work sees the flag, returns early and its
+    /// slot is free again.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn dropping_the_caller_cancels_the_work_and_frees_the_slot() {
+        let slots = SdpSlots::new(1);
+        let (tx, rx) = std::sync::mpsc::channel();
+        let work = slots.run(move || {
+            let start = std::time::Instant::now();
+            while !crate::fit::cancel::is_cancelled() {
+                assert!(start.elapsed() < std::time::Duration::from_secs(10), "never cancelled");
+                std::thread::sleep(std::time::Duration::from_millis(1));
+            }
+            tx.send(start.elapsed()).unwrap();
+            Ok(())
+        });
+        let out = tokio::time::timeout(std::time::Duration::from_millis(30), work).await;
+        assert!(out.is_err(), "the work ran past the timeout");
+        let ran = tokio::task::spawn_blocking(move || rx.recv_timeout(std::time::Duration::from_secs(5)))
+            .await
+            .unwrap()
+            .expect("the work saw the cancel flag");
+        assert!(ran >= std::time::Duration::from_millis(25), "{ran:?}");
+        // The permit is released when the closure returns, just after it reported.
+        for _ in 0..500 {
+            if slots.available() == 1 {
+                break;
+            }
+            tokio::time::sleep(std::time::Duration::from_millis(2)).await;
+        }
+        assert_eq!(slots.available(), 1);
+        let after = slots.run(|| Ok(crate::fit::cancel::is_cancelled())).await.unwrap();
+        assert!(!after, "a new request starts uncancelled");
     }
 }

@@ -432,6 +432,9 @@ impl Store for TimedStore {
     fn quarantine(&self, table: &str, key: &str, reason: &str) -> Result<()> {
         self.timed("quarantine", |s| s.quarantine(table, key, reason))
     }
+    fn shared(&self) -> bool {
+        self.inner.shared()
+    }
     fn quarantined(&self) -> Result<Vec<QuarantinedRecord>> {
         self.inner.quarantined()
     }

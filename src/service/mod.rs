@@ -33,6 +33,10 @@
 //! their `serve` flag, blocking query solves wait for one of `max_concurrent_sdp` slots) and
 //! [`metrics`] (Prometheus counters and histograms, a span and an `x-request-id` per RPC).
 //!
+//! Deadlines: a call past the client's `grpc-timeout` (or the operator's `--max-request-ms`)
+//! answers DEADLINE_EXCEEDED, and the blocking query work it waited for is cancelled at the next
+//! Clarabel iteration or batch pair, freeing its SDP slot ([`deadline`]).
+//!
 //! # Adding an RPC
 //!
 //! 1. declare it with commented messages in `proto/sublevel/v1/sublevel.proto`;
@@ -42,6 +46,7 @@
 
 pub mod auth;
 pub mod convert;
+pub mod deadline;
 mod handlers;
 mod jobs;
 mod limits;
@@ -87,8 +92,11 @@ pub const KEEPALIVE_TIMEOUT: std::time::Duration = std::time::Duration::from_sec
 /// Server settings and request limits.
 #[derive(Clone, Debug)]
 pub struct ServerConfig {
-    /// Directory of the redb database (created if missing).
+    /// Directory of the redb database (created if missing); unused with [`Self::store_url`].
     pub data_dir: PathBuf,
+    /// `postgres://…` URL of a PostgreSQL store shared by several replicas (`--store`, feature
+    /// `postgres`; see `deploy/SCALING.md`); `None` keeps the embedded redb store in `data_dir`.
+    pub store_url: Option<String>,
     /// Largest encoded request or response, in bytes (tonic rejects larger messages with
     /// OUT_OF_RANGE before a handler runs).
     pub max_message_bytes: usize,
@@ -112,6 +120,10 @@ pub struct ServerConfig {
     /// Blocking SDP solves of queries (certificates, nonconvex scenes) running at once; the rest
     /// wait for a slot.
     pub max_concurrent_sdp: usize,
+    /// Longest time a `sublevel.v1` call may take (`--max-request-ms`); the shorter of it and the
+    /// client's `grpc-timeout` applies, and a call past it answers DEADLINE_EXCEEDED with its
+    /// blocking query work cancelled ([`deadline`]). `None`: only client deadlines apply.
+    pub max_request_time: Option<std::time::Duration>,
     /// Tolerances of every query.
     pub newton: NewtonParams,
     /// Settings of every fit (the degree comes from each request).
@@ -131,6 +143,7 @@ impl Default for ServerConfig {
     fn default() -> Self {
         Self {
             data_dir: PathBuf::from("./sublevel-data"),
+            store_url: None,
             max_message_bytes: 64 * 1024 * 1024,
             max_fit_points: 2_000_000,
             max_batch_pairs: 10_000,
@@ -141,6 +154,7 @@ impl Default for ServerConfig {
             max_bodies: 10_000,
             max_instances_per_scene: 100_000,
             max_concurrent_sdp: 2,
+            max_request_time: None,
             newton: NewtonParams::default(),
             fit: FitSettings::default(),
             shutdown_grace: DEFAULT_SHUTDOWN_GRACE,
@@ -150,14 +164,22 @@ impl Default for ServerConfig {
     }
 }
 
-/// Opens the catalog stored in `config.data_dir` (redb), creating it if missing.
+/// Opens the catalog stored in `config.data_dir` (redb), creating it if missing, or in the
+/// PostgreSQL database of `config.store_url`.
 ///
 /// # Errors
 /// [`Error::Io`] / [`Error::Storage`] when the database cannot be opened (e.g. another server
-/// holds it).
+/// holds it, PostgreSQL is unreachable); [`Error::InvalidArgument`] naming `--store` for a bad
+/// URL or a build without the `postgres` feature.
 pub fn open_catalog(config: &ServerConfig) -> Result<Arc<Catalog>> {
-    let store = RedbStore::open_dir(&config.data_dir)?;
-    let store = metrics::TimedStore::new(Box::new(store));
+    let store: Box<dyn crate::scene::store::Store> = match &config.store_url {
+        None => Box::new(RedbStore::open_dir(&config.data_dir)?),
+        #[cfg(feature = "postgres")]
+        Some(url) => Box::new(crate::scene::store::PostgresStore::connect(url)?),
+        #[cfg(not(feature = "postgres"))]
+        Some(_) => return Err(Error::invalid("--store", "this build has no PostgreSQL store (feature `postgres`)")),
+    };
+    let store = metrics::TimedStore::new(store);
     Ok(Arc::new(Catalog::open(Box::new(store), config.newton)?))
 }
 
@@ -221,6 +243,7 @@ pub async fn serve_catalog(
     };
     let auth_on = config.auth.is_some();
     let auth = auth::AuthLayer::new(config.auth.clone());
+    let deadlines = deadline::DeadlineLayer::new(config.max_request_time);
     let builder = match &config.tls {
         None => tonic::transport::Server::builder(),
         Some(tls) => tonic::transport::Server::builder()
@@ -250,6 +273,7 @@ pub async fn serve_catalog(
         .layer(metrics::RpcLayer)
         .layer(status_layer::StatusLayer)
         .layer(auth)
+        .layer(deadlines)
         .add_service(health)
         .add_service(reflection)
         .add_service(reflection_v1alpha)

@@ -277,7 +277,49 @@ impl Catalog {
     /// # Errors
     /// [`Error::NotFound`] (kind `body`).
     pub fn body(&self, id: &str) -> Result<Arc<BodyEntry>> {
-        read(&self.bodies).get(id).cloned().ok_or_else(|| Error::not_found("body", id))
+        if let Some(entry) = read(&self.bodies).get(id).cloned() {
+            return Ok(entry);
+        }
+        self.load_body(id)?.ok_or_else(|| Error::not_found("body", id))
+    }
+
+    /// A body another replica stored in a shared store ([`Store::shared`]) since this catalog
+    /// was opened, now held here too; `None` when the store has none (or is not shared).
+    fn load_body(&self, id: &str) -> Result<Option<Arc<BodyEntry>>> {
+        if !self.store.shared() {
+            return Ok(None);
+        }
+        let Some(rec) = self.store.get_body(id)? else { return Ok(None) };
+        let body = Body::from_file(rec.body).map_err(|e| Error::Storage(format!("stored body `{id}`: {e}")))?;
+        let entry = Arc::new(BodyEntry { id: id.to_owned(), name: rec.name, body: Arc::new(body) });
+        Ok(Some(write(&self.bodies).entry(id.to_owned()).or_insert(entry).clone()))
+    }
+
+    /// A scene written by another replica to a shared store ([`Store::shared`]), loaded with its
+    /// instances (scale-out: the replica that owns a scene loads it on first use, see
+    /// `deploy/SCALING.md`); `None` when the store has none (or is not shared).
+    fn load_scene(&self, id: &str) -> Result<Option<Arc<Mutex<SceneState>>>> {
+        if !self.store.shared() {
+            return Ok(None);
+        }
+        let Some(rec) = self.store.get_scene(id)? else { return Ok(None) };
+        let mut instances = BTreeMap::new();
+        for (iid, inst) in rec.instances {
+            let (Ok(entry), Ok(pose)) = (self.body(&inst.body_id), inst.pose.to_isometry("pose")) else {
+                tracing::warn!(scene_id = %id, instance_id = %iid, "skipping an instance that does not load");
+                continue;
+            };
+            instances.insert(iid, Instance { body_id: inst.body_id, body: entry.body.clone(), pose });
+        }
+        let state = SceneState {
+            id: id.to_owned(),
+            name: rec.meta.name,
+            instances,
+            cache: WarmStartCache::default(),
+            deleted: false,
+        };
+        tracing::info!(scene_id = %id, "scene loaded from the shared store");
+        Ok(Some(write(&self.scenes).entry(id.to_owned()).or_insert_with(|| Arc::new(Mutex::new(state))).clone()))
     }
 
     /// All bodies, ordered by id.
@@ -334,7 +376,10 @@ impl Catalog {
 
     /// The scene `id` (its lock not taken; see [`Catalog::with_scene`]).
     fn scene(&self, id: &str) -> Result<Arc<Mutex<SceneState>>> {
-        read(&self.scenes).get(id).cloned().ok_or_else(|| Error::not_found("scene", id))
+        if let Some(scene) = read(&self.scenes).get(id).cloned() {
+            return Ok(scene);
+        }
+        self.load_scene(id)?.ok_or_else(|| Error::not_found("scene", id))
     }
 
     /// Locks a live scene (one that was not deleted meanwhile).
@@ -387,7 +432,10 @@ impl Catalog {
     /// # Errors
     /// [`Error::NotFound`] for the scene or the body; [`Error::Storage`].
     pub fn add_instance(&self, scene_id: &str, body_id: &str, pose: Isometry3) -> Result<String> {
-        // Hold the bodies lock so the body cannot be deleted between the check and the insert.
+        // Load it first if another replica stored it (shared store); then hold the bodies lock
+        // so the body cannot be deleted between the check and the insert.
+        self.body(body_id)?;
+        self.scene(scene_id)?;
         let bodies = read(&self.bodies);
         let body = bodies.get(body_id).ok_or_else(|| Error::not_found("body", body_id))?.body.clone();
         self.with_scene(scene_id, |s| {

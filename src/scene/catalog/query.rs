@@ -262,6 +262,9 @@ impl Catalog {
     /// lock:    write the new warm starts back (those of instances still in the scene)
     /// ```
     ///
+    /// Inside a cancelled [`crate::fit::cancel::cancellable`] scope it stops before the next pair
+    /// with [`Error::Cancelled`] (a running certificate SDP stops at its next iteration).
+    ///
     /// Two requests of one scene solve in parallel; a concurrent pose change is seen by the next
     /// request, never halfway through this one. Warm starts are copied as `Arc`s (no 1 KB copies).
     ///
@@ -289,13 +292,16 @@ impl Catalog {
             (posed_by_id, scratch)
         };
         let params = self.certify_params();
-        let answers = pairs
-            .iter()
-            .map(|p| {
-                let (a, b) = (&posed_by_id[p.first], &posed_by_id[p.second]);
-                planner::answer_pair(*p, a, b, &mut scratch, &params)
-            })
-            .collect();
+        let mut answers = Vec::with_capacity(pairs.len());
+        for p in pairs {
+            if crate::fit::cancel::is_cancelled() {
+                // The caller abandoned the request (its deadline passed): stop before the next
+                // pair and leave the warm starts as they were.
+                return Err(Error::Cancelled(format!("query of scene `{scene_id}` abandoned by its caller")));
+            }
+            let (a, b) = (&posed_by_id[p.first], &posed_by_id[p.second]);
+            answers.push(planner::answer_pair(*p, a, b, &mut scratch, &params));
+        }
         if !scratch.is_empty() {
             let mut s = lock(&scene);
             if !s.deleted {

@@ -1,5 +1,7 @@
-//! The persistent store behind a trait, its redb implementation ([`RedbStore`], feature `store`)
-//! and an in-memory one ([`MemoryStore`]).
+//! The persistent store behind a trait, its redb implementation ([`RedbStore`], feature `store`,
+//! the single-node default), a PostgreSQL one shared by the replicas of a scale-out deployment
+//! (`PostgresStore`, feature `postgres`, see `deploy/SCALING.md`) and an in-memory one
+//! ([`MemoryStore`]).
 //!
 //! Three tables of JSON values keyed by id:
 //!
@@ -29,8 +31,14 @@
 use super::{BodyRecord, InstanceRecord, JobRecord, SceneMeta, SceneRecord};
 use crate::{Error, Result};
 
+#[cfg(all(test, feature = "store"))]
+pub(crate) mod conformance;
 mod memory;
 pub use memory::MemoryStore;
+#[cfg(feature = "postgres")]
+mod postgres_store;
+#[cfg(feature = "postgres")]
+pub use postgres_store::PostgresStore;
 #[cfg(feature = "store")]
 mod redb_store;
 #[cfg(feature = "store")]
@@ -131,6 +139,12 @@ pub trait Store: Send + Sync {
     /// [`Error::Storage`] when the database fails.
     fn quarantined(&self) -> Result<Vec<QuarantinedRecord>> {
         Ok(Vec::new())
+    }
+    /// Whether other processes write this store too (replicas sharing one database): the
+    /// catalog then looks up a body or scene it does not hold in the store before it answers
+    /// NOT_FOUND. The default (an embedded store) is false.
+    fn shared(&self) -> bool {
+        false
     }
     /// Deletes the instances `remove` of one scene and inserts `add`, in one transaction (used to
     /// replace grouped instances by their containing body, paper §V).

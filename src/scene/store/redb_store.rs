@@ -379,6 +379,13 @@ mod tests {
         }
     }
 
+    /// The store checks every store passes (`conformance::check_store`), reopening the file.
+    #[test]
+    fn redb_store_passes_the_store_checks() {
+        let dir = tempfile::tempdir().unwrap();
+        crate::scene::store::conformance::check_store(&|| Box::new(RedbStore::open_dir(dir.path()).unwrap()));
+    }
+
     #[test]
     fn redb_round_trip_survives_reopen_and_scopes_instances_by_scene() {
         let dir = tempfile::tempdir().unwrap();

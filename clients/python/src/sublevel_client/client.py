@@ -37,6 +37,9 @@ from .types import (
 
 __all__ = ["Client", "PlannerStream", "Query", "DEFAULT_ADDR"]
 
+# Metadata key naming the scene of a call, for scene-sharding proxies (deploy/SCALING.md).
+SCENE_ID_HEADER = "x-scene-id"
+
 #: The demo server's address (``cargo run --release -- serve --demo``).
 DEFAULT_ADDR = "127.0.0.1:50051"
 
@@ -249,8 +252,14 @@ class Client:
             raise SublevelError(grpc.StatusCode.UNAVAILABLE, f"no server at {self.addr} after {timeout} s") from None
 
     def _call(self, method: str, request: Any, timeout: Optional[float] = None) -> Any:
+        # Scale-out routing (deploy/SCALING.md): a proxy sends every call of a scene to the replica
+        # that owns it by the `x-scene-id` header; servers ignore it.
+        scene = getattr(request, "scene_id", "")
+        metadata = ((SCENE_ID_HEADER, scene),) if scene else None
         try:
-            return getattr(self.stub, method)(request, timeout=self.timeout if timeout is None else timeout)
+            return getattr(self.stub, method)(
+                request, timeout=self.timeout if timeout is None else timeout, metadata=metadata
+            )
         except grpc.RpcError as e:
             raise SublevelError.from_rpc_error(e) from None
 
@@ -459,7 +468,9 @@ class PlannerStream:
         self._error: Optional[BaseException] = None
         self._closed = False
         try:
-            self._responses = client.stub.QueryStream(self._request_iterator(), timeout=timeout)
+            self._responses = client.stub.QueryStream(
+                self._request_iterator(), timeout=timeout, metadata=((SCENE_ID_HEADER, scene),)
+            )
         except grpc.RpcError as e:  # pragma: no cover (the call starts lazily)
             raise SublevelError.from_rpc_error(e) from None
 
