@@ -86,6 +86,25 @@ impl BodyTree for Body {
     }
 }
 
+/// A compound body (issue 14 part 1) is the containment tree its nodes describe.
+impl BodyTree for crate::compound::CompoundBody {
+    fn root(&self) -> usize {
+        crate::compound::CompoundBody::root(self)
+    }
+    fn node_count(&self) -> usize {
+        crate::compound::CompoundBody::node_count(self)
+    }
+    fn body(&self, node: usize) -> &Body {
+        crate::compound::CompoundBody::body(self, node)
+    }
+    fn children(&self, node: usize) -> &[usize] {
+        crate::compound::CompoundBody::children(self, node)
+    }
+    fn depth(&self, node: usize) -> usize {
+        crate::compound::CompoundBody::depth(self, node)
+    }
+}
+
 /// Checks the structure of a tree: at least one node, the root in range with depth 0, every child
 /// index in range with depth = parent's depth + 1 (so the structure has no cycles), every node
 /// reached from the root exactly once.
