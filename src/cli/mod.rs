@@ -4,6 +4,7 @@ pub mod bench;
 pub mod chart;
 pub mod csv_file;
 pub mod fit;
+pub mod fit_compound;
 pub mod fit_time;
 pub mod group;
 pub mod loadtest;
