@@ -5,6 +5,7 @@ pub mod chart;
 pub mod chart_compound;
 pub mod csv_file;
 pub mod fit;
+pub mod fit_compound;
 pub mod fit_time;
 pub mod group;
 pub mod loadtest;

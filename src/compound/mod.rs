@@ -19,17 +19,28 @@
 //!
 //! A single [`Body`] is a one-node tree ([`CompoundBody::single`]); [`CompoundBody::load`] reads a
 //! compound file or a single-body file. The file format is [`CompoundFile`].
+//!
+//! Files: [`decompose`] (VHACD parts of whole triangles), [`build`] (leaf fits, the tree, the
+//! part-count search: [`fit_compound`]), [`surface`] (the excess), [`check`] (every triangle
+//! covered), [`file`] (JSON).
 
 use crate::body::Body;
 use crate::math::Real;
 use crate::Result;
 use std::path::Path;
 
+pub mod build;
+pub mod check;
+pub mod decompose;
 pub mod file;
+pub mod surface;
 
+#[cfg(test)]
+mod build_tests;
 #[cfg(test)]
 mod tests;
 
+pub use build::{fit_compound, CompoundSettings, PartCount};
 pub use file::{CompoundFile, CompoundNodeFile, COMPOUND_FORMAT};
 
 /// One node of a compound body's containment tree.
@@ -201,12 +212,13 @@ impl CompoundBody {
         }
     }
 
-    /// Writes the compound file (pretty JSON, [`CompoundFile`]).
+    /// Writes the compound file ([`CompoundFile`], compact JSON: a tree of 31 degree-6 nodes is
+    /// ~0.2 MB compact against ~1 MB pretty).
     ///
     /// # Errors
     /// [`crate::Error::Io`] or [`crate::Error::Json`] (e.g. a report figure that is not finite).
     pub fn save(&self, path: &Path) -> Result<()> {
-        std::fs::write(path, serde_json::to_string_pretty(&self.to_file())?)?;
+        std::fs::write(path, serde_json::to_string(&self.to_file())?)?;
         Ok(())
     }
 }
