@@ -16,7 +16,8 @@
 //!   grouped into a containment tree of bodies (paper §V), with its file format.
 //! - [`fit`]: fitting bodies to point clouds with Clarabel (paper §III), mesh loading.
 //! - [`query`]: distance and growth queries by warm-started Newton / active-set methods, and
-//!   their level-0 sos certificates (paper §IV-A, §IV-B).
+//!   their level-0 sos certificates (paper §IV-A, §IV-B); `query::tree`: the same queries between
+//!   containment trees (compound bodies) by branch and bound (paper §V).
 //! - [`scene`]: scenes of posed instances, warm-start caches, the persistent store.
 //! - [`service`]: the gRPC API (`sublevel.v1`); the only module that knows tonic.
 //!

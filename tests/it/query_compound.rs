@@ -75,3 +75,41 @@ fn single_body_files_are_answered_as_before() {
     assert!((v["distance"].as_f64().unwrap() - 0.7).abs() < 1e-9, "{v}");
     assert_eq!(v["source"], "Newton");
 }
+
+/// The bundled compound fits of data/compound (chair and human, fitted on branch `cfit`): the tree
+/// answer equals the brute-force minimum over all leaf pairs, and margin queries agree with it.
+#[test]
+fn bundled_compound_bodies_match_brute_force_over_leaf_pairs() {
+    use rand::{Rng, SeedableRng};
+    use sublevel::math::{Isometry3, UnitQuaternion, Vector3};
+    use sublevel::query::tree::{tree_closer_than, tree_distance, TreeQueryParams};
+    use sublevel::query::{distance, NewtonParams};
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("data/compound");
+    let chair = CompoundBody::load(&root.join("chair_101.json")).expect("data/compound/chair_101.json");
+    let human = CompoundBody::load(&root.join("human_10.json")).expect("data/compound/human_10.json");
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+    let id = Isometry3::identity();
+    let params = TreeQueryParams::default();
+    for case in 0..30 {
+        let t = Vector3::new(rng.random_range(-1.5..1.5), rng.random_range(-1.5..1.5), rng.random_range(-1.5..1.5));
+        let q = UnitQuaternion::from_euler_angles(rng.random(), rng.random(), rng.random());
+        let pose = Isometry3::from_parts(t.into(), q);
+        let mut brute = f64::INFINITY;
+        for i in chair.leaves() {
+            for j in human.leaves() {
+                let r = distance(chair.body(i), &pose, human.body(j), &id, None, &NewtonParams::default());
+                assert!(r.status.converged(), "case {case}: leaf pair ({i}, {j})");
+                brute = brute.min(r.distance);
+            }
+        }
+        let r = tree_distance(&chair, &pose, &human, &id, None, &params).unwrap();
+        assert!(r.converged, "case {case}");
+        assert!((r.lower - brute).abs() < 1e-7 && (r.upper - brute).abs() < 1e-7, "case {case}: {r:?} vs {brute}");
+        for m in [0.0, 0.05, 0.3] {
+            let c = tree_closer_than(&chair, &pose, &human, &id, m, None, &params).unwrap();
+            if (brute - m).abs() > 1e-7 {
+                assert_eq!(c.closer, brute < m, "case {case} margin {m}: brute {brute}");
+            }
+        }
+    }
+}

@@ -363,12 +363,12 @@ impl<'t, A: BodyTree + ?Sized, B: BodyTree + ?Sized> Search<'t, A, B> {
                 self.unresolved_min = self.unresolved_min.min(e.lower);
                 return e.lower;
             }
-            let children: Vec<(usize, usize)> = if split_a(self.a, e.a, self.b, e.b) {
-                self.a.children(e.a).iter().map(|&c| (c, e.b)).collect()
-            } else {
-                self.b.children(e.b).iter().map(|&c| (e.a, c)).collect()
-            };
-            for (ca, cb) in children {
+            // The trees outlive `self`'s borrow: iterate their child slices without copying them.
+            let (a, b) = (self.a, self.b);
+            let split = split_a(a, e.a, b, e.b);
+            let children = if split { a.children(e.a) } else { b.children(e.b) };
+            for &c in children {
+                let (ca, cb) = if split { (c, e.b) } else { (e.a, c) };
                 self.visit(ca, cb, e.lower);
                 if self.decided() {
                     break;
