@@ -5,8 +5,8 @@
 //! Query times are medians over poses of the mean of `--repeats` back-to-back calls on the same
 //! input (a warm call reuses the previous pose's warm start, so repeating it is the same work).
 
-use super::coal_peer::CoalFigures;
 use super::csv_file::CsvFile;
+use super::peer_coal::CoalFigures;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::sync::Arc;

@@ -4,7 +4,11 @@
 //! ```text
 //! speed-accuracy   x = median cold distance-query time (µs, log scale), y = |distance − exact
 //!                  mesh–mesh distance| (mean and max over the separated poses, meters); one point
-//!                  per model: sos-convex 2d = 2/4/6/8, convex hull (parry GJK), [+ baselines]
+//!                  per model: sos-convex 2d = 2/4/6/8, convex hull (parry GJK), [+ baselines],
+//!                  compound models (`--compound CHAIR:HUMAN`, per `--bound-tolerances`), and the
+//!                  coal peers (`--peer coal.txt`: hull GJK, exact mesh BVH); the table adds the
+//!                  median warm time (smooth motion), the conservative share (answers ≤ exact)
+//!                  and, for compound models, the level histogram of the margin query
 //! tolerance        x = Newton KKT tolerance 1e-4 … 1e-12 (log), y = median time and the error
 //!                  against the tolerance-1e-12 answer, per degree
 //! ```
@@ -12,8 +16,12 @@
 //! A model is a [`ModelRow`] (name, time, errors); adding one is adding a row (see
 //! [`extra_model_rows`], which holds the sphere, oriented-box and relaxed-convexity models).
 
-use super::bench::{cold_poses, error_stats, load_off_mesh, load_or_fit_pair, median, time_us, PeerShapes};
+use super::bench::{
+    cold_poses, error_stats, load_off_mesh, load_or_fit_pair, median, motion_poses, time_us, PeerShapes,
+};
+use super::chart_compound::{compound_rows, conservative_share, CompoundPair};
 use super::csv_file::CsvFile;
+use super::peer_coal::CoalPeer;
 use plotters::prelude::*;
 use sublevel::fit::mesh::load_points;
 use sublevel::math::{Isometry3, Real};
@@ -64,6 +72,23 @@ struct CommonArgs {
     /// PNG output.
     #[arg(long)]
     png: Option<std::path::PathBuf>,
+    /// Speed-accuracy: a compound model pair `CHAIR.json:HUMAN.json` (files of `sublevel fit
+    /// --parts`; either may be a single body); repeat for several part counts.
+    #[arg(long)]
+    compound: Vec<String>,
+    /// Speed-accuracy: query tolerances (upper − lower, meters) of the compound models.
+    #[arg(long, default_value = "0", value_delimiter = ',')]
+    bound_tolerances: Vec<f64>,
+    /// Speed-accuracy: margin of the "closer than m?" query whose level histogram is reported (m).
+    #[arg(long, default_value_t = 0.05)]
+    margin: f64,
+    /// Speed-accuracy: steps of the smooth motion for the warm times (as `sublevel bench`).
+    #[arg(long, default_value_t = 200)]
+    motion: usize,
+    /// Speed-accuracy: output of the shared coal peer benchmark (`bash ../shared/peers/coal/run.sh
+    /// > coal.txt`): its hull GJK and exact mesh BVH rows are added.
+    #[arg(long)]
+    peer: Option<std::path::PathBuf>,
 }
 
 /// One model of the speed-accuracy chart.
@@ -73,10 +98,17 @@ pub struct ModelRow {
     pub name: String,
     /// Median cold distance-query time in microseconds.
     pub time_us: Real,
+    /// Median warm distance-query time along the smooth motion (µs); NaN when not measured.
+    pub warm_us: Real,
     /// Mean |distance − exact| over separated poses (meters).
     pub err_mean: Real,
     /// Max |distance − exact| over separated poses (meters).
     pub err_max: Real,
+    /// Share of answers ≤ the exact mesh distance over all poses (1 = conservative); NaN when not
+    /// measured.
+    pub conservative: Real,
+    /// Compound models: how many margin queries were decided at tree level 0, 1, …
+    pub levels: Option<Vec<usize>>,
 }
 
 /// The baseline models of Table 1 and the relaxed-convexity body, timed and scored on `poses`
@@ -102,7 +134,16 @@ pub fn extra_model_rows(
     let mut rows = Vec::new();
     let score = |name: &str, times: Vec<Real>, dists: Vec<Real>| {
         let (err_mean, err_max) = error_stats(&dists, exact);
-        ModelRow { name: name.into(), time_us: median(times), err_mean, err_max }
+        let conservative = conservative_share(&dists, exact);
+        ModelRow {
+            name: name.into(),
+            time_us: median(times),
+            warm_us: Real::NAN,
+            err_mean,
+            err_max,
+            conservative,
+            levels: None,
+        }
     };
 
     let (ball_a, ball_b) = (min_enclosing_ball(chair, 1)?, min_enclosing_ball(human, 1)?);
@@ -198,6 +239,8 @@ fn speed_accuracy(a: &CommonArgs) -> Result<()> {
     eprintln!("exact mesh–mesh distances at {} poses", poses.len());
     let exact: Vec<Real> = poses.iter().map(|p| peers.mesh_distance(p, &id)).collect();
     let params = NewtonParams::default();
+    let motion = motion_poses(a.motion);
+    let compound: Vec<CompoundPair> = a.compound.iter().map(|c| CompoundPair::load(c)).collect::<Result<_>>()?;
     let mut rows = Vec::new();
     for &degree in &a.degrees {
         let (chair, human) = load_or_fit_pair(&a.bodies, degree, &chair_pts, &human_pts)?;
@@ -208,9 +251,27 @@ fn speed_accuracy(a: &CommonArgs) -> Result<()> {
             times.push(us);
             dists.push(r.distance);
         }
+        let mut warm = Vec::new();
+        let mut state = None;
+        for (k, p) in motion.iter().enumerate() {
+            let (us, r) = time_us(a.repeats, || distance(&chair, p, &human, &id, state.as_deref(), &params));
+            if k > 0 {
+                warm.push(us);
+            }
+            state = Some(r.warm_start);
+        }
         let (err_mean, err_max) = error_stats(&dists, &exact);
-        rows.push(ModelRow { name: format!("sos 2d={degree}"), time_us: median(times), err_mean, err_max });
+        rows.push(ModelRow {
+            name: format!("sos 2d={degree}"),
+            time_us: median(times),
+            warm_us: median(warm),
+            err_mean,
+            err_max,
+            conservative: conservative_share(&dists, &exact),
+            levels: None,
+        });
     }
+    rows.extend(compound_rows(&compound, &a.bound_tolerances, a.margin, &poses, &motion, &exact, a.repeats)?);
     let mut times = Vec::new();
     let mut dists = Vec::new();
     for p in &poses {
@@ -218,24 +279,80 @@ fn speed_accuracy(a: &CommonArgs) -> Result<()> {
         times.push(us);
         dists.push(d);
     }
+    let mut warm = Vec::new();
+    let mut dir = parry3d_f64::math::Vector::ZERO;
+    for (k, p) in motion.iter().enumerate() {
+        let mut d = dir;
+        let (us, _) = time_us(a.repeats, || {
+            d = dir;
+            peers.hull_distance_warm(p, &id, &mut d)
+        });
+        dir = d;
+        if k > 0 {
+            warm.push(us);
+        }
+    }
     let (err_mean, err_max) = error_stats(&dists, &exact);
-    rows.push(ModelRow { name: "hull (parry GJK)".into(), time_us: median(times), err_mean, err_max });
+    rows.push(ModelRow {
+        name: "hull (parry GJK)".into(),
+        time_us: median(times),
+        warm_us: median(warm),
+        err_mean,
+        err_max,
+        conservative: conservative_share(&dists, &exact),
+        levels: None,
+    });
+    let mesh_us = median(poses.iter().map(|p| time_us(1, || peers.mesh_distance(p, &id)).0).collect());
+    rows.push(ModelRow {
+        name: "mesh (parry BVH)".into(),
+        time_us: mesh_us,
+        warm_us: Real::NAN,
+        err_mean: 0.0,
+        err_max: 0.0,
+        conservative: 1.0,
+        levels: None,
+    });
+    if let Some(path) = &a.peer {
+        rows.extend(coal_rows(&CoalPeer::load(path)?));
+    }
     rows.extend(extra_model_rows(&chair_pts, &human_pts, &poses, &exact, a.repeats)?);
 
     let n_sep = exact.iter().filter(|d| **d > 0.0).count();
     println!("speed vs accuracy: chair_101 vs human_10, {n_sep} separated of {} poses", poses.len());
-    println!("{:>18} {:>12} {:>14} {:>14}", "model", "median µs", "err mean [m]", "err max [m]");
+    println!(
+        "{:>30} {:>10} {:>10} {:>13} {:>13} {:>7}  margin {} m levels",
+        "model", "cold µs", "warm µs", "err mean [m]", "err max [m]", "≤exact", a.margin
+    );
     for r in &rows {
-        println!("{:>18} {:>12.2} {:>14.5} {:>14.5}", r.name, r.time_us, r.err_mean, r.err_max);
+        let levels = r.levels.as_ref().map_or(String::new(), |l| format!("{l:?}"));
+        println!(
+            "{:>30} {:>10.2} {:>10.2} {:>13.5} {:>13.5} {:>6.1}%  {levels}",
+            r.name,
+            r.time_us,
+            r.warm_us,
+            r.err_mean,
+            r.err_max,
+            100.0 * r.conservative
+        );
     }
     if let Some(path) = &a.csv {
-        let mut csv = CsvFile::create(path, &["model", "median_us", "err_mean_m", "err_max_m"])?;
+        let mut csv = CsvFile::create(
+            path,
+            &["model", "median_us", "warm_us", "err_mean_m", "err_max_m", "conservative", "margin_levels"],
+        )?;
         for r in &rows {
+            let levels = r
+                .levels
+                .as_ref()
+                .map_or(String::new(), |l| l.iter().map(|c| c.to_string()).collect::<Vec<_>>().join(" "));
             csv.record([
                 r.name.clone(),
                 format!("{:.4}", r.time_us),
+                format!("{:.4}", r.warm_us),
                 format!("{:.6}", r.err_mean),
                 format!("{:.6}", r.err_max),
+                format!("{:.4}", r.conservative),
+                levels,
             ])?;
         }
         eprintln!("wrote {}", csv.finish()?.display());
@@ -252,6 +369,31 @@ fn speed_accuracy(a: &CommonArgs) -> Result<()> {
         )?;
     }
     Ok(())
+}
+
+/// The coal peer rows (from its own output, its own poses; see [`CoalPeer`]): hull GJK (cold, warm,
+/// mean error) and the exact mesh BVH (cold; error 0 by definition).
+fn coal_rows(peer: &CoalPeer) -> Vec<ModelRow> {
+    vec![
+        ModelRow {
+            name: "hull (coal GJK)".into(),
+            time_us: peer.get("hull_gjk_cold_us"),
+            warm_us: peer.get("hull_gjk_warm_us"),
+            err_mean: peer.get("hull_err_mean"),
+            err_max: Real::NAN,
+            conservative: 1.0,
+            levels: None,
+        },
+        ModelRow {
+            name: "mesh (coal BVH)".into(),
+            time_us: peer.get("mesh_bvh_cold_us"),
+            warm_us: Real::NAN,
+            err_mean: 0.0,
+            err_max: 0.0,
+            conservative: 1.0,
+            levels: None,
+        },
+    ]
 }
 
 /// Tolerances of the tolerance chart.

@@ -2,6 +2,10 @@
 //! write its JSON body file. Progress (stage and Clarabel iteration) goes to stderr, a one-line
 //! summary to stdout. `--degree auto --volume-tolerance τ` fits 2, 4, 6, 8 in turn and keeps the
 //! lowest degree within τ of the next one (see [`sublevel::fit::auto`]).
+//!
+//! With `--parts N|auto` the mesh (OFF, with faces) becomes a compound body instead: a convex
+//! decomposition fitted part by part under a containment tree (see [`super::fit_compound`] and
+//! [`sublevel::compound`]); `--tolerance T` is then the leaf-excess tolerance in meters.
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -60,9 +64,27 @@ pub struct FitArgs {
     /// Seed of the volume estimate.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Clarabel's gap and feasibility tolerance (see `FitSettings::solver_tolerance`).
-    #[arg(long, default_value_t = 1e-6)]
-    pub tolerance: f64,
+    /// With --parts: the leaf-excess tolerance T in meters (`--parts auto` keeps the fewest parts
+    /// whose max leaf excess is ≤ T, and each part the lowest degree within T). Without --parts:
+    /// Clarabel's gap tolerance, as before (same as --solver-tolerance).
+    #[arg(long)]
+    pub tolerance: Option<f64>,
+    /// Clarabel's gap and feasibility tolerance (see `FitSettings::solver_tolerance`; default 1e-6).
+    #[arg(long)]
+    pub solver_tolerance: Option<f64>,
+    /// Fit a compound body: at most N convex parts (VHACD), or `auto` (needs --tolerance). The
+    /// mesh must be an OFF file with faces. Without it, one body is fitted as before.
+    #[arg(long)]
+    pub parts: Option<String>,
+    /// With --parts: boundary samples per node for the excess (one-sided Hausdorff, meters).
+    #[arg(long, default_value_t = sublevel::compound::surface::DEFAULT_EXCESS_SAMPLES)]
+    pub excess_samples: usize,
+    /// With --parts: VHACD voxel resolution.
+    #[arg(long, default_value_t = sublevel::compound::decompose::DEFAULT_RESOLUTION)]
+    pub resolution: u32,
+    /// With --parts: degree 2d of the parent bodies of the containment tree (2, 4 or 6).
+    #[arg(long, default_value_t = 4)]
+    pub parent_degree: usize,
     /// Clarabel's iteration cap.
     #[arg(long, default_value_t = 200)]
     pub max_iterations: u32,
@@ -98,66 +120,15 @@ pub struct FitArgs {
 /// # Errors
 /// Whatever loading, fitting or writing returns (see [`sublevel::fit::fit_points`]).
 pub fn run(args: FitArgs) -> sublevel::Result<()> {
+    if args.parts.is_some() {
+        return super::fit_compound::run(args);
+    }
     let points = match &args.format {
         Some(f) => mesh::parse_points(&std::fs::read(&args.mesh)?, f.parse()?)?,
         None => mesh::load_points(&args.mesh)?,
     };
-    let method: FitMethod = args.method.parse()?;
-    let c = args.relaxation;
-    if !(c.is_finite() && c >= 0.0) {
-        return Err(sublevel::Error::invalid("relaxation", format!("must be finite and ≥ 0, got {c}")));
-    }
-    if c > 0.0 && !matches!(method, FitMethod::LogDetP | FitMethod::TraceP) {
-        return Err(sublevel::Error::invalid(
-            "relaxation",
-            format!("only logdet_p and trace_p take --relaxation, not {}", method.name()),
-        ));
-    }
-    let settings = FitSettings {
-        degree: match args.degree {
-            DegreeArg::Fixed(d) => d,
-            DegreeArg::Auto => 2,
-        },
-        method,
-        convexity_relaxation: c,
-        volume_samples: args.samples,
-        seed: args.seed,
-        solver_tolerance: args.tolerance,
-        max_solver_iterations: args.max_iterations,
-        linear_solver: args.linear_solver.parse()?,
-        solver_threads: args.solver_threads,
-        iterative_refinement: args.refinement,
-        normalization: args.normalization.parse()?,
-        alternate_normalization: sublevel::fit::hull::parse_optional_normalization(&args.alternate_normalization)?,
-        rows_in_rounds: false,
-        trace_basis: match args.trace_basis.as_str() {
-            "both" => None,
-            "plain" => Some(TraceBasis::Plain),
-            "scaled" => Some(TraceBasis::Scaled),
-            other => {
-                return Err(sublevel::Error::invalid(
-                    "trace_basis",
-                    format!("must be one of both, plain, scaled, got {other:?}"),
-                ))
-            }
-        },
-    };
-    let quiet = args.quiet;
-    let mut stderr = std::io::stderr();
-    let mut progress = |p: &FitProgress| {
-        if quiet {
-            return;
-        }
-        // Clarabel iterations overwrite one line; every other stage gets its own line.
-        let _ = if p.stage == FitStage::Solve {
-            write!(stderr, "\r[{:>3.0}%] {:?}: {}\x1b[K", p.fraction * 100.0, p.stage, p.message)
-        } else {
-            write!(stderr, "\n[{:>3.0}%] {:?}: {}", p.fraction * 100.0, p.stage, p.message)
-        };
-        if p.stage == FitStage::Done {
-            let _ = writeln!(stderr);
-        }
-    };
+    let settings = fit_settings(&args)?;
+    let mut progress = progress_printer(args.quiet);
     let body = match args.degree {
         DegreeArg::Fixed(_) => fit_points(&points, &settings, &mut progress)?,
         DegreeArg::Auto => {
@@ -191,4 +162,76 @@ pub fn run(args: FitArgs) -> sublevel::Result<()> {
         println!("degree auto (τ = {}): {}; {}", choice.volume_tolerance, list.join(", "), choice.reason);
     }
     Ok(())
+}
+
+/// The leaf / single-body fit settings of `args` (everything but the compound options).
+///
+/// # Errors
+/// [`sublevel::Error::InvalidArgument`] naming `relaxation`, `method`, `linear_solver`,
+/// `normalization`, `alternate_normalization` or `trace_basis`.
+pub fn fit_settings(args: &FitArgs) -> sublevel::Result<FitSettings> {
+    let method: FitMethod = args.method.parse()?;
+    let c = args.relaxation;
+    if !(c.is_finite() && c >= 0.0) {
+        return Err(sublevel::Error::invalid("relaxation", format!("must be finite and ≥ 0, got {c}")));
+    }
+    if c > 0.0 && !matches!(method, FitMethod::LogDetP | FitMethod::TraceP) {
+        return Err(sublevel::Error::invalid(
+            "relaxation",
+            format!("only logdet_p and trace_p take --relaxation, not {}", method.name()),
+        ));
+    }
+    Ok(FitSettings {
+        degree: match args.degree {
+            DegreeArg::Fixed(d) => d,
+            DegreeArg::Auto => 2,
+        },
+        method,
+        convexity_relaxation: c,
+        volume_samples: args.samples,
+        seed: args.seed,
+        // With --parts, --tolerance is the excess tolerance (meters), not Clarabel's.
+        solver_tolerance: args
+            .solver_tolerance
+            .or(if args.parts.is_none() { args.tolerance } else { None })
+            .unwrap_or(1e-6),
+        max_solver_iterations: args.max_iterations,
+        linear_solver: args.linear_solver.parse()?,
+        solver_threads: args.solver_threads,
+        iterative_refinement: args.refinement,
+        normalization: args.normalization.parse()?,
+        alternate_normalization: sublevel::fit::hull::parse_optional_normalization(&args.alternate_normalization)?,
+        rows_in_rounds: false,
+        trace_basis: match args.trace_basis.as_str() {
+            "both" => None,
+            "plain" => Some(TraceBasis::Plain),
+            "scaled" => Some(TraceBasis::Scaled),
+            other => {
+                return Err(sublevel::Error::invalid(
+                    "trace_basis",
+                    format!("must be one of both, plain, scaled, got {other:?}"),
+                ))
+            }
+        },
+    })
+}
+
+/// A progress callback writing to stderr (Clarabel iterations overwrite one line), or nothing
+/// when `quiet`.
+pub fn progress_printer(quiet: bool) -> impl FnMut(&FitProgress) {
+    let mut stderr = std::io::stderr();
+    move |p: &FitProgress| {
+        if quiet {
+            return;
+        }
+        // Clarabel iterations overwrite one line; every other stage gets its own line.
+        let _ = if p.stage == FitStage::Solve {
+            write!(stderr, "\r[{:>3.0}%] {:?}: {}\x1b[K", p.fraction * 100.0, p.stage, p.message)
+        } else {
+            write!(stderr, "\n[{:>3.0}%] {:?}: {}", p.fraction * 100.0, p.stage, p.message)
+        };
+        if p.stage == FitStage::Done {
+            let _ = writeln!(stderr);
+        }
+    }
 }

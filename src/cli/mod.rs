@@ -2,13 +2,15 @@
 
 pub mod bench;
 pub mod chart;
-pub mod coal_peer;
+pub mod chart_compound;
 pub mod csv_file;
 pub mod fit;
+pub mod fit_compound;
 pub mod fit_time;
 pub mod group;
 pub mod health;
 pub mod loadtest;
+pub mod peer_coal;
 pub mod query;
 pub mod serve;
 pub mod serve_config;

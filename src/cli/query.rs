@@ -1,14 +1,21 @@
 //! `sublevel query distance|growth A.json B.json --pose-a w,x,y,z,tx,ty,tz --pose-b … [--json] [--certify]
 //! [--gradient]`:
 //! one query between two body files, for scripts and debugging.
+//!
+//! Compound body files (`sublevel.compound.v1`, issue 14) are answered by branch and bound over the
+//! two containment trees ([`sublevel::query::tree`]): the same fields, plus `compound`, the bounds
+//! `lower` / `upper`, the `level` reached, the active `leaves` pair and `pairs_evaluated`. A file
+//! holding one body (or a one-node compound) behaves exactly as before.
 
 use serde_json::json;
+use sublevel::compound::CompoundBody;
 use sublevel::math::{pose_from_parts, Isometry3};
+use sublevel::query::tree::{tree_collide, tree_distance, TreeQueryParams};
 use sublevel::query::{
     certified_distance, certified_growth, distance_gradient, growth_gradient, CertificateSummary, CertifyMode,
     CertifyParams, NewtonParams, PoseGradient,
 };
-use sublevel::{Body, Error, Result};
+use sublevel::{Error, Result};
 
 /// Which query to run.
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
@@ -50,6 +57,10 @@ pub struct QueryArgs {
     /// KKT-residual tolerance of the Newton solver.
     #[arg(long, default_value_t = sublevel::math::NEWTON_KKT_TOLERANCE)]
     tolerance: f64,
+    /// Compound bodies only: stop refining the distance once upper − lower ≤ this (meters, ≥ 0;
+    /// 0 = the exact distance of the two models).
+    #[arg(long, default_value_t = 0.0)]
+    bound_tolerance: f64,
 }
 
 fn parse_pose(field: &str, text: &str) -> Result<Isometry3> {
@@ -82,8 +93,8 @@ fn gradient_json(g: &PoseGradient) -> serde_json::Value {
 
 /// Runs `sublevel query`.
 pub fn run(args: QueryArgs) -> Result<()> {
-    let a = Body::load(&args.a)?;
-    let b = Body::load(&args.b)?;
+    let ta = CompoundBody::load(&args.a)?;
+    let tb = CompoundBody::load(&args.b)?;
     let pose_a = parse_pose("--pose-a", &args.pose_a)?;
     let pose_b = parse_pose("--pose-b", &args.pose_b)?;
     let params = CertifyParams {
@@ -91,10 +102,132 @@ pub fn run(args: QueryArgs) -> Result<()> {
         ..CertifyParams::default()
     };
     let mode = if args.certify { CertifyMode::Certify } else { CertifyMode::Newton };
+    let out = if ta.node_count() == 1 && tb.node_count() == 1 {
+        single(&args, ta.body(ta.root()), &pose_a, tb.body(tb.root()), &pose_b, &params, mode)
+    } else {
+        let tree = TreeQueryParams {
+            newton: params.newton,
+            certificate: params.certificate,
+            certify: mode,
+            tolerance: args.bound_tolerance,
+            ..TreeQueryParams::default()
+        };
+        compound(&args, &ta, &pose_a, &tb, &pose_b, &tree)?
+    };
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&out)?);
+    } else {
+        for (k, v) in out.as_object().into_iter().flatten() {
+            println!("{k:>14}: {v}");
+        }
+    }
+    Ok(())
+}
+
+/// The query between two compound bodies (branch and bound; module docs).
+fn compound(
+    args: &QueryArgs,
+    a: &CompoundBody,
+    pose_a: &Isometry3,
+    b: &CompoundBody,
+    pose_b: &Isometry3,
+    params: &TreeQueryParams,
+) -> Result<serde_json::Value> {
     let start = std::time::Instant::now();
-    let out = match args.kind {
+    Ok(match args.kind {
         QueryKind::Distance => {
-            let c = certified_distance(&a, &pose_a, &b, &pose_b, None, &params, mode);
+            let t = tree_distance(a, pose_a, b, pose_b, None, params)?;
+            let micros = start.elapsed().as_secs_f64() * 1e6;
+            let best = t.best.as_ref();
+            let r = best.map(|l| &l.result);
+            let point = |p: Option<sublevel::math::Point3>| p.map(|p| json!([p.x, p.y, p.z]));
+            let mut v = json!({
+                "query": "distance",
+                "compound": true,
+                "distance": t.upper,
+                "lower": t.lower,
+                "upper": t.upper,
+                "witness_a": point(r.map(|r| r.witness_a)),
+                "witness_b": point(r.map(|r| r.witness_b)),
+                "normal": r.map(|r| [r.normal.x, r.normal.y, r.normal.z]),
+                "overlapping": t.overlapping(),
+                "converged": t.converged,
+                "within_tolerance": t.within_tolerance,
+                "source": best.map(|l| format!("{:?}", l.source)),
+                "lower_bound": false,
+                "tight": false,
+                "status": r.map(|r| format!("{:?}", r.status)),
+                "iterations": r.map(|r| r.iterations),
+                "kkt_residual": r.map(|r| r.kkt_residual),
+                "microseconds": micros,
+                "certificate": certificate_json(&best.and_then(|l| l.certificate.clone())),
+                "leaves": best.map(|l| [l.leaves.0, l.leaves.1]),
+                "level": t.level,
+                "pairs_evaluated": t.pairs_evaluated,
+                "pairs_pruned_by_spheres": t.pairs_pruned_by_spheres,
+                "leaf_certificates": t.leaf_pairs.iter().filter(|l| l.certificate.is_some()).map(|l| json!({
+                    "leaves": [l.leaves.0, l.leaves.1], "distance": l.result.distance,
+                    "certificate": certificate_json(&l.certificate),
+                })).collect::<Vec<_>>(),
+            });
+            if args.gradient {
+                if let Some((ga, gb)) = t.gradient() {
+                    v["gradient_a"] = gradient_json(&ga);
+                    v["gradient_b"] = gradient_json(&gb);
+                }
+            }
+            v
+        }
+        QueryKind::Growth => {
+            let t = tree_collide(a, pose_a, b, pose_b, true, None, params)?;
+            let micros = start.elapsed().as_secs_f64() * 1e6;
+            let r = t.growth.as_ref();
+            let mut v = json!({
+                "query": "growth",
+                "compound": true,
+                "value": r.map(|r| r.value),
+                "minimizer": r.map(|r| [r.minimizer.x, r.minimizer.y, r.minimizer.z]),
+                "multiplier": r.map(|r| r.multiplier),
+                "separated": !t.colliding,
+                "converged": t.converged,
+                "source": "Newton",
+                "lower_bound": false,
+                "tight": false,
+                "status": r.map(|r| format!("{:?}", r.status)),
+                "iterations": r.map(|r| r.iterations),
+                "kkt_residual": r.map(|r| r.kkt_residual),
+                "microseconds": micros,
+                "certificate": serde_json::Value::Null,
+                "leaves": t.leaves.map(|l| [l.0, l.1]),
+                "level": t.level,
+                "pairs_evaluated": t.pairs_evaluated,
+                "pairs_pruned_by_spheres": t.pairs_pruned_by_spheres,
+            });
+            if args.gradient {
+                if let Some((g1, g2)) = t.gradient {
+                    v["gradient_a"] = gradient_json(&g1);
+                    v["gradient_b"] = gradient_json(&g2);
+                }
+            }
+            v
+        }
+    })
+}
+
+/// The query between two single bodies, as before compound bodies.
+fn single(
+    args: &QueryArgs,
+    a: &sublevel::Body,
+    pose_a: &Isometry3,
+    b: &sublevel::Body,
+    pose_b: &Isometry3,
+    params: &CertifyParams,
+    mode: CertifyMode,
+) -> serde_json::Value {
+    let start = std::time::Instant::now();
+    match args.kind {
+        QueryKind::Distance => {
+            let c = certified_distance(a, pose_a, b, pose_b, None, params, mode);
             let micros = start.elapsed().as_secs_f64() * 1e6;
             let r = &c.result;
             let mut v = json!({
@@ -122,7 +255,7 @@ pub fn run(args: QueryArgs) -> Result<()> {
             v
         }
         QueryKind::Growth => {
-            let c = certified_growth(&a, &pose_a, &b, &pose_b, None, &params, mode);
+            let c = certified_growth(a, pose_a, b, pose_b, None, params, mode);
             let micros = start.elapsed().as_secs_f64() * 1e6;
             let r = &c.result;
             let mut v = json!({
@@ -142,19 +275,11 @@ pub fn run(args: QueryArgs) -> Result<()> {
                 "certificate": certificate_json(&c.certificate),
             });
             if args.gradient && !c.lower_bound {
-                let (g1, g2) = growth_gradient(&a, &pose_a, r);
+                let (g1, g2) = growth_gradient(a, pose_a, r);
                 v["gradient_a"] = gradient_json(&g1);
                 v["gradient_b"] = gradient_json(&g2);
             }
             v
         }
-    };
-    if args.json {
-        println!("{}", serde_json::to_string_pretty(&out)?);
-    } else {
-        for (k, v) in out.as_object().into_iter().flatten() {
-            println!("{k:>14}: {v}");
-        }
     }
-    Ok(())
 }

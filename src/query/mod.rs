@@ -10,6 +10,7 @@ pub mod growth;
 pub mod newton;
 pub mod penetration;
 pub mod sdp_certificate;
+pub mod tree;
 
 pub use certified::{
     certified_distance, certified_growth, AnswerSource, CertificateKind, CertificateSummary, Certified,

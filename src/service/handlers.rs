@@ -242,8 +242,20 @@ impl Sublevel for SublevelService {
         let (file, prefix): (BodyFile, &str) = match req.body {
             None => return Err(Error::invalid("body", "set `body_json` or `data`").into()),
             Some(pb::upload_body_request::Body::BodyJson(text)) => {
-                let mut file: BodyFile =
+                let value: serde_json::Value =
                     serde_json::from_str(&text).map_err(|e| Error::invalid("body_json", e.to_string()))?;
+                if crate::compound::file::is_compound_json(&value) {
+                    // Compound bodies (issue 14) are not served yet: say so rather than report a
+                    // missing `degree`.
+                    return Err(Error::invalid(
+                        "body_json",
+                        "is a compound body file (it has `nodes`); the service takes single bodies only \
+                         for now: upload one node's `body` (e.g. the root's)",
+                    )
+                    .into());
+                }
+                let mut file: BodyFile =
+                    serde_json::from_value(value).map_err(|e| Error::invalid("body_json", e.to_string()))?;
                 if file.report.method.is_empty() {
                     file.report = cv::uploaded_report();
                 }

@@ -9,6 +9,7 @@ mod jobs_api;
 mod ops;
 mod planner;
 mod query;
+mod query_compound;
 mod security;
 mod service;
 mod service_jobs;

@@ -1,0 +1,113 @@
+//! `sublevel fit MESH.off --parts auto --tolerance T --output X.json` (or `--parts N`): fit a
+//! compound body — a convex decomposition fitted part by part under a containment tree
+//! ([`sublevel::compound`], issue 14 part 1) — and write its compound file. The report (stdout,
+//! and the file's `report`) lists every part count tried and every node: degree, triangles,
+//! excess, fit time. Then the conservativeness check: triangles not inside any leaf (must be 0).
+
+use super::fit::{fit_settings, progress_printer, DegreeArg, FitArgs};
+use sublevel::compound::check::uncovered_triangles;
+use sublevel::compound::{fit_compound, CompoundBody, CompoundSettings, PartCount};
+use sublevel::fit::auto::DEFAULT_AUTO_DEGREES;
+use sublevel::fit::mesh::{parse_off_mesh, MeshFormat, DEFAULT_MAX_MESH_POINTS};
+use sublevel::Error;
+
+/// Runs `sublevel fit --parts …`.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `parts`, `tolerance`, `format` (not an OFF mesh) or a fit
+/// setting; whatever loading, fitting and writing return (see [`fit_compound`]).
+pub fn run(args: FitArgs) -> sublevel::Result<()> {
+    let parts: PartCount = args.parts.as_deref().unwrap_or("auto").parse()?;
+    if let PartCount::Fixed(n) = parts {
+        if n == 0 {
+            return Err(Error::invalid("parts", "must be ≥ 1 or auto"));
+        }
+    }
+    let format = match &args.format {
+        Some(f) => f.parse()?,
+        None => MeshFormat::of_path(&args.mesh)?,
+    };
+    if format != MeshFormat::Off {
+        return Err(Error::invalid("format", "--parts needs a triangle mesh in OFF format (faces are decomposed)"));
+    }
+    let mesh = parse_off_mesh(&std::fs::read(&args.mesh)?, DEFAULT_MAX_MESH_POINTS)?;
+    let settings = CompoundSettings {
+        fit: fit_settings(&args)?,
+        degrees: match args.degree {
+            DegreeArg::Fixed(d) => vec![d],
+            // Containment (the parents) takes degrees up to 6: leaves of degree 8 would only be
+            // contained at degree ≤ 6 anyway, and cost the most per query.
+            DegreeArg::Auto => DEFAULT_AUTO_DEGREES.iter().copied().filter(|&d| d <= 6).collect(),
+        },
+        volume_tolerance: args.volume_tolerance,
+        excess_tolerance: args.tolerance,
+        parent_degree: args.parent_degree,
+        resolution: args.resolution,
+        excess_samples: args.excess_samples,
+        ..CompoundSettings::default()
+    };
+    let name = args.mesh.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let mut progress = progress_printer(args.quiet);
+    let body = fit_compound(&mesh, Some(&name), parts, &settings, &mut progress)?;
+    let output = args.output.clone().unwrap_or_else(|| args.mesh.with_extension("compound.json"));
+    body.save(&output)?;
+    print_report(&name, &body);
+    let uncovered = uncovered_triangles(&body, &mesh);
+    println!(
+        "conservative: {} of {} triangles inside a leaf body ({} uncovered) -> {}",
+        mesh.triangles.len() - uncovered.len(),
+        mesh.triangles.len(),
+        uncovered.len(),
+        output.display()
+    );
+    if !uncovered.is_empty() {
+        return Err(Error::Numerical(format!(
+            "{} triangles are not inside any leaf body (first: {:?})",
+            uncovered.len(),
+            &uncovered[..uncovered.len().min(5)]
+        )));
+    }
+    Ok(())
+}
+
+/// Prints the fit report: attempts, then one line per node (leaves first).
+pub fn print_report(name: &str, body: &CompoundBody) {
+    let r = &body.report;
+    println!(
+        "{name}: {} parts, {} nodes, height {}, max leaf excess {:.4} m, root excess {:.4} m; decomposition {:.2} s, leaves {:.2} s, tree {:.2} s, total {:.2} s",
+        body.leaf_count(),
+        body.node_count(),
+        body.height(),
+        body.max_leaf_excess(),
+        body.node(body.root()).excess,
+        r.decomposition_seconds,
+        r.leaf_fit_seconds,
+        r.tree_fit_seconds,
+        r.total_seconds
+    );
+    for (asked, got, excess, seconds) in &r.attempts {
+        println!("  attempt: parts asked {asked}, obtained {got}, max leaf excess {excess:.4} m, {seconds:.2} s");
+    }
+    for note in &r.notes {
+        println!("  note: {note}");
+    }
+    println!("  node  kind    depth  degree  triangles  excess_m  fit_s  children");
+    for (i, n) in body.nodes().iter().enumerate() {
+        let kind = if n.children.is_empty() {
+            "part"
+        } else if i == body.root() {
+            "root"
+        } else {
+            "parent"
+        };
+        println!(
+            "  {i:>4}  {kind:<6}  {:>5}  {:>6}  {:>9}  {:>8.4}  {:>5.2}  {:?}",
+            n.depth,
+            n.body.degree(),
+            n.triangles,
+            n.excess,
+            n.fit_seconds,
+            n.children
+        );
+    }
+}

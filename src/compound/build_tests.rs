@@ -1,0 +1,165 @@
+//! Tests of the compound fit against closed forms, and of conservativeness on the bundled meshes.
+
+use super::check::uncovered_triangles;
+use super::*;
+use crate::fit::containment::boundary_points;
+use crate::fit::mesh::{parse_off_mesh, OffMesh, DEFAULT_MAX_MESH_POINTS};
+use crate::math::{Isometry3, Point3};
+
+/// A closed axis-aligned cube mesh of side `side` centered at `c` (8 vertices, 12 triangles).
+fn cube(c: [Real; 3], side: Real, first: u32) -> (Vec<Point3>, Vec<[u32; 3]>) {
+    let h = side / 2.0;
+    let v = (0..8)
+        .map(|k| {
+            let s = |b: u32| if (k >> b) & 1 == 0 { -h } else { h };
+            Point3::new(c[0] + s(0), c[1] + s(1), c[2] + s(2))
+        })
+        .collect();
+    let faces = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]];
+    let t = faces.iter().flat_map(|f| [[f[0], f[1], f[2]], [f[0], f[2], f[3]]]).map(|t| t.map(|i| i + first)).collect();
+    (v, t)
+}
+
+/// Two unit cubes centered at x = ±2: a nonconvex (disconnected) mesh of 24 triangles.
+fn two_cubes() -> OffMesh {
+    let (mut vertices, mut triangles) = cube([-2.0, 0.0, 0.0], 1.0, 0);
+    let (v2, t2) = cube([2.0, 0.0, 0.0], 1.0, 8);
+    vertices.extend(v2);
+    triangles.extend(t2);
+    OffMesh { vertices, triangles }
+}
+
+fn quick_settings(degrees: Vec<usize>) -> CompoundSettings {
+    let mut s = CompoundSettings { degrees, resolution: 32, excess_samples: 400, ..CompoundSettings::default() };
+    s.fit.volume_samples = 20_000;
+    s.containment = s.containment.with_volume_samples(20_000);
+    s
+}
+
+#[test]
+fn two_cubes_give_two_spheres_under_one_root() {
+    let mesh = two_cubes();
+    let c = fit_compound(&mesh, Some("two_cubes"), PartCount::Fixed(2), &quick_settings(vec![2]), &mut |_| {}).unwrap();
+    assert_eq!((c.leaf_count(), c.node_count(), c.height()), (2, 3, 1));
+    assert!(uncovered_triangles(&c, &mesh).is_empty());
+    let r = c.root();
+    for leaf in c.leaves() {
+        let n = c.node(leaf);
+        // Each part is one whole cube (12 triangles); its degree-2 log det fit is, by the cube's
+        // symmetry, the sphere through the 8 corners: radius √3/2 about the cube's center, so the
+        // excess over the cube is √3/2 − 1/2 ≈ 0.3660 (at the face centers' directions).
+        assert_eq!(n.triangles, 12);
+        let center = n.body.interior_point();
+        assert!((center.coords.norm() - 2.0).abs() < 1e-4 && center.y.abs() < 1e-4, "center {center}");
+        for x in boundary_points(&n.body, &Isometry3::identity(), 50).unwrap() {
+            assert!(((x - center).norm() - 3f64.sqrt() / 2.0).abs() < 1e-3, "radius {}", (x - center).norm());
+            // The root contains the leaf's body: every boundary point of the leaf is in the root.
+            assert!(c.body(r).value_at(&x) <= 1.0 + 1e-9);
+        }
+        assert!((n.excess - (3f64.sqrt() / 2.0 - 0.5)).abs() < 0.01, "excess {}", n.excess);
+        assert_eq!(n.depth, 1);
+    }
+    // The root reaches beyond the gap between the cubes: at least the leaves' excess, and at the
+    // origin (1.5 from both cubes) it contains empty space.
+    assert!(c.node(r).excess >= c.max_leaf_excess());
+    assert!(c.body(r).value_at(&Point3::origin()) <= 1.0);
+    assert_eq!(c.report.attempts.len(), 1);
+    assert_eq!(c.report.mesh_triangles, 24);
+}
+
+#[test]
+fn auto_part_count_stops_at_the_first_count_within_tolerance() {
+    let mesh = two_cubes();
+    let mut s = quick_settings(vec![2]);
+    // One sphere around both cubes reaches ≈ 2.5 − 0.5 beyond them; two spheres 0.366.
+    s.excess_tolerance = Some(0.5);
+    let c = fit_compound(&mesh, None, PartCount::Auto, &s, &mut |_| {}).unwrap();
+    let asked: Vec<usize> = c.report.attempts.iter().map(|a| a.0).collect();
+    assert_eq!(asked, vec![1, 2]);
+    assert!(c.report.attempts[0].2 > 0.5, "one part: excess {}", c.report.attempts[0].2);
+    assert_eq!(c.leaf_count(), 2);
+    assert!(c.max_leaf_excess() <= 0.5);
+    assert!(uncovered_triangles(&c, &mesh).is_empty());
+}
+
+#[test]
+fn bad_settings_and_meshes_are_refused_by_field() {
+    let mesh = two_cubes();
+    let fit = |parts: PartCount, s: &CompoundSettings, m: &OffMesh| fit_compound(m, None, parts, s, &mut |_| {});
+    let field_of = |r: crate::Result<CompoundBody>| match r {
+        Err(crate::Error::InvalidArgument { field, .. }) => field,
+        other => panic!("expected InvalidArgument, got {other:?}"),
+    };
+    let s = quick_settings(vec![2]);
+    assert_eq!(field_of(fit(PartCount::Auto, &s, &mesh)), "parts");
+    assert_eq!(field_of(fit(PartCount::Fixed(0), &s, &mesh)), "parts");
+    assert_eq!(field_of(fit(PartCount::Fixed(1000), &s, &mesh)), "parts");
+    let t = CompoundSettings { excess_tolerance: Some(-1.0), ..s.clone() };
+    assert_eq!(field_of(fit(PartCount::Fixed(2), &t, &mesh)), "tolerance");
+    let d = CompoundSettings { degrees: vec![4, 2], ..s.clone() };
+    assert_eq!(field_of(fit(PartCount::Fixed(2), &d, &mesh)), "degrees");
+    let empty = OffMesh { vertices: mesh.vertices.clone(), triangles: vec![] };
+    assert_eq!(field_of(fit(PartCount::Fixed(2), &s, &empty)), "mesh");
+    let bad = OffMesh { vertices: mesh.vertices.clone(), triangles: vec![[0, 1, 99]] };
+    assert_eq!(field_of(fit(PartCount::Fixed(2), &s, &bad)), "mesh");
+    assert!("auto".parse::<PartCount>().is_ok_and(|p| p == PartCount::Auto));
+    assert_eq!(field_of_parse("many"), "parts");
+}
+
+fn field_of_parse(s: &str) -> String {
+    match s.parse::<PartCount>() {
+        Err(crate::Error::InvalidArgument { field, .. }) => field,
+        other => panic!("expected InvalidArgument, got {other:?}"),
+    }
+}
+
+fn data(path: &str) -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(path)
+}
+
+fn psb(name: &str) -> OffMesh {
+    let path = data(&format!("data/psb/{name}.off"));
+    parse_off_mesh(&std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display())), DEFAULT_MAX_MESH_POINTS)
+        .unwrap()
+}
+
+/// The bundled PSB meshes; each has a pre-fitted compound file in data/compound/ (see its
+/// SOURCE.md for the command).
+const PSB: [&str; 5] = ["chair_101", "hand_181", "human_10", "octopus_121", "vase_361"];
+
+#[test]
+fn every_bundled_compound_file_covers_every_triangle_of_its_mesh() {
+    for name in PSB {
+        let mesh = psb(name);
+        let c = CompoundBody::load(&data(&format!("data/compound/{name}.json"))).unwrap();
+        assert!(c.leaf_count() >= 2, "{name}: {} parts", c.leaf_count());
+        assert_eq!(c.report.mesh_triangles, mesh.triangles.len(), "{name}");
+        let uncovered = uncovered_triangles(&c, &mesh);
+        assert!(uncovered.is_empty(), "{name}: {} of {} triangles uncovered", uncovered.len(), mesh.triangles.len());
+        // Each parent contains its children's bodies: their boundary samples have value ≤ 1 in it
+        // (the S-procedure certifies all of each child; the samples only spot-check it).
+        for i in 0..c.node_count() {
+            for &child in c.children(i) {
+                for x in boundary_points(c.body(child), &Isometry3::identity(), 200).unwrap() {
+                    let v = c.body(i).value_at(&x);
+                    assert!(v <= 1.0 + 1e-6, "{name}: node {i} misses a boundary point of child {child} (p = {v})");
+                }
+            }
+        }
+        // The excess stored is the one measured against this mesh (recomputed with the same samples).
+        let surface = super::surface::MeshSurface::new(&mesh.vertices, &mesh.triangles).unwrap();
+        let root = c.root();
+        let e = surface.excess(c.body(root), c.report.excess_samples).unwrap();
+        assert!((e - c.node(root).excess).abs() < 1e-9, "{name}: root excess {e} vs stored {}", c.node(root).excess);
+    }
+}
+
+#[test]
+fn a_bundled_mesh_fitted_in_two_parts_is_conservative() {
+    let mesh = psb("vase_361");
+    let c = fit_compound(&mesh, None, PartCount::Fixed(2), &quick_settings(vec![2]), &mut |_| {}).unwrap();
+    assert!(uncovered_triangles(&c, &mesh).is_empty());
+    let total: usize = c.leaves().map(|l| c.node(l).triangles).sum();
+    assert_eq!(total, mesh.triangles.len());
+    assert_eq!(c.node(c.root()).triangles, mesh.triangles.len());
+}

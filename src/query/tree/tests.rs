@@ -1,0 +1,346 @@
+//! Tree queries against independent references: closed-form sphere distances, brute force over all
+//! leaf pairs, and the single-body queries.
+
+use super::*;
+use crate::body::ellipsoid;
+use crate::math::{Isometry3, Point3, Real, UnitQuaternion, Vector3};
+use crate::query::test_bodies::random_body;
+use crate::query::{distance, growth, NewtonParams};
+use rand::{Rng, SeedableRng};
+
+/// A containment tree for tests: leaves given, parents are spheres containing their children's
+/// bounding spheres (containment in closed form: |c_i − c| + r_i ≤ r).
+struct TestTree {
+    bodies: Vec<Body>,
+    children: Vec<Vec<usize>>,
+    depth: Vec<usize>,
+}
+
+impl BodyTree for TestTree {
+    fn root(&self) -> usize {
+        0
+    }
+    fn node_count(&self) -> usize {
+        self.bodies.len()
+    }
+    fn body(&self, node: usize) -> &Body {
+        &self.bodies[node]
+    }
+    fn children(&self, node: usize) -> &[usize] {
+        &self.children[node]
+    }
+    fn depth(&self, node: usize) -> usize {
+        self.depth[node]
+    }
+}
+
+impl TestTree {
+    fn leaves(&self) -> Vec<usize> {
+        (0..self.bodies.len()).filter(|&i| self.children[i].is_empty()).collect()
+    }
+}
+
+fn containing_sphere(bodies: &[&Body]) -> Body {
+    let spheres: Vec<(Point3, Real)> = bodies.iter().map(|b| b.bounding_sphere().unwrap()).collect();
+    let c = spheres.iter().map(|s| s.0.coords).sum::<Vector3>() / spheres.len() as Real;
+    let r = spheres.iter().map(|(p, r)| (p.coords - c).norm() + r).fold(0.0, Real::max) * 1.001;
+    ellipsoid([c.x, c.y, c.z], [r; 3]).unwrap()
+}
+
+/// Root → `groups` middle nodes → `per_group` leaves each; leaves from `leaf(group, k)`.
+fn three_level_tree(groups: usize, per_group: usize, leaf: impl Fn(usize, usize) -> Body) -> TestTree {
+    let mut bodies = vec![];
+    let mut children = vec![vec![]];
+    let mut depth = vec![0];
+    let mut mids = vec![];
+    let mut groups_leaves = vec![];
+    for g in 0..groups {
+        let leaves: Vec<Body> = (0..per_group).map(|k| leaf(g, k)).collect();
+        let mid = containing_sphere(&leaves.iter().collect::<Vec<_>>());
+        groups_leaves.push(leaves);
+        mids.push(mid);
+    }
+    let root = containing_sphere(&mids.iter().collect::<Vec<_>>());
+    bodies.push(root);
+    for (mid, leaves) in mids.into_iter().zip(groups_leaves) {
+        let m = bodies.len();
+        bodies.push(mid);
+        children.push(vec![]);
+        depth.push(1);
+        children[0].push(m);
+        for l in leaves {
+            let i = bodies.len();
+            bodies.push(l);
+            children.push(vec![]);
+            depth.push(2);
+            children[m].push(i);
+        }
+    }
+    TestTree { bodies, children, depth }
+}
+
+fn sphere_tree(seed: u64) -> (TestTree, Vec<(Vector3, Real)>) {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let mut spheres = vec![];
+    for g in 0..3 {
+        let gc = Vector3::new(0.8 * g as Real - 0.8, rng.random_range(-0.2..0.2), 0.0);
+        for _ in 0..3 {
+            let c = gc
+                + Vector3::new(rng.random_range(-0.3..0.3), rng.random_range(-0.3..0.3), rng.random_range(-0.3..0.3));
+            spheres.push((c, rng.random_range(0.1..0.3)));
+        }
+    }
+    let s = spheres.clone();
+    let tree = three_level_tree(3, 3, |g, k| {
+        let (c, r) = s[3 * g + k];
+        ellipsoid([c.x, c.y, c.z], [r; 3]).unwrap()
+    });
+    (tree, spheres)
+}
+
+fn random_rotation(rng: &mut impl Rng) -> UnitQuaternion {
+    UnitQuaternion::from_euler_angles(rng.random(), rng.random(), rng.random())
+}
+
+fn random_pose(rng: &mut impl Rng, spread: Real) -> Isometry3 {
+    Isometry3::from_parts(
+        Vector3::new(
+            rng.random_range(-spread..spread),
+            rng.random_range(-spread..spread),
+            rng.random_range(-spread..spread),
+        )
+        .into(),
+        UnitQuaternion::from_euler_angles(rng.random(), rng.random(), rng.random()),
+    )
+}
+
+/// Brute force: (min distance over all leaf pairs, its pair, every leaf pair's distance).
+fn brute_force(a: &TestTree, pa: &Isometry3, b: &TestTree, pb: &Isometry3) -> (Real, Vec<Real>) {
+    let mut all = vec![];
+    for &i in &a.leaves() {
+        for &j in &b.leaves() {
+            let r = distance(&a.bodies[i], pa, &b.bodies[j], pb, None, &NewtonParams::default());
+            assert!(r.status.converged());
+            all.push(r.distance);
+        }
+    }
+    (all.iter().cloned().fold(Real::INFINITY, Real::min), all)
+}
+
+#[test]
+fn sphere_trees_match_the_closed_form() {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+    let (ta, sa) = sphere_tree(10);
+    let (tb, sb) = sphere_tree(20);
+    for _ in 0..40 {
+        let pa = random_pose(&mut rng, 0.5);
+        let pb = Isometry3::from_parts(
+            (Vector3::new(rng.random_range(1.0..4.0), 0.0, 0.0) + random_pose(&mut rng, 0.5).translation.vector).into(),
+            random_rotation(&mut rng),
+        );
+        // Closed form: max(0, |c_a − c_b| − r_a − r_b), minimized over the 81 leaf pairs.
+        let exact = sa
+            .iter()
+            .flat_map(|(ca, ra)| sb.iter().map(move |(cb, rb)| (*ca, *ra, *cb, *rb)))
+            .map(|(ca, ra, cb, rb)| ((pa * Point3::from(ca)) - (pb * Point3::from(cb))).norm() - ra - rb)
+            .fold(Real::INFINITY, Real::min)
+            .max(0.0);
+        let r = tree_distance(&ta, &pa, &tb, &pb, None, &TreeQueryParams::default()).unwrap();
+        assert!(r.converged && r.within_tolerance, "{r:?}");
+        assert!((r.lower - exact).abs() < 1e-7 && (r.upper - exact).abs() < 1e-7, "{} {} vs {exact}", r.lower, r.upper);
+        assert!(r.pairs_evaluated < 81 + 30, "searched {} pairs", r.pairs_evaluated);
+    }
+}
+
+#[test]
+fn tolerance_brackets_the_brute_force_minimum() {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(2);
+    let ta = three_level_tree(2, 3, |g, k| {
+        rescaled(
+            &random_body(4, 300 + 3 * g as u64 + k as u64),
+            0.25,
+            Vector3::new(0.7 * g as Real - 0.35, 0.5 * k as Real - 0.5, 0.0),
+        )
+    });
+    let tb = three_level_tree(3, 2, |g, k| {
+        ellipsoid([0.6 * g as Real - 0.6, 0.4 * k as Real, 0.1], [0.2, 0.12, 0.3]).unwrap()
+    });
+    for case in 0..25 {
+        let pa = random_pose(&mut rng, 0.3);
+        let shift = Vector3::new(rng.random_range(0.5..3.0), rng.random_range(-0.5..0.5), 0.0);
+        let pb = Isometry3::from_parts(shift.into(), random_rotation(&mut rng));
+        let (exact, all) = brute_force(&ta, &pa, &tb, &pb);
+        for tol in [0.0, 0.01, 0.05, 0.3] {
+            let params = TreeQueryParams { tolerance: tol, ..Default::default() };
+            let r = tree_distance(&ta, &pa, &tb, &pb, None, &params).unwrap();
+            assert!(r.converged && r.within_tolerance, "case {case} tol {tol}: {r:?}");
+            assert!(r.upper - r.lower <= tol + 1e-12, "case {case} tol {tol}: {} {}", r.lower, r.upper);
+            assert!(
+                r.lower <= exact + 1e-9 && exact <= r.upper + 1e-9,
+                "case {case}: {exact} ∉ [{}, {}]",
+                r.lower,
+                r.upper
+            );
+            assert!(all.iter().all(|d| r.lower <= d + 1e-9), "case {case}: lower bound above a leaf pair");
+            if tol == 0.0 {
+                assert!((r.upper - exact).abs() < 1e-8, "case {case}: {} vs {exact}", r.upper);
+            }
+        }
+    }
+}
+
+/// `body` with its normalization center moved to `at` and its sublevel set scaled by `size`.
+fn rescaled(body: &Body, size: Real, at: Vector3) -> Body {
+    Body::new(body.polynomial().clone(), [at.x, at.y, at.z], body.scale() * size, body.report.clone()).unwrap()
+}
+
+#[test]
+fn margin_queries_agree_with_brute_force() {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+    let (ta, _) = sphere_tree(30);
+    let (tb, _) = sphere_tree(40);
+    let mut root_decided = 0;
+    for case in 0..40 {
+        let pa = random_pose(&mut rng, 0.2);
+        let pb = Isometry3::from_parts(
+            Vector3::new(rng.random_range(1.5..6.0), rng.random_range(-1.0..1.0), 0.0).into(),
+            random_rotation(&mut rng),
+        );
+        let (exact, _) = brute_force(&ta, &pa, &tb, &pb);
+        for m in [0.0, 0.05, 0.2, 1.0] {
+            let r = tree_closer_than(&ta, &pa, &tb, &pb, m, None, &TreeQueryParams::default()).unwrap();
+            assert!(r.converged);
+            if (exact - m).abs() > 1e-9 {
+                assert_eq!(r.closer, exact < m, "case {case} margin {m}: brute {exact}, {r:?}");
+            }
+            if r.closer {
+                assert!(r.bound < m && (r.bound - exact) >= -1e-9);
+            } else {
+                assert!(r.bound >= m && r.bound <= exact + 1e-9);
+            }
+            // The roots are decisive when they are farther apart than the margin.
+            let roots = distance(ta.body(0), &pa, tb.body(0), &pb, None, &NewtonParams::default()).distance;
+            if roots >= m + 1e-9 {
+                assert_eq!(r.level, 0, "case {case}: roots {roots} ≥ {m} but level {}", r.level);
+                root_decided += 1;
+            }
+        }
+    }
+    assert!(root_decided > 10, "{root_decided}");
+}
+
+#[test]
+fn growth_collision_agrees_with_brute_force() {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
+    let (ta, _) = sphere_tree(50);
+    let tb =
+        three_level_tree(2, 2, |g, k| ellipsoid([0.5 * g as Real, 0.3 * k as Real, 0.0], [0.25, 0.1, 0.15]).unwrap());
+    let (mut hits, mut misses) = (0, 0);
+    for case in 0..60 {
+        let pa = random_pose(&mut rng, 0.2);
+        let pb = Isometry3::from_parts(
+            Vector3::new(rng.random_range(0.0..2.5), rng.random_range(-0.6..0.6), rng.random_range(-0.3..0.3)).into(),
+            random_rotation(&mut rng),
+        );
+        let mut brute_min: Option<Real> = None;
+        for &i in &ta.leaves() {
+            for &j in &tb.leaves() {
+                let g = growth(&ta.bodies[i], &pa, &tb.bodies[j], &pb, None, &NewtonParams::default());
+                assert!(g.status.converged());
+                if g.value <= 1.0 {
+                    brute_min = Some(brute_min.map_or(g.value, |m: Real| m.min(g.value)));
+                }
+            }
+        }
+        let quick = tree_collide(&ta, &pa, &tb, &pb, false, None, &TreeQueryParams::default()).unwrap();
+        let full = tree_collide(&ta, &pa, &tb, &pb, true, None, &TreeQueryParams::default()).unwrap();
+        assert!(quick.converged && full.converged);
+        assert_eq!(quick.colliding, brute_min.is_some(), "case {case}");
+        assert_eq!(full.colliding, brute_min.is_some(), "case {case}");
+        if let Some(m) = brute_min {
+            hits += 1;
+            let g = full.growth.as_ref().unwrap().value;
+            assert!((g - m).abs() < 1e-8, "case {case}: {g} vs brute {m}");
+        } else {
+            misses += 1;
+        }
+    }
+    assert!(hits > 5 && misses > 5, "{hits} {misses}");
+}
+
+#[test]
+fn warm_started_queries_give_the_cold_answers() {
+    let (ta, _) = sphere_tree(60);
+    let (tb, _) = sphere_tree(70);
+    let pa = Isometry3::identity();
+    let mut warm: Option<TreeWarmStart> = None;
+    for step in 0..30 {
+        let t = step as Real * 0.01;
+        let pb = Isometry3::from_parts(
+            Vector3::new(2.6 - t, 0.1 * t, 0.05).into(),
+            UnitQuaternion::from_euler_angles(0.2 + t, 0.1, -0.3 * t),
+        );
+        let params = TreeQueryParams::default();
+        let w = tree_distance(&ta, &pa, &tb, &pb, warm.as_ref(), &params).unwrap();
+        let c = tree_distance(&ta, &pa, &tb, &pb, None, &params).unwrap();
+        assert!((w.lower - c.lower).abs() < 1e-8 && (w.upper - c.upper).abs() < 1e-8, "step {step}");
+        assert_eq!(w.best.as_ref().map(|b| b.leaves), c.best.as_ref().map(|b| b.leaves));
+        assert!(w.warm_start.distance_pairs() > 0);
+        warm = Some(w.warm_start);
+    }
+}
+
+#[test]
+fn a_single_body_is_a_one_node_tree() {
+    let a = random_body(6, 7);
+    let b = random_body(4, 8);
+    let pa = Isometry3::identity();
+    let pb =
+        Isometry3::from_parts(Vector3::new(2.2, 0.3, -0.1).into(), UnitQuaternion::from_euler_angles(0.3, 0.2, 0.1));
+    let r = tree_distance(&a, &pa, &b, &pb, None, &TreeQueryParams::default()).unwrap();
+    let d = distance(&a, &pa, &b, &pb, None, &NewtonParams::default());
+    assert!((r.lower - d.distance).abs() < 1e-12 && (r.upper - d.distance).abs() < 1e-12);
+    assert_eq!((r.level, r.best.unwrap().leaves), (0, (0, 0)));
+}
+
+#[test]
+fn gradient_of_the_active_leaf_pair_matches_finite_differences() {
+    let (ta, _) = sphere_tree(80);
+    let (tb, _) = sphere_tree(90);
+    let pa = Isometry3::identity();
+    let pb =
+        Isometry3::from_parts(Vector3::new(2.4, 0.2, 0.1).into(), UnitQuaternion::from_euler_angles(0.1, 0.4, 0.2));
+    let p = TreeQueryParams::default();
+    let r = tree_distance(&ta, &pa, &tb, &pb, None, &p).unwrap();
+    let (_, gb) = r.gradient().unwrap();
+    let h = 1e-6;
+    for k in 0..3 {
+        let mut v = Vector3::zeros();
+        v[k] = h;
+        let plus = crate::query::gradient::perturb_pose(&pb, &v, &Vector3::zeros());
+        let minus = crate::query::gradient::perturb_pose(&pb, &-v, &Vector3::zeros());
+        let fd = (tree_distance(&ta, &pa, &tb, &plus, None, &p).unwrap().lower
+            - tree_distance(&ta, &pa, &tb, &minus, None, &p).unwrap().lower)
+            / (2.0 * h);
+        assert!((fd - gb.linear[k]).abs() < 1e-5, "component {k}: fd {fd} vs {}", gb.linear[k]);
+    }
+}
+
+#[test]
+fn bad_input_is_an_error_naming_the_field() {
+    let (ta, _) = sphere_tree(1);
+    let pose = Isometry3::identity();
+    let bad = TreeQueryParams { tolerance: -1.0, ..Default::default() };
+    let e = tree_distance(&ta, &pose, &ta, &pose, None, &bad).unwrap_err().to_string();
+    assert!(e.contains("tolerance"), "{e}");
+    let e = tree_closer_than(&ta, &pose, &ta, &pose, Real::NAN, None, &TreeQueryParams::default()).unwrap_err();
+    assert!(e.to_string().contains("margin"), "{e}");
+    let mut broken = sphere_tree(2).0;
+    broken.children[1].push(99);
+    let e = tree_distance(&broken, &pose, &ta, &pose, None, &TreeQueryParams::default()).unwrap_err().to_string();
+    assert!(e.contains("tree_a"), "{e}");
+    let mut cyclic = sphere_tree(3).0;
+    cyclic.children[1].push(0);
+    let e = tree_collide(&ta, &pose, &cyclic, &pose, false, None, &TreeQueryParams::default()).unwrap_err();
+    assert!(e.to_string().contains("tree_b"), "{e}");
+}
