@@ -11,10 +11,22 @@ fn median(mut v: Vec<Duration>) -> Duration {
     v[v.len() / 2]
 }
 
+/// The fastest of several timed calls: noise on a shared machine only adds time, and a Nagle /
+/// delayed-ACK stall adds ~40 ms to every call, so the fastest call shows a stall and hides noise.
+fn fastest(v: &[Duration]) -> Duration {
+    v.iter().copied().min().unwrap_or_default()
+}
+
+/// Slack over the expected cost that still rules out a stall (a stall costs ~40 ms per call).
+const STALL_SLACK: Duration = Duration::from_millis(15);
+
 /// BatchQuery of 1, 5, 19, 100 and 1000 pairs and SetPoses + a 19-pair BatchQuery (a planner's
-/// state check), each timed from the Rust client: every median within 10× of the unary Distance
-/// median plus the batch's own in-process work (measured here, five times over for noise and encoding).
-/// A stall adds ~40 ms to a sub-millisecond call and fails this by far.
+/// state check), each timed from the Rust client: the fastest call of each kind costs at most the
+/// fastest unary Distance plus the batch's own in-process work (measured here, five times over for
+/// encoding) plus 15 ms. A stall adds ~40 ms to every call and fails this by far; noise on a loaded
+/// machine does not (it would have to delay every one of 40 calls). This is a regression check for
+/// the stall, not a speed target: the medians are printed, and the speed figures live in
+/// `sublevel loadtest` and `clients/python/examples/round_trips.py`.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn batch_round_trips_cost_no_stall() {
     let dir = tempfile::tempdir().unwrap();
@@ -42,7 +54,8 @@ async fn batch_round_trips_cost_no_stall() {
         c.distance(distance.clone()).await.unwrap();
         unary_times.push(t.elapsed());
     }
-    let unary = median(unary_times);
+    let unary = fastest(&unary_times);
+    let unary_median = median(unary_times);
 
     // In-process cost of one warm pair query, to budget the batch's own work.
     let catalog = sublevel::scene::Catalog::open(
@@ -70,7 +83,8 @@ async fn batch_round_trips_cost_no_stall() {
         with_gradient: false,
         signed: false,
     };
-    let mut report = vec![format!("unary Distance median {unary:?}, in-process pair {per_pair:?}")];
+    let mut report =
+        vec![format!("unary Distance median {unary_median:?} (fastest {unary:?}), in-process pair {per_pair:?}")];
     for n in [1usize, 5, 19, 100, 1000] {
         let req = pb::BatchQueryRequest { scene_id: scene.clone(), pairs: (0..n).map(pair).collect(), columns: None };
         c.batch_query(req.clone()).await.unwrap();
@@ -82,10 +96,10 @@ async fn batch_round_trips_cost_no_stall() {
             times.push(t.elapsed());
             assert_eq!(r.answers.len(), n);
         }
-        let m = median(times);
-        let budget = unary * 10 + per_pair * (5 * n as u32);
-        report.push(format!("BatchQuery {n:>4} pairs: median {m:?} (budget {budget:?})"));
-        assert!(m <= budget, "{}", report.join("\n"));
+        let (fast, m) = (fastest(&times), median(times));
+        let budget = unary + per_pair * (5 * n as u32) + STALL_SLACK;
+        report.push(format!("BatchQuery {n:>4} pairs: median {m:?}, fastest {fast:?} (budget {budget:?})"));
+        assert!(fast <= budget, "{}", report.join("\n"));
     }
     // A QueryStream message: move the chair in the stream's own view, 19 distance queries.
     let (tx, rx) = tokio::sync::mpsc::channel(4);
@@ -116,10 +130,10 @@ async fn batch_round_trips_cost_no_stall() {
         times.push(t.elapsed());
         assert_eq!((r.request_id, r.answers.len()), (k, 19));
     }
-    let m = median(times[10..].to_vec());
-    let budget = unary * 10 + per_pair * (5 * 19);
-    report.push(format!("QueryStream message, 19 pairs: median {m:?} (budget {budget:?})"));
-    assert!(m <= budget, "{}", report.join("\n"));
+    let (fast, m) = (fastest(&times[10..]), median(times[10..].to_vec()));
+    let budget = unary + per_pair * (5 * 19) + STALL_SLACK;
+    report.push(format!("QueryStream message, 19 pairs: median {m:?}, fastest {fast:?} (budget {budget:?})"));
+    assert!(fast <= budget, "{}", report.join("\n"));
     drop(tx);
 
     // A planner's state check: move one instance, query 19 pairs.
@@ -133,10 +147,10 @@ async fn batch_round_trips_cost_no_stall() {
         c.batch_query(req.clone()).await.unwrap();
         times.push(t.elapsed());
     }
-    let m = median(times);
-    let budget = unary * 20 + per_pair * (5 * 19);
-    report.push(format!("SetPoses + BatchQuery 19 pairs: median {m:?} (budget {budget:?})"));
-    assert!(m <= budget, "{}", report.join("\n"));
+    let (fast, m) = (fastest(&times), median(times));
+    let budget = unary * 2 + per_pair * (5 * 19) + STALL_SLACK;
+    report.push(format!("SetPoses + BatchQuery 19 pairs: median {m:?}, fastest {fast:?} (budget {budget:?})"));
+    assert!(fast <= budget, "{}", report.join("\n"));
     eprintln!("{}", report.join("\n"));
     server.stop().await;
 }
