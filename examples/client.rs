@@ -6,8 +6,12 @@
 //! cargo run --release -- serve --demo          # terminal 1
 //! cargo run --release --example client         # terminal 2 (SUBLEVEL_ADDR to point elsewhere)
 //! ```
+//!
+//! Every call about a scene carries the `x-scene-id` metadata ([`scene_request`]), which a
+//! scene-sharding proxy routes on (`deploy/SCALING.md`).
 
 use sublevel::service::pb::{self, sublevel_client::SublevelClient};
+use sublevel::service::scene_request;
 
 fn pose(tx: f64, ty: f64, tz: f64) -> pb::Pose {
     pb::Pose {
@@ -29,7 +33,10 @@ async fn main() -> Result<(), Box<dyn std::error::Error>> {
     let Some(demo) = scenes.iter().find(|s| s.name == "demo") else {
         return Err("no scene named `demo`: start the server with `sublevel serve --demo`".into());
     };
-    let scene = client.get_scene(pb::GetSceneRequest { scene_id: demo.scene_id.clone() }).await?.into_inner();
+    let scene = client
+        .get_scene(scene_request(&demo.scene_id, pb::GetSceneRequest { scene_id: demo.scene_id.clone() }))
+        .await?
+        .into_inner();
     let name_of =
         |body_id: &str| bodies.iter().find(|b| b.body_id == body_id).map(|b| b.name.clone()).unwrap_or_default();
     let chair = scene.instances.iter().find(|i| name_of(&i.body_id) == "chair_101").ok_or("no chair instance")?;
@@ -44,27 +51,39 @@ async fn main() -> Result<(), Box<dyn std::error::Error>> {
     for k in 0..=12 {
         let x = human_x - 2.4 + 0.4 * k as f64;
         client
-            .set_poses(pb::SetPosesRequest {
-                scene_id: scene.scene_id.clone(),
-                poses: vec![pb::InstancePose { instance_id: chair.instance_id.clone(), pose: Some(pose(x, 0.0, 0.0)) }],
-            })
+            .set_poses(scene_request(
+                &scene.scene_id,
+                pb::SetPosesRequest {
+                    scene_id: scene.scene_id.clone(),
+                    poses: vec![pb::InstancePose {
+                        instance_id: chair.instance_id.clone(),
+                        pose: Some(pose(x, 0.0, 0.0)),
+                    }],
+                },
+            ))
             .await?;
         let d = client
-            .distance(pb::DistanceRequest {
-                scene_id: scene.scene_id.clone(),
-                instance_a: chair.instance_id.clone(),
-                instance_b: human.instance_id.clone(),
-                ..Default::default()
-            })
+            .distance(scene_request(
+                &scene.scene_id,
+                pb::DistanceRequest {
+                    scene_id: scene.scene_id.clone(),
+                    instance_a: chair.instance_id.clone(),
+                    instance_b: human.instance_id.clone(),
+                    ..Default::default()
+                },
+            ))
             .await?
             .into_inner();
         let g = client
-            .growth(pb::GrowthRequest {
-                scene_id: scene.scene_id.clone(),
-                instance_1: chair.instance_id.clone(),
-                instance_2: human.instance_id.clone(),
-                ..Default::default()
-            })
+            .growth(scene_request(
+                &scene.scene_id,
+                pb::GrowthRequest {
+                    scene_id: scene.scene_id.clone(),
+                    instance_1: chair.instance_id.clone(),
+                    instance_2: human.instance_id.clone(),
+                    ..Default::default()
+                },
+            ))
             .await?
             .into_inner();
         let (Some(da), Some(ga)) = (d.answer, g.answer) else { return Err("empty answer".into()) };

@@ -23,8 +23,7 @@ use sublevel::service::pb::{self, sublevel_client::SublevelClient};
 use sublevel::{Error, Result};
 use tonic::transport::Channel;
 
-/// The metadata key a scene-sharding proxy routes on (see `deploy/SCALING.md`).
-pub const SCENE_ID_HEADER: &str = "x-scene-id";
+use sublevel::service::SCENE_ID_HEADER;
 
 /// What the probe does (module docs).
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]

@@ -11,6 +11,7 @@
 //! | sos-convex bodies, Newton did not converge (either mode) | the SDP's value and moment witnesses | `SdpFallback` | SDP verified |
 //! | [`CertifyMode::Certify`], Newton converged but disagrees with a verified SDP | the SDP's | `SdpFallback` | true |
 //! | either body nonconvex (`report.nonconvex`) | the SDP's verified lower bound | `SdpLowerBound` | SDP verified |
+//! | [`CertifyMode::NewtonOnly`], Newton did not converge or a body is nonconvex | Newton's, `needs_sdp = true` (no SDP solved) | `Newton` | false |
 //!
 //! No answer is silently wrong: an answer that is neither a converged Newton answer nor a verified
 //! SDP answer has `converged = false`, and a disagreement is visible in
@@ -75,6 +76,12 @@ pub enum CertifyMode {
     Newton,
     /// Always solve the SDP, attach it, and compare it with Newton's answer.
     Certify,
+    /// Newton only, never an SDP (for callers on an async worker): when Newton converged the
+    /// answer is [`CertifyMode::Newton`]'s; when it did not (or a body is nonconvex) the answer is
+    /// Newton's unconverged one with `source = Newton`, `converged = false`, no certificate and
+    /// [`Certified::needs_sdp`] set. The caller then asks again in [`CertifyMode::Newton`] off
+    /// the async workers, which gives the answer the SDP fallback gives.
+    NewtonOnly,
 }
 
 /// Where a certified answer's value and points come from.
@@ -155,12 +162,28 @@ pub struct Certified<R> {
     pub tight: bool,
     /// True when the answer is a converged Newton answer or a verified SDP answer.
     pub converged: bool,
+    /// [`CertifyMode::NewtonOnly`] only: the answer needs the SDP (Newton did not converge or a
+    /// body is nonconvex), which was not solved; ask again in [`CertifyMode::Newton`].
+    pub needs_sdp: bool,
 }
 
 impl<R> Certified<R> {
     /// Newton's answer as it is (`source = Newton`, not a lower bound).
     fn newton(result: R, certificate: Option<CertificateSummary>, converged: bool) -> Self {
-        Self { result, source: AnswerSource::Newton, certificate, lower_bound: false, tight: false, converged }
+        Self {
+            result,
+            source: AnswerSource::Newton,
+            certificate,
+            lower_bound: false,
+            tight: false,
+            converged,
+            needs_sdp: false,
+        }
+    }
+
+    /// Newton's unconverged answer of [`CertifyMode::NewtonOnly`], marked as needing the SDP.
+    fn sdp_needed(result: R) -> Self {
+        Self { needs_sdp: true, ..Self::newton(result, None, false) }
     }
 }
 
@@ -254,12 +277,16 @@ pub fn certified_distance(
     mode: CertifyMode,
 ) -> CertifiedDistance {
     let cert = &params.certificate;
-    if is_nonconvex(a, b) {
+    let nonconvex = is_nonconvex(a, b);
+    if nonconvex && mode != CertifyMode::NewtonOnly {
         return distance_lower_bound(a, pose_a, b, pose_b, cert);
     }
     let newton = distance(a, pose_a, b, pose_b, warm, &params.newton);
     let newton_ok = newton.status.converged();
-    if newton_ok && mode == CertifyMode::Newton {
+    if mode == CertifyMode::NewtonOnly && (nonconvex || !newton_ok) {
+        return CertifiedDistance::sdp_needed(newton);
+    }
+    if newton_ok && mode != CertifyMode::Certify {
         return CertifiedDistance::newton(newton, None, true);
     }
     let n2 = newton.distance * newton.distance;
@@ -298,6 +325,7 @@ pub fn certified_distance(
         lower_bound: false,
         tight: false,
         converged,
+        needs_sdp: false,
     }
 }
 
@@ -433,6 +461,7 @@ fn distance_lower_bound(
             lower_bound: true,
             tight: false,
             converged: false,
+            needs_sdp: false,
         };
     };
     let s = distance_summary(&c, None);
@@ -472,6 +501,7 @@ fn distance_lower_bound(
         result,
         source: AnswerSource::SdpLowerBound,
         converged: s.verified,
+        needs_sdp: false,
         certificate: Some(s),
         lower_bound: true,
         tight,
@@ -492,12 +522,16 @@ pub fn certified_growth(
     mode: CertifyMode,
 ) -> CertifiedGrowth {
     let cert = &params.certificate;
-    if is_nonconvex(p1, p2) {
+    let nonconvex = is_nonconvex(p1, p2);
+    if nonconvex && mode != CertifyMode::NewtonOnly {
         return growth_lower_bound(p1, pose1, p2, pose2, cert);
     }
     let newton = growth(p1, pose1, p2, pose2, warm, &params.newton);
     let newton_ok = newton.status.converged();
-    if newton_ok && mode == CertifyMode::Newton {
+    if mode == CertifyMode::NewtonOnly && (nonconvex || !newton_ok) {
+        return CertifiedGrowth::sdp_needed(newton);
+    }
+    if newton_ok && mode != CertifyMode::Certify {
         return CertifiedGrowth::newton(newton, None, true);
     }
     let Ok(c) = certify_growth_with_params(p1, pose1, p2, pose2, cert) else {
@@ -530,6 +564,7 @@ pub fn certified_growth(
         lower_bound: false,
         tight: false,
         converged,
+        needs_sdp: false,
     }
 }
 
@@ -559,6 +594,7 @@ fn growth_lower_bound(
             lower_bound: true,
             tight: false,
             converged: false,
+            needs_sdp: false,
         };
     };
     let s = growth_summary(&c, None);
@@ -572,6 +608,7 @@ fn growth_lower_bound(
         result,
         source: AnswerSource::SdpLowerBound,
         converged: s.verified,
+        needs_sdp: false,
         certificate: Some(s),
         lower_bound: true,
         tight,

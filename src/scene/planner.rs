@@ -20,7 +20,7 @@ use super::catalog::{Catalog, DistanceReply, GrowthReply, PairRef, QueryAnswer, 
 use crate::body::Body;
 use crate::math::{Isometry3, Real};
 use crate::query::{
-    certified_distance, certified_growth, distance_gradient, growth_gradient, AnswerSource, CertifyParams,
+    certified_distance, certified_growth, distance_gradient, growth_gradient, AnswerSource, CertifyMode, CertifyParams,
 };
 use crate::{Error, Result};
 use std::collections::HashMap;
@@ -205,6 +205,30 @@ impl QueryView {
     /// naming `poses[k].instance_id` / `states[s].poses[k].instance_id` for an unknown or repeated
     /// instance (the view is then unchanged).
     pub fn run(&mut self, catalog: &Catalog, request: &PlannerRequest) -> Result<PlannerAnswers> {
+        match self.run_with(catalog, request, false)? {
+            Some(answers) => Ok(answers),
+            None => Err(Error::Numerical("an answer needs the SDP outside CertifyMode::NewtonOnly".into())),
+        }
+    }
+
+    /// [`QueryView::run`] without any SDP (for an async worker): every query is answered in
+    /// [`CertifyMode::NewtonOnly`] (a request asking for a certificate must not come here). When an
+    /// answer needs the SDP ([`QueryAnswer::needs_sdp`]) it returns `None` and keeps none of the
+    /// request's warm starts, so [`QueryView::run`] then gives exactly the answers it would have
+    /// given first (the pose updates, already applied, are applied again to the same values).
+    ///
+    /// # Errors
+    /// As [`QueryView::run`].
+    pub fn run_newton_only(&mut self, catalog: &Catalog, request: &PlannerRequest) -> Result<Option<PlannerAnswers>> {
+        self.run_with(catalog, request, true)
+    }
+
+    fn run_with(
+        &mut self,
+        catalog: &Catalog,
+        request: &PlannerRequest,
+        newton_only: bool,
+    ) -> Result<Option<PlannerAnswers>> {
         check_unique("poses", &request.poses)?;
         for (s, state) in request.states.iter().enumerate() {
             check_unique(&format!("states[{s}].poses"), state)?;
@@ -249,8 +273,38 @@ impl QueryView {
             posed.insert(id, p);
         }
         let params = catalog.certify_params();
+        if !newton_only {
+            return Ok(Some(self.answer_states(request, &mut posed, &params, None)));
+        }
+        // The request's warm starts go to a scratch cache, kept only when no answer needs the SDP.
+        let mut scratch = WarmStartCache::default();
+        for q in request.queries.iter().filter(|q| !q.options.cold) {
+            self.cache.copy_pair(&mut scratch, super::catalog::warm_kind(q.kind), &q.first, &q.second);
+        }
+        let saved = std::mem::replace(&mut self.cache, scratch);
+        let out = self.answer_states(request, &mut posed, &params, Some(CertifyMode::NewtonOnly));
+        let scratch = std::mem::replace(&mut self.cache, saved);
+        let needs_sdp = match &out {
+            PlannerAnswers::Single(a) => a.iter().any(QueryAnswer::needs_sdp),
+            PlannerAnswers::PerState(s) => s.iter().flatten().any(QueryAnswer::needs_sdp),
+        };
+        if needs_sdp {
+            return Ok(None);
+        }
+        self.cache.merge(scratch, |_| true);
+        Ok(Some(out))
+    }
+
+    /// The queries answered once, or once per candidate state; `mode` overrides each query's.
+    fn answer_states(
+        &mut self,
+        request: &PlannerRequest,
+        posed: &mut PosedMap<'_>,
+        params: &CertifyParams,
+        mode: Option<CertifyMode>,
+    ) -> PlannerAnswers {
         if request.states.is_empty() {
-            return Ok(PlannerAnswers::Single(self.answer_all(&request.queries, &posed, &params)));
+            return PlannerAnswers::Single(self.answer_all(&request.queries, posed, params, mode));
         }
         let mut out = Vec::with_capacity(request.states.len());
         for state in &request.states {
@@ -260,22 +314,32 @@ impl QueryView {
                     posed.get_mut(id.as_str()).map(|p| (id.as_str(), std::mem::replace(&mut p.pose, *pose)))
                 })
                 .collect();
-            out.push(self.answer_all(&request.queries, &posed, &params));
+            out.push(self.answer_all(&request.queries, posed, params, mode));
             for (id, pose) in saved {
                 if let Some(p) = posed.get_mut(id) {
                     p.pose = pose;
                 }
             }
         }
-        Ok(PlannerAnswers::PerState(out))
+        PlannerAnswers::PerState(out)
     }
 
-    fn answer_all(&mut self, queries: &[QueryPair], posed: &PosedMap<'_>, params: &CertifyParams) -> Vec<QueryAnswer> {
+    fn answer_all(
+        &mut self,
+        queries: &[QueryPair],
+        posed: &PosedMap<'_>,
+        params: &CertifyParams,
+        mode: Option<CertifyMode>,
+    ) -> Vec<QueryAnswer> {
         queries
             .iter()
             .filter_map(|q| {
                 let (a, b) = (posed.get(q.first.as_str())?, posed.get(q.second.as_str())?);
-                Some(answer_pair(q.view(), a, b, &mut self.cache, params))
+                let mut pair = q.view();
+                if let Some(mode) = mode {
+                    pair.options.mode = mode;
+                }
+                Some(answer_pair(pair, a, b, &mut self.cache, params))
             })
             .collect()
     }

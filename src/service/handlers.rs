@@ -8,8 +8,9 @@ use super::ServerConfig;
 use crate::body::BodyFile;
 use crate::fit::mesh::parse_points_limited;
 use crate::fit::sos_convexity::admit_uploaded;
+use crate::query::CertifyMode;
 use crate::scene::planner::{PlannerAnswers, PlannerRequest, QueryView};
-use crate::scene::{Catalog, QueryOptions};
+use crate::scene::{Catalog, QueryAnswer, QueryOptions};
 use crate::{Error, Result};
 use std::sync::Arc;
 use tokio_stream::wrappers::ReceiverStream;
@@ -44,11 +45,15 @@ async fn run_view(
     mut view: QueryView,
     request: PlannerRequest,
 ) -> (QueryView, Result<PlannerAnswers, Status>) {
-    let certify = request.queries.iter().any(|q| q.options.mode == crate::query::CertifyMode::Certify);
+    let certify = request.queries.iter().any(|q| q.options.mode == CertifyMode::Certify);
     let answers = request.queries.len() * request.states.len().max(1);
     if !off_workers(&catalog, view.scene_id(), certify, answers) {
-        let out = view.run(&catalog, &request).map_err(Status::from);
-        return (view, out);
+        // Newton only: an answer that needs the SDP sends the whole request to the blocking pool.
+        match view.run_newton_only(&catalog, &request) {
+            Ok(Some(out)) => return (view, Ok(out)),
+            Ok(None) => {}
+            Err(e) => return (view, Err(Status::from(e))),
+        }
     }
     let scene = view.scene_id().to_owned();
     match sdp
@@ -75,21 +80,27 @@ fn off_workers(catalog: &Catalog, scene_id: &str, certify: bool, answers: usize)
 }
 
 /// Runs query work `f` inline when it is microseconds, else on the blocking pool (see
-/// [`off_workers`]).
+/// [`off_workers`]). `f` gets the certification mode to use instead of the queries' own: inline
+/// [`CertifyMode::NewtonOnly`] (no SDP ever runs on an async worker); when `needs_sdp` says an
+/// answer needed the SDP fallback, `f` runs again on the blocking pool with the queries' own modes
+/// (`None`), which gives the answers a first run there would have given.
 async fn query_work<T: Send + 'static>(
     catalog: &Arc<Catalog>,
     sdp: &SdpSlots,
     scene_id: &str,
     certify: bool,
     answers: usize,
-    f: impl FnOnce(&Catalog) -> Result<T> + Send + 'static,
+    f: impl Fn(&Catalog, Option<CertifyMode>) -> Result<T> + Send + 'static,
+    needs_sdp: impl Fn(&T) -> bool,
 ) -> Result<T, Status> {
-    if off_workers(catalog, scene_id, certify, answers) {
-        let catalog = catalog.clone();
-        sdp.run(move || f(&catalog)).await
-    } else {
-        f(catalog).map_err(Status::from)
+    if !off_workers(catalog, scene_id, certify, answers) {
+        let out = f(catalog, Some(CertifyMode::NewtonOnly)).map_err(Status::from)?;
+        if !needs_sdp(&out) {
+            return Ok(out);
+        }
     }
+    let catalog = catalog.clone();
+    sdp.run(move || f(&catalog, None)).await
 }
 
 /// Runs blocking work (an fsync'd store write, mesh parsing, an SDP) on tokio's blocking pool.
@@ -386,9 +397,18 @@ impl Sublevel for SublevelService {
         let options =
             crate::scene::QueryOptions { signed: req.signed, ..cv::query_options(req.certify, req.with_gradient) };
         let scene = req.scene_id.clone();
-        let r = query_work(&self.catalog, &self.sdp, &scene, req.certify, 1, move |c| {
-            c.distance_with(&req.scene_id, &req.instance_a, &req.instance_b, &options)
-        })
+        let r = query_work(
+            &self.catalog,
+            &self.sdp,
+            &scene,
+            req.certify,
+            1,
+            move |c, mode| {
+                let options = QueryOptions { mode: mode.unwrap_or(options.mode), ..options };
+                c.distance_with(&req.scene_id, &req.instance_a, &req.instance_b, &options)
+            },
+            |r| r.answer.needs_sdp,
+        )
         .await?;
         let answer = cv::distance_reply_to_proto(&r);
         super::metrics::query_answer("distance", answer.solve.as_ref(), answer.source);
@@ -402,9 +422,18 @@ impl Sublevel for SublevelService {
         require_id("instance_2", &req.instance_2)?;
         let options = cv::query_options(req.certify, req.with_gradient);
         let scene = req.scene_id.clone();
-        let r = query_work(&self.catalog, &self.sdp, &scene, req.certify, 1, move |c| {
-            c.growth_with(&req.scene_id, &req.instance_1, &req.instance_2, &options)
-        })
+        let r = query_work(
+            &self.catalog,
+            &self.sdp,
+            &scene,
+            req.certify,
+            1,
+            move |c, mode| {
+                let options = QueryOptions { mode: mode.unwrap_or(options.mode), ..options };
+                c.growth_with(&req.scene_id, &req.instance_1, &req.instance_2, &options)
+            },
+            |r| r.answer.needs_sdp,
+        )
         .await?;
         let answer = cv::growth_reply_to_proto(&r);
         super::metrics::query_answer("growth", answer.solve.as_ref(), answer.source);
@@ -420,25 +449,41 @@ impl Sublevel for SublevelService {
             }
             let c = cv::pair_columns_from_proto(&columns, self.config.max_batch_pairs)?;
             let (scene, n, kind) = (req.scene_id.clone(), c.first.len(), c.kind);
-            let answers = query_work(&self.catalog, &self.sdp, &scene, false, n, move |catalog| {
-                catalog.batch_columns(
-                    &req.scene_id,
-                    &c.instance_ids,
-                    (&c.first, &c.second),
-                    c.kind,
-                    QueryOptions::default(),
-                    c.margin,
-                )
-            })
+            let answers = query_work(
+                &self.catalog,
+                &self.sdp,
+                &scene,
+                false,
+                n,
+                move |catalog, mode| {
+                    catalog.batch_columns(
+                        &req.scene_id,
+                        &c.instance_ids,
+                        (&c.first, &c.second),
+                        c.kind,
+                        QueryOptions { mode: mode.unwrap_or_default(), ..QueryOptions::default() },
+                        c.margin,
+                    )
+                },
+                |a| a.iter().any(QueryAnswer::needs_sdp),
+            )
             .await?;
             let columns = Some(cv::answers_to_columns(kind, &answers));
             return Ok(Response::new(pb::BatchQueryResponse { answers: Vec::new(), columns }));
         }
         let pairs = cv::pairs_from_proto(&req.pairs, self.config.max_batch_pairs)?;
-        let certify = pairs.iter().any(|p| p.options.mode == crate::query::CertifyMode::Certify);
+        let certify = pairs.iter().any(|p| p.options.mode == CertifyMode::Certify);
         let (scene, n) = (req.scene_id.clone(), pairs.len());
-        let answers =
-            query_work(&self.catalog, &self.sdp, &scene, certify, n, move |c| c.batch(&req.scene_id, &pairs)).await?;
+        let answers = query_work(
+            &self.catalog,
+            &self.sdp,
+            &scene,
+            certify,
+            n,
+            move |c, mode| c.batch_with(&req.scene_id, &pairs, mode),
+            |a| a.iter().any(QueryAnswer::needs_sdp),
+        )
+        .await?;
         let answers: Vec<pb::QueryAnswer> = answers.iter().map(cv::answer_to_proto).collect();
         super::metrics::batch_answers(&answers);
         Ok(Response::new(pb::BatchQueryResponse { answers, columns: None }))
@@ -557,5 +602,109 @@ impl Sublevel for SublevelService {
         })
         .await?;
         Ok(Response::new(cv::scene_check_to_proto(&check, start.elapsed().as_secs_f64())))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::body::ellipsoid;
+    use crate::math::pose_from_parts;
+    use crate::query::{AnswerSource, NewtonParams};
+    use crate::scene::planner::PlannerAnswers;
+    use crate::scene::store::MemoryStore;
+
+    /// A catalog whose Newton solver stops after one iteration (so it never converges on two
+    /// ellipsoids) with a scene of two separated ellipsoids: (catalog, scene, a, b).
+    fn one_iteration_scene() -> (Arc<Catalog>, String, String, String) {
+        let params = NewtonParams { max_iterations: 1, ..NewtonParams::default() };
+        let catalog = Catalog::open(Box::new(MemoryStore::new()), params).unwrap();
+        let b1 = catalog.add_body("e1", ellipsoid([0.0; 3], [0.5, 0.2, 0.3]).unwrap()).unwrap();
+        let b2 = catalog.add_body("e2", ellipsoid([0.0; 3], [0.25, 0.4, 0.2]).unwrap()).unwrap();
+        let s = catalog.create_scene("s").unwrap();
+        let q = [0.9238795325112867, 0.0, 0.3826834323650898, 0.0];
+        let a =
+            catalog.add_instance(&s, &b1, pose_from_parts("pose", [1.0, 0.0, 0.0, 0.0], [0.0; 3]).unwrap()).unwrap();
+        let b = catalog.add_instance(&s, &b2, pose_from_parts("pose", q, [1.5, 0.3, -0.2]).unwrap()).unwrap();
+        (Arc::new(catalog), s, a, b)
+    }
+
+    /// Newton does not converge: the inline mode (`NewtonOnly`) reports "needs the SDP" without
+    /// solving one and keeps no warm start; the service (which answers such a request inline
+    /// first) returns exactly the SDP fallback's answer of a catalog asked directly.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn an_unconverged_newton_answer_is_solved_off_the_workers_with_the_fallback() {
+        let (catalog, s, a, b) = one_iteration_scene();
+        let only = QueryOptions { mode: CertifyMode::NewtonOnly, ..QueryOptions::default() };
+        let inline = catalog.distance_with(&s, &a, &b, &only).unwrap();
+        assert!(inline.answer.needs_sdp);
+        assert!(!inline.answer.converged);
+        assert_eq!(inline.answer.source, AnswerSource::Newton);
+        assert!(inline.answer.certificate.is_none(), "no SDP was solved");
+        assert_eq!(catalog.cached_warm_starts(&s).unwrap(), 0, "an answer needing the SDP keeps no warm start");
+        let g = catalog.growth_with(&s, &a, &b, &only).unwrap();
+        assert!(g.answer.needs_sdp && g.answer.certificate.is_none());
+        // A planner view: no answers, no warm starts kept.
+        let mut view = QueryView::new(&s);
+        assert!(view.run_newton_only(&catalog, &request_of(&a, &b)).unwrap().is_none());
+        assert_eq!(view.warm_starts(), 0);
+
+        // The reference: a fresh identical catalog asked in the normal mode (the fallback SDP).
+        let (reference, rs, ra, rb) = one_iteration_scene();
+        let want = reference.distance_with(&rs, &ra, &rb, &QueryOptions::default()).unwrap();
+        assert_eq!(want.answer.source, AnswerSource::SdpFallback);
+        assert!(want.answer.converged);
+        let want_growth = reference.growth_with(&rs, &ra, &rb, &QueryOptions::default()).unwrap();
+        assert_eq!(want_growth.answer.source, AnswerSource::SdpFallback);
+
+        let service = SublevelService::new(catalog.clone(), crate::service::ServerConfig::default());
+        let request = pb::DistanceRequest {
+            scene_id: s.clone(),
+            instance_a: a.clone(),
+            instance_b: b.clone(),
+            ..Default::default()
+        };
+        let got = service.distance(Request::new(request)).await.unwrap().into_inner().answer.unwrap();
+        assert_eq!(got.source, pb::AnswerSource::SdpFallback as i32);
+        assert!(got.solve.as_ref().unwrap().converged);
+        assert!(want.answer.result.distance > 0.1, "{}", want.answer.result.distance);
+        assert!(
+            (got.distance - want.answer.result.distance).abs() <= 1e-12,
+            "{} vs {}",
+            got.distance,
+            want.answer.result.distance
+        );
+        let request = pb::GrowthRequest {
+            scene_id: s.clone(),
+            instance_1: a.clone(),
+            instance_2: b.clone(),
+            ..Default::default()
+        };
+        let got = service.growth(Request::new(request)).await.unwrap().into_inner().answer.unwrap();
+        assert_eq!(got.source, pb::AnswerSource::SdpFallback as i32);
+        assert!(
+            (got.value - want_growth.answer.result.value).abs()
+                <= 1e-12 * want_growth.answer.result.value.abs().max(1.0)
+        );
+
+        // The planner path: the view answers the fallback's value too.
+        let (view, out) = run_view(catalog.clone(), &service.sdp, QueryView::new(&s), request_of(&a, &b)).await;
+        let PlannerAnswers::Single(answers) = out.unwrap() else { panic!("one list of answers") };
+        let crate::scene::QueryAnswer::Distance(d) = &answers[0] else { panic!("a distance answer") };
+        assert_eq!(d.answer.source, AnswerSource::SdpFallback);
+        assert!(!d.answer.needs_sdp);
+        assert!((d.answer.result.distance - want.answer.result.distance).abs() <= 1e-12);
+        assert_eq!(view.warm_starts(), 1, "the blocking run keeps its warm start");
+    }
+
+    fn request_of(a: &str, b: &str) -> PlannerRequest {
+        let pair = crate::scene::QueryPair {
+            kind: crate::scene::QueryKind::Distance,
+            first: a.to_owned(),
+            second: b.to_owned(),
+            options: QueryOptions::default(),
+            margin: 0.0,
+        };
+        PlannerRequest { queries: vec![pair], ..PlannerRequest::default() }
     }
 }

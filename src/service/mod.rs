@@ -67,6 +67,26 @@ use std::sync::Arc;
 pub use handlers::SublevelService;
 pub use shutdown::DEFAULT_SHUTDOWN_GRACE;
 
+/// The gRPC metadata key a scene-sharding proxy routes on: every call about a scene carries
+/// `x-scene-id: <scene id>` (nginx consistent hash, `deploy/SCALING.md`).
+pub const SCENE_ID_HEADER: &str = "x-scene-id";
+
+/// A request for `message` carrying the routing metadata [`SCENE_ID_HEADER`] of `scene_id`
+/// ([`with_scene_id`]).
+pub fn scene_request<T>(scene_id: &str, message: T) -> tonic::Request<T> {
+    with_scene_id(tonic::Request::new(message), scene_id)
+}
+
+/// `request` with the metadata [`SCENE_ID_HEADER`] set to `scene_id` (replacing any). A scene id
+/// that is not a valid metadata value (never one the server issues) is left out: the request then
+/// goes to any replica, which answers it (or rejects the id) like a single server.
+pub fn with_scene_id<T>(mut request: tonic::Request<T>, scene_id: &str) -> tonic::Request<T> {
+    if let Ok(value) = scene_id.parse() {
+        request.metadata_mut().insert(SCENE_ID_HEADER, value);
+    }
+    request
+}
+
 /// Code generated from `proto/sublevel/v1/sublevel.proto` (messages, client and server).
 #[allow(missing_docs, clippy::all, clippy::pedantic)]
 pub mod pb {
@@ -287,4 +307,24 @@ pub async fn serve_catalog(
     shutdown::within(serving, deadline, grace).await?;
     tracing::info!("server stopped");
     Ok(())
+}
+
+#[cfg(test)]
+mod routing_tests {
+    use super::*;
+
+    /// The routing header carries the scene id; an unusable id leaves the request without it.
+    #[test]
+    fn scene_requests_carry_the_scene_id_header() {
+        let r = scene_request("s-0123abcd", pb::DistanceRequest::default());
+        assert_eq!(r.metadata().get(SCENE_ID_HEADER).unwrap().to_str().unwrap(), "s-0123abcd");
+        let mut r = tonic::Request::new(());
+        r.metadata_mut().insert(SCENE_ID_HEADER, "old".parse().unwrap());
+        let r = with_scene_id(r, "s-2");
+        let values: Vec<_> =
+            r.metadata().get_all(SCENE_ID_HEADER).iter().map(|v| v.to_str().unwrap().to_owned()).collect();
+        assert_eq!(values, ["s-2"]);
+        let r = scene_request("bad\nid", ());
+        assert!(r.metadata().get(SCENE_ID_HEADER).is_none());
+    }
 }

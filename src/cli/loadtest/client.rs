@@ -8,6 +8,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Barrier, OnceLock};
 use std::time::{Duration, Instant};
 use sublevel::service::pb::{self, sublevel_client::SublevelClient};
+use sublevel::service::scene_request;
 use sublevel::{Error, Result};
 use tonic::transport::{Channel, Endpoint};
 
@@ -87,10 +88,15 @@ pub(super) async fn setup(client: &mut SublevelClient<Channel>, layout: &Layout,
         body_id: body.to_owned(),
         pose: Some(proto_pose(pose)),
     };
-    remote.chair =
-        call("AddInstance", client.add_instance(add(&body_ids[0], &CHAIR_HOME))).await?.into_inner().instance_id;
+    remote.chair = call("AddInstance", client.add_instance(scene_request(&scene, add(&body_ids[0], &CHAIR_HOME))))
+        .await?
+        .into_inner()
+        .instance_id;
     for h in &layout.humans {
-        let id = call("AddInstance", client.add_instance(add(&body_ids[1], h))).await?.into_inner().instance_id;
+        let id = call("AddInstance", client.add_instance(scene_request(&scene, add(&body_ids[1], h))))
+            .await?
+            .into_inner()
+            .instance_id;
         remote.humans.push(id);
     }
     Ok(())
@@ -99,7 +105,7 @@ pub(super) async fn setup(client: &mut SublevelClient<Channel>, layout: &Layout,
 /// Deletes the scene, then the bodies; failures are printed on stderr (the run's figures stand).
 pub(super) async fn teardown(client: &mut SublevelClient<Channel>, remote: &Remote) {
     if let Some(scene) = &remote.scene {
-        let req = pb::DeleteSceneRequest { scene_id: scene.clone() };
+        let req = scene_request(scene, pb::DeleteSceneRequest { scene_id: scene.clone() });
         if let Err(e) = call("DeleteScene", client.delete_scene(req)).await {
             eprintln!("warning: could not delete the load-test scene {scene}: {e}");
         }
@@ -266,7 +272,13 @@ impl<'a> Task<'a> {
                     instance_b: plan.seconds[j].clone(),
                     ..Default::default()
                 };
-                let answer = self.client.distance(req).await?.into_inner().answer.ok_or(Failure::BadResponse)?;
+                let answer = self
+                    .client
+                    .distance(scene_request(&plan.scene, req))
+                    .await?
+                    .into_inner()
+                    .answer
+                    .ok_or(Failure::BadResponse)?;
                 if let Some(r) = record {
                     r.pairs.push(j);
                     r.distances.push(answer.distance);
@@ -280,12 +292,18 @@ impl<'a> Task<'a> {
                         pairs: Vec::new(),
                         columns: Some(self.columns.clone()),
                     };
-                    let c = self.client.batch_query(req).await?.into_inner().columns.ok_or(Failure::BadResponse)?;
+                    let c = self
+                        .client
+                        .batch_query(scene_request(&plan.scene, req))
+                        .await?
+                        .into_inner()
+                        .columns
+                        .ok_or(Failure::BadResponse)?;
                     return self.check_columns(&c, record);
                 }
                 let req =
                     pb::BatchQueryRequest { scene_id: plan.scene.clone(), pairs: self.batch.clone(), columns: None };
-                let answers = self.client.batch_query(req).await?.into_inner().answers;
+                let answers = self.client.batch_query(scene_request(&plan.scene, req)).await?.into_inner().answers;
                 self.check(&answers, record)
             }
             Op::Stream => {
@@ -368,7 +386,8 @@ impl<'a> Task<'a> {
         // sending its headers is served too.
         let (tx, rx) = tokio::sync::mpsc::channel(4);
         tx.send(req).await.map_err(|_| Failure::BadResponse)?;
-        let mut inbound = self.client.query_stream(tokio_stream::wrappers::ReceiverStream::new(rx)).await?.into_inner();
+        let outbound = scene_request(&self.plan.scene, tokio_stream::wrappers::ReceiverStream::new(rx));
+        let mut inbound = self.client.query_stream(outbound).await?.into_inner();
         let first =
             inbound.message().await?.ok_or(Failure::Status(tonic::Status::aborted("the server ended the stream")))?;
         self.stream = Some(OpenStream { tx, rx: inbound });

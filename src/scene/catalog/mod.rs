@@ -12,6 +12,7 @@ mod query;
 mod tests;
 
 pub use grouping::PosedInstance;
+pub(crate) use query::warm_kind;
 pub use query::{
     precision_limited, DistanceReply, GrowthReply, PairRef, QueryAnswer, QueryKind, QueryOptions, QueryPair,
     PRECISION_LIMIT,

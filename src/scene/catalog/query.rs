@@ -151,6 +151,18 @@ pub enum QueryAnswer {
     Collide(CollideReply),
 }
 
+impl QueryAnswer {
+    /// Whether this answer of a [`CertifyMode::NewtonOnly`] query needs the SDP that mode does not
+    /// solve ([`crate::query::Certified::needs_sdp`]): ask again in [`CertifyMode::Newton`].
+    pub fn needs_sdp(&self) -> bool {
+        match self {
+            QueryAnswer::Distance(d) => d.answer.needs_sdp,
+            QueryAnswer::Growth(g) => g.answer.needs_sdp,
+            QueryAnswer::Collide(c) => c.solve.as_ref().is_some_and(|d| d.answer.needs_sdp),
+        }
+    }
+}
+
 impl Catalog {
     /// Distance between instances `a` and `b` of a scene (eq. "distance"), warm-started from the
     /// previous answer of the same ordered pair; the new answer's warm start replaces it. The
@@ -211,7 +223,30 @@ impl Catalog {
     /// # Errors
     /// [`Error::NotFound`] for the scene or any instance (checked before any query runs).
     pub fn batch(&self, scene_id: &str, pairs: &[QueryPair]) -> Result<Vec<QueryAnswer>> {
-        let views: Vec<PairRef<'_>> = pairs.iter().map(QueryPair::view).collect();
+        self.batch_with(scene_id, pairs, None)
+    }
+
+    /// [`Catalog::batch`] with every query's certification mode replaced by `mode` when given
+    /// (e.g. [`CertifyMode::NewtonOnly`] on an async worker).
+    ///
+    /// # Errors
+    /// As [`Catalog::batch`].
+    pub fn batch_with(
+        &self,
+        scene_id: &str,
+        pairs: &[QueryPair],
+        mode: Option<CertifyMode>,
+    ) -> Result<Vec<QueryAnswer>> {
+        let views: Vec<PairRef<'_>> = pairs
+            .iter()
+            .map(|p| {
+                let mut v = p.view();
+                if let Some(mode) = mode {
+                    v.options.mode = mode;
+                }
+                v
+            })
+            .collect();
         self.answer_snapshot(scene_id, &views)
     }
 
@@ -265,6 +300,10 @@ impl Catalog {
     /// Inside a cancelled [`crate::fit::cancel::cancellable`] scope it stops before the next pair
     /// with [`Error::Cancelled`] (a running certificate SDP stops at its next iteration).
     ///
+    /// When an answer needs the SDP ([`QueryAnswer::needs_sdp`], [`CertifyMode::NewtonOnly`]
+    /// queries) no warm start is written back, so asking again in [`CertifyMode::Newton`] gives
+    /// exactly the answers a first ask in that mode would have given.
+    ///
     /// Two requests of one scene solve in parallel; a concurrent pose change is seen by the next
     /// request, never halfway through this one. Warm starts are copied as `Arc`s (no 1 KB copies).
     ///
@@ -302,7 +341,7 @@ impl Catalog {
             let (a, b) = (&posed_by_id[p.first], &posed_by_id[p.second]);
             answers.push(planner::answer_pair(*p, a, b, &mut scratch, &params));
         }
-        if !scratch.is_empty() {
+        if !scratch.is_empty() && !answers.iter().any(QueryAnswer::needs_sdp) {
             let mut s = lock(&scene);
             if !s.deleted {
                 let SceneState { instances, cache, .. } = &mut *s;
@@ -314,7 +353,7 @@ impl Catalog {
 }
 
 /// The warm-start table a query kind uses (collide queries solve distances).
-fn warm_kind(kind: QueryKind) -> WarmKind {
+pub(crate) fn warm_kind(kind: QueryKind) -> WarmKind {
     match kind {
         QueryKind::Distance | QueryKind::Collide => WarmKind::Distance,
         QueryKind::Growth => WarmKind::Growth,
