@@ -2,14 +2,18 @@
 //! tree, and the search over part counts (issue 14 part 1).
 //!
 //! ```text
-//! for N in (fixed N) or (1, 2, 4, 8, 16, 32 until max leaf excess ≤ T):
+//! for N in (fixed N) or (1, 2, 4, 8 until max leaf excess ≤ T):
 //!     parts  = decompose(mesh, N)                                          (decompose.rs)
 //!     leaf j = fit of the vertices of part j's triangles (paper §III-A, log det P):
 //!              with T: the lowest candidate degree whose excess ≤ T (else the smallest excess)
 //!              without: the degree `--degree auto` picks (fit::auto, volume tolerance τ)
+//! auto, last N, still above T: refine — split the leaf of largest excess > T (VHACD on its own
+//!       sub-mesh, else a median cut of its triangles; decompose::split_part) and fit the pieces,
+//!       until every leaf ≤ T or max_parts leaves
 //! tree: level by level, pair the nodes greedily by the diagonal of their union's bounding box;
 //!       each pair gets a parent body containing both bodies (paper §V, S-procedure,
-//!       fit::containment::contain_bodies); an odd node out moves up alone; until one root
+//!       fit::containment::contain_bodies; a pair the solver fails on is skipped); a node left
+//!       out moves up alone; until one root
 //! excess of every node: sampled one-sided Hausdorff excess over the mesh          (surface.rs)
 //! ```
 //!
@@ -19,7 +23,7 @@
 //! (flat) is fitted with its VHACD hull points added (then it reaches up to about one voxel beyond
 //! the mesh).
 
-use super::decompose::{decompose, Part, DEFAULT_RESOLUTION};
+use super::decompose::{decompose, split_part, Part, DEFAULT_RESOLUTION, MAX_PARTS};
 use super::surface::{MeshSurface, DEFAULT_EXCESS_SAMPLES};
 use super::{CompoundBody, CompoundNode, CompoundReport};
 use crate::body::Body;
@@ -30,8 +34,14 @@ use crate::math::{Isometry3, Point3, Real};
 use crate::{Error, Result};
 use std::time::Instant;
 
-/// Part counts `--parts auto` tries, in order (VHACD may return fewer than asked).
-pub const AUTO_PART_COUNTS: [usize; 6] = [1, 2, 4, 8, 16, 32];
+/// Part counts `--parts auto` tries, in order (VHACD may return fewer than asked); the last
+/// one is refined (its parts above the tolerance split again) up to
+/// [`CompoundSettings::max_parts`]. Asking VHACD for more than 8 gains little: parry's VHACD
+/// returns at most about 14 parts on the bundled meshes however many are asked.
+pub const AUTO_PART_COUNTS: [usize; 4] = [1, 2, 4, 8];
+
+/// Default cap on the part count reached by refinement.
+pub const DEFAULT_MAX_PARTS: usize = 32;
 
 /// How many parts to decompose into.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -77,6 +87,8 @@ pub struct CompoundSettings {
     pub resolution: u32,
     /// Boundary samples per node for the excess.
     pub excess_samples: usize,
+    /// Most leaves refinement may reach with [`PartCount::Auto`] (2..=[`MAX_PARTS`]).
+    pub max_parts: usize,
 }
 
 impl Default for CompoundSettings {
@@ -90,6 +102,7 @@ impl Default for CompoundSettings {
             containment: ContainmentSettings::default().with_volume_samples(50_000),
             resolution: DEFAULT_RESOLUTION,
             excess_samples: DEFAULT_EXCESS_SAMPLES,
+            max_parts: DEFAULT_MAX_PARTS,
         }
     }
 }
@@ -118,6 +131,9 @@ impl CompoundSettings {
                 "excess_samples",
                 format!("must be in 16..=100000, got {}", self.excess_samples),
             ));
+        }
+        if !(2..=MAX_PARTS).contains(&self.max_parts) {
+            return Err(Error::invalid("max_parts", format!("must be in 2..={MAX_PARTS}, got {}", self.max_parts)));
         }
         Ok(())
     }
@@ -171,8 +187,20 @@ pub fn fit_compound(
             };
             leaves.push(fit_leaf(mesh, part, j, &surface, settings, &mut inner)?);
         }
+        if let (PartCount::Auto, Some(t)) = (parts, settings.excess_tolerance) {
+            if a + 1 == counts.len() {
+                let before = leaves.len();
+                refine(mesh, decomposition, &mut leaves, t, &surface, settings, progress)?;
+                if leaves.len() > before {
+                    notes.push(format!(
+                        "{before} VHACD parts refined to {}: parts with excess above {t} m split again",
+                        leaves.len()
+                    ));
+                }
+            }
+        }
         let max_excess = leaves.iter().map(|l| l.excess).fold(0.0, Real::max);
-        attempts.push((n, got, max_excess, t0.elapsed().as_secs_f64()));
+        attempts.push((n, leaves.len(), max_excess, t0.elapsed().as_secs_f64()));
         let better = best.as_ref().is_none_or(|b| max_excess < b.2);
         if better {
             best = Some((leaves, decomposition_seconds, max_excess));
@@ -316,6 +344,67 @@ fn fit_leaf_points(
     Ok((body, e))
 }
 
+/// Refinement: while a leaf's excess is above `t` and fewer than `settings.max_parts` leaves
+/// exist, the leaf of largest excess is split ([`split_part`]) and its pieces fitted anew; a
+/// leaf that cannot split (one triangle, or a piece the solver fails on) stays. `leaves[j]` is the fit of `parts[j]`.
+fn refine(
+    mesh: &OffMesh,
+    parts: Vec<Part>,
+    leaves: &mut Vec<CompoundNode>,
+    t: Real,
+    surface: &MeshSurface,
+    settings: &CompoundSettings,
+    progress: &mut dyn FnMut(&FitProgress),
+) -> Result<()> {
+    let mut parts: Vec<(Part, bool)> = parts.into_iter().map(|p| (p, true)).collect();
+    while leaves.len() < settings.max_parts {
+        let worst = (0..leaves.len())
+            .filter(|&j| parts[j].1 && leaves[j].excess > t)
+            .max_by(|&a, &b| leaves[a].excess.total_cmp(&leaves[b].excess));
+        let Some(j) = worst else { break };
+        let pieces = split_part(&mesh.vertices, &mesh.triangles, &parts[j].0, settings.resolution);
+        if pieces.len() < 2 || leaves.len() + pieces.len() - 1 > settings.max_parts {
+            parts[j].1 = false;
+            continue;
+        }
+        let n = leaves.len();
+        let mut fitted = Vec::with_capacity(pieces.len());
+        for (k, piece) in pieces.iter().enumerate() {
+            let mut inner = |p: &FitProgress| {
+                progress(&FitProgress {
+                    stage: p.stage,
+                    fraction: p.fraction,
+                    message: format!(
+                        "refining ({n} parts), piece {}/{} of part {j}: {}",
+                        k + 1,
+                        pieces.len(),
+                        p.message
+                    ),
+                })
+            };
+            match fit_leaf(mesh, piece, n + k, surface, settings, &mut inner) {
+                Ok(leaf) => fitted.push(leaf),
+                // A piece the solver cannot fit: the part stays whole (its fit is valid).
+                Err(Error::Numerical(_)) => break,
+                Err(e) => return Err(e),
+            }
+        }
+        if fitted.len() < pieces.len() {
+            parts[j].1 = false;
+            continue;
+        }
+        let mut pieces = pieces.into_iter();
+        let mut fitted = fitted.into_iter();
+        if let (Some(p), Some(l)) = (pieces.next(), fitted.next()) {
+            parts[j] = (p, true);
+            leaves[j] = l;
+        }
+        parts.extend(pieces.map(|p| (p, true)));
+        leaves.extend(fitted);
+    }
+    Ok(())
+}
+
 /// Diagonal (meters) of the box around two nodes' bounding boxes (a convex body always has one).
 fn union_diagonal(a: &Body, b: &Body) -> Real {
     let id = Isometry3::identity();
@@ -346,12 +435,11 @@ fn build_tree(
         pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
         let mut used = vec![false; nodes.len()];
         let mut next = Vec::new();
+        let mut failure = None;
         for (_, i, j) in pairs {
             if used[i] || used[j] {
                 continue;
             }
-            used[i] = true;
-            used[j] = true;
             made += 1;
             let mut inner = |p: &FitProgress| {
                 progress(&FitProgress {
@@ -360,9 +448,23 @@ fn build_tree(
                     message: format!("parent {made}: {}", p.message),
                 })
             };
-            let parent = fit_parent(&nodes, [i, j], surface, settings, &mut inner)?;
+            // A pair the solver cannot contain is skipped: its nodes pair otherwise, or move up.
+            let parent = match fit_parent(&nodes, [i, j], surface, settings, &mut inner) {
+                Ok(p) => p,
+                Err(Error::Numerical(m)) => {
+                    made -= 1;
+                    failure = Some(m);
+                    continue;
+                }
+                Err(e) => return Err(e),
+            };
+            used[i] = true;
+            used[j] = true;
             nodes.push(parent);
             next.push(nodes.len() - 1);
+        }
+        if next.is_empty() {
+            return Err(Error::Numerical(failure.unwrap_or_else(|| "no pair of nodes could be contained".into())));
         }
         next.extend(level.iter().copied().filter(|&i| !used[i]));
         level = next;

@@ -83,6 +83,55 @@ fn auto_part_count_stops_at_the_first_count_within_tolerance() {
 }
 
 #[test]
+fn split_part_separates_the_two_cubes_then_halves_a_cube() {
+    let mesh = two_cubes();
+    let whole = super::decompose::decompose(&mesh.vertices, &mesh.triangles, 1, 32).unwrap().remove(0);
+    let mut halves = super::decompose::split_part(&mesh.vertices, &mesh.triangles, &whole, 32);
+    assert_eq!(halves.len(), 2);
+    for h in &mut halves {
+        h.triangles.sort_unstable();
+    }
+    halves.sort_by_key(|h| h.triangles[0]);
+    assert_eq!(halves[0].triangles, (0..12).collect::<Vec<_>>());
+    assert_eq!(halves[1].triangles, (12..24).collect::<Vec<_>>());
+    // One cube: whatever the cut, two pieces partition its 12 triangles.
+    let pieces = super::decompose::split_part(&mesh.vertices, &mesh.triangles, &halves[0], 32);
+    assert!(pieces.len() >= 2);
+    let mut all: Vec<usize> = pieces.iter().flat_map(|p| p.triangles.clone()).collect();
+    all.sort_unstable();
+    assert_eq!(all, (0..12).collect::<Vec<_>>());
+}
+
+#[test]
+fn auto_refines_parts_above_tolerance_up_to_the_cap() {
+    // A 4 × 1 × 1 bar of four unit cubes (48 triangles): convex, so VHACD keeps it nearly whole;
+    // refinement cuts it at the median of its triangles until the cap.
+    let (mut vertices, mut triangles) = (Vec::new(), Vec::new());
+    for k in 0..4u32 {
+        let (v, t) = cube([k as Real, 0.0, 0.0], 1.0, 8 * k);
+        vertices.extend(v);
+        triangles.extend(t);
+    }
+    let mesh = OffMesh { vertices, triangles };
+    let mut s = quick_settings(vec![2]);
+    // One sphere per cube still reaches 0.366 beyond it: above 0.1, so the cap (4 parts) stops it.
+    s.excess_tolerance = Some(0.1);
+    s.max_parts = 4;
+    let c = fit_compound(&mesh, None, PartCount::Auto, &s, &mut |_| {}).unwrap();
+    assert_eq!(c.leaf_count(), 4);
+    assert_eq!(c.report.attempts.last().map(|a| a.1), Some(4));
+    assert!(c.max_leaf_excess() < c.report.attempts[0].2, "{:?}", c.report.attempts);
+    let total: usize = c.leaves().map(|l| c.node(l).triangles).sum();
+    assert_eq!(total, 48);
+    assert!(uncovered_triangles(&c, &mesh).is_empty());
+    let bad = CompoundSettings { max_parts: 1, ..s };
+    assert!(matches!(
+        fit_compound(&mesh, None, PartCount::Auto, &bad, &mut |_| {}),
+        Err(crate::Error::InvalidArgument { field, .. }) if field == "max_parts"
+    ));
+}
+
+#[test]
 fn bad_settings_and_meshes_are_refused_by_field() {
     let mesh = two_cubes();
     let fit = |parts: PartCount, s: &CompoundSettings, m: &OffMesh| fit_compound(m, None, parts, s, &mut |_| {});

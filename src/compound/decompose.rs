@@ -141,3 +141,36 @@ fn part_of(triangles: &[[u32; 3]], tris: Vec<usize>, hull: Vec<Point3>) -> Part 
     vertices.dedup();
     Part { triangles: tris, vertices, hull }
 }
+
+/// Splits one part in two for refinement: VHACD (two parts asked) on the part's own sub-mesh,
+/// whose concavity is measured relative to the part's size so it splits where the whole-mesh
+/// run stopped; when VHACD keeps it whole (or fails), the triangles split at the median of their
+/// centroids along the longest side of the centroids' bounding box. Returns the part unchanged
+/// (one element) when it has fewer than two triangles; otherwise two or more parts whose
+/// triangles (indices into the whole mesh's `triangles`) partition the part's.
+pub fn split_part(vertices: &[Point3], triangles: &[[u32; 3]], part: &Part, resolution: u32) -> Vec<Part> {
+    if part.triangles.len() < 2 {
+        return vec![part.clone()];
+    }
+    let local: std::collections::HashMap<u32, u32> =
+        part.vertices.iter().enumerate().map(|(k, &v)| (v, k as u32)).collect();
+    let sub_vertices: Vec<Point3> = part.vertices.iter().map(|&v| vertices[v as usize]).collect();
+    let sub_triangles: Vec<[u32; 3]> = part.triangles.iter().map(|&k| triangles[k].map(|i| local[&i])).collect();
+    if let Ok(sub) = decompose(&sub_vertices, &sub_triangles, 2, resolution) {
+        if sub.len() >= 2 {
+            return sub
+                .into_iter()
+                .map(|p| part_of(triangles, p.triangles.iter().map(|&k| part.triangles[k]).collect(), p.hull))
+                .collect();
+        }
+    }
+    let centroid = |k: usize| triangles[k].iter().fold(Point3::origin(), |a, &i| a + vertices[i as usize].coords / 3.0);
+    let cs: Vec<Point3> = part.triangles.iter().map(|&k| centroid(k)).collect();
+    let (lo, hi) = cs.iter().fold((cs[0], cs[0]), |(l, h), c| (l.inf(c), h.sup(c)));
+    let axis = (hi - lo).imax();
+    let mut order: Vec<usize> = (0..cs.len()).collect();
+    order.sort_by(|&a, &b| cs[a][axis].total_cmp(&cs[b][axis]));
+    let half = order.len() / 2;
+    let pick = |ix: &[usize]| part_of(triangles, ix.iter().map(|&i| part.triangles[i]).collect(), part.hull.clone());
+    vec![pick(&order[..half]), pick(&order[half..])]
+}
