@@ -66,6 +66,9 @@ write_nginx() { # replica indices
     echo "events { worker_connections 1024; }"
     echo "http {"
     echo "  access_log off; client_max_body_size 64m;"
+    # nginx closes a client connection after keepalive_requests (default 1000) with a GOAWAY, and a
+    # call racing that GOAWAY fails: long-lived gRPC channels need a far higher bound.
+    echo "  keepalive_requests 10000000; keepalive_time 24h;"
     for t in client_body proxy fastcgi uwsgi scgi; do echo "  ${t}_temp_path $WORK/nginx-$t;"; done
     echo "  upstream sublevel {"
     echo "    hash \$http_x_scene_id consistent;"

@@ -234,7 +234,12 @@ async fn load(args: &ShardProbeArgs, scenes: Vec<Scene>, offset: f64) -> Result<
                         answered.fetch_add(1, Ordering::Relaxed)
                     }
                     Ok(_) => wrong.fetch_add(1, Ordering::Relaxed),
-                    Err(_) => failed.fetch_add(1, Ordering::Relaxed),
+                    Err(e) => {
+                        if failed.fetch_add(1, Ordering::Relaxed) == 0 {
+                            eprintln!("first failed answer (scene {i}): {e}");
+                        }
+                        0
+                    }
                 };
             }
         }));
