@@ -16,12 +16,7 @@
 set -euo pipefail
 [ -n "${CONTAINER_LIKE_INNER:-}" ] || CONTAINER_LIKE_INNER=1 exec timeout -k 5 120 "$0" "$@"
 
-ROOT="$(cd "$(dirname "$0")/../.." && pwd)"
-BIN="${SUBLEVEL_BIN:-}"
-for b in "$ROOT/target/release/sublevel" "$ROOT/target/debug/sublevel"; do
-  [ -n "$BIN" ] || { [ -x "$b" ] && BIN="$b"; }
-done
-[ -x "$BIN" ] || { echo "no sublevel binary: cargo build first (or set SUBLEVEL_BIN)"; exit 2; }
+source "$(dirname "$0")/find-binary.sh"
 GRACE="${GRACE:-10}"
 WORK="$(mktemp -d /tmp/sublevel-container-like.XXXXXX)"
 DATA="$WORK/data"; mkdir -p "$DATA"

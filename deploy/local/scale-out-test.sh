@@ -14,12 +14,7 @@
 set -euo pipefail
 [ -n "${SCALE_OUT_INNER:-}" ] || SCALE_OUT_INNER=1 exec timeout -k 5 170 "$0" "$@"
 
-ROOT="$(cd "$(dirname "$0")/../.." && pwd)"
-BIN="${SUBLEVEL_BIN:-}"
-for b in "$ROOT/target/release/sublevel" "$ROOT/target/debug/sublevel"; do
-  [ -n "$BIN" ] || { [ -x "$b" ] && BIN="$b"; }
-done
-[ -x "$BIN" ] || { echo "no sublevel binary: cargo build first (or set SUBLEVEL_BIN)"; exit 2; }
+source "$(dirname "$0")/find-binary.sh"
 PG_BIN="${PG_BIN:-$(ls -d /usr/lib/postgresql/*/bin 2>/dev/null | sort | tail -1)}"
 [ -x "$PG_BIN/initdb" ] || { echo "no PostgreSQL server binaries (apt-get install postgresql)"; exit 2; }
 command -v nginx >/dev/null || { echo "no nginx (apt-get install nginx-light)"; exit 2; }
