@@ -284,8 +284,28 @@ pub fn run(args: BenchArgs) -> Result<()> {
     Ok(())
 }
 
-/// The bundled chair and human bodies at `degree` (`{name}.deg{2d}.json` under `dir`), fitted on the
-/// spot when missing.
+/// The body fitted to `points` at `degree`, loaded from `{name}.deg{2d}.json` under `dir`, or
+/// fitted on the spot (log det P, 20 000 volume samples) when that file is missing.
+///
+/// # Errors
+/// Any load or fit error.
+pub fn load_or_fit_body(
+    dir: &std::path::Path,
+    name: &str,
+    degree: usize,
+    points: &[sublevel::math::Point3],
+) -> Result<Body> {
+    let path = dir.join(format!("{name}.deg{degree}.json"));
+    if path.exists() {
+        return Body::load(&path);
+    }
+    eprintln!("{} missing: fitting {name} at 2d = {degree}", path.display());
+    let settings = FitSettings { degree, volume_samples: 20_000, ..FitSettings::default() };
+    fit_points(points, &settings, &mut |_| {})
+}
+
+/// The bundled chair and human bodies at `degree` ([`load_or_fit_body`] of chair_101 and
+/// human_10).
 ///
 /// # Errors
 /// Any load or fit error.
@@ -295,16 +315,7 @@ pub fn load_or_fit_pair(
     chair: &[sublevel::math::Point3],
     human: &[sublevel::math::Point3],
 ) -> Result<(Body, Body)> {
-    let load_or_fit = |name: &str, points: &[sublevel::math::Point3]| -> Result<Body> {
-        let path = dir.join(format!("{name}.deg{degree}.json"));
-        if path.exists() {
-            return Body::load(&path);
-        }
-        eprintln!("{} missing: fitting {name} at 2d = {degree}", path.display());
-        let settings = FitSettings { degree, volume_samples: 20_000, ..FitSettings::default() };
-        fit_points(points, &settings, &mut |_| {})
-    };
-    Ok((load_or_fit("chair_101", chair)?, load_or_fit("human_10", human)?))
+    Ok((load_or_fit_body(dir, "chair_101", degree, chair)?, load_or_fit_body(dir, "human_10", degree, human)?))
 }
 
 impl Row {

@@ -17,7 +17,7 @@
 //! [`extra_model_rows`], which holds the sphere, oriented-box and relaxed-convexity models).
 
 use super::bench::{
-    cold_poses, error_stats, load_off_mesh, load_or_fit_pair, median, motion_poses, time_us, PeerShapes,
+    cold_poses, error_stats, load_off_mesh, load_or_fit_body, median, motion_poses, time_us, PeerShapes,
 };
 use super::chart_compound::{compound_rows, conservative_share, CompoundPair};
 use super::csv_file::CsvFile;
@@ -48,16 +48,20 @@ enum ChartKind {
 /// Options shared by both charts.
 #[derive(clap::Args, Debug)]
 struct CommonArgs {
-    /// Folder with chair_101.off and human_10.off.
+    /// Folder with the PSB meshes (`SHAPE.off` and human_10.off).
     #[arg(long, default_value = "data/psb")]
     psb: std::path::PathBuf,
-    /// Folder of fitted bodies `{chair_101,human_10}.deg{2d}.json` (missing ones are fitted).
+    /// The posed shape, against human_10 at the identity: chair_101 (default, the pair),
+    /// hand_181, octopus_121 or vase_361 (any `SHAPE.off` in `--psb`).
+    #[arg(long, default_value = "chair_101")]
+    shape: String,
+    /// Folder of fitted bodies `{SHAPE,human_10}.deg{2d}.json` (missing ones are fitted).
     #[arg(long, default_value = "tests/data")]
     bodies: std::path::PathBuf,
     /// Degrees 2d, comma separated.
     #[arg(long, default_value = "2,4,6,8", value_delimiter = ',')]
     degrees: Vec<usize>,
-    /// Random chair poses around the human (the exact mesh–mesh distance is computed at each).
+    /// Random poses of the shape around the human (the exact mesh–mesh distance is computed at each).
     #[arg(long, default_value_t = 100)]
     poses: usize,
     /// Back-to-back calls averaged per timed query.
@@ -179,7 +183,7 @@ pub fn extra_model_rows(
     }
     rows.push(score("oriented box", times, dists));
 
-    eprintln!("fitting the chair and the human with c = 10 at 2d = 4 (relaxed convexity)");
+    eprintln!("fitting both meshes with c = 10 at 2d = 4 (relaxed convexity)");
     let settings =
         sublevel::fit::FitSettings { degree: 4, volume_samples: 20_000, ..Default::default() }.with_relaxation(10.0);
     let chair_c = sublevel::fit::fit_points(chair, &settings, &mut |_| {})?;
@@ -229,11 +233,11 @@ fn check(a: &CommonArgs) -> Result<()> {
 
 fn speed_accuracy(a: &CommonArgs) -> Result<()> {
     check(a)?;
-    let chair_mesh = load_off_mesh(&a.psb.join("chair_101.off"))?;
+    let shape_off = a.psb.join(format!("{}.off", a.shape));
+    let chair_mesh = load_off_mesh(&shape_off)?;
     let human_mesh = load_off_mesh(&a.psb.join("human_10.off"))?;
     let peers = PeerShapes::new(&chair_mesh, &human_mesh)?;
-    let (chair_pts, human_pts) =
-        (load_points(&a.psb.join("chair_101.off"))?, load_points(&a.psb.join("human_10.off"))?);
+    let (chair_pts, human_pts) = (load_points(&shape_off)?, load_points(&a.psb.join("human_10.off"))?);
     let poses = cold_poses(a.seed, a.poses);
     let id = Isometry3::identity();
     eprintln!("exact mesh–mesh distances at {} poses", poses.len());
@@ -243,7 +247,10 @@ fn speed_accuracy(a: &CommonArgs) -> Result<()> {
     let compound: Vec<CompoundPair> = a.compound.iter().map(|c| CompoundPair::load(c)).collect::<Result<_>>()?;
     let mut rows = Vec::new();
     for &degree in &a.degrees {
-        let (chair, human) = load_or_fit_pair(&a.bodies, degree, &chair_pts, &human_pts)?;
+        let (chair, human) = (
+            load_or_fit_body(&a.bodies, &a.shape, degree, &chair_pts)?,
+            load_or_fit_body(&a.bodies, "human_10", degree, &human_pts)?,
+        );
         let mut times = Vec::new();
         let mut dists = Vec::new();
         for p in &poses {
@@ -318,7 +325,7 @@ fn speed_accuracy(a: &CommonArgs) -> Result<()> {
     rows.extend(extra_model_rows(&chair_pts, &human_pts, &poses, &exact, a.repeats)?);
 
     let n_sep = exact.iter().filter(|d| **d > 0.0).count();
-    println!("speed vs accuracy: chair_101 vs human_10, {n_sep} separated of {} poses", poses.len());
+    println!("speed vs accuracy: {} vs human_10, {n_sep} separated of {} poses", a.shape, poses.len());
     println!(
         "{:>30} {:>10} {:>10} {:>13} {:>13} {:>7}  margin {} m levels",
         "model", "cold µs", "warm µs", "err mean [m]", "err max [m]", "≤exact", a.margin
@@ -362,7 +369,7 @@ fn speed_accuracy(a: &CommonArgs) -> Result<()> {
             rows.iter().map(|r| (r.name.clone(), r.time_us, r.err_mean, r.err_max)).collect();
         plot_points(
             path,
-            "Speed vs accuracy (chair_101 vs human_10)",
+            &format!("Speed vs accuracy ({} vs human_10)", a.shape),
             "median distance query time [µs] (log)",
             "|d − d_mesh| [m]",
             &pts,
@@ -402,12 +409,15 @@ pub const TOLERANCES: [Real; 5] = [1e-4, 1e-6, 1e-8, 1e-10, 1e-12];
 fn tolerance(a: &CommonArgs) -> Result<()> {
     check(a)?;
     let (chair_pts, human_pts) =
-        (load_points(&a.psb.join("chair_101.off"))?, load_points(&a.psb.join("human_10.off"))?);
+        (load_points(&a.psb.join(format!("{}.off", a.shape)))?, load_points(&a.psb.join("human_10.off"))?);
     let poses = cold_poses(a.seed, a.poses);
     let id = Isometry3::identity();
     let mut rows: Vec<(usize, Real, Real, Real, Real)> = Vec::new();
     for &degree in &a.degrees {
-        let (chair, human) = load_or_fit_pair(&a.bodies, degree, &chair_pts, &human_pts)?;
+        let (chair, human) = (
+            load_or_fit_body(&a.bodies, &a.shape, degree, &chair_pts)?,
+            load_or_fit_body(&a.bodies, "human_10", degree, &human_pts)?,
+        );
         let tight = NewtonParams { kkt_tolerance: 1e-12, ..NewtonParams::default() };
         let reference: Vec<Real> =
             poses.iter().map(|p| distance(&chair, p, &human, &id, None, &tight).distance).collect();
@@ -425,7 +435,7 @@ fn tolerance(a: &CommonArgs) -> Result<()> {
             rows.push((degree, tol, median(times), mean, max));
         }
     }
-    println!("Newton KKT tolerance: cold distance, chair_101 vs human_10, {} poses", poses.len());
+    println!("Newton KKT tolerance: cold distance, {} vs human_10, {} poses", a.shape, poses.len());
     println!("{:>3} {:>9} {:>11} {:>14} {:>14}", "2d", "tolerance", "median µs", "err mean [m]", "err max [m]");
     for r in &rows {
         println!("{:>3} {:>9.0e} {:>11.2} {:>14.3e} {:>14.3e}", r.0, r.1, r.2, r.3, r.4);

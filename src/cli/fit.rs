@@ -85,6 +85,9 @@ pub struct FitArgs {
     /// With --parts: degree 2d of the parent bodies of the containment tree (2, 4 or 6).
     #[arg(long, default_value_t = 4)]
     pub parent_degree: usize,
+    /// With --parts auto: most leaves the refinement may reach (2..=64).
+    #[arg(long, default_value_t = sublevel::compound::build::DEFAULT_MAX_PARTS)]
+    pub max_parts: usize,
     /// Clarabel's iteration cap.
     #[arg(long, default_value_t = 200)]
     pub max_iterations: u32,

@@ -44,6 +44,7 @@ pub fn run(args: FitArgs) -> sublevel::Result<()> {
         parent_degree: args.parent_degree,
         resolution: args.resolution,
         excess_samples: args.excess_samples,
+        max_parts: args.max_parts,
         ..CompoundSettings::default()
     };
     let name = args.mesh.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();

@@ -490,16 +490,41 @@ fn fit_parent(
         let s = settings.containment.clone().with_degree(degree).with_multiplier_degree(degree.saturating_sub(lowest));
         contain_bodies(&bodies, &s, progress)
     };
-    let body = match attempt(degree, progress) {
+    let mut body = match attempt(degree, progress) {
         Ok(b) => b,
-        Err(Error::Numerical(m)) if degree > 2 => {
-            let mut b = attempt(2, progress)?;
-            b.report.notes.push(format!("degree {degree} containment failed ({m}); degree 2 kept"));
-            b
+        Err(Error::Numerical(m)) => {
+            let retried = if degree > 2 { attempt(2, progress) } else { Err(Error::Numerical(m.clone())) };
+            match retried {
+                Ok(mut b) => {
+                    b.report.notes.push(format!("degree {degree} containment failed ({m}); degree 2 kept"));
+                    b
+                }
+                Err(Error::Numerical(m2)) => {
+                    let mut b = box_ellipsoid(&bodies)?;
+                    b.report.notes.push(format!(
+                        "containment SDP failed ({m}; at degree 2: {m2}): the parent is the ellipsoid through the corners of the children's bounding box"
+                    ));
+                    b
+                }
+                Err(e) => return Err(e),
+            }
         }
         Err(e) => return Err(e),
     };
-    let excess = surface.excess(&body, settings.excess_samples)?;
+    let mut excess = surface.excess(&body, settings.excess_samples)?;
+    // A §V parent can come out far looser than the box ellipsoid (a poorly scaled solve: up to
+    // kilometers of excess on chair_101); the tighter of the two is kept.
+    if let Ok(mut fallback) = box_ellipsoid(&bodies) {
+        let e = surface.excess(&fallback, settings.excess_samples)?;
+        if e < excess {
+            fallback.report.notes.push(format!(
+                "the ellipsoid through the corners of the children's bounding box (excess {e:.4} m) kept: tighter than the degree-{} containment fit (excess {excess:.4} m)",
+                body.degree()
+            ));
+            excess = e;
+            body = fallback;
+        }
+    }
     Ok(CompoundNode {
         body,
         children: children.to_vec(),
@@ -508,6 +533,29 @@ fn fit_parent(
         triangles: children.iter().map(|&c| nodes[c].triangles).sum(),
         fit_seconds: t0.elapsed().as_secs_f64(),
     })
+}
+
+/// The ellipsoid through the corners of the box around the children's bounding boxes
+/// (semi-axes √3 × the box's half extents, widened by 1e-9 relative): it contains the box, hence
+/// the children's bodies, exactly (convexity). The parent when the containment SDP fails at every
+/// degree, and whenever it is tighter than the §V fit (by sampled excess).
+///
+/// # Errors
+/// [`Error::Numerical`] when a child has no bounding box (not convex).
+fn box_ellipsoid(bodies: &[(&Body, Isometry3)]) -> Result<Body> {
+    let mut lo = crate::math::Vector3::repeat(Real::INFINITY);
+    let mut hi = crate::math::Vector3::repeat(Real::NEG_INFINITY);
+    for (b, pose) in bodies {
+        let (l, h) = b
+            .world_aabb(pose)
+            .ok_or_else(|| Error::Numerical("a child of the parent has no bounding box (not convex)".into()))?;
+        lo = lo.inf(&l);
+        hi = hi.sup(&h);
+    }
+    let c = (lo + hi) * 0.5;
+    let radii = ((hi - lo) * (0.5 * 3.0_f64.sqrt() * (1.0 + 1e-9))).map(|r| r.max(1e-9));
+    crate::body::ellipsoid([c.x, c.y, c.z], [radii.x, radii.y, radii.z])
+        .map_err(|e| Error::Numerical(format!("the box ellipsoid of a parent: {e}")))
 }
 
 /// Sets every node's depth from the root down.
