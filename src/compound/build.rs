@@ -12,8 +12,9 @@
 //!       until every leaf ≤ T or max_parts leaves
 //! tree: level by level, pair the nodes greedily by the diagonal of their union's bounding box;
 //!       each pair gets a parent body containing both bodies (paper §V, S-procedure,
-//!       fit::containment::contain_bodies; a pair the solver fails on is skipped); a node left
-//!       out moves up alone; until one root
+//!       fit::containment::contain_bodies), or the ellipsoid through the corners of the
+//!       children's bounding box when that is tighter or the solver fails at every degree
+//!       (box_ellipsoid); a node left out moves up alone; until one root
 //! excess of every node: sampled one-sided Hausdorff excess over the mesh          (surface.rs)
 //! ```
 //!
@@ -542,7 +543,7 @@ fn fit_parent(
 ///
 /// # Errors
 /// [`Error::Numerical`] when a child has no bounding box (not convex).
-fn box_ellipsoid(bodies: &[(&Body, Isometry3)]) -> Result<Body> {
+pub(super) fn box_ellipsoid(bodies: &[(&Body, Isometry3)]) -> Result<Body> {
     let mut lo = crate::math::Vector3::repeat(Real::INFINITY);
     let mut hi = crate::math::Vector3::repeat(Real::NEG_INFINITY);
     for (b, pose) in bodies {

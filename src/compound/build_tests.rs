@@ -212,3 +212,23 @@ fn a_bundled_mesh_fitted_in_two_parts_is_conservative() {
     assert_eq!(total, mesh.triangles.len());
     assert_eq!(c.node(c.root()).triangles, mesh.triangles.len());
 }
+
+#[test]
+fn the_box_ellipsoid_contains_both_children_and_passes_through_the_box_corners() {
+    // Two spheres of radius 1 at x = ±2: the bounding box is [−3, 3] × [−1, 1]², so the box
+    // ellipsoid has semi-axes √3 · (3, 1, 1) (closed form) and contains both spheres.
+    let a = crate::body::ellipsoid([-2.0, 0.0, 0.0], [1.0; 3]).unwrap();
+    let b = crate::body::ellipsoid([2.0, 0.0, 0.0], [1.0; 3]).unwrap();
+    let id = Isometry3::identity();
+    let e = super::build::box_ellipsoid(&[(&a, id), (&b, id)]).unwrap();
+    let s3 = 3.0_f64.sqrt();
+    for (x, want) in [([3.0, 1.0, 1.0], 1.0), ([3.0 * s3, 0.0, 0.0], 1.0), ([0.0, s3, 0.0], 1.0), ([0.0; 3], 0.0)] {
+        let v = e.value_at(&Point3::from(x));
+        assert!((v - want).abs() < 1e-6, "p({x:?}) = {v}, want {want}");
+    }
+    for child in [&a, &b] {
+        for x in boundary_points(child, &id, 200).unwrap() {
+            assert!(e.value_at(&x) <= 1.0, "a boundary point {x} of a child is outside");
+        }
+    }
+}
