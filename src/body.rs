@@ -445,6 +445,17 @@ impl Body {
         Some((Point3::from(self.center + c * self.scale), 0.5 * (hi - lo).norm() * self.scale))
     }
 
+    /// A box containing the body, axis-aligned in the body frame: its center and half extents
+    /// (meters, body frame). It is the box of supporting halfspaces `fit::volume::bounding_box`
+    /// solved when the body was built (tangent planes of the convex sublevel set, so it contains
+    /// the whole set, not only sampled points); `None` for a nonconvex body. The cheap lower bounds
+    /// of the tree queries ([`crate::query::tree`]) project these boxes.
+    pub fn bounding_box(&self) -> Option<(Point3, Vector3)> {
+        let (lo, hi) = self.bounding_box_u?;
+        let c = (lo + hi) * 0.5;
+        Some((Point3::from(self.center + c * self.scale), (hi - lo) * (0.5 * self.scale)))
+    }
+
     /// The axis-aligned world box of the body under `pose` (the 8 corners of its body-frame
     /// bounding box, posed), `None` for a nonconvex body.
     pub fn world_aabb(&self, pose: &Isometry3) -> Option<(Vector3, Vector3)> {

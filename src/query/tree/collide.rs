@@ -4,12 +4,12 @@
 //! d(p_A‖p_B) > 1  ⇔  A ∩ B = ∅    and    A_child ⊆ A, B_child ⊆ B  ⇒  A_child ∩ B_child = ∅
 //! ```
 //!
-//! so a node pair with d > 1 (or disjoint bounding spheres) is pruned with everything below it, and
+//! so a node pair with d > 1 (or disjoint bounding boxes, [`super::search::CheapBounds`]) is pruned with everything below it, and
 //! the models collide iff some leaf pair has d ≤ 1. Pairs are refined smallest d first; the
 //! exhaustive variant visits every overlapping leaf pair and reports the smallest d as the depth
 //! measure (the lower, the deeper body B reaches into A's level sets).
 
-use super::search::{sphere_gap, split_a, TreeQueryParams};
+use super::search::{split_a, CheapBounds, TreeQueryParams};
 use super::warm::TreeWarmStart;
 use super::{check_tree, BodyTree};
 use crate::error::Result;
@@ -36,7 +36,7 @@ pub struct TreeCollideResult {
     pub level: usize,
     /// Node pairs solved.
     pub pairs_evaluated: usize,
-    /// Node pairs decided by their bounding spheres alone.
+    /// Node pairs decided by their bounding boxes alone (cheap bounds, no solve).
     pub pairs_pruned_by_spheres: usize,
     /// State for warm-starting the next query of the same two trees.
     pub warm_start: TreeWarmStart,
@@ -84,6 +84,7 @@ pub fn tree_collide<A: BodyTree + ?Sized, B: BodyTree + ?Sized>(
     check_tree(a, "tree_a")?;
     check_tree(b, "tree_b")?;
     let mut fresh = TreeWarmStart::default();
+    let cheap = CheapBounds::new(pose_a, pose_b);
     let mut heap = BinaryHeap::new();
     let (mut level, mut pairs, mut sphere_pruned) = (0, 0, 0);
     let mut converged = true;
@@ -101,7 +102,7 @@ pub fn tree_collide<A: BodyTree + ?Sized, B: BodyTree + ?Sized>(
         };
         for (na, nb) in candidates {
             let (ba, bb) = (a.body(na), b.body(nb));
-            if sphere_gap(ba, pose_a, bb, pose_b).is_some_and(|g| g > 0.0) {
+            if cheap.gap(ba, bb).is_some_and(|g| g > 0.0) {
                 sphere_pruned += 1;
                 continue;
             }

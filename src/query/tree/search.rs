@@ -1,11 +1,11 @@
 //! Best-first branch and bound over two containment trees: distance with a tolerance, and the
 //! margin query "closer than m?" (module docs of [`super`]).
 
-use super::warm::TreeWarmStart;
+use super::warm::{SolvedPair, TreeWarmStart};
 use super::{check_tree, BodyTree};
 use crate::body::Body;
 use crate::error::{Error, Result};
-use crate::math::{Isometry3, Real};
+use crate::math::{Isometry3, Real, Vector3};
 use crate::query::sdp_certificate::CertificateParams;
 use crate::query::{
     certified_distance, distance, distance_gradient, AnswerSource, CertificateSummary, CertifyMode, CertifyParams,
@@ -97,7 +97,8 @@ pub struct TreeDistanceResult {
     pub level: usize,
     /// Node pairs solved (Newton solves, leaf pairs included).
     pub pairs_evaluated: usize,
-    /// Node pairs decided by their bounding spheres alone (no solve).
+    /// Node pairs decided by cheap bounds alone (no solve): the separating-axis gap of their
+    /// bounding boxes, which contains the bounding spheres' gap (module docs of [`super`]).
     pub pairs_pruned_by_spheres: usize,
     /// Solves that did not converge (internal pairs: only descended, never used as bounds).
     pub unconverged_solves: usize,
@@ -139,7 +140,7 @@ pub struct TreeMarginResult {
     pub level: usize,
     /// Node pairs solved.
     pub pairs_evaluated: usize,
-    /// Node pairs decided by their bounding spheres alone.
+    /// Node pairs decided by cheap bounds alone (bounding boxes, no solve).
     pub pairs_pruned_by_spheres: usize,
     /// State for warm-starting the next query of the same two trees.
     pub warm_start: TreeWarmStart,
@@ -236,6 +237,9 @@ enum Goal {
 /// A node pair waiting in the queue with its lower bound.
 struct Entry {
     lower: Real,
+    /// Tie-break among equal lower bounds (most often 0 for overlapping boxes): the raw box gap,
+    /// negative when the boxes overlap; the deepest overlap is refined first.
+    key: Real,
     a: usize,
     b: usize,
 }
@@ -254,16 +258,76 @@ impl PartialOrd for Entry {
 impl Ord for Entry {
     /// Reversed, so that the max-heap pops the smallest lower bound first.
     fn cmp(&self, other: &Self) -> Ordering {
-        other.lower.total_cmp(&self.lower)
+        other.lower.total_cmp(&self.lower).then_with(|| other.key.total_cmp(&self.key))
     }
 }
 
-/// Lower bound of the distance of two bodies from their bounding spheres (free, no solve);
-/// `None` for a nonconvex body (no proven sphere).
-pub(crate) fn sphere_gap(a: &Body, pose_a: &Isometry3, b: &Body, pose_b: &Isometry3) -> Option<Real> {
-    let (ca, ra) = a.bounding_sphere()?;
-    let (cb, rb) = b.bounding_sphere()?;
-    Some(((pose_a * ca) - (pose_b * cb)).norm() - ra - rb)
+/// The cheap lower bounds of one query: tree B's boxes are seen in tree A's frame, where A's boxes
+/// are axis-aligned (every node of a tree shares the tree's pose).
+///
+/// For a unit axis `L`, the projections of two sets onto `L` are intervals, and any two points
+/// `x ∈ A`, `y ∈ B` satisfy `‖x − y‖ ≥ |L·(x − y)|`; so the gap between the projected intervals
+/// of two boxes containing the bodies is a lower bound of the bodies' distance (the separating
+/// axis test). [`CheapBounds::gap`] takes the best of A's three face normals, B's three and the
+/// direction between the box centers; the last one alone already dominates the bounding spheres'
+/// gap `‖c_B − c_A‖ − r_A − r_B` (Cauchy–Schwarz: Σ h_k |n·e_k| ≤ ‖h‖).
+pub(crate) struct CheapBounds {
+    /// Pose of B's frame in A's frame, `pose_a⁻¹·pose_b`.
+    rel: Isometry3,
+    /// Rotation of B's frame in A's frame.
+    rot: crate::math::Matrix3,
+    /// |rot| entrywise.
+    abs_rot: crate::math::Matrix3,
+    /// Translation of B's frame in A's frame.
+    shift: Vector3,
+}
+
+/// Relative slack of the cheap bounds (meters per meter of center distance): rounding of the box
+/// projections never makes a bound exceed the true gap.
+const CHEAP_SLACK: Real = 1e-12;
+
+impl CheapBounds {
+    pub(crate) fn new(pose_a: &Isometry3, pose_b: &Isometry3) -> Self {
+        let rel = pose_a.inverse() * pose_b;
+        let rot = *rel.rotation.to_rotation_matrix().matrix();
+        Self { rot, abs_rot: rot.abs(), shift: rel.translation.vector, rel }
+    }
+
+    /// Lower bound of a leaf pair's distance now from its exact distance `solved.distance` at
+    /// another relative pose (meters): every point of B (body `b`, inside its bounding sphere
+    /// (c, r)) moved by at most `δ = ‖rel·c − rel₀·c‖ + 2 sin(θ/2)·r` relative to A, θ the angle of
+    /// the rotation between the two poses (‖R − R₀‖₂ = 2 sin(θ/2)), so `dist ≥ solved.distance − δ`.
+    pub(crate) fn motion_bound(&self, b: &Body, solved: &SolvedPair) -> Option<Real> {
+        let (c, r) = b.bounding_sphere()?;
+        let moved = (self.rel * c - solved.relative_pose * c).norm();
+        let angle = (self.rel.rotation * solved.relative_pose.rotation.inverse()).angle();
+        let delta = moved + 2.0 * (0.5 * angle).sin() * r;
+        Some(solved.distance - delta - CHEAP_SLACK * (1.0 + solved.distance + delta))
+    }
+
+    /// Lower bound of the distance between bodies `a` (tree A) and `b` (tree B), meters; negative
+    /// when the boxes overlap (then only 0 is a bound); `None` for a nonconvex body (no box).
+    pub(crate) fn gap(&self, a: &Body, b: &Body) -> Option<Real> {
+        let (ca, ha) = a.bounding_box()?;
+        let (cb, hb) = b.bounding_box()?;
+        // B's center relative to A's, in A's frame and in B's frame.
+        let d = self.rot * cb.coords + self.shift - ca.coords;
+        let db = self.rot.transpose() * d;
+        // B's half extents along A's axes and A's along B's.
+        let hb_in_a = self.abs_rot * hb;
+        let ha_in_b = self.abs_rot.transpose() * ha;
+        let mut gap = Real::NEG_INFINITY;
+        for k in 0..3 {
+            gap = gap.max(d[k].abs() - ha[k] - hb_in_a[k]);
+            gap = gap.max(db[k].abs() - hb[k] - ha_in_b[k]);
+        }
+        let norm = d.norm();
+        if norm > 0.0 {
+            let reach = ha.dot(&d.abs()) + hb.dot(&db.abs());
+            gap = gap.max(norm - reach / norm);
+        }
+        Some(gap - CHEAP_SLACK * (1.0 + norm))
+    }
 }
 
 /// Which node of a pair to split: the non-leaf one, else the one with the larger bounding sphere.
@@ -287,10 +351,13 @@ struct Search<'t, A: ?Sized, B: ?Sized> {
     goal: Goal,
     old: Option<&'t TreeWarmStart>,
     fresh: TreeWarmStart,
+    cheap: CheapBounds,
     heap: BinaryHeap<Entry>,
     upper: Real,
     best: Option<usize>,
     leaf_pairs: Vec<LeafPairAnswer>,
+    /// The leaf pair solved before the search (the previous answer's active pair).
+    seeded: Option<(usize, usize)>,
     /// Smallest lower bound of the pairs pruned (they were not refined further).
     pruned_min: Real,
     /// Smallest lower bound of the leaf pairs left unresolved (and of pairs left by the cap).
@@ -322,11 +389,18 @@ impl<'t, A: BodyTree + ?Sized, B: BodyTree + ?Sized> Search<'t, A, B> {
             params,
             goal,
             old,
-            fresh: TreeWarmStart::default(),
-            heap: BinaryHeap::new(),
+            fresh: TreeWarmStart {
+                distance: Vec::with_capacity(16),
+                growth: Vec::new(),
+                active: None,
+                solved: Vec::with_capacity(8),
+            },
+            cheap: CheapBounds::new(pose_a, pose_b),
+            heap: BinaryHeap::with_capacity(32),
             upper: Real::INFINITY,
             best: None,
-            leaf_pairs: Vec::new(),
+            leaf_pairs: Vec::with_capacity(4),
+            seeded: None,
             pruned_min: Real::INFINITY,
             unresolved_min: Real::INFINITY,
             level: 0,
@@ -349,19 +423,40 @@ impl<'t, A: BodyTree + ?Sized, B: BodyTree + ?Sized> Search<'t, A, B> {
         matches!(self.goal, Goal::Margin(m) if self.upper < m)
     }
 
+    fn is_leaf_pair(&self, na: usize, nb: usize) -> bool {
+        self.a.children(na).is_empty() && self.b.children(nb).is_empty()
+    }
+
     /// Runs the search; returns the lower bound of the pairs left in the queue (+∞ when empty).
+    ///
+    /// Order of work (issue 14 part 2, speed targets): (1) the previous answer's active leaf pair,
+    /// warm-started, for a tight upper bound at once; (2) best-first descent on the cheap box
+    /// bounds ([`CheapBounds`]) and the motion bounds of pairs solved before, which prune without
+    /// any solve; (3) leaf pairs solved when popped, internal pairs only by margin queries.
     fn run(&mut self) -> Real {
-        self.visit(self.a.root(), self.b.root(), 0.0);
+        self.seed();
+        self.consider(self.a.root(), self.b.root(), 0.0);
         while let Some(e) = self.heap.pop() {
-            if self.decided() {
-                return e.lower;
-            }
-            if e.lower >= self.threshold() {
+            if self.decided() || e.lower >= self.threshold() {
                 return e.lower;
             }
             if self.pairs >= self.params.max_pairs {
                 self.unresolved_min = self.unresolved_min.min(e.lower);
                 return e.lower;
+            }
+            if self.is_leaf_pair(e.a, e.b) {
+                if self.seeded != Some((e.a, e.b)) && !self.pruned_by_motion(e.a, e.b, e.lower) {
+                    self.leaf(e.a, e.b, e.lower);
+                }
+                continue;
+            }
+            let mut lower = e.lower;
+            if matches!(self.goal, Goal::Margin(_)) {
+                lower = self.internal(e.a, e.b, lower);
+                if lower >= self.threshold() {
+                    self.pruned_min = self.pruned_min.min(lower);
+                    continue;
+                }
             }
             // The trees outlive `self`'s borrow: iterate their child slices without copying them.
             let (a, b) = (self.a, self.b);
@@ -369,54 +464,101 @@ impl<'t, A: BodyTree + ?Sized, B: BodyTree + ?Sized> Search<'t, A, B> {
             let children = if split { a.children(e.a) } else { b.children(e.b) };
             for &c in children {
                 let (ca, cb) = if split { (c, e.b) } else { (e.a, c) };
-                self.visit(ca, cb, e.lower);
-                if self.decided() {
-                    break;
-                }
+                self.consider(ca, cb, lower);
             }
         }
         Real::INFINITY
     }
 
-    /// Bounds one node pair whose parent pair had lower bound `parent_lower`.
-    fn visit(&mut self, na: usize, nb: usize, parent_lower: Real) {
-        let (ba, bb) = (self.a.body(na), self.b.body(nb));
-        if let Some(gap) = sphere_gap(ba, self.pose_a, bb, self.pose_b) {
-            let bound = gap.max(parent_lower);
-            if bound >= self.threshold() {
-                self.sphere_pruned += 1;
-                self.pruned_min = self.pruned_min.min(bound);
-                return;
-            }
-        }
-        self.pairs += 1;
-        self.level = self.level.max(self.a.depth(na).max(self.b.depth(nb)));
-        if self.a.children(na).is_empty() && self.b.children(nb).is_empty() {
-            let answer = self.solve_leaf(na, nb);
-            if answer.exact {
-                if answer.result.distance < self.upper {
-                    self.upper = answer.result.distance;
-                    self.best = Some(self.leaf_pairs.len());
-                }
-            } else {
-                self.unresolved_min = self.unresolved_min.min(parent_lower);
-            }
-            self.leaf_pairs.push(answer);
+    /// Solves the previous answer's active leaf pair first (when it is still a leaf pair of these
+    /// trees and its cheap bound does not already rule it out of a margin query).
+    fn seed(&mut self) {
+        let Some((na, nb)) = self.old.and_then(|w| w.active) else { return };
+        if na >= self.a.node_count() || nb >= self.b.node_count() || !self.is_leaf_pair(na, nb) {
             return;
         }
+        let gap = self.cheap.gap(self.a.body(na), self.b.body(nb)).unwrap_or(0.0).max(0.0);
+        if gap >= self.threshold() {
+            return;
+        }
+        self.pairs += 1;
+        let answer = self.solve_leaf(na, nb);
+        if answer.exact {
+            self.seeded = Some((na, nb));
+            self.level = self.level.max(self.a.depth(na).max(self.b.depth(nb)));
+            self.take_leaf(answer);
+        }
+        // An unresolved seed is solved again in the search, where its lower bound is known.
+    }
+
+    /// Cheap bound of one node pair whose parent pair had lower bound `parent_lower`: pruned when
+    /// it reaches the threshold, else queued.
+    fn consider(&mut self, na: usize, nb: usize, parent_lower: Real) {
+        let gap = self.cheap.gap(self.a.body(na), self.b.body(nb));
+        let lower = gap.map_or(parent_lower, |g| g.max(parent_lower));
+        if lower >= self.threshold() {
+            self.sphere_pruned += 1;
+            self.pruned_min = self.pruned_min.min(lower);
+            return;
+        }
+        self.level = self.level.max(self.a.depth(na).max(self.b.depth(nb)));
+        self.heap.push(Entry { lower, key: gap.unwrap_or(lower), a: na, b: nb });
+    }
+
+    /// Whether the previous answers' exact distance of leaf pair (na, nb), less the motion since
+    /// ([`CheapBounds::motion_bound`]), already reaches the threshold; such a pair keeps its
+    /// record for the next query.
+    fn pruned_by_motion(&mut self, na: usize, nb: usize, lower: Real) -> bool {
+        let Some(solved) = self.old.and_then(|w| w.solved_of((na, nb))) else { return false };
+        let Some(bound) = self.cheap.motion_bound(self.b.body(nb), solved) else { return false };
+        let bound = bound.max(lower);
+        if bound < self.threshold() {
+            return false;
+        }
+        self.sphere_pruned += 1;
+        self.pruned_min = self.pruned_min.min(bound);
+        self.fresh.solved.push(*solved);
+        true
+    }
+
+    /// Solves a leaf pair popped with lower bound `lower` and records it.
+    fn leaf(&mut self, na: usize, nb: usize, lower: Real) {
+        self.pairs += 1;
+        let answer = self.solve_leaf(na, nb);
+        if !answer.exact {
+            self.unresolved_min = self.unresolved_min.min(lower);
+        }
+        self.take_leaf(answer);
+    }
+
+    fn take_leaf(&mut self, answer: LeafPairAnswer) {
+        if answer.exact {
+            self.fresh.solved.push(SolvedPair {
+                pair: answer.leaves,
+                distance: answer.result.distance,
+                relative_pose: self.cheap.rel,
+            });
+        }
+        if answer.exact && answer.result.distance < self.upper {
+            self.upper = answer.result.distance;
+            self.best = Some(self.leaf_pairs.len());
+            self.fresh.active = Some(answer.leaves);
+        }
+        self.leaf_pairs.push(answer);
+    }
+
+    /// Newton lower bound of an internal pair (containment: it bounds every leaf pair below);
+    /// `lower` when the solve does not converge.
+    fn internal(&mut self, na: usize, nb: usize, lower: Real) -> Real {
+        self.pairs += 1;
         let warm = self.old.and_then(|w| w.distance_of((na, nb)));
-        let r = distance(ba, self.pose_a, bb, self.pose_b, warm, &self.params.newton);
+        let r = distance(self.a.body(na), self.pose_a, self.b.body(nb), self.pose_b, warm, &self.params.newton);
         self.fresh.keep_distance((na, nb), r.warm_start.clone());
-        let lower = if r.status.converged() {
-            r.distance.max(parent_lower)
+        if r.status.converged() {
+            r.distance.max(lower)
         } else {
             self.unconverged += 1;
-            parent_lower
-        };
-        if lower >= self.threshold() {
-            self.pruned_min = self.pruned_min.min(lower);
-        } else {
-            self.heap.push(Entry { lower, a: na, b: nb });
+            lower
         }
     }
 

@@ -344,3 +344,161 @@ fn bad_input_is_an_error_naming_the_field() {
     let e = tree_collide(&ta, &pose, &cyclic, &pose, false, None, &TreeQueryParams::default()).unwrap_err();
     assert!(e.to_string().contains("tree_b"), "{e}");
 }
+
+/// The bundled compound bodies (data/compound/), chair and human first.
+const BUNDLED: [&str; 5] = ["chair_101", "human_10", "hand_181", "octopus_121", "vase_361"];
+
+/// Every bundled compound body (data/compound/*.json); a missing file fails the test.
+fn bundled_compounds() -> Vec<(String, crate::compound::CompoundBody)> {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/compound");
+    let mut out = vec![];
+    for name in BUNDLED {
+        let path = dir.join(format!("{name}.json"));
+        let c = crate::compound::CompoundBody::load(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        out.push((name.to_string(), c));
+    }
+    out
+}
+
+/// Boundary point of a convex body on the ray from its interior point along `dir` (unit), by
+/// bisection on p = 1 (independent of the body's radial and support tables); returns a point
+/// with p ≤ 1 within 1e-12 m of the crossing.
+fn ray_boundary(body: &Body, dir: &Vector3) -> Point3 {
+    let c = body.interior_point();
+    let mut hi = body.scale();
+    while body.value_at(&(c + dir * hi)) <= 1.0 {
+        hi *= 2.0;
+    }
+    let mut lo = 0.0;
+    while hi - lo > 1e-12 {
+        let mid = 0.5 * (lo + hi);
+        if body.value_at(&(c + dir * mid)) <= 1.0 {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    c + dir * lo
+}
+
+/// Unit directions spread over the sphere (Fibonacci lattice).
+fn sphere_directions(n: usize) -> Vec<Vector3> {
+    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    (0..n)
+        .map(|k| {
+            let z = 1.0 - 2.0 * (k as Real + 0.5) / n as Real;
+            let r = (1.0 - z * z).sqrt();
+            let phi = golden * k as Real;
+            Vector3::new(r * phi.cos(), r * phi.sin(), z)
+        })
+        .collect()
+}
+
+#[test]
+fn bounding_boxes_contain_the_boundary_of_every_bundled_body() {
+    let dirs = sphere_directions(400);
+    let (mut checked, mut total) = (0, 0);
+    for (name, compound) in bundled_compounds() {
+        total += compound.node_count();
+        for node in 0..compound.node_count() {
+            let body = &compound.nodes()[node].body;
+            let Some((c, h)) = body.bounding_box() else { continue };
+            let (sc, sr) = body.bounding_sphere().unwrap();
+            assert!((sc - c).norm() < 1e-12 && (sr - h.norm()).abs() < 1e-12, "{name} node {node}: box ≠ sphere's");
+            for d in &dirs {
+                let x = ray_boundary(body, d);
+                let excess = ((x - c).abs() - h).max();
+                assert!(excess <= 1e-9, "{name} node {node}: boundary point {x} outside the box by {excess} m");
+            }
+            checked += 1;
+        }
+    }
+    // Only nonconvex bodies (no proven box) are skipped.
+    assert!(10 * checked >= 9 * total, "{checked} of {total} bodies checked");
+}
+
+#[test]
+fn cheap_bounds_never_exceed_the_distance_of_any_bundled_node_pair() {
+    use super::search::CheapBounds;
+    let all = bundled_compounds();
+    let (chair, human) = (&all[0].1, &all[1].1);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(21);
+    let params = NewtonParams::default();
+    let (mut separated, mut tight, mut unconverged) = (0, 0, 0);
+    for _ in 0..6 {
+        let pa = random_pose(&mut rng, 1.5);
+        let pb = random_pose(&mut rng, 0.3);
+        let cheap = CheapBounds::new(&pa, &pb);
+        for i in 0..chair.node_count() {
+            for j in 0..human.node_count() {
+                let (ba, bb) = (chair.body(i), human.body(j));
+                let gap = cheap.gap(ba, bb).unwrap();
+                let r = distance(ba, &pa, bb, &pb, None, &params);
+                if !r.status.converged() {
+                    unconverged += 1;
+                    continue;
+                }
+                // A pruned pair's true distance is ≥ the bound that pruned it.
+                assert!(gap <= r.distance + 1e-9, "pair ({i}, {j}): cheap bound {gap} > distance {}", r.distance);
+                // The bound contains the bounding spheres' gap.
+                let (ca, ra) = ba.bounding_sphere().unwrap();
+                let (cb, rb) = bb.bounding_sphere().unwrap();
+                let spheres = ((pa * ca) - (pb * cb)).norm() - ra - rb;
+                assert!(gap >= spheres - 1e-9, "pair ({i}, {j}): {gap} < sphere gap {spheres}");
+                if r.distance > 0.0 {
+                    separated += 1;
+                    tight += usize::from(gap > 0.5 * r.distance);
+                }
+            }
+        }
+    }
+    assert!(separated > 500 && unconverged * 100 < separated, "{separated} separated, {unconverged} unconverged");
+    eprintln!("cheap bound > half the distance for {tight} of {separated} separated node pairs");
+}
+
+#[test]
+fn cheap_bounds_match_closed_forms_on_boxes_of_spheres() {
+    use super::search::CheapBounds;
+    // Spheres r = 0.5 at the origin and at x = 3: boxes of half extent 0.5, gap 2 on the x axis.
+    let a = ellipsoid([0.0; 3], [0.5; 3]).unwrap();
+    let b = ellipsoid([3.0, 0.0, 0.0], [0.5; 3]).unwrap();
+    let id = Isometry3::identity();
+    let g = CheapBounds::new(&id, &id).gap(&a, &b).unwrap();
+    assert!((g - 2.0).abs() < 1e-9, "{g}");
+    // B turned 45° about z around its center: its box reaches 0.5·√2 along x, gap 2.5 − 0.5·√2.
+    let turn = Isometry3::rotation_wrt_point(
+        UnitQuaternion::from_axis_angle(&Vector3::z_axis(), std::f64::consts::FRAC_PI_4),
+        Point3::new(3.0, 0.0, 0.0),
+    );
+    let g = CheapBounds::new(&id, &turn).gap(&a, &b).unwrap();
+    assert!((g - (2.5 - 0.5 * 2f64.sqrt())).abs() < 1e-9, "{g}");
+    // Overlapping boxes: a negative gap (no bound beyond 0).
+    let g = CheapBounds::new(&id, &Isometry3::translation(-2.5, 0.0, 0.0)).gap(&a, &b).unwrap();
+    assert!(g < 0.0, "{g}");
+}
+
+#[test]
+fn warm_queries_start_from_the_active_leaf_pair() {
+    let all = bundled_compounds();
+    let (chair, human) = (&all[0].1, &all[1].1);
+    let id = Isometry3::identity();
+    let params = TreeQueryParams::default();
+    let mut warm: Option<TreeWarmStart> = None;
+    for k in 0..12 {
+        let s = k as Real / 11.0;
+        let pose = Isometry3::from_parts(
+            Vector3::new(-1.4 + 0.4 * s, 0.3, 0.1).into(),
+            UnitQuaternion::from_axis_angle(&Vector3::y_axis(), 0.3 * s),
+        );
+        let cold = tree_distance(chair, &pose, human, &id, None, &params).unwrap();
+        let w = tree_distance(chair, &pose, human, &id, warm.as_ref(), &params).unwrap();
+        assert!((w.lower - cold.lower).abs() < 1e-7 && (w.upper - cold.upper).abs() < 1e-7, "step {k}");
+        assert_eq!(w.warm_start.active_pair(), w.best.as_ref().map(|b| b.leaves), "step {k}");
+        if let Some(prev) = warm.as_ref().and_then(TreeWarmStart::active_pair) {
+            // The previous active pair is solved first.
+            assert_eq!(w.leaf_pairs[0].leaves, prev, "step {k}");
+            assert!(w.pairs_evaluated <= cold.pairs_evaluated + 1, "step {k}");
+        }
+        warm = Some(w.warm_start);
+    }
+}
