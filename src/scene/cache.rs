@@ -5,7 +5,13 @@
 //! back on the next query. Warm starts are expressed in body frames, so they survive pose changes;
 //! they only become meaningless when an instance disappears, which is what
 //! [`WarmStartCache::invalidate_instance`] handles.
+//!
+//! A pair involving a compound body (issue 14) keeps a [`TreeWarmStart`] instead (one solver
+//! state per node pair of the two trees), under the same key: a pair is either compound or not
+//! for the lifetime of its instances, so the distance (growth) kind copies, merges and drops both
+//! tables together.
 
+use crate::query::tree::TreeWarmStart;
 use crate::query::{DistanceWarmStart, GrowthWarmStart};
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -46,6 +52,10 @@ type PairMap<W> = HashMap<String, HashMap<String, W, Fast>, Fast>;
 pub struct WarmStartCache {
     distance: PairMap<Arc<DistanceWarmStart>>,
     growth: PairMap<Arc<GrowthWarmStart>>,
+    /// Tree queries of pairs with a compound body: distance and collide-with-margin.
+    tree_distance: PairMap<Arc<TreeWarmStart>>,
+    /// Tree queries of pairs with a compound body: growth (overlap by d(p₁‖p₂)).
+    tree_growth: PairMap<Arc<TreeWarmStart>>,
 }
 
 fn get<'a, W>(map: &'a PairMap<W>, a: &str, b: &str) -> Option<&'a W> {
@@ -98,27 +108,56 @@ impl WarmStartCache {
         put(&mut self.growth, p1, p2, warm);
     }
 
+    /// The stored tree-distance warm start of the ordered pair (a, b) (a compound pair), if any.
+    pub fn tree_distance(&self, a: &str, b: &str) -> Option<&TreeWarmStart> {
+        get(&self.tree_distance, a, b).map(|w| &**w)
+    }
+
+    /// Stores the tree-distance warm start of (a, b), replacing the previous one.
+    pub fn put_tree_distance(&mut self, a: &str, b: &str, warm: Arc<TreeWarmStart>) {
+        put(&mut self.tree_distance, a, b, warm);
+    }
+
+    /// The stored tree-growth warm start of the ordered pair (p₁, p₂) (a compound pair), if any.
+    pub fn tree_growth(&self, p1: &str, p2: &str) -> Option<&TreeWarmStart> {
+        get(&self.tree_growth, p1, p2).map(|w| &**w)
+    }
+
+    /// Stores the tree-growth warm start of (p₁, p₂), replacing the previous one.
+    pub fn put_tree_growth(&mut self, p1: &str, p2: &str, warm: Arc<TreeWarmStart>) {
+        put(&mut self.tree_growth, p1, p2, warm);
+    }
+
     /// Whether a warm start is stored for `key`.
     pub fn contains(&self, key: &PairKey) -> bool {
         match key.kind {
-            WarmKind::Distance => get(&self.distance, &key.first, &key.second).is_some(),
-            WarmKind::Growth => get(&self.growth, &key.first, &key.second).is_some(),
+            WarmKind::Distance => {
+                get(&self.distance, &key.first, &key.second).is_some()
+                    || get(&self.tree_distance, &key.first, &key.second).is_some()
+            }
+            WarmKind::Growth => {
+                get(&self.growth, &key.first, &key.second).is_some()
+                    || get(&self.tree_growth, &key.first, &key.second).is_some()
+            }
         }
     }
 
-    /// Copies the warm start of `kind` for the ordered pair (a, b), if any and not already there,
-    /// into `into` (the state is shared, not copied).
+    /// Copies the warm start of `kind` for the ordered pair (a, b) (single or tree), if any and
+    /// not already there, into `into` (the state is shared, not copied).
     pub fn copy_pair(&self, into: &mut WarmStartCache, kind: WarmKind, a: &str, b: &str) {
+        fn copy<W: Clone>(from: &PairMap<W>, into: &mut PairMap<W>, a: &str, b: &str) {
+            if let (Some(w), None) = (get(from, a, b), get(into, a, b)) {
+                put(into, a, b, w.clone());
+            }
+        }
         match kind {
             WarmKind::Distance => {
-                if let (Some(w), None) = (get(&self.distance, a, b), get(&into.distance, a, b)) {
-                    put(&mut into.distance, a, b, w.clone());
-                }
+                copy(&self.distance, &mut into.distance, a, b);
+                copy(&self.tree_distance, &mut into.tree_distance, a, b);
             }
             WarmKind::Growth => {
-                if let (Some(w), None) = (get(&self.growth, a, b), get(&into.growth, a, b)) {
-                    put(&mut into.growth, a, b, w.clone());
-                }
+                copy(&self.growth, &mut into.growth, a, b);
+                copy(&self.tree_growth, &mut into.tree_growth, a, b);
             }
         }
     }
@@ -140,17 +179,21 @@ impl WarmStartCache {
         }
         merge_map(&mut self.distance, other.distance, &keep);
         merge_map(&mut self.growth, other.growth, &keep);
+        merge_map(&mut self.tree_distance, other.tree_distance, &keep);
+        merge_map(&mut self.tree_growth, other.tree_growth, &keep);
     }
 
     /// Drops every warm start involving `instance_id` (on either side, both kinds).
     pub fn invalidate_instance(&mut self, instance_id: &str) {
         drop_instance(&mut self.distance, instance_id);
         drop_instance(&mut self.growth, instance_id);
+        drop_instance(&mut self.tree_distance, instance_id);
+        drop_instance(&mut self.tree_growth, instance_id);
     }
 
     /// Number of stored warm starts (both kinds).
     pub fn len(&self) -> usize {
-        count(&self.distance) + count(&self.growth)
+        count(&self.distance) + count(&self.growth) + count(&self.tree_distance) + count(&self.tree_growth)
     }
 
     /// True when nothing is stored.

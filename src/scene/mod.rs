@@ -29,13 +29,14 @@
 
 pub mod cache;
 mod catalog;
+mod compound_pairs;
 pub mod planner;
 pub mod store;
 
 pub use catalog::precision_limited;
 pub use catalog::{
     BodyEntry, Catalog, DistanceReply, GrowthReply, InstanceView, PairRef, PosedInstance, QueryAnswer, QueryKind,
-    QueryOptions, QueryPair, SceneView, MAX_JOB_RECORDS, MAX_NAME_BYTES, PRECISION_LIMIT,
+    QueryOptions, QueryPair, SceneView, TreeInfo, MAX_JOB_RECORDS, MAX_NAME_BYTES, PRECISION_LIMIT,
 };
 
 use crate::body::BodyFile;
@@ -68,13 +69,31 @@ impl StoredPose {
     }
 }
 
-/// A body as stored: its name and its JSON body file.
+/// A body as stored: its name and its JSON body file, plus the whole containment tree for a
+/// compound body (issue 14).
+///
+/// Record forms (JSON): `{name, body}` is a single body — every record written before compound
+/// bodies has this form and still loads unchanged; `{name, body, compound}` is a compound body,
+/// `body` then holding its root node's body (so a reader that ignores `compound` still sees a
+/// body containing the whole model) and `compound` the compound file
+/// ([`crate::compound::CompoundFile`], format `sublevel.compound.v1`) with every node.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct BodyRecord {
     /// Human-readable name (not necessarily unique).
     pub name: String,
-    /// The body file (degree, exponents, coefficients, center, scale, fit report).
+    /// The body file (degree, exponents, coefficients, center, scale, fit report); for a compound
+    /// body, its root node's.
     pub body: BodyFile,
+    /// The compound file of a compound body (with more than one node); absent for a single body.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub compound: Option<crate::compound::CompoundFile>,
+}
+
+impl BodyRecord {
+    /// The record of a single body.
+    pub fn single(name: &str, body: BodyFile) -> Self {
+        Self { name: name.to_owned(), body, compound: None }
+    }
 }
 
 /// A scene's own fields as stored (its instances are stored separately, one record each, so a

@@ -40,13 +40,19 @@ pub struct CollideReply {
     pub solve: Option<DistanceReply>,
     /// The margin asked for (meters).
     pub margin: Real,
+    /// Compound pairs: the tree query's bounds, level and cost (`distance` is then the deciding
+    /// bound of [`crate::query::tree::TreeMarginResult`]; `solve` is `None`).
+    pub tree: Option<super::catalog::TreeInfo>,
 }
 
 /// A posed instance of a request's snapshot: its body and its pose in this view.
 #[derive(Clone, Debug)]
 pub struct Posed {
-    /// The body (shared with the catalog).
+    /// The body (shared with the catalog); a compound body's root body.
     pub body: Arc<Body>,
+    /// A compound body's containment tree (`None` for a single body): queries involving it run
+    /// the tree queries ([`super::compound_pairs`]).
+    pub tree: Option<Arc<crate::compound::CompoundBody>>,
     /// The pose in this view (body frame → world).
     pub pose: Isometry3,
 }
@@ -69,6 +75,14 @@ pub fn answer_pair(
     cache: &mut WarmStartCache,
     params: &CertifyParams,
 ) -> QueryAnswer {
+    if super::compound_pairs::is_compound_pair(a, b) {
+        use super::compound_pairs as cp;
+        return match pair.kind {
+            QueryKind::Distance => QueryAnswer::Distance(cp::distance_reply(pair, a, b, cache, params)),
+            QueryKind::Growth => QueryAnswer::Growth(cp::growth_reply(pair, a, b, cache, params)),
+            QueryKind::Collide => QueryAnswer::Collide(cp::collide_reply(pair, a, b, cache, params)),
+        };
+    }
     match pair.kind {
         QueryKind::Distance => QueryAnswer::Distance(distance_reply(pair, a, b, cache, params)),
         QueryKind::Growth => QueryAnswer::Growth(growth_reply(pair, a, b, cache, params)),
@@ -81,6 +95,7 @@ pub fn answer_pair(
                         decided_by_bounds: true,
                         solve: None,
                         margin: pair.margin,
+                        tree: None,
                     });
                 }
             }
@@ -93,6 +108,7 @@ pub fn answer_pair(
                 decided_by_bounds: false,
                 margin: pair.margin,
                 solve: Some(d),
+                tree: None,
             })
         }
     }
@@ -116,7 +132,7 @@ fn distance_reply(
     if !r.lower_bound && !o.cold {
         cache.put_distance(pair.first, pair.second, r.result.warm_start.clone());
     }
-    DistanceReply { answer: r, gradients, precision_limited, signed: o.signed, penetration }
+    DistanceReply { answer: r, gradients, precision_limited, signed: o.signed, penetration, tree: None }
 }
 
 fn growth_reply(
@@ -135,7 +151,7 @@ fn growth_reply(
     if !r.lower_bound && !o.cold {
         cache.put_growth(pair.first, pair.second, r.result.warm_start.clone());
     }
-    GrowthReply { answer: r, gradients, precision_limited }
+    GrowthReply { answer: r, gradients, precision_limited, tree: None }
 }
 
 /// A planner request on a [`QueryView`] (see the module docs).
@@ -458,9 +474,13 @@ pub fn check_scene(
         crate::fit::cancel::check()?;
         out.narrow_phase_solves += 1;
         let pair = QueryPair { kind: QueryKind::Distance, first: a.id.clone(), second: b.id.clone(), options, margin };
-        let pa = Posed { body: a.body.clone(), pose: a.pose };
-        let pb = Posed { body: b.body.clone(), pose: b.pose };
-        let d = distance_reply(pair.view(), &pa, &pb, &mut scratch, &params);
+        let pa = Posed { body: a.body.clone(), tree: a.tree.clone(), pose: a.pose };
+        let pb = Posed { body: b.body.clone(), tree: b.tree.clone(), pose: b.pose };
+        let d = if super::compound_pairs::is_compound_pair(&pa, &pb) {
+            super::compound_pairs::distance_reply(pair.view(), &pa, &pb, &mut scratch, &params)
+        } else {
+            distance_reply(pair.view(), &pa, &pb, &mut scratch, &params)
+        };
         let r = &d.answer.result;
         if r.overlapping || r.distance < margin {
             out.pairs.push(ScenePair { first: a.id.clone(), second: b.id.clone(), distance: d });

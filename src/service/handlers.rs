@@ -72,11 +72,21 @@ async fn run_view(
 /// requests run on the blocking pool so they never hold up other connections.
 const INLINE_ANSWERS: usize = 256;
 
+/// Cost of one answer between compound bodies in units of a single-body answer: a tree query
+/// solves a few to a few tens of node pairs (tens of µs), so a request with a compound body goes
+/// to the blocking pool from [`INLINE_ANSWERS`] / this many answers on.
+const COMPOUND_ANSWER_COST: usize = 32;
+
 /// Whether a query request is slow work, to run off the async workers: it asks for certificates
 /// (an SDP each), its scene holds a nonconvex body (SDP lower bounds), or it has more than
-/// [`INLINE_ANSWERS`] answers.
+/// [`INLINE_ANSWERS`] answers (counting [`COMPOUND_ANSWER_COST`] per answer in a scene with a
+/// compound body). A compound query that needs an SDP (a leaf pair Newton did not resolve) is
+/// re-run on the SDP slots as any `needs_sdp` answer is.
 fn off_workers(catalog: &Catalog, scene_id: &str, certify: bool, answers: usize) -> bool {
-    certify || answers > INLINE_ANSWERS || catalog.has_nonconvex(scene_id)
+    certify
+        || answers > INLINE_ANSWERS
+        || catalog.has_nonconvex(scene_id)
+        || (answers.saturating_mul(COMPOUND_ANSWER_COST) > INLINE_ANSWERS && catalog.has_compound(scene_id))
 }
 
 /// Runs query work `f` inline when it is microseconds, else on the blocking pool (see
@@ -112,6 +122,13 @@ pub(crate) async fn blocking<T: Send + 'static>(f: impl FnOnce() -> Result<T> + 
 }
 
 type Reply<T> = Result<Response<T>, Status>;
+
+/// An `UploadBody` request's body, parsed: a single body file (with the field it came from) or a
+/// compound body file (issue 14).
+enum Upload {
+    Single(Box<BodyFile>, &'static str),
+    Compound(crate::compound::CompoundFile),
+}
 
 /// One QueryStream: its requests, its private view of the scene (from the first request on).
 struct QueryStreamState {
@@ -150,6 +167,50 @@ impl QueryStreamState {
     }
 }
 
+impl SublevelService {
+    /// `StartFitJob` with `parts` / `auto_parts` (a compound fit, issue 14): the mesh (OFF, with
+    /// triangles) is parsed off the async workers, the settings checked, the job started.
+    async fn start_compound_fit(
+        &self,
+        req: pb::StartFitJobRequest,
+        fit: &cv::FitOptions,
+        settings: crate::fit::FitSettings,
+        parts: crate::compound::PartCount,
+    ) -> Reply<pb::StartFitJobResponse> {
+        let compound = cv::compound_settings(&req, fit, settings)?;
+        let mesh = match req.source {
+            Some(pb::start_fit_job_request::Source::Mesh(mesh)) => mesh,
+            _ => {
+                return Err(Error::invalid(
+                    "mesh",
+                    "a compound fit (`parts` or `auto_parts`) needs `mesh`: a triangle mesh in OFF format",
+                )
+                .into())
+            }
+        };
+        if mesh.data.is_empty() {
+            return Err(Error::invalid("mesh.data", "must not be empty").into());
+        }
+        if cv::mesh_format_from_proto(&mesh)? != crate::fit::mesh::MeshFormat::Off {
+            return Err(
+                Error::invalid("mesh.format", "a compound fit decomposes the mesh's faces: send an OFF mesh").into()
+            );
+        }
+        let max = self.config.max_fit_points;
+        let mesh = blocking(move || {
+            let mesh = crate::fit::mesh::parse_off_mesh(&mesh.data, max)?;
+            cv::check_point_count("mesh", mesh.vertices.len(), max)?;
+            if mesh.triangles.is_empty() {
+                return Err(Error::invalid("mesh.data", "the OFF mesh has no faces to decompose"));
+            }
+            Ok(mesh)
+        })
+        .await?;
+        let job_id = self.jobs.start_compound(req.name, mesh, parts, compound).await?;
+        Ok(Response::new(pb::StartFitJobResponse { job_id }))
+    }
+}
+
 #[tonic::async_trait]
 impl Sublevel for SublevelService {
     async fn start_fit_job(&self, request: Request<pb::StartFitJobRequest>) -> Reply<pb::StartFitJobResponse> {
@@ -167,6 +228,9 @@ impl Sublevel for SublevelService {
         settings.validate()?;
         check_room(limits::BODIES, self.catalog.bodies().len(), self.config.max_bodies)?;
         let max = self.config.max_fit_points;
+        if let Some(parts) = cv::part_count(&req)? {
+            return self.start_compound_fit(req, &fit, settings, parts).await;
+        }
         let top_degree = fit.auto.as_ref().and_then(|(d, _)| d.iter().max().copied()).unwrap_or(fit.degree);
         let points = match req.source {
             None => return Err(Error::invalid("source", "set `points` or `mesh`").into()),
@@ -250,57 +314,71 @@ impl Sublevel for SublevelService {
 
     async fn upload_body(&self, request: Request<pb::UploadBodyRequest>) -> Reply<pb::UploadBodyResponse> {
         let req = request.into_inner();
-        let (file, prefix): (BodyFile, &str) = match req.body {
+        let upload = match req.body {
             None => return Err(Error::invalid("body", "set `body_json` or `data`").into()),
             Some(pb::upload_body_request::Body::BodyJson(text)) => {
                 let value: serde_json::Value =
                     serde_json::from_str(&text).map_err(|e| Error::invalid("body_json", e.to_string()))?;
                 if crate::compound::file::is_compound_json(&value) {
-                    // Compound bodies (issue 14) are not served yet: say so rather than report a
-                    // missing `degree`.
-                    return Err(Error::invalid(
-                        "body_json",
-                        "is a compound body file (it has `nodes`); the service takes single bodies only \
-                         for now: upload one node's `body` (e.g. the root's)",
-                    )
-                    .into());
+                    // A compound body (issue 14): a containment tree of bodies.
+                    let file: crate::compound::CompoundFile =
+                        serde_json::from_value(value).map_err(|e| Error::invalid("body_json", e.to_string()))?;
+                    Upload::Compound(file)
+                } else {
+                    let mut file: BodyFile =
+                        serde_json::from_value(value).map_err(|e| Error::invalid("body_json", e.to_string()))?;
+                    if file.report.method.is_empty() {
+                        file.report = cv::uploaded_report();
+                    }
+                    Upload::Single(Box::new(file), "body_json")
                 }
-                let mut file: BodyFile =
-                    serde_json::from_value(value).map_err(|e| Error::invalid("body_json", e.to_string()))?;
-                if file.report.method.is_empty() {
-                    file.report = cv::uploaded_report();
-                }
-                (file, "body_json")
             }
-            Some(pb::upload_body_request::Body::Data(data)) => (cv::body_file_from_proto(&data)?, "data"),
+            Some(pb::upload_body_request::Body::Data(data)) => {
+                Upload::Single(Box::new(cv::body_file_from_proto(&data)?), "data")
+            }
         };
         if req.name.len() > crate::scene::MAX_NAME_BYTES {
             return Err(Error::invalid("name", format!("at most {} bytes", crate::scene::MAX_NAME_BYTES)).into());
         }
         check_room(limits::BODIES, self.catalog.bodies().len(), self.config.max_bodies)?;
         let catalog = self.catalog.clone();
-        // The sos-convexity certificate is an SDP: off the async workers, like the store write.
-        let (body_id, nonconvex, margin) = blocking(move || {
-            let admitted = admit_uploaded(file).map_err(|e| prefix_field(e, prefix))?;
-            let nonconvex = admitted.body.report.nonconvex;
-            let margin = admitted.certificate.as_ref().map_or(f64::NAN, |c| c.margin);
-            let id = catalog.add_body(&req.name, admitted.body)?;
-            Ok((id, nonconvex, margin))
+        // The sos-convexity certificate is an SDP (one per node of a compound body): off the
+        // async workers, like the store write.
+        let (body_id, nonconvex, margin, nodes) = blocking(move || match upload {
+            Upload::Single(file, prefix) => {
+                let admitted = admit_uploaded(*file).map_err(|e| prefix_field(e, prefix))?;
+                let nonconvex = admitted.body.report.nonconvex;
+                let margin = admitted.certificate.as_ref().map_or(f64::NAN, |c| c.margin);
+                let id = catalog.add_body(&req.name, admitted.body)?;
+                Ok((id, nonconvex, margin, 1))
+            }
+            Upload::Compound(file) => {
+                let (tree, margin) = cv::admit_compound(file, "body_json")?;
+                let nodes = tree.node_count();
+                let id = catalog.add_compound_body(&req.name, tree)?;
+                Ok((id, false, margin, nodes))
+            }
         })
         .await?;
-        Ok(Response::new(pb::UploadBodyResponse { body_id, nonconvex, convexity_margin: margin }))
+        let nodes = u32::try_from(nodes).unwrap_or(u32::MAX);
+        Ok(Response::new(pb::UploadBodyResponse { body_id, nonconvex, convexity_margin: margin, nodes }))
     }
 
     async fn get_body(&self, request: Request<pb::GetBodyRequest>) -> Reply<pb::GetBodyResponse> {
         let req = request.into_inner();
         let entry = self.catalog.body(require_id("body_id", &req.body_id)?)?;
         let file = entry.body.to_file();
-        let body_json = serde_json::to_string(&file).map_err(Error::from)?;
+        let body_json = match &entry.tree {
+            Some(tree) => serde_json::to_string(&tree.to_file()),
+            None => serde_json::to_string(&file),
+        }
+        .map_err(Error::from)?;
         Ok(Response::new(pb::GetBodyResponse {
             body_id: entry.id.clone(),
             name: entry.name.clone(),
             data: Some(cv::body_file_to_proto(&file)),
             body_json,
+            nodes: u32::try_from(entry.node_count()).unwrap_or(u32::MAX),
         }))
     }
 
@@ -394,8 +472,12 @@ impl Sublevel for SublevelService {
         require_id("scene_id", &req.scene_id)?;
         require_id("instance_a", &req.instance_a)?;
         require_id("instance_b", &req.instance_b)?;
-        let options =
-            crate::scene::QueryOptions { signed: req.signed, ..cv::query_options(req.certify, req.with_gradient) };
+        let tolerance = cv::tree_tolerance("tolerance", req.tolerance)?;
+        let options = crate::scene::QueryOptions {
+            signed: req.signed,
+            tolerance,
+            ..cv::query_options(req.certify, req.with_gradient)
+        };
         let scene = req.scene_id.clone();
         let r = query_work(
             &self.catalog,

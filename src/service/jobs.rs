@@ -78,6 +78,7 @@ pub(crate) struct FitJobs {
 }
 
 fn update(job_id: &str, stage: pb::FitStage, fraction: f64, message: &str, state: pb::JobState) -> pb::FitJobUpdate {
+    let (part, parts) = part_of(message);
     pb::FitJobUpdate {
         job_id: job_id.to_owned(),
         stage: stage as i32,
@@ -86,6 +87,25 @@ fn update(job_id: &str, stage: pb::FitStage, fraction: f64, message: &str, state
         state: state as i32,
         body_id: String::new(),
         error: String::new(),
+        part,
+        parts,
+    }
+}
+
+/// The part being fitted and the parts of the attempt, `(j, n)`, read from a compound fit's
+/// progress message ([`crate::compound::fit_compound`] writes `parts N, part j/n: …` while it
+/// fits part j and `parts N: …` around the parts); `(0, 0)` for any other message.
+fn part_of(message: &str) -> (u32, u32) {
+    let Some(rest) = message.strip_prefix("parts ") else { return (0, 0) };
+    let count = |t: &str| t.chars().take_while(char::is_ascii_digit).collect::<String>().parse::<u32>().ok();
+    let Some(parts) = count(rest) else { return (0, 0) };
+    let part = rest
+        .split_once(", part ")
+        .and_then(|(_, p)| p.split_once('/'))
+        .and_then(|(j, n)| Some((j.parse::<u32>().ok()?, count(n)?)));
+    match part {
+        Some((j, n)) => (j, n),
+        None => (0, parts),
     }
 }
 
@@ -413,6 +433,52 @@ impl FitJobs {
             // A cancellation that arrived after the last solver iteration still stores nothing.
             crate::fit::cancel::check()?;
             Ok((catalog.add_body(&name, body)?, "fit stored".into()))
+        });
+        Ok(job_id)
+    }
+
+    /// Starts a compound fit (issue 14; [`crate::compound::fit_compound`]) of `mesh` (validated:
+    /// OFF with triangles) and returns the job id. Progress reports the part being fitted
+    /// (`FitJobUpdate.part` / `parts`); on success the compound body is stored under `name` (the
+    /// job id when empty) after checking that every mesh triangle lies inside a leaf body.
+    ///
+    /// # Errors
+    /// UNAVAILABLE when the job's record cannot be written.
+    pub(crate) async fn start_compound(
+        &self,
+        name: String,
+        mesh: crate::fit::mesh::OffMesh,
+        parts: crate::compound::PartCount,
+        settings: crate::compound::CompoundSettings,
+    ) -> Result<String, Status> {
+        let job = self.register("fit", name).await?;
+        let (job_id, name) = (job.job_id.clone(), job.name.clone());
+        tracing::info!(job_id = %job_id, vertices = mesh.vertices.len(), triangles = mesh.triangles.len(), ?parts, "compound fit queued");
+        let catalog = self.catalog.clone();
+        self.spawn(job, "fit", move |progress| {
+            let body = crate::compound::fit_compound(&mesh, Some(&name), parts, &settings, progress)?;
+            let uncovered = crate::compound::check::uncovered_triangles(&body, &mesh);
+            if !uncovered.is_empty() {
+                return Err(Error::Numerical(format!(
+                    "{} of {} triangles are not inside any leaf body (first: {:?})",
+                    uncovered.len(),
+                    mesh.triangles.len(),
+                    &uncovered[..uncovered.len().min(5)]
+                )));
+            }
+            let mut file = body.to_file();
+            for node in &mut file.nodes {
+                node.body.report.sanitize_non_finite();
+            }
+            let body = crate::compound::CompoundBody::from_file(file)?;
+            crate::fit::cancel::check()?;
+            let message = format!(
+                "compound fit stored: {} parts, {} nodes, max leaf excess {:.4} m",
+                body.leaf_count(),
+                body.node_count(),
+                body.max_leaf_excess()
+            );
+            Ok((catalog.add_compound_body(&name, body)?, message))
         });
         Ok(job_id)
     }

@@ -156,6 +156,7 @@ async fn repro_3_uploaded_bodies_are_certified_or_stored_as_nonconvex() {
             certify,
             with_gradient: false,
             signed: false,
+            tolerance: 0.0,
         };
         let d = c.distance(req).await.unwrap().into_inner().answer.unwrap();
         assert_eq!(d.source, pb::AnswerSource::SdpLowerBound as i32, "{d:?}");

@@ -12,6 +12,7 @@ mod query;
 mod query_compound;
 mod security;
 mod service;
+mod service_compound;
 mod service_jobs;
 mod table;
 mod transport;

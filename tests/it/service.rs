@@ -430,6 +430,7 @@ async fn certified_queries_and_gradients_on_the_demo_scene() {
             certify: true,
             with_gradient: true,
             signed: false,
+            tolerance: 0.0,
         };
         let d = c.distance(req).await.unwrap().into_inner().answer.unwrap();
         assert_eq!(d.source, pb::AnswerSource::Newton as i32, "{d:?}");
@@ -498,6 +499,7 @@ async fn certified_queries_and_gradients_on_the_demo_scene() {
             certify: true,
             with_gradient: true,
             signed: false,
+            tolerance: 0.0,
         };
         let req = pb::BatchQueryRequest {
             scene_id: scene.clone(),
@@ -544,6 +546,7 @@ async fn nonconvex_body_answers_with_an_sdp_lower_bound() {
         certify: false,
         with_gradient: true,
         signed: false,
+        tolerance: 0.0,
     };
     let d = c.distance(req).await.unwrap().into_inner().answer.unwrap();
     assert_eq!(d.source, pb::AnswerSource::SdpLowerBound as i32, "{d:?}");

@@ -82,6 +82,7 @@ async fn batch_round_trips_cost_no_stall() {
         certify: false,
         with_gradient: false,
         signed: false,
+        tolerance: 0.0,
     };
     let mut report =
         vec![format!("unary Distance median {unary_median:?} (fastest {unary:?}), in-process pair {per_pair:?}")];

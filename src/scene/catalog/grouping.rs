@@ -16,8 +16,10 @@ pub struct PosedInstance {
     pub id: String,
     /// The instantiated body's id.
     pub body_id: String,
-    /// The body (shared, parsed once).
+    /// The body (shared, parsed once); a compound body's root body.
     pub body: Arc<Body>,
+    /// A compound body's containment tree (`None` for a single body).
+    pub tree: Option<Arc<crate::compound::CompoundBody>>,
     /// Its pose (body frame → world).
     pub pose: Isometry3,
 }
@@ -44,6 +46,7 @@ impl Catalog {
                 id: id.to_owned(),
                 body_id: inst.body_id.clone(),
                 body: inst.body.clone(),
+                tree: inst.tree.clone(),
                 pose: inst.pose,
             };
             if ids.is_empty() {
@@ -68,7 +71,7 @@ impl Catalog {
         pose: Isometry3,
     ) -> Result<String> {
         let bodies = read(&self.bodies);
-        let body = bodies.get(body_id).ok_or_else(|| Error::not_found("body", body_id))?.body.clone();
+        let entry = bodies.get(body_id).ok_or_else(|| Error::not_found("body", body_id))?.clone();
         self.with_scene(scene_id, |s| {
             for id in remove {
                 instance(s, id)?;
@@ -81,7 +84,7 @@ impl Catalog {
                 s.instances.remove(old);
                 s.cache.invalidate_instance(old);
             }
-            s.instances.insert(id.clone(), Instance { body_id: body_id.to_owned(), body, pose });
+            s.instances.insert(id.clone(), Instance::of(&entry, pose));
             Ok(id)
         })
     }

@@ -14,7 +14,7 @@ mod tests;
 pub use grouping::PosedInstance;
 pub(crate) use query::warm_kind;
 pub use query::{
-    precision_limited, DistanceReply, GrowthReply, PairRef, QueryAnswer, QueryKind, QueryOptions, QueryPair,
+    precision_limited, DistanceReply, GrowthReply, PairRef, QueryAnswer, QueryKind, QueryOptions, QueryPair, TreeInfo,
     PRECISION_LIMIT,
 };
 
@@ -22,6 +22,7 @@ use super::cache::WarmStartCache;
 use super::store::Store;
 use super::{BodyRecord, InstanceRecord, JobRecord, JobRecordState, SceneMeta, StoredPose};
 use crate::body::Body;
+use crate::compound::CompoundBody;
 use crate::math::Isometry3;
 use crate::query::NewtonParams;
 use crate::{Error, Result};
@@ -38,8 +39,36 @@ pub struct BodyEntry {
     pub id: String,
     /// Its name.
     pub name: String,
-    /// The validated body.
+    /// The validated body; for a compound body its root node's body (which contains every other
+    /// node's body, paper §V), so bounding boxes, spheres and grouping see the whole model.
     pub body: Arc<Body>,
+    /// The containment tree of a compound body (issue 14; more than one node); `None` for a
+    /// single body, which stays on the single-body query path.
+    pub tree: Option<Arc<CompoundBody>>,
+}
+
+impl BodyEntry {
+    /// The entry of a stored record: a single body, or a compound body when the record holds a
+    /// compound file (see [`BodyRecord`]).
+    ///
+    /// # Errors
+    /// The validation errors of [`Body::from_file`] / [`CompoundBody::from_file`], naming the
+    /// field.
+    fn from_record(id: &str, rec: BodyRecord) -> Result<Self> {
+        let (body, tree) = match rec.compound {
+            None => (Arc::new(Body::from_file(rec.body)?), None),
+            Some(file) => {
+                let tree = CompoundBody::from_file(file)?;
+                (Arc::new(tree.body(tree.root()).clone()), Some(Arc::new(tree)))
+            }
+        };
+        Ok(Self { id: id.to_owned(), name: rec.name, body, tree })
+    }
+
+    /// Number of nodes of the body's containment tree (1 for a single body).
+    pub fn node_count(&self) -> usize {
+        self.tree.as_ref().map_or(1, |t| t.node_count())
+    }
 }
 
 /// An instance as seen from outside: its body and pose.
@@ -68,7 +97,15 @@ pub struct SceneView {
 struct Instance {
     body_id: String,
     body: Arc<Body>,
+    /// The body's containment tree when it is a compound body (see [`BodyEntry::tree`]).
+    tree: Option<Arc<CompoundBody>>,
     pose: Isometry3,
+}
+
+impl Instance {
+    fn of(entry: &BodyEntry, pose: Isometry3) -> Self {
+        Self { body_id: entry.id.clone(), body: entry.body.clone(), tree: entry.tree.clone(), pose }
+    }
 }
 
 #[derive(Debug)]
@@ -144,9 +181,8 @@ impl Catalog {
     pub fn open(store: Box<dyn Store>, params: NewtonParams) -> Result<Self> {
         let mut bodies = BTreeMap::new();
         for (id, rec) in store.list_bodies()? {
-            match Body::from_file(rec.body) {
-                Ok(body) => {
-                    let entry = BodyEntry { id: id.clone(), name: rec.name, body: Arc::new(body) };
+            match BodyEntry::from_record(&id, rec) {
+                Ok(entry) => {
                     bodies.insert(id, Arc::new(entry));
                 }
                 Err(e) => {
@@ -165,7 +201,7 @@ impl Catalog {
                 };
                 match inst.pose.to_isometry("pose") {
                     Ok(pose) => {
-                        instances.insert(iid, Instance { body_id: inst.body_id, body: entry.body.clone(), pose });
+                        instances.insert(iid, Instance::of(entry, pose));
                     }
                     Err(e) => {
                         tracing::warn!(scene_id = %id, instance_id = %iid, error = %e, "quarantining instance");
@@ -267,8 +303,30 @@ impl Catalog {
     pub fn add_body(&self, name: &str, body: Body) -> Result<String> {
         check_name("name", name)?;
         let id = new_id("b");
-        self.store.put_body(&id, &BodyRecord { name: name.to_owned(), body: body.to_file() })?;
-        let entry = BodyEntry { id: id.clone(), name: name.to_owned(), body: Arc::new(body) };
+        self.store.put_body(&id, &BodyRecord::single(name, body.to_file()))?;
+        let entry = BodyEntry { id: id.clone(), name: name.to_owned(), body: Arc::new(body), tree: None };
+        write(&self.bodies).insert(id.clone(), Arc::new(entry));
+        Ok(id)
+    }
+
+    /// Stores a validated compound body (issue 14) under a fresh id and returns the id. A
+    /// one-node tree is stored as the single body it is (one-node tree semantics: its queries
+    /// stay on the single-body path); a larger tree is stored as a compound record
+    /// ([`BodyRecord`]: the root's body plus the compound file).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `name` for an over-long name; [`Error::Storage`].
+    pub fn add_compound_body(&self, name: &str, tree: CompoundBody) -> Result<String> {
+        if tree.node_count() == 1 {
+            return self.add_body(name, tree.body(tree.root()).clone());
+        }
+        check_name("name", name)?;
+        let id = new_id("b");
+        let root = tree.body(tree.root()).clone();
+        let rec = BodyRecord { name: name.to_owned(), body: root.to_file(), compound: Some(tree.to_file()) };
+        self.store.put_body(&id, &rec)?;
+        let entry =
+            BodyEntry { id: id.clone(), name: name.to_owned(), body: Arc::new(root), tree: Some(Arc::new(tree)) };
         write(&self.bodies).insert(id.clone(), Arc::new(entry));
         Ok(id)
     }
@@ -291,8 +349,8 @@ impl Catalog {
             return Ok(None);
         }
         let Some(rec) = self.store.get_body(id)? else { return Ok(None) };
-        let body = Body::from_file(rec.body).map_err(|e| Error::Storage(format!("stored body `{id}`: {e}")))?;
-        let entry = Arc::new(BodyEntry { id: id.to_owned(), name: rec.name, body: Arc::new(body) });
+        let entry = BodyEntry::from_record(id, rec).map_err(|e| Error::Storage(format!("stored body `{id}`: {e}")))?;
+        let entry = Arc::new(entry);
         Ok(Some(write(&self.bodies).entry(id.to_owned()).or_insert(entry).clone()))
     }
 
@@ -310,7 +368,7 @@ impl Catalog {
                 tracing::warn!(scene_id = %id, instance_id = %iid, "skipping an instance that does not load");
                 continue;
             };
-            instances.insert(iid, Instance { body_id: inst.body_id, body: entry.body.clone(), pose });
+            instances.insert(iid, Instance::of(&entry, pose));
         }
         let state = SceneState {
             id: id.to_owned(),
@@ -410,7 +468,17 @@ impl Catalog {
     /// bound (milliseconds): the service runs such queries off its async workers. False for an
     /// unknown scene (the query itself then reports it).
     pub fn has_nonconvex(&self, scene_id: &str) -> bool {
-        self.scene(scene_id).map(|sc| lock(&sc).instances.values().any(|i| i.body.report.nonconvex)).unwrap_or(false)
+        let nonconvex = |i: &Instance| {
+            i.body.report.nonconvex
+                || i.tree.as_ref().is_some_and(|t| t.nodes().iter().any(|n| n.body.report.nonconvex))
+        };
+        self.scene(scene_id).map(|sc| lock(&sc).instances.values().any(nonconvex)).unwrap_or(false)
+    }
+
+    /// Whether any instance of the scene is a compound body (its queries run the tree queries,
+    /// tens of µs each). False for an unknown scene.
+    pub fn has_compound(&self, scene_id: &str) -> bool {
+        self.scene(scene_id).map(|sc| lock(&sc).instances.values().any(|i| i.tree.is_some())).unwrap_or(false)
     }
 
     /// Deletes a scene with its instances and warm starts.
@@ -438,12 +506,12 @@ impl Catalog {
         self.body(body_id)?;
         self.scene(scene_id)?;
         let bodies = read(&self.bodies);
-        let body = bodies.get(body_id).ok_or_else(|| Error::not_found("body", body_id))?.body.clone();
+        let entry = bodies.get(body_id).ok_or_else(|| Error::not_found("body", body_id))?.clone();
         self.with_scene(scene_id, |s| {
             let id = new_id("i");
             let rec = InstanceRecord { body_id: body_id.to_owned(), pose: StoredPose::from_isometry(&pose) };
             self.store.put_instances(scene_id, &[(&id, &rec)], false)?;
-            s.instances.insert(id.clone(), Instance { body_id: body_id.to_owned(), body, pose });
+            s.instances.insert(id.clone(), Instance::of(&entry, pose));
             Ok(id)
         })
     }
@@ -529,5 +597,5 @@ fn instance<'a>(s: &'a SceneState, id: &str) -> Result<&'a Instance> {
 /// The instance `id` of a locked scene as a posed body (the body shared, the pose copied).
 fn posed(s: &SceneState, id: &str) -> Result<super::planner::Posed> {
     let inst = instance(s, id)?;
-    Ok(super::planner::Posed { body: inst.body.clone(), pose: inst.pose })
+    Ok(super::planner::Posed { body: inst.body.clone(), tree: inst.tree.clone(), pose: inst.pose })
 }

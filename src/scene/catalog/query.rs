@@ -28,7 +28,7 @@ pub enum QueryKind {
 }
 
 /// Per-query options: certification mode and pose gradients.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct QueryOptions {
     /// [`CertifyMode::Newton`] (default: the SDP only as a fallback) or [`CertifyMode::Certify`]
     /// (always attach the level-0 certificate); see [`crate::query::certified`].
@@ -41,6 +41,36 @@ pub struct QueryOptions {
     /// Distance queries: also the penetration depth when overlapping (signed distance,
     /// [`crate::query::penetration`]).
     pub signed: bool,
+    /// Distance queries of pairs with a compound body: stop refining once the bounds are within
+    /// this many meters (upper − lower ≤ tolerance; [`crate::query::tree::TreeQueryParams`]).
+    /// 0 (default): the exact distance of the two models. Finite and ≥ 0 (checked by the
+    /// callers that take it from outside). Ignored by single-body pairs.
+    pub tolerance: crate::math::Real,
+}
+
+/// What a query between a compound body and another body (issue 14) adds to its answer: the
+/// branch and bound's bounds and cost ([`crate::query::tree`]). `None` on single-body pairs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TreeInfo {
+    /// Lower bound of the models' distance (meters; distance and collide queries; the answer's
+    /// distance). Growth queries: the answer's d.
+    pub lower: crate::math::Real,
+    /// Upper bound of the models' distance (meters): the best leaf pair's distance (+∞ when no
+    /// leaf pair was resolved). Growth and collide queries: equal to `lower`.
+    pub upper: crate::math::Real,
+    /// The deepest tree level reached (0: decided by the root pair).
+    pub level: usize,
+    /// The active leaf pair (node of the first body's tree, node of the second's), when one
+    /// decided (a single body is node 0 of its one-node tree).
+    pub leaves: Option<(usize, usize)>,
+    /// Node pairs solved (Newton solves, leaf pairs included).
+    pub pairs_evaluated: usize,
+    /// Node pairs decided by their bounding spheres alone (no solve).
+    pub pairs_pruned_by_spheres: usize,
+    /// Distance: upper − lower ≤ the tolerance asked for (and no leaf pair stayed unresolved).
+    pub within_tolerance: bool,
+    /// [`CertifyMode::NewtonOnly`] only: a leaf pair needs the SDP that mode does not solve.
+    pub needs_sdp: bool,
 }
 
 /// One query of a batch: a kind, an ordered pair of instance ids and its options.
@@ -100,8 +130,11 @@ pub struct DistanceReply {
     pub precision_limited: bool,
     /// The signed distance was asked for ([`QueryOptions::signed`]).
     pub signed: bool,
-    /// With [`QueryOptions::signed`] on an overlapping answer of convex bodies: the penetration.
+    /// With [`QueryOptions::signed`] on an overlapping answer of convex bodies: the penetration
+    /// (not computed for compound pairs).
     pub penetration: Option<crate::query::penetration::Penetration>,
+    /// Compound pairs: the bounds and cost of the tree query ([`TreeInfo`]).
+    pub tree: Option<TreeInfo>,
 }
 
 /// A certified growth answer with optional pose gradients.
@@ -113,6 +146,8 @@ pub struct GrowthReply {
     pub gradients: Option<(PoseGradient, PoseGradient)>,
     /// The inputs limit the accuracy (see [`precision_limited`]).
     pub precision_limited: bool,
+    /// Compound pairs: the tree query's level and cost ([`TreeInfo`]).
+    pub tree: Option<TreeInfo>,
 }
 
 /// Relative precision in a body's normalized coordinates below which an answer is flagged as
@@ -158,7 +193,9 @@ impl QueryAnswer {
         match self {
             QueryAnswer::Distance(d) => d.answer.needs_sdp,
             QueryAnswer::Growth(g) => g.answer.needs_sdp,
-            QueryAnswer::Collide(c) => c.solve.as_ref().is_some_and(|d| d.answer.needs_sdp),
+            QueryAnswer::Collide(c) => {
+                c.solve.as_ref().is_some_and(|d| d.answer.needs_sdp) || c.tree.is_some_and(|t| t.needs_sdp)
+            }
         }
     }
 }

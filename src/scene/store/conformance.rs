@@ -34,8 +34,8 @@ pub(crate) fn check_store(open: &dyn Fn() -> Box<dyn Store>) {
     {
         let s = open();
         assert!(s.list_bodies().unwrap().is_empty() && s.list_scenes().unwrap().is_empty());
-        s.put_body("b-1", &BodyRecord { name: "egg".into(), body: body.to_file() }).unwrap();
-        s.put_body("b-2", &BodyRecord { name: "two".into(), body: body.to_file() }).unwrap();
+        s.put_body("b-1", &BodyRecord::single("egg", body.to_file())).unwrap();
+        s.put_body("b-2", &BodyRecord::single("two", body.to_file())).unwrap();
         s.put_scene("s-1", &SceneMeta { name: "one".into() }).unwrap();
         // "s-10" shares the prefix "s-1": its instances must not leak into s-1.
         s.put_scene("s-10", &SceneMeta { name: "ten".into() }).unwrap();
@@ -49,7 +49,7 @@ pub(crate) fn check_store(open: &dyn Fn() -> Box<dyn Store>) {
         // Refused writes change nothing.
         let mut nan = body.to_file();
         nan.report.volume = f64::NAN;
-        assert!(s.put_body("b-nan", &BodyRecord { name: "nan".into(), body: nan }).is_err());
+        assert!(s.put_body("b-nan", &BodyRecord::single("nan", nan)).is_err());
         let mut bad = inst("b-1", 0.0);
         bad.pose.translation[0] = f64::INFINITY;
         assert!(s.put_instances("s-1", &[("i-bad", &bad)], true).is_err());

@@ -6,7 +6,7 @@
 //! Three tables of JSON values keyed by id:
 //!
 //! ```text
-//! bodies     body_id                → BodyRecord   { name, body: BodyFile }
+//! bodies     body_id                → BodyRecord   { name, body: BodyFile, compound?: CompoundFile }
 //! scenes     scene_id               → SceneMeta    { name }
 //! instances  scene_id "/" inst_id   → InstanceRecord { body_id, pose }
 //! jobs       job_id                 → JobRecord    { kind, name, state, body_id, error, … }

@@ -392,7 +392,7 @@ mod tests {
         let body = ellipsoid([0.0; 3], [1.0, 2.0, 3.0]).unwrap();
         {
             let s = RedbStore::open_dir(dir.path()).unwrap();
-            s.put_body("b-1", &BodyRecord { name: "egg".into(), body: body.to_file() }).unwrap();
+            s.put_body("b-1", &BodyRecord::single("egg", body.to_file())).unwrap();
             s.put_scene("s-1", &SceneMeta { name: "one".into() }).unwrap();
             // "s-10" shares the prefix "s-1": its instances must not leak into s-1.
             s.put_scene("s-10", &SceneMeta { name: "ten".into() }).unwrap();
@@ -430,9 +430,9 @@ mod tests {
         let mut file = ellipsoid([0.0; 3], [1.0; 3]).unwrap().to_file();
         {
             let s = RedbStore::open_dir(dir.path()).unwrap();
-            s.put_body("b-ok", &BodyRecord { name: "ok".into(), body: file.clone() }).unwrap();
+            s.put_body("b-ok", &BodyRecord::single("ok", file.clone())).unwrap();
             file.report.volume = f64::NAN;
-            let e = s.put_body("b-nan", &BodyRecord { name: "nan".into(), body: file.clone() }).unwrap_err();
+            let e = s.put_body("b-nan", &BodyRecord::single("nan", file.clone())).unwrap_err();
             assert!(matches!(&e, Error::InvalidArgument { field, .. } if field == "body"), "{e}");
             let bad_pose = InstanceRecord {
                 body_id: "b-ok".into(),

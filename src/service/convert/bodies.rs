@@ -73,6 +73,64 @@ pub fn fit_options(req: &pb::StartFitJobRequest) -> Result<FitOptions> {
     Ok(FitOptions { degree: degrees[0], method, convexity_relaxation: c, auto: Some((degrees, tol)) })
 }
 
+/// The compound part count of a `StartFitJobRequest` (issue 14): `None` for a single-body fit
+/// (`parts` 0, `auto_parts` false), `Fixed(n)` for `parts` n, `Auto` for `auto_parts`.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `parts` (both set, or above
+/// [`crate::compound::decompose::MAX_PARTS`]) or `tolerance` (`auto_parts` without one).
+pub fn part_count(req: &pb::StartFitJobRequest) -> Result<Option<crate::compound::PartCount>> {
+    use crate::compound::decompose::MAX_PARTS;
+    use crate::compound::PartCount;
+    match (req.parts, req.auto_parts) {
+        (0, false) => Ok(None),
+        (0, true) if req.tolerance == 0.0 => {
+            Err(Error::invalid("tolerance", "`auto_parts` needs a leaf-excess tolerance in meters (> 0)"))
+        }
+        (0, true) => Ok(Some(PartCount::Auto)),
+        (_, true) => Err(Error::invalid("parts", "set `parts` or `auto_parts`, not both")),
+        (n, false) if n as usize > MAX_PARTS => {
+            Err(Error::invalid("parts", format!("at most {MAX_PARTS} parts, got {n}")))
+        }
+        (n, false) => Ok(Some(PartCount::Fixed(n as usize))),
+    }
+}
+
+/// The settings of a compound fit job: the server's fit settings for every leaf, leaf degrees
+/// `degree` (or with `auto_degree` the candidates up to `degree`, at most 6 — the containment
+/// parents take degrees ≤ 6), the request's `volume_tolerance` and leaf-excess `tolerance`.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `degree` (8 without `auto_degree`), `tolerance` (not finite
+/// or < 0) or a field of [`crate::compound::CompoundSettings::validate`].
+pub fn compound_settings(
+    req: &pb::StartFitJobRequest,
+    fit: &FitOptions,
+    settings: crate::fit::FitSettings,
+) -> Result<crate::compound::CompoundSettings> {
+    let t = req.tolerance;
+    if !(t.is_finite() && t >= 0.0) {
+        return Err(Error::invalid("tolerance", format!("must be a finite number >= 0 meters, got {t}")));
+    }
+    let (degrees, volume_tolerance) = match &fit.auto {
+        Some((degrees, tol)) => (degrees.iter().copied().filter(|&d| d <= 6).collect::<Vec<_>>(), *tol),
+        None if fit.degree > 6 => {
+            return Err(Error::invalid("degree", "compound parts are fitted at degree 2, 4 or 6 (containment)"))
+        }
+        None => (vec![fit.degree], 0.05),
+    };
+    let defaults = crate::compound::CompoundSettings::default();
+    let compound = crate::compound::CompoundSettings {
+        fit: settings,
+        degrees,
+        volume_tolerance,
+        excess_tolerance: (t > 0.0).then_some(t),
+        ..defaults
+    };
+    compound.validate()?;
+    Ok(compound)
+}
+
 /// Unpacks a point cloud `x0, y0, z0, x1, …`.
 ///
 /// # Errors
@@ -318,6 +376,71 @@ pub fn uploaded_report() -> FitReport {
     FitReport { method: "uploaded".into(), containment_rescale: 1.0, ..Default::default() }
 }
 
+/// Most nodes of an uploaded compound body: the largest tree `sublevel fit --parts` builds
+/// (2 × [`crate::compound::decompose::MAX_PARTS`] − 1, a binary tree over its most parts). Each
+/// node is certified sos-convex on upload (an SDP each), so the bound also caps that work.
+pub const MAX_COMPOUND_NODES: usize = 2 * crate::compound::decompose::MAX_PARTS - 1;
+
+/// Admits an uploaded compound body file (issue 14; `UploadBody.body_json` with `nodes`): at most
+/// [`MAX_COMPOUND_NODES`] nodes; the tree shape, format and every node's body and excess checked
+/// ([`CompoundBody::from_file`]); then every node admitted as an uploaded single body is
+/// ([`admit_uploaded`]: finite report, sos-convexity certificate). A node that is not sos-convex
+/// is refused: the branch and bound uses node distances as lower bounds, which only a convex
+/// node's Newton answer is. Returns the body and the smallest certified margin over its nodes.
+///
+/// Runs one SDP per node: call it off the async workers.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `{field}.nodes` (too many), `{field}.format`,
+/// `{field}.root`, `{field}.nodes[i].<…>` (e.g. `body_json.nodes[3].body.scale`), or
+/// `{field}.nodes[i].body` for a node that is not sos-convex; [`Error::Numerical`] when Clarabel
+/// rejects a certificate program.
+pub fn admit_compound(
+    mut file: crate::compound::CompoundFile,
+    field: &str,
+) -> Result<(crate::compound::CompoundBody, Real)> {
+    use crate::compound::{CompoundBody, CompoundNode};
+    use crate::service::convert::prefix_field;
+    if file.nodes.len() > MAX_COMPOUND_NODES {
+        return Err(Error::invalid(
+            format!("{field}.nodes"),
+            format!("{} nodes exceed the limit of {MAX_COMPOUND_NODES} per compound body", file.nodes.len()),
+        ));
+    }
+    for node in &mut file.nodes {
+        if node.body.report.method.is_empty() {
+            node.body.report = uploaded_report();
+        }
+    }
+    // The cheap checks first (shape, every field), before one SDP per node.
+    CompoundBody::from_file(file.clone()).map_err(|e| prefix_field(e, field))?;
+    let mut nodes = Vec::with_capacity(file.nodes.len());
+    let mut margin = Real::INFINITY;
+    for (i, n) in file.nodes.into_iter().enumerate() {
+        let at = format!("{field}.nodes[{i}].body");
+        let admitted = crate::fit::sos_convexity::admit_uploaded(n.body).map_err(|e| prefix_field(e, &at))?;
+        if admitted.body.report.nonconvex {
+            return Err(Error::invalid(
+                at,
+                "is not certified sos-convex; every node of a compound body must be (its distances bound the                  leaves below it only when it is convex)",
+            ));
+        }
+        if let Some(c) = &admitted.certificate {
+            margin = margin.min(c.margin);
+        }
+        nodes.push(CompoundNode {
+            body: admitted.body,
+            children: n.children,
+            depth: n.depth,
+            excess: n.excess.unwrap_or(Real::NAN),
+            triangles: n.triangles,
+            fit_seconds: n.fit_seconds,
+        });
+    }
+    let body = CompoundBody::new(nodes, file.root, file.report).map_err(|e| prefix_field(e, field))?;
+    Ok((body, if margin.is_finite() { margin } else { Real::NAN }))
+}
+
 /// A body entry as the proto summary.
 pub fn body_summary(e: &BodyEntry) -> pb::BodySummary {
     pb::BodySummary {
@@ -326,6 +449,7 @@ pub fn body_summary(e: &BodyEntry) -> pb::BodySummary {
         degree: e.body.degree() as u32,
         method: e.body.report.method.clone(),
         volume: e.body.report.volume,
+        nodes: u32::try_from(e.node_count()).unwrap_or(u32::MAX),
     }
 }
 

@@ -37,9 +37,10 @@ mod queries;
 mod scenes;
 
 pub use bodies::{
-    body_file_from_proto, body_file_to_proto, body_summary, check_cloud, check_point_count, fit_degree,
-    fit_method_from_proto, fit_options, fit_stage_to_proto, mesh_format_from_proto, min_thickness, points_from_proto,
-    report_from_proto, report_to_proto, sdp_status_to_proto, uploaded_report, FitOptions,
+    admit_compound, body_file_from_proto, body_file_to_proto, body_summary, check_cloud, check_point_count,
+    compound_settings, fit_degree, fit_method_from_proto, fit_options, fit_stage_to_proto, mesh_format_from_proto,
+    min_thickness, part_count, points_from_proto, report_from_proto, report_to_proto, sdp_status_to_proto,
+    uploaded_report, FitOptions, MAX_COMPOUND_NODES,
 };
 pub use errors::prefix_field;
 pub use planner::{
@@ -49,6 +50,7 @@ pub use planner::{
 pub use queries::{
     answer_to_proto, certificate_to_proto, distance_reply_to_proto, distance_to_proto, gradient_to_proto,
     growth_reply_to_proto, growth_to_proto, pairs_from_proto, query_options, source_to_proto, status_to_proto,
+    tree_to_proto, tree_tolerance,
 };
 pub use scenes::{
     instance_to_proto, point_to_proto, pose_from_proto, pose_to_proto, poses_from_proto, scene_to_proto,

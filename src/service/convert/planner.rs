@@ -90,7 +90,15 @@ pub fn answers_to_columns(kind: QueryKind, answers: &[QueryAnswer]) -> pb::Answe
         overlapping: Vec::with_capacity(n),
         lower_bound: Vec::with_capacity(n),
         decided_by_bounds: Vec::with_capacity(if kind == QueryKind::Collide { n } else { 0 }),
+        upper: Vec::new(),
+        level: Vec::new(),
     };
+    let tree_of = |a: &QueryAnswer| match a {
+        QueryAnswer::Distance(d) => d.tree,
+        QueryAnswer::Growth(g) => g.tree,
+        QueryAnswer::Collide(c) => c.tree,
+    };
+    let any_tree = answers.iter().any(|a| tree_of(a).is_some());
     let nan = [Real::NAN; 3];
     for a in answers {
         let (value, pa, pb_, converged, overlapping, lower_bound) = match a {
@@ -118,10 +126,18 @@ pub fn answers_to_columns(kind: QueryKind, answers: &[QueryAnswer]) -> pb::Answe
                         let (wa, wb) = (r.witness_a.coords.into(), r.witness_b.coords.into());
                         (col.distance, wa, wb, d.answer.converged, col.collides, d.answer.lower_bound)
                     }
-                    None => (col.distance, nan, nan, true, col.collides, false),
+                    None => {
+                        let converged = col.tree.is_none_or(|t| t.within_tolerance);
+                        (col.distance, nan, nan, converged, col.collides, false)
+                    }
                 }
             }
         };
+        if any_tree {
+            let t = tree_of(a);
+            c.upper.push(t.map_or(value, |t| t.upper));
+            c.level.push(t.map_or(0, |t| u32::try_from(t.level).unwrap_or(u32::MAX)));
+        }
         c.value.push(value);
         c.point_a.extend_from_slice(&pa);
         c.point_b.extend_from_slice(&pb_);
@@ -212,6 +228,7 @@ pub fn planner_request_from_proto(
             let mut options = query_options(q.certify, q.with_gradient);
             options.cold = q.cold;
             options.signed = q.signed;
+            options.tolerance = super::queries::tree_tolerance(&format!("queries[{k}].tolerance"), q.tolerance)?;
             Ok(crate::scene::QueryPair {
                 kind,
                 first: q.first.clone(),

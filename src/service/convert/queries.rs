@@ -7,7 +7,7 @@ use crate::math::Real;
 use crate::query::{
     AnswerSource, CertificateSummary, CertifyMode, DistanceResult, GrowthResult, PoseGradient, SolveStatus,
 };
-use crate::scene::{DistanceReply, GrowthReply, QueryAnswer, QueryKind, QueryOptions};
+use crate::scene::{DistanceReply, GrowthReply, QueryAnswer, QueryKind, QueryOptions, TreeInfo};
 use crate::service::pb;
 use crate::{Error, Result};
 
@@ -80,6 +80,32 @@ pub fn certificate_to_proto(c: &CertificateSummary) -> pb::Certificate {
     }
 }
 
+/// The tree part of a compound pair's answer (issue 14) as the proto message.
+pub fn tree_to_proto(t: &TreeInfo) -> pb::TreeAnswer {
+    let count = |n: usize| u64::try_from(n).unwrap_or(u64::MAX);
+    let node = |n: usize| u32::try_from(n).unwrap_or(u32::MAX);
+    pb::TreeAnswer {
+        lower: t.lower,
+        upper: t.upper,
+        level: node(t.level),
+        leaves: t.leaves.map(|(a, b)| pb::LeafPair { node_a: node(a), node_b: node(b) }),
+        pairs_evaluated: count(t.pairs_evaluated),
+        pairs_pruned_by_spheres: count(t.pairs_pruned_by_spheres),
+        within_tolerance: t.within_tolerance,
+    }
+}
+
+/// Checks a compound pair's bound tolerance (`DistanceRequest.tolerance` and the like).
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `field` unless it is finite and ≥ 0 meters.
+pub fn tree_tolerance(field: &str, tolerance: Real) -> Result<Real> {
+    if !(tolerance.is_finite() && tolerance >= 0.0) {
+        return Err(Error::invalid(field, format!("must be finite and >= 0 meters, got {tolerance}")));
+    }
+    Ok(tolerance)
+}
+
 /// A pose gradient as the proto message.
 pub fn gradient_to_proto(g: &PoseGradient) -> pb::PoseGradient {
     pb::PoseGradient { linear: Some(vector_to_proto(&g.linear)), angular: Some(vector_to_proto(&g.angular)) }
@@ -98,6 +124,7 @@ pub fn distance_reply_to_proto(r: &DistanceReply) -> pb::DistanceAnswer {
     out.certificate = c.certificate.as_ref().map(certificate_to_proto);
     out.lower_bound = c.lower_bound;
     out.tight = c.tight;
+    out.tree = r.tree.as_ref().map(tree_to_proto);
     if let Some((ga, gb)) = &r.gradients {
         out.gradient_a = Some(gradient_to_proto(ga));
         out.gradient_b = Some(gradient_to_proto(gb));
@@ -140,6 +167,7 @@ pub fn growth_reply_to_proto(r: &GrowthReply) -> pb::GrowthAnswer {
         out.gradient_1 = Some(gradient_to_proto(g1));
         out.gradient_2 = Some(gradient_to_proto(g2));
     }
+    out.tree = r.tree.as_ref().map(tree_to_proto);
     out
 }
 
@@ -150,6 +178,7 @@ pub fn query_options(certify: bool, with_gradient: bool) -> QueryOptions {
         with_gradient,
         cold: false,
         signed: false,
+        tolerance: 0.0,
     }
 }
 
@@ -164,6 +193,7 @@ pub fn answer_to_proto(a: &QueryAnswer) -> pb::QueryAnswer {
             decided_by_bounds: c.decided_by_bounds,
             solve: c.solve.as_ref().and_then(|d| distance_reply_to_proto(d).solve),
             margin: c.margin,
+            tree: c.tree.as_ref().map(tree_to_proto),
         }),
     };
     pb::QueryAnswer { answer: Some(answer) }
@@ -193,11 +223,12 @@ pub fn pairs_from_proto(pairs: &[pb::QueryPair], max_pairs: usize) -> Result<Vec
             let at = |e| prefix_field(e, &format!("pairs[{k}]"));
             require_id("first", &p.first).map_err(at)?;
             require_id("second", &p.second).map_err(at)?;
+            let tolerance = tree_tolerance(&format!("pairs[{k}].tolerance"), p.tolerance)?;
             Ok(crate::scene::QueryPair {
                 kind,
                 first: p.first.clone(),
                 second: p.second.clone(),
-                options: QueryOptions { signed: p.signed, ..query_options(p.certify, p.with_gradient) },
+                options: QueryOptions { signed: p.signed, tolerance, ..query_options(p.certify, p.with_gradient) },
                 margin: 0.0,
             })
         })

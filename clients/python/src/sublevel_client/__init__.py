@@ -40,6 +40,7 @@ from .types import (
     SceneSummary,
     SolveInfo,
     StateAnswers,
+    TreeAnswer,
     UploadedBody,
 )
 
@@ -73,5 +74,6 @@ __all__ = [
     "SceneSummary",
     "SolveInfo",
     "StateAnswers",
+    "TreeAnswer",
     "UploadedBody",
 ]

@@ -268,7 +268,9 @@ class Client:
         """Stores a body; like :meth:`upload_body` but returns the whole response (id, nonconvex,
         certified convexity margin)."""
         r = self._call("UploadBody", pb.UploadBodyRequest(name=name, body_json=_body_json(body)))
-        return UploadedBody(body_id=r.body_id, nonconvex=r.nonconvex, convexity_margin=r.convexity_margin)
+        return UploadedBody(
+            body_id=r.body_id, nonconvex=r.nonconvex, convexity_margin=r.convexity_margin, nodes=r.nodes
+        )
 
     def upload_body(self, name: str, body: Any) -> str:
         """Stores a body and returns its id.
@@ -354,15 +356,29 @@ class Client:
 
     # -- queries ------------------------------------------------------------------------------
     def distance(
-        self, scene: str, a: str, b: str, certify: bool = False, with_gradient: bool = False, signed: bool = False
+        self,
+        scene: str,
+        a: str,
+        b: str,
+        certify: bool = False,
+        with_gradient: bool = False,
+        signed: bool = False,
+        tolerance: float = 0.0,
     ) -> DistanceAnswer:
         """Euclidean distance (meters) between instances ``a`` and ``b`` at their stored poses, with
         witness points (world frame, meters), the normal from A to B, solver diagnostics, and
         (``with_gradient``) the gradients as (6,) twists; ``certify`` also solves the SDP;
         ``signed`` also returns the signed distance (minus the penetration depth when the bodies
-        overlap) with the penetration normal."""
+        overlap) with the penetration normal. Pairs with a compound body: ``tolerance`` (meters,
+        >= 0) stops the branch and bound once its bounds are that close (``answer.tree``)."""
         req = pb.DistanceRequest(
-            scene_id=scene, instance_a=a, instance_b=b, certify=certify, with_gradient=with_gradient, signed=signed
+            scene_id=scene,
+            instance_a=a,
+            instance_b=b,
+            certify=certify,
+            with_gradient=with_gradient,
+            signed=signed,
+            tolerance=tolerance,
         )
         return DistanceAnswer.from_proto(self._call("Distance", req).answer)
 

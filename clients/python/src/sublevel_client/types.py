@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Dict, List, Optional, Union
+from typing import Dict, List, Optional, Tuple, Union
 
 import numpy as np
 
@@ -125,6 +125,46 @@ class Certificate:
 
 
 @dataclass
+class TreeAnswer:
+    """What a query involving a compound body (a containment tree of bodies) reports besides the
+    answer: the branch and bound's bounds and cost (``TreeAnswer`` in the proto).
+
+    Attributes:
+        lower, upper: distance: bounds of the models' distance in meters (``distance`` is
+            ``lower``); growth and collide: both the answer's value / deciding bound.
+        level: the deepest tree level reached (0: the root pair decided).
+        leaves: the active leaf pair ``(node of the first body, node of the second)``, or None.
+        pairs_evaluated: node pairs solved; pairs_pruned_by_spheres: pairs decided by bounding
+            spheres alone.
+        within_tolerance: distance: upper - lower <= the tolerance asked for.
+    """
+
+    lower: float
+    upper: float
+    level: int
+    leaves: Optional[Tuple[int, int]]
+    pairs_evaluated: int
+    pairs_pruned_by_spheres: int
+    within_tolerance: bool
+
+    @classmethod
+    def from_proto(cls, m) -> "TreeAnswer":
+        return cls(
+            lower=m.lower,
+            upper=m.upper,
+            level=m.level,
+            leaves=(m.leaves.node_a, m.leaves.node_b) if m.HasField("leaves") else None,
+            pairs_evaluated=m.pairs_evaluated,
+            pairs_pruned_by_spheres=m.pairs_pruned_by_spheres,
+            within_tolerance=m.within_tolerance,
+        )
+
+
+def _tree(m) -> Optional[TreeAnswer]:
+    return TreeAnswer.from_proto(m.tree) if m.HasField("tree") else None
+
+
+@dataclass
 class DistanceAnswer:
     """Euclidean distance between two posed bodies.
 
@@ -149,6 +189,7 @@ class DistanceAnswer:
             to B along which translating B by penetration_depth separates them (else zero).
         signed_gradient_a, signed_gradient_b: with ``signed`` and ``with_gradient``: gradients of
             signed_distance as twists shape (6,), else None.
+        tree: when either body is a compound body, the tree bounds (:class:`TreeAnswer`), else None.
     """
 
     distance: float
@@ -171,6 +212,7 @@ class DistanceAnswer:
     penetration_normal: np.ndarray = field(default_factory=lambda: np.zeros(3))
     signed_gradient_a: Optional[np.ndarray] = None
     signed_gradient_b: Optional[np.ndarray] = None
+    tree: Optional[TreeAnswer] = None
 
     @property
     def warm_started(self) -> bool:
@@ -203,6 +245,7 @@ class DistanceAnswer:
             penetration_normal=_v3(m.penetration_normal),
             signed_gradient_a=_twist(m.signed_gradient_a, m.HasField("signed_gradient_a")),
             signed_gradient_b=_twist(m.signed_gradient_b, m.HasField("signed_gradient_b")),
+            tree=_tree(m),
         )
 
 
@@ -218,6 +261,8 @@ class GrowthAnswer:
         converged, iterations, kkt_residual, source, lower_bound, tight, certificate, solve: as in
             :class:`DistanceAnswer`.
         gradient_1, gradient_2: d value / d pose of p1 / p2 as twists shape (6,), else None.
+        tree: compound pairs: the tree bounds (value is then the smallest d over overlapping leaf
+            pairs, +inf when none overlaps), else None.
     """
 
     value: float
@@ -234,6 +279,7 @@ class GrowthAnswer:
     gradient_2: Optional[np.ndarray]
     certificate: Optional[Certificate]
     solve: SolveInfo
+    tree: Optional[TreeAnswer] = None
 
     @property
     def warm_started(self) -> bool:
@@ -260,6 +306,7 @@ class GrowthAnswer:
             gradient_2=_twist(m.gradient_2, m.HasField("gradient_2")),
             certificate=Certificate.from_proto(m.certificate) if m.HasField("certificate") else None,
             solve=solve,
+            tree=_tree(m),
         )
 
 
@@ -274,6 +321,7 @@ class CollideAnswer:
         decided_by_bounds: the bounding spheres alone decided (no solve ran).
         margin: the margin asked for, meters.
         solve: the distance solve's diagnostics when one ran, else None.
+        tree: compound pairs: the tree level that decided and the deciding bound, else None.
     """
 
     collides: bool
@@ -281,6 +329,7 @@ class CollideAnswer:
     decided_by_bounds: bool
     margin: float
     solve: Optional[SolveInfo]
+    tree: Optional[TreeAnswer] = None
 
     @property
     def warm_started(self) -> bool:
@@ -295,6 +344,7 @@ class CollideAnswer:
             decided_by_bounds=m.decided_by_bounds,
             margin=m.margin,
             solve=SolveInfo.from_proto(m.solve) if m.HasField("solve") else None,
+            tree=_tree(m),
         )
 
 
@@ -467,6 +517,7 @@ class UploadedBody:
     body_id: str
     nonconvex: bool
     convexity_margin: float
+    nodes: int = 1
 
 
 @dataclass
