@@ -102,6 +102,8 @@ pub fn tree_collide<A: BodyTree + ?Sized, B: BodyTree + ?Sized>(
         };
         for (na, nb) in candidates {
             let (ba, bb) = (a.body(na), b.body(nb));
+            // A pair decided by its cheap bounds was reached too: its level counts.
+            level = level.max(a.depth(na).max(b.depth(nb)));
             if cheap.gap(ba, bb).is_some_and(|g| g > 0.0) {
                 sphere_pruned += 1;
                 continue;
@@ -111,7 +113,6 @@ pub fn tree_collide<A: BodyTree + ?Sized, B: BodyTree + ?Sized>(
                 continue;
             }
             pairs += 1;
-            level = level.max(a.depth(na).max(b.depth(nb)));
             let w = warm.and_then(|w| w.growth_of((na, nb)));
             let leaf = a.children(na).is_empty() && b.children(nb).is_empty();
             let mut r = growth(ba, pose_a, bb, pose_b, w, &params.newton);
