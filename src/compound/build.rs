@@ -30,7 +30,7 @@ use super::{CompoundBody, CompoundNode, CompoundReport};
 use crate::body::Body;
 use crate::fit::containment::{contain_bodies, ContainmentSettings};
 use crate::fit::mesh::OffMesh;
-use crate::fit::{auto, fit_points, FitProgress, FitSettings, FitStage};
+use crate::fit::{auto, fit_points, FitProgress, FitSettings, FitStage, PartProgress};
 use crate::math::{Isometry3, Point3, Real};
 use crate::{Error, Result};
 use std::time::Instant;
@@ -167,12 +167,16 @@ pub fn fit_compound(
         }
     };
     let surface = MeshSurface::new(&mesh.vertices, &mesh.triangles)?;
+    // Overall fraction: the attempts (decomposition and part fits) up to `attempts_end`, the
+    // refinement up to `leaves_end`, the tree (parents, the slowest stage) up to 1.
+    let refining = parts == PartCount::Auto && settings.excess_tolerance.is_some();
+    let (attempts_end, leaves_end) = if refining { (0.15, 0.4) } else { (0.4, 0.4) };
     let mut attempts = Vec::new();
     let mut best: Option<(Vec<CompoundNode>, Real, Real)> = None; // (leaves, decomposition s, max excess)
     let mut notes = Vec::new();
     for (a, &n) in counts.iter().enumerate() {
         let t0 = Instant::now();
-        let frac = |f: Real| (a as Real + f) / counts.len() as Real;
+        let frac = |f: Real| attempts_end * (a as Real + f) / counts.len() as Real;
         report(progress, FitStage::Hull, frac(0.0), format!("parts {n}: convex decomposition (VHACD)"));
         let decomposition = decompose(&mesh.vertices, &mesh.triangles, n, settings.resolution)?;
         let decomposition_seconds = t0.elapsed().as_secs_f64();
@@ -184,6 +188,7 @@ pub fn fit_compound(
                     stage: p.stage,
                     fraction: frac((j as Real + p.fraction) / got as Real).min(1.0),
                     message: format!("parts {n}, part {}/{got}: {}", j + 1, p.message),
+                    part: Some(PartProgress { index: j + 1, count: got }),
                 })
             };
             leaves.push(fit_leaf(mesh, part, j, &surface, settings, &mut inner)?);
@@ -191,7 +196,7 @@ pub fn fit_compound(
         if let (PartCount::Auto, Some(t)) = (parts, settings.excess_tolerance) {
             if a + 1 == counts.len() {
                 let before = leaves.len();
-                refine(mesh, decomposition, &mut leaves, t, &surface, settings, progress)?;
+                refine(mesh, decomposition, &mut leaves, t, &surface, settings, (attempts_end, leaves_end), progress)?;
                 if leaves.len() > before {
                     notes.push(format!(
                         "{before} VHACD parts refined to {}: parts with excess above {t} m split again",
@@ -227,7 +232,7 @@ pub fn fit_compound(
     };
     let leaf_fit_seconds = leaves.iter().map(|l| l.fit_seconds).sum();
     let t_tree = Instant::now();
-    let nodes = build_tree(leaves, &surface, settings, progress)?;
+    let nodes = build_tree(leaves, &surface, settings, leaves_end, progress)?;
     let tree_fit_seconds = t_tree.elapsed().as_secs_f64();
     let root = nodes.len() - 1;
     let report = CompoundReport {
@@ -250,7 +255,7 @@ pub fn fit_compound(
 }
 
 fn report(progress: &mut dyn FnMut(&FitProgress), stage: FitStage, fraction: Real, message: String) {
-    progress(&FitProgress { stage, fraction: fraction.min(1.0), message });
+    progress(&FitProgress { stage, fraction: fraction.min(1.0), message, part: None });
 }
 
 fn report_done(progress: &mut dyn FnMut(&FitProgress), body: &CompoundBody) {
@@ -348,6 +353,8 @@ fn fit_leaf_points(
 /// Refinement: while a leaf's excess is above `t` and fewer than `settings.max_parts` leaves
 /// exist, the leaf of largest excess is split ([`split_part`]) and its pieces fitted anew; a
 /// leaf that cannot split (one triangle, or a piece the solver fails on) stays. `leaves[j]` is the fit of `parts[j]`.
+/// Progress fractions run over `span` as the leaf count goes to `settings.max_parts`.
+#[allow(clippy::too_many_arguments)]
 fn refine(
     mesh: &OffMesh,
     parts: Vec<Part>,
@@ -355,8 +362,11 @@ fn refine(
     t: Real,
     surface: &MeshSurface,
     settings: &CompoundSettings,
+    span: (Real, Real),
     progress: &mut dyn FnMut(&FitProgress),
 ) -> Result<()> {
+    let first = leaves.len();
+    let room = settings.max_parts.saturating_sub(first).max(1) as Real;
     let mut parts: Vec<(Part, bool)> = parts.into_iter().map(|p| (p, true)).collect();
     while leaves.len() < settings.max_parts {
         let worst = (0..leaves.len())
@@ -369,18 +379,23 @@ fn refine(
             continue;
         }
         let n = leaves.len();
+        let count = n + pieces.len() - 1;
         let mut fitted = Vec::with_capacity(pieces.len());
         for (k, piece) in pieces.iter().enumerate() {
             let mut inner = |p: &FitProgress| {
+                let within = (k as Real + p.fraction) / pieces.len() as Real;
+                let done = ((n - first) as Real + (pieces.len() - 1) as Real * within) / room;
                 progress(&FitProgress {
                     stage: p.stage,
-                    fraction: p.fraction,
+                    fraction: (span.0 + (span.1 - span.0) * done).min(span.1),
                     message: format!(
                         "refining ({n} parts), piece {}/{} of part {j}: {}",
                         k + 1,
                         pieces.len(),
                         p.message
                     ),
+                    // The piece becomes leaf j (the first) or a new leaf after the others.
+                    part: Some(PartProgress { index: if k == 0 { j + 1 } else { n + k }, count }),
                 })
             };
             match fit_leaf(mesh, piece, n + k, surface, settings, &mut inner) {
@@ -417,10 +432,12 @@ fn union_diagonal(a: &Body, b: &Body) -> Real {
 
 /// Groups the leaves bottom-up into parents (see the module docs); returns every node, leaves
 /// first, the root last.
+/// Progress fractions run from `start` to 1.
 fn build_tree(
     mut nodes: Vec<CompoundNode>,
     surface: &MeshSurface,
     settings: &CompoundSettings,
+    start: Real,
     progress: &mut dyn FnMut(&FitProgress),
 ) -> Result<Vec<CompoundNode>> {
     let parents_total = nodes.len().saturating_sub(1).max(1) as Real;
@@ -445,8 +462,9 @@ fn build_tree(
             let mut inner = |p: &FitProgress| {
                 progress(&FitProgress {
                     stage: p.stage,
-                    fraction: ((made as Real - 1.0 + p.fraction) / parents_total).min(1.0),
+                    fraction: (start + (1.0 - start) * (made as Real - 1.0 + p.fraction) / parents_total).min(1.0),
                     message: format!("parent {made}: {}", p.message),
+                    part: None,
                 })
             };
             // A pair the solver cannot contain is skipped: its nodes pair otherwise, or move up.

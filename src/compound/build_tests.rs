@@ -117,8 +117,16 @@ fn auto_refines_parts_above_tolerance_up_to_the_cap() {
     // One sphere per cube still reaches 0.366 beyond it: above 0.1, so the cap (4 parts) stops it.
     s.excess_tolerance = Some(0.1);
     s.max_parts = 4;
-    let c = fit_compound(&mesh, None, PartCount::Auto, &s, &mut |_| {}).unwrap();
+    let mut reports: Vec<(Real, Option<crate::fit::PartProgress>)> = Vec::new();
+    let c = fit_compound(&mesh, None, PartCount::Auto, &s, &mut |p| reports.push((p.fraction, p.part))).unwrap();
     assert_eq!(c.leaf_count(), 4);
+    // Progress: the fraction never goes back and ends at 1; every part fit (the attempts' and the
+    // refinement's pieces) names its part, 1 ≤ index ≤ count ≤ the cap, up to a count of 4.
+    assert!(reports.windows(2).all(|w| w[1].0 >= w[0].0), "fraction went back: {reports:?}");
+    assert_eq!(reports.last().map(|r| r.0), Some(1.0));
+    let parts: Vec<_> = reports.iter().filter_map(|r| r.1).collect();
+    assert!(parts.iter().all(|p| 1 <= p.index && p.index <= p.count && p.count <= 4), "{parts:?}");
+    assert!(parts.iter().any(|p| p.count == 4), "{parts:?}");
     assert_eq!(c.report.attempts.last().map(|a| a.1), Some(4));
     assert!(c.max_leaf_excess() < c.report.attempts[0].2, "{:?}", c.report.attempts);
     let total: usize = c.leaves().map(|l| c.node(l).triangles).sum();

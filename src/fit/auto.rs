@@ -73,6 +73,7 @@ pub fn fit_auto(
                 stage: p.stage,
                 fraction: ((k as Real + p.fraction) / n).min(1.0),
                 message: format!("degree {degree}: {}", p.message),
+                part: p.part,
             })
         };
         fit_points(points, &s, &mut inner)

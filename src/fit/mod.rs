@@ -40,7 +40,7 @@ pub mod volume;
 
 pub use sdp::{KktSolver, SolverSettings, FIT_STATIC_REGULARIZATION, FIT_STEP_FRACTION};
 pub(crate) use settings::{report, validate_solver_fields};
-pub use settings::{FitMethod, FitProgress, FitSettings, FitStage};
+pub use settings::{FitMethod, FitProgress, FitSettings, FitStage, PartProgress};
 
 /// Fits a body to a point cloud with the formulation `settings.method` (paper §III).
 ///

@@ -265,10 +265,23 @@ pub enum FitStage {
 pub struct FitProgress {
     /// Current stage.
     pub stage: FitStage,
-    /// Overall completion in [0, 1].
+    /// Overall completion in [0, 1] (never decreases within one fit).
     pub fraction: Real,
     /// Human-readable detail.
     pub message: String,
+    /// In a compound fit ([`crate::compound::fit_compound`]), the part whose body is being
+    /// fitted; `None` outside the part fits (decomposition, parents) and in single-body fits.
+    pub part: Option<PartProgress>,
+}
+
+/// Which part of a compound fit a progress report is about (issue 14 §1, "progress per part").
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PartProgress {
+    /// The part being fitted, 1-based.
+    pub index: usize,
+    /// Parts of the current attempt (VHACD's parts, or the leaves once the refinement's current
+    /// split is done); `index ≤ count`.
+    pub count: usize,
 }
 
 /// Checks the Monte Carlo and solver fields shared by every fit and containment job.
@@ -291,7 +304,7 @@ pub(crate) fn validate_solver_fields(volume_samples: usize, tolerance: Real, max
 
 /// Sends one progress report.
 pub(crate) fn report(progress: &mut dyn FnMut(&FitProgress), stage: FitStage, fraction: Real, message: String) {
-    progress(&FitProgress { stage, fraction, message });
+    progress(&FitProgress { stage, fraction, message, part: None });
 }
 
 /// A named option (a type with a `name()` text form and `FromStr`) as its name in JSON, read

@@ -17,7 +17,7 @@
 use super::convert::fit_stage_to_proto;
 use super::pb;
 use crate::fit::auto::fit_auto;
-use crate::fit::{fit_points, FitProgress, FitSettings};
+use crate::fit::{fit_points, FitProgress, FitSettings, PartProgress};
 use crate::math::{Point3, Real};
 use crate::scene::{Catalog, JobRecord, JobRecordState};
 use crate::{Error, Result};
@@ -77,8 +77,16 @@ pub(crate) struct FitJobs {
     active: Arc<watch::Sender<usize>>,
 }
 
-fn update(job_id: &str, stage: pb::FitStage, fraction: f64, message: &str, state: pb::JobState) -> pb::FitJobUpdate {
-    let (part, parts) = part_of(message);
+/// One `FitJobUpdate`; `part` is the compound fit's part being fitted (`part` / `parts` 0 without).
+fn update(
+    job_id: &str,
+    stage: pb::FitStage,
+    fraction: f64,
+    message: &str,
+    state: pb::JobState,
+    part: Option<PartProgress>,
+) -> pb::FitJobUpdate {
+    let (part, parts) = part.map_or((0, 0), |p| (saturate_u32(p.index), saturate_u32(p.count)));
     pb::FitJobUpdate {
         job_id: job_id.to_owned(),
         stage: stage as i32,
@@ -92,21 +100,8 @@ fn update(job_id: &str, stage: pb::FitStage, fraction: f64, message: &str, state
     }
 }
 
-/// The part being fitted and the parts of the attempt, `(j, n)`, read from a compound fit's
-/// progress message ([`crate::compound::fit_compound`] writes `parts N, part j/n: …` while it
-/// fits part j and `parts N: …` around the parts); `(0, 0)` for any other message.
-fn part_of(message: &str) -> (u32, u32) {
-    let Some(rest) = message.strip_prefix("parts ") else { return (0, 0) };
-    let count = |t: &str| t.chars().take_while(char::is_ascii_digit).collect::<String>().parse::<u32>().ok();
-    let Some(parts) = count(rest) else { return (0, 0) };
-    let part = rest
-        .split_once(", part ")
-        .and_then(|(_, p)| p.split_once('/'))
-        .and_then(|(j, n)| Some((j.parse::<u32>().ok()?, count(n)?)));
-    match part {
-        Some((j, n)) => (j, n),
-        None => (0, parts),
-    }
+fn saturate_u32(n: usize) -> u32 {
+    u32::try_from(n).unwrap_or(u32::MAX)
 }
 
 pub(crate) fn is_terminal(u: &pb::FitJobUpdate) -> bool {
@@ -115,7 +110,7 @@ pub(crate) fn is_terminal(u: &pb::FitJobUpdate) -> bool {
 
 fn failed(job_id: &str, error: &str) -> pb::FitJobUpdate {
     tracing::warn!(%job_id, %error, "job failed");
-    let mut u = update(job_id, pb::FitStage::Done, 1.0, "job failed", pb::JobState::Failed);
+    let mut u = update(job_id, pb::FitStage::Done, 1.0, "job failed", pb::JobState::Failed, None);
     u.error = error.to_owned();
     u
 }
@@ -142,7 +137,7 @@ fn error_of_record(r: &JobRecord) -> String {
 
 /// The terminal update a stored record stands for.
 fn update_of_record(job_id: &str, r: &JobRecord) -> pb::FitJobUpdate {
-    let mut u = update(job_id, pb::FitStage::Done, 1.0, &r.message, state_of_record(r.state));
+    let mut u = update(job_id, pb::FitStage::Done, 1.0, &r.message, state_of_record(r.state), None);
     u.body_id = r.body_id.clone();
     u.error = error_of_record(r);
     u
@@ -293,6 +288,7 @@ impl FitJobs {
             0.0,
             &format!("waiting for a fitting slot ({kind})"),
             pb::JobState::Running,
+            None,
         );
         let (tx, rx) = watch::channel(first);
         let cancel = Arc::new(AtomicBool::new(false));
@@ -348,7 +344,14 @@ impl FitJobs {
                             let stage = fit_stage_to_proto(p.stage);
                             let message =
                                 if kind == "fit" { p.message.clone() } else { format!("{kind}: {}", p.message) };
-                            tx_work.send_replace(update(&id_work, stage, p.fraction, &message, pb::JobState::Running));
+                            tx_work.send_replace(update(
+                                &id_work,
+                                stage,
+                                p.fraction,
+                                &message,
+                                pb::JobState::Running,
+                                p.part,
+                            ));
                         };
                         crate::fit::cancel::cancellable(flag, || work(&mut progress))
                     })
@@ -361,7 +364,7 @@ impl FitJobs {
             let (last, state) = match outcome {
                 Ok(Ok((body_id, message))) => {
                     tracing::info!(job_id = %job_id, %body_id, "job succeeded");
-                    let mut u = update(&job_id, pb::FitStage::Done, 1.0, &message, pb::JobState::Succeeded);
+                    let mut u = update(&job_id, pb::FitStage::Done, 1.0, &message, pb::JobState::Succeeded, None);
                     u.body_id = body_id;
                     (u, JobRecordState::Succeeded)
                 }
@@ -372,7 +375,7 @@ impl FitJobs {
                         "cancelled by CancelFitJob; no body was stored"
                     };
                     tracing::info!(job_id = %job_id, error = %e, "job cancelled");
-                    let mut u = update(&job_id, pb::FitStage::Done, 1.0, "cancelled", pb::JobState::Cancelled);
+                    let mut u = update(&job_id, pb::FitStage::Done, 1.0, "cancelled", pb::JobState::Cancelled, None);
                     u.error = format!("{why} ({e})");
                     (u, JobRecordState::Cancelled)
                 }
