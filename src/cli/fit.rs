@@ -38,9 +38,10 @@ pub struct FitArgs {
     /// Mesh or point cloud (.off, .obj, .stl, .ply, .xyz).
     pub mesh: PathBuf,
     /// Total degree 2d of the polynomial: 2, 4, 6, 8, or `auto` (the lowest degree whose volume
-    /// is within --volume-tolerance of the next degree's).
-    #[arg(long, short, default_value = "4")]
-    pub degree: DegreeArg,
+    /// is within --volume-tolerance of the next degree's; with --parts, per part: the lowest of
+    /// 2, 4, 6 whose excess is within --tolerance). Default: 4, and `auto` with --parts.
+    #[arg(long, short)]
+    pub degree: Option<DegreeArg>,
     /// With `--degree auto`: relative volume tolerance τ; a degree is kept when the next one
     /// shrinks the volume by no more than τ.
     #[arg(long, default_value_t = 0.05)]
@@ -132,7 +133,7 @@ pub fn run(args: FitArgs) -> sublevel::Result<()> {
     };
     let settings = fit_settings(&args)?;
     let mut progress = progress_printer(args.quiet);
-    let body = match args.degree {
+    let body = match args.degree.unwrap_or(DegreeArg::Fixed(4)) {
         DegreeArg::Fixed(_) => fit_points(&points, &settings, &mut progress)?,
         DegreeArg::Auto => {
             auto::fit_auto(&points, &settings, &auto::DEFAULT_AUTO_DEGREES, args.volume_tolerance, &mut progress)?
@@ -186,8 +187,9 @@ pub fn fit_settings(args: &FitArgs) -> sublevel::Result<FitSettings> {
     }
     Ok(FitSettings {
         degree: match args.degree {
-            DegreeArg::Fixed(d) => d,
-            DegreeArg::Auto => 2,
+            Some(DegreeArg::Fixed(d)) => d,
+            Some(DegreeArg::Auto) => 2,
+            None => 4,
         },
         method,
         convexity_relaxation: c,

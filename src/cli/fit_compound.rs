@@ -33,7 +33,7 @@ pub fn run(args: FitArgs) -> sublevel::Result<()> {
     let mesh = parse_off_mesh(&std::fs::read(&args.mesh)?, DEFAULT_MAX_MESH_POINTS)?;
     let settings = CompoundSettings {
         fit: fit_settings(&args)?,
-        degrees: match args.degree {
+        degrees: match args.degree.unwrap_or(DegreeArg::Auto) {
             DegreeArg::Fixed(d) => vec![d],
             // Containment (the parents) takes degrees up to 6: leaves of degree 8 would only be
             // contained at degree ≤ 6 anyway, and cost the most per query.

@@ -315,8 +315,18 @@ fn name_part(e: Error, index: usize) -> Error {
     }
 }
 
+/// Largest |coefficient| a leaf fit of degree above the lowest candidate may have (normalized
+/// coordinates, where the body's boundary is p = 1): about 7 of the 16 digits of a value near the
+/// boundary survive cancellation.
+pub const MAX_LEAF_COEFFICIENT: Real = 1e9;
+
+fn max_coefficient(body: &Body) -> Real {
+    body.polynomial().coefficients().iter().fold(0.0, |m: Real, c| m.max(c.abs()))
+}
+
 /// The body of one part and its excess: the lowest degree within the excess tolerance, or the
-/// `--degree auto` choice without one.
+/// `--degree auto` choice without one; with a tolerance, higher degrees whose coefficients exceed
+/// [`MAX_LEAF_COEFFICIENT`] are not tried further.
 fn fit_leaf_points(
     points: &[Point3],
     surface: &MeshSurface,
@@ -336,6 +346,12 @@ fn fit_leaf_points(
             Err(Error::Numerical(_)) if best.is_some() => break,
             Err(e) => return Err(e),
         };
+        // A nearly flat part can give a higher degree a polynomial of huge coefficients (1e15 on
+        // chair_101's seat at 2d = 6): its values near the boundary lose most of their digits to
+        // cancellation, so such a fit is not a candidate when a lower degree has one.
+        if best.is_some() && max_coefficient(&body) > MAX_LEAF_COEFFICIENT {
+            break;
+        }
         let e = surface.excess(&body, settings.excess_samples)?;
         let done = e <= t;
         if best.as_ref().is_none_or(|b| e < b.1) {

@@ -67,7 +67,17 @@ async fn compound_chair_and_human_answer_the_brute_force_model_distance_on_every
     assert_eq!((up.nodes as usize, up.nonconvex), (chair.node_count(), false));
     // The smallest sos-convexity margin over the nodes: certified, i.e. ≥ −tolerance × the Hessian
     // scale (fit::sos_convexity); a fitted node can sit on the boundary within the solver tolerance.
-    assert!(up.convexity_margin.is_finite() && up.convexity_margin > -1e-3, "{}", up.convexity_margin);
+    // The Hessian's coefficients are at most (2d)² × the largest coefficient of p.
+    let hessian_scale = chair
+        .nodes()
+        .iter()
+        .map(|n| {
+            let d = n.body.degree() as f64;
+            d * d * n.body.polynomial().coefficients().iter().fold(0.0, |m: f64, c| m.max(c.abs()))
+        })
+        .fold(0.0, f64::max);
+    let floor = -sublevel::fit::sos_convexity::SOS_CONVEXITY_TOLERANCE * hessian_scale;
+    assert!(up.convexity_margin.is_finite() && up.convexity_margin >= floor, "{} < {floor}", up.convexity_margin);
     let chair_id = up.body_id;
     let human_id = upload_json(&mut c, "human", human_json).await.body_id;
     let listed = c.list_bodies(pb::ListBodiesRequest::default()).await.unwrap().into_inner().bodies;
