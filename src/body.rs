@@ -14,7 +14,7 @@
 //! `scale` and the fit `report`.
 
 use crate::math::{Isometry3, Matrix3, Point3, Real, Vector3};
-use crate::poly::{Eval, FastPoly, Polynomial, RadialTable, SupportTable};
+use crate::poly::{Eval, FastPoly, Polynomial, RadialTable, SupportBound, SupportTable};
 use crate::{Error, Result};
 use serde::{Deserialize, Serialize};
 
@@ -259,6 +259,9 @@ pub struct Body {
     /// A box containing {p ≤ 1} in normalized coordinates (`fit::volume::bounding_box`, from
     /// supporting halfspaces; `None` for a nonconvex body, whose halfspaces prove nothing).
     bounding_box_u: Option<(Vector3, Vector3)>,
+    /// Certified upper bounds of the support function (normalized units), from the support map,
+    /// its tangent halfspaces and the box; `None` for a nonconvex body (as the box).
+    support_bound: Option<SupportBound>,
     /// Fit report.
     pub report: FitReport,
 }
@@ -320,6 +323,7 @@ impl Body {
         let support = SupportTable::new(&fast, &radial, &interior_u);
         let bounding_box_u =
             if report.nonconvex { None } else { crate::fit::volume::bounding_box(&polynomial, &interior_u).ok() };
+        let support_bound = bounding_box_u.map(|(lo, hi)| SupportBound::new(&fast, &support, &lo, &hi));
         Ok(Self {
             polynomial,
             center: Vector3::from(center),
@@ -330,6 +334,7 @@ impl Body {
             radial,
             support,
             bounding_box_u,
+            support_bound,
             report,
         })
     }
@@ -454,6 +459,34 @@ impl Body {
         let (lo, hi) = self.bounding_box_u?;
         let c = (lo + hi) * 0.5;
         Some((Point3::from(self.center + c * self.scale), (hi - lo) * (0.5 * self.scale)))
+    }
+
+    /// An upper bound of the body's support function in the body-frame direction `n` (meters; any
+    /// length, the bound scales with |n|): `≥ max{n·x : x in the body}`, from the certified
+    /// support table of [`SupportBound`] (within ~1 % of the support value between its tabulated
+    /// directions, exact to rounding at them). +∞ for a zero or non-finite `n`; `None` for a
+    /// nonconvex body. The cheap lower bounds of the tree queries ([`crate::query::tree`]) take
+    /// the separating-axis gap of two bodies from it.
+    #[inline]
+    pub fn support_upper(&self, n: &Vector3) -> Option<Real> {
+        let bound = self.support_bound.as_ref()?;
+        Some(n.dot(&self.center) + self.scale * bound.upper(n))
+    }
+
+    /// The certified support bounds of the body in normalized coordinates ([`SupportBound`]);
+    /// `None` for a nonconvex body. [`SupportBound::in_frame`] with [`Body::center`] and
+    /// [`Body::scale`] gives them in the body frame (meters).
+    pub fn support_bound(&self) -> Option<&SupportBound> {
+        self.support_bound.as_ref()
+    }
+
+    /// An estimate of the body's support point in the body-frame direction `n` (any nonzero
+    /// length; meters, body frame), interpolated in its [`SupportTable`]: a point near the
+    /// boundary where n·x is largest, not a certified one. `None` for a zero or non-finite `n`.
+    #[inline]
+    pub fn support_estimate(&self, n: &Vector3) -> Option<Point3> {
+        // n·x = n·center + scale·n·u: the same direction in normalized coordinates.
+        Some(Point3::from(self.center + self.support.support(n)? * self.scale))
     }
 
     /// The axis-aligned world box of the body under `pose` (the 8 corners of its body-frame

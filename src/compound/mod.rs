@@ -26,6 +26,7 @@
 
 use crate::body::Body;
 use crate::math::Real;
+use crate::poly::SupportBound;
 use crate::Result;
 use std::path::Path;
 
@@ -110,6 +111,10 @@ pub struct CompoundReport {
 pub struct CompoundBody {
     nodes: Vec<CompoundNode>,
     root: usize,
+    /// Per node, certified support bounds of the union of the leaves below it (the compound
+    /// body's frame, meters): derived from the nodes when the tree is built (see
+    /// [`CompoundBody::leaf_support_upper`]).
+    supports: Vec<Option<SupportBound>>,
     /// How the tree was built.
     pub report: CompoundReport,
 }
@@ -123,14 +128,30 @@ impl CompoundBody {
     /// `root` with consistent depths, or an excess is negative.
     pub fn new(nodes: Vec<CompoundNode>, root: usize, report: CompoundReport) -> Result<Self> {
         file::check_tree(nodes.len(), root, |i| (&nodes[i].children, nodes[i].depth, nodes[i].excess))?;
-        Ok(Self { nodes, root, report })
+        let supports = leaf_supports(&nodes);
+        Ok(Self { nodes, root, supports, report })
     }
 
     /// A one-node tree holding `body` (excess unknown: `NaN`).
     pub fn single(body: Body) -> Self {
         let node =
             CompoundNode { body, children: Vec::new(), depth: 0, excess: Real::NAN, triangles: 0, fit_seconds: 0.0 };
-        Self { nodes: vec![node], root: 0, report: CompoundReport::default() }
+        let nodes = vec![node];
+        let supports = leaf_supports(&nodes);
+        Self { nodes, root: 0, supports, report: CompoundReport::default() }
+    }
+
+    /// An upper bound of `max n·x` over the leaves below `node` (for a leaf: its body), for any
+    /// direction `n` in the compound body's frame (meters; the bound scales with |n|, +∞ for a
+    /// zero or non-finite `n`). `None` when a body below is nonconvex (no certified bound).
+    ///
+    /// Tighter than the node's own body ([`Body::support_upper`]) where the containment fit is
+    /// loose: a parent's table is the node-wise min of its own body's table and the max of its
+    /// children's ([`SupportBound::union`], [`SupportBound::tighten`]), i.e. it bounds the convex
+    /// hull of its leaves, which every leaf pair below lies in (issue 14 part 2: the tree
+    /// queries' cheap bounds). Panics if `node` is out of range.
+    pub fn leaf_support_upper(&self, node: usize, n: &crate::math::Vector3) -> Option<Real> {
+        self.supports[node].as_ref().map(|t| t.upper(n))
     }
 
     /// Index of the root node (its body contains every other node's body).
@@ -221,4 +242,40 @@ impl CompoundBody {
         std::fs::write(path, serde_json::to_string(&self.to_file())?)?;
         Ok(())
     }
+}
+
+/// The support tables of [`CompoundBody::leaf_support_upper`], children before parents (depth
+/// order; the structure is checked before this runs).
+fn leaf_supports(nodes: &[CompoundNode]) -> Vec<Option<SupportBound>> {
+    let mut order: Vec<usize> = (0..nodes.len()).collect();
+    order.sort_by_key(|&i| std::cmp::Reverse(nodes[i].depth));
+    let mut supports: Vec<Option<SupportBound>> = vec![None; nodes.len()];
+    for i in order {
+        let body = &nodes[i].body;
+        let own = body.support_bound().map(|t| t.in_frame(&body.center(), body.scale()));
+        let children = &nodes[i].children;
+        let mut hull: Option<SupportBound> = None;
+        for (k, &c) in children.iter().enumerate() {
+            hull = match (k, hull, supports[c].as_ref()) {
+                (0, _, Some(t)) => Some(t.clone()),
+                (_, Some(h), Some(t)) => Some(h.union(t)),
+                _ => None,
+            };
+            if hull.is_none() {
+                break;
+            }
+        }
+        supports[i] = match (own, hull) {
+            (Some(mut own), Some(hull)) => {
+                own.tighten(&hull);
+                Some(own)
+            }
+            (own, None) if children.is_empty() => own,
+            // A parent whose own body is nonconvex: its leaves' hull still bounds them.
+            (None, hull) => hull,
+            // A leaf below without a certified bound: nothing bounds that leaf.
+            (Some(_), None) => None,
+        };
+    }
+    supports
 }

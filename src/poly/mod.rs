@@ -9,7 +9,8 @@
 //! - [`fast`]: [`FastPoly`], precomputed derivative tables for the query hot path;
 //! - [`radial`]: [`RadialTable`], the radial function of a sublevel set about an interior point
 //!   (cold starts of the query solvers);
-//! - [`support`]: [`SupportTable`], the support map of a sublevel set (cold distance starts);
+//! - [`support`]: [`SupportTable`], the support map of a sublevel set (cold distance starts), and
+//!   [`SupportBound`], certified upper bounds of its support function (cheap distance bounds);
 //! - [`gram`]: Gram forms `z(x)ᵀ Q z(x)` in any number of variables, and Clarabel's packed-triangle
 //!   convention used by every SDP in the crate.
 
@@ -23,4 +24,4 @@ pub mod support;
 pub use fast::FastPoly;
 pub use polynomial::{Eval, Polynomial, MAX_DEGREE};
 pub use radial::RadialTable;
-pub use support::SupportTable;
+pub use support::{SupportBound, SupportTable};

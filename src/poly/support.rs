@@ -85,7 +85,7 @@ impl SupportTable {
         }
         let half = 0.5 * SUPPORT_GRID as Real;
         let (fa, fb) = ((a + 1.0) * half, (b + 1.0) * half);
-        let (i, j) = ((fa as usize).min(SUPPORT_GRID - 1), (fb as usize).min(SUPPORT_GRID - 1));
+        let (i, j) = (grid_cell(fa), grid_cell(fb));
         let (ta, tb) = (fa - i as Real, fb - j as Real);
         let r = &self.points[face];
         let k = j * NODES + i;
@@ -96,6 +96,153 @@ impl SupportTable {
         let high = lerp(&r[k + NODES], &r[k + NODES + 1], ta);
         Some(low + (high - low) * tb)
     }
+}
+
+/// Certified upper bounds of the support function `h(m) = max{m·u : p(u) ≤ 1}` of a convex body
+/// (normalized units) at the nodes of the [`SupportTable`]'s cube map, and their interpolation:
+/// an upper bound of h in every direction (issue 14 part 2: the tight cheap bounds of the tree
+/// queries, [`crate::query::tree`]).
+///
+/// At a node direction v (unnormalized, `face_direction(face, a_i, b_j)`) with tabulated support
+/// point s, convexity gives the supporting halfspace of the tangent plane at s, and the body's
+/// box [lo, hi] (`fit::volume::bounding_box`) contains the body too; weak duality of
+/// `max{v·w : g·w ≤ c, w ∈ box}` bounds h(v) whatever the accuracy of s:
+///
+/// ```text
+/// g = ∇p(s),  c = g·s + 1 − p(s):   p(w) ≥ p(s) + g·(w − s)  ⇒  {p ≤ 1} ⊂ {w : g·w ≤ c}
+/// H(v) = min( h_box(v),  λc + h_box(v − λg) ),   λ = v·g / g·g ≥ 0,
+/// h_box(e) = e·(lo + hi)/2 + Σₖ |eₖ| (hiₖ − loₖ)/2
+/// ```
+///
+/// Between nodes, h is sublinear (positively homogeneous and subadditive) and a direction m on
+/// face f is a nonnegative combination of its cell's four node directions with the bilinear
+/// weights of its face coordinates (face_direction is linear in (a, b)):
+///
+/// ```text
+/// m / |m_f| = Σ w_ij v_ij,  w_ij ≥ 0, Σ w_ij = 1   ⇒   h(m) ≤ |m_f| Σ w_ij H(v_ij)
+/// ```
+///
+/// The interpolation error is second order in the cell's angle (11° at most): on a sphere the
+/// bound exceeds h by < 1 %. Valid only for convex p (a nonconvex body has no such table).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SupportBound {
+    /// H at the nodes (same layout as [`SupportTable`]'s points), padded for rounding.
+    h: Box<[[Real; NODES * NODES]; 6]>,
+}
+
+impl SupportBound {
+    /// Bounds the support function of the convex body `{p ≤ 1}` at the nodes of `table` (its
+    /// support map), using the box `(lo, hi)` that contains the body (normalized units). Each node
+    /// is padded by 10⁻⁹ of the box's width times |v| for rounding (as the box itself is).
+    pub fn new(p: &FastPoly, table: &SupportTable, lo: &Vector3, hi: &Vector3) -> Self {
+        let mid = (lo + hi) * 0.5;
+        let half = (hi - lo) * 0.5;
+        let h_box = |e: &Vector3| e.dot(&mid) + e.abs().dot(&half);
+        let pad = 1e-9 * (hi - lo).norm();
+        let mut h = Box::new([[0.0; NODES * NODES]; 6]);
+        for (face, nodes) in h.iter_mut().enumerate() {
+            for j in 0..NODES {
+                for i in 0..NODES {
+                    let a = -1.0 + 2.0 * i as Real / SUPPORT_GRID as Real;
+                    let b = -1.0 + 2.0 * j as Real / SUPPORT_GRID as Real;
+                    let v = face_direction(face, a, b);
+                    let k = j * NODES + i;
+                    let s = Vector3::from(table.points[face][k]);
+                    let (ps, g) = p.value_gradient(&s);
+                    let mut bound = h_box(&v);
+                    let gg = g.norm_squared();
+                    let lam = v.dot(&g) / gg;
+                    if ps.is_finite() && gg.is_finite() && gg > 0.0 && lam.is_finite() && lam > 0.0 {
+                        let c = g.dot(&s) + 1.0 - ps;
+                        let dual = lam * c + h_box(&(v - g * lam));
+                        if dual.is_finite() {
+                            bound = bound.min(dual);
+                        }
+                    }
+                    nodes[k] = bound + pad * v.norm();
+                }
+            }
+        }
+        Self { h }
+    }
+
+    /// The same bound for the body in the coordinates `x = center + scale·u` (scale > 0; e.g. a
+    /// body's frame in meters): `h_x(v) = v·center + scale·h_u(v)` at every node, padded by 10⁻¹²
+    /// of the terms for rounding.
+    pub fn in_frame(&self, center: &Vector3, scale: Real) -> Self {
+        let mut h = self.h.clone();
+        for (face, nodes) in h.iter_mut().enumerate() {
+            for (k, value) in nodes.iter_mut().enumerate() {
+                let (i, j) = (k % NODES, k / NODES);
+                let a = -1.0 + 2.0 * i as Real / SUPPORT_GRID as Real;
+                let b = -1.0 + 2.0 * j as Real / SUPPORT_GRID as Real;
+                let v = face_direction(face, a, b);
+                let (offset, spread) = (v.dot(center), scale * *value);
+                *value = offset + spread + 1e-12 * (offset.abs() + spread.abs());
+            }
+        }
+        Self { h }
+    }
+
+    /// The bound of the union of two sets given in the same coordinates (node-wise max): the
+    /// support function of a union is the max of the two (and that of its convex hull too).
+    pub fn union(&self, other: &Self) -> Self {
+        let mut h = self.h.clone();
+        for (mine, theirs) in h.iter_mut().zip(other.h.iter()) {
+            for (x, y) in mine.iter_mut().zip(theirs.iter()) {
+                *x = x.max(*y);
+            }
+        }
+        Self { h }
+    }
+
+    /// The tighter of two bounds of the same set (node-wise min): both are upper bounds of its
+    /// support function at every node, so is their min.
+    pub fn tighten(&mut self, other: &Self) {
+        for (mine, theirs) in self.h.iter_mut().zip(other.h.iter()) {
+            for (x, y) in mine.iter_mut().zip(theirs.iter()) {
+                *x = x.min(*y);
+            }
+        }
+    }
+
+    /// An upper bound of `max{m·u : p(u) ≤ 1}` (normalized units) for any `m`: +∞ for a zero or
+    /// non-finite `m` (a bound that bounds nothing).
+    #[inline]
+    pub fn upper(&self, m: &Vector3) -> Real {
+        // face_coordinates inlined with one division: the face of the largest component, and the
+        // grid coordinates (a + 1)·G/2 of a = (other component)/|largest|.
+        let (ax, ay, az) = (m.x.abs(), m.y.abs(), m.z.abs());
+        let (face, major, u, v) = if ax >= ay && ax >= az {
+            (usize::from(m.x < 0.0), ax, m.y, m.z)
+        } else if ay >= az {
+            (2 + usize::from(m.y < 0.0), ay, m.z, m.x)
+        } else {
+            (4 + usize::from(m.z < 0.0), az, m.x, m.y)
+        };
+        let half = 0.5 * SUPPORT_GRID as Real;
+        let scale = half / major;
+        let (fa, fb) = (u * scale + half, v * scale + half);
+        if !(fa.is_finite() && fb.is_finite()) {
+            return Real::INFINITY;
+        }
+        let (i, j) = (grid_cell(fa), grid_cell(fb));
+        // Clamped into [0, 1]: the weights stay nonnegative whatever the rounding.
+        let (ta, tb) = ((fa - i as Real).clamp(0.0, 1.0), (fb - j as Real).clamp(0.0, 1.0));
+        let r = &self.h[face];
+        let k = j * NODES + i;
+        let low = r[k] + (r[k + 1] - r[k]) * ta;
+        let high = r[k + NODES] + (r[k + NODES + 1] - r[k + NODES]) * ta;
+        major * (low + (high - low) * tb)
+    }
+}
+
+/// The cell of a grid coordinate `f ∈ [0, G]`, clamped into `0..G`. Through i32: f64 → i32 is
+/// one instruction, f64 → usize a branchy saturating sequence (measured 31 of the 128
+/// instructions of [`SupportBound::upper`]).
+#[inline]
+fn grid_cell(f: Real) -> usize {
+    (f as i32).clamp(0, SUPPORT_GRID as i32 - 1) as usize
 }
 
 /// Newton on `m = λ∇p(u)`, `p(u) = 1` from the boundary point `start` (unit `m`); `Some` only
@@ -170,5 +317,42 @@ mod tests {
         }
         assert!(worst <= 0.07, "largest relative support-value error {worst}");
         assert!(table.support(&Vector3::zeros()).is_none());
+    }
+
+    #[test]
+    fn support_bound_is_above_and_close_to_the_ellipsoid_support_function() {
+        // h(m) = ‖D m‖ for p(u) = Σ (uᵢ/rᵢ)², and the exact box is [−r, r].
+        let radii = [0.9, 0.5, 0.3];
+        let terms: Vec<([u8; 3], Real)> = (0..3)
+            .map(|i| {
+                let mut e = [0u8; 3];
+                e[i] = 2;
+                (e, 1.0 / (radii[i] * radii[i]))
+            })
+            .collect();
+        let p = FastPoly::new(&Polynomial::from_terms(2, &terms).unwrap());
+        let center = Vector3::zeros();
+        let table = SupportTable::new(&p, &RadialTable::new(&p, &center), &center);
+        let r = Vector3::from(radii);
+        let bound = SupportBound::new(&p, &table, &(-r * 1.001), &(r * 1.001));
+        let exact = |m: &Vector3| Vector3::new(radii[0] * m.x, radii[1] * m.y, radii[2] * m.z).norm();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let mut worst: Real = 0.0;
+        for _ in 0..5000 {
+            let m = Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0))
+                * rng.random_range(0.1..3.0);
+            let (h, hb) = (exact(&m), bound.upper(&m));
+            assert!(hb >= h, "{m}: bound {hb} below h {h}");
+            worst = worst.max((hb - h) / h);
+        }
+        // Second order in the cell angle: measured 6.8 % at worst on this 3:1 ellipsoid, near
+        // the short axes where h curves most (h ≈ 0.3 + 1.2 δ² there, δ up to half a cell).
+        assert!(worst <= 0.08, "largest relative excess {worst}");
+        // At the nodes, exact up to the padding.
+        for face in 0..6 {
+            let m = face_direction(face, 0.25, -0.5);
+            assert!((bound.upper(&m) - exact(&m)).abs() <= 1e-8, "face {face}");
+        }
+        assert_eq!(bound.upper(&Vector3::zeros()), Real::INFINITY);
     }
 }

@@ -104,7 +104,7 @@ pub fn tree_collide<A: BodyTree + ?Sized, B: BodyTree + ?Sized>(
             let (ba, bb) = (a.body(na), b.body(nb));
             // A pair decided by its cheap bounds was reached too: its level counts.
             level = level.max(a.depth(na).max(b.depth(nb)));
-            if cheap.gap(ba, bb).is_some_and(|g| g > 0.0) {
+            if cheap.gap_axis(a, na, b, nb).is_some_and(|g| g.0 > 0.0) {
                 sphere_pruned += 1;
                 continue;
             }

@@ -1,7 +1,7 @@
 //! Best-first branch and bound over two containment trees: distance with a tolerance, and the
 //! margin query "closer than m?" (module docs of [`super`]).
 
-use super::warm::{SolvedPair, TreeWarmStart};
+use super::warm::{Cut, CutPair, TreeWarmStart, MAX_CUT_PAIRS};
 use super::{check_tree, BodyTree};
 use crate::body::Body;
 use crate::error::{Error, Result};
@@ -93,12 +93,15 @@ pub struct TreeDistanceResult {
     pub best: Option<LeafPairAnswer>,
     /// Every leaf pair solved, in the order solved (certificates per leaf pair).
     pub leaf_pairs: Vec<LeafPairAnswer>,
-    /// The deepest tree level reached: max over solved node pairs of max(depth in A, depth in B).
+    /// The deepest tree level reached: max over the node pairs queued or solved by this query of
+    /// max(depth in A, depth in B) (pairs of the warm start's cut kept by their motion bounds
+    /// are not counted).
     pub level: usize,
     /// Node pairs solved (Newton solves, leaf pairs included).
     pub pairs_evaluated: usize,
-    /// Node pairs decided by cheap bounds alone (no solve): the separating-axis gap of their
-    /// bounding boxes, which contains the bounding spheres' gap (module docs of [`super`]).
+    /// Node pairs decided by cheap bounds alone (no solve): separating-axis gaps of their boxes
+    /// and support bounds, which contain the bounding spheres' gap, and the pairs of the warm
+    /// start's cut kept by their motion bounds (module docs of [`super`]).
     pub pairs_pruned_by_spheres: usize,
     /// Solves that did not converge (internal pairs: only descended, never used as bounds).
     pub unconverged_solves: usize,
@@ -136,11 +139,13 @@ pub struct TreeMarginResult {
     pub bound: Real,
     /// The leaf pair closer than the margin, when there is one.
     pub leaves: Option<(usize, usize)>,
-    /// The deepest tree level reached (0: decided by the root pair).
+    /// The deepest tree level reached (0: decided by the root pair; pairs of the warm start's
+    /// cut kept by their motion bounds are not counted).
     pub level: usize,
     /// Node pairs solved.
     pub pairs_evaluated: usize,
-    /// Node pairs decided by cheap bounds alone (bounding boxes, no solve).
+    /// Node pairs decided by cheap bounds alone (no solve; as
+    /// [`TreeDistanceResult::pairs_pruned_by_spheres`]).
     pub pairs_pruned_by_spheres: usize,
     /// State for warm-starting the next query of the same two trees.
     pub warm_start: TreeWarmStart,
@@ -166,6 +171,7 @@ pub fn tree_distance<A: BodyTree + ?Sized, B: BodyTree + ?Sized>(
 ) -> Result<TreeDistanceResult> {
     let mut s = Search::new(a, pose_a, b, pose_b, warm, params, Goal::Distance(params.tolerance))?;
     let stop = s.run();
+    let warm_start = s.finish();
     let lower = stop.min(s.upper).min(s.pruned_min).min(s.unresolved_min).max(0.0);
     let best = s.best.map(|i| s.leaf_pairs[i].clone());
     let converged = s.unresolved_min == Real::INFINITY;
@@ -180,7 +186,7 @@ pub fn tree_distance<A: BodyTree + ?Sized, B: BodyTree + ?Sized>(
         pairs_evaluated: s.pairs,
         pairs_pruned_by_spheres: s.sphere_pruned,
         unconverged_solves: s.unconverged,
-        warm_start: s.fresh,
+        warm_start,
     })
 }
 
@@ -206,6 +212,7 @@ pub fn tree_closer_than<A: BodyTree + ?Sized, B: BodyTree + ?Sized>(
     }
     let mut s = Search::new(a, pose_a, b, pose_b, warm, params, Goal::Margin(margin))?;
     let stop = s.run();
+    let warm_start = s.finish();
     let lower = stop.min(s.pruned_min).min(s.unresolved_min);
     let (closer, converged, bound) = if s.upper < margin {
         (true, true, s.upper)
@@ -224,7 +231,7 @@ pub fn tree_closer_than<A: BodyTree + ?Sized, B: BodyTree + ?Sized>(
         level: s.level,
         pairs_evaluated: s.pairs,
         pairs_pruned_by_spheres: s.sphere_pruned,
-        warm_start: s.fresh,
+        warm_start,
     })
 }
 
@@ -235,11 +242,14 @@ enum Goal {
 }
 
 /// A node pair waiting in the queue with its lower bound.
+#[derive(Clone, Copy)]
 struct Entry {
     lower: Real,
     /// Tie-break among equal lower bounds (most often 0 for overlapping boxes): the raw box gap,
     /// negative when the boxes overlap; the deepest overlap is refined first.
     key: Real,
+    /// The axis `lower` is the separating gap along (zero when none; [`CutPair::axis`]).
+    axis: Vector3,
     a: usize,
     b: usize,
 }
@@ -262,22 +272,25 @@ impl Ord for Entry {
     }
 }
 
-/// The cheap lower bounds of one query: tree B's boxes are seen in tree A's frame, where A's boxes
-/// are axis-aligned (every node of a tree shares the tree's pose).
+/// The cheap lower bounds of one query: tree B is seen in tree A's frame (every node of a tree
+/// shares the tree's pose).
 ///
 /// For a unit axis `L`, the projections of two sets onto `L` are intervals, and any two points
 /// `x ∈ A`, `y ∈ B` satisfy `‖x − y‖ ≥ |L·(x − y)|`; so the gap between the projected intervals
-/// of two boxes containing the bodies is a lower bound of the bodies' distance (the separating
-/// axis test). [`CheapBounds::gap`] takes the best of A's three face normals, B's three and the
-/// direction between the box centers; the last one alone already dominates the bounding spheres'
-/// gap `‖c_B − c_A‖ − r_A − r_B` (Cauchy–Schwarz: Σ h_k |n·e_k| ≤ ‖h‖).
+/// of two sets containing the bodies is a lower bound of the bodies' distance (the separating
+/// axis test). The sets are the certified support bounds of the leaves below each node
+/// ([`BodyTree::support_upper`]: for a compound body, the leaves' convex hull, tighter than the
+/// containment fits) and the nodes' boxes; the axis is the direction between the box centers
+/// ([`CheapBounds::gap_axis`]), refined towards the witnesses' normal before a leaf pair is
+/// solved ([`CheapBounds::refined_gap`]), or the axis a kept cut pair was decided along.
+/// Measured on chair_101 × human_10 (cold poses of `tree_profile`): 7.2 leaf solves per query
+/// with the boxes' separating axes alone, 2.1 with the bodies' support bounds, 1.5 with the
+/// leaves' hulls at the parents.
 pub(crate) struct CheapBounds {
     /// Pose of B's frame in A's frame, `pose_a⁻¹·pose_b`.
     rel: Isometry3,
     /// Rotation of B's frame in A's frame.
     rot: crate::math::Matrix3,
-    /// |rot| entrywise.
-    abs_rot: crate::math::Matrix3,
     /// Translation of B's frame in A's frame.
     shift: Vector3,
 }
@@ -290,43 +303,110 @@ impl CheapBounds {
     pub(crate) fn new(pose_a: &Isometry3, pose_b: &Isometry3) -> Self {
         let rel = pose_a.inverse() * pose_b;
         let rot = *rel.rotation.to_rotation_matrix().matrix();
-        Self { rot, abs_rot: rot.abs(), shift: rel.translation.vector, rel }
-    }
-
-    /// Lower bound of a leaf pair's distance now from its exact distance `solved.distance` at
-    /// another relative pose (meters): every point of B (body `b`, inside its bounding sphere
-    /// (c, r)) moved by at most `δ = ‖rel·c − rel₀·c‖ + 2 sin(θ/2)·r` relative to A, θ the angle of
-    /// the rotation between the two poses (‖R − R₀‖₂ = 2 sin(θ/2)), so `dist ≥ solved.distance − δ`.
-    pub(crate) fn motion_bound(&self, b: &Body, solved: &SolvedPair) -> Option<Real> {
-        let (c, r) = b.bounding_sphere()?;
-        let moved = (self.rel * c - solved.relative_pose * c).norm();
-        let angle = (self.rel.rotation * solved.relative_pose.rotation.inverse()).angle();
-        let delta = moved + 2.0 * (0.5 * angle).sin() * r;
-        Some(solved.distance - delta - CHEAP_SLACK * (1.0 + solved.distance + delta))
+        Self { rot, shift: rel.translation.vector, rel }
     }
 
     /// Lower bound of the distance between bodies `a` (tree A) and `b` (tree B), meters; negative
     /// when the boxes overlap (then only 0 is a bound); `None` for a nonconvex body (no box).
+    #[cfg(test)]
     pub(crate) fn gap(&self, a: &Body, b: &Body) -> Option<Real> {
-        let (ca, ha) = a.bounding_box()?;
-        let (cb, hb) = b.bounding_box()?;
-        // B's center relative to A's, in A's frame and in B's frame.
+        self.gap_axis(a, 0, b, 0).map(|(g, _)| g)
+    }
+
+    /// [`CheapBounds::gap`] and its axis: the separating-axis gap of nodes `na` of A and `nb` of B
+    /// along the direction n between their box centers (A's frame, from A towards B), the best of
+    /// their boxes' projections and the certified support bounds of their leaves
+    /// ([`CheapBounds::axis_gap`]), slack subtracted. The bound is also a lower bound of the gap
+    /// along n, which the motion bounds of a kept cut follow ([`super::warm::CutPair`]). `None`
+    /// for a nonconvex body.
+    ///
+    /// The boxes' own separating axes (their six face normals) decided almost no pair of
+    /// chair_101 × human_10 that n did not, at twice the cost, so they are not tried.
+    pub(crate) fn gap_axis<A: BodyTree + ?Sized, B: BodyTree + ?Sized>(
+        &self,
+        a: &A,
+        na: usize,
+        b: &B,
+        nb: usize,
+    ) -> Option<(Real, Vector3)> {
+        let (ca, ha) = a.body(na).bounding_box()?;
+        let (cb, hb) = b.body(nb).bounding_box()?;
         let d = self.rot * cb.coords + self.shift - ca.coords;
-        let db = self.rot.transpose() * d;
-        // B's half extents along A's axes and A's along B's.
-        let hb_in_a = self.abs_rot * hb;
-        let ha_in_b = self.abs_rot.transpose() * ha;
-        let mut gap = Real::NEG_INFINITY;
-        for k in 0..3 {
-            gap = gap.max(d[k].abs() - ha[k] - hb_in_a[k]);
-            gap = gap.max(db[k].abs() - hb[k] - ha_in_b[k]);
-        }
         let norm = d.norm();
-        if norm > 0.0 {
-            let reach = ha.dot(&d.abs()) + hb.dot(&db.abs());
-            gap = gap.max(norm - reach / norm);
+        let n = if norm > 0.0 { d / norm } else { Vector3::x() };
+        let m = self.rot.transpose() * n;
+        // The boxes' projections on n (contains the bounding spheres' gap ‖d‖ − r_A − r_B, by
+        // Cauchy–Schwarz: Σ hₖ |nₖ| ≤ ‖h‖) and the leaves' support bounds along n.
+        let boxes = norm - ha.dot(&n.abs()) - hb.dot(&m.abs());
+        let g = n.dot(&self.shift) - b.support_upper(nb, &-m)? - a.support_upper(na, &n)?;
+        Some((g.max(boxes) - CHEAP_SLACK * (1.0 + norm + g.abs()), n))
+    }
+
+    /// The separating-axis gap along an axis refined towards the witnesses' normal: from the
+    /// direction between the box centers, twice `n ← (y − x)/‖y − x‖` with x, y the estimated
+    /// support points of A along n and of B along −n ([`Body::support_estimate`]); the best
+    /// [`CheapBounds::axis_gap`] of the axes tried, slack subtracted (meters), and its axis.
+    /// `None` for a nonconvex body.
+    pub(crate) fn refined_gap<A: BodyTree + ?Sized, B: BodyTree + ?Sized>(
+        &self,
+        a: &A,
+        na: usize,
+        b: &B,
+        nb: usize,
+    ) -> Option<(Real, Vector3)> {
+        let (ba, bb) = (a.body(na), b.body(nb));
+        let (ca, _) = ba.bounding_box()?;
+        let (cb, _) = bb.bounding_box()?;
+        let d = self.rot * cb.coords + self.shift - ca.coords;
+        let mut n = d.try_normalize(0.0)?;
+        let mut best = (Real::NEG_INFINITY, n);
+        for _ in 0..2 {
+            let x = ba.support_estimate(&n)?;
+            let z = bb.support_estimate(&-(self.rot.transpose() * n))?;
+            let y = self.rot * z.coords + self.shift;
+            n = match (y - x.coords).try_normalize(0.0) {
+                Some(m) => m,
+                None => break,
+            };
+            let g = self.axis_gap(a, na, b, nb, &n)?;
+            if g > best.0 {
+                best = (g, n);
+            }
         }
-        Some(gap - CHEAP_SLACK * (1.0 + norm))
+        Some((best.0 - CHEAP_SLACK * (1.0 + d.norm()), best.1))
+    }
+
+    /// The separating-axis gap of nodes `na` of A and `nb` of B along the unit axis `n` (A's
+    /// frame, meters) from the certified support bounds of their leaves
+    /// ([`BodyTree::support_upper`]):
+    ///
+    /// ```text
+    /// min_{y ∈ B} n·y − max_{x ∈ A} n·x = n·t − h_B(−Rᵀn) − h_A(n)     (B posed by (R, t) in A's frame)
+    /// ```
+    ///
+    /// a lower bound of dist(A, B) for every unit n, equal to it at the witnesses' normal (up to
+    /// the support table's interpolation). `None` for a nonconvex body. Without slack: callers
+    /// subtract [`CHEAP_SLACK`].
+    #[inline]
+    pub(crate) fn axis_gap<A: BodyTree + ?Sized, B: BodyTree + ?Sized>(
+        &self,
+        a: &A,
+        na: usize,
+        b: &B,
+        nb: usize,
+        n: &Vector3,
+    ) -> Option<Real> {
+        let ha = a.support_upper(na, n)?;
+        let hb = b.support_upper(nb, &-(self.rot.transpose() * n))?;
+        Some(n.dot(&self.shift) - hb - ha)
+    }
+
+    /// The motion of B from the relative pose `from` to this query's, in A's frame: `(R − R₀, t − t₀)`
+    /// and `‖R − R₀‖₂ = 2 sin(θ/2)` ([`super::warm::CutPair`]).
+    fn motion_since(&self, from: &Isometry3) -> (crate::math::Matrix3, Vector3, Real) {
+        let turn = self.rot - from.rotation.to_rotation_matrix().matrix();
+        let angle = (self.rel.rotation * from.rotation.inverse()).angle();
+        (turn, self.shift - from.translation.vector, 2.0 * (0.5 * angle).sin())
     }
 }
 
@@ -358,6 +438,8 @@ struct Search<'t, A: ?Sized, B: ?Sized> {
     leaf_pairs: Vec<LeafPairAnswer>,
     /// The leaf pair solved before the search (the previous answer's active pair).
     seeded: Option<(usize, usize)>,
+    /// The cut of this search: every terminal node pair with its lower bound (see [`Cut`]).
+    cut: Vec<CutPair>,
     /// Smallest lower bound of the pairs pruned (they were not refined further).
     pruned_min: Real,
     /// Smallest lower bound of the leaf pairs left unresolved (and of pairs left by the cap).
@@ -379,8 +461,12 @@ impl<'t, A: BodyTree + ?Sized, B: BodyTree + ?Sized> Search<'t, A, B> {
         goal: Goal,
     ) -> Result<Self> {
         params.validate()?;
-        check_tree(a, "tree_a")?;
-        check_tree(b, "tree_b")?;
+        if !a.structure_checked() {
+            check_tree(a, "tree_a")?;
+        }
+        if !b.structure_checked() {
+            check_tree(b, "tree_b")?;
+        }
         Ok(Self {
             a,
             pose_a,
@@ -389,18 +475,14 @@ impl<'t, A: BodyTree + ?Sized, B: BodyTree + ?Sized> Search<'t, A, B> {
             params,
             goal,
             old,
-            fresh: TreeWarmStart {
-                distance: Vec::with_capacity(16),
-                growth: Vec::new(),
-                active: None,
-                solved: Vec::with_capacity(8),
-            },
+            fresh: TreeWarmStart::default(),
             cheap: CheapBounds::new(pose_a, pose_b),
-            heap: BinaryHeap::with_capacity(32),
+            heap: BinaryHeap::new(),
             upper: Real::INFINITY,
             best: None,
-            leaf_pairs: Vec::with_capacity(4),
+            leaf_pairs: Vec::new(),
             seeded: None,
+            cut: Vec::with_capacity(old.map_or(32, |w| w.cut_pairs() + 16)),
             pruned_min: Real::INFINITY,
             unresolved_min: Real::INFINITY,
             level: 0,
@@ -427,47 +509,79 @@ impl<'t, A: BodyTree + ?Sized, B: BodyTree + ?Sized> Search<'t, A, B> {
         self.a.children(na).is_empty() && self.b.children(nb).is_empty()
     }
 
+    /// Records a terminal node pair of this search (see [`Cut`]).
+    fn keep(&mut self, na: usize, nb: usize, lower: Real, axis: Vector3) {
+        let box_b = self
+            .b
+            .body(nb)
+            .bounding_box()
+            .map_or((Vector3::zeros(), Vector3::repeat(Real::INFINITY)), |(c, h)| (c.coords, h));
+        let size = 1.0 + box_b.0.abs().sum() + box_b.1.sum();
+        self.cut.push(CutPair { a: na as u32, b: nb as u32, lower, axis, support_a: Real::NAN, box_b, size });
+    }
+
     /// Runs the search; returns the lower bound of the pairs left in the queue (+∞ when empty).
     ///
     /// Order of work (issue 14 part 2, speed targets): (1) the previous answer's active leaf pair,
-    /// warm-started, for a tight upper bound at once; (2) best-first descent on the cheap box
-    /// bounds ([`CheapBounds`]) and the motion bounds of pairs solved before, which prune without
-    /// any solve; (3) leaf pairs solved when popped, internal pairs only by margin queries.
+    /// warm-started, for a tight upper bound at once; (2) the previous search's cut, whose pairs
+    /// keep their bounds less the motion since ([`Search::resume`]), or else the root pair;
+    /// (3) best-first descent on the cheap bounds ([`CheapBounds`]), which prune without any
+    /// solve; (4) leaf pairs solved when popped (unless a refined axis prunes them), internal
+    /// pairs only by margin queries.
     fn run(&mut self) -> Real {
         self.seed();
-        self.consider(self.a.root(), self.b.root(), 0.0);
+        if !self.resume() {
+            self.consider(self.a.root(), self.b.root(), 0.0);
+        }
         while let Some(e) = self.heap.pop() {
             if self.decided() || e.lower >= self.threshold() {
+                self.drain(e);
                 return e.lower;
             }
             if self.pairs >= self.params.max_pairs {
                 self.unresolved_min = self.unresolved_min.min(e.lower);
+                self.drain(e);
                 return e.lower;
             }
             if self.is_leaf_pair(e.a, e.b) {
-                if self.seeded != Some((e.a, e.b)) && !self.pruned_by_motion(e.a, e.b, e.lower) {
+                if self.seeded != Some((e.a, e.b)) && !self.pruned_by_axis(e.a, e.b, e.lower) {
                     self.leaf(e.a, e.b, e.lower);
                 }
                 continue;
             }
             let mut lower = e.lower;
             if matches!(self.goal, Goal::Margin(_)) {
-                lower = self.internal(e.a, e.b, lower);
+                let (l, axis) = self.internal(e.a, e.b, lower);
+                lower = l;
                 if lower >= self.threshold() {
                     self.pruned_min = self.pruned_min.min(lower);
+                    self.keep(e.a, e.b, lower, axis);
                     continue;
                 }
             }
-            // The trees outlive `self`'s borrow: iterate their child slices without copying them.
-            let (a, b) = (self.a, self.b);
-            let split = split_a(a, e.a, b, e.b);
-            let children = if split { a.children(e.a) } else { b.children(e.b) };
-            for &c in children {
-                let (ca, cb) = if split { (c, e.b) } else { (e.a, c) };
-                self.consider(ca, cb, lower);
-            }
+            self.expand(e.a, e.b, lower);
         }
         Real::INFINITY
+    }
+
+    /// Splits an internal pair with lower bound `lower` ([`split_a`]) and considers its children.
+    fn expand(&mut self, na: usize, nb: usize, lower: Real) {
+        // The trees outlive `self`'s borrow: iterate their child slices without copying them.
+        let (a, b) = (self.a, self.b);
+        let split = split_a(a, na, b, nb);
+        let children = if split { a.children(na) } else { b.children(nb) };
+        for &c in children {
+            let (ca, cb) = if split { (c, nb) } else { (na, c) };
+            self.consider(ca, cb, lower);
+        }
+    }
+
+    /// Moves the popped entry `e` and every pair left in the queue into the cut.
+    fn drain(&mut self, e: Entry) {
+        self.keep(e.a, e.b, e.lower, e.axis);
+        while let Some(e) = self.heap.pop() {
+            self.keep(e.a, e.b, e.lower, e.axis);
+        }
     }
 
     /// Solves the previous answer's active leaf pair first (when it is still a leaf pair of these
@@ -477,7 +591,7 @@ impl<'t, A: BodyTree + ?Sized, B: BodyTree + ?Sized> Search<'t, A, B> {
         if na >= self.a.node_count() || nb >= self.b.node_count() || !self.is_leaf_pair(na, nb) {
             return;
         }
-        let gap = self.cheap.gap(self.a.body(na), self.b.body(nb)).unwrap_or(0.0).max(0.0);
+        let gap = self.cheap.gap_axis(self.a, na, self.b, nb).map_or(0.0, |g| g.0).max(0.0);
         if gap >= self.threshold() {
             return;
         }
@@ -486,38 +600,143 @@ impl<'t, A: BodyTree + ?Sized, B: BodyTree + ?Sized> Search<'t, A, B> {
         if answer.exact {
             self.seeded = Some((na, nb));
             self.level = self.level.max(self.a.depth(na).max(self.b.depth(nb)));
-            self.take_leaf(answer);
+            self.take_leaf(answer, 0.0);
         }
         // An unresolved seed is solved again in the search, where its lower bound is known.
+    }
+
+    /// Starts from the previous search's cut instead of the root pair, when the warm start has
+    /// one for these trees: each pair's bound less the motion since ([`CutPair`]) is kept when it
+    /// still reaches the threshold; else the pair's cheap bounds are evaluated again (along its
+    /// axis, then [`CheapBounds::gap`]), and the pairs still below the threshold are queued.
+    /// Returns false without a usable cut.
+    fn resume(&mut self) -> bool {
+        let Some(cut) = self.old.and_then(|w| w.cut.as_ref()) else { return false };
+        if cut.nodes != (self.a.node_count(), self.b.node_count()) {
+            return false;
+        }
+        if self.threshold() <= 0.0 && !self.decided() {
+            // Overlap within the tolerance: every bound (≥ 0) decides; the root pair covers all.
+            self.pruned_min = self.pruned_min.min(0.0);
+            self.keep(self.a.root(), self.b.root(), 0.0, Vector3::zeros());
+            return true;
+        }
+        let (turn, shift, k) = self.cheap.motion_since(&cut.pose);
+        // (R − R₀)ᵀ by rows, for w = (R − R₀)ᵀ n below (written out: this loop runs over every
+        // kept pair of every warm query).
+        let tt = [turn.column(0).into_owned(), turn.column(1).into_owned(), turn.column(2).into_owned()];
+        let slack = CHEAP_SLACK * (1.0 + shift.norm());
+        let (nodes_a, nodes_b) = cut.nodes;
+        // Constant during the loop: the upper bound only changes when a leaf pair is solved.
+        let (threshold, decided) = (self.threshold(), self.decided());
+        let seeded = self.seeded.map_or((usize::MAX, usize::MAX), |s| s);
+        for p in &cut.pairs {
+            let (na, nb) = (p.a as usize, p.b as usize);
+            if na >= nodes_a || nb >= nodes_b || (na, nb) == seeded {
+                continue;
+            }
+            // B's node box (c, h) moved by (R − R₀)c + t − t₀ at its center (`CutPair`). Along
+            // the pair's axis n the gap moves by n·((R − R₀)c + t − t₀) = w·c + n·(t − t₀) with
+            // w = (R − R₀)ᵀn, less Σ hₖ|wₖ| for the box; without an axis, by the length.
+            let (c, h) = (&p.box_b.0, &p.box_b.1);
+            let n = &p.axis;
+            let along = if n.x == 0.0 && n.y == 0.0 && n.z == 0.0 {
+                -(turn * c + shift).norm() - k * h.norm()
+            } else {
+                let w = [tt[0].dot(n), tt[1].dot(n), tt[2].dot(n)];
+                w[0] * c.x + w[1] * c.y + w[2] * c.z + n.dot(&shift)
+                    - (h.x * w[0].abs() + h.y * w[1].abs() + h.z * w[2].abs())
+            };
+            let bound = p.lower + along - slack * (p.size + p.lower.abs());
+            if bound >= threshold || decided {
+                self.carry(CutPair { lower: bound, ..*p });
+                continue;
+            }
+            let (c, h) = p.box_b;
+            // Evaluated again at this pose: along the pair's axis (A's support along it is
+            // kept), else by the cheap bounds. A bound that would fail again within about a
+            // step (`fragile`) does not keep an internal pair: its children are considered
+            // instead, whose bounds are tighter.
+            let step = (turn * c + shift).norm() + k * h.norm();
+            let mut q = CutPair { lower: bound, ..*p };
+            if p.axis != Vector3::zeros() {
+                if p.support_a.is_nan() {
+                    q.support_a = self.a.support_upper(na, &p.axis).unwrap_or(Real::INFINITY);
+                }
+                if let Some(hb) = self.b.support_upper(nb, &-(self.cheap.rot.transpose() * p.axis)) {
+                    let g = p.axis.dot(&self.cheap.shift) - hb - q.support_a;
+                    q.lower = q.lower.max(g - CHEAP_SLACK * (1.0 + g.abs() + q.support_a.abs()));
+                }
+            }
+            if q.lower.is_nan() || q.lower < 0.0 {
+                // 0 bounds the distance but not the gap along the axis (it may be negative).
+                q = CutPair { lower: 0.0, axis: Vector3::zeros(), support_a: Real::NAN, ..q };
+            }
+            let leaf = self.is_leaf_pair(na, nb);
+            if q.lower >= threshold + step || (leaf && q.lower >= threshold) {
+                self.carry(q);
+                continue;
+            }
+            let mut key = q.lower;
+            if let Some((g, n)) = self.cheap.gap_axis(self.a, na, self.b, nb) {
+                key = g;
+                if g > q.lower {
+                    q = CutPair { lower: g, axis: n, support_a: Real::NAN, ..q };
+                }
+            }
+            if q.lower >= threshold + step || (leaf && q.lower >= threshold) {
+                self.carry(q);
+            } else if q.lower >= threshold {
+                self.level = self.level.max(self.a.depth(na).max(self.b.depth(nb)));
+                self.expand(na, nb, q.lower);
+            } else {
+                self.level = self.level.max(self.a.depth(na).max(self.b.depth(nb)));
+                self.heap.push(Entry { lower: q.lower, key, axis: q.axis, a: na, b: nb });
+            }
+        }
+        true
+    }
+
+    /// Keeps a pair of the previous cut whose bound still decides it.
+    #[inline]
+    fn carry(&mut self, p: CutPair) {
+        self.sphere_pruned += 1;
+        self.pruned_min = self.pruned_min.min(p.lower);
+        self.cut.push(p);
     }
 
     /// Cheap bound of one node pair whose parent pair had lower bound `parent_lower`: pruned when
     /// it reaches the threshold, else queued.
     fn consider(&mut self, na: usize, nb: usize, parent_lower: Real) {
-        let gap = self.cheap.gap(self.a.body(na), self.b.body(nb));
-        let lower = gap.map_or(parent_lower, |g| g.max(parent_lower));
+        let gap = self.cheap.gap_axis(self.a, na, self.b, nb);
+        let lower = gap.map_or(parent_lower, |g| g.0.max(parent_lower));
         if lower >= self.threshold() {
             self.sphere_pruned += 1;
             self.pruned_min = self.pruned_min.min(lower);
+            // The axis only when the bound is the gap along it (not the parent's bound).
+            let axis = gap.filter(|g| g.0 >= parent_lower).map_or(Vector3::zeros(), |g| g.1);
+            self.keep(na, nb, lower, axis);
             return;
         }
         self.level = self.level.max(self.a.depth(na).max(self.b.depth(nb)));
-        self.heap.push(Entry { lower, key: gap.unwrap_or(lower), a: na, b: nb });
+        let axis = gap.filter(|g| g.0 >= parent_lower).map_or(Vector3::zeros(), |g| g.1);
+        self.heap.push(Entry { lower, key: gap.map_or(lower, |g| g.0), axis, a: na, b: nb });
     }
 
-    /// Whether the previous answers' exact distance of leaf pair (na, nb), less the motion since
-    /// ([`CheapBounds::motion_bound`]), already reaches the threshold; such a pair keeps its
-    /// record for the next query.
-    fn pruned_by_motion(&mut self, na: usize, nb: usize, lower: Real) -> bool {
-        let Some(solved) = self.old.and_then(|w| w.solved_of((na, nb))) else { return false };
-        let Some(bound) = self.cheap.motion_bound(self.b.body(nb), solved) else { return false };
-        let bound = bound.max(lower);
-        if bound < self.threshold() {
+    /// Whether the separating-axis gap of leaf pair (na, nb) along a refined axis reaches the
+    /// threshold ([`CheapBounds::refined_gap`]), so that the pair needs no solve.
+    fn pruned_by_axis(&mut self, na: usize, nb: usize, lower: Real) -> bool {
+        let Some((g, axis)) = self.cheap.refined_gap(self.a, na, self.b, nb) else { return false };
+        if g.max(lower) < self.threshold() {
             return false;
         }
         self.sphere_pruned += 1;
-        self.pruned_min = self.pruned_min.min(bound);
-        self.fresh.solved.push(*solved);
+        self.pruned_min = self.pruned_min.min(g.max(lower));
+        if g >= lower {
+            self.keep(na, nb, g, axis);
+        } else {
+            self.keep(na, nb, lower, Vector3::zeros());
+        }
         true
     }
 
@@ -528,16 +747,20 @@ impl<'t, A: BodyTree + ?Sized, B: BodyTree + ?Sized> Search<'t, A, B> {
         if !answer.exact {
             self.unresolved_min = self.unresolved_min.min(lower);
         }
-        self.take_leaf(answer);
+        self.take_leaf(answer, lower);
     }
 
-    fn take_leaf(&mut self, answer: LeafPairAnswer) {
+    /// Records a solved leaf pair (popped with lower bound `lower`): the upper bound and the
+    /// active pair when it is the best so far, and its cut entry (its exact distance and normal,
+    /// or `lower` when unresolved).
+    fn take_leaf(&mut self, answer: LeafPairAnswer, lower: Real) {
+        let (na, nb) = answer.leaves;
         if answer.exact {
-            self.fresh.solved.push(SolvedPair {
-                pair: answer.leaves,
-                distance: answer.result.distance,
-                relative_pose: self.cheap.rel,
-            });
+            let r = &answer.result;
+            let axis = if r.overlapping { Vector3::zeros() } else { self.pose_a.rotation.inverse() * r.normal };
+            self.keep(na, nb, r.distance, axis);
+        } else {
+            self.keep(na, nb, lower, Vector3::zeros());
         }
         if answer.exact && answer.result.distance < self.upper {
             self.upper = answer.result.distance;
@@ -547,19 +770,36 @@ impl<'t, A: BodyTree + ?Sized, B: BodyTree + ?Sized> Search<'t, A, B> {
         self.leaf_pairs.push(answer);
     }
 
-    /// Newton lower bound of an internal pair (containment: it bounds every leaf pair below);
-    /// `lower` when the solve does not converge.
-    fn internal(&mut self, na: usize, nb: usize, lower: Real) -> Real {
+    /// Newton lower bound of an internal pair (containment: it bounds every leaf pair below) and
+    /// its normal (A's frame; zero when overlapping); `lower` when the solve does not converge.
+    fn internal(&mut self, na: usize, nb: usize, lower: Real) -> (Real, Vector3) {
         self.pairs += 1;
         let warm = self.old.and_then(|w| w.distance_of((na, nb)));
         let r = distance(self.a.body(na), self.pose_a, self.b.body(nb), self.pose_b, warm, &self.params.newton);
         self.fresh.keep_distance((na, nb), r.warm_start.clone());
-        if r.status.converged() {
-            r.distance.max(lower)
+        if r.status.converged() && r.distance > lower {
+            let axis = if r.overlapping { Vector3::zeros() } else { self.pose_a.rotation.inverse() * r.normal };
+            (r.distance, axis)
         } else {
-            self.unconverged += 1;
-            lower
+            if !r.status.converged() {
+                self.unconverged += 1;
+            }
+            (lower, Vector3::zeros())
         }
+    }
+
+    /// The state for the next query: solver warm starts, the active pair, and the cut (when not
+    /// larger than [`MAX_CUT_PAIRS`]).
+    fn finish(&mut self) -> TreeWarmStart {
+        let mut fresh = std::mem::take(&mut self.fresh);
+        if self.cut.len() <= MAX_CUT_PAIRS {
+            fresh.cut = Some(Cut {
+                pairs: std::mem::take(&mut self.cut),
+                pose: self.cheap.rel,
+                nodes: (self.a.node_count(), self.b.node_count()),
+            });
+        }
+        fresh
     }
 
     /// Solves a leaf pair by Newton, with the SDP when asked or as fallback (module docs).

@@ -1,20 +1,30 @@
 //! Warm starts of tree queries: one [`DistanceWarmStart`] / [`GrowthWarmStart`] per node pair, and
 //! the active leaf pair of the last distance answer.
 
+use crate::math::{Isometry3, Real, Vector3};
 use crate::query::{DistanceWarmStart, GrowthWarmStart};
 use std::sync::Arc;
 
 /// Most node pairs a [`TreeWarmStart`] keeps; pairs beyond it are solved cold next time.
 pub const MAX_WARM_PAIRS: usize = 1024;
 
+/// Most node pairs of a kept cut (see [`TreeWarmStart`]); a query whose cut is larger keeps none,
+/// and the next query searches from the roots again. Checking a kept pair costs a few
+/// nanoseconds, a search from the roots a few microseconds (issue 14 part 2: chair_101 ×
+/// human_10 keeps 20–150 pairs along the bench's motion).
+pub const MAX_CUT_PAIRS: usize = 4096;
+
 /// Solver states of the node pairs solved by the last tree query of one ordered pair of trees,
-/// keyed by `(node of A, node of B)`, and the last answer's active leaf pair.
+/// keyed by `(node of A, node of B)`, the last answer's active leaf pair, and the *cut* of the
+/// last search with its lower bounds.
 ///
 /// Pass the `warm_start` of an answer to the next query of the same two trees (any poses; nearby
 /// poses make it pay off). Only the pairs the last query solved are kept (at most
 /// [`MAX_WARM_PAIRS`]), so the cache follows the active leaf pairs as the bodies move and never
 /// grows with the trees. A query solves the active leaf pair first (one warm solve gives a tight
-/// upper bound at once), then prunes every node pair whose cheap bound exceeds it.
+/// upper bound at once), then checks the cut: every leaf pair lies below one of its node pairs,
+/// whose lower bound less the motion since ([`CutPair`]) still decides most of them without
+/// touching the trees; only the pairs it no longer decides are searched again.
 #[derive(Clone, Debug, Default)]
 pub struct TreeWarmStart {
     /// A short list searched linearly rather than a hash map: a query solves a handful of pairs,
@@ -23,18 +33,58 @@ pub struct TreeWarmStart {
     pub(crate) growth: Vec<((usize, usize), Arc<GrowthWarmStart>)>,
     /// The best leaf pair of the last distance or margin answer (the active pair).
     pub(crate) active: Option<(usize, usize)>,
-    /// Exact distances of leaf pairs and the relative poses they were solved at: the motion since
-    /// then bounds each pair's distance now (`super::search::motion_bound`).
-    pub(crate) solved: Vec<SolvedPair>,
+    /// The cut of the last search, when it kept one: node pairs covering every leaf pair, each
+    /// with a lower bound of its leaf pairs' distances at `cut_pose`.
+    pub(crate) cut: Option<Cut>,
 }
 
-/// A leaf pair's exact distance at a relative pose `pose_a⁻¹·pose_b`.
+/// The terminal node pairs of a search (pruned, solved, or left in the queue) with their lower
+/// bounds: every leaf pair of the two trees lies below at least one of them.
+#[derive(Clone, Debug)]
+pub(crate) struct Cut {
+    pub(crate) pairs: Vec<CutPair>,
+    /// The relative pose `pose_a⁻¹·pose_b` at which the bounds hold.
+    pub(crate) pose: Isometry3,
+    /// Node counts of the trees the cut belongs to (a cut of other trees is ignored).
+    pub(crate) nodes: (usize, usize),
+}
+
+/// One node pair of a [`Cut`].
+///
+/// After a relative motion of B from the cut's pose (R₀, t₀) to (R, t) in A's frame, every point
+/// `c + w` of B's node (its bounding box: center c, half extents h, B's frame) moved by
+/// `(R − R₀) c + t − t₀` plus `(R − R₀) w`. So the separating gap along a fixed unit axis n (A's
+/// frame) moved by at least
+///
+/// ```text
+/// n·((R − R₀) c + t − t₀) − Σₖ hₖ |((R − R₀)ᵀ n)ₖ|
+/// ```
+///
+/// and any distance by at least `−‖(R − R₀) c + t − t₀‖ − ‖R − R₀‖₂ ‖h‖` (‖R − R₀‖₂ = 2 sin(θ/2),
+/// θ the angle between the rotations); `lower` plus that is still a lower bound of the pair's
+/// leaf distances: distance is 1-Lipschitz in the points of either set, and a gap along n bounds
+/// the distance of every pair of subsets (containment).
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct SolvedPair {
-    pub(crate) pair: (usize, usize),
-    /// Distance of the pair (meters) at `relative_pose`.
-    pub(crate) distance: crate::math::Real,
-    pub(crate) relative_pose: crate::math::Isometry3,
+pub(crate) struct CutPair {
+    pub(crate) a: u32,
+    pub(crate) b: u32,
+    /// Lower bound of the distance of every leaf pair below (meters), and of the separating gap
+    /// along `axis` when there is one.
+    pub(crate) lower: Real,
+    /// A unit axis (A's frame, from A towards B) along which `lower` bounds the pair's separating
+    /// gap (a solved leaf pair's normal, or the axis of its cheap bound); zero when none.
+    /// Re-evaluating the gap along it at the new pose is nearly as tight as a solve
+    /// ([`super::search::CheapBounds::axis_gap`]).
+    pub(crate) axis: Vector3,
+    /// A's support value along `axis`, `h_A(axis)` (meters, A's frame; NaN until computed): A is
+    /// fixed in its own frame, so re-evaluating the gap along the same axis needs only B's
+    /// support bound.
+    pub(crate) support_a: Real,
+    /// Bounding box of B's node (center and half extents, B's frame, meters); half extents +∞
+    /// without one.
+    pub(crate) box_b: (Vector3, Vector3),
+    /// `1 + ‖c‖₁ + Σ hₖ` (meters): the scale of the rounding slack of the motion bound.
+    pub(crate) size: Real,
 }
 
 impl TreeWarmStart {
@@ -54,8 +104,10 @@ impl TreeWarmStart {
         self.active
     }
 
-    pub(crate) fn solved_of(&self, pair: (usize, usize)) -> Option<&SolvedPair> {
-        self.solved.iter().find(|s| s.pair == pair)
+    /// Number of node pairs of the kept cut (0 when none is kept): the pairs the next query checks
+    /// by their motion bounds before searching.
+    pub fn cut_pairs(&self) -> usize {
+        self.cut.as_ref().map_or(0, |c| c.pairs.len())
     }
 
     pub(crate) fn distance_of(&self, pair: (usize, usize)) -> Option<&DistanceWarmStart> {
