@@ -280,10 +280,8 @@ mod tests {
     use crate::poly::Polynomial;
     use rand::{Rng, SeedableRng};
 
-    #[test]
-    fn ellipsoid_support_matches_closed_form() {
-        // p(u) = Σ (uᵢ/rᵢ)²: u*(m) = D² m / ‖D m‖ with D = diag(r).
-        let radii = [0.9, 0.5, 0.3];
+    /// p(u) = Σ (uᵢ/rᵢ)² and its support table about the origin.
+    fn ellipsoid_table(radii: [Real; 3]) -> (FastPoly, SupportTable) {
         let terms: Vec<([u8; 3], Real)> = (0..3)
             .map(|i| {
                 let mut e = [0u8; 3];
@@ -294,6 +292,14 @@ mod tests {
         let p = FastPoly::new(&Polynomial::from_terms(2, &terms).unwrap());
         let center = Vector3::zeros();
         let table = SupportTable::new(&p, &RadialTable::new(&p, &center), &center);
+        (p, table)
+    }
+
+    #[test]
+    fn ellipsoid_support_matches_closed_form() {
+        // p(u) = Σ (uᵢ/rᵢ)²: u*(m) = D² m / ‖D m‖ with D = diag(r).
+        let radii = [0.9, 0.5, 0.3];
+        let (_, table) = ellipsoid_table(radii);
         let exact = |m: &Vector3| {
             let dm = Vector3::new(radii[0] * m.x, radii[1] * m.y, radii[2] * m.z);
             Vector3::new(radii[0] * dm.x, radii[1] * dm.y, radii[2] * dm.z) / dm.norm()
@@ -323,16 +329,7 @@ mod tests {
     fn support_bound_is_above_and_close_to_the_ellipsoid_support_function() {
         // h(m) = ‖D m‖ for p(u) = Σ (uᵢ/rᵢ)², and the exact box is [−r, r].
         let radii = [0.9, 0.5, 0.3];
-        let terms: Vec<([u8; 3], Real)> = (0..3)
-            .map(|i| {
-                let mut e = [0u8; 3];
-                e[i] = 2;
-                (e, 1.0 / (radii[i] * radii[i]))
-            })
-            .collect();
-        let p = FastPoly::new(&Polynomial::from_terms(2, &terms).unwrap());
-        let center = Vector3::zeros();
-        let table = SupportTable::new(&p, &RadialTable::new(&p, &center), &center);
+        let (p, table) = ellipsoid_table(radii);
         let r = Vector3::from(radii);
         let bound = SupportBound::new(&p, &table, &(-r * 1.001), &(r * 1.001));
         let exact = |m: &Vector3| Vector3::new(radii[0] * m.x, radii[1] * m.y, radii[2] * m.z).norm();
