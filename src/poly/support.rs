@@ -210,16 +210,17 @@ impl SupportBound {
     /// non-finite `m` (a bound that bounds nothing).
     #[inline]
     pub fn upper(&self, m: &Vector3) -> Real {
-        // face_coordinates inlined with one division: the face of the largest component, and the
-        // grid coordinates (a + 1)·G/2 of a = (other component)/|largest|.
-        let (ax, ay, az) = (m.x.abs(), m.y.abs(), m.z.abs());
-        let (face, major, u, v) = if ax >= ay && ax >= az {
-            (usize::from(m.x < 0.0), ax, m.y, m.z)
-        } else if ay >= az {
-            (2 + usize::from(m.y < 0.0), ay, m.z, m.x)
-        } else {
-            (4 + usize::from(m.z < 0.0), az, m.x, m.y)
-        };
+        // face_coordinates without branches (the directions of successive calls vary, and a
+        // mispredicted face costs more than the arithmetic) and with one division: the axis i of
+        // the largest component (ties: any of them, every face's table bounds its directions),
+        // the face 2i + (mᵢ < 0), and the grid coordinates (a + 1)·G/2 of a = m_{i+1}/|mᵢ|,
+        // b = m_{i+2}/|mᵢ| (face_direction's order: x → (y, z), y → (z, x), z → (x, y)).
+        let c = [m.x, m.y, m.z];
+        let (ax, ay, az) = (c[0].abs(), c[1].abs(), c[2].abs());
+        let i = usize::from(ay > ax && ay >= az) + 2 * usize::from(az > ax && az > ay);
+        let major = c[i].abs();
+        let face = 2 * i + usize::from(c[i] < 0.0);
+        let (u, v) = (c[(i + 1) % 3], c[(i + 2) % 3]);
         let half = 0.5 * SUPPORT_GRID as Real;
         let scale = half / major;
         let (fa, fb) = (u * scale + half, v * scale + half);

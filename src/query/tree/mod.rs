@@ -51,8 +51,7 @@
 //! ```
 //!
 //! Only the pairs whose moved bound no longer decides them are evaluated again (along their axis,
-//! then by the cheap bounds; an internal pair barely decided is split, so that its children carry
-//! more margin to the next query), and only those still undecided are searched. Pose gradients
+//! then by the cheap bounds), and only those still undecided are searched. Pose gradients
 //! come from the active leaf pair ([`TreeDistanceResult::gradient`]); certificates, on request,
 //! per leaf pair.
 //!

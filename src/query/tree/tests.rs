@@ -587,7 +587,7 @@ fn check_cut(
 ) {
     let cut = warm.cut.as_ref().unwrap_or_else(|| panic!("{what}: no cut kept"));
     let mut covered = std::collections::HashSet::new();
-    for p in &cut.pairs {
+    for p in cut.pairs() {
         let (la, lb) = (leaves_below(a, p.a as usize), leaves_below(b, p.b as usize));
         for &i in &la {
             for &j in &lb {

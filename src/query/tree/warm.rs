@@ -40,13 +40,38 @@ pub struct TreeWarmStart {
 
 /// The terminal node pairs of a search (pruned, solved, or left in the queue) with their lower
 /// bounds: every leaf pair of the two trees lies below at least one of them.
+///
+/// Most pairs stay in the cut for many queries with only their bound changing, so the pairs are
+/// shared between successive warm starts (`base`, behind an `Arc`) and each query writes only
+/// their bounds (`lower`, 8 bytes a pair instead of a copy of each pair); pairs added since the
+/// base was built are in `extra`, until a query folds them into a new base.
 #[derive(Clone, Debug)]
 pub(crate) struct Cut {
-    pub(crate) pairs: Vec<CutPair>,
+    /// Pairs shared with earlier warm starts (their own `lower` field is stale: see `lower`).
+    pub(crate) base: Arc<Vec<CutPair>>,
+    /// The bound of each base pair at `pose`; NaN for a pair no longer in the cut.
+    pub(crate) lower: Vec<Real>,
+    /// Pairs added since the base was built, with their bounds at `pose`.
+    pub(crate) extra: Vec<CutPair>,
     /// The relative pose `pose_a⁻¹·pose_b` at which the bounds hold.
     pub(crate) pose: Isometry3,
     /// Node counts of the trees the cut belongs to (a cut of other trees is ignored).
     pub(crate) nodes: (usize, usize),
+}
+
+impl Cut {
+    /// Number of pairs in the cut.
+    pub(crate) fn len(&self) -> usize {
+        self.lower.iter().filter(|l| !l.is_nan()).count() + self.extra.len()
+    }
+
+    /// The pairs of the cut with their current bounds.
+    #[cfg(test)]
+    pub(crate) fn pairs(&self) -> impl Iterator<Item = CutPair> + '_ {
+        let base =
+            self.base.iter().zip(&self.lower).filter(|(_, l)| !l.is_nan()).map(|(p, &l)| CutPair { lower: l, ..*p });
+        base.chain(self.extra.iter().copied())
+    }
 }
 
 /// One node pair of a [`Cut`].
@@ -107,7 +132,7 @@ impl TreeWarmStart {
     /// Number of node pairs of the kept cut (0 when none is kept): the pairs the next query checks
     /// by their motion bounds before searching.
     pub fn cut_pairs(&self) -> usize {
-        self.cut.as_ref().map_or(0, |c| c.pairs.len())
+        self.cut.as_ref().map_or(0, Cut::len)
     }
 
     pub(crate) fn distance_of(&self, pair: (usize, usize)) -> Option<&DistanceWarmStart> {
