@@ -102,6 +102,15 @@ fn main() -> sublevel::Result<()> {
         }
         state = Some(r.warm_start);
     }
+    let mut sorted = warm.clone();
+    sorted.sort_by(|a, b| a.total_cmp(b));
+    let q = |f: Real| sorted.get(((sorted.len() as Real - 1.0) * f) as usize).copied().unwrap_or(Real::NAN);
+    let by_solves = |n: usize| median(warm.iter().zip(&leaves).filter(|(_, &l)| l == n).map(|(&t, _)| t).collect());
+    let count = |n: usize| leaves.iter().filter(|&&l| l == n).count();
+    println!(
+        "warm quantiles 10/25/50/75/90 %: {:.2} {:.2} {:.2} {:.2} {:.2} us; median with 0/1/2 leaf solves: {:.2} ({}) {:.2} ({}) {:.2} ({})",
+        q(0.1), q(0.25), q(0.5), q(0.75), q(0.9), by_solves(0), count(0), by_solves(1), count(1), by_solves(2), count(2)
+    );
     println!(
         "warm: median {:.2} us; per query: {:.1} node pairs solved ({:.1} leaf pairs), {:.1} pruned by cheap bounds",
         median(warm),

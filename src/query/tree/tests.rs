@@ -691,3 +691,44 @@ fn warm_starts_from_unrelated_poses_stay_exact() {
         }
     }
 }
+
+#[test]
+fn far_groups_carry_over_fine_motion_and_stay_valid() {
+    // A fine slide of the chair towards and into the human (≈ 1 cm a step, the bench's warm
+    // motion): the warm start's far group (pairs far above the threshold, checked as one) is
+    // carried from step to step and erodes; every warm answer must equal the cold one, and the
+    // cut (near and far pairs, far ones at the group's bound) must bound every leaf pair below it.
+    let all = bundled_compounds();
+    let (chair, human) = (&all[0].1, &all[1].1);
+    let id = Isometry3::identity();
+    let params = TreeQueryParams::default();
+    let axis = nalgebra::Unit::new_normalize(Vector3::new(0.2, 1.0, 0.1));
+    let steps = 120;
+    let mut warm: Option<TreeWarmStart> = None;
+    let (mut grouped, mut carried) = (0, 0);
+    for k in 0..steps {
+        let s = 0.15 + 0.25 * k as Real / (steps - 1) as Real;
+        let pose = Isometry3::from_parts(
+            Vector3::new(-2.5 + 5.0 * s, 0.3, 0.1).into(),
+            UnitQuaternion::from_axis_angle(&axis, 1.5 * s),
+        );
+        let cold = tree_distance(chair, &pose, human, &id, None, &params).unwrap();
+        let w = tree_distance(chair, &pose, human, &id, warm.as_ref(), &params).unwrap();
+        assert!(w.converged && w.within_tolerance, "step {k}");
+        assert!((w.upper - cold.upper).abs() < 1e-9, "step {k}: warm {} vs cold {}", w.upper, cold.upper);
+        assert!(w.lower <= cold.upper + 1e-9 && w.lower >= cold.upper - 1e-9, "step {k}: lower {}", w.lower);
+        let far = w.warm_start.cut.as_ref().and_then(|c| c.far.clone());
+        if let Some(far) = &far {
+            grouped += 1;
+            let previous = warm.as_ref().and_then(|p| p.cut.as_ref()).and_then(|c| c.far.as_ref());
+            carried += usize::from(previous.is_some_and(|p| std::sync::Arc::ptr_eq(p, far)));
+        }
+        if k % 30 == 29 {
+            let leaf = leaf_distances(chair, &pose, human, &id);
+            check_cut(&w.warm_start, chair, human, &leaf, &format!("step {k}"));
+        }
+        warm = Some(w.warm_start);
+    }
+    assert!(grouped > steps / 2, "{grouped} of {steps} steps kept a far group");
+    assert!(carried > steps / 3, "{carried} of {steps} steps carried the previous far group");
+}
