@@ -86,8 +86,9 @@ struct CommonArgs {
     /// Speed-accuracy: margin of the "closer than m?" query whose level histogram is reported (m).
     #[arg(long, default_value_t = 0.05)]
     margin: f64,
-    /// Speed-accuracy: steps of the smooth motion for the warm times (as `sublevel bench`).
-    #[arg(long, default_value_t = 200)]
+    /// Speed-accuracy: steps of the smooth motion for the warm times (the recipe of `sublevel bench`
+    /// and of the coal script).
+    #[arg(long, default_value_t = 500)]
     motion: usize,
     /// Speed-accuracy: output of the shared coal peer benchmark (`bash ../shared/peers/coal/run.sh
     /// > coal.txt`): its hull GJK and exact mesh BVH rows are added.

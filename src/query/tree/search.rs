@@ -675,9 +675,13 @@ impl<'t, A: BodyTree + ?Sized, B: BodyTree + ?Sized> Search<'t, A, B> {
         if na >= self.a.node_count() || nb >= self.b.node_count() || !self.is_leaf_pair(na, nb) {
             return;
         }
-        let gap = self.cheap.gap_axis(self.a, na, self.b, nb).map_or(0.0, |g| g.0).max(0.0);
-        if gap >= self.threshold() {
-            return;
+        // A distance query has no threshold yet (+∞): no bound rules the pair out.
+        let threshold = self.threshold();
+        if threshold.is_finite() {
+            let gap = self.cheap.gap_axis(self.a, na, self.b, nb).map_or(0.0, |g| g.0).max(0.0);
+            if gap >= threshold {
+                return;
+            }
         }
         self.pairs += 1;
         let answer = self.solve_leaf(na, nb);
