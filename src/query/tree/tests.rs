@@ -606,6 +606,16 @@ fn check_cut(
     assert_eq!(covered.len(), leaf.len(), "{what}: the cut misses leaf pairs");
 }
 
+/// The chair's pose at `s ∈ [0, 1]` of the slide-and-turn through the human of `sublevel bench`
+/// (examples/tree_profile.rs).
+fn slide_pose(s: Real) -> Isometry3 {
+    let axis = nalgebra::Unit::new_normalize(Vector3::new(0.2, 1.0, 0.1));
+    Isometry3::from_parts(
+        Vector3::new(-2.5 + 5.0 * s, 0.3, 0.1).into(),
+        UnitQuaternion::from_axis_angle(&axis, 1.5 * s),
+    )
+}
+
 #[test]
 fn warm_motion_through_contact_matches_cold_and_brute_force() {
     // The profile's slide-and-turn motion through the human (examples/tree_profile.rs), coarser:
@@ -615,17 +625,13 @@ fn warm_motion_through_contact_matches_cold_and_brute_force() {
     let (chair, human) = (&all[0].1, &all[1].1);
     let id = Isometry3::identity();
     let params = TreeQueryParams::default();
-    let axis = nalgebra::Unit::new_normalize(Vector3::new(0.2, 1.0, 0.1));
     let steps = 36;
     let mut warm: Option<TreeWarmStart> = None;
     let mut margin_warm: Option<TreeWarmStart> = None;
     let (mut contact, mut kept) = (0, 0);
     for k in 0..steps {
         let s = k as Real / (steps - 1) as Real;
-        let pose = Isometry3::from_parts(
-            Vector3::new(-2.5 + 5.0 * s, 0.3, 0.1).into(),
-            UnitQuaternion::from_axis_angle(&axis, 1.5 * s),
-        );
+        let pose = slide_pose(s);
         let leaf = leaf_distances(chair, &pose, human, &id);
         let exact = leaf.values().cloned().fold(Real::INFINITY, Real::min);
         let cold = tree_distance(chair, &pose, human, &id, None, &params).unwrap();
@@ -702,16 +708,12 @@ fn far_groups_carry_over_fine_motion_and_stay_valid() {
     let (chair, human) = (&all[0].1, &all[1].1);
     let id = Isometry3::identity();
     let params = TreeQueryParams::default();
-    let axis = nalgebra::Unit::new_normalize(Vector3::new(0.2, 1.0, 0.1));
     let steps = 120;
     let mut warm: Option<TreeWarmStart> = None;
     let (mut grouped, mut carried) = (0, 0);
     for k in 0..steps {
         let s = 0.15 + 0.25 * k as Real / (steps - 1) as Real;
-        let pose = Isometry3::from_parts(
-            Vector3::new(-2.5 + 5.0 * s, 0.3, 0.1).into(),
-            UnitQuaternion::from_axis_angle(&axis, 1.5 * s),
-        );
+        let pose = slide_pose(s);
         let cold = tree_distance(chair, &pose, human, &id, None, &params).unwrap();
         let w = tree_distance(chair, &pose, human, &id, warm.as_ref(), &params).unwrap();
         assert!(w.converged && w.within_tolerance, "step {k}");
