@@ -115,6 +115,11 @@ pub struct CompoundBody {
     /// body's frame, meters): derived from the nodes when the tree is built (see
     /// [`CompoundBody::leaf_support_upper`]).
     supports: Vec<Option<SupportBound>>,
+    /// Per node, what the tree queries read for every node pair they bound, in one array (the
+    /// nodes themselves hold whole bodies, far apart in memory).
+    layout: Vec<NodeLayout>,
+    /// The children of every node, one after another ([`NodeLayout::children`]).
+    child_list: Vec<usize>,
     /// How the tree was built.
     pub report: CompoundReport,
 }
@@ -129,7 +134,8 @@ impl CompoundBody {
     pub fn new(nodes: Vec<CompoundNode>, root: usize, report: CompoundReport) -> Result<Self> {
         file::check_tree(nodes.len(), root, |i| (&nodes[i].children, nodes[i].depth, nodes[i].excess))?;
         let supports = leaf_supports(&nodes);
-        Ok(Self { nodes, root, supports, report })
+        let (layout, child_list) = node_layout(&nodes);
+        Ok(Self { nodes, root, supports, layout, child_list, report })
     }
 
     /// A one-node tree holding `body` (excess unknown: `NaN`).
@@ -138,7 +144,8 @@ impl CompoundBody {
             CompoundNode { body, children: Vec::new(), depth: 0, excess: Real::NAN, triangles: 0, fit_seconds: 0.0 };
         let nodes = vec![node];
         let supports = leaf_supports(&nodes);
-        Self { nodes, root: 0, supports, report: CompoundReport::default() }
+        let (layout, child_list) = node_layout(&nodes);
+        Self { nodes, root: 0, supports, layout, child_list, report: CompoundReport::default() }
     }
 
     /// An upper bound of `max n·x` over the leaves below `node` (for a leaf: its body), for any
@@ -152,6 +159,19 @@ impl CompoundBody {
     /// queries' cheap bounds). Panics if `node` is out of range.
     pub fn leaf_support_upper(&self, node: usize, n: &crate::math::Vector3) -> Option<Real> {
         self.supports[node].as_ref().map(|t| t.upper(n))
+    }
+
+    /// The bounding box of `node`'s body ([`Body::bounding_box`]: center and half extents, the
+    /// compound body's frame, meters); `None` for a nonconvex body. Panics if `node` is out of
+    /// range.
+    pub fn node_box(&self, node: usize) -> Option<(crate::math::Vector3, crate::math::Vector3)> {
+        self.layout[node].bbox
+    }
+
+    /// The radius of `node`'s bounding sphere ([`Body::bounding_sphere`]; the body's scale for a
+    /// nonconvex body), meters. Panics if `node` is out of range.
+    pub fn node_radius(&self, node: usize) -> Real {
+        self.layout[node].radius
     }
 
     /// Index of the root node (its body contains every other node's body).
@@ -181,12 +201,13 @@ impl CompoundBody {
 
     /// Children of node `i` (empty for a leaf). Panics if `i` is out of range.
     pub fn children(&self, i: usize) -> &[usize] {
-        &self.nodes[i].children
+        let (start, len) = self.layout[i].children;
+        &self.child_list[start..start + len]
     }
 
     /// Depth of node `i` (0 at the root). Panics if `i` is out of range.
     pub fn depth(&self, i: usize) -> usize {
-        self.nodes[i].depth
+        self.layout[i].depth
     }
 
     /// Indices of the leaves (the parts of the decomposition), in index order.
@@ -242,6 +263,42 @@ impl CompoundBody {
         std::fs::write(path, serde_json::to_string(&self.to_file())?)?;
         Ok(())
     }
+}
+
+/// One node's entry of [`CompoundBody`]'s compact layout.
+#[derive(Clone, Copy, Debug)]
+struct NodeLayout {
+    /// [`CompoundBody::node_box`].
+    bbox: Option<(crate::math::Vector3, crate::math::Vector3)>,
+    /// [`CompoundBody::node_radius`].
+    radius: Real,
+    /// [`CompoundBody::depth`].
+    depth: usize,
+    /// Start and length of the node's children in `child_list`.
+    children: (usize, usize),
+}
+
+/// The compact layout of [`CompoundBody`]: per node its box, sphere radius, depth and children.
+/// Measured with `tree_profile` (chair_101 × human_10, three alternating runs of each build):
+/// cold queries 11.7–11.9 → 10.3–10.6 µs median, warm 2.2–2.3 → 2.1 µs, with these read from here
+/// instead of the nodes' bodies.
+fn node_layout(nodes: &[CompoundNode]) -> (Vec<NodeLayout>, Vec<usize>) {
+    let mut child_list = Vec::with_capacity(nodes.len());
+    let layout = nodes
+        .iter()
+        .map(|n| {
+            let b = &n.body;
+            let start = child_list.len();
+            child_list.extend_from_slice(&n.children);
+            NodeLayout {
+                bbox: b.bounding_box().map(|(c, h)| (c.coords, h)),
+                radius: b.bounding_sphere().map_or(b.scale(), |s| s.1),
+                depth: n.depth,
+                children: (start, n.children.len()),
+            }
+        })
+        .collect();
+    (layout, child_list)
 }
 
 /// The support tables of [`CompoundBody::leaf_support_upper`], children before parents (depth

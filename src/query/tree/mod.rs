@@ -105,6 +105,18 @@ pub trait BodyTree {
     fn support_upper(&self, node: usize, n: &crate::math::Vector3) -> Option<crate::math::Real> {
         self.body(node).support_upper(n)
     }
+    /// The bounding box of `node`'s body ([`Body::bounding_box`]): its center and half extents
+    /// (the tree's frame, meters); `None` for a nonconvex body. A tree may keep them in one array
+    /// (the queries' cheap bounds read two per node pair).
+    fn node_box(&self, node: usize) -> Option<(crate::math::Vector3, crate::math::Vector3)> {
+        self.body(node).bounding_box().map(|(c, h)| (c.coords, h))
+    }
+    /// The radius of `node`'s bounding sphere ([`Body::bounding_sphere`]; the body's scale for a
+    /// nonconvex body), meters: which node of a pair the queries split.
+    fn node_radius(&self, node: usize) -> crate::math::Real {
+        let body = self.body(node);
+        body.bounding_sphere().map_or(body.scale(), |s| s.1)
+    }
     /// Whether the structure is known valid (checked when the tree was built, immutable since),
     /// so that queries skip [`check_tree`] (a few microseconds per query on 95-node trees: more
     /// than a warm query's solve). Default false: every query checks.
@@ -155,6 +167,12 @@ impl BodyTree for crate::compound::CompoundBody {
     }
     fn support_upper(&self, node: usize, n: &crate::math::Vector3) -> Option<crate::math::Real> {
         self.leaf_support_upper(node, n)
+    }
+    fn node_box(&self, node: usize) -> Option<(crate::math::Vector3, crate::math::Vector3)> {
+        crate::compound::CompoundBody::node_box(self, node)
+    }
+    fn node_radius(&self, node: usize) -> crate::math::Real {
+        crate::compound::CompoundBody::node_radius(self, node)
     }
     /// [`crate::compound::CompoundBody::new`] checks the same invariants, and the nodes cannot
     /// change afterwards ([`crate::compound::CompoundBody::single`] is one node).

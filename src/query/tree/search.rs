@@ -3,7 +3,6 @@
 
 use super::warm::{Cut, CutPair, FarPairs, TreeWarmStart, MAX_CUT_PAIRS};
 use super::{check_tree, BodyTree};
-use crate::body::Body;
 use crate::error::{Error, Result};
 use crate::math::{Isometry3, Real, Vector3};
 use crate::query::sdp_certificate::CertificateParams;
@@ -320,7 +319,7 @@ impl CheapBounds {
     /// Lower bound of the distance between bodies `a` (tree A) and `b` (tree B), meters; negative
     /// when the boxes overlap (then only 0 is a bound); `None` for a nonconvex body (no box).
     #[cfg(test)]
-    pub(crate) fn gap(&self, a: &Body, b: &Body) -> Option<Real> {
+    pub(crate) fn gap(&self, a: &crate::body::Body, b: &crate::body::Body) -> Option<Real> {
         self.gap_axis(a, 0, b, 0).map(|(g, _)| g)
     }
 
@@ -340,9 +339,9 @@ impl CheapBounds {
         b: &B,
         nb: usize,
     ) -> Option<(Real, Vector3)> {
-        let (ca, ha) = a.body(na).bounding_box()?;
-        let (cb, hb) = b.body(nb).bounding_box()?;
-        let d = self.rot * cb.coords + self.shift - ca.coords;
+        let (ca, ha) = a.node_box(na)?;
+        let (cb, hb) = b.node_box(nb)?;
+        let d = self.rot * cb + self.shift - ca;
         let norm = d.norm();
         let n = if norm > 0.0 { d / norm } else { Vector3::x() };
         let m = self.rot.transpose() * n;
@@ -356,7 +355,7 @@ impl CheapBounds {
     /// The separating-axis gap along an axis refined towards the witnesses' normal: from `start`
     /// (a unit axis, e.g. the pair's normal in an earlier query; zero for the direction between
     /// the box centers), twice `n ← (y − x)/‖y − x‖` with x, y the estimated
-    /// support points of A along n and of B along −n ([`Body::support_estimate`]); the best
+    /// support points of A along n and of B along −n ([`crate::body::Body::support_estimate`]); the best
     /// [`CheapBounds::axis_gap`] of the axes tried, slack subtracted (meters), and its axis.
     /// `None` for a nonconvex body.
     pub(crate) fn refined_gap<A: BodyTree + ?Sized, B: BodyTree + ?Sized>(
@@ -368,9 +367,9 @@ impl CheapBounds {
         start: &Vector3,
     ) -> Option<(Real, Vector3)> {
         let (ba, bb) = (a.body(na), b.body(nb));
-        let (ca, _) = ba.bounding_box()?;
-        let (cb, _) = bb.bounding_box()?;
-        let d = self.rot * cb.coords + self.shift - ca.coords;
+        let (ca, _) = a.node_box(na)?;
+        let (cb, _) = b.node_box(nb)?;
+        let d = self.rot * cb + self.shift - ca;
         let mut n = if *start == Vector3::zeros() { d.try_normalize(0.0)? } else { *start };
         let mut best = (Real::NEG_INFINITY, n);
         for _ in 0..2 {
@@ -481,8 +480,7 @@ pub(crate) fn split_a<A: BodyTree + ?Sized, B: BodyTree + ?Sized>(a: &A, na: usi
     if b.children(nb).is_empty() {
         return true;
     }
-    let radius = |body: &Body| body.bounding_sphere().map_or(body.scale(), |s| s.1);
-    radius(a.body(na)) >= radius(b.body(nb))
+    a.node_radius(na) >= b.node_radius(nb)
 }
 
 struct Search<'t, A: ?Sized, B: ?Sized> {
@@ -595,11 +593,7 @@ impl<'t, A: BodyTree + ?Sized, B: BodyTree + ?Sized> Search<'t, A, B> {
 
     /// Records a terminal node pair of this search (see [`Cut`]).
     fn keep(&mut self, na: usize, nb: usize, lower: Real, axis: Vector3) {
-        let box_b = self
-            .b
-            .body(nb)
-            .bounding_box()
-            .map_or((Vector3::zeros(), Vector3::repeat(Real::INFINITY)), |(c, h)| (c.coords, h));
+        let box_b = self.b.node_box(nb).unwrap_or((Vector3::zeros(), Vector3::repeat(Real::INFINITY)));
         let size = 1.0 + box_b.0.abs().sum() + box_b.1.sum();
         self.cut.push(CutPair { a: na as u32, b: nb as u32, lower, axis, support_a: Real::NAN, box_b, size });
     }
@@ -615,6 +609,8 @@ impl<'t, A: BodyTree + ?Sized, B: BodyTree + ?Sized> Search<'t, A, B> {
     fn run(&mut self) -> Real {
         self.seed();
         if !self.resume() {
+            // A search from the roots queues a few dozen pairs (52 on chair_101 × human_10).
+            self.heap.reserve(64);
             self.consider(self.a.root(), self.b.root(), 0.0);
         }
         while let Some(e) = self.heap.pop() {
@@ -746,8 +742,8 @@ impl<'t, A: BodyTree + ?Sized, B: BodyTree + ?Sized> Search<'t, A, B> {
                 self.revisit(CutPair { lower: bound, ..*p }, threshold);
             }
         }
-        if let Some((c, h)) = self.b.body(self.b.root()).bounding_box() {
-            self.step = self.cheap.displacement(&cut.pose, c.coords.norm() + h.norm());
+        if let Some((c, h)) = self.b.node_box(self.b.root()) {
+            self.step = self.cheap.displacement(&cut.pose, c.norm() + h.norm());
         }
         if let Some(far) = cut.far.as_ref() {
             // The group's pairs in increasing order of bound: release those whose bound less the
