@@ -52,6 +52,13 @@ pub(super) fn face_coordinates(v: &Vector3) -> (usize, Real, Real) {
     }
 }
 
+/// The (unnormalized) direction of node `k = j·(grid + 1) + i` of a cube map with `grid` cells per
+/// face side, on `face`: face coordinates a = −1 + 2i/grid, b = −1 + 2j/grid ([`face_direction`]).
+pub(super) fn node_direction(face: usize, k: usize, grid: usize) -> Vector3 {
+    let (i, j) = (k % (grid + 1), k / (grid + 1));
+    face_direction(face, -1.0 + 2.0 * i as Real / grid as Real, -1.0 + 2.0 * j as Real / grid as Real)
+}
+
 /// The (unnormalized) direction of face coordinates (a, b) on `face`; inverse of
 /// [`face_coordinates`] up to a positive factor.
 pub(super) fn face_direction(face: usize, a: Real, b: Real) -> Vector3 {
@@ -69,13 +76,9 @@ impl RadialTable {
     pub fn new(p: &FastPoly, center: &Vector3) -> Self {
         let mut radius = Box::new([[0.0; NODES * NODES]; 6]);
         for (face, nodes) in radius.iter_mut().enumerate() {
-            for j in 0..NODES {
-                for i in 0..NODES {
-                    let a = -1.0 + 2.0 * i as Real / RADIAL_GRID as Real;
-                    let b = -1.0 + 2.0 * j as Real / RADIAL_GRID as Real;
-                    let dir = face_direction(face, a, b).normalize();
-                    nodes[j * NODES + i] = ray_radius(p, center, &dir);
-                }
+            for (k, r) in nodes.iter_mut().enumerate() {
+                let dir = node_direction(face, k, RADIAL_GRID).normalize();
+                *r = ray_radius(p, center, &dir);
             }
         }
         Self { radius }

@@ -21,7 +21,7 @@
 //! to |p − 1| ≤ 10⁻¹⁰), and [`SupportTable::support`] interpolates bilinearly between the four
 //! nodes around the direction. The interpolated point is a start for Newton, not an answer.
 
-use super::radial::{face_coordinates, face_direction};
+use super::radial::{face_coordinates, node_direction};
 use super::{FastPoly, RadialTable};
 use crate::math::{Real, Vector3};
 
@@ -49,27 +49,18 @@ impl SupportTable {
     pub fn new(p: &FastPoly, radial: &RadialTable, center: &Vector3) -> Self {
         let mut candidates = Vec::with_capacity(6 * (CANDIDATE_GRID + 1) * (CANDIDATE_GRID + 1));
         for face in 0..6 {
-            for j in 0..=CANDIDATE_GRID {
-                for i in 0..=CANDIDATE_GRID {
-                    let a = -1.0 + 2.0 * i as Real / CANDIDATE_GRID as Real;
-                    let b = -1.0 + 2.0 * j as Real / CANDIDATE_GRID as Real;
-                    let dir = face_direction(face, a, b).normalize();
-                    candidates.push(center + dir * radial.radius(&dir));
-                }
+            for k in 0..(CANDIDATE_GRID + 1) * (CANDIDATE_GRID + 1) {
+                let dir = node_direction(face, k, CANDIDATE_GRID).normalize();
+                candidates.push(center + dir * radial.radius(&dir));
             }
         }
         let mut points = Box::new([[[0.0; 3]; NODES * NODES]; 6]);
         for (face, nodes) in points.iter_mut().enumerate() {
-            for j in 0..NODES {
-                for i in 0..NODES {
-                    let a = -1.0 + 2.0 * i as Real / SUPPORT_GRID as Real;
-                    let b = -1.0 + 2.0 * j as Real / SUPPORT_GRID as Real;
-                    let m = face_direction(face, a, b).normalize();
-                    let best =
-                        candidates.iter().copied().max_by(|u, v| m.dot(u).total_cmp(&m.dot(v))).unwrap_or(*center);
-                    let u = polish(p, &m, best).unwrap_or(best);
-                    nodes[j * NODES + i] = [u.x, u.y, u.z];
-                }
+            for (k, node) in nodes.iter_mut().enumerate() {
+                let m = node_direction(face, k, SUPPORT_GRID).normalize();
+                let best = candidates.iter().copied().max_by(|u, v| m.dot(u).total_cmp(&m.dot(v))).unwrap_or(*center);
+                let u = polish(p, &m, best).unwrap_or(best);
+                *node = [u.x, u.y, u.z];
             }
         }
         Self { points }
@@ -141,26 +132,21 @@ impl SupportBound {
         let pad = 1e-9 * (hi - lo).norm();
         let mut h = Box::new([[0.0; NODES * NODES]; 6]);
         for (face, nodes) in h.iter_mut().enumerate() {
-            for j in 0..NODES {
-                for i in 0..NODES {
-                    let a = -1.0 + 2.0 * i as Real / SUPPORT_GRID as Real;
-                    let b = -1.0 + 2.0 * j as Real / SUPPORT_GRID as Real;
-                    let v = face_direction(face, a, b);
-                    let k = j * NODES + i;
-                    let s = Vector3::from(table.points[face][k]);
-                    let (ps, g) = p.value_gradient(&s);
-                    let mut bound = h_box(&v);
-                    let gg = g.norm_squared();
-                    let lam = v.dot(&g) / gg;
-                    if ps.is_finite() && gg.is_finite() && gg > 0.0 && lam.is_finite() && lam > 0.0 {
-                        let c = g.dot(&s) + 1.0 - ps;
-                        let dual = lam * c + h_box(&(v - g * lam));
-                        if dual.is_finite() {
-                            bound = bound.min(dual);
-                        }
+            for (k, node) in nodes.iter_mut().enumerate() {
+                let v = node_direction(face, k, SUPPORT_GRID);
+                let s = Vector3::from(table.points[face][k]);
+                let (ps, g) = p.value_gradient(&s);
+                let mut bound = h_box(&v);
+                let gg = g.norm_squared();
+                let lam = v.dot(&g) / gg;
+                if ps.is_finite() && gg.is_finite() && gg > 0.0 && lam.is_finite() && lam > 0.0 {
+                    let c = g.dot(&s) + 1.0 - ps;
+                    let dual = lam * c + h_box(&(v - g * lam));
+                    if dual.is_finite() {
+                        bound = bound.min(dual);
                     }
-                    nodes[k] = bound + pad * v.norm();
                 }
+                *node = bound + pad * v.norm();
             }
         }
         Self { h }
@@ -173,10 +159,7 @@ impl SupportBound {
         let mut h = self.h.clone();
         for (face, nodes) in h.iter_mut().enumerate() {
             for (k, value) in nodes.iter_mut().enumerate() {
-                let (i, j) = (k % NODES, k / NODES);
-                let a = -1.0 + 2.0 * i as Real / SUPPORT_GRID as Real;
-                let b = -1.0 + 2.0 * j as Real / SUPPORT_GRID as Real;
-                let v = face_direction(face, a, b);
+                let v = node_direction(face, k, SUPPORT_GRID);
                 let (offset, spread) = (v.dot(center), scale * *value);
                 *value = offset + spread + 1e-12 * (offset.abs() + spread.abs());
             }
@@ -278,6 +261,7 @@ fn polish(p: &FastPoly, m: &Vector3, start: Vector3) -> Option<Vector3> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::poly::radial::face_direction;
     use crate::poly::Polynomial;
     use rand::{Rng, SeedableRng};
 

@@ -296,7 +296,7 @@ pub(crate) struct CheapBounds {
 
 /// Relative slack of the cheap bounds (meters per meter of center distance): rounding of the box
 /// projections never makes a bound exceed the true gap.
-const CHEAP_SLACK: Real = 1e-12;
+pub(crate) const CHEAP_SLACK: Real = 1e-12;
 
 /// A cut pair goes to the far group of the next warm start ([`FarPairs`]) when its bound exceeds
 /// the threshold by more than this many times the last step's motion; the group then releases its
@@ -417,9 +417,7 @@ impl CheapBounds {
     /// the relative pose `from` to this query's: `‖t − t₀‖ + ‖R − R₀‖₂·reach`, rounding included
     /// ([`FarPairs`]).
     fn displacement(&self, from: &Isometry3, reach: Real) -> Real {
-        let k = (2.0 * (self.rel.rotation * from.rotation.inverse()).imag().norm()).min(2.0);
-        let m = (self.shift - from.translation.vector).norm() + k * reach;
-        m * (1.0 + 1e-12) + CHEAP_SLACK * (1.0 + reach + self.shift.norm())
+        super::warm::displacement(from, &self.rel, reach)
     }
 
     /// The motion of B from the relative pose `from` to this query's, in A's frame: `(R − R₀, t − t₀)`
@@ -510,8 +508,6 @@ struct Search<'t, A: ?Sized, B: ?Sized> {
     far: Option<std::sync::Arc<FarPairs>>,
     /// First pair of `far` still in the group (the ones before were released to the search).
     far_start: usize,
-    /// The far group's bound at this query's pose (+∞ without one).
-    far_bound: Real,
     /// How far B's root box moved since the previous cut's pose (meters; NaN without a cut): the
     /// step of the motion, which sets the far group's margin ([`FAR_STEPS`]).
     step: Real,
@@ -563,7 +559,6 @@ impl<'t, A: BodyTree + ?Sized, B: BodyTree + ?Sized> Search<'t, A, B> {
             base_lower: Vec::new(),
             far: None,
             far_start: 0,
-            far_bound: Real::INFINITY,
             step: Real::NAN,
             pruned_min: Real::INFINITY,
             unresolved_min: Real::INFINITY,
@@ -770,7 +765,6 @@ impl<'t, A: BodyTree + ?Sized, B: BodyTree + ?Sized> Search<'t, A, B> {
                 self.pruned_min = self.pruned_min.min(bound);
                 self.far = Some(far.clone());
                 self.far_start = start;
-                self.far_bound = bound;
             }
         }
         true
@@ -958,7 +952,6 @@ impl<'t, A: BodyTree + ?Sized, B: BodyTree + ?Sized> Search<'t, A, B> {
             nodes: (self.a.node_count(), self.b.node_count()),
             far: self.far.take(),
             far_start: self.far_start,
-            far_bound: self.far_bound,
         });
         fresh
     }
@@ -1003,7 +996,6 @@ impl<'t, A: BodyTree + ?Sized, B: BodyTree + ?Sized> Search<'t, A, B> {
         far.sort_unstable_by(|x, y| x.lower.total_cmp(&y.lower));
         let lower = near.iter().map(|p| p.lower).collect();
         let rel = self.cheap.rel;
-        let far_bound = far[0].lower;
         Some(Cut {
             base: std::sync::Arc::new(near),
             lower,
@@ -1012,7 +1004,6 @@ impl<'t, A: BodyTree + ?Sized, B: BodyTree + ?Sized> Search<'t, A, B> {
             nodes: (self.a.node_count(), self.b.node_count()),
             far: Some(std::sync::Arc::new(FarPairs { pairs: far, pose: rel, reach })),
             far_start: 0,
-            far_bound,
         })
     }
 

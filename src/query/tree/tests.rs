@@ -114,6 +114,27 @@ fn random_pose(rng: &mut impl Rng, spread: Real) -> Isometry3 {
     )
 }
 
+/// Poses of two sphere trees ([`sphere_tree`]): A near the origin, B `x` ∈ `along` meters along
+/// the x axis and near it, both turned at random.
+fn separated_poses(rng: &mut impl Rng, along: std::ops::Range<Real>) -> (Isometry3, Isometry3) {
+    let pa = random_pose(rng, 0.5);
+    let pb = Isometry3::from_parts(
+        (Vector3::new(rng.random_range(along), 0.0, 0.0) + random_pose(rng, 0.5).translation.vector).into(),
+        random_rotation(rng),
+    );
+    (pa, pb)
+}
+
+/// Closed form of the distance of two posed sphere trees: max(0, |c_a − c_b| − r_a − r_b),
+/// minimized over all leaf pairs.
+fn sphere_distance(sa: &[(Vector3, Real)], pa: &Isometry3, sb: &[(Vector3, Real)], pb: &Isometry3) -> Real {
+    sa.iter()
+        .flat_map(|(ca, ra)| sb.iter().map(move |(cb, rb)| (*ca, *ra, *cb, *rb)))
+        .map(|(ca, ra, cb, rb)| ((pa * Point3::from(ca)) - (pb * Point3::from(cb))).norm() - ra - rb)
+        .fold(Real::INFINITY, Real::min)
+        .max(0.0)
+}
+
 /// Brute force: (min distance over all leaf pairs, its pair, every leaf pair's distance).
 fn brute_force(a: &TestTree, pa: &Isometry3, b: &TestTree, pb: &Isometry3) -> (Real, Vec<Real>) {
     let mut all = vec![];
@@ -133,18 +154,8 @@ fn sphere_trees_match_the_closed_form() {
     let (ta, sa) = sphere_tree(10);
     let (tb, sb) = sphere_tree(20);
     for _ in 0..40 {
-        let pa = random_pose(&mut rng, 0.5);
-        let pb = Isometry3::from_parts(
-            (Vector3::new(rng.random_range(1.0..4.0), 0.0, 0.0) + random_pose(&mut rng, 0.5).translation.vector).into(),
-            random_rotation(&mut rng),
-        );
-        // Closed form: max(0, |c_a − c_b| − r_a − r_b), minimized over the 81 leaf pairs.
-        let exact = sa
-            .iter()
-            .flat_map(|(ca, ra)| sb.iter().map(move |(cb, rb)| (*ca, *ra, *cb, *rb)))
-            .map(|(ca, ra, cb, rb)| ((pa * Point3::from(ca)) - (pb * Point3::from(cb))).norm() - ra - rb)
-            .fold(Real::INFINITY, Real::min)
-            .max(0.0);
+        let (pa, pb) = separated_poses(&mut rng, 1.0..4.0);
+        let exact = sphere_distance(&sa, &pa, &sb, &pb);
         let r = tree_distance(&ta, &pa, &tb, &pb, None, &TreeQueryParams::default()).unwrap();
         assert!(r.converged && r.within_tolerance, "{r:?}");
         assert!((r.lower - exact).abs() < 1e-7 && (r.upper - exact).abs() < 1e-7, "{} {} vs {exact}", r.lower, r.upper);
@@ -669,17 +680,8 @@ fn warm_starts_from_unrelated_poses_stay_exact() {
     let (tb, sb) = sphere_tree(90);
     let mut warm: Option<TreeWarmStart> = None;
     for case in 0..60 {
-        let pa = random_pose(&mut rng, 0.5);
-        let pb = Isometry3::from_parts(
-            (Vector3::new(rng.random_range(0.5..3.5), 0.0, 0.0) + random_pose(&mut rng, 0.5).translation.vector).into(),
-            random_rotation(&mut rng),
-        );
-        let exact = sa
-            .iter()
-            .flat_map(|(ca, ra)| sb.iter().map(move |(cb, rb)| (*ca, *ra, *cb, *rb)))
-            .map(|(ca, ra, cb, rb)| ((pa * Point3::from(ca)) - (pb * Point3::from(cb))).norm() - ra - rb)
-            .fold(Real::INFINITY, Real::min)
-            .max(0.0);
+        let (pa, pb) = separated_poses(&mut rng, 0.5..3.5);
+        let exact = sphere_distance(&sa, &pa, &sb, &pb);
         for tol in [0.0, 0.05] {
             let params = TreeQueryParams { tolerance: tol, ..Default::default() };
             let r = tree_distance(&ta, &pa, &tb, &pb, warm.as_ref(), &params).unwrap();

@@ -61,10 +61,6 @@ pub(crate) struct Cut {
     pub(crate) far: Option<Arc<FarPairs>>,
     /// First pair of `far` still in the group (the ones before are among the near pairs).
     pub(crate) far_start: usize,
-    /// A lower bound of every far pair's leaf distances at `pose` (meters): the group's bound
-    /// less the motion since its pose; +∞ without far pairs. (Read by the tests' cut checks.)
-    #[cfg_attr(not(test), allow(dead_code))]
-    pub(crate) far_bound: Real,
 }
 
 /// The pairs of a [`Cut`] whose bounds were far above the query's threshold when it was built,
@@ -85,6 +81,16 @@ pub(crate) struct FarPairs {
     pub(crate) reach: Real,
 }
 
+/// How far any point of B within `reach` meters of B's origin moves (A's frame, meters) when B's
+/// relative pose goes from `from` to `to`: `‖t − t₀‖ + ‖R − R₀‖₂·reach`, with ‖R − R₀‖₂ = 2 sin(θ/2)
+/// (twice the norm of the imaginary part of R R₀⁻¹), rounding included ([`FarPairs`]).
+pub(crate) fn displacement(from: &Isometry3, to: &Isometry3, reach: Real) -> Real {
+    let k = (2.0 * (to.rotation * from.rotation.inverse()).imag().norm()).min(2.0);
+    let shift = to.translation.vector;
+    let m = (shift - from.translation.vector).norm() + k * reach;
+    m * (1.0 + 1e-12) + super::search::CHEAP_SLACK * (1.0 + reach + shift.norm())
+}
+
 impl Cut {
     /// Number of pairs in the cut.
     pub(crate) fn len(&self) -> usize {
@@ -98,10 +104,10 @@ impl Cut {
     pub(crate) fn pairs(&self) -> impl Iterator<Item = CutPair> + '_ {
         let base =
             self.base.iter().zip(&self.lower).filter(|(_, l)| !l.is_nan()).map(|(p, &l)| CutPair { lower: l, ..*p });
-        let far = self
-            .far
-            .iter()
-            .flat_map(|f| f.pairs[self.far_start..].iter().map(|p| CutPair { lower: self.far_bound, ..*p }));
+        let far = self.far.iter().flat_map(|f| {
+            let moved = displacement(&f.pose, &self.pose, f.reach);
+            f.pairs[self.far_start..].iter().map(move |p| CutPair { lower: p.lower - moved, ..*p })
+        });
         base.chain(self.extra.iter().copied()).chain(far)
     }
 }
