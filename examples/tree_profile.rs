@@ -5,7 +5,7 @@
 //!
 //! ```text
 //! cargo build --release --example tree_profile
-//! target/release/examples/tree_profile [repeats=20] [tolerance=0] [poses=100] [motion=200]
+//! target/release/examples/tree_profile [repeats=20] [tolerance=0] [poses=100] [motion=200] [cold|warm|both]
 //! valgrind --tool=callgrind target/release/examples/tree_profile 1 0 30 30
 //! ```
 
@@ -35,6 +35,7 @@ fn main() -> sublevel::Result<()> {
     let tolerance: Real = arg(2, "0").parse().unwrap_or(0.0);
     let n_poses: usize = arg(3, "100").parse().unwrap_or(100);
     let n_motion: usize = arg(4, "200").parse().unwrap_or(200);
+    let which = arg(5, "both");
     let dir = std::path::Path::new("data/compound");
     let chair = CompoundBody::load(&dir.join("chair_101.json"))?;
     let human = CompoundBody::load(&dir.join("human_10.json"))?;
@@ -64,7 +65,7 @@ fn main() -> sublevel::Result<()> {
 
     let (mut cold, mut pairs, mut leaves, mut pruned) = (vec![], vec![], vec![], vec![]);
     let mut overlapping = 0;
-    for p in &poses {
+    for p in poses.iter().filter(|_| which != "warm") {
         let start = Instant::now();
         let mut r = tree_distance(&chair, p, &human, &id, None, &params)?;
         for _ in 1..repeats {
@@ -87,7 +88,7 @@ fn main() -> sublevel::Result<()> {
 
     let (mut warm, mut pairs, mut leaves, mut pruned) = (vec![], vec![], vec![], vec![]);
     let mut state: Option<TreeWarmStart> = None;
-    for (k, p) in motion.iter().enumerate() {
+    for (k, p) in motion.iter().enumerate().filter(|_| which != "cold") {
         let start = Instant::now();
         let mut r = tree_distance(&chair, p, &human, &id, state.as_ref(), &params)?;
         for _ in 1..repeats {

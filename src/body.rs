@@ -321,8 +321,15 @@ impl Body {
         let fast = FastPoly::new(&polynomial);
         let radial = RadialTable::new(&fast, &interior_u);
         let support = SupportTable::new(&fast, &radial, &interior_u);
-        let bounding_box_u =
-            if report.nonconvex { None } else { crate::fit::volume::bounding_box(&polynomial, &interior_u).ok() };
+        // The box's six support points from the support table (exact nodes on the axes): loading
+        // a body no longer solves them again (a 127-node compound body loaded in 4.7 s, 70 % of
+        // it here).
+        let bounding_box_u = if report.nonconvex {
+            None
+        } else {
+            let table = |e: &Vector3| support.support(e).ok_or_else(|| Error::Numerical("no support point".into()));
+            crate::fit::volume::bounding_box_from_support(&polynomial, table).ok()
+        };
         let support_bound = bounding_box_u.map(|(lo, hi)| SupportBound::new(&fast, &support, &lo, &hi));
         Ok(Self {
             polynomial,

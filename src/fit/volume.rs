@@ -129,13 +129,26 @@ fn support_point(p: &Polynomial, e: &Vector3, u0: &Vector3) -> Result<Vector3> {
 /// [`Error::Numerical`] when a support point cannot be found or the halfspaces do not form a
 /// cube-like polytope (p not convex / not coercive).
 pub fn bounding_box(p: &Polynomial, interior: &Vector3) -> Result<(Vector3, Vector3)> {
+    bounding_box_from_support(p, |e| support_point(p, e, interior))
+}
+
+/// [`bounding_box`] from the points `support(e)` near the support points of `{p ≤ 1}` along the
+/// six axis directions e = ±eₖ (e.g. a body's tabulated support map, [`crate::poly::SupportTable`],
+/// whose cube map has a node on every axis): the box contains the body whatever their accuracy.
+///
+/// # Errors
+/// As [`bounding_box`], and any error of `support`.
+pub fn bounding_box_from_support(
+    p: &Polynomial,
+    mut support: impl FnMut(&Vector3) -> Result<Vector3>,
+) -> Result<(Vector3, Vector3)> {
     // planes[k][s]: normal and offset for direction (−1)^s eₖ.
     let mut planes = [[(Vector3::zeros(), 0.0); 2]; 3];
     for (k, pair) in planes.iter_mut().enumerate() {
         for (s, plane) in pair.iter_mut().enumerate() {
             let mut e = Vector3::zeros();
             e[k] = if s == 0 { 1.0 } else { -1.0 };
-            let v = support_point(p, &e, interior)?;
+            let v = support(&e)?;
             let (pv, n) = p.value_gradient(&v);
             let along = n.dot(&e);
             if along.is_nan() || along <= 0.9 * n.norm() {
