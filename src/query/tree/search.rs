@@ -457,8 +457,8 @@ impl Motion {
     /// without an axis, by the length (written out: this runs for every kept pair of every warm
     /// query).
     #[inline(always)]
-    fn moved(&self, p: &CutPair, lower: Real, box_b: &(Vector3, Vector3)) -> Real {
-        let (c, h, n) = (&box_b.0, &box_b.1, &p.axis);
+    fn moved(&self, p: &CutPair, lower: Real) -> Real {
+        let (c, h, n) = (&p.box_b.0, &p.box_b.1, &p.axis);
         let along = if n.x == 0.0 && n.y == 0.0 && n.z == 0.0 {
             -(self.turn * c + self.shift).norm() - self.k * h.norm()
         } else {
@@ -466,16 +466,8 @@ impl Motion {
             w[0] * c.x + w[1] * c.y + w[2] * c.z + n.dot(&self.shift)
                 - (h.x * w[0].abs() + h.y * w[1].abs() + h.z * w[2].abs())
         };
-        let size = 1.0 + c.x.abs() + c.y.abs() + c.z.abs() + h.x + h.y + h.z;
-        lower + along - self.slack * (size + lower.abs())
+        lower + along - self.slack * (p.size + lower.abs())
     }
-}
-
-/// B's node box (center, half extents; B's frame, meters) as the motion bounds read it: half
-/// extents +∞ for a node without one (its moved bounds are then NaN: never kept by motion).
-#[inline(always)]
-fn box_or_unbounded<B: BodyTree + ?Sized>(b: &B, nb: u32) -> (Vector3, Vector3) {
-    b.node_box(nb as usize).unwrap_or((Vector3::zeros(), Vector3::repeat(Real::INFINITY)))
 }
 
 /// Which node of a pair to split: the non-leaf one, else the one with the larger bounding sphere.
@@ -596,7 +588,9 @@ impl<'t, A: BodyTree + ?Sized, B: BodyTree + ?Sized> Search<'t, A, B> {
 
     /// Records a terminal node pair of this search (see [`Cut`]).
     fn keep(&mut self, na: usize, nb: usize, lower: Real, axis: Vector3) {
-        self.cut.push(CutPair { a: na as u32, b: nb as u32, lower, axis, support_a: Real::NAN });
+        let box_b = self.b.node_box(nb).unwrap_or((Vector3::zeros(), Vector3::repeat(Real::INFINITY)));
+        let size = 1.0 + box_b.0.abs().sum() + box_b.1.sum();
+        self.cut.push(CutPair { a: na as u32, b: nb as u32, lower, axis, support_a: Real::NAN, box_b, size });
     }
 
     /// Runs the search; returns the lower bound of the pairs left in the queue (+∞ when empty).
@@ -721,7 +715,7 @@ impl<'t, A: BodyTree + ?Sized, B: BodyTree + ?Sized> Search<'t, A, B> {
                 self.base_lower.push(Real::NAN);
                 continue;
             }
-            let bound = motion.moved(p, lower, &box_or_unbounded(self.b, p.b));
+            let bound = motion.moved(p, lower);
             if bound >= threshold || decided {
                 self.base_lower.push(bound);
                 self.sphere_pruned += 1;
@@ -736,7 +730,7 @@ impl<'t, A: BodyTree + ?Sized, B: BodyTree + ?Sized> Search<'t, A, B> {
             if !valid(p) {
                 continue;
             }
-            let bound = motion.moved(p, p.lower, &box_or_unbounded(self.b, p.b));
+            let bound = motion.moved(p, p.lower);
             if bound >= threshold || decided {
                 self.carry(CutPair { lower: bound, ..*p });
             } else {
@@ -758,8 +752,7 @@ impl<'t, A: BodyTree + ?Sized, B: BodyTree + ?Sized> Search<'t, A, B> {
                 if !valid(&p) {
                     continue;
                 }
-                let motion = motion.get_or_insert_with(|| Motion::new(&self.cheap, &far.pose));
-                let bound = motion.moved(&p, p.lower, &box_or_unbounded(self.b, p.b));
+                let bound = motion.get_or_insert_with(|| Motion::new(&self.cheap, &far.pose)).moved(&p, p.lower);
                 if bound >= threshold {
                     self.carry(CutPair { lower: bound, ..p });
                 } else {
@@ -975,19 +968,17 @@ impl<'t, A: BodyTree + ?Sized, B: BodyTree + ?Sized> Search<'t, A, B> {
         if !(threshold.is_finite() && margin.is_finite()) {
             return None;
         }
-        let b = self.b;
         let is_far = |p: &CutPair| {
             p.lower - threshold > margin
-                && b.node_box(p.b as usize).is_some_and(|(_, h)| h.iter().all(|h| h.is_finite()))
+                && p.box_b.1.iter().all(|h| h.is_finite())
                 && active != Some((p.a as usize, p.b as usize))
         };
         let old_far = self.far.as_ref().map(|f| (&f.pairs[self.far_start..], Motion::new(&self.cheap, &f.pose)));
         let kept = self.base.iter().flat_map(|b| b.iter().zip(&self.base_lower)).filter(|(_, l)| !l.is_nan());
-        let pairs = kept.map(|(p, &l)| CutPair { lower: l, ..*p }).chain(self.cut.iter().copied()).chain(
-            old_far.iter().flat_map(|(f, m)| {
-                f.iter().map(|p| CutPair { lower: m.moved(p, p.lower, &box_or_unbounded(b, p.b)), ..*p })
-            }),
-        );
+        let pairs = kept
+            .map(|(p, &l)| CutPair { lower: l, ..*p })
+            .chain(self.cut.iter().copied())
+            .chain(old_far.iter().flat_map(|(f, m)| f.iter().map(|p| CutPair { lower: m.moved(p, p.lower), ..*p })));
         let count = pairs.clone().filter(is_far).count();
         if count < MIN_FAR_PAIRS {
             return None;
@@ -996,8 +987,7 @@ impl<'t, A: BodyTree + ?Sized, B: BodyTree + ?Sized> Search<'t, A, B> {
         let mut reach: Real = 0.0;
         for p in pairs {
             if is_far(&p) {
-                let (c, h) = box_or_unbounded(b, p.b);
-                reach = reach.max(c.norm() + h.norm());
+                reach = reach.max(p.box_b.0.norm() + p.box_b.1.norm());
                 far.push(p);
             } else {
                 near.push(p);

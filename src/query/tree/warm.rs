@@ -112,8 +112,7 @@ impl Cut {
     }
 }
 
-/// One node pair of a [`Cut`] (48 bytes: the cut is copied when a query folds or regroups it, so
-/// B's node box is read from the tree, [`super::BodyTree::node_box`], not kept here).
+/// One node pair of a [`Cut`].
 ///
 /// After a relative motion of B from the cut's pose (R₀, t₀) to (R, t) in A's frame, every point
 /// `c + w` of B's node (its bounding box: center c, half extents h, B's frame) moved by
@@ -144,6 +143,14 @@ pub(crate) struct CutPair {
     /// fixed in its own frame, so re-evaluating the gap along the same axis needs only B's
     /// support bound.
     pub(crate) support_a: Real,
+    /// Bounding box of B's node (center and half extents, B's frame, meters); half extents +∞
+    /// without one. Kept here rather than read from the tree: the motion bound of every kept pair
+    /// reads it on every warm query, and the copy was measured faster than the look-up (warm
+    /// 2.03–2.05 against 2.12–2.14 µs median with `tree_profile`, though the pair is 104 bytes
+    /// instead of 48 when a query folds or regroups the cut).
+    pub(crate) box_b: (Vector3, Vector3),
+    /// `1 + ‖c‖₁ + Σ hₖ` (meters): the scale of the rounding slack of the motion bound.
+    pub(crate) size: Real,
 }
 
 impl TreeWarmStart {
