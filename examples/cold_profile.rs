@@ -8,6 +8,11 @@
 //! target/release/examples/cold_profile 6 [repeats=200] [distance|growth|both]
 //! perf record -g target/release/examples/cold_profile 6 400 distance && perf report
 //! ```
+//!
+//! A fifth argument `save=PATH` writes every pose's distance and growth value (one line per pose);
+//! `check=PATH` compares them with such a file and fails unless every answer is within 10⁻⁹
+//! relative (of max(|old|, 1 mm) for distances, of max(|old|, 1) for growth values): a change to
+//! the solvers' starts or steps must not change the answers.
 
 use rand::{Rng, SeedableRng};
 use std::time::Instant;
@@ -20,6 +25,7 @@ fn main() -> sublevel::Result<()> {
     let degree: usize = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(6);
     let repeats: usize = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(200);
     let which = args.get(3).map(String::as_str).unwrap_or("both");
+    let answers = args.get(4).map(String::as_str).unwrap_or("");
     let dir = std::path::Path::new("tests/data");
     let chair = Body::load(&dir.join(format!("chair_101.deg{degree}.json")))?;
     let human = Body::load(&dir.join(format!("human_10.deg{degree}.json")))?;
@@ -41,6 +47,8 @@ fn main() -> sublevel::Result<()> {
     let (mut sep, mut ovl, mut it_sep, mut it_ovl, mut conv) = (0usize, 0usize, 0usize, 0usize, 0usize);
     let mut hist = [0usize; 12];
     let (mut td, mut tg) = (Vec::new(), Vec::new());
+    // (distance, growth value) per pose; NaN where not run.
+    let mut values: Vec<(Real, Real)> = Vec::with_capacity(poses.len());
     for p in &poses {
         if which != "growth" {
             let t = Instant::now();
@@ -59,13 +67,20 @@ fn main() -> sublevel::Result<()> {
                 it_sep += d.iterations;
             }
         }
+        let mut value = (Real::NAN, Real::NAN);
+        if which != "growth" {
+            value.0 = distance(&chair, p, &human, &id, None, &params).distance;
+        }
         if which != "distance" {
             let t = Instant::now();
-            for _ in 0..repeats {
-                std::hint::black_box(growth(&chair, p, &human, &id, None, &params));
+            let mut g = growth(&chair, p, &human, &id, None, &params);
+            for _ in 1..repeats {
+                g = std::hint::black_box(growth(&chair, p, &human, &id, None, &params));
             }
             tg.push(t.elapsed().as_secs_f64() * 1e6 / repeats as Real);
+            value.1 = g.value;
         }
+        values.push(value);
     }
     let median = |mut v: Vec<Real>| {
         v.sort_by(|a, b| a.total_cmp(b));
@@ -78,5 +93,25 @@ fn main() -> sublevel::Result<()> {
         it_ovl as Real / ovl.max(1) as Real
     );
     println!("iterations histogram (0..=10, 11+): {hist:?}");
+    if let Some(path) = answers.strip_prefix("save=") {
+        let text: String = values.iter().map(|(d, g)| format!("{d:.17e} {g:.17e}\n")).collect();
+        std::fs::write(path, text)?;
+    } else if let Some(path) = answers.strip_prefix("check=") {
+        let text = std::fs::read_to_string(path)?;
+        let mut worst: Real = 0.0;
+        let mut compared = 0usize;
+        for (line, (d, g)) in text.lines().zip(&values) {
+            let old: Vec<Real> = line.split_whitespace().filter_map(|v| v.parse().ok()).collect();
+            let [d0, g0] = old[..] else { continue };
+            for (new, old, floor) in [(*d, d0, 1e-3), (*g, g0, 1.0)] {
+                if new.is_finite() && old.is_finite() {
+                    worst = worst.max((new - old).abs() / old.abs().max(floor));
+                    compared += 1;
+                }
+            }
+        }
+        println!("answers: {compared} compared with {path}, largest relative difference {worst:.2e}");
+        assert!(worst <= 1e-9 && compared > 0, "answers changed");
+    }
     Ok(())
 }
