@@ -96,6 +96,21 @@ pub fn pose_to_parts(pose: &Isometry3) -> ([Real; 4], [Real; 3]) {
     ([q.w, q.i, q.j, q.k], [t.x, t.y, t.z])
 }
 
+/// Whether this CPU runs code compiled for AVX2 and FMA (x86-64-v3): the query solvers and the
+/// polynomial kernels keep a copy compiled for them and pick it at run time (the check is a
+/// cached flag after the first call). Always false off x86-64.
+#[inline(always)]
+pub fn cpu_has_avx2_fma() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -294,6 +294,7 @@ fn support_start(
 
 /// Least-squares multipliers of `2(x − y) + λ_a ∇p_a' = 0`, `−2(x − y) + λ_b ∇p_b' = 0` for the
 /// gradients `ga` at x and `gb` at y, clamped positive.
+#[inline(always)]
 fn initial_multipliers(ga: &Vector3, gb: &Vector3, x: &Vector3, y: &Vector3) -> [Real; 2] {
     let d = y - x;
     let la = 2.0 * d.dot(ga) / ga.norm_squared().max(Real::MIN_POSITIVE);
@@ -326,6 +327,7 @@ struct KktPoint {
 }
 
 impl KktPoint {
+    #[inline(always)]
     fn new(fa: &FastPosed<'_>, fb: &FastPosed<'_>, x: &Vector3, y: &Vector3, lam: [Real; 2], hessian: bool) -> Self {
         let ea = fa.eval(x, hessian);
         let eb = fb.eval(y, hessian);
@@ -336,16 +338,19 @@ impl KktPoint {
     }
 
     /// Recomputes the stationarity residuals for the multipliers `lam` (no new evaluation).
+    #[inline(always)]
     fn set_multipliers(&mut self, x: &Vector3, y: &Vector3, lam: [Real; 2]) {
         let d = (x - y) * 2.0;
         self.ra = d + self.ea.gradient * lam[0];
         self.rb = -d + self.eb.gradient * lam[1];
     }
 
+    #[inline(always)]
     fn norm_inf(&self) -> Real {
         abs_max(&self.ra).max(abs_max(&self.rb)).max(self.ca.abs()).max(self.cb.abs())
     }
 
+    #[inline(always)]
     fn norm2(&self) -> Real {
         (self.ra.norm_squared() + self.rb.norm_squared() + self.ca * self.ca + self.cb * self.cb).sqrt()
     }
@@ -353,6 +358,7 @@ impl KktPoint {
 
 /// The Newton step for the Hessians `(ha, hb)` at `pt`: closed-form block elimination, dense LU if
 /// that is singular.
+#[inline(always)]
 fn newton_step(h: &(Matrix3, Matrix3), pt: &KktPoint, lam: [Real; 2]) -> Option<(Vector3, Vector3, [Real; 2])> {
     let two = Matrix3::identity() * 2.0;
     let wa = two + h.0 * lam[0];
@@ -361,11 +367,20 @@ fn newton_step(h: &(Matrix3, Matrix3), pt: &KktPoint, lam: [Real; 2]) -> Option<
     if let Some(step) = solve_kkt8(&wa, &wb, ga, gb, &pt.ra, &pt.rb, pt.ca, pt.cb) {
         return Some(step);
     }
+    newton_step_lu(&wa, &wb, pt)
+}
+
+/// [`newton_step`] by dense LU when the block elimination meets a singular block.
+#[cold]
+#[inline(never)]
+fn newton_step_lu(wa: &Matrix3, wb: &Matrix3, pt: &KktPoint) -> Option<(Vector3, Vector3, [Real; 2])> {
+    let two = Matrix3::identity() * 2.0;
+    let (ga, gb) = (&pt.ea.gradient, &pt.eb.gradient);
     let mut jac = Mat8::zeros();
-    jac.fixed_view_mut::<3, 3>(0, 0).copy_from(&wa);
+    jac.fixed_view_mut::<3, 3>(0, 0).copy_from(wa);
     jac.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-two));
     jac.fixed_view_mut::<3, 3>(3, 0).copy_from(&(-two));
-    jac.fixed_view_mut::<3, 3>(3, 3).copy_from(&wb);
+    jac.fixed_view_mut::<3, 3>(3, 3).copy_from(wb);
     jac.fixed_view_mut::<3, 1>(0, 6).copy_from(ga);
     jac.fixed_view_mut::<3, 1>(3, 7).copy_from(gb);
     jac.fixed_view_mut::<1, 3>(6, 0).copy_from(&ga.transpose());
@@ -381,6 +396,42 @@ fn newton_step(h: &(Matrix3, Matrix3), pt: &KktPoint, lam: [Real; 2]) -> Option<
 /// evaluated once; near the solution (residual below [`CHORD_RESIDUAL`]) trial points skip the
 /// Hessians and a further step reuses the last ones (chord step), refreshed when it stalls.
 fn kkt_newton(
+    ba: &PosedBody<'_>,
+    bb: &PosedBody<'_>,
+    x0: Vector3,
+    y0: Vector3,
+    lam0: Option<[Real; 2]>,
+    params: &NewtonParams,
+    warm: bool,
+) -> KktOut {
+    #[cfg(target_arch = "x86_64")]
+    if crate::math::cpu_has_avx2_fma() {
+        // SAFETY: the CPU supports AVX2 and FMA (checked just above).
+        return unsafe { kkt_newton_avx2(ba, bb, x0, y0, lam0, params, warm) };
+    }
+    kkt_newton_body(ba, bb, x0, y0, lam0, params, warm)
+}
+
+/// [`kkt_newton`] compiled for AVX2 + FMA: the solver's 3 × 3 algebra in three-operand and fused
+/// instructions (callgrind, cold distance at 2d = 6: 18 % fewer instructions per query than the
+/// SSE2 build of the same code).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn kkt_newton_avx2(
+    ba: &PosedBody<'_>,
+    bb: &PosedBody<'_>,
+    x0: Vector3,
+    y0: Vector3,
+    lam0: Option<[Real; 2]>,
+    params: &NewtonParams,
+    warm: bool,
+) -> KktOut {
+    kkt_newton_body(ba, bb, x0, y0, lam0, params, warm)
+}
+
+/// The body of [`kkt_newton`], inlined into each of its builds.
+#[inline(always)]
+fn kkt_newton_body(
     ba: &PosedBody<'_>,
     bb: &PosedBody<'_>,
     x0: Vector3,

@@ -32,6 +32,7 @@ pub(crate) struct PosedEval {
 
 impl<'a> FastPosed<'a> {
     /// The evaluator of a posed body.
+    #[inline(always)]
     pub fn new(pb: &PosedBody<'a>) -> Self {
         let a = *pb.linear();
         let q = pb.pose.rotation.quaternion();
@@ -46,7 +47,7 @@ impl<'a> FastPosed<'a> {
     }
 
     /// u = A x + b.
-    #[inline]
+    #[inline(always)]
     fn normalized(&self, x: &Vector3) -> Vector3 {
         match self.unrotated {
             Some(k) => x * k + self.b,
@@ -55,7 +56,7 @@ impl<'a> FastPosed<'a> {
     }
 
     /// ∇ₓ = Aᵀ∇ᵤ.
-    #[inline]
+    #[inline(always)]
     fn world_gradient(&self, g: &Vector3) -> Vector3 {
         match self.unrotated {
             Some(k) => g * k,
@@ -64,20 +65,20 @@ impl<'a> FastPosed<'a> {
     }
 
     /// p'(x).
-    #[inline]
+    #[inline(always)]
     pub fn value(&self, x: &Vector3) -> Real {
         self.poly.value(&self.normalized(x))
     }
 
     /// p'(x) and ∇p'(x).
-    #[inline]
+    #[inline(always)]
     pub fn value_gradient(&self, x: &Vector3) -> (Real, Vector3) {
         let (v, g) = self.poly.value_gradient(&self.normalized(x));
         (v, self.world_gradient(&g))
     }
 
     /// p'(x), ∇p'(x) and, when `hessian` is set, (deferred) ∇²p'(x), in one pass.
-    #[inline]
+    #[inline(always)]
     pub fn eval(&self, x: &Vector3, hessian: bool) -> PosedEval {
         let u = self.normalized(x);
         if hessian {
@@ -90,18 +91,28 @@ impl<'a> FastPosed<'a> {
     }
 
     /// ∇²p'(x) from an evaluation of [`Self::eval`] at x that included the Hessian.
-    #[inline]
+    #[inline(always)]
     pub fn hessian(&self, e: &PosedEval) -> Option<Matrix3> {
         let h = e.hessian_u?;
         Some(match self.unrotated {
             Some(k) => h * (k * k),
-            None => self.at * h * self.a,
+            None => congruence_sym(&self.a, &h),
         })
     }
 }
 
+/// Aᵀ H A for a symmetric H, computing the six entries of the upper triangle (45 products
+/// instead of the 54 of two general 3 × 3 products).
+#[inline(always)]
+fn congruence_sym(a: &Matrix3, h: &Matrix3) -> Matrix3 {
+    let t = h * a;
+    let e = |i: usize, j: usize| a[(0, i)] * t[(0, j)] + a[(1, i)] * t[(1, j)] + a[(2, i)] * t[(2, j)];
+    let (m00, m01, m02, m11, m12, m22) = (e(0, 0), e(0, 1), e(0, 2), e(1, 1), e(1, 2), e(2, 2));
+    Matrix3::new(m00, m01, m02, m01, m11, m12, m02, m12, m22)
+}
+
 /// max |vᵢ| (plain comparisons; nalgebra's `amax` goes through generic SIMD traits on the hot path).
-#[inline]
+#[inline(always)]
 pub(crate) fn abs_max(v: &Vector3) -> Real {
     v.x.abs().max(v.y.abs()).max(v.z.abs())
 }
@@ -111,36 +122,33 @@ pub(crate) fn abs_max(v: &Vector3) -> Real {
 /// reuses the last Hessians (a chord step), refreshed when that step does not halve the residual.
 pub(crate) const CHORD_RESIDUAL: Real = 1e-3;
 
-/// Inverse of a 3 × 3 matrix by cofactors; `None` when (nearly) singular relative to its entries.
-#[inline]
-pub(crate) fn inverse3(m: &Matrix3) -> Option<Matrix3> {
-    let c00 = m[(1, 1)] * m[(2, 2)] - m[(1, 2)] * m[(2, 1)];
-    let c01 = m[(1, 2)] * m[(2, 0)] - m[(1, 0)] * m[(2, 2)];
-    let c02 = m[(1, 0)] * m[(2, 1)] - m[(1, 1)] * m[(2, 0)];
-    let det = m[(0, 0)] * c00 + m[(0, 1)] * c01 + m[(0, 2)] * c02;
-    let s = m.iter().fold(0.0, |acc: Real, v| acc.max(v.abs()));
+/// Inverse of a symmetric 3 × 3 matrix by cofactors, reading the upper triangle only (six
+/// cofactors instead of nine); `None` when (nearly) singular relative to its entries
+/// (|det| ≤ 10⁻¹⁴ max|mᵢⱼ|³, or non-finite). The KKT blocks `2I + λ∇²p'` and their Schur
+/// complements are symmetric; rounding asymmetry of the world Hessians below is ignored.
+#[inline(always)]
+pub(crate) fn inverse_sym3(m: &Matrix3) -> Option<Matrix3> {
+    let (a, b, c) = (m[(0, 0)], m[(0, 1)], m[(0, 2)]);
+    let (d, e, f) = (m[(1, 1)], m[(1, 2)], m[(2, 2)]);
+    let c00 = d * f - e * e;
+    let c01 = c * e - b * f;
+    let c02 = b * e - c * d;
+    let det = a * c00 + b * c01 + c * c02;
+    let s = a.abs().max(b.abs()).max(c.abs()).max(d.abs()).max(e.abs()).max(f.abs());
     if !(det.is_finite() && det.abs() > 1e-14 * s * s * s && s > 0.0) {
         return None;
     }
-    let inv_det = 1.0 / det;
-    Some(Matrix3::new(
-        c00 * inv_det,
-        (m[(0, 2)] * m[(2, 1)] - m[(0, 1)] * m[(2, 2)]) * inv_det,
-        (m[(0, 1)] * m[(1, 2)] - m[(0, 2)] * m[(1, 1)]) * inv_det,
-        c01 * inv_det,
-        (m[(0, 0)] * m[(2, 2)] - m[(0, 2)] * m[(2, 0)]) * inv_det,
-        (m[(0, 2)] * m[(1, 0)] - m[(0, 0)] * m[(1, 2)]) * inv_det,
-        c02 * inv_det,
-        (m[(0, 1)] * m[(2, 0)] - m[(0, 0)] * m[(2, 1)]) * inv_det,
-        (m[(0, 0)] * m[(1, 1)] - m[(0, 1)] * m[(1, 0)]) * inv_det,
-    ))
+    let k = 1.0 / det;
+    let (i00, i01, i02) = (c00 * k, c01 * k, c02 * k);
+    let (i11, i12, i22) = ((a * f - c * c) * k, (b * c - a * e) * k, (a * d - b * b) * k);
+    Some(Matrix3::new(i00, i01, i02, i01, i11, i12, i02, i12, i22))
 }
 
 /// Solves the growth KKT system `[W g; gᵀ 0] [dx; dμ] = −[r; c]` by eliminating dx
 /// (dμ = (c − gᵀW⁻¹r)/(gᵀW⁻¹g)); `None` when W or the Schur complement is singular.
-#[inline]
+#[inline(always)]
 pub(crate) fn solve_kkt4(w: &Matrix3, g: &Vector3, r: &Vector3, c: Real) -> Option<(Vector3, Real)> {
-    let wi = inverse3(w)?;
+    let wi = inverse_sym3(w)?;
     let wg = wi * g;
     let wr = wi * r;
     let s = g.dot(&wg);
@@ -164,7 +172,7 @@ pub(crate) fn solve_kkt4(w: &Matrix3, g: &Vector3, r: &Vector3, c: Real) -> Opti
 /// by block elimination: the 6 × 6 block M = [[Wa, −2I], [−2I, Wb]] through Wa⁻¹ and the Schur
 /// complement Wb − 4Wa⁻¹, then the 2 × 2 Schur complement GᵀM⁻¹G of the constraints.
 #[allow(clippy::too_many_arguments)]
-#[inline]
+#[inline(always)]
 pub(crate) fn solve_kkt8(
     wa: &Matrix3,
     wb: &Matrix3,
@@ -175,18 +183,18 @@ pub(crate) fn solve_kkt8(
     ca: Real,
     cb: Real,
 ) -> Option<(Vector3, Vector3, [Real; 2])> {
-    let ai = inverse3(wa)?;
-    let si = inverse3(&(wb - ai * 4.0))?;
-    // M⁻¹ [f; g]: q = Si (g + 2 Ai f), p = Ai (f + 2 q).
-    let solve = |f: &Vector3, g: &Vector3| {
-        let q = si * (g + ai * f * 2.0);
-        let p = ai * (f + q * 2.0);
-        (p, q)
-    };
-    let (p0, q0) = solve(ra, rb);
-    let z = Vector3::zeros();
-    let (p1, q1) = solve(ga, &z);
-    let (p2, q2) = solve(&z, gb);
+    let ai = inverse_sym3(wa)?;
+    let si = inverse_sym3(&(wb - ai * 4.0))?;
+    // M⁻¹ [f; g] = [p; q] with q = Si (g + 2 Ai f), p = Ai f + 2 Ai q; the two constraint columns
+    // have a zero half each, so eight 3 × 3 products in all.
+    let t0 = ai * ra;
+    let q0 = si * (rb + t0 * 2.0);
+    let p0 = t0 + ai * q0 * 2.0;
+    let t1 = ai * ga;
+    let q1 = si * t1 * 2.0;
+    let p1 = t1 + ai * q1 * 2.0;
+    let q2 = si * gb;
+    let p2 = ai * q2 * 2.0;
     let (s11, s12, s21, s22) = (ga.dot(&p1), ga.dot(&p2), gb.dot(&q1), gb.dot(&q2));
     let det = s11 * s22 - s12 * s21;
     let scale = (s11.abs() + s12.abs()) * (s21.abs() + s22.abs());
@@ -198,7 +206,8 @@ pub(crate) fn solve_kkt8(
     let l2 = (s11 * h2 - s21 * h1) / det;
     let dx = -(p0 + p1 * l1 + p2 * l2);
     let dy = -(q0 + q1 * l1 + q2 * l2);
-    let ok = dx.iter().chain(dy.iter()).all(|v| v.is_finite()) && l1.is_finite() && l2.is_finite();
+    // One sum carries any NaN or infinity of the eight components.
+    let ok = (dx.sum() + dy.sum() + l1 + l2).is_finite();
     ok.then_some((dx, dy, [l1, l2]))
 }
 
@@ -274,6 +283,11 @@ mod tests {
             assert!((dy - dense.fixed_rows::<3>(3)).amax() < tol);
             assert!((dl[0] - dense[6]).abs() < tol && (dl[1] - dense[7]).abs() < tol);
         }
-        assert!(inverse3(&Matrix3::zeros()).is_none());
+        assert!(inverse_sym3(&Matrix3::zeros()).is_none());
+        for _ in 0..20 {
+            let m = random_spd(&mut rng);
+            let inv = inverse_sym3(&m).unwrap();
+            assert!((inv * m - Matrix3::identity()).amax() < 1e-10 * (1.0 + inv.amax() * m.amax()));
+        }
     }
 }

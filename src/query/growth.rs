@@ -247,6 +247,7 @@ pub(crate) fn solve_growth(
 
 /// Least-squares multiplier of ∇f + μ∇g = 0 for the gradients `gf`, `gg` at one point, clamped
 /// positive.
+#[inline(always)]
 fn initial_multiplier(gf: &Vector3, gg: &Vector3) -> Real {
     let mu = -gf.dot(gg) / gg.norm_squared().max(Real::MIN_POSITIVE);
     if mu.is_finite() && mu > 0.0 {
@@ -310,6 +311,7 @@ struct KktPoint {
 }
 
 impl KktPoint {
+    #[inline(always)]
     fn new(f1: &FastPosed<'_>, f2: &FastPosed<'_>, x: &Vector3, mu: Real, hessian: bool) -> Self {
         let e1 = f1.eval(x, hessian);
         let e2 = f2.eval(x, hessian);
@@ -318,10 +320,12 @@ impl KktPoint {
         Self { e1, e2, r, c }
     }
 
+    #[inline(always)]
     fn norm_inf(&self) -> Real {
         abs_max(&self.r).max(self.c.abs())
     }
 
+    #[inline(always)]
     fn norm2(&self) -> Real {
         (self.r.norm_squared() + self.c * self.c).sqrt()
     }
@@ -329,14 +333,22 @@ impl KktPoint {
 
 /// The Newton step for the Hessians `(h1, h2)` at `pt`: closed-form elimination, dense LU if that is
 /// singular.
+#[inline(always)]
 fn newton_step(h: &(Matrix3, Matrix3), pt: &KktPoint, mu: Real) -> Option<(Vector3, Real)> {
     let w = h.0 + h.1 * mu;
-    let gg = &pt.e2.gradient;
-    if let Some(step) = solve_kkt4(&w, gg, &pt.r, pt.c) {
+    if let Some(step) = solve_kkt4(&w, &pt.e2.gradient, &pt.r, pt.c) {
         return Some(step);
     }
+    newton_step_lu(&w, pt)
+}
+
+/// [`newton_step`] by dense LU when the elimination meets a singular block.
+#[cold]
+#[inline(never)]
+fn newton_step_lu(w: &Matrix3, pt: &KktPoint) -> Option<(Vector3, Real)> {
+    let gg = &pt.e2.gradient;
     let mut k = nalgebra::Matrix4::<Real>::zeros();
-    k.fixed_view_mut::<3, 3>(0, 0).copy_from(&w);
+    k.fixed_view_mut::<3, 3>(0, 0).copy_from(w);
     k.fixed_view_mut::<3, 1>(0, 3).copy_from(gg);
     k.fixed_view_mut::<1, 3>(3, 0).copy_from(&gg.transpose());
     let step = k.lu().solve(&-nalgebra::Vector4::new(pt.r.x, pt.r.y, pt.r.z, pt.c))?;
@@ -349,6 +361,40 @@ fn newton_step(h: &(Matrix3, Matrix3), pt: &KktPoint, mu: Real) -> Option<(Vecto
 /// evaluated once; near the solution (residual below [`CHORD_RESIDUAL`]) trial points skip the
 /// Hessians and a further step reuses the last ones (chord step), refreshed when it stalls.
 fn kkt_newton(
+    b1: &PosedBody<'_>,
+    b2: &PosedBody<'_>,
+    x0: Vector3,
+    mu0: Option<Real>,
+    params: &NewtonParams,
+    warm: bool,
+) -> KktOut {
+    #[cfg(target_arch = "x86_64")]
+    if crate::math::cpu_has_avx2_fma() {
+        // SAFETY: the CPU supports AVX2 and FMA (checked just above).
+        return unsafe { kkt_newton_avx2(b1, b2, x0, mu0, params, warm) };
+    }
+    kkt_newton_body(b1, b2, x0, mu0, params, warm)
+}
+
+/// [`kkt_newton`] compiled for AVX2 + FMA: the solver's 3 × 3 algebra in three-operand and fused
+/// instructions (callgrind, cold distance at 2d = 6: 18 % fewer instructions per query than the
+/// SSE2 build of the same code).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn kkt_newton_avx2(
+    b1: &PosedBody<'_>,
+    b2: &PosedBody<'_>,
+    x0: Vector3,
+    mu0: Option<Real>,
+    params: &NewtonParams,
+    warm: bool,
+) -> KktOut {
+    kkt_newton_body(b1, b2, x0, mu0, params, warm)
+}
+
+/// The body of [`kkt_newton`], inlined into each of its builds.
+#[inline(always)]
+fn kkt_newton_body(
     b1: &PosedBody<'_>,
     b2: &PosedBody<'_>,
     x0: Vector3,
