@@ -328,7 +328,14 @@ struct KktPoint {
 
 impl KktPoint {
     #[inline(always)]
-    fn new(fa: &FastPosed<'_>, fb: &FastPosed<'_>, x: &Vector3, y: &Vector3, lam: [Real; 2], hessian: bool) -> Self {
+    fn new<const FMA: bool>(
+        fa: &FastPosed<'_, FMA>,
+        fb: &FastPosed<'_, FMA>,
+        x: &Vector3,
+        y: &Vector3,
+        lam: [Real; 2],
+        hessian: bool,
+    ) -> Self {
         let ea = fa.eval(x, hessian);
         let eb = fb.eval(y, hessian);
         let (ca, cb) = (ea.value - 1.0, eb.value - 1.0);
@@ -359,12 +366,16 @@ impl KktPoint {
 /// The Newton step for the Hessians `(ha, hb)` at `pt`: closed-form block elimination, dense LU if
 /// that is singular.
 #[inline(always)]
-fn newton_step(h: &(Matrix3, Matrix3), pt: &KktPoint, lam: [Real; 2]) -> Option<(Vector3, Vector3, [Real; 2])> {
+fn newton_step<const FMA: bool>(
+    h: &(Matrix3, Matrix3),
+    pt: &KktPoint,
+    lam: [Real; 2],
+) -> Option<(Vector3, Vector3, [Real; 2])> {
     let two = Matrix3::identity() * 2.0;
     let wa = two + h.0 * lam[0];
     let wb = two + h.1 * lam[1];
     let (ga, gb) = (&pt.ea.gradient, &pt.eb.gradient);
-    if let Some(step) = solve_kkt8(&wa, &wb, ga, gb, &pt.ra, &pt.rb, pt.ca, pt.cb) {
+    if let Some(step) = solve_kkt8::<FMA>(&wa, &wb, ga, gb, &pt.ra, &pt.rb, pt.ca, pt.cb) {
         return Some(step);
     }
     newton_step_lu(&wa, &wb, pt)
@@ -409,7 +420,7 @@ fn kkt_newton(
         // SAFETY: the CPU supports AVX2 and FMA (checked just above).
         return unsafe { kkt_newton_avx2(ba, bb, x0, y0, lam0, params, warm) };
     }
-    kkt_newton_body(ba, bb, x0, y0, lam0, params, warm)
+    kkt_newton_body::<false>(ba, bb, x0, y0, lam0, params, warm)
 }
 
 /// [`kkt_newton`] compiled for AVX2 + FMA: the solver's 3 × 3 algebra in three-operand and fused
@@ -426,12 +437,12 @@ fn kkt_newton_avx2(
     params: &NewtonParams,
     warm: bool,
 ) -> KktOut {
-    kkt_newton_body(ba, bb, x0, y0, lam0, params, warm)
+    kkt_newton_body::<true>(ba, bb, x0, y0, lam0, params, warm)
 }
 
 /// The body of [`kkt_newton`], inlined into each of its builds.
 #[inline(always)]
-fn kkt_newton_body(
+fn kkt_newton_body<const FMA: bool>(
     ba: &PosedBody<'_>,
     bb: &PosedBody<'_>,
     x0: Vector3,
@@ -440,7 +451,7 @@ fn kkt_newton_body(
     params: &NewtonParams,
     warm: bool,
 ) -> KktOut {
-    let (fa, fb) = (FastPosed::new(ba), FastPosed::new(bb));
+    let (fa, fb) = (FastPosed::<FMA>::build(ba), FastPosed::<FMA>::build(bb));
     let (mut x, mut y) = (x0, y0);
     let mut pt = KktPoint::new(&fa, &fb, &x, &y, lam0.unwrap_or_default(), true);
     // Without a start for the multipliers: least squares from the first point's gradients.
@@ -477,7 +488,7 @@ fn kkt_newton_body(
             continue;
         };
         it += 1;
-        let Some((dx, dy, dl)) = newton_step(&h, &pt, lam) else {
+        let Some((dx, dy, dl)) = newton_step::<FMA>(&h, &pt, lam) else {
             status = SolveStatus::Stalled;
             break;
         };

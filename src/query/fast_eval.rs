@@ -9,9 +9,34 @@ use crate::body::PosedBody;
 use crate::math::{Matrix3, Real, Vector3};
 use crate::poly::FastPoly;
 
-/// A posed body's world → normalized map and its fast evaluator.
+/// a·b + c, fused when `FMA` (the solvers' AVX2 + FMA builds, see
+/// [`crate::math::cpu_has_avx2_fma`]); two roundings otherwise, never a library call.
+#[inline(always)]
+pub(crate) fn fmadd<const FMA: bool>(a: Real, b: Real, c: Real) -> Real {
+    if FMA {
+        a.mul_add(b, c)
+    } else {
+        a * b + c
+    }
+}
+
+/// M v for a 3 × 3 matrix (column-major: M v = m₀ vₓ + m₁ v_y + m₂ v_z), fused where `FMA`.
+#[inline(always)]
+pub(crate) fn mat_vec<const FMA: bool>(m: &Matrix3, v: &Vector3) -> Vector3 {
+    let row = |i: usize| fmadd::<FMA>(m[(i, 2)], v.z, fmadd::<FMA>(m[(i, 1)], v.y, m[(i, 0)] * v.x));
+    Vector3::new(row(0), row(1), row(2))
+}
+
+/// a · b, fused where `FMA`.
+#[inline(always)]
+pub(crate) fn dot<const FMA: bool>(a: &Vector3, b: &Vector3) -> Real {
+    fmadd::<FMA>(a.z, b.z, fmadd::<FMA>(a.y, b.y, a.x * b.x))
+}
+
+/// A posed body's world → normalized map and its fast evaluator; `FMA` selects fused arithmetic
+/// for the solvers' AVX2 + FMA builds (the default `false` is the portable one).
 #[derive(Clone, Copy)]
-pub(crate) struct FastPosed<'a> {
+pub(crate) struct FastPosed<'a, const FMA: bool = false> {
     poly: &'a FastPoly,
     a: Matrix3,
     at: Matrix3,
@@ -31,9 +56,17 @@ pub(crate) struct PosedEval {
 }
 
 impl<'a> FastPosed<'a> {
-    /// The evaluator of a posed body.
+    /// The evaluator of a posed body, portable arithmetic.
     #[inline(always)]
     pub fn new(pb: &PosedBody<'a>) -> Self {
+        Self::build(pb)
+    }
+}
+
+impl<'a, const FMA: bool> FastPosed<'a, FMA> {
+    /// The evaluator of a posed body, fused arithmetic where `FMA`.
+    #[inline(always)]
+    pub fn build(pb: &PosedBody<'a>) -> Self {
         let a = *pb.linear();
         let q = pb.pose.rotation.quaternion();
         let unrotated = (q.i == 0.0 && q.j == 0.0 && q.k == 0.0).then(|| 1.0 / pb.body.scale());
@@ -50,8 +83,12 @@ impl<'a> FastPosed<'a> {
     #[inline(always)]
     fn normalized(&self, x: &Vector3) -> Vector3 {
         match self.unrotated {
-            Some(k) => x * k + self.b,
-            None => self.a * x + self.b,
+            Some(k) => Vector3::new(
+                fmadd::<FMA>(x.x, k, self.b.x),
+                fmadd::<FMA>(x.y, k, self.b.y),
+                fmadd::<FMA>(x.z, k, self.b.z),
+            ),
+            None => mat_vec::<FMA>(&self.a, x) + self.b,
         }
     }
 
@@ -60,7 +97,7 @@ impl<'a> FastPosed<'a> {
     fn world_gradient(&self, g: &Vector3) -> Vector3 {
         match self.unrotated {
             Some(k) => g * k,
-            None => self.at * g,
+            None => mat_vec::<FMA>(&self.at, g),
         }
     }
 
@@ -96,7 +133,7 @@ impl<'a> FastPosed<'a> {
         let h = e.hessian_u?;
         Some(match self.unrotated {
             Some(k) => h * (k * k),
-            None => congruence_sym(&self.a, &h),
+            None => congruence_sym::<FMA>(&self.a, &h),
         })
     }
 }
@@ -104,10 +141,13 @@ impl<'a> FastPosed<'a> {
 /// Aᵀ H A for a symmetric H, computing the six entries of the upper triangle (45 products
 /// instead of the 54 of two general 3 × 3 products).
 #[inline(always)]
-fn congruence_sym(a: &Matrix3, h: &Matrix3) -> Matrix3 {
-    let t = h * a;
-    let e = |i: usize, j: usize| a[(0, i)] * t[(0, j)] + a[(1, i)] * t[(1, j)] + a[(2, i)] * t[(2, j)];
-    let (m00, m01, m02, m11, m12, m22) = (e(0, 0), e(0, 1), e(0, 2), e(1, 1), e(1, 2), e(2, 2));
+fn congruence_sym<const FMA: bool>(a: &Matrix3, h: &Matrix3) -> Matrix3 {
+    // Columns a_j of A and h_j = H a_j; entry (i, j) = a_i · h_j.
+    let col = |j: usize| Vector3::new(a[(0, j)], a[(1, j)], a[(2, j)]);
+    let (a0, a1, a2) = (col(0), col(1), col(2));
+    let (h0, h1, h2) = (mat_vec::<FMA>(h, &a0), mat_vec::<FMA>(h, &a1), mat_vec::<FMA>(h, &a2));
+    let (m00, m01, m02) = (dot::<FMA>(&a0, &h0), dot::<FMA>(&a0, &h1), dot::<FMA>(&a0, &h2));
+    let (m11, m12, m22) = (dot::<FMA>(&a1, &h1), dot::<FMA>(&a1, &h2), dot::<FMA>(&a2, &h2));
     Matrix3::new(m00, m01, m02, m01, m11, m12, m02, m12, m22)
 }
 
@@ -127,35 +167,36 @@ pub(crate) const CHORD_RESIDUAL: Real = 1e-3;
 /// (|det| ≤ 10⁻¹⁴ max|mᵢⱼ|³, or non-finite). The KKT blocks `2I + λ∇²p'` and their Schur
 /// complements are symmetric; rounding asymmetry of the world Hessians below is ignored.
 #[inline(always)]
-pub(crate) fn inverse_sym3(m: &Matrix3) -> Option<Matrix3> {
+pub(crate) fn inverse_sym3<const FMA: bool>(m: &Matrix3) -> Option<Matrix3> {
     let (a, b, c) = (m[(0, 0)], m[(0, 1)], m[(0, 2)]);
     let (d, e, f) = (m[(1, 1)], m[(1, 2)], m[(2, 2)]);
-    let c00 = d * f - e * e;
-    let c01 = c * e - b * f;
-    let c02 = b * e - c * d;
-    let det = a * c00 + b * c01 + c * c02;
+    let c00 = fmadd::<FMA>(d, f, -e * e);
+    let c01 = fmadd::<FMA>(c, e, -b * f);
+    let c02 = fmadd::<FMA>(b, e, -c * d);
+    let det = fmadd::<FMA>(a, c00, fmadd::<FMA>(b, c01, c * c02));
     let s = a.abs().max(b.abs()).max(c.abs()).max(d.abs()).max(e.abs()).max(f.abs());
     if !(det.is_finite() && det.abs() > 1e-14 * s * s * s && s > 0.0) {
         return None;
     }
     let k = 1.0 / det;
     let (i00, i01, i02) = (c00 * k, c01 * k, c02 * k);
-    let (i11, i12, i22) = ((a * f - c * c) * k, (b * c - a * e) * k, (a * d - b * b) * k);
+    let (i11, i12, i22) =
+        (fmadd::<FMA>(a, f, -c * c) * k, fmadd::<FMA>(b, c, -a * e) * k, fmadd::<FMA>(a, d, -b * b) * k);
     Some(Matrix3::new(i00, i01, i02, i01, i11, i12, i02, i12, i22))
 }
 
 /// Solves the growth KKT system `[W g; gᵀ 0] [dx; dμ] = −[r; c]` by eliminating dx
 /// (dμ = (c − gᵀW⁻¹r)/(gᵀW⁻¹g)); `None` when W or the Schur complement is singular.
 #[inline(always)]
-pub(crate) fn solve_kkt4(w: &Matrix3, g: &Vector3, r: &Vector3, c: Real) -> Option<(Vector3, Real)> {
-    let wi = inverse_sym3(w)?;
-    let wg = wi * g;
-    let wr = wi * r;
-    let s = g.dot(&wg);
+pub(crate) fn solve_kkt4<const FMA: bool>(w: &Matrix3, g: &Vector3, r: &Vector3, c: Real) -> Option<(Vector3, Real)> {
+    let wi = inverse_sym3::<FMA>(w)?;
+    let wg = mat_vec::<FMA>(&wi, g);
+    let wr = mat_vec::<FMA>(&wi, r);
+    let s = dot::<FMA>(g, &wg);
     if !(s.is_finite() && s.abs() > 1e-300) {
         return None;
     }
-    let dmu = (c - g.dot(&wr)) / s;
+    let dmu = (c - dot::<FMA>(g, &wr)) / s;
     let dx = -(wr + wg * dmu);
     (dx.iter().all(|v| v.is_finite()) && dmu.is_finite()).then_some((dx, dmu))
 }
@@ -173,7 +214,7 @@ pub(crate) fn solve_kkt4(w: &Matrix3, g: &Vector3, r: &Vector3, c: Real) -> Opti
 /// complement Wb − 4Wa⁻¹, then the 2 × 2 Schur complement GᵀM⁻¹G of the constraints.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-pub(crate) fn solve_kkt8(
+pub(crate) fn solve_kkt8<const FMA: bool>(
     wa: &Matrix3,
     wb: &Matrix3,
     ga: &Vector3,
@@ -183,25 +224,27 @@ pub(crate) fn solve_kkt8(
     ca: Real,
     cb: Real,
 ) -> Option<(Vector3, Vector3, [Real; 2])> {
-    let ai = inverse_sym3(wa)?;
-    let si = inverse_sym3(&(wb - ai * 4.0))?;
+    let ai = inverse_sym3::<FMA>(wa)?;
+    let si = inverse_sym3::<FMA>(&(wb - ai * 4.0))?;
+    let (am, sm) = (|v: &Vector3| mat_vec::<FMA>(&ai, v), |v: &Vector3| mat_vec::<FMA>(&si, v));
     // M⁻¹ [f; g] = [p; q] with q = Si (g + 2 Ai f), p = Ai f + 2 Ai q; the two constraint columns
     // have a zero half each, so eight 3 × 3 products in all.
-    let t0 = ai * ra;
-    let q0 = si * (rb + t0 * 2.0);
-    let p0 = t0 + ai * q0 * 2.0;
-    let t1 = ai * ga;
-    let q1 = si * t1 * 2.0;
-    let p1 = t1 + ai * q1 * 2.0;
-    let q2 = si * gb;
-    let p2 = ai * q2 * 2.0;
-    let (s11, s12, s21, s22) = (ga.dot(&p1), ga.dot(&p2), gb.dot(&q1), gb.dot(&q2));
+    let t0 = am(ra);
+    let q0 = sm(&(rb + t0 * 2.0));
+    let p0 = t0 + am(&q0) * 2.0;
+    let t1 = am(ga);
+    let q1 = sm(&t1) * 2.0;
+    let p1 = t1 + am(&q1) * 2.0;
+    let q2 = sm(gb);
+    let p2 = am(&q2) * 2.0;
+    let d = |a: &Vector3, b: &Vector3| dot::<FMA>(a, b);
+    let (s11, s12, s21, s22) = (d(ga, &p1), d(ga, &p2), d(gb, &q1), d(gb, &q2));
     let det = s11 * s22 - s12 * s21;
     let scale = (s11.abs() + s12.abs()) * (s21.abs() + s22.abs());
     if !(det.is_finite() && det.abs() > 1e-14 * scale && scale > 0.0) {
         return None;
     }
-    let (h1, h2) = (ca - ga.dot(&p0), cb - gb.dot(&q0));
+    let (h1, h2) = (ca - d(ga, &p0), cb - d(gb, &q0));
     let l1 = (s22 * h1 - s12 * h2) / det;
     let l2 = (s11 * h2 - s21 * h1) / det;
     let dx = -(p0 + p1 * l1 + p2 * l2);
@@ -228,6 +271,7 @@ mod tests {
         let pose = crate::math::pose_from_parts("p", [0.9, 0.1, 0.3, 0.3], [1.0, -2.0, 0.5]).unwrap();
         let pb = PosedBody::new(&body, &pose);
         let f = FastPosed::new(&pb);
+        let fused = FastPosed::<true>::build(&pb);
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
         for _ in 0..20 {
             let x = Vector3::new(rng.random_range(0.0..2.0), rng.random_range(-3.0..-1.0), rng.random_range(0.0..1.0));
@@ -241,6 +285,10 @@ mod tests {
             assert!((f.hessian(&full).unwrap() - r.hessian).amax() <= 1e-12 * scale);
             assert!(f.hessian(&vg).is_none());
             assert!((f.value(&x) - r.value).abs() <= 1e-12 * scale);
+            // The fused-arithmetic evaluator of the AVX2 + FMA solver builds.
+            let e = fused.eval(&x, true);
+            assert!((e.value - r.value).abs() <= 1e-12 * scale && (e.gradient - r.gradient).amax() <= 1e-12 * scale);
+            assert!((fused.hessian(&e).unwrap() - r.hessian).amax() <= 1e-12 * scale);
         }
     }
 
@@ -258,9 +306,11 @@ mod tests {
             k.fixed_view_mut::<3, 1>(0, 3).copy_from(&g);
             k.fixed_view_mut::<1, 3>(3, 0).copy_from(&g.transpose());
             let dense = k.lu().solve(&-nalgebra::Vector4::new(r.x, r.y, r.z, c)).unwrap();
-            let (dx, dmu) = solve_kkt4(&w, &g, &r, c).unwrap();
-            assert!((dx - dense.fixed_rows::<3>(0)).amax() < 1e-9 * (1.0 + dense.amax()));
-            assert!((dmu - dense[3]).abs() < 1e-9 * (1.0 + dense.amax()));
+            // Both arithmetic builds (fused: the solvers' AVX2 + FMA copies).
+            for (dx, dmu) in [solve_kkt4::<false>(&w, &g, &r, c).unwrap(), solve_kkt4::<true>(&w, &g, &r, c).unwrap()] {
+                assert!((dx - dense.fixed_rows::<3>(0)).amax() < 1e-9 * (1.0 + dense.amax()));
+                assert!((dmu - dense[3]).abs() < 1e-9 * (1.0 + dense.amax()));
+            }
             // Distance 8 × 8.
             let two = Matrix3::identity() * 2.0;
             let (wa, wb) = (two + random_spd(&mut rng), two + random_spd(&mut rng));
@@ -277,17 +327,22 @@ mod tests {
             j.fixed_view_mut::<1, 3>(7, 3).copy_from(&gb.transpose());
             let rhs = -SVector::<Real, 8>::from_column_slice(&[ra.x, ra.y, ra.z, rb.x, rb.y, rb.z, ca, cb]);
             let dense = j.lu().solve(&rhs).unwrap();
-            let (dx, dy, dl) = solve_kkt8(&wa, &wb, &ga, &gb, &ra, &rb, ca, cb).unwrap();
             let tol = 1e-9 * (1.0 + dense.amax());
-            assert!((dx - dense.fixed_rows::<3>(0)).amax() < tol);
-            assert!((dy - dense.fixed_rows::<3>(3)).amax() < tol);
-            assert!((dl[0] - dense[6]).abs() < tol && (dl[1] - dense[7]).abs() < tol);
+            for (dx, dy, dl) in [
+                solve_kkt8::<false>(&wa, &wb, &ga, &gb, &ra, &rb, ca, cb).unwrap(),
+                solve_kkt8::<true>(&wa, &wb, &ga, &gb, &ra, &rb, ca, cb).unwrap(),
+            ] {
+                assert!((dx - dense.fixed_rows::<3>(0)).amax() < tol);
+                assert!((dy - dense.fixed_rows::<3>(3)).amax() < tol);
+                assert!((dl[0] - dense[6]).abs() < tol && (dl[1] - dense[7]).abs() < tol);
+            }
         }
-        assert!(inverse_sym3(&Matrix3::zeros()).is_none());
+        assert!(inverse_sym3::<false>(&Matrix3::zeros()).is_none());
         for _ in 0..20 {
             let m = random_spd(&mut rng);
-            let inv = inverse_sym3(&m).unwrap();
-            assert!((inv * m - Matrix3::identity()).amax() < 1e-10 * (1.0 + inv.amax() * m.amax()));
+            for inv in [inverse_sym3::<false>(&m).unwrap(), inverse_sym3::<true>(&m).unwrap()] {
+                assert!((inv * m - Matrix3::identity()).amax() < 1e-10 * (1.0 + inv.amax() * m.amax()));
+            }
         }
     }
 }

@@ -312,7 +312,13 @@ struct KktPoint {
 
 impl KktPoint {
     #[inline(always)]
-    fn new(f1: &FastPosed<'_>, f2: &FastPosed<'_>, x: &Vector3, mu: Real, hessian: bool) -> Self {
+    fn new<const FMA: bool>(
+        f1: &FastPosed<'_, FMA>,
+        f2: &FastPosed<'_, FMA>,
+        x: &Vector3,
+        mu: Real,
+        hessian: bool,
+    ) -> Self {
         let e1 = f1.eval(x, hessian);
         let e2 = f2.eval(x, hessian);
         let r = e1.gradient + e2.gradient * mu;
@@ -334,9 +340,9 @@ impl KktPoint {
 /// The Newton step for the Hessians `(h1, h2)` at `pt`: closed-form elimination, dense LU if that is
 /// singular.
 #[inline(always)]
-fn newton_step(h: &(Matrix3, Matrix3), pt: &KktPoint, mu: Real) -> Option<(Vector3, Real)> {
+fn newton_step<const FMA: bool>(h: &(Matrix3, Matrix3), pt: &KktPoint, mu: Real) -> Option<(Vector3, Real)> {
     let w = h.0 + h.1 * mu;
-    if let Some(step) = solve_kkt4(&w, &pt.e2.gradient, &pt.r, pt.c) {
+    if let Some(step) = solve_kkt4::<FMA>(&w, &pt.e2.gradient, &pt.r, pt.c) {
         return Some(step);
     }
     newton_step_lu(&w, pt)
@@ -373,7 +379,7 @@ fn kkt_newton(
         // SAFETY: the CPU supports AVX2 and FMA (checked just above).
         return unsafe { kkt_newton_avx2(b1, b2, x0, mu0, params, warm) };
     }
-    kkt_newton_body(b1, b2, x0, mu0, params, warm)
+    kkt_newton_body::<false>(b1, b2, x0, mu0, params, warm)
 }
 
 /// [`kkt_newton`] compiled for AVX2 + FMA: the solver's 3 × 3 algebra in three-operand and fused
@@ -389,12 +395,12 @@ fn kkt_newton_avx2(
     params: &NewtonParams,
     warm: bool,
 ) -> KktOut {
-    kkt_newton_body(b1, b2, x0, mu0, params, warm)
+    kkt_newton_body::<true>(b1, b2, x0, mu0, params, warm)
 }
 
 /// The body of [`kkt_newton`], inlined into each of its builds.
 #[inline(always)]
-fn kkt_newton_body(
+fn kkt_newton_body<const FMA: bool>(
     b1: &PosedBody<'_>,
     b2: &PosedBody<'_>,
     x0: Vector3,
@@ -402,7 +408,7 @@ fn kkt_newton_body(
     params: &NewtonParams,
     warm: bool,
 ) -> KktOut {
-    let (f1, f2) = (FastPosed::new(b1), FastPosed::new(b2));
+    let (f1, f2) = (FastPosed::<FMA>::build(b1), FastPosed::<FMA>::build(b2));
     let mut x = x0;
     let mut pt = KktPoint::new(&f1, &f2, &x, mu0.unwrap_or_default(), true);
     // Without a start for the multiplier: least squares from the first point's gradients.
@@ -438,7 +444,7 @@ fn kkt_newton_body(
             continue;
         };
         it += 1;
-        let Some((dx, dmu)) = newton_step(&h, &pt, mu) else {
+        let Some((dx, dmu)) = newton_step::<FMA>(&h, &pt, mu) else {
             status = SolveStatus::Stalled;
             break;
         };
