@@ -19,14 +19,22 @@
 //!
 //! One evaluation is then a sequence of lane-wise fused multiply–adds `acc ← acc·z + row` (then ·y,
 //! ·x) over contiguous rows: no monomial vector is built, and the many short z chains are
-//! independent. The chain lengths of every degree are literals (macro `horner_fn!`), so each scheme
-//! compiles to straight-line code. On x86-64 CPUs with AVX2 and FMA (detected at run time) the
-//! kernels are compiled for those instructions; elsewhere they run the portable code.
+//! independent. Each Horner sum starts from its top term (no multiply–add with zero). The chain
+//! lengths of every degree are literals (macro `horner_fn!`), so each scheme compiles to
+//! straight-line code, written once over a lane accumulator (trait `Acc`). On x86-64 CPUs with
+//! AVX2 and FMA (detected at run time) the accumulators are `__m256d` (4-lane tables) and `__m128d`
+//! ([yz, zz]) registers: one `vfmadd` per row with the row as its memory operand, no scalar lanes.
+//! An empty `asm!` after each power of x pins the running sum, else LLVM hoists every z chain above
+//! the y and x steps and spills. Elsewhere the portable code runs on `[f64; L]` arrays with unfused
+//! a·b + c.
 //!
-//! Cost at 2d = 6, measured with callgrind (instructions per evaluation, the previous kernel that
-//! summed table rows against the monomial vector in parentheses): value 140 (244), value + gradient
-//! 158 (410), value + gradient + Hessian 467 (574). The value reads lane 0 of the value + gradient
-//! rows (the unused lanes are dropped by the compiler).
+//! Cost at 2d = 6, measured with callgrind (instructions per evaluation; in parentheses the
+//! previous kernels over `[f64; L]` left to LLVM's vectorizers, which split the Hessian passes into
+//! scalar chains and `vmovsd`/`vmovhpd` pairs): value 116 (129), value + gradient 118 (132), value +
+//! gradient + Hessian 220 (439). At 2d = 4: 56 (65), 58 (68), 96 (176); at 2d = 8: 208 (225), 210
+//! (228), 431 (952). Before these, a kernel that summed table rows against the monomial vector took
+//! 244, 410 and 574 at 2d = 6. The value runs the value + gradient scheme and returns lane 0 (a
+//! 4-lane FMA is one instruction, like a scalar one).
 
 use super::monomial::{basis_len, index3};
 use super::polynomial::{Polynomial, MAX_DEGREE};
@@ -75,57 +83,164 @@ fn horner_exponents(d: usize) -> Vec<[usize; 3]> {
     out
 }
 
-/// a·b + c, fused when the kernel is compiled with FMA.
-#[inline(always)]
-fn fmadd<const FMA: bool>(a: Real, b: Real, c: Real) -> Real {
-    if FMA {
-        a.mul_add(b, c)
-    } else {
-        a * b + c
+/// A lane-wise accumulator of the Horner schemes: one value per lane of a table row. The schemes
+/// (`horner_fn!`) are written once over this trait; [`Lanes`] is the portable implementation,
+/// `x86::F64x4` / `x86::F64x2` the AVX2 + FMA ones.
+trait Acc: Copy {
+    /// One table row (the lanes in memory).
+    type Row;
+    /// What creating an accumulator needs besides a row: nothing for the portable lanes, the
+    /// proof that the CPU runs AVX2 and FMA for the x86 registers.
+    type Cpu: Copy;
+    /// A coordinate broadcast to every lane.
+    type Coord: Copy;
+
+    /// `t` in every lane.
+    fn splat(cpu: Self::Cpu, t: Real) -> Self::Coord;
+    /// The accumulator holding `row`.
+    fn load(cpu: Self::Cpu, row: &Self::Row) -> Self;
+    /// `self·t + row`, lane-wise (fused on x86).
+    fn mul_add_row(self, t: Self::Coord, row: &Self::Row) -> Self;
+    /// `self·t + c`, lane-wise (fused on x86).
+    fn mul_add(self, t: Self::Coord, c: Self) -> Self;
+    /// The lanes.
+    fn lanes(self) -> Self::Row;
+
+    /// `self`, computed before any later table load: a scheduling barrier after each power of x
+    /// and at the end of a scheme (without it LLVM computes every z chain of the x86 kernels
+    /// first, then the y and x steps, and spills). Emits no instruction; the identity here.
+    #[inline(always)]
+    fn pin(self) -> Self {
+        self
     }
 }
 
-/// `acc ← acc·t + row`, lane-wise.
-#[inline(always)]
-fn step<const L: usize, const FMA: bool>(acc: &mut [Real; L], t: Real, row: &[Real; L]) {
-    for l in 0..L {
-        acc[l] = fmadd::<FMA>(acc[l], t, row[l]);
+/// A 4-lane accumulator (the value + gradient and [xx, xy, xz, yy] tables) with the matching
+/// 2-lane accumulator of the [yz, zz] table: the type parameter of the kernels.
+trait Quad: Acc<Row = [Real; 4]> {
+    /// The 2-lane accumulator of the same code path.
+    type Pair: Acc<Row = [Real; 2], Cpu = Self::Cpu>;
+
+    /// The symmetric Hessian from the [xx, xy, xz, yy] and [yz, zz] sums. On x86 it is stored as
+    /// [xx, xy, xz, xy] (one permute), [yy, yz] (one shuffle), then xz, yz, zz.
+    #[inline(always)]
+    fn hessian(h: Self, g: Self::Pair) -> Matrix3 {
+        let (h, g) = (h.lanes(), g.lanes());
+        Matrix3::new(h[0], h[1], h[2], h[1], h[3], g[0], h[2], g[0], g[1])
     }
 }
 
-/// Horner in z along one chain of M rows starting at `k` (the top coefficient first): M is a
-/// constant, so the loop unrolls.
-#[inline(always)]
-fn chain<const M: usize, const L: usize, const FMA: bool>(rows: &[[Real; L]], k: usize, z: Real) -> [Real; L] {
-    let mut acc = rows[k];
-    for row in &rows[k + 1..k + M] {
-        step::<L, FMA>(&mut acc, z, row);
+/// The portable accumulator: `L` lanes, unfused a·b + c (no FMA).
+#[derive(Clone, Copy)]
+struct Lanes<const L: usize>([Real; L]);
+
+impl<const L: usize> Lanes<L> {
+    /// `self·t + c` lane-wise, unfused.
+    #[inline(always)]
+    fn step(mut self, t: Real, c: &[Real; L]) -> Self {
+        for (a, c) in self.0.iter_mut().zip(c) {
+            *a = *a * t + *c;
+        }
+        self
     }
+}
+
+impl<const L: usize> Acc for Lanes<L> {
+    type Row = [Real; L];
+    type Cpu = ();
+    type Coord = Real;
+
+    #[inline(always)]
+    fn splat((): (), t: Real) -> Real {
+        t
+    }
+
+    #[inline(always)]
+    fn load((): (), row: &[Real; L]) -> Self {
+        Self(*row)
+    }
+
+    #[inline(always)]
+    fn mul_add_row(self, t: Real, row: &[Real; L]) -> Self {
+        self.step(t, row)
+    }
+
+    #[inline(always)]
+    fn mul_add(self, t: Real, c: Self) -> Self {
+        self.step(t, &c.0)
+    }
+
+    #[inline(always)]
+    fn lanes(self) -> [Real; L] {
+        self.0
+    }
+}
+
+/// The portable 4-lane accumulator.
+type Portable = Lanes<4>;
+
+impl Quad for Portable {
+    type Pair = Lanes<2>;
+}
+
+/// Horner in z along the chain of M rows starting at `*k` (the top coefficient first), then
+/// `*k += M`: M is a constant, so the loop unrolls.
+#[inline(always)]
+fn chain<const M: usize, A: Acc>(cpu: A::Cpu, rows: &[A::Row], k: &mut usize, z: A::Coord) -> A {
+    let mut acc = A::load(cpu, &rows[*k]);
+    for row in &rows[*k + 1..*k + M] {
+        acc = acc.mul_add_row(z, row);
+    }
+    *k += M;
     acc
 }
 
-/// Defines `$name::<L, FMA>(rows, u)`: Σ rows[(a, b, c)] x^a y^b z^c lane-wise over the $n rows of
+/// The evaluation point with each coordinate broadcast to every lane.
+#[derive(Clone, Copy)]
+struct Point<C> {
+    x: C,
+    y: C,
+    z: C,
+}
+
+impl<C: Copy> Point<C> {
+    /// `u` broadcast for accumulator `A`.
+    #[inline(always)]
+    fn splat<A: Acc<Coord = C>>(cpu: A::Cpu, u: &Vector3) -> Self {
+        Self { x: A::splat(cpu, u.x), y: A::splat(cpu, u.y), z: A::splat(cpu, u.z) }
+    }
+}
+
+/// Horner in y over the z chains of one power of x (lengths `$m0, $m…`, the top power of y
+/// first); the first chain starts the sum (no multiply–add with zero).
+macro_rules! horner_y {
+    ($cpu:ident, $rows:ident, $k:ident, $p:ident; $m0:literal $(, $m:literal)*) => {{
+        let acc_y = chain::<$m0, A>($cpu, $rows, &mut $k, $p.z);
+        $(
+            let acc_y = acc_y.mul_add($p.y, chain::<$m, A>($cpu, $rows, &mut $k, $p.z));
+        )*
+        acc_y
+    }};
+}
+
+/// Defines `$name::<A>(cpu, rows, u)`: Σ rows[(a, b, c)] x^a y^b z^c lane-wise over the $n rows of
 /// one degree in Horner order ([`horner_exponents`]), as Horner in x of Horner in y of the z
 /// chains whose lengths are listed per power of x (descending); every count is a literal, so the
-/// whole scheme is straight-line code.
+/// whole scheme is straight-line code. Each Horner sum starts from its top term (no multiply–add
+/// with zero).
 macro_rules! horner_fn {
-    ($name:ident, $n:literal; $([$($m:literal),*]),*) => {
+    ($name:ident, $n:literal; [$($m0:literal),*] $(, [$($m:literal),*])*) => {
         #[inline(always)]
-        fn $name<const L: usize, const FMA: bool>(rows: &[[Real; L]], u: &Vector3) -> [Real; L] {
+        fn $name<A: Acc>(cpu: A::Cpu, rows: &[A::Row], u: &Vector3) -> A {
             let rows = &rows[..$n];
+            let p = Point::splat::<A>(cpu, u);
             let mut k = 0usize;
-            let mut acc_x = [0.0; L];
+            let acc_x = horner_y!(cpu, rows, k, p; $($m0),*);
             $(
-                let mut acc_y = [0.0; L];
-                $(
-                    let acc_z = chain::<$m, L, FMA>(rows, k, u.z);
-                    k += $m;
-                    step::<L, FMA>(&mut acc_y, u.y, &acc_z);
-                )*
-                step::<L, FMA>(&mut acc_x, u.x, &acc_y);
+                let acc_x = acc_x.pin().mul_add(p.x, horner_y!(cpu, rows, k, p; $($m),*));
             )*
-            let _ = k; // the last chain's increment is not read
-            acc_x
+            debug_assert_eq!(k, $n);
+            acc_x.pin()
         }
     };
 }
@@ -140,88 +255,225 @@ horner_fn!(horner_6, 84; [1],[1,2],[1,2,3],[1,2,3,4],[1,2,3,4,5],[1,2,3,4,5,6],[
 horner_fn!(horner_7, 120; [1],[1,2],[1,2,3],[1,2,3,4],[1,2,3,4,5],[1,2,3,4,5,6],[1,2,3,4,5,6,7],[1,2,3,4,5,6,7,8]);
 horner_fn!(horner_8, 165; [1],[1,2],[1,2,3],[1,2,3,4],[1,2,3,4,5],[1,2,3,4,5,6],[1,2,3,4,5,6,7],[1,2,3,4,5,6,7,8],[1,2,3,4,5,6,7,8,9]);
 
-/// The Horner scheme of degree `$d` (0..=8) over `$rows` with `$l` lanes.
+/// The Horner scheme of degree `$d` (0..=8) with accumulator `$a` over `$rows`.
 macro_rules! horner_of_degree {
-    ($d:expr, $l:literal, $fma:expr, $rows:expr, $u:expr) => {
+    ($d:expr, $a:ty, $cpu:expr, $rows:expr, $u:expr) => {
         match $d {
-            0 => horner_0::<$l, $fma>($rows, $u),
-            1 => horner_1::<$l, $fma>($rows, $u),
-            2 => horner_2::<$l, $fma>($rows, $u),
-            3 => horner_3::<$l, $fma>($rows, $u),
-            4 => horner_4::<$l, $fma>($rows, $u),
-            5 => horner_5::<$l, $fma>($rows, $u),
-            6 => horner_6::<$l, $fma>($rows, $u),
-            7 => horner_7::<$l, $fma>($rows, $u),
-            _ => horner_8::<$l, $fma>($rows, $u),
+            0 => horner_0::<$a>($cpu, $rows, $u),
+            1 => horner_1::<$a>($cpu, $rows, $u),
+            2 => horner_2::<$a>($cpu, $rows, $u),
+            3 => horner_3::<$a>($cpu, $rows, $u),
+            4 => horner_4::<$a>($cpu, $rows, $u),
+            5 => horner_5::<$a>($cpu, $rows, $u),
+            6 => horner_6::<$a>($cpu, $rows, $u),
+            7 => horner_7::<$a>($cpu, $rows, $u),
+            _ => horner_8::<$a>($cpu, $rows, $u),
         }
     };
 }
 
 /// p(u) and ∇p(u) for degree `D` (a constant at every call site).
 #[inline(always)]
-fn gradient_kernel<const D: usize, const FMA: bool>(t: &Tables, u: &Vector3) -> (Real, Vector3) {
-    let r = horner_of_degree!(D, 4, FMA, &t.value_gradient, u);
+fn gradient_kernel<const D: usize, Q: Quad>(cpu: Q::Cpu, t: &Tables, u: &Vector3) -> (Real, Vector3) {
+    let r = horner_of_degree!(D, Q, cpu, &t.value_gradient, u).lanes();
     (r[0], Vector3::new(r[1], r[2], r[3]))
 }
 
 /// p(u).
 #[inline(always)]
-fn value_kernel<const D: usize, const FMA: bool>(t: &Tables, u: &Vector3) -> Real {
-    horner_of_degree!(D, 4, FMA, &t.value_gradient, u)[0]
+fn value_kernel<const D: usize, Q: Quad>(cpu: Q::Cpu, t: &Tables, u: &Vector3) -> Real {
+    horner_of_degree!(D, Q, cpu, &t.value_gradient, u).lanes()[0]
 }
 
 /// p(u), ∇p(u) and ∇²p(u) (the Hessian's rows have degree D − 2; zero for D < 2).
 #[inline(always)]
-fn full_kernel<const D: usize, const FMA: bool>(t: &Tables, u: &Vector3) -> super::Eval {
-    let (value, gradient) = gradient_kernel::<D, FMA>(t, u);
+fn full_kernel<const D: usize, Q: Quad>(cpu: Q::Cpu, t: &Tables, u: &Vector3) -> super::Eval {
+    let (value, gradient) = gradient_kernel::<D, Q>(cpu, t, u);
     let hessian = if D >= 2 {
-        let h = horner_of_degree!(D - 2, 4, FMA, &t.hessian, u);
-        let g = horner_of_degree!(D - 2, 2, FMA, &t.hessian_yz_zz, u);
-        Matrix3::new(h[0], h[1], h[2], h[1], h[3], g[0], h[2], g[0], g[1])
+        let h = horner_of_degree!(D - 2, Q, cpu, &t.hessian, u);
+        let g = horner_of_degree!(D - 2, Q::Pair, cpu, &t.hessian_yz_zz, u);
+        Q::hessian(h, g)
     } else {
         Matrix3::zeros()
     };
     super::Eval { value, gradient, hessian }
 }
 
-/// Calls `$kernel::<D, FMA>` for the runtime degree `$d` (0..=8).
+/// Calls `$kernel::<D, $q>($args)` for the runtime degree `$d` (0..=8).
 macro_rules! dispatch {
-    ($d:expr, value, $fma:expr, $($arg:expr),*) => { dispatch!(@ $d, value_kernel, $fma, $($arg),*) };
-    ($d:expr, gradient, $fma:expr, $($arg:expr),*) => { dispatch!(@ $d, gradient_kernel, $fma, $($arg),*) };
-    ($d:expr, full, $fma:expr, $($arg:expr),*) => { dispatch!(@ $d, full_kernel, $fma, $($arg),*) };
-    (@ $d:expr, $kernel:ident, $fma:expr, $($arg:expr),*) => {
+    ($d:expr, $kernel:ident::<$q:ty>($($arg:expr),*)) => {
         match $d {
-            0 => $kernel::<0, $fma>($($arg),*),
-            1 => $kernel::<1, $fma>($($arg),*),
-            2 => $kernel::<2, $fma>($($arg),*),
-            3 => $kernel::<3, $fma>($($arg),*),
-            4 => $kernel::<4, $fma>($($arg),*),
-            5 => $kernel::<5, $fma>($($arg),*),
-            6 => $kernel::<6, $fma>($($arg),*),
-            7 => $kernel::<7, $fma>($($arg),*),
-            _ => $kernel::<8, $fma>($($arg),*),
+            0 => $kernel::<0, $q>($($arg),*),
+            1 => $kernel::<1, $q>($($arg),*),
+            2 => $kernel::<2, $q>($($arg),*),
+            3 => $kernel::<3, $q>($($arg),*),
+            4 => $kernel::<4, $q>($($arg),*),
+            5 => $kernel::<5, $q>($($arg),*),
+            6 => $kernel::<6, $q>($($arg),*),
+            7 => $kernel::<7, $q>($($arg),*),
+            _ => $kernel::<8, $q>($($arg),*),
         }
     };
 }
 
-/// The kernels compiled for AVX2 + FMA (x86-64-v3). Callers must have checked [`has_fma`].
+/// The kernels compiled for AVX2 + FMA (x86-64-v3) over `__m256d` / `__m128d` accumulators.
+/// Callers must have checked [`has_fma`].
 #[cfg(target_arch = "x86_64")]
 mod x86 {
     use super::*;
+    use std::arch::asm;
+    use std::arch::x86_64::{
+        __m128d, __m256d, _mm256_fmadd_pd, _mm256_loadu_pd, _mm256_set1_pd, _mm_fmadd_pd, _mm_loadu_pd, _mm_set1_pd,
+    };
 
+    /// `v` through an empty `asm!` that may touch memory: the compiler computes `v` before it and
+    /// issues no later load ahead of it. No instruction (the template is an assembler comment).
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn pin4(mut v: __m256d) -> __m256d {
+        // SAFETY: the template is an assembler comment: no instruction runs, no memory or flag is
+        // touched and `v` stays in its register.
+        unsafe { asm!("/* {0} */", inout(ymm_reg) v, options(nostack, preserves_flags)) };
+        v
+    }
+
+    /// [`pin4`] for two lanes.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn pin2(mut v: __m128d) -> __m128d {
+        // SAFETY: the template is an assembler comment: no instruction runs, no memory or flag is
+        // touched and `v` stays in its register.
+        unsafe { asm!("/* {0} */", inout(xmm_reg) v, options(nostack, preserves_flags)) };
+        v
+    }
+
+    /// Proof that the CPU runs AVX2 and FMA: its only constructor is compiled with those features,
+    /// so safe code can only call it from code that is itself only run on such a CPU.
+    #[derive(Clone, Copy)]
+    struct Avx2Fma(());
+
+    impl Avx2Fma {
+        /// The proof (callable only where AVX2 and FMA are enabled).
+        #[target_feature(enable = "avx2,fma")]
+        fn new() -> Self {
+            Self(())
+        }
+    }
+
+    /// Four lanes in one AVX register.
+    #[derive(Clone, Copy)]
+    struct F64x4(__m256d, Avx2Fma);
+
+    impl Acc for F64x4 {
+        type Row = [Real; 4];
+        type Cpu = Avx2Fma;
+        type Coord = Self;
+
+        #[inline(always)]
+        fn splat(cpu: Avx2Fma, t: Real) -> Self {
+            // SAFETY: `cpu` proves the CPU runs AVX.
+            Self(unsafe { _mm256_set1_pd(t) }, cpu)
+        }
+
+        #[inline(always)]
+        fn load(cpu: Avx2Fma, row: &[Real; 4]) -> Self {
+            // SAFETY: `row` is four readable `f64` (an unaligned load); `cpu` proves AVX.
+            Self(unsafe { _mm256_loadu_pd(row.as_ptr()) }, cpu)
+        }
+
+        #[inline(always)]
+        fn mul_add_row(self, t: Self, row: &[Real; 4]) -> Self {
+            // SAFETY: `row` is four readable `f64` (an unaligned load, folded into the FMA);
+            // `self.1` proves AVX and FMA.
+            Self(unsafe { _mm256_fmadd_pd(self.0, t.0, _mm256_loadu_pd(row.as_ptr())) }, self.1)
+        }
+
+        #[inline(always)]
+        fn mul_add(self, t: Self, c: Self) -> Self {
+            // SAFETY: `self.1` proves AVX and FMA.
+            Self(unsafe { _mm256_fmadd_pd(self.0, t.0, c.0) }, self.1)
+        }
+
+        #[inline(always)]
+        fn pin(self) -> Self {
+            // SAFETY: `self.1` proves AVX (the register class of `pin4`).
+            Self(unsafe { pin4(self.0) }, self.1)
+        }
+
+        #[inline(always)]
+        fn lanes(self) -> [Real; 4] {
+            // SAFETY: `__m256d` is four `f64` in lane order; every bit pattern is a valid `f64`.
+            unsafe { std::mem::transmute::<__m256d, [Real; 4]>(self.0) }
+        }
+    }
+
+    impl Quad for F64x4 {
+        type Pair = F64x2;
+    }
+
+    /// Two lanes in one SSE register (the [yz, zz] table).
+    #[derive(Clone, Copy)]
+    struct F64x2(__m128d, Avx2Fma);
+
+    impl Acc for F64x2 {
+        type Row = [Real; 2];
+        type Cpu = Avx2Fma;
+        type Coord = Self;
+
+        #[inline(always)]
+        fn splat(cpu: Avx2Fma, t: Real) -> Self {
+            // SAFETY: `cpu` proves the CPU runs SSE2 (part of AVX2).
+            Self(unsafe { _mm_set1_pd(t) }, cpu)
+        }
+
+        #[inline(always)]
+        fn load(cpu: Avx2Fma, row: &[Real; 2]) -> Self {
+            // SAFETY: `row` is two readable `f64` (an unaligned load); `cpu` proves SSE2.
+            Self(unsafe { _mm_loadu_pd(row.as_ptr()) }, cpu)
+        }
+
+        #[inline(always)]
+        fn mul_add_row(self, t: Self, row: &[Real; 2]) -> Self {
+            // SAFETY: `row` is two readable `f64` (an unaligned load, folded into the FMA);
+            // `self.1` proves FMA.
+            Self(unsafe { _mm_fmadd_pd(self.0, t.0, _mm_loadu_pd(row.as_ptr())) }, self.1)
+        }
+
+        #[inline(always)]
+        fn mul_add(self, t: Self, c: Self) -> Self {
+            // SAFETY: `self.1` proves FMA.
+            Self(unsafe { _mm_fmadd_pd(self.0, t.0, c.0) }, self.1)
+        }
+
+        #[inline(always)]
+        fn pin(self) -> Self {
+            // SAFETY: `self.1` proves AVX (the register class of `pin2`).
+            Self(unsafe { pin2(self.0) }, self.1)
+        }
+
+        #[inline(always)]
+        fn lanes(self) -> [Real; 2] {
+            // SAFETY: `__m128d` is two `f64` in lane order; every bit pattern is a valid `f64`.
+            unsafe { std::mem::transmute::<__m128d, [Real; 2]>(self.0) }
+        }
+    }
+
+    /// p(u) for degree `d` (0..=8).
     #[target_feature(enable = "avx2,fma")]
     pub(super) fn value(d: usize, t: &Tables, u: &Vector3) -> Real {
-        dispatch!(d, value, true, t, u)
+        dispatch!(d, value_kernel::<F64x4>(Avx2Fma::new(), t, u))
     }
 
+    /// p(u) and ∇p(u) for degree `d` (0..=8).
     #[target_feature(enable = "avx2,fma")]
     pub(super) fn value_gradient(d: usize, t: &Tables, u: &Vector3) -> (Real, Vector3) {
-        dispatch!(d, gradient, true, t, u)
+        dispatch!(d, gradient_kernel::<F64x4>(Avx2Fma::new(), t, u))
     }
 
+    /// p(u), ∇p(u) and ∇²p(u) for degree `d` (0..=8).
     #[target_feature(enable = "avx2,fma")]
     pub(super) fn eval(d: usize, t: &Tables, u: &Vector3) -> crate::poly::Eval {
-        dispatch!(d, full, true, t, u)
+        dispatch!(d, full_kernel::<F64x4>(Avx2Fma::new(), t, u))
     }
 }
 
@@ -301,7 +553,7 @@ impl FastPoly {
             // SAFETY: the CPU supports AVX2 and FMA (checked at run time just above).
             return unsafe { x86::value(self.degree, &self.tables, u) };
         }
-        dispatch!(self.degree, value, false, &self.tables, u)
+        dispatch!(self.degree, value_kernel::<Portable>((), &self.tables, u))
     }
 
     /// p(u) and ∇p(u).
@@ -312,7 +564,7 @@ impl FastPoly {
             // SAFETY: the CPU supports AVX2 and FMA (checked at run time just above).
             return unsafe { x86::value_gradient(self.degree, &self.tables, u) };
         }
-        dispatch!(self.degree, gradient, false, &self.tables, u)
+        dispatch!(self.degree, gradient_kernel::<Portable>((), &self.tables, u))
     }
 
     /// p(u), ∇p(u) and ∇²p(u) in one pass.
@@ -323,16 +575,16 @@ impl FastPoly {
             // SAFETY: the CPU supports AVX2 and FMA (checked at run time just above).
             return unsafe { x86::eval(self.degree, &self.tables, u) };
         }
-        dispatch!(self.degree, full, false, &self.tables, u)
+        dispatch!(self.degree, full_kernel::<Portable>((), &self.tables, u))
     }
 
     /// The portable kernels (no AVX2 / FMA), for tests of both code paths.
     #[cfg(test)]
     fn eval_portable(&self, u: &Vector3) -> (Real, (Real, Vector3), super::Eval) {
         (
-            dispatch!(self.degree, value, false, &self.tables, u),
-            dispatch!(self.degree, gradient, false, &self.tables, u),
-            dispatch!(self.degree, full, false, &self.tables, u),
+            dispatch!(self.degree, value_kernel::<Portable>((), &self.tables, u)),
+            dispatch!(self.degree, gradient_kernel::<Portable>((), &self.tables, u)),
+            dispatch!(self.degree, full_kernel::<Portable>((), &self.tables, u)),
         )
     }
 }
