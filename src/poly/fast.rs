@@ -477,11 +477,12 @@ mod x86 {
     }
 }
 
-/// Whether this CPU runs the AVX2 + FMA kernels (detected once, then a cached flag).
+/// Whether this CPU runs the AVX2 + FMA kernels ([`crate::math::cpu_has_avx2_fma`], the check the
+/// query solvers' builds use too).
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 fn has_fma() -> bool {
-    std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+    crate::math::cpu_has_avx2_fma()
 }
 
 impl FastPoly {
