@@ -401,43 +401,16 @@ fn newton_step_lu(wa: &Matrix3, wb: &Matrix3, pt: &KktPoint) -> Option<(Vector3,
     Some((Vector3::new(step[0], step[1], step[2]), Vector3::new(step[3], step[4], step[5]), [step[6], step[7]]))
 }
 
-/// Active-set Newton on the 8 × 8 KKT system from (x0, y0) and the multipliers `lam0` (least
-/// squares at the start when `None`), globalized by backtracking on ‖r‖₂; a `warm` run gives up
-/// (Stalled) when a multiplier turns nonpositive. Every point is
-/// evaluated once; near the solution (residual below [`CHORD_RESIDUAL`]) trial points skip the
-/// Hessians and a further step reuses the last ones (chord step), refreshed when it stalls.
-fn kkt_newton(
-    ba: &PosedBody<'_>,
-    bb: &PosedBody<'_>,
-    x0: Vector3,
-    y0: Vector3,
-    lam0: Option<[Real; 2]>,
-    params: &NewtonParams,
-    warm: bool,
-) -> KktOut {
-    #[cfg(target_arch = "x86_64")]
-    if crate::math::cpu_has_avx2_fma() {
-        // SAFETY: the CPU supports AVX2 and FMA (checked just above).
-        return unsafe { kkt_newton_avx2(ba, bb, x0, y0, lam0, params, warm) };
-    }
-    kkt_newton_body::<false>(ba, bb, x0, y0, lam0, params, warm)
-}
-
-/// [`kkt_newton`] compiled for AVX2 + FMA: the solver's 3 × 3 algebra in three-operand and fused
-/// instructions (callgrind, cold distance at 2d = 6: 18 % fewer instructions per query than the
-/// SSE2 build of the same code).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn kkt_newton_avx2(
-    ba: &PosedBody<'_>,
-    bb: &PosedBody<'_>,
-    x0: Vector3,
-    y0: Vector3,
-    lam0: Option<[Real; 2]>,
-    params: &NewtonParams,
-    warm: bool,
-) -> KktOut {
-    kkt_newton_body::<true>(ba, bb, x0, y0, lam0, params, warm)
+avx2_dispatch! {
+    /// Active-set Newton on the 8 × 8 KKT system from (x0, y0) and the multipliers `lam0` (least
+    /// squares at the start when `None`), globalized by backtracking on ‖r‖₂; a `warm` run gives up
+    /// (Stalled) when a multiplier turns nonpositive. Every point is evaluated once; near the
+    /// solution (residual below [`CHORD_RESIDUAL`]) trial points skip the Hessians and a further
+    /// step reuses the last ones (chord step), refreshed when it stalls.
+    fn kkt_newton, kkt_newton_avx2 => kkt_newton_body(
+        ba: &PosedBody<'_>, bb: &PosedBody<'_>, x0: Vector3, y0: Vector3, lam0: Option<[Real; 2]>,
+        params: &NewtonParams, warm: bool,
+    ) -> KktOut
 }
 
 /// The body of [`kkt_newton`], inlined into each of its builds.

@@ -361,41 +361,16 @@ fn newton_step_lu(w: &Matrix3, pt: &KktPoint) -> Option<(Vector3, Real)> {
     Some((Vector3::new(step[0], step[1], step[2]), step[3]))
 }
 
-/// Active-set Newton on `∇f + μ∇g = 0, g = 0` from x0 and the multiplier `mu0` (least squares at the
-/// start when `None`), globalized by backtracking on ‖r‖₂; a `warm` run gives up (Stalled) when μ
-/// turns nonpositive. Every point is
-/// evaluated once; near the solution (residual below [`CHORD_RESIDUAL`]) trial points skip the
-/// Hessians and a further step reuses the last ones (chord step), refreshed when it stalls.
-fn kkt_newton(
-    b1: &PosedBody<'_>,
-    b2: &PosedBody<'_>,
-    x0: Vector3,
-    mu0: Option<Real>,
-    params: &NewtonParams,
-    warm: bool,
-) -> KktOut {
-    #[cfg(target_arch = "x86_64")]
-    if crate::math::cpu_has_avx2_fma() {
-        // SAFETY: the CPU supports AVX2 and FMA (checked just above).
-        return unsafe { kkt_newton_avx2(b1, b2, x0, mu0, params, warm) };
-    }
-    kkt_newton_body::<false>(b1, b2, x0, mu0, params, warm)
-}
-
-/// [`kkt_newton`] compiled for AVX2 + FMA: the solver's 3 × 3 algebra in three-operand and fused
-/// instructions (callgrind, cold distance at 2d = 6: 18 % fewer instructions per query than the
-/// SSE2 build of the same code).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn kkt_newton_avx2(
-    b1: &PosedBody<'_>,
-    b2: &PosedBody<'_>,
-    x0: Vector3,
-    mu0: Option<Real>,
-    params: &NewtonParams,
-    warm: bool,
-) -> KktOut {
-    kkt_newton_body::<true>(b1, b2, x0, mu0, params, warm)
+avx2_dispatch! {
+    /// Active-set Newton on `∇f + μ∇g = 0, g = 0` from x0 and the multiplier `mu0` (least squares at
+    /// the start when `None`), globalized by backtracking on ‖r‖₂; a `warm` run gives up (Stalled)
+    /// when μ turns nonpositive. Every point is evaluated once; near the solution (residual below
+    /// [`CHORD_RESIDUAL`]) trial points skip the Hessians and a further step reuses the last ones
+    /// (chord step), refreshed when it stalls.
+    fn kkt_newton, kkt_newton_avx2 => kkt_newton_body(
+        b1: &PosedBody<'_>, b2: &PosedBody<'_>, x0: Vector3, mu0: Option<Real>, params: &NewtonParams,
+        warm: bool,
+    ) -> KktOut
 }
 
 /// The body of [`kkt_newton`], inlined into each of its builds.

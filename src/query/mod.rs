@@ -2,6 +2,32 @@
 //! the growth measure d(p₁‖p₂), solved by a warm-started Newton / active-set method, and their
 //! level-0 sos certificates.
 
+/// Defines `fn $name(args) -> ret` that runs `$body::<true>` compiled for AVX2 + FMA (as `$avx2`)
+/// when the CPU has them ([`crate::math::cpu_has_avx2_fma`], a cached flag), else the portable
+/// `$body::<false>`. `$body` is `#[inline(always)]` and generic over `const FMA: bool` (fused
+/// arithmetic in [`fast_eval`]), so each build is one copy of the whole solver: three-operand and
+/// fused instructions cut the Newton loop's own instructions by about a fifth (issue 15).
+macro_rules! avx2_dispatch {
+    ($(#[$meta:meta])* fn $name:ident, $avx2:ident => $body:ident($($arg:ident: $ty:ty),* $(,)?) -> $ret:ty) => {
+        $(#[$meta])*
+        fn $name($($arg: $ty),*) -> $ret {
+            #[cfg(target_arch = "x86_64")]
+            if crate::math::cpu_has_avx2_fma() {
+                // SAFETY: the CPU supports AVX2 and FMA (checked just above).
+                return unsafe { $avx2($($arg),*) };
+            }
+            $body::<false>($($arg),*)
+        }
+
+        /// The AVX2 + FMA build of the function above (see `avx2_dispatch!`).
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx2,fma")]
+        fn $avx2($($arg: $ty),*) -> $ret {
+            $body::<true>($($arg),*)
+        }
+    };
+}
+
 pub mod certified;
 pub mod distance;
 pub(crate) mod fast_eval;
