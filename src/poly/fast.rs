@@ -326,27 +326,6 @@ mod x86 {
         __m128d, __m256d, _mm256_fmadd_pd, _mm256_loadu_pd, _mm256_set1_pd, _mm_fmadd_pd, _mm_loadu_pd, _mm_set1_pd,
     };
 
-    /// `v` through an empty `asm!` that may touch memory: the compiler computes `v` before it and
-    /// issues no later load ahead of it. No instruction (the template is an assembler comment).
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    fn pin4(mut v: __m256d) -> __m256d {
-        // SAFETY: the template is an assembler comment: no instruction runs, no memory or flag is
-        // touched and `v` stays in its register.
-        unsafe { asm!("/* {0} */", inout(ymm_reg) v, options(nostack, preserves_flags)) };
-        v
-    }
-
-    /// [`pin4`] for two lanes.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    fn pin2(mut v: __m128d) -> __m128d {
-        // SAFETY: the template is an assembler comment: no instruction runs, no memory or flag is
-        // touched and `v` stays in its register.
-        unsafe { asm!("/* {0} */", inout(xmm_reg) v, options(nostack, preserves_flags)) };
-        v
-    }
-
     /// Proof that the CPU runs AVX2 and FMA: its only constructor is compiled with those features,
     /// so safe code can only call it from code that is itself only run on such a CPU.
     #[derive(Clone, Copy)]
@@ -360,102 +339,83 @@ mod x86 {
         }
     }
 
-    /// Four lanes in one AVX register.
-    #[derive(Clone, Copy)]
-    struct F64x4(__m256d, Avx2Fma);
+    /// Defines the accumulator `$name` of `$n` lanes in one `$reg` register (`$vec`, loaded and
+    /// broadcast by `$load` / `$set1`, fused by `$fmadd`) with its scheduling barrier `$pin`: an
+    /// empty `asm!` the compiler must compute the value before (and may assume touches memory, so
+    /// no later table load moves ahead of it). No instruction: the template is an assembler
+    /// comment.
+    macro_rules! simd_acc {
+        ($(#[$doc:meta])* $name:ident, $vec:ty, $n:literal, $reg:ident, $set1:ident, $load:ident, $fmadd:ident, $pin:ident) => {
+            #[target_feature(enable = "avx2,fma")]
+            #[inline]
+            fn $pin(mut v: $vec) -> $vec {
+                // SAFETY: the template is an assembler comment: no instruction runs, no memory or
+                // flag is touched and `v` stays in its register.
+                unsafe { asm!("/* {0} */", inout($reg) v, options(nostack, preserves_flags)) };
+                v
+            }
 
-    impl Acc for F64x4 {
-        type Row = [Real; 4];
-        type Cpu = Avx2Fma;
-        type Coord = Self;
+            $(#[$doc])*
+            #[derive(Clone, Copy)]
+            struct $name($vec, Avx2Fma);
 
-        #[inline(always)]
-        fn splat(cpu: Avx2Fma, t: Real) -> Self {
-            // SAFETY: `cpu` proves the CPU runs AVX.
-            Self(unsafe { _mm256_set1_pd(t) }, cpu)
-        }
+            impl Acc for $name {
+                type Row = [Real; $n];
+                type Cpu = Avx2Fma;
+                type Coord = Self;
 
-        #[inline(always)]
-        fn load(cpu: Avx2Fma, row: &[Real; 4]) -> Self {
-            // SAFETY: `row` is four readable `f64` (an unaligned load); `cpu` proves AVX.
-            Self(unsafe { _mm256_loadu_pd(row.as_ptr()) }, cpu)
-        }
+                #[inline(always)]
+                fn splat(cpu: Avx2Fma, t: Real) -> Self {
+                    // SAFETY: `cpu` proves the CPU runs AVX2 (and so SSE2).
+                    Self(unsafe { $set1(t) }, cpu)
+                }
 
-        #[inline(always)]
-        fn mul_add_row(self, t: Self, row: &[Real; 4]) -> Self {
-            // SAFETY: `row` is four readable `f64` (an unaligned load, folded into the FMA);
-            // `self.1` proves AVX and FMA.
-            Self(unsafe { _mm256_fmadd_pd(self.0, t.0, _mm256_loadu_pd(row.as_ptr())) }, self.1)
-        }
+                #[inline(always)]
+                fn load(cpu: Avx2Fma, row: &[Real; $n]) -> Self {
+                    // SAFETY: `row` is `$n` readable `f64` (an unaligned load); `cpu` proves AVX2.
+                    Self(unsafe { $load(row.as_ptr()) }, cpu)
+                }
 
-        #[inline(always)]
-        fn mul_add(self, t: Self, c: Self) -> Self {
-            // SAFETY: `self.1` proves AVX and FMA.
-            Self(unsafe { _mm256_fmadd_pd(self.0, t.0, c.0) }, self.1)
-        }
+                #[inline(always)]
+                fn mul_add_row(self, t: Self, row: &[Real; $n]) -> Self {
+                    // SAFETY: `row` is `$n` readable `f64` (an unaligned load, folded into the
+                    // FMA); `self.1` proves AVX2 and FMA.
+                    Self(unsafe { $fmadd(self.0, t.0, $load(row.as_ptr())) }, self.1)
+                }
 
-        #[inline(always)]
-        fn pin(self) -> Self {
-            // SAFETY: `self.1` proves AVX (the register class of `pin4`).
-            Self(unsafe { pin4(self.0) }, self.1)
-        }
+                #[inline(always)]
+                fn mul_add(self, t: Self, c: Self) -> Self {
+                    // SAFETY: `self.1` proves AVX2 and FMA.
+                    Self(unsafe { $fmadd(self.0, t.0, c.0) }, self.1)
+                }
 
-        #[inline(always)]
-        fn lanes(self) -> [Real; 4] {
-            // SAFETY: `__m256d` is four `f64` in lane order; every bit pattern is a valid `f64`.
-            unsafe { std::mem::transmute::<__m256d, [Real; 4]>(self.0) }
-        }
+                #[inline(always)]
+                fn pin(self) -> Self {
+                    // SAFETY: `self.1` proves AVX2 (the register class of the barrier).
+                    Self(unsafe { $pin(self.0) }, self.1)
+                }
+
+                #[inline(always)]
+                fn lanes(self) -> [Real; $n] {
+                    // SAFETY: the register is `$n` `f64` in lane order; every bit pattern is a
+                    // valid `f64`.
+                    unsafe { std::mem::transmute::<$vec, [Real; $n]>(self.0) }
+                }
+            }
+        };
     }
+
+    simd_acc!(
+        /// Four lanes in one AVX register (the value + gradient and [xx, xy, xz, yy] tables).
+        F64x4, __m256d, 4, ymm_reg, _mm256_set1_pd, _mm256_loadu_pd, _mm256_fmadd_pd, pin4
+    );
+    simd_acc!(
+        /// Two lanes in one SSE register (the [yz, zz] table).
+        F64x2, __m128d, 2, xmm_reg, _mm_set1_pd, _mm_loadu_pd, _mm_fmadd_pd, pin2
+    );
 
     impl Quad for F64x4 {
         type Pair = F64x2;
-    }
-
-    /// Two lanes in one SSE register (the [yz, zz] table).
-    #[derive(Clone, Copy)]
-    struct F64x2(__m128d, Avx2Fma);
-
-    impl Acc for F64x2 {
-        type Row = [Real; 2];
-        type Cpu = Avx2Fma;
-        type Coord = Self;
-
-        #[inline(always)]
-        fn splat(cpu: Avx2Fma, t: Real) -> Self {
-            // SAFETY: `cpu` proves the CPU runs SSE2 (part of AVX2).
-            Self(unsafe { _mm_set1_pd(t) }, cpu)
-        }
-
-        #[inline(always)]
-        fn load(cpu: Avx2Fma, row: &[Real; 2]) -> Self {
-            // SAFETY: `row` is two readable `f64` (an unaligned load); `cpu` proves SSE2.
-            Self(unsafe { _mm_loadu_pd(row.as_ptr()) }, cpu)
-        }
-
-        #[inline(always)]
-        fn mul_add_row(self, t: Self, row: &[Real; 2]) -> Self {
-            // SAFETY: `row` is two readable `f64` (an unaligned load, folded into the FMA);
-            // `self.1` proves FMA.
-            Self(unsafe { _mm_fmadd_pd(self.0, t.0, _mm_loadu_pd(row.as_ptr())) }, self.1)
-        }
-
-        #[inline(always)]
-        fn mul_add(self, t: Self, c: Self) -> Self {
-            // SAFETY: `self.1` proves FMA.
-            Self(unsafe { _mm_fmadd_pd(self.0, t.0, c.0) }, self.1)
-        }
-
-        #[inline(always)]
-        fn pin(self) -> Self {
-            // SAFETY: `self.1` proves AVX (the register class of `pin2`).
-            Self(unsafe { pin2(self.0) }, self.1)
-        }
-
-        #[inline(always)]
-        fn lanes(self) -> [Real; 2] {
-            // SAFETY: `__m128d` is two `f64` in lane order; every bit pattern is a valid `f64`.
-            unsafe { std::mem::transmute::<__m128d, [Real; 2]>(self.0) }
-        }
     }
 
     /// p(u) for degree `d` (0..=8).
