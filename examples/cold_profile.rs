@@ -9,6 +9,10 @@
 //! perf record -g target/release/examples/cold_profile 6 400 distance && perf report
 //! ```
 //!
+//! The third argument `warm` times the warm queries instead: the 500-step slide and turn of
+//! `sublevel bench` (each step's distance and growth query repeated from the previous step's warm
+//! starts), so `--toggle-collect` on `distance` / `growth` profiles warm queries.
+//!
 //! A fifth argument `save=PATH` writes every pose's distance and growth value (one line per pose);
 //! `check=PATH` compares them with such a file and fails unless every answer is within 10⁻⁹
 //! relative (of max(|old|, 1 mm) for distances, of max(|old|, 1) for growth values): a change to
@@ -44,6 +48,9 @@ fn main() -> sublevel::Result<()> {
         .collect();
     let id = Isometry3::identity();
     let params = NewtonParams::default();
+    if which == "warm" {
+        return warm(&chair, &human, degree, repeats, &params);
+    }
     let (mut sep, mut ovl, mut it_sep, mut it_ovl, mut conv) = (0usize, 0usize, 0usize, 0usize, 0usize);
     let mut hist = [0usize; 12];
     let (mut td, mut tg) = (Vec::new(), Vec::new());
@@ -113,5 +120,46 @@ fn main() -> sublevel::Result<()> {
         println!("answers: {compared} compared with {path}, largest relative difference {worst:.2e}");
         assert!(worst <= 1e-9 && compared > 0, "answers changed");
     }
+    Ok(())
+}
+
+/// The warm queries of `sublevel bench`: the chair slides through the human while turning slowly
+/// (500 steps), each step's queries repeated `repeats` times from the previous step's warm starts;
+/// prints the median times and the warm-started share.
+fn warm(chair: &Body, human: &Body, degree: usize, repeats: usize, params: &NewtonParams) -> sublevel::Result<()> {
+    let axis = nalgebra::Unit::new_normalize(Vector3::new(0.2, 1.0, 0.1));
+    let id = Isometry3::identity();
+    let (mut td, mut tg, mut warm_d, mut warm_g, mut conv) = (Vec::new(), Vec::new(), 0usize, 0usize, 0usize);
+    let (mut wd, mut wg) = (None, None);
+    for k in 0..500 {
+        let s = k as Real / 499.0;
+        let pose = Isometry3::from_parts(
+            Vector3::new(-2.5 + 5.0 * s, 0.3, 0.1).into(),
+            UnitQuaternion::from_axis_angle(&axis, 1.5 * s),
+        );
+        let t = Instant::now();
+        let mut d = distance(chair, &pose, human, &id, wd.as_deref(), params);
+        for _ in 1..repeats {
+            d = std::hint::black_box(distance(chair, &pose, human, &id, wd.as_deref(), params));
+        }
+        td.push(t.elapsed().as_secs_f64() * 1e6 / repeats as Real);
+        let t = Instant::now();
+        let mut g = growth(chair, &pose, human, &id, wg.as_deref(), params);
+        for _ in 1..repeats {
+            g = std::hint::black_box(growth(chair, &pose, human, &id, wg.as_deref(), params));
+        }
+        tg.push(t.elapsed().as_secs_f64() * 1e6 / repeats as Real);
+        warm_d += usize::from(d.warm_started);
+        warm_g += usize::from(g.warm_started);
+        conv += usize::from(d.status.converged()) + usize::from(g.status.converged());
+        wd = Some(d.warm_start);
+        wg = Some(g.warm_start);
+    }
+    let median = |mut v: Vec<Real>| {
+        v.sort_by(|a, b| a.total_cmp(b));
+        v[v.len() / 2]
+    };
+    println!("2d = {degree}: distance warm median {:.3} µs, growth warm median {:.3} µs", median(td), median(tg));
+    println!("warm-started: distance {warm_d} / 500, growth {warm_g} / 500; converged {conv} / 1000");
     Ok(())
 }

@@ -539,6 +539,40 @@ impl FastPoly {
         dispatch!(self.degree, full_kernel::<Portable>((), &self.tables, u))
     }
 
+    /// [`Self::value`] through the AVX2 + FMA kernel, without the run-time check: for the query
+    /// solvers' AVX2 builds, which made that check once per solve.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2 and FMA ([`crate::math::cpu_has_avx2_fma`]).
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    pub(crate) unsafe fn value_avx2(&self, u: &Vector3) -> Real {
+        // SAFETY: the caller guarantees AVX2 and FMA.
+        unsafe { x86::value(self.degree, &self.tables, u) }
+    }
+
+    /// [`Self::value_gradient`] through the AVX2 + FMA kernel, without the run-time check.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2 and FMA ([`crate::math::cpu_has_avx2_fma`]).
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    pub(crate) unsafe fn value_gradient_avx2(&self, u: &Vector3) -> (Real, Vector3) {
+        // SAFETY: the caller guarantees AVX2 and FMA.
+        unsafe { x86::value_gradient(self.degree, &self.tables, u) }
+    }
+
+    /// [`Self::eval`] through the AVX2 + FMA kernel, without the run-time check.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2 and FMA ([`crate::math::cpu_has_avx2_fma`]).
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    pub(crate) unsafe fn eval_avx2(&self, u: &Vector3) -> super::Eval {
+        // SAFETY: the caller guarantees AVX2 and FMA.
+        unsafe { x86::eval(self.degree, &self.tables, u) }
+    }
+
     /// The portable kernels (no AVX2 / FMA), for tests of both code paths.
     #[cfg(test)]
     fn eval_portable(&self, u: &Vector3) -> (Real, (Real, Vector3), super::Eval) {

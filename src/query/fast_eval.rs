@@ -44,6 +44,9 @@ pub(crate) struct FastPosed<'a, const FMA: bool = false> {
     /// 1/scale when A = I/scale (the body posed without rotation, as the frame body of every
     /// query is): then ∇ₓ = ∇ᵤ/scale and ∇²ₓ = ∇²ᵤ/scale², with no matrix products.
     unrotated: Option<Real>,
+    /// `FMA` and the CPU runs the AVX2 + FMA kernels (checked once in [`Self::build`]): the
+    /// evaluations call them directly instead of through [`FastPoly`]'s per-call check.
+    avx2: bool,
 }
 
 /// Value, world gradient and (when evaluated) the normalized-frame Hessian at one point (one
@@ -76,7 +79,41 @@ impl<'a, const FMA: bool> FastPosed<'a, FMA> {
             at: a.transpose(),
             b: pb.to_normalized(&Vector3::zeros()),
             unrotated,
+            avx2: FMA && crate::math::cpu_has_avx2_fma(),
         }
+    }
+
+    /// p(u) through the kernel this evaluator was built for.
+    #[inline(always)]
+    fn poly_value(&self, u: &Vector3) -> Real {
+        #[cfg(target_arch = "x86_64")]
+        if FMA && self.avx2 {
+            // SAFETY: `avx2` is set only when the CPU supports AVX2 and FMA.
+            return unsafe { self.poly.value_avx2(u) };
+        }
+        self.poly.value(u)
+    }
+
+    /// p(u) and ∇p(u) through the kernel this evaluator was built for.
+    #[inline(always)]
+    fn poly_value_gradient(&self, u: &Vector3) -> (Real, Vector3) {
+        #[cfg(target_arch = "x86_64")]
+        if FMA && self.avx2 {
+            // SAFETY: `avx2` is set only when the CPU supports AVX2 and FMA.
+            return unsafe { self.poly.value_gradient_avx2(u) };
+        }
+        self.poly.value_gradient(u)
+    }
+
+    /// p(u), ∇p(u) and ∇²p(u) through the kernel this evaluator was built for.
+    #[inline(always)]
+    fn poly_eval(&self, u: &Vector3) -> crate::poly::Eval {
+        #[cfg(target_arch = "x86_64")]
+        if FMA && self.avx2 {
+            // SAFETY: `avx2` is set only when the CPU supports AVX2 and FMA.
+            return unsafe { self.poly.eval_avx2(u) };
+        }
+        self.poly.eval(u)
     }
 
     /// u = A x + b.
@@ -104,13 +141,13 @@ impl<'a, const FMA: bool> FastPosed<'a, FMA> {
     /// p'(x).
     #[inline(always)]
     pub fn value(&self, x: &Vector3) -> Real {
-        self.poly.value(&self.normalized(x))
+        self.poly_value(&self.normalized(x))
     }
 
     /// p'(x) and ∇p'(x).
     #[inline(always)]
     pub fn value_gradient(&self, x: &Vector3) -> (Real, Vector3) {
-        let (v, g) = self.poly.value_gradient(&self.normalized(x));
+        let (v, g) = self.poly_value_gradient(&self.normalized(x));
         (v, self.world_gradient(&g))
     }
 
@@ -119,10 +156,10 @@ impl<'a, const FMA: bool> FastPosed<'a, FMA> {
     pub fn eval(&self, x: &Vector3, hessian: bool) -> PosedEval {
         let u = self.normalized(x);
         if hessian {
-            let e = self.poly.eval(&u);
+            let e = self.poly_eval(&u);
             PosedEval { value: e.value, gradient: self.world_gradient(&e.gradient), hessian_u: Some(e.hessian) }
         } else {
-            let (value, g) = self.poly.value_gradient(&u);
+            let (value, g) = self.poly_value_gradient(&u);
             PosedEval { value, gradient: self.world_gradient(&g), hessian_u: None }
         }
     }
