@@ -45,7 +45,9 @@ pub(crate) struct FastPosed<'a, const FMA: bool = false> {
     /// query is): then ∇ₓ = ∇ᵤ/scale and ∇²ₓ = ∇²ᵤ/scale², with no matrix products.
     unrotated: Option<Real>,
     /// `FMA` and the CPU runs the AVX2 + FMA kernels (checked once in [`Self::build`]): the
-    /// evaluations call them directly instead of through [`FastPoly`]'s per-call check.
+    /// evaluations call them directly instead of through [`FastPoly`]'s per-call check. Always
+    /// false (and unread) off x86-64.
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
     avx2: bool,
 }
 
