@@ -89,10 +89,6 @@ fn main() -> sublevel::Result<()> {
         }
         values.push(value);
     }
-    let median = |mut v: Vec<Real>| {
-        v.sort_by(|a, b| a.total_cmp(b));
-        v.get(v.len() / 2).copied().unwrap_or(Real::NAN)
-    };
     println!("2d = {degree}: distance cold median {:.3} µs, growth cold median {:.3} µs", median(td), median(tg));
     println!(
         "distance: {sep} separated ({:.2} it/query), {ovl} overlapping ({:.2} it/query), converged {conv}",
@@ -155,11 +151,13 @@ fn warm(chair: &Body, human: &Body, degree: usize, repeats: usize, params: &Newt
         wd = Some(d.warm_start);
         wg = Some(g.warm_start);
     }
-    let median = |mut v: Vec<Real>| {
-        v.sort_by(|a, b| a.total_cmp(b));
-        v[v.len() / 2]
-    };
     println!("2d = {degree}: distance warm median {:.3} µs, growth warm median {:.3} µs", median(td), median(tg));
     println!("warm-started: distance {warm_d} / 500, growth {warm_g} / 500; converged {conv} / 1000");
     Ok(())
+}
+
+/// Median of the per-pose times (NaN when none were taken, e.g. growth in `distance` mode).
+fn median(mut v: Vec<Real>) -> Real {
+    v.sort_by(|a, b| a.total_cmp(b));
+    v.get(v.len() / 2).copied().unwrap_or(Real::NAN)
 }
