@@ -525,6 +525,14 @@ pub struct PosedBody<'a> {
 }
 
 impl<'a> PosedBody<'a> {
+    /// The body under the identity pose (`A = I/scale`, `b = −center/scale`), without the
+    /// quaternion → matrix work of [`Self::new`]: the frame body of every query.
+    #[inline]
+    pub fn unposed(body: &'a Body) -> Self {
+        let inv_s = 1.0 / body.scale;
+        Self { body, pose: Isometry3::identity(), a: Matrix3::from_diagonal_element(inv_s), b: -body.center * inv_s }
+    }
+
     /// Precomputes the world → normalized map `u = A x + b`.
     pub fn new(body: &'a Body, pose: &Isometry3) -> Self {
         let rt = pose.rotation.to_rotation_matrix().matrix().transpose();

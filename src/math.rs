@@ -96,6 +96,33 @@ pub fn pose_to_parts(pose: &Isometry3) -> ([Real; 4], [Real; 3]) {
     ([q.w, q.i, q.j, q.k], [t.x, t.y, t.z])
 }
 
+/// A symmetric 3 × 3 matrix by its upper triangle `[xx, xy, xz, yy, yz, zz]`, the order the
+/// Hessian kernels of [`crate::poly::FastPoly`] produce it in (their `[xx, xy, xz, yy]` and
+/// `[yz, zz]` lanes). The query solvers carry their Hessians and KKT blocks in this form: 6 entries
+/// to copy, scale and add instead of the 9 of a [`Matrix3`] (paper §IV; the blocks `2I + λ∇²p'`
+/// of the distance KKT system and `∇²p₁' + μ∇²p₂'` of the growth one are symmetric).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Sym3(pub [Real; 6]);
+
+impl Sym3 {
+    /// The upper triangle of `m` (its lower triangle is not read).
+    pub fn from_upper(m: &Matrix3) -> Self {
+        Self([m[(0, 0)], m[(0, 1)], m[(0, 2)], m[(1, 1)], m[(1, 2)], m[(2, 2)]])
+    }
+
+    /// The full symmetric matrix.
+    pub fn to_matrix(&self) -> Matrix3 {
+        let [xx, xy, xz, yy, yz, zz] = self.0;
+        Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz)
+    }
+
+    /// `k · self`.
+    #[inline(always)]
+    pub fn scaled(&self, k: Real) -> Self {
+        Self(self.0.map(|v| v * k))
+    }
+}
+
 /// Whether this CPU runs code compiled for AVX2 and FMA (x86-64-v3): the query solvers and the
 /// polynomial kernels keep a copy compiled for them and pick it at run time (the check is a
 /// cached flag after the first call). Always false off x86-64.

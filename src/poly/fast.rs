@@ -38,7 +38,7 @@
 
 use super::monomial::{basis_len, index3};
 use super::polynomial::{Polynomial, MAX_DEGREE};
-use crate::math::{Matrix3, Real, Vector3};
+use crate::math::{Real, Sym3, Vector3};
 
 /// Rows of the value / gradient table: monomials of degree ≤ 8 in three variables.
 pub const MAX_MONOMIALS: usize = 165;
@@ -121,12 +121,12 @@ trait Quad: Acc<Row = [Real; 4]> {
     /// The 2-lane accumulator of the same code path.
     type Pair: Acc<Row = [Real; 2], Cpu = Self::Cpu>;
 
-    /// The symmetric Hessian from the [xx, xy, xz, yy] and [yz, zz] sums. On x86 it is stored as
-    /// [xx, xy, xz, xy] (one permute), [yy, yz] (one shuffle), then xz, yz, zz.
+    /// The symmetric Hessian's upper triangle from the [xx, xy, xz, yy] and [yz, zz] sums (the
+    /// two registers stored as they are on x86).
     #[inline(always)]
-    fn hessian(h: Self, g: Self::Pair) -> Matrix3 {
+    fn hessian(h: Self, g: Self::Pair) -> Sym3 {
         let (h, g) = (h.lanes(), g.lanes());
-        Matrix3::new(h[0], h[1], h[2], h[1], h[3], g[0], h[2], g[0], g[1])
+        Sym3([h[0], h[1], h[2], h[3], g[0], g[1]])
     }
 }
 
@@ -285,18 +285,36 @@ fn value_kernel<const D: usize, Q: Quad>(cpu: Q::Cpu, t: &Tables, u: &Vector3) -
     horner_of_degree!(D, Q, cpu, &t.value_gradient, u).lanes()[0]
 }
 
+/// p(u), ∇p(u) and the upper triangle of ∇²p(u): the fast kernels' full evaluation
+/// ([`FastPoly::eval`] returns the same as a [`super::Eval`], with the full Hessian).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SymEval {
+    /// p(u).
+    pub value: Real,
+    /// ∇p(u).
+    pub gradient: Vector3,
+    /// ∇²p(u), upper triangle.
+    pub hessian: Sym3,
+}
+
+impl From<SymEval> for super::Eval {
+    fn from(e: SymEval) -> Self {
+        Self { value: e.value, gradient: e.gradient, hessian: e.hessian.to_matrix() }
+    }
+}
+
 /// p(u), ∇p(u) and ∇²p(u) (the Hessian's rows have degree D − 2; zero for D < 2).
 #[inline(always)]
-fn full_kernel<const D: usize, Q: Quad>(cpu: Q::Cpu, t: &Tables, u: &Vector3) -> super::Eval {
+fn full_kernel<const D: usize, Q: Quad>(cpu: Q::Cpu, t: &Tables, u: &Vector3) -> SymEval {
     let (value, gradient) = gradient_kernel::<D, Q>(cpu, t, u);
     let hessian = if D >= 2 {
         let h = horner_of_degree!(D - 2, Q, cpu, &t.hessian, u);
         let g = horner_of_degree!(D - 2, Q::Pair, cpu, &t.hessian_yz_zz, u);
         Q::hessian(h, g)
     } else {
-        Matrix3::zeros()
+        Sym3::default()
     };
-    super::Eval { value, gradient, hessian }
+    SymEval { value, gradient, hessian }
 }
 
 /// Calls `$kernel::<D, $q>($args)` for the runtime degree `$d` (0..=8).
@@ -432,7 +450,7 @@ mod x86 {
 
     /// p(u), ∇p(u) and ∇²p(u) for degree `d` (0..=8).
     #[target_feature(enable = "avx2,fma")]
-    pub(super) fn eval(d: usize, t: &Tables, u: &Vector3) -> crate::poly::Eval {
+    pub(super) fn eval(d: usize, t: &Tables, u: &Vector3) -> SymEval {
         dispatch!(d, full_kernel::<F64x4>(Avx2Fma::new(), t, u))
     }
 }
@@ -531,6 +549,12 @@ impl FastPoly {
     /// p(u), ∇p(u) and ∇²p(u) in one pass.
     #[inline]
     pub fn eval(&self, u: &Vector3) -> super::Eval {
+        self.eval_sym(u).into()
+    }
+
+    /// [`Self::eval`] with the Hessian's upper triangle (the query solvers' form).
+    #[inline]
+    pub(crate) fn eval_sym(&self, u: &Vector3) -> SymEval {
         #[cfg(target_arch = "x86_64")]
         if has_fma() {
             // SAFETY: the CPU supports AVX2 and FMA (checked at run time just above).
@@ -562,13 +586,13 @@ impl FastPoly {
         unsafe { x86::value_gradient(self.degree, &self.tables, u) }
     }
 
-    /// [`Self::eval`] through the AVX2 + FMA kernel, without the run-time check.
+    /// [`Self::eval_sym`] through the AVX2 + FMA kernel, without the run-time check.
     ///
     /// # Safety
     /// The CPU must support AVX2 and FMA ([`crate::math::cpu_has_avx2_fma`]).
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
-    pub(crate) unsafe fn eval_avx2(&self, u: &Vector3) -> super::Eval {
+    pub(crate) unsafe fn eval_sym_avx2(&self, u: &Vector3) -> SymEval {
         // SAFETY: the caller guarantees AVX2 and FMA.
         unsafe { x86::eval(self.degree, &self.tables, u) }
     }
@@ -579,7 +603,7 @@ impl FastPoly {
         (
             dispatch!(self.degree, value_kernel::<Portable>((), &self.tables, u)),
             dispatch!(self.degree, gradient_kernel::<Portable>((), &self.tables, u)),
-            dispatch!(self.degree, full_kernel::<Portable>((), &self.tables, u)),
+            dispatch!(self.degree, full_kernel::<Portable>((), &self.tables, u)).into(),
         )
     }
 }

@@ -22,6 +22,7 @@ pub mod radial;
 pub mod support;
 
 pub use fast::FastPoly;
+pub(crate) use fast::SymEval;
 pub use polynomial::{Eval, Polynomial, MAX_DEGREE};
 pub use radial::RadialTable;
 pub use support::{SupportBound, SupportTable};

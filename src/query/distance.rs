@@ -25,14 +25,14 @@
 //! it is the start. A log-barrier path from the two interior points is the globally convergent
 //! fallback. A KKT point with λ_a, λ_b > 0 is the global minimizer of this convex program.
 
-use super::fast_eval::{abs_max, solve_kkt8, FastPosed, PosedEval, CHORD_RESIDUAL};
+use super::fast_eval::{abs_max, max_plain, shifted, solve_kkt8, FastPosed, PosedEval, CHORD_RESIDUAL};
 use super::growth::{solve_growth, GrowthWarmStart};
 use super::newton::{
     boundary_on_segment_within, pose_step, MotionTrail, NewtonParams, SolveStatus, START_BOUNDARY_TOLERANCE,
     WARM_ITERATIONS,
 };
 use crate::body::{Body, PosedBody};
-use crate::math::{Isometry3, Matrix3, Point3, Real, Vector3};
+use crate::math::{Isometry3, Matrix3, Point3, Real, Sym3, Vector3};
 use nalgebra::{SMatrix, SVector};
 
 /// Answer of a distance query; all points in world coordinates (meters).
@@ -133,7 +133,7 @@ pub fn distance(
     params: &NewtonParams,
 ) -> DistanceResult {
     let rel = pose_a.inverse() * pose_b;
-    let ba = PosedBody::new(a, &Isometry3::identity());
+    let ba = PosedBody::unposed(a);
     let bb = PosedBody::new(b, &rel);
     let mut iterations = 0;
 
@@ -237,12 +237,15 @@ fn finish(
 ) -> DistanceResult {
     let diff = out.y - out.x;
     let dist = diff.norm();
-    let normal = if dist > 0.0 { pose_a.rotation * (diff / dist) } else { Vector3::zeros() };
-    let b_local = rel.inverse() * Point3::from(out.y);
+    // One rotation matrix for the three world vectors (a quaternion rotation costs twice a product).
+    let r = pose_a.rotation.to_rotation_matrix();
+    let t = pose_a.translation.vector;
+    let normal = if dist > 0.0 { r * (diff / dist) } else { Vector3::zeros() };
+    let b_local = rel.inverse_transform_point(&Point3::from(out.y));
     DistanceResult {
         distance: dist,
-        witness_a: pose_a * Point3::from(out.x),
-        witness_b: pose_a * Point3::from(out.y),
+        witness_a: Point3::from(r * out.x + t),
+        witness_b: Point3::from(r * out.y + t),
         normal,
         overlapping: false,
         status: out.status,
@@ -354,7 +357,7 @@ impl KktPoint {
 
     #[inline(always)]
     fn norm_inf(&self) -> Real {
-        abs_max(&self.ra).max(abs_max(&self.rb)).max(self.ca.abs()).max(self.cb.abs())
+        max_plain(max_plain(abs_max(&self.ra), abs_max(&self.rb)), max_plain(self.ca.abs(), self.cb.abs()))
     }
 
     #[inline(always)]
@@ -367,13 +370,12 @@ impl KktPoint {
 /// that is singular.
 #[inline(always)]
 fn newton_step<const FMA: bool>(
-    h: &(Matrix3, Matrix3),
+    h: &(Sym3, Sym3),
     pt: &KktPoint,
     lam: [Real; 2],
 ) -> Option<(Vector3, Vector3, [Real; 2])> {
-    let two = Matrix3::identity() * 2.0;
-    let wa = two + h.0 * lam[0];
-    let wb = two + h.1 * lam[1];
+    let wa = shifted::<FMA>(&h.0, lam[0], 2.0);
+    let wb = shifted::<FMA>(&h.1, lam[1], 2.0);
     let (ga, gb) = (&pt.ea.gradient, &pt.eb.gradient);
     if let Some(step) = solve_kkt8::<FMA>(&wa, &wb, ga, gb, &pt.ra, &pt.rb, pt.ca, pt.cb) {
         return Some(step);
@@ -384,8 +386,9 @@ fn newton_step<const FMA: bool>(
 /// [`newton_step`] by dense LU when the block elimination meets a singular block.
 #[cold]
 #[inline(never)]
-fn newton_step_lu(wa: &Matrix3, wb: &Matrix3, pt: &KktPoint) -> Option<(Vector3, Vector3, [Real; 2])> {
+fn newton_step_lu(wa: &Sym3, wb: &Sym3, pt: &KktPoint) -> Option<(Vector3, Vector3, [Real; 2])> {
     let two = Matrix3::identity() * 2.0;
+    let (wa, wb) = (&wa.to_matrix(), &wb.to_matrix());
     let (ga, gb) = (&pt.ea.gradient, &pt.eb.gradient);
     let mut jac = Mat8::zeros();
     jac.fixed_view_mut::<3, 3>(0, 0).copy_from(wa);
@@ -432,7 +435,7 @@ fn kkt_newton_body<const FMA: bool>(
     if lam0.is_none() {
         pt.set_multipliers(&x, &y, lam);
     }
-    let mut hess: Option<(Matrix3, Matrix3)> = None;
+    let mut hess: Option<(Sym3, Sym3)> = None;
     let mut status = SolveStatus::MaxIterations;
     let mut it = 0;
     let scale = |x: &Vector3, y: &Vector3| 1.0 + 2.0 * (x - y).norm();
@@ -440,7 +443,9 @@ fn kkt_newton_body<const FMA: bool>(
         pt.norm_inf() <= params.kkt_tolerance * scale(x, y) && lam[0] > 0.0 && lam[1] > 0.0
     };
     while it < params.max_iterations {
-        if !pt.norm_inf().is_finite() {
+        // The 2-norm carries any NaN or infinity of the residual (the ∞-norm's plain maxima do not).
+        let r0 = pt.norm2();
+        if !r0.is_finite() {
             status = SolveStatus::Stalled;
             break;
         }
@@ -465,19 +470,20 @@ fn kkt_newton_body<const FMA: bool>(
             status = SolveStatus::Stalled;
             break;
         };
-        let r0 = pt.norm2();
         let cheap = r0 <= CHORD_RESIDUAL * scale(&x, &y);
         let mut alpha = 1.0;
         let mut accepted = false;
+        // The trial points are evaluated into `pt` itself (its Hessians are in `hess` already):
+        // no copy of the accepted point. A rejected line search re-evaluates the current point.
         for _ in 0..40 {
             let (xt, yt) = (x + dx * alpha, y + dy * alpha);
             let lt = [lam[0] + dl[0] * alpha, lam[1] + dl[1] * alpha];
-            let tr = KktPoint::new(&fa, &fb, &xt, &yt, lt, !cheap);
-            let r1 = tr.norm2();
+            pt = KktPoint::new(&fa, &fb, &xt, &yt, lt, !cheap);
+            let r1 = pt.norm2();
             // A chord step must at least halve the residual; otherwise refresh the Hessians here.
             let bound = if fresh { (1.0 - 1e-4 * alpha) * r0 } else { 0.5 * r0 };
             if r1.is_finite() && r1 <= bound {
-                (x, y, lam, pt) = (xt, yt, lt, tr);
+                (x, y, lam) = (xt, yt, lt);
                 accepted = true;
                 break;
             }
@@ -487,8 +493,8 @@ fn kkt_newton_body<const FMA: bool>(
             alpha *= 0.5;
         }
         if !accepted {
+            pt = KktPoint::new(&fa, &fb, &x, &y, lam, true);
             if !fresh {
-                pt = KktPoint::new(&fa, &fb, &x, &y, lam, true);
                 continue;
             }
             status = SolveStatus::Stalled;
@@ -501,7 +507,7 @@ fn kkt_newton_body<const FMA: bool>(
             break;
         }
     }
-    if status == SolveStatus::MaxIterations && converged(&pt, &x, &y, lam) {
+    if status == SolveStatus::MaxIterations && converged(&pt, &x, &y, lam) && pt.norm2().is_finite() {
         status = SolveStatus::Converged;
     }
     KktOut { x, y, lam, status, iterations: it, residual: pt.norm_inf() }

@@ -6,8 +6,8 @@
 //! block elimination of the 4 × 4 growth and 8 × 8 distance systems).
 
 use crate::body::PosedBody;
-use crate::math::{Matrix3, Real, Vector3};
-use crate::poly::FastPoly;
+use crate::math::{Matrix3, Real, Sym3, Vector3};
+use crate::poly::{FastPoly, SymEval};
 
 /// a·b + c, fused when `FMA` (the solvers' AVX2 + FMA builds, see
 /// [`crate::math::cpu_has_avx2_fma`]); two roundings otherwise, never a library call.
@@ -25,6 +25,30 @@ pub(crate) fn fmadd<const FMA: bool>(a: Real, b: Real, c: Real) -> Real {
 pub(crate) fn mat_vec<const FMA: bool>(m: &Matrix3, v: &Vector3) -> Vector3 {
     let row = |i: usize| fmadd::<FMA>(m[(i, 2)], v.z, fmadd::<FMA>(m[(i, 1)], v.y, m[(i, 0)] * v.x));
     Vector3::new(row(0), row(1), row(2))
+}
+
+/// S v for a symmetric 3 × 3 matrix, fused where `FMA`.
+#[inline(always)]
+pub(crate) fn sym_mat_vec<const FMA: bool>(s: &Sym3, v: &Vector3) -> Vector3 {
+    let [xx, xy, xz, yy, yz, zz] = s.0;
+    Vector3::new(
+        fmadd::<FMA>(xz, v.z, fmadd::<FMA>(xy, v.y, xx * v.x)),
+        fmadd::<FMA>(yz, v.z, fmadd::<FMA>(yy, v.y, xy * v.x)),
+        fmadd::<FMA>(zz, v.z, fmadd::<FMA>(yz, v.y, xz * v.x)),
+    )
+}
+
+/// `d·I + k·S`, fused where `FMA` (the KKT blocks `2I + λ∇²p'`).
+#[inline(always)]
+pub(crate) fn shifted<const FMA: bool>(s: &Sym3, k: Real, d: Real) -> Sym3 {
+    let [xx, xy, xz, yy, yz, zz] = s.0;
+    Sym3([fmadd::<FMA>(k, xx, d), k * xy, k * xz, fmadd::<FMA>(k, yy, d), k * yz, fmadd::<FMA>(k, zz, d)])
+}
+
+/// `a + k·b` entrywise, fused where `FMA`.
+#[inline(always)]
+pub(crate) fn sym_add_scaled<const FMA: bool>(a: &Sym3, k: Real, b: &Sym3) -> Sym3 {
+    Sym3(std::array::from_fn(|i| fmadd::<FMA>(k, b.0[i], a.0[i])))
 }
 
 /// a · b, fused where `FMA`.
@@ -51,13 +75,13 @@ pub(crate) struct FastPosed<'a, const FMA: bool = false> {
     avx2: bool,
 }
 
-/// Value, world gradient and (when evaluated) the normalized-frame Hessian at one point (one
-/// evaluation pass); the world Hessian `Aᵀ∇²ᵤA` is formed only when a Newton step needs it
-/// ([`FastPosed::hessian`]).
+/// Value, world gradient and (when evaluated) the normalized-frame Hessian's upper triangle at
+/// one point (one evaluation pass); the world Hessian `Aᵀ∇²ᵤA` is formed only when a Newton step
+/// needs it ([`FastPosed::hessian`]).
 pub(crate) struct PosedEval {
     pub value: Real,
     pub gradient: Vector3,
-    hessian_u: Option<Matrix3>,
+    hessian_u: Option<Sym3>,
 }
 
 impl<'a> FastPosed<'a> {
@@ -107,15 +131,15 @@ impl<'a, const FMA: bool> FastPosed<'a, FMA> {
         self.poly.value_gradient(u)
     }
 
-    /// p(u), ∇p(u) and ∇²p(u) through the kernel this evaluator was built for.
+    /// p(u), ∇p(u) and ∇²p(u) (upper triangle) through the kernel this evaluator was built for.
     #[inline(always)]
-    fn poly_eval(&self, u: &Vector3) -> crate::poly::Eval {
+    fn poly_eval(&self, u: &Vector3) -> SymEval {
         #[cfg(target_arch = "x86_64")]
         if FMA && self.avx2 {
             // SAFETY: `avx2` is set only when the CPU supports AVX2 and FMA.
-            return unsafe { self.poly.eval_avx2(u) };
+            return unsafe { self.poly.eval_sym_avx2(u) };
         }
-        self.poly.eval(u)
+        self.poly.eval_sym(u)
     }
 
     /// u = A x + b.
@@ -166,34 +190,36 @@ impl<'a, const FMA: bool> FastPosed<'a, FMA> {
         }
     }
 
-    /// ∇²p'(x) from an evaluation of [`Self::eval`] at x that included the Hessian.
+    /// ∇²p'(x) (upper triangle) from an evaluation of [`Self::eval`] at x that included the
+    /// Hessian.
     #[inline(always)]
-    pub fn hessian(&self, e: &PosedEval) -> Option<Matrix3> {
+    pub fn hessian(&self, e: &PosedEval) -> Option<Sym3> {
         let h = e.hessian_u?;
         Some(match self.unrotated {
-            Some(k) => h * (k * k),
+            Some(k) => h.scaled(k * k),
             None => congruence_sym::<FMA>(&self.a, &h),
         })
     }
 }
 
-/// Aᵀ H A for a symmetric H, computing the six entries of the upper triangle (45 products
-/// instead of the 54 of two general 3 × 3 products).
+/// Aᵀ H A for a symmetric H: the six entries of the upper triangle (45 products instead of the 54
+/// of two general 3 × 3 products).
 #[inline(always)]
-fn congruence_sym<const FMA: bool>(a: &Matrix3, h: &Matrix3) -> Matrix3 {
+fn congruence_sym<const FMA: bool>(a: &Matrix3, h: &Sym3) -> Sym3 {
     // Columns a_j of A and h_j = H a_j; entry (i, j) = a_i · h_j.
     let col = |j: usize| Vector3::new(a[(0, j)], a[(1, j)], a[(2, j)]);
     let (a0, a1, a2) = (col(0), col(1), col(2));
-    let (h0, h1, h2) = (mat_vec::<FMA>(h, &a0), mat_vec::<FMA>(h, &a1), mat_vec::<FMA>(h, &a2));
+    let (h0, h1, h2) = (sym_mat_vec::<FMA>(h, &a0), sym_mat_vec::<FMA>(h, &a1), sym_mat_vec::<FMA>(h, &a2));
     let (m00, m01, m02) = (dot::<FMA>(&a0, &h0), dot::<FMA>(&a0, &h1), dot::<FMA>(&a0, &h2));
     let (m11, m12, m22) = (dot::<FMA>(&a1, &h1), dot::<FMA>(&a1, &h2), dot::<FMA>(&a2, &h2));
-    Matrix3::new(m00, m01, m02, m01, m11, m12, m02, m12, m22)
+    Sym3([m00, m01, m02, m11, m12, m22])
 }
 
 /// max |vᵢ| (plain comparisons; nalgebra's `amax` goes through generic SIMD traits on the hot path).
+/// A NaN entry is not propagated (nor is it by `f64::max`): callers test finiteness separately.
 #[inline(always)]
 pub(crate) fn abs_max(v: &Vector3) -> Real {
-    v.x.abs().max(v.y.abs()).max(v.z.abs())
+    max_plain(max_plain(v.x.abs(), v.y.abs()), v.z.abs())
 }
 
 /// KKT residual (2-norm, relative to the solver's stationarity scale) below which the next trial
@@ -201,19 +227,29 @@ pub(crate) fn abs_max(v: &Vector3) -> Real {
 /// reuses the last Hessians (a chord step), refreshed when that step does not halve the residual.
 pub(crate) const CHORD_RESIDUAL: Real = 1e-3;
 
-/// Inverse of a symmetric 3 × 3 matrix by cofactors, reading the upper triangle only (six
-/// cofactors instead of nine); `None` when (nearly) singular relative to its entries
-/// (|det| ≤ 10⁻¹⁴ max|mᵢⱼ|³, or non-finite). The KKT blocks `2I + λ∇²p'` and their Schur
-/// complements are symmetric; rounding asymmetry of the world Hessians below is ignored.
+/// max(a, b) without NaN handling (one `maxsd`, where `f64::max` adds a NaN test and a blend):
+/// for bounds whose NaN inputs are caught by another test.
 #[inline(always)]
-pub(crate) fn inverse_sym3<const FMA: bool>(m: &Matrix3) -> Option<Matrix3> {
-    let (a, b, c) = (m[(0, 0)], m[(0, 1)], m[(0, 2)]);
-    let (d, e, f) = (m[(1, 1)], m[(1, 2)], m[(2, 2)]);
+pub(crate) fn max_plain(a: Real, b: Real) -> Real {
+    if a > b {
+        a
+    } else {
+        b
+    }
+}
+
+/// Inverse of a symmetric 3 × 3 matrix by cofactors (six cofactors instead of nine); `None` when
+/// (nearly) singular relative to its entries (|det| ≤ 10⁻¹⁴ max|mᵢⱼ|³, or non-finite). The KKT
+/// blocks `2I + λ∇²p'` and their Schur complements are symmetric.
+#[inline(always)]
+pub(crate) fn inverse_sym3<const FMA: bool>(m: &Sym3) -> Option<Sym3> {
+    let [a, b, c, d, e, f] = m.0;
     let c00 = fmadd::<FMA>(d, f, -e * e);
     let c01 = fmadd::<FMA>(c, e, -b * f);
     let c02 = fmadd::<FMA>(b, e, -c * d);
     let det = fmadd::<FMA>(a, c00, fmadd::<FMA>(b, c01, c * c02));
-    let s = a.abs().max(b.abs()).max(c.abs()).max(d.abs()).max(e.abs()).max(f.abs());
+    // Any NaN entry makes `det` NaN, so the plain maxima need not see it.
+    let s = max_plain(max_plain(max_plain(a.abs(), b.abs()), max_plain(c.abs(), d.abs())), max_plain(e.abs(), f.abs()));
     if !(det.is_finite() && det.abs() > 1e-14 * s * s * s && s > 0.0) {
         return None;
     }
@@ -221,16 +257,16 @@ pub(crate) fn inverse_sym3<const FMA: bool>(m: &Matrix3) -> Option<Matrix3> {
     let (i00, i01, i02) = (c00 * k, c01 * k, c02 * k);
     let (i11, i12, i22) =
         (fmadd::<FMA>(a, f, -c * c) * k, fmadd::<FMA>(b, c, -a * e) * k, fmadd::<FMA>(a, d, -b * b) * k);
-    Some(Matrix3::new(i00, i01, i02, i01, i11, i12, i02, i12, i22))
+    Some(Sym3([i00, i01, i02, i11, i12, i22]))
 }
 
 /// Solves the growth KKT system `[W g; gᵀ 0] [dx; dμ] = −[r; c]` by eliminating dx
 /// (dμ = (c − gᵀW⁻¹r)/(gᵀW⁻¹g)); `None` when W or the Schur complement is singular.
 #[inline(always)]
-pub(crate) fn solve_kkt4<const FMA: bool>(w: &Matrix3, g: &Vector3, r: &Vector3, c: Real) -> Option<(Vector3, Real)> {
+pub(crate) fn solve_kkt4<const FMA: bool>(w: &Sym3, g: &Vector3, r: &Vector3, c: Real) -> Option<(Vector3, Real)> {
     let wi = inverse_sym3::<FMA>(w)?;
-    let wg = mat_vec::<FMA>(&wi, g);
-    let wr = mat_vec::<FMA>(&wi, r);
+    let wg = sym_mat_vec::<FMA>(&wi, g);
+    let wr = sym_mat_vec::<FMA>(&wi, r);
     let s = dot::<FMA>(g, &wg);
     if !(s.is_finite() && s.abs() > 1e-300) {
         return None;
@@ -254,8 +290,8 @@ pub(crate) fn solve_kkt4<const FMA: bool>(w: &Matrix3, g: &Vector3, r: &Vector3,
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 pub(crate) fn solve_kkt8<const FMA: bool>(
-    wa: &Matrix3,
-    wb: &Matrix3,
+    wa: &Sym3,
+    wb: &Sym3,
     ga: &Vector3,
     gb: &Vector3,
     ra: &Vector3,
@@ -264,8 +300,8 @@ pub(crate) fn solve_kkt8<const FMA: bool>(
     cb: Real,
 ) -> Option<(Vector3, Vector3, [Real; 2])> {
     let ai = inverse_sym3::<FMA>(wa)?;
-    let si = inverse_sym3::<FMA>(&(wb - ai * 4.0))?;
-    let (am, sm) = (|v: &Vector3| mat_vec::<FMA>(&ai, v), |v: &Vector3| mat_vec::<FMA>(&si, v));
+    let si = inverse_sym3::<FMA>(&sym_add_scaled::<FMA>(wb, -4.0, &ai))?;
+    let (am, sm) = (|v: &Vector3| sym_mat_vec::<FMA>(&ai, v), |v: &Vector3| sym_mat_vec::<FMA>(&si, v));
     // M⁻¹ [f; g] = [p; q] with q = Si (g + 2 Ai f), p = Ai f + 2 Ai q; the two constraint columns
     // have a zero half each, so eight 3 × 3 products in all.
     let t0 = am(ra);
@@ -321,13 +357,13 @@ mod tests {
                 assert!((e.value - r.value).abs() <= 1e-12 * scale);
                 assert!((e.gradient - r.gradient).amax() <= 1e-12 * scale);
             }
-            assert!((f.hessian(&full).unwrap() - r.hessian).amax() <= 1e-12 * scale);
+            assert!((f.hessian(&full).unwrap().to_matrix() - r.hessian).amax() <= 1e-12 * scale);
             assert!(f.hessian(&vg).is_none());
             assert!((f.value(&x) - r.value).abs() <= 1e-12 * scale);
             // The fused-arithmetic evaluator of the AVX2 + FMA solver builds.
             let e = fused.eval(&x, true);
             assert!((e.value - r.value).abs() <= 1e-12 * scale && (e.gradient - r.gradient).amax() <= 1e-12 * scale);
-            assert!((fused.hessian(&e).unwrap() - r.hessian).amax() <= 1e-12 * scale);
+            assert!((fused.hessian(&e).unwrap().to_matrix() - r.hessian).amax() <= 1e-12 * scale);
         }
     }
 
@@ -346,7 +382,9 @@ mod tests {
             k.fixed_view_mut::<1, 3>(3, 0).copy_from(&g.transpose());
             let dense = k.lu().solve(&-nalgebra::Vector4::new(r.x, r.y, r.z, c)).unwrap();
             // Both arithmetic builds (fused: the solvers' AVX2 + FMA copies).
-            for (dx, dmu) in [solve_kkt4::<false>(&w, &g, &r, c).unwrap(), solve_kkt4::<true>(&w, &g, &r, c).unwrap()] {
+            let ws = Sym3::from_upper(&w);
+            for (dx, dmu) in [solve_kkt4::<false>(&ws, &g, &r, c).unwrap(), solve_kkt4::<true>(&ws, &g, &r, c).unwrap()]
+            {
                 assert!((dx - dense.fixed_rows::<3>(0)).amax() < 1e-9 * (1.0 + dense.amax()));
                 assert!((dmu - dense[3]).abs() < 1e-9 * (1.0 + dense.amax()));
             }
@@ -367,6 +405,7 @@ mod tests {
             let rhs = -SVector::<Real, 8>::from_column_slice(&[ra.x, ra.y, ra.z, rb.x, rb.y, rb.z, ca, cb]);
             let dense = j.lu().solve(&rhs).unwrap();
             let tol = 1e-9 * (1.0 + dense.amax());
+            let (wa, wb) = (Sym3::from_upper(&wa), Sym3::from_upper(&wb));
             for (dx, dy, dl) in [
                 solve_kkt8::<false>(&wa, &wb, &ga, &gb, &ra, &rb, ca, cb).unwrap(),
                 solve_kkt8::<true>(&wa, &wb, &ga, &gb, &ra, &rb, ca, cb).unwrap(),
@@ -376,12 +415,23 @@ mod tests {
                 assert!((dl[0] - dense[6]).abs() < tol && (dl[1] - dense[7]).abs() < tol);
             }
         }
-        assert!(inverse_sym3::<false>(&Matrix3::zeros()).is_none());
+        assert!(inverse_sym3::<false>(&Sym3::default()).is_none());
+        assert!(inverse_sym3::<true>(&Sym3([1.0, 0.0, 0.0, Real::NAN, 0.0, 1.0])).is_none());
         for _ in 0..20 {
             let m = random_spd(&mut rng);
-            for inv in [inverse_sym3::<false>(&m).unwrap(), inverse_sym3::<true>(&m).unwrap()] {
+            let s = Sym3::from_upper(&m);
+            for inv in [inverse_sym3::<false>(&s).unwrap(), inverse_sym3::<true>(&s).unwrap()] {
+                let inv = inv.to_matrix();
                 assert!((inv * m - Matrix3::identity()).amax() < 1e-10 * (1.0 + inv.amax() * m.amax()));
             }
+            // The symmetric helpers against nalgebra's products.
+            let (v, k) = (v(&mut rng), rng.random_range(-2.0..2.0));
+            for mv in [sym_mat_vec::<false>(&s, &v), sym_mat_vec::<true>(&s, &v)] {
+                assert!((mv - m * v).amax() < 1e-12 * (1.0 + m.amax() * v.amax()));
+            }
+            let two = Matrix3::identity() * 2.0;
+            assert!((shifted::<true>(&s, k, 2.0).to_matrix() - (two + m * k)).amax() < 1e-12 * (1.0 + m.amax()));
+            assert!((sym_add_scaled::<true>(&s, k, &s).to_matrix() - m * (1.0 + k)).amax() < 1e-12 * (1.0 + m.amax()));
         }
     }
 }

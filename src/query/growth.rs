@@ -17,10 +17,10 @@
 //! 3. if that fails, a log-barrier path `min p₁' − t·log(1 − p₂')` from body 2's interior point, then
 //!    the KKT polish.
 
-use super::fast_eval::{abs_max, solve_kkt4, FastPosed, PosedEval, CHORD_RESIDUAL};
+use super::fast_eval::{abs_max, max_plain, solve_kkt4, sym_add_scaled, FastPosed, PosedEval, CHORD_RESIDUAL};
 use super::newton::{pose_step, MotionTrail, NewtonParams, SolveStatus, WARM_ITERATIONS};
 use crate::body::{Body, PosedBody};
-use crate::math::{Isometry3, Matrix3, Point3, Real, Vector3};
+use crate::math::{Isometry3, Matrix3, Point3, Real, Sym3, Vector3};
 
 /// Answer of a growth query: d(p₁‖p₂) = min p₁'(x) s.t. p₂'(x) ≤ 1 (paper eq. "overlap").
 #[derive(Clone, Debug)]
@@ -139,7 +139,7 @@ pub fn growth(
 ) -> GrowthResult {
     let rel = pose2.inverse() * pose1;
     let b1 = PosedBody::new(p1, &rel);
-    let b2 = PosedBody::new(p2, &Isometry3::identity());
+    let b2 = PosedBody::unposed(p2);
     let start = warm.map(|w| w.towards(&rel, p1.scale()));
     let core = solve_growth(&b1, &b2, start, params);
     GrowthResult {
@@ -297,7 +297,7 @@ struct KktState {
 /// overlapping queries that reach this path).
 fn kkt_state(f1: &FastPosed<'_>, f2: &FastPosed<'_>, x: &Vector3) -> Option<KktState> {
     let (e1, e2) = (f1.eval(x, true), f2.eval(x, true));
-    let (hf, hg) = (f1.hessian(&e1)?, f2.hessian(&e2)?);
+    let (hf, hg) = (f1.hessian(&e1)?.to_matrix(), f2.hessian(&e2)?.to_matrix());
     Some(KktState { f: e1.value, gf: e1.gradient, hf, g: e2.value - 1.0, gg: e2.gradient, hg })
 }
 
@@ -328,7 +328,7 @@ impl KktPoint {
 
     #[inline(always)]
     fn norm_inf(&self) -> Real {
-        abs_max(&self.r).max(self.c.abs())
+        max_plain(abs_max(&self.r), self.c.abs())
     }
 
     #[inline(always)]
@@ -340,8 +340,8 @@ impl KktPoint {
 /// The Newton step for the Hessians `(h1, h2)` at `pt`: closed-form elimination, dense LU if that is
 /// singular.
 #[inline(always)]
-fn newton_step<const FMA: bool>(h: &(Matrix3, Matrix3), pt: &KktPoint, mu: Real) -> Option<(Vector3, Real)> {
-    let w = h.0 + h.1 * mu;
+fn newton_step<const FMA: bool>(h: &(Sym3, Sym3), pt: &KktPoint, mu: Real) -> Option<(Vector3, Real)> {
+    let w = sym_add_scaled::<FMA>(&h.0, mu, &h.1);
     if let Some(step) = solve_kkt4::<FMA>(&w, &pt.e2.gradient, &pt.r, pt.c) {
         return Some(step);
     }
@@ -351,10 +351,10 @@ fn newton_step<const FMA: bool>(h: &(Matrix3, Matrix3), pt: &KktPoint, mu: Real)
 /// [`newton_step`] by dense LU when the elimination meets a singular block.
 #[cold]
 #[inline(never)]
-fn newton_step_lu(w: &Matrix3, pt: &KktPoint) -> Option<(Vector3, Real)> {
+fn newton_step_lu(w: &Sym3, pt: &KktPoint) -> Option<(Vector3, Real)> {
     let gg = &pt.e2.gradient;
     let mut k = nalgebra::Matrix4::<Real>::zeros();
-    k.fixed_view_mut::<3, 3>(0, 0).copy_from(w);
+    k.fixed_view_mut::<3, 3>(0, 0).copy_from(&w.to_matrix());
     k.fixed_view_mut::<3, 1>(0, 3).copy_from(gg);
     k.fixed_view_mut::<1, 3>(3, 0).copy_from(&gg.transpose());
     let step = k.lu().solve(&-nalgebra::Vector4::new(pt.r.x, pt.r.y, pt.r.z, pt.c))?;
@@ -391,14 +391,16 @@ fn kkt_newton_body<const FMA: bool>(
     if mu0.is_none() {
         pt.r = pt.e1.gradient + pt.e2.gradient * mu;
     }
-    let mut hess: Option<(Matrix3, Matrix3)> = None;
+    let mut hess: Option<(Sym3, Sym3)> = None;
     let mut status = SolveStatus::MaxIterations;
     let mut it = 0;
     // Scale stationarity by the objective's gradient so far-apart bodies (large p₁) are judged fairly.
     let scale = |pt: &KktPoint| 1.0 + abs_max(&pt.e1.gradient);
     let converged = |pt: &KktPoint, mu: Real| pt.norm_inf() <= params.kkt_tolerance * scale(pt) && mu > 0.0;
     while it < params.max_iterations {
-        if !pt.norm_inf().is_finite() {
+        // The 2-norm carries any NaN or infinity of the residual (the ∞-norm's plain maxima do not).
+        let r0 = pt.norm2();
+        if !r0.is_finite() {
             status = SolveStatus::Stalled;
             break;
         }
@@ -423,7 +425,6 @@ fn kkt_newton_body<const FMA: bool>(
             status = SolveStatus::Stalled;
             break;
         };
-        let r0 = pt.norm2();
         let cheap = r0 <= CHORD_RESIDUAL * scale(&pt);
         let mut alpha = 1.0;
         let mut accepted = false;
@@ -459,7 +460,7 @@ fn kkt_newton_body<const FMA: bool>(
             break;
         }
     }
-    if status == SolveStatus::MaxIterations && converged(&pt, mu) {
+    if status == SolveStatus::MaxIterations && converged(&pt, mu) && pt.norm2().is_finite() {
         status = SolveStatus::Converged;
     }
     KktOut { x, mu, value: pt.e1.value, status, iterations: it, residual: pt.norm_inf() }
