@@ -9,9 +9,19 @@
 //! ∂ᵢ∂ⱼ p(u) = Σ_{|β| ≤ 2d−2} (βᵢ + 1)(βⱼ + 1 + δᵢⱼ) c_{β+eᵢ+eⱼ} u^β
 //! ```
 //!
-//! The coefficients are rearranged once per body ([`FastPoly::new`]) into lane-interleaved rows —
-//! `[c_β, ∂ₓ, ∂ᵧ, ∂_z]` for |β| ≤ 2d, `[xx, xy, xz, yy]` and `[yz, zz]` for |β| ≤ 2d − 2 — ordered
-//! for a nested Horner scheme (exponent a of x, then b of y, then c of z, each descending):
+//! A full evaluation reads only the rows of degree ≤ 2d − 2, through Euler's identity for
+//! homogeneous parts (u·∇pₖ = k pₖ): with D = 2d,
+//!
+//! ```text
+//! ∇p = ∇²p u / (D − 1) + r,   rᵢ = Σₖ (D − 1 − k)/(D − 1) (∂ᵢp)ₖ                  (degree ≤ D − 2)
+//! p  = (2 u·∇p − uᵀ∇²p u / (D − 1)) / D + w,   w = Σₖ (D − 1 − k)(D − k)/(D(D − 1)) pₖ  (degree ≤ D − 2)
+//! ```
+//!
+//! and a value or value + gradient evaluation only the rows of degree ≤ 2d − 1
+//! (p = u·∇p / D + s, s = Σₖ (D − k)/D pₖ). The coefficients are rearranged once per body
+//! ([`FastPoly::new`]) into lane-interleaved rows — `[s, ∂ₓ, ∂ᵧ, ∂_z]` for |β| ≤ 2d − 1;
+//! `[xx, xy, xz, yy]`, `[yz, zz, r_x, r_y]` and `[r_z, w]` for |β| ≤ 2d − 2 — ordered for a nested
+//! Horner scheme (exponent a of x, then b of y, then c of z, each descending):
 //!
 //! ```text
 //! q(u) = Σ_a x^a Σ_b y^b Σ_c r_abc z^c  =  Horner in x of (Horner in y of (chains of Horner in z))
@@ -33,32 +43,50 @@
 //! scalar chains and `vmovsd`/`vmovhpd` pairs): value 116 (129), value + gradient 118 (132), value +
 //! gradient + Hessian 220 (439). At 2d = 4: 56 (65), 58 (68), 96 (176); at 2d = 8: 208 (225), 210
 //! (228), 431 (952). Before these, a kernel that summed table rows against the monomial vector took
-//! 244, 410 and 574 at 2d = 6. The value runs the value + gradient scheme and returns lane 0 (a
-//! 4-lane FMA is one instruction, like a scalar one).
+//! 244, 410 and 574 at 2d = 6. The kernels are bound by the FMA units' throughput (a chain of
+//! dependent evaluations runs as fast as independent ones), so Euler's identity, which drops the
+//! rows of the top one or two degrees for a few scalar operations, buys time: a full evaluation at
+//! 2d = 6 went from 154 multiply–adds (84 value + gradient rows of degree ≤ 6, 35 + 35 Hessian rows)
+//! to 92 (35 + 35 rows of degree ≤ 4, and the [r_z, w] table folded in x to 22 four-lane rows), at
+//! 2d = 8 from 333 to 218; a value + gradient evaluation from 84 to 56 rows (165 to 120). The value
+//! runs the value + gradient scheme (a 4-lane FMA is one instruction, like a scalar one).
 
 use super::monomial::{basis_len, index3};
 use super::polynomial::{Polynomial, MAX_DEGREE};
 use crate::math::{Real, Sym3, Vector3};
 
-/// Rows of the value / gradient table: monomials of degree ≤ 8 in three variables.
+/// Monomials of degree ≤ 8 in three variables (the basis of a degree-8 polynomial).
 pub const MAX_MONOMIALS: usize = 165;
 
-/// Rows of the Hessian table: monomials of degree ≤ 6 (84), the Hessian of a degree-8 polynomial.
+/// Rows of the value / gradient table: monomials of degree ≤ 7 (120), the gradient of a degree-8
+/// polynomial.
+const MAX_GRADIENT_MONOMIALS: usize = 120;
+
+/// Rows of the Hessian tables: monomials of degree ≤ 6 (84), the Hessian of a degree-8 polynomial.
 const MAX_HESSIAN_MONOMIALS: usize = 84;
 
+/// Rows of the folded [r_z, w] table at degree 6 ([`fold_exponents`]).
+const MAX_FOLDED_ROWS: usize = 50;
+
 /// The per-body coefficient tables (see the module docs); rows beyond the body's basis are zero.
+/// D is the degree bound 2d, p = Σₖ pₖ its homogeneous parts.
 #[derive(Clone, Debug, PartialEq)]
 struct Tables {
-    /// [c_β, coefficient of u^β in ∂ₓp, ∂ᵧp, ∂_zp].
-    value_gradient: [[Real; 4]; MAX_MONOMIALS],
-    /// Coefficients of u^β in [∂ₓₓp, ∂ₓᵧp, ∂ₓ_zp, ∂ᵧᵧp] (|β| ≤ 2d − 2).
+    /// Coefficients of u^β (|β| ≤ D − 1) in [s, ∂ₓp, ∂ᵧp, ∂_zp] with s = Σₖ (D − k)/D · pₖ, so that
+    /// p = u·∇p / D + s (Euler's identity u·∇pₖ = k pₖ; the degree-D part of s vanishes).
+    value_gradient: [[Real; 4]; MAX_GRADIENT_MONOMIALS],
+    /// Coefficients of u^β (|β| ≤ D − 2) in [∂ₓₓp, ∂ₓᵧp, ∂ₓ_zp, ∂ᵧᵧp].
     hessian: [[Real; 4]; MAX_HESSIAN_MONOMIALS],
-    /// Coefficients of u^β in [∂ᵧ_zp, ∂_z_zp] (|β| ≤ 2d − 2).
-    ///
-    /// One 8-lane table `[xx, xy, xz, yy, yz, zz, 0, 0]` instead of this 4 + 2 split was measured
-    /// (issue 15, callgrind, `cold_profile 6 20 distance`): 37.4 M instead of 36.0 M instructions
-    /// in the full kernel, so the split stays.
-    hessian_yz_zz: [[Real; 2]; MAX_HESSIAN_MONOMIALS],
+    /// Coefficients of u^β (|β| ≤ D − 2) in [∂ᵧ_zp, ∂_z_zp, r_x, r_y], where
+    /// rᵢ = Σₖ (D − 1 − k)/(D − 1) · (∂ᵢp)ₖ, so that ∇p = ∇²p u / (D − 1) + r (Euler's identity on
+    /// the gradient; its degree-(D − 1) part vanishes).
+    hessian_rest: [[Real; 4]; MAX_HESSIAN_MONOMIALS],
+    /// [r_z, w] with w = Σₖ (D − 1 − k)(D − k)/(D(D − 1)) · pₖ, so that
+    /// p = (2 u·∇p − uᵀ∇²p u / (D − 1)) / D + w; folded in x to fill four lanes: q = E(x², y, z) +
+    /// x·O(x², y, z) for the parts E, O of even and odd powers of x, the row of (a, b, c), a even
+    /// ([`fold_exponents`]), holding [E, O] = [q_(a,b,c), q_(a+1,b,c)] for q = r_z, w (zero beyond
+    /// degree D − 2). 22 rows instead of 35 at 2d = 6, 50 instead of 84 at 2d = 8.
+    tail: [[Real; 4]; MAX_FOLDED_ROWS],
 }
 
 /// A polynomial with its derivative coefficient tables for the fast kernels (see the module docs).
@@ -83,9 +111,16 @@ fn horner_exponents(d: usize) -> Vec<[usize; 3]> {
     out
 }
 
+/// The exponents (a, b, c) of degree ≤ `d` with a even, in Horner order: the rows of the folded
+/// table ([`Tables::tail`]), a Horner scheme in x² whose groups have the chain lengths of the even
+/// powers of x.
+fn fold_exponents(d: usize) -> Vec<[usize; 3]> {
+    horner_exponents(d).into_iter().filter(|e| e[0] % 2 == 0).collect()
+}
+
 /// A lane-wise accumulator of the Horner schemes: one value per lane of a table row. The schemes
 /// (`horner_fn!`) are written once over this trait; [`Lanes`] is the portable implementation,
-/// `x86::F64x4` / `x86::F64x2` the AVX2 + FMA ones.
+/// `x86::F64x4` the AVX2 + FMA one.
 trait Acc: Copy {
     /// One table row (the lanes in memory).
     type Row;
@@ -115,20 +150,8 @@ trait Acc: Copy {
     }
 }
 
-/// A 4-lane accumulator (the value + gradient and [xx, xy, xz, yy] tables) with the matching
-/// 2-lane accumulator of the [yz, zz] table: the type parameter of the kernels.
-trait Quad: Acc<Row = [Real; 4]> {
-    /// The 2-lane accumulator of the same code path.
-    type Pair: Acc<Row = [Real; 2], Cpu = Self::Cpu>;
-
-    /// The symmetric Hessian's upper triangle from the [xx, xy, xz, yy] and [yz, zz] sums (the
-    /// two registers stored as they are on x86).
-    #[inline(always)]
-    fn hessian(h: Self, g: Self::Pair) -> Sym3 {
-        let (h, g) = (h.lanes(), g.lanes());
-        Sym3([h[0], h[1], h[2], h[3], g[0], g[1]])
-    }
-}
+/// A 4-lane accumulator (every table has four lanes): the type parameter of the kernels.
+trait Quad: Acc<Row = [Real; 4]> {}
 
 /// The portable accumulator: `L` lanes, unfused a·b + c (no FMA).
 #[derive(Clone, Copy)]
@@ -179,9 +202,7 @@ impl<const L: usize> Acc for Lanes<L> {
 /// The portable 4-lane accumulator.
 type Portable = Lanes<4>;
 
-impl Quad for Portable {
-    type Pair = Lanes<2>;
-}
+impl Quad for Portable {}
 
 /// Horner in z along the chain of M rows starting at `*k` (the top coefficient first), then
 /// `*k += M`: M is a constant, so the loop unrolls.
@@ -255,6 +276,30 @@ horner_fn!(horner_6, 84; [1],[1,2],[1,2,3],[1,2,3,4],[1,2,3,4,5],[1,2,3,4,5,6],[
 horner_fn!(horner_7, 120; [1],[1,2],[1,2,3],[1,2,3,4],[1,2,3,4,5],[1,2,3,4,5,6],[1,2,3,4,5,6,7],[1,2,3,4,5,6,7,8]);
 horner_fn!(horner_8, 165; [1],[1,2],[1,2,3],[1,2,3,4],[1,2,3,4,5],[1,2,3,4,5,6],[1,2,3,4,5,6,7],[1,2,3,4,5,6,7,8],[1,2,3,4,5,6,7,8,9]);
 
+// The folded schemes: the groups of even powers of x only, evaluated at (x², y, z).
+horner_fn!(fold_0, 1; [1]);
+horner_fn!(fold_1, 3; [1,2]);
+horner_fn!(fold_2, 7; [1],[1,2,3]);
+horner_fn!(fold_3, 13; [1,2],[1,2,3,4]);
+horner_fn!(fold_4, 22; [1],[1,2,3],[1,2,3,4,5]);
+horner_fn!(fold_5, 34; [1,2],[1,2,3,4],[1,2,3,4,5,6]);
+horner_fn!(fold_6, 50; [1],[1,2,3],[1,2,3,4,5],[1,2,3,4,5,6,7]);
+
+/// The folded Horner scheme of degree `$d` (0..=6) at `$u` = (x², y, z).
+macro_rules! fold_of_degree {
+    ($d:expr, $a:ty, $cpu:expr, $rows:expr, $u:expr) => {
+        match $d {
+            0 => fold_0::<$a>($cpu, $rows, $u),
+            1 => fold_1::<$a>($cpu, $rows, $u),
+            2 => fold_2::<$a>($cpu, $rows, $u),
+            3 => fold_3::<$a>($cpu, $rows, $u),
+            4 => fold_4::<$a>($cpu, $rows, $u),
+            5 => fold_5::<$a>($cpu, $rows, $u),
+            _ => fold_6::<$a>($cpu, $rows, $u),
+        }
+    };
+}
+
 /// The Horner scheme of degree `$d` (0..=8) with accumulator `$a` over `$rows`.
 macro_rules! horner_of_degree {
     ($d:expr, $a:ty, $cpu:expr, $rows:expr, $u:expr) => {
@@ -272,17 +317,27 @@ macro_rules! horner_of_degree {
     };
 }
 
-/// p(u) and ∇p(u) for degree `D` (a constant at every call site).
+/// u · v, unfused (the same rounding on every code path).
+#[inline(always)]
+fn dot3(u: &Vector3, v: &Vector3) -> Real {
+    u.x * v.x + u.y * v.y + u.z * v.z
+}
+
+/// p(u) and ∇p(u) for degree `D` (a constant at every call site): one pass over the rows of
+/// degree ≤ D − 1, then p = u·∇p / D + s.
 #[inline(always)]
 fn gradient_kernel<const D: usize, Q: Quad>(cpu: Q::Cpu, t: &Tables, u: &Vector3) -> (Real, Vector3) {
-    let r = horner_of_degree!(D, Q, cpu, &t.value_gradient, u).lanes();
-    (r[0], Vector3::new(r[1], r[2], r[3]))
+    let r = horner_of_degree!(D.saturating_sub(1), Q, cpu, &t.value_gradient, u).lanes();
+    let g = Vector3::new(r[1], r[2], r[3]);
+    // D = 0: the constant is s itself (and ∇p = 0).
+    let value = if D == 0 { r[0] } else { dot3(u, &g) * (1.0 / D as Real) + r[0] };
+    (value, g)
 }
 
 /// p(u).
 #[inline(always)]
 fn value_kernel<const D: usize, Q: Quad>(cpu: Q::Cpu, t: &Tables, u: &Vector3) -> Real {
-    horner_of_degree!(D, Q, cpu, &t.value_gradient, u).lanes()[0]
+    gradient_kernel::<D, Q>(cpu, t, u).0
 }
 
 /// p(u), ∇p(u) and the upper triangle of ∇²p(u): the fast kernels' full evaluation
@@ -303,17 +358,28 @@ impl From<SymEval> for super::Eval {
     }
 }
 
-/// p(u), ∇p(u) and ∇²p(u) (the Hessian's rows have degree D − 2; zero for D < 2).
+/// p(u), ∇p(u) and ∇²p(u) from the rows of degree ≤ D − 2 only (D ≥ 2; below, the value +
+/// gradient pass and a zero Hessian): ∇p = ∇²p u / (D − 1) + r and
+/// p = (2 u·∇p − uᵀ∇²p u / (D − 1)) / D + w (see [`Tables`]).
 #[inline(always)]
 fn full_kernel<const D: usize, Q: Quad>(cpu: Q::Cpu, t: &Tables, u: &Vector3) -> SymEval {
-    let (value, gradient) = gradient_kernel::<D, Q>(cpu, t, u);
-    let hessian = if D >= 2 {
-        let h = horner_of_degree!(D - 2, Q, cpu, &t.hessian, u);
-        let g = horner_of_degree!(D - 2, Q::Pair, cpu, &t.hessian_yz_zz, u);
-        Q::hessian(h, g)
-    } else {
-        Sym3::default()
-    };
+    if D < 2 {
+        let (value, gradient) = gradient_kernel::<D, Q>(cpu, t, u);
+        return SymEval { value, gradient, hessian: Sym3::default() };
+    }
+    let h = horner_of_degree!(D - 2, Q, cpu, &t.hessian, u).lanes();
+    let m = horner_of_degree!(D - 2, Q, cpu, &t.hessian_rest, u).lanes();
+    let f = fold_of_degree!(D - 2, Q, cpu, &t.tail, &Vector3::new(u.x * u.x, u.y, u.z)).lanes();
+    let n = [f[0] + u.x * f[2], f[1] + u.x * f[3]];
+    let hessian = Sym3([h[0], h[1], h[2], h[3], m[0], m[1]]);
+    let hu = Vector3::new(
+        h[0] * u.x + h[1] * u.y + h[2] * u.z,
+        h[1] * u.x + h[3] * u.y + m[0] * u.z,
+        h[2] * u.x + m[0] * u.y + m[1] * u.z,
+    );
+    let (k1, k2) = (1.0 / (D - 1) as Real, 1.0 / D as Real);
+    let gradient = hu * k1 + Vector3::new(m[2], m[3], n[0]);
+    let value = (2.0 * dot3(u, &gradient) - dot3(u, &hu) * k1) * k2 + n[1];
     SymEval { value, gradient, hessian }
 }
 
@@ -340,9 +406,7 @@ macro_rules! dispatch {
 mod x86 {
     use super::*;
     use std::arch::asm;
-    use std::arch::x86_64::{
-        __m128d, __m256d, _mm256_fmadd_pd, _mm256_loadu_pd, _mm256_set1_pd, _mm_fmadd_pd, _mm_loadu_pd, _mm_set1_pd,
-    };
+    use std::arch::x86_64::{__m256d, _mm256_fmadd_pd, _mm256_loadu_pd, _mm256_set1_pd};
 
     /// Proof that the CPU runs AVX2 and FMA: its only constructor is compiled with those features,
     /// so safe code can only call it from code that is itself only run on such a CPU.
@@ -424,17 +488,10 @@ mod x86 {
     }
 
     simd_acc!(
-        /// Four lanes in one AVX register (the value + gradient and [xx, xy, xz, yy] tables).
+        /// Four lanes in one AVX register (every table).
         F64x4, __m256d, 4, ymm_reg, _mm256_set1_pd, _mm256_loadu_pd, _mm256_fmadd_pd, pin4
     );
-    simd_acc!(
-        /// Two lanes in one SSE register (the [yz, zz] table).
-        F64x2, __m128d, 2, xmm_reg, _mm_set1_pd, _mm_loadu_pd, _mm_fmadd_pd, pin2
-    );
-
-    impl Quad for F64x4 {
-        type Pair = F64x2;
-    }
+    impl Quad for F64x4 {}
 
     /// p(u) for degree `d` (0..=8).
     #[target_feature(enable = "avx2,fma")]
@@ -484,16 +541,20 @@ impl FastPoly {
             f
         };
         let mut t = Tables {
-            value_gradient: [[0.0; 4]; MAX_MONOMIALS],
+            value_gradient: [[0.0; 4]; MAX_GRADIENT_MONOMIALS],
             hessian: [[0.0; 4]; MAX_HESSIAN_MONOMIALS],
-            hessian_yz_zz: [[0.0; 2]; MAX_HESSIAN_MONOMIALS],
+            hessian_rest: [[0.0; 4]; MAX_HESSIAN_MONOMIALS],
+            tail: [[0.0; 4]; MAX_FOLDED_ROWS],
         };
-        for (k, b) in horner_exponents(degree).into_iter().enumerate() {
-            let mut row = [coef_of(b), 0.0, 0.0, 0.0];
-            for i in 0..3 {
-                row[i + 1] = (b[i] + 1) as Real * coef_of(plus(b, i, None));
-            }
-            t.value_gradient[k] = row;
+        // Coefficient of u^b in ∂ᵢp.
+        let grad_of = |b: [usize; 3], i: usize| (b[i] + 1) as Real * coef_of(plus(b, i, None));
+        let d = degree as Real;
+        // rᵢ = Σₖ (D − 1 − k)/(D − 1) (∂ᵢp)ₖ: the weight of a row of degree |b| (D ≥ 2).
+        let r_weight = |b: [usize; 3]| (d - 1.0 - (b[0] + b[1] + b[2]) as Real) / (d - 1.0);
+        for (k, b) in horner_exponents(degree.saturating_sub(1)).into_iter().enumerate() {
+            // s = Σₖ (D − k)/D pₖ (the constant itself at D = 0).
+            let weight = if degree == 0 { 1.0 } else { (d - (b[0] + b[1] + b[2]) as Real) / d };
+            t.value_gradient[k] = [weight * coef_of(b), grad_of(b, 0), grad_of(b, 1), grad_of(b, 2)];
         }
         if degree >= 2 {
             for (k, b) in horner_exponents(degree - 2).into_iter().enumerate() {
@@ -502,8 +563,22 @@ impl FastPoly {
                     let factor = if i == j { (b[i] + 1) * (b[i] + 2) } else { (b[i] + 1) * (b[j] + 1) };
                     h[l] = factor as Real * coef_of(plus(b, i, Some(j)));
                 }
+                let rw = r_weight(b);
                 t.hessian[k] = [h[0], h[1], h[2], h[3]];
-                t.hessian_yz_zz[k] = [h[4], h[5]];
+                t.hessian_rest[k] = [h[4], h[5], rw * grad_of(b, 0), rw * grad_of(b, 1)];
+            }
+            // [r_z, w] at (a, b, c) (zero beyond degree D − 2), folded in x.
+            let tail_of = |b: [usize; 3]| -> [Real; 2] {
+                if b.iter().sum::<usize>() > degree - 2 {
+                    return [0.0; 2];
+                }
+                let k_b = (b[0] + b[1] + b[2]) as Real;
+                let ww = (d - 1.0 - k_b) * (d - k_b) / (d * (d - 1.0));
+                [r_weight(b) * grad_of(b, 2), ww * coef_of(b)]
+            };
+            for (k, b) in fold_exponents(degree - 2).into_iter().enumerate() {
+                let (even, odd) = (tail_of(b), tail_of(plus(b, 0, None)));
+                t.tail[k] = [even[0], even[1], odd[0], odd[1]];
             }
         }
         Self { degree, len, tables: Box::new(t) }
@@ -622,6 +697,18 @@ mod tests {
             seen.sort_unstable();
             assert_eq!(seen, (0..basis_len(3, d)).collect::<Vec<_>>());
         }
+    }
+
+    #[test]
+    fn folded_order_matches_the_folded_schemes() {
+        // The row counts of `fold_0` … `fold_6`, and each row's odd partner (a + 1, b, c) is the
+        // row of the same (b, c) one power of x up (zero beyond the degree).
+        for (d, rows) in [1, 3, 7, 13, 22, 34, 50].into_iter().enumerate() {
+            let e = fold_exponents(d);
+            assert_eq!(e.len(), rows, "degree {d}");
+            assert!(e.iter().all(|e| e[0] % 2 == 0 && e.iter().sum::<usize>() <= d));
+        }
+        assert_eq!(fold_exponents(6).len(), MAX_FOLDED_ROWS);
     }
 
     #[test]
