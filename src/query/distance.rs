@@ -453,6 +453,12 @@ fn kkt_newton_body<const FMA: bool>(
             status = SolveStatus::Converged;
             break;
         }
+        // A KKT point with a multiplier that is not positive is not the minimizer, and Newton does
+        // not leave it: stop instead of iterating there up to the cap.
+        if pt.norm_inf() <= params.kkt_tolerance * scale(&x, &y) {
+            status = SolveStatus::Stalled;
+            break;
+        }
         // Fresh Hessians when this point has them, else the last ones (chord step).
         let fresh = match (fa.hessian(&pt.ea), fb.hessian(&pt.eb)) {
             (Some(ha), Some(hb)) => {

@@ -408,6 +408,13 @@ fn kkt_newton_body<const FMA: bool>(
             status = SolveStatus::Converged;
             break;
         }
+        // A KKT point whose multiplier is not positive is not the minimizer, and Newton does not
+        // leave it (it used to iterate there up to the cap: 100 of a cold query's 167 iterations
+        // on one chair / human pose): leave it to the barrier path.
+        if pt.norm_inf() <= params.kkt_tolerance * scale(&pt) {
+            status = SolveStatus::Stalled;
+            break;
+        }
         // Fresh Hessians when this point has them, else the last ones (chord step).
         let fresh = match (f1.hessian(&pt.e1), f2.hessian(&pt.e2)) {
             (Some(h1), Some(h2)) => {
@@ -426,7 +433,9 @@ fn kkt_newton_body<const FMA: bool>(
             break;
         };
         let cheap = r0 <= CHORD_RESIDUAL * scale(&pt);
-        let mut alpha = 1.0;
+        // A cold run keeps μ ≥ μ/2 per step: the KKT points with μ < 0 (maxima and saddles of p₁
+        // on body 2's boundary) attract Newton from some starts and are not the answer.
+        let mut alpha = if !warm && mu > 0.0 && mu + dmu < 0.5 * mu { 0.5 * mu / -dmu } else { 1.0 };
         let mut accepted = false;
         for _ in 0..40 {
             let xt = x + dx * alpha;
