@@ -542,6 +542,14 @@ impl<'a> PosedBody<'a> {
         Self { body, pose: *pose, a, b }
     }
 
+    /// The body-frame point `local` in world coordinates, R·local + t, through the stored matrix
+    /// A = Rᵀ/scale (R = scale·Aᵀ: one transposed matrix–vector product instead of a quaternion
+    /// rotation).
+    #[inline]
+    pub fn to_world(&self, local: &Vector3) -> Vector3 {
+        self.a.tr_mul(local) * self.body.scale + self.pose.translation.vector
+    }
+
     /// The linear part A of the world → normalized map (Rᵀ/scale).
     pub fn linear(&self) -> &Matrix3 {
         &self.a

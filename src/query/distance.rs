@@ -132,7 +132,7 @@ pub fn distance(
     warm: Option<&DistanceWarmStart>,
     params: &NewtonParams,
 ) -> DistanceResult {
-    let rel = pose_a.inverse() * pose_b;
+    let rel = pose_a.inv_mul(pose_b);
     let ba = PosedBody::unposed(a);
     let bb = PosedBody::new(b, &rel);
     let mut iterations = 0;
@@ -145,9 +145,9 @@ pub fn distance(
     });
     if let (Some(w), Some((step, _))) = (warm.filter(|w| w.valid), &previous) {
         let (a0, b0, lam0) = w.predict(step);
-        let y0 = rel * Point3::from(b0);
+        let y0 = bb.to_world(&b0);
         let capped = NewtonParams { max_iterations: params.max_iterations.min(WARM_ITERATIONS), ..*params };
-        let out = kkt_newton(&ba, &bb, a0, y0.coords, Some(lam0), &capped, true);
+        let out = kkt_newton(&ba, &bb, a0, y0, Some(lam0), &capped, true);
         iterations += out.iterations;
         if out.status.converged() {
             return finish(pose_a, &rel, out, iterations, true, w.growth, previous);

@@ -92,8 +92,11 @@ pub(crate) fn pose_step(from: &Isometry3, to: &Isometry3, length: Real) -> [Real
     [t.x, t.y, t.z, q.i * s, q.j * s, q.k * s]
 }
 
+/// a · b for 6-vectors, written out (the iterator form compiled to a loop through `Zip`: 4 % of a
+/// warm distance query's instructions).
+#[inline(always)]
 fn dot6(a: &[Real; 6], b: &[Real; 6]) -> Real {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
+    (a[0] * b[0] + a[1] * b[1]) + (a[2] * b[2] + a[3] * b[3]) + (a[4] * b[4] + a[5] * b[5])
 }
 
 /// The step `d` in units of the step `d1` before it, when the two are nearly parallel (cosine ≥ 0.9)
