@@ -285,35 +285,37 @@ horner_fn!(fold_4, 22; [1],[1,2,3],[1,2,3,4,5]);
 horner_fn!(fold_5, 34; [1,2],[1,2,3,4],[1,2,3,4,5,6]);
 horner_fn!(fold_6, 50; [1],[1,2,3],[1,2,3,4,5],[1,2,3,4,5,6,7]);
 
+/// `$f::<$a>($cpu, $rows, $u)` for the scheme `$f` listed for the runtime degree `$d` (the last
+/// one for any larger `$d`).
+macro_rules! scheme_of_degree {
+    ($d:expr, [$($n:literal => $f:ident),*; $last:ident], $a:ty, $cpu:expr, $rows:expr, $u:expr) => {
+        match $d {
+            $($n => $f::<$a>($cpu, $rows, $u),)*
+            _ => $last::<$a>($cpu, $rows, $u),
+        }
+    };
+}
+
 /// The folded Horner scheme of degree `$d` (0..=6) at `$u` = (x², y, z).
 macro_rules! fold_of_degree {
     ($d:expr, $a:ty, $cpu:expr, $rows:expr, $u:expr) => {
-        match $d {
-            0 => fold_0::<$a>($cpu, $rows, $u),
-            1 => fold_1::<$a>($cpu, $rows, $u),
-            2 => fold_2::<$a>($cpu, $rows, $u),
-            3 => fold_3::<$a>($cpu, $rows, $u),
-            4 => fold_4::<$a>($cpu, $rows, $u),
-            5 => fold_5::<$a>($cpu, $rows, $u),
-            _ => fold_6::<$a>($cpu, $rows, $u),
-        }
+        scheme_of_degree!(
+            $d,
+            [0 => fold_0, 1 => fold_1, 2 => fold_2, 3 => fold_3, 4 => fold_4, 5 => fold_5; fold_6],
+            $a, $cpu, $rows, $u
+        )
     };
 }
 
 /// The Horner scheme of degree `$d` (0..=8) with accumulator `$a` over `$rows`.
 macro_rules! horner_of_degree {
     ($d:expr, $a:ty, $cpu:expr, $rows:expr, $u:expr) => {
-        match $d {
-            0 => horner_0::<$a>($cpu, $rows, $u),
-            1 => horner_1::<$a>($cpu, $rows, $u),
-            2 => horner_2::<$a>($cpu, $rows, $u),
-            3 => horner_3::<$a>($cpu, $rows, $u),
-            4 => horner_4::<$a>($cpu, $rows, $u),
-            5 => horner_5::<$a>($cpu, $rows, $u),
-            6 => horner_6::<$a>($cpu, $rows, $u),
-            7 => horner_7::<$a>($cpu, $rows, $u),
-            _ => horner_8::<$a>($cpu, $rows, $u),
-        }
+        scheme_of_degree!(
+            $d,
+            [0 => horner_0, 1 => horner_1, 2 => horner_2, 3 => horner_3, 4 => horner_4, 5 => horner_5,
+             6 => horner_6, 7 => horner_7; horner_8],
+            $a, $cpu, $rows, $u
+        )
     };
 }
 
