@@ -55,9 +55,6 @@ use super::monomial::{basis_len, index3};
 use super::polynomial::{Polynomial, MAX_DEGREE};
 use crate::math::{Real, Sym3, Vector3};
 
-/// Monomials of degree ≤ 8 in three variables (the basis of a degree-8 polynomial).
-pub const MAX_MONOMIALS: usize = 165;
-
 /// Rows of the value / gradient table: monomials of degree ≤ 7 (120), the gradient of a degree-8
 /// polynomial.
 const MAX_GRADIENT_MONOMIALS: usize = 120;

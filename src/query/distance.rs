@@ -439,9 +439,7 @@ fn kkt_newton_body<const FMA: bool>(
     let mut status = SolveStatus::MaxIterations;
     let mut it = 0;
     let scale = |x: &Vector3, y: &Vector3| 1.0 + 2.0 * (x - y).norm();
-    let converged = |pt: &KktPoint, x: &Vector3, y: &Vector3, lam: [Real; 2]| {
-        pt.norm_inf() <= params.kkt_tolerance * scale(x, y) && lam[0] > 0.0 && lam[1] > 0.0
-    };
+    let positive = |lam: [Real; 2]| lam[0] > 0.0 && lam[1] > 0.0;
     while it < params.max_iterations {
         // The 2-norm carries any NaN or infinity of the residual (the ∞-norm's plain maxima do not).
         let r0 = pt.norm2();
@@ -449,14 +447,11 @@ fn kkt_newton_body<const FMA: bool>(
             status = SolveStatus::Stalled;
             break;
         }
-        if converged(&pt, &x, &y, lam) {
-            status = SolveStatus::Converged;
-            break;
-        }
-        // A KKT point with a multiplier that is not positive is not the minimizer, and Newton does
-        // not leave it: stop instead of iterating there up to the cap.
-        if pt.norm_inf() <= params.kkt_tolerance * scale(&x, &y) {
-            status = SolveStatus::Stalled;
+        let sc = scale(&x, &y);
+        // A KKT point is the answer when its multipliers are positive; otherwise it is not the
+        // minimizer and Newton does not leave it: stop instead of iterating there up to the cap.
+        if pt.norm_inf() <= params.kkt_tolerance * sc {
+            status = if positive(lam) { SolveStatus::Converged } else { SolveStatus::Stalled };
             break;
         }
         // Fresh Hessians when this point has them, else the last ones (chord step).
@@ -476,7 +471,7 @@ fn kkt_newton_body<const FMA: bool>(
             status = SolveStatus::Stalled;
             break;
         };
-        let cheap = r0 <= CHORD_RESIDUAL * scale(&x, &y);
+        let cheap = r0 <= CHORD_RESIDUAL * sc;
         let mut alpha = 1.0;
         let mut accepted = false;
         // The trial points are evaluated into `pt` itself (its Hessians are in `hess` already):
@@ -513,7 +508,11 @@ fn kkt_newton_body<const FMA: bool>(
             break;
         }
     }
-    if status == SolveStatus::MaxIterations && converged(&pt, &x, &y, lam) && pt.norm2().is_finite() {
+    if status == SolveStatus::MaxIterations
+        && positive(lam)
+        && pt.norm_inf() <= params.kkt_tolerance * scale(&x, &y)
+        && pt.norm2().is_finite()
+    {
         status = SolveStatus::Converged;
     }
     KktOut { x, y, lam, status, iterations: it, residual: pt.norm_inf() }

@@ -84,6 +84,19 @@ pub(crate) struct PosedEval {
     hessian_u: Option<Sym3>,
 }
 
+/// `$s.poly.$avx2($u)` (the AVX2 + FMA kernel, no CPU check) when `$s` was built for it, else
+/// `$s.poly.$portable($u)` (which checks the CPU and dispatches).
+macro_rules! through_kernel {
+    ($s:ident, $avx2:ident, $portable:ident, $u:ident) => {{
+        #[cfg(target_arch = "x86_64")]
+        if FMA && $s.avx2 {
+            // SAFETY: `avx2` is set only when the CPU supports AVX2 and FMA.
+            return unsafe { $s.poly.$avx2($u) };
+        }
+        $s.poly.$portable($u)
+    }};
+}
+
 impl<'a> FastPosed<'a> {
     /// The evaluator of a posed body, portable arithmetic.
     #[inline(always)]
@@ -112,34 +125,19 @@ impl<'a, const FMA: bool> FastPosed<'a, FMA> {
     /// p(u) through the kernel this evaluator was built for.
     #[inline(always)]
     fn poly_value(&self, u: &Vector3) -> Real {
-        #[cfg(target_arch = "x86_64")]
-        if FMA && self.avx2 {
-            // SAFETY: `avx2` is set only when the CPU supports AVX2 and FMA.
-            return unsafe { self.poly.value_avx2(u) };
-        }
-        self.poly.value(u)
+        through_kernel!(self, value_avx2, value, u)
     }
 
     /// p(u) and ∇p(u) through the kernel this evaluator was built for.
     #[inline(always)]
     fn poly_value_gradient(&self, u: &Vector3) -> (Real, Vector3) {
-        #[cfg(target_arch = "x86_64")]
-        if FMA && self.avx2 {
-            // SAFETY: `avx2` is set only when the CPU supports AVX2 and FMA.
-            return unsafe { self.poly.value_gradient_avx2(u) };
-        }
-        self.poly.value_gradient(u)
+        through_kernel!(self, value_gradient_avx2, value_gradient, u)
     }
 
     /// p(u), ∇p(u) and ∇²p(u) (upper triangle) through the kernel this evaluator was built for.
     #[inline(always)]
     fn poly_eval(&self, u: &Vector3) -> SymEval {
-        #[cfg(target_arch = "x86_64")]
-        if FMA && self.avx2 {
-            // SAFETY: `avx2` is set only when the CPU supports AVX2 and FMA.
-            return unsafe { self.poly.eval_sym_avx2(u) };
-        }
-        self.poly.eval_sym(u)
+        through_kernel!(self, eval_sym_avx2, eval_sym, u)
     }
 
     /// u = A x + b.

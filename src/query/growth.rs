@@ -396,7 +396,7 @@ fn kkt_newton_body<const FMA: bool>(
     let mut it = 0;
     // Scale stationarity by the objective's gradient so far-apart bodies (large p₁) are judged fairly.
     let scale = |pt: &KktPoint| 1.0 + abs_max(&pt.e1.gradient);
-    let converged = |pt: &KktPoint, mu: Real| pt.norm_inf() <= params.kkt_tolerance * scale(pt) && mu > 0.0;
+    let stationary = |pt: &KktPoint| pt.norm_inf() <= params.kkt_tolerance * scale(pt);
     while it < params.max_iterations {
         // The 2-norm carries any NaN or infinity of the residual (the ∞-norm's plain maxima do not).
         let r0 = pt.norm2();
@@ -404,15 +404,11 @@ fn kkt_newton_body<const FMA: bool>(
             status = SolveStatus::Stalled;
             break;
         }
-        if converged(&pt, mu) {
-            status = SolveStatus::Converged;
-            break;
-        }
-        // A KKT point whose multiplier is not positive is not the minimizer, and Newton does not
-        // leave it (it used to iterate there up to the cap: 100 of a cold query's 167 iterations
-        // on one chair / human pose): leave it to the barrier path.
-        if pt.norm_inf() <= params.kkt_tolerance * scale(&pt) {
-            status = SolveStatus::Stalled;
+        // A KKT point is the answer when μ > 0; otherwise it is not the minimizer and Newton does
+        // not leave it (it used to iterate there up to the cap: 100 of a cold query's 167
+        // iterations on one chair / human pose): leave it to the barrier path.
+        if stationary(&pt) {
+            status = if mu > 0.0 { SolveStatus::Converged } else { SolveStatus::Stalled };
             break;
         }
         // Fresh Hessians when this point has them, else the last ones (chord step).
@@ -469,7 +465,7 @@ fn kkt_newton_body<const FMA: bool>(
             break;
         }
     }
-    if status == SolveStatus::MaxIterations && converged(&pt, mu) && pt.norm2().is_finite() {
+    if status == SolveStatus::MaxIterations && mu > 0.0 && stationary(&pt) && pt.norm2().is_finite() {
         status = SolveStatus::Converged;
     }
     KktOut { x, mu, value: pt.e1.value, status, iterations: it, residual: pt.norm_inf() }
