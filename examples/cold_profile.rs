@@ -53,6 +53,7 @@ fn main() -> sublevel::Result<()> {
     }
     let (mut sep, mut ovl, mut it_sep, mut it_ovl, mut conv) = (0usize, 0usize, 0usize, 0usize, 0usize);
     let mut hist = [0usize; 12];
+    let (mut g_runs, mut g_it, mut g_hist) = (0usize, 0usize, [0usize; 12]);
     let (mut td, mut tg) = (Vec::new(), Vec::new());
     // (distance, growth value) per pose; NaN where not run.
     let mut values: Vec<(Real, Real)> = Vec::with_capacity(poses.len());
@@ -86,6 +87,9 @@ fn main() -> sublevel::Result<()> {
             }
             tg.push(t.elapsed().as_secs_f64() * 1e6 / repeats as Real);
             value.1 = g.value;
+            g_runs += 1;
+            g_it += g.iterations;
+            g_hist[g.iterations.min(11)] += 1;
         }
         values.push(value);
     }
@@ -96,6 +100,7 @@ fn main() -> sublevel::Result<()> {
         it_ovl as Real / ovl.max(1) as Real
     );
     println!("iterations histogram (0..=10, 11+): {hist:?}");
+    println!("growth: {:.2} it/query, histogram (0..=10, 11+): {g_hist:?}", g_it as Real / g_runs.max(1) as Real);
     if let Some(path) = answers.strip_prefix("save=") {
         let text: String = values.iter().map(|(d, g)| format!("{d:.17e} {g:.17e}\n")).collect();
         std::fs::write(path, text)?;

@@ -43,13 +43,25 @@
 //! scalar chains and `vmovsd`/`vmovhpd` pairs): value 116 (129), value + gradient 118 (132), value +
 //! gradient + Hessian 220 (439). At 2d = 4: 56 (65), 58 (68), 96 (176); at 2d = 8: 208 (225), 210
 //! (228), 431 (952). Before these, a kernel that summed table rows against the monomial vector took
-//! 244, 410 and 574 at 2d = 6. The kernels are bound by the FMA units' throughput (a chain of
-//! dependent evaluations runs as fast as independent ones), so Euler's identity, which drops the
-//! rows of the top one or two degrees for a few scalar operations, buys time: a full evaluation at
-//! 2d = 6 went from 154 multiply–adds (84 value + gradient rows of degree ≤ 6, 35 + 35 Hessian rows)
-//! to 92 (35 + 35 rows of degree ≤ 4, and the [r_z, w] table folded in x to 22 four-lane rows), at
-//! 2d = 8 from 333 to 218; a value + gradient evaluation from 84 to 56 rows (165 to 120). The value
-//! runs the value + gradient scheme (a 4-lane FMA is one instruction, like a scalar one).
+//! 244, 410 and 574 at 2d = 6. The kernels' time follows their count of multiply–adds (a chain of
+//! dependent evaluations runs almost as fast as independent ones), so Euler's identity, which
+//! drops the rows of the top one or two degrees for a few scalar operations, buys time: a full
+//! evaluation at 2d = 6 went from 154 multiply–adds (84 value + gradient rows of degree ≤ 6, 35 +
+//! 35 Hessian rows) to 92 (35 + 35 rows of degree ≤ 4, and the [r_z, w] table folded in x to 22
+//! four-lane rows), at 2d = 8 from 333 to 218; a value + gradient evaluation from 84 to 56 rows
+//! (165 to 120). The value runs the value + gradient scheme (a 4-lane FMA is one instruction, like
+//! a scalar one).
+//!
+//! The two Hessian tables are one table of paired rows read by one pass ([`Two`]): two independent
+//! chains side by side. Measured on this project's machine (AMD EPYC Zen 3 at ~3.2 GHz, the
+//! `kbench` loop of issue 15's notes; independent evaluations, medians of three rounds): a full
+//! evaluation 81 → 73 ns at 2d = 8, 38.8 → 39.5 ns at 2d = 6 (no change), bit-identical answers;
+//! the cold distance query 2–3 % faster at 2d = 4, 6, 8. That is about 1.35 cycles per
+//! multiply–add at 2d = 6, where the FMA units peak at 0.5 and their latency is 4 (a synthetic loop
+//! on the same machine): neither bound alone, and more rows always cost more — the value +
+//! gradient pass split the same way into its even and odd powers of x (68 rows instead of 56, two
+//! chains) ran 28 % slower (29 → 37 ns), and dropping the scheduling barriers moved a full
+//! evaluation to 42 ns and a value + gradient one to 27 ns.
 
 use super::monomial::{basis_len, index3};
 use super::polynomial::{Polynomial, MAX_DEGREE};
@@ -72,12 +84,12 @@ struct Tables {
     /// Coefficients of u^β (|β| ≤ D − 1) in [s, ∂ₓp, ∂ᵧp, ∂_zp] with s = Σₖ (D − k)/D · pₖ, so that
     /// p = u·∇p / D + s (Euler's identity u·∇pₖ = k pₖ; the degree-D part of s vanishes).
     value_gradient: [[Real; 4]; MAX_GRADIENT_MONOMIALS],
-    /// Coefficients of u^β (|β| ≤ D − 2) in [∂ₓₓp, ∂ₓᵧp, ∂ₓ_zp, ∂ᵧᵧp].
-    hessian: [[Real; 4]; MAX_HESSIAN_MONOMIALS],
-    /// Coefficients of u^β (|β| ≤ D − 2) in [∂ᵧ_zp, ∂_z_zp, r_x, r_y], where
-    /// rᵢ = Σₖ (D − 1 − k)/(D − 1) · (∂ᵢp)ₖ, so that ∇p = ∇²p u / (D − 1) + r (Euler's identity on
-    /// the gradient; its degree-(D − 1) part vanishes).
-    hessian_rest: [[Real; 4]; MAX_HESSIAN_MONOMIALS],
+    /// Coefficients of u^β (|β| ≤ D − 2) in two 4-lane halves, [∂ₓₓp, ∂ₓᵧp, ∂ₓ_zp, ∂ᵧᵧp] and
+    /// [∂ᵧ_zp, ∂_z_zp, r_x, r_y], where rᵢ = Σₖ (D − 1 − k)/(D − 1) · (∂ᵢp)ₖ, so that
+    /// ∇p = ∇²p u / (D − 1) + r (Euler's identity on the gradient; its degree-(D − 1) part
+    /// vanishes). Both halves of a row are read by one pass ([`Two`]): two independent chains of
+    /// multiply–adds side by side.
+    hessian: [[[Real; 4]; 2]; MAX_HESSIAN_MONOMIALS],
     /// [r_z, w] with w = Σₖ (D − 1 − k)(D − k)/(D(D − 1)) · pₖ, so that
     /// p = (2 u·∇p − uᵀ∇²p u / (D − 1)) / D + w; folded in x to fill four lanes: q = E(x², y, z) +
     /// x·O(x², y, z) for the parts E, O of even and odd powers of x, the row of (a, b, c), a even
@@ -144,6 +156,50 @@ trait Acc: Copy {
     #[inline(always)]
     fn pin(self) -> Self {
         self
+    }
+}
+
+/// Two accumulators run side by side over rows of two halves: one pass over a table of paired
+/// rows is two independent chains of multiply–adds, interleaved instruction by instruction. A
+/// Horner pass is a chain of dependent multiply–adds, so a single one runs at the FMA latency
+/// (about a third of the FMA units' throughput); the processor's scheduler sees only a few dozen
+/// instructions ahead, so separate passes do not overlap, while interleaved ones do.
+#[derive(Clone, Copy)]
+struct Two<A>(A, A);
+
+impl<A: Acc> Acc for Two<A> {
+    type Row = [A::Row; 2];
+    type Cpu = A::Cpu;
+    type Coord = A::Coord;
+
+    #[inline(always)]
+    fn splat(cpu: Self::Cpu, t: Real) -> Self::Coord {
+        A::splat(cpu, t)
+    }
+
+    #[inline(always)]
+    fn load(cpu: Self::Cpu, row: &Self::Row) -> Self {
+        Self(A::load(cpu, &row[0]), A::load(cpu, &row[1]))
+    }
+
+    #[inline(always)]
+    fn mul_add_row(self, t: Self::Coord, row: &Self::Row) -> Self {
+        Self(self.0.mul_add_row(t, &row[0]), self.1.mul_add_row(t, &row[1]))
+    }
+
+    #[inline(always)]
+    fn mul_add(self, t: Self::Coord, c: Self) -> Self {
+        Self(self.0.mul_add(t, c.0), self.1.mul_add(t, c.1))
+    }
+
+    #[inline(always)]
+    fn lanes(self) -> Self::Row {
+        [self.0.lanes(), self.1.lanes()]
+    }
+
+    #[inline(always)]
+    fn pin(self) -> Self {
+        Self(self.0.pin(), self.1.pin())
     }
 }
 
@@ -366,8 +422,7 @@ fn full_kernel<const D: usize, Q: Quad>(cpu: Q::Cpu, t: &Tables, u: &Vector3) ->
         let (value, gradient) = gradient_kernel::<D, Q>(cpu, t, u);
         return SymEval { value, gradient, hessian: Sym3::default() };
     }
-    let h = horner_of_degree!(D - 2, Q, cpu, &t.hessian, u).lanes();
-    let m = horner_of_degree!(D - 2, Q, cpu, &t.hessian_rest, u).lanes();
+    let [h, m] = horner_of_degree!(D - 2, Two<Q>, cpu, &t.hessian, u).lanes();
     let f = fold_of_degree!(D - 2, Q, cpu, &t.tail, &Vector3::new(u.x * u.x, u.y, u.z)).lanes();
     let n = [f[0] + u.x * f[2], f[1] + u.x * f[3]];
     let hessian = Sym3([h[0], h[1], h[2], h[3], m[0], m[1]]);
@@ -541,8 +596,7 @@ impl FastPoly {
         };
         let mut t = Tables {
             value_gradient: [[0.0; 4]; MAX_GRADIENT_MONOMIALS],
-            hessian: [[0.0; 4]; MAX_HESSIAN_MONOMIALS],
-            hessian_rest: [[0.0; 4]; MAX_HESSIAN_MONOMIALS],
+            hessian: [[[0.0; 4]; 2]; MAX_HESSIAN_MONOMIALS],
             tail: [[0.0; 4]; MAX_FOLDED_ROWS],
         };
         // Coefficient of u^b in ∂ᵢp.
@@ -563,8 +617,7 @@ impl FastPoly {
                     h[l] = factor as Real * coef_of(plus(b, i, Some(j)));
                 }
                 let rw = r_weight(b);
-                t.hessian[k] = [h[0], h[1], h[2], h[3]];
-                t.hessian_rest[k] = [h[4], h[5], rw * grad_of(b, 0), rw * grad_of(b, 1)];
+                t.hessian[k] = [[h[0], h[1], h[2], h[3]], [h[4], h[5], rw * grad_of(b, 0), rw * grad_of(b, 1)]];
             }
             // [r_z, w] at (a, b, c) (zero beyond degree D − 2), folded in x.
             let tail_of = |b: [usize; 3]| -> [Real; 2] {
