@@ -52,9 +52,9 @@
 //! (165 to 120). The value runs the value + gradient scheme (a 4-lane FMA is one instruction, like
 //! a scalar one).
 //!
-//! The two Hessian tables are one table of paired rows read by one pass ([`Two`]): two independent
+//! The two Hessian tables are one table of paired rows read by one pass (`Two`): two independent
 //! chains side by side. Measured on this project's machine (AMD EPYC Zen 3 at ~3.2 GHz, the
-//! `kbench` loop of issue 15's notes; independent evaluations, medians of three rounds): a full
+//! `kernel_timing` example; independent evaluations, medians of three rounds): a full
 //! evaluation 81 → 73 ns at 2d = 8, 38.8 → 39.5 ns at 2d = 6 (no change), bit-identical answers;
 //! the cold distance query 2–3 % faster at 2d = 4, 6, 8. That is about 1.35 cycles per
 //! multiply–add at 2d = 6, where the FMA units peak at 0.5 and their latency is 4 (a synthetic loop

@@ -1,0 +1,63 @@
+//! Timing of the polynomial kernels alone (issue 15): the chair_101 body of `tests/data` at one
+//! degree, 1024 points inside it, each evaluated 200 times per round; prints ns per evaluation for
+//! a full evaluation (p, ∇p, ∇²p) on independent points, on a chain where each point depends on
+//! the previous answer (the Newton solvers' pattern), and for value + gradient:
+//!
+//! ```text
+//! cargo build --release --example kernel_timing
+//! target/release/examples/kernel_timing 6      # 2d = 6 (2, 4, 6 or 8)
+//! ```
+//!
+//! Compare builds alternated in one session: the machine's speed drifts between minutes.
+
+use std::time::Instant;
+use sublevel::math::{Real, Vector3};
+use sublevel::Body;
+
+fn main() -> sublevel::Result<()> {
+    let degree: usize = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(6);
+    let chair = Body::load(&std::path::Path::new("tests/data").join(format!("chair_101.deg{degree}.json")))?;
+    let f = chair.fast_polynomial();
+    let points: Vec<Vector3> = (0..1024)
+        .map(|i| {
+            let t = i as Real * 0.01;
+            Vector3::new(t.sin() * 0.3, (1.3 * t).cos() * 0.3, (0.7 * t).sin() * 0.3)
+        })
+        .collect();
+    let per_eval = |t: Instant| t.elapsed().as_secs_f64() * 1e9 / (200.0 * points.len() as f64);
+    for round in 0..3 {
+        let t = Instant::now();
+        let mut sum = 0.0;
+        for _ in 0..200 {
+            for u in &points {
+                let e = f.eval(std::hint::black_box(u));
+                sum += e.value + e.hessian[(0, 0)];
+            }
+        }
+        let independent = per_eval(t);
+        // Each point moved by a negligible multiple of the previous answer: a dependency chain.
+        let t = Instant::now();
+        let mut u = points[0];
+        for _ in 0..200 {
+            for p in &points {
+                let e = f.eval(&u);
+                u = p + Vector3::new(e.value, e.gradient.x, e.hessian[(2, 2)]) * 1e-30;
+            }
+        }
+        let dependent = per_eval(t);
+        let t = Instant::now();
+        for _ in 0..200 {
+            for u in &points {
+                let (v, g) = f.value_gradient(std::hint::black_box(u));
+                sum += v + g.x;
+            }
+        }
+        let gradient = per_eval(t);
+        println!(
+            "2d = {degree}, round {round}: full {independent:.1} ns independent, {dependent:.1} ns dependent; \
+             value + gradient {gradient:.1} ns (checksum {:.6e})",
+            sum + u.x
+        );
+    }
+    Ok(())
+}
