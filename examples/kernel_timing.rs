@@ -1,7 +1,8 @@
 //! Timing of the polynomial kernels alone (issue 15): the chair_101 body of `tests/data` at one
 //! degree, 1024 points inside it, each evaluated 200 times per round; prints ns per evaluation for
 //! a full evaluation (p, ∇p, ∇²p) on independent points, on a chain where each point depends on
-//! the previous answer (the Newton solvers' pattern), and for value + gradient:
+//! the previous answer (the Newton solvers' pattern), for value + gradient, and for full
+//! evaluations four points per pass (`SoaPoly::eval4`, per point):
 //!
 //! ```text
 //! cargo build --release --example kernel_timing
@@ -18,6 +19,7 @@ fn main() -> sublevel::Result<()> {
     let degree: usize = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(6);
     let chair = Body::load(&std::path::Path::new("tests/data").join(format!("chair_101.deg{degree}.json")))?;
     let f = chair.fast_polynomial();
+    let soa = sublevel::poly::SoaPoly::new(f);
     let points: Vec<Vector3> = (0..1024)
         .map(|i| {
             let t = i as Real * 0.01;
@@ -53,9 +55,18 @@ fn main() -> sublevel::Result<()> {
             }
         }
         let gradient = per_eval(t);
+        // Four points per pass (the structure-of-arrays table).
+        let t = Instant::now();
+        for _ in 0..200 {
+            for q in points.chunks_exact(4) {
+                let e = soa.eval4(std::hint::black_box(&[q[0], q[1], q[2], q[3]]));
+                sum += e.value[0] + e.hessian[0][3];
+            }
+        }
+        let four = per_eval(t);
         println!(
             "2d = {degree}, round {round}: full {independent:.1} ns independent, {dependent:.1} ns dependent; \
-             value + gradient {gradient:.1} ns (checksum {:.6e})",
+             value + gradient {gradient:.1} ns; full, four points per pass {four:.1} ns (checksum {:.6e})",
             sum + u.x
         );
     }

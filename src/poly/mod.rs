@@ -21,8 +21,8 @@ pub mod polynomial;
 pub mod radial;
 pub mod support;
 
-pub use fast::FastPoly;
 pub(crate) use fast::SymEval;
+pub use fast::{FastPoly, Soa4Eval, SoaPoly};
 pub use polynomial::{Eval, Polynomial, MAX_DEGREE};
 pub use radial::RadialTable;
 pub use support::{SupportBound, SupportTable};
