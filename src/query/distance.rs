@@ -28,8 +28,8 @@
 use super::fast_eval::{abs_max, max_plain, shifted, solve_kkt8, FastPosed, PosedEval, CHORD_RESIDUAL};
 use super::growth::{solve_growth, GrowthWarmStart};
 use super::newton::{
-    boundary_on_segment_within, pose_step, MotionTrail, NewtonParams, SolveStatus, START_BOUNDARY_TOLERANCE,
-    WARM_ITERATIONS,
+    boundary_on_segment_within, pose_step, spheres_apart, MotionTrail, NewtonParams, SolveStatus,
+    START_BOUNDARY_TOLERANCE, WARM_ITERATIONS,
 };
 use crate::body::{Body, PosedBody};
 use crate::math::{Isometry3, Matrix3, Point3, Real, Sym3, Vector3};
@@ -151,27 +151,30 @@ pub fn distance(
         }
     }
 
-    // Cold start without a growth warm start: a cheap overlap certificate on the segment between
-    // the interior points, else Newton straight from the segment's boundary points. A converged
-    // KKT point with λ_a, λ_b > 0 is the global minimizer, so separation needs no growth solve.
+    // Cold start without a growth warm start: separation shown by disjoint bounding spheres (then
+    // Newton from the support points towards each other), or by the segment between the interior
+    // points (both outside the other body, A's crossing before B's: then Newton from the closer of
+    // the support and the segment's boundary points). A converged KKT point with λ_a, λ_b > 0 is
+    // the global minimizer, so separation needs no growth solve.
     if !warm.is_some_and(|w| w.growth.valid) {
         let (ca, cb) = (ba.interior_point(), bb.interior_point());
-        let (fa, fb) = (FastPosed::new(&ba), FastPosed::new(&bb));
-        if fb.value(&ca) > 1.0 && fa.value(&cb) > 1.0 {
-            let x0 = ba.boundary_towards(&cb);
-            let y0 = bb.boundary_towards(&ca);
-            // Separated along the segment: A's crossing comes before B's.
-            if (x0 - ca).norm_squared() < (y0 - ca).norm_squared() {
-                let (x0, y0) = support_start(&ba, &bb, x0, y0, &(cb - ca));
-                let capped =
-                    NewtonParams { max_iterations: params.max_iterations.min(SPECULATIVE_ITERATIONS), ..*params };
-                let out = kkt_newton(&ba, &bb, x0, y0, None, &capped, false);
-                iterations += out.iterations;
-                // Near contact (x ≈ y) the multipliers lose meaning: let the growth test decide.
-                let clear = (out.y - out.x).norm() > 1e-6 * (a.scale() + b.scale());
-                if out.status.converged() && clear {
-                    return finish(pose_a, &rel, out, iterations, false, &GrowthWarmStart::default(), previous);
-                }
+        let apart = spheres_apart(&ba, &bb);
+        // Past 2d = 2 the support points alone start as well as the closer of them and the
+        // segment's points (5.88 vs 5.90 Newton iterations at 2d = 6, 6.03 vs 6.05 at 2d = 8) and
+        // spare two radial look-ups; an ellipsoid keeps the comparison (exact for spheres).
+        let quadric = a.degree() <= 2 || b.degree() <= 2;
+        let start = match (apart && !quadric).then(|| supports_towards(&ba, &bb, &(cb - ca))).flatten() {
+            Some(start) => Some(start),
+            None => segment_start(&ba, &bb, &ca, &cb, apart),
+        };
+        if let Some((x0, y0)) = start {
+            let capped = NewtonParams { max_iterations: params.max_iterations.min(SPECULATIVE_ITERATIONS), ..*params };
+            let out = kkt_newton(&ba, &bb, x0, y0, None, &capped, false);
+            iterations += out.iterations;
+            // Near contact (x ≈ y) the multipliers lose meaning: let the growth test decide.
+            let clear = (out.y - out.x).norm() > 1e-6 * (a.scale() + b.scale());
+            if out.status.converged() && clear {
+                return finish(pose_a, &rel, out, iterations, false, &GrowthWarmStart::default(), previous);
             }
         }
     }
@@ -267,6 +270,34 @@ fn finish(
             trail,
         }),
     }
+}
+
+/// The support points h_A(n) and h_B(−n) for n = `axis` ([`PosedBody::support`]), when both
+/// bodies have them.
+fn supports_towards(ba: &PosedBody<'_>, bb: &PosedBody<'_>, axis: &Vector3) -> Option<(Vector3, Vector3)> {
+    Some((ba.support(axis)?, bb.support(&-axis)?))
+}
+
+/// The cold start of a pair shown separated — by disjoint bounding spheres (`apart`), else by the
+/// segment between its interior points `ca`, `cb` (each outside the other body, and A's boundary
+/// crossing before B's) — through [`support_start`]; `None` when neither shows it.
+fn segment_start(
+    ba: &PosedBody<'_>,
+    bb: &PosedBody<'_>,
+    ca: &Vector3,
+    cb: &Vector3,
+    apart: bool,
+) -> Option<(Vector3, Vector3)> {
+    if !apart {
+        let (fa, fb) = (FastPosed::new(ba), FastPosed::new(bb));
+        if !(fb.value(ca) > 1.0 && fa.value(cb) > 1.0) {
+            return None;
+        }
+    }
+    let x0 = ba.boundary_towards(cb);
+    let y0 = bb.boundary_towards(ca);
+    // With disjoint spheres A's crossing comes first (each lies in its own sphere).
+    (apart || (x0 - ca).norm_squared() < (y0 - ca).norm_squared()).then(|| support_start(ba, bb, x0, y0, &(cb - ca)))
 }
 
 /// The cold start of a pair separated along the segment between its interior points: the support
