@@ -259,6 +259,8 @@ pub struct Body {
     /// A box containing {p ≤ 1} in normalized coordinates (`fit::volume::bounding_box`, from
     /// supporting halfspaces; `None` for a nonconvex body, whose halfspaces prove nothing).
     bounding_box_u: Option<(Vector3, Vector3)>,
+    /// [`Body::bounding_sphere`], computed once (the cold distance start tests it on every query).
+    sphere: Option<(Point3, Real)>,
     /// Certified upper bounds of the support function (normalized units), from the support map,
     /// its tangent halfspaces and the box; `None` for a nonconvex body (as the box).
     support_bound: Option<SupportBound>,
@@ -331,9 +333,12 @@ impl Body {
             crate::fit::volume::bounding_box_from_support(&polynomial, table).ok()
         };
         let support_bound = bounding_box_u.map(|(lo, hi)| SupportBound::new(&fast, &support, &lo, &hi));
+        let center = Vector3::from(center);
+        let sphere = bounding_box_u
+            .map(|(lo, hi)| (Point3::from(center + (lo + hi) * (0.5 * scale)), 0.5 * (hi - lo).norm() * scale));
         Ok(Self {
             polynomial,
-            center: Vector3::from(center),
+            center,
             scale,
             interior_u,
             min_value,
@@ -341,6 +346,7 @@ impl Body {
             radial,
             support,
             bounding_box_u,
+            sphere,
             support_bound,
             report,
         })
@@ -452,9 +458,7 @@ impl Body {
     /// of its bounding box and the box's half diagonal. `None` for a nonconvex body (no proven
     /// bound). Broad phases and collide-with-margin queries test these before any solve.
     pub fn bounding_sphere(&self) -> Option<(Point3, Real)> {
-        let (lo, hi) = self.bounding_box_u?;
-        let c = (lo + hi) * 0.5;
-        Some((Point3::from(self.center + c * self.scale), 0.5 * (hi - lo).norm() * self.scale))
+        self.sphere
     }
 
     /// A box containing the body, axis-aligned in the body frame: its center and half extents

@@ -84,13 +84,16 @@ pub(crate) fn boundary_on_segment_within(
 /// false for a nonconvex body, which has none). Then the bodies are separated, which spares the
 /// distance solver's cold start its overlap tests (two evaluations) and, past 2d = 2, its radial
 /// points (two table look-ups): on the chair / human cold poses of `sublevel bench`
-/// (`examples/cold_profile`, same Newton iteration counts within 0.02) 3 % of the instructions of a
-/// cold distance query at 2d = 6 and 2.5 / 4 % of its median time at 2d = 6 / 8 (the two builds
-/// alternated three times). The growth solver's one evaluation it would spare (p₂ at p₁'s
+/// (`examples/cold_profile`, same Newton iteration counts within 0.02) 4.4 % of the instructions
+/// of a cold distance query at 2d = 6 and 2.5 / 4 % of its median time at 2d = 6 / 8 (the two
+/// builds alternated three times). The test itself is about 90 instructions (the spheres are
+/// cached in the body, the centers mapped through the posed bodies' matrices). The growth solver's one evaluation it would spare (p₂ at p₁'s
 /// minimizer) costs about what this test does, so it does not ask.
 pub(crate) fn spheres_apart(b1: &PosedBody<'_>, b2: &PosedBody<'_>) -> bool {
     match (b1.body.bounding_sphere(), b2.body.bounding_sphere()) {
-        (Some((c1, r1)), Some((c2, r2))) => (b1.pose * c1 - b2.pose * c2).norm() > r1 + r2,
+        (Some((c1, r1)), Some((c2, r2))) => {
+            (b1.to_world(&c1.coords) - b2.to_world(&c2.coords)).norm_squared() > (r1 + r2) * (r1 + r2)
+        }
         _ => false,
     }
 }
