@@ -353,13 +353,16 @@ horner_fn!(fold_6, 50; [1],[1,2,3],[1,2,3,4,5],[1,2,3,4,5,6,7]);
 /// `$f::<$a>($cpu, $rows, $u)` for the scheme `$f` listed for the runtime degree `$d` (the last
 /// one for any larger `$d`).
 macro_rules! scheme_of_degree {
-    ($d:expr, [$($n:literal => $f:ident),*; $last:ident], $a:ty, $cpu:expr, $rows:expr, $u:expr) => {{
-        let p = Point::splat::<$a>($cpu, $u);
+    ($d:expr, [$($n:literal => $f:ident),*; $last:ident], $a:ty, $cpu:expr, $rows:expr, point = $p:expr) => {{
+        let p = $p;
         match $d {
             $($n => $f::<$a>($cpu, $rows, p),)*
             _ => $last::<$a>($cpu, $rows, p),
         }
     }};
+    ($d:expr, [$($n:literal => $f:ident),*; $last:ident], $a:ty, $cpu:expr, $rows:expr, $u:expr) => {
+        scheme_of_degree!($d, [$($n => $f),*; $last], $a, $cpu, $rows, point = Point::splat::<$a>($cpu, $u))
+    };
 }
 
 /// The folded Horner scheme of degree `$d` (0..=6) at `$u` = (x², y, z).
@@ -375,12 +378,12 @@ macro_rules! fold_of_degree {
 
 /// The Horner scheme of degree `$d` (0..=8) with accumulator `$a` over `$rows`.
 macro_rules! horner_of_degree {
-    ($d:expr, $a:ty, $cpu:expr, $rows:expr, $u:expr) => {
+    ($d:expr, $a:ty, $cpu:expr, $rows:expr, $($u:tt)+) => {
         scheme_of_degree!(
             $d,
             [0 => horner_0, 1 => horner_1, 2 => horner_2, 3 => horner_3, 4 => horner_4, 5 => horner_5,
              6 => horner_6, 7 => horner_7; horner_8],
-            $a, $cpu, $rows, $u
+            $a, $cpu, $rows, $($u)+
         )
     };
 }
@@ -646,13 +649,13 @@ mod x86 {
             F64x4(unsafe { _mm256_loadu_pd(c.as_ptr()) }, cpu)
         };
         let p = Point { x: coordinate(0), y: coordinate(1), z: coordinate(2) };
-        let a = soa_scheme::<D, 0, 2>(cpu, rows, p).0;
-        let b = soa_scheme::<D, 2, 2>(cpu, rows, p).0;
-        let c = soa_scheme::<D, 4, 2>(cpu, rows, p).0;
-        let e = soa_scheme::<D, 6, 2>(cpu, rows, p).0;
-        let f = soa_scheme::<D, 8, 2>(cpu, rows, p).0;
-        let lo = [a[0], a[1], b[0], b[1], c[0]];
-        let hi = [c[1], e[0], e[1], f[0], f[1]];
+        // Passes of 3, 3, 2, 2 quantities (see `SoaAcc`).
+        let a = soa_scheme::<D, 0, 3>(cpu, rows, p).0;
+        let b = soa_scheme::<D, 3, 3>(cpu, rows, p).0;
+        let c = soa_scheme::<D, 6, 2>(cpu, rows, p).0;
+        let e = soa_scheme::<D, 8, 2>(cpu, rows, p).0;
+        let lo = [a[0], a[1], a[2], b[0], b[1]];
+        let hi = [b[2], c[0], c[1], e[0], e[1]];
         let (x, y, z) = (p.x.0, p.y.0, p.z.0);
         // [xx, xy, xz, yy, yz] = lo, [zz, r_x, r_y, r_z, w] = hi; Euler's identity as in
         // `full_kernel`, four points per instruction.
@@ -683,22 +686,15 @@ mod x86 {
         }
     }
 
-    /// The Horner scheme of degree `D` − 2 over five quantities of the SoA rows at the point `p`.
+    /// The Horner scheme of degree `D` − 2 over the `N` quantities of the SoA rows from entry
+    /// `OFF`, at the four points `p`.
     #[inline(always)]
     fn soa_scheme<const D: usize, const OFF: usize, const N: usize>(
         cpu: Avx2Fma,
         rows: &[[Real; SOA_WIDTH]],
         p: Point<F64x4>,
     ) -> SoaAcc<OFF, N> {
-        match D - 2 {
-            0 => horner_0::<SoaAcc<OFF, N>>(cpu, rows, p),
-            1 => horner_1::<SoaAcc<OFF, N>>(cpu, rows, p),
-            2 => horner_2::<SoaAcc<OFF, N>>(cpu, rows, p),
-            3 => horner_3::<SoaAcc<OFF, N>>(cpu, rows, p),
-            4 => horner_4::<SoaAcc<OFF, N>>(cpu, rows, p),
-            5 => horner_5::<SoaAcc<OFF, N>>(cpu, rows, p),
-            _ => horner_6::<SoaAcc<OFF, N>>(cpu, rows, p),
-        }
+        horner_of_degree!(D - 2, SoaAcc<OFF, N>, cpu, rows, point = p)
     }
 
     /// [`SoaPoly::eval4`] for degree `d` (2..=8).

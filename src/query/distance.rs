@@ -476,6 +476,7 @@ fn kkt_newton_body<const FMA: bool>(
     let mut it = 0;
     let scale = |x: &Vector3, y: &Vector3| 1.0 + 2.0 * (x - y).norm();
     let positive = |lam: [Real; 2]| lam[0] > 0.0 && lam[1] > 0.0;
+    let stationary = |pt: &KktPoint, sc: Real| pt.norm_inf() <= params.kkt_tolerance * sc;
     while it < params.max_iterations {
         // The 2-norm carries any NaN or infinity of the residual (the ∞-norm's plain maxima do not).
         let r0 = pt.norm2();
@@ -486,7 +487,7 @@ fn kkt_newton_body<const FMA: bool>(
         let sc = scale(&x, &y);
         // A KKT point is the answer when its multipliers are positive; otherwise it is not the
         // minimizer and Newton does not leave it: stop instead of iterating there up to the cap.
-        if pt.norm_inf() <= params.kkt_tolerance * sc {
+        if stationary(&pt, sc) {
             status = if positive(lam) { SolveStatus::Converged } else { SolveStatus::Stalled };
             break;
         }
@@ -544,10 +545,7 @@ fn kkt_newton_body<const FMA: bool>(
             break;
         }
     }
-    if status == SolveStatus::MaxIterations
-        && positive(lam)
-        && pt.norm_inf() <= params.kkt_tolerance * scale(&x, &y)
-        && pt.norm2().is_finite()
+    if status == SolveStatus::MaxIterations && positive(lam) && stationary(&pt, scale(&x, &y)) && pt.norm2().is_finite()
     {
         status = SolveStatus::Converged;
     }
