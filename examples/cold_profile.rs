@@ -51,6 +51,9 @@ fn main() -> sublevel::Result<()> {
     if which == "warm" {
         return warm(&chair, &human, degree, repeats, &params);
     }
+    if which == "batch" {
+        return batch(&chair, &human, &poses, degree, repeats, &params);
+    }
     let (mut sep, mut ovl, mut it_sep, mut it_ovl, mut conv) = (0usize, 0usize, 0usize, 0usize, 0usize);
     let mut hist = [0usize; 12];
     let (mut g_runs, mut g_it, mut g_hist) = (0usize, 0usize, [0usize; 12]);
@@ -162,6 +165,66 @@ fn warm(chair: &Body, human: &Body, degree: usize, repeats: usize, params: &Newt
 }
 
 /// Median of the per-pose times (NaN when none were taken, e.g. growth in `distance` mode).
+/// The 300 cold poses as one batch ([`sublevel::query::batch::cold_distances`], four pairs per
+/// SIMD pass; with and without warm starts) against the same poses one [`distance`] at a time:
+/// `repeats` rounds, the three alternated; prints the median time per pair of each and the ratios,
+/// and checks that every batch answer is the single-pair answer (distance within 10⁻⁹ m, same
+/// overlap flag, converged).
+fn batch(
+    chair: &Body,
+    human: &Body,
+    poses: &[Isometry3],
+    degree: usize,
+    repeats: usize,
+    params: &NewtonParams,
+) -> sublevel::Result<()> {
+    use sublevel::query::batch::cold_distances;
+    let id = Isometry3::identity();
+    let pairs: Vec<(Isometry3, Isometry3)> = poses.iter().map(|p| (*p, id)).collect();
+    let singles: Vec<_> = poses.iter().map(|p| distance(chair, p, human, &id, None, params)).collect();
+    let mut worst: Real = 0.0;
+    for warm_starts in [true, false] {
+        let batch = cold_distances(chair, human, &pairs, params, warm_starts);
+        for (s, b) in singles.iter().zip(&batch) {
+            assert!(b.status.converged() && s.overlapping == b.overlapping, "{s:?} vs {b:?}");
+            assert!((s.witness_a - b.witness_a).norm() <= 1e-6 && (s.witness_b - b.witness_b).norm() <= 1e-6);
+            worst = worst.max((s.distance - b.distance).abs());
+        }
+    }
+    assert!(worst <= 1e-9, "batch answers differ by {worst:e} m");
+    let (mut ts, mut tw, mut tb) = (Vec::new(), Vec::new(), Vec::new());
+    let n = pairs.len() as Real;
+    for _ in 0..repeats {
+        let t = Instant::now();
+        for p in poses {
+            std::hint::black_box(distance(chair, p, human, &id, None, params));
+        }
+        ts.push(t.elapsed().as_secs_f64() * 1e6 / n);
+        let t = Instant::now();
+        std::hint::black_box(cold_distances(chair, human, &pairs, params, true));
+        tw.push(t.elapsed().as_secs_f64() * 1e6 / n);
+        let t = Instant::now();
+        std::hint::black_box(cold_distances(chair, human, &pairs, params, false));
+        tb.push(t.elapsed().as_secs_f64() * 1e6 / n);
+    }
+    let (ms, mw, mb) = (median(ts), median(tw), median(tb));
+    let batch = cold_distances(chair, human, &pairs, params, false);
+    let it_s: usize = singles.iter().map(|d| d.iterations).sum();
+    let it_b: usize = batch.iter().map(|d| d.iterations).sum();
+    println!(
+        "2d = {degree}: cold distance per pair, one at a time {ms:.3} µs; batch {mw:.3} µs with warm starts \
+         ({:.2}×), {mb:.3} µs without ({:.2}× the single-query rate)",
+        ms / mw,
+        ms / mb
+    );
+    println!(
+        "Newton iterations {:.2} vs {:.2} per pair; largest distance difference {worst:.1e} m",
+        it_s as Real / n,
+        it_b as Real / n
+    );
+    Ok(())
+}
+
 fn median(mut v: Vec<Real>) -> Real {
     v.sort_by(|a, b| a.total_cmp(b));
     v.get(v.len() / 2).copied().unwrap_or(Real::NAN)

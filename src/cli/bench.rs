@@ -20,7 +20,10 @@ use sublevel::{Body, Error, Result};
 /// meters against the exact mesh–mesh distance).
 /// The `coal_*` and `*_over_coal` columns come from `--peer` (empty without it): coal's medians and
 /// ours / coal's GJK on the hulls (cold over cold, warm over warm; below 1 is faster than coal).
-pub const CSV_COLUMNS: [&str; 29] = [
+/// The last three are the batch solver ([`sublevel::query::batch::cold_distances`]): all cold
+/// poses one at a time and as one batch, alternated `--repeats` times, µs per pair (medians over
+/// the rounds), and single time / batch time (the batch's rate in units of the single-query rate).
+pub const CSV_COLUMNS: [&str; 32] = [
     "degree",
     "fit_chair_s",
     "distance_cold_us",
@@ -50,6 +53,9 @@ pub const CSV_COLUMNS: [&str; 29] = [
     "distance_warm_over_coal",
     "growth_cold_over_coal",
     "growth_warm_over_coal",
+    "distance_cold_single_us",
+    "distance_cold_batch_us",
+    "batch_over_single_rate",
 ];
 
 /// The paper's Table 2: distance query times (seconds, MATLAB fmincon) at 2d = 2, 4, 6, 8.
@@ -167,6 +173,9 @@ struct Row {
     total: usize,
     /// Mean / max |ours − exact mesh–mesh| over the separated ground-truth poses (meters).
     err: (Real, Real),
+    /// All cold poses one at a time / as one batch (µs per pair, medians over rounds).
+    single_us: Real,
+    batch_us: Real,
 }
 
 /// The parry3d-f64 side of the benchmark (degree-independent).
@@ -277,6 +286,9 @@ pub fn run(args: BenchArgs) -> Result<()> {
                 opt(coal.map(|c| r.dist_warm / c.gjk_warm_us), 3),
                 opt(coal.map(|c| r.growth_cold / c.gjk_cold_us), 3),
                 opt(coal.map(|c| r.growth_warm / c.gjk_warm_us), 3),
+                format!("{:.3}", r.single_us),
+                format!("{:.3}", r.batch_us),
+                format!("{:.3}", r.single_us / r.batch_us),
             ])?;
         }
         eprintln!("wrote {}", csv.finish()?.display());
@@ -382,9 +394,12 @@ fn bench_queries(
         wd = Some(d.warm_start);
         wg = Some(g.warm_start);
     }
+    let (single_us, batch_us) = batch_against_single(args.repeats, chair, human, cold, params);
     Row {
         degree,
         fit_chair_s,
+        single_us,
+        batch_us,
         dist_cold: median(dc),
         dist_warm: median(dw),
         growth_cold: median(gc),
@@ -393,6 +408,33 @@ fn bench_queries(
         total,
         err: error_stats(&ours, exact),
     }
+}
+
+/// The cold distance queries at all `cold` poses one at a time ([`distance`]) and as one batch
+/// ([`sublevel::query::batch::cold_distances`], no warm starts kept: what a cold batch query of a
+/// planner asks), alternated `repeats` times: µs per pair, medians over the rounds.
+fn batch_against_single(
+    repeats: usize,
+    chair: &Body,
+    human: &Body,
+    cold: &[Isometry3],
+    params: &NewtonParams,
+) -> (Real, Real) {
+    let id = Isometry3::identity();
+    let pairs: Vec<(Isometry3, Isometry3)> = cold.iter().map(|p| (*p, id)).collect();
+    let n = pairs.len().max(1) as Real;
+    let (mut single, mut batch) = (Vec::new(), Vec::new());
+    for _ in 0..repeats {
+        let t = Instant::now();
+        for p in cold {
+            std::hint::black_box(distance(chair, p, human, &id, None, params));
+        }
+        single.push(t.elapsed().as_secs_f64() * 1e6 / n);
+        let t = Instant::now();
+        std::hint::black_box(sublevel::query::batch::cold_distances(chair, human, &pairs, params, false));
+        batch.push(t.elapsed().as_secs_f64() * 1e6 / n);
+    }
+    (median(single), median(batch))
 }
 
 fn print_table(rows: &[Row], peer: &PeerRow) {
@@ -410,6 +452,16 @@ fn print_table(rows: &[Row], peer: &PeerRow) {
         );
     }
     println!("x cold / x warm: speed-up of our distance query over the paper's Table 2 (MATLAB fmincon).");
+    for r in rows {
+        println!(
+            "2d = {}: cold distance at all cold poses, {:.3} µs per pair one at a time, {:.3} µs as one batch \
+             (4 pairs per SIMD pass): {:.2}x the single-query rate",
+            r.degree,
+            r.single_us,
+            r.batch_us,
+            r.single_us / r.batch_us
+        );
+    }
     println!("fit chair: `-` where the fit was not timed (--fit-degrees); the queries then use the bundled bodies.");
     println!();
     let n_sep = peer.exact.iter().filter(|d| **d > 0.0).count();

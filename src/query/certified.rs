@@ -282,6 +282,23 @@ pub fn certified_distance(
         return distance_lower_bound(a, pose_a, b, pose_b, cert);
     }
     let newton = distance(a, pose_a, b, pose_b, warm, &params.newton);
+    certify_newton_distance(a, pose_a, b, pose_b, newton, params, mode)
+}
+
+/// [`certified_distance`] from Newton's answer `newton` of the same query (e.g. one of the batch
+/// solver's, [`crate::query::batch::cold_distances`]), for two convex bodies (a nonconvex body's
+/// answer is the SDP's lower bound, which [`certified_distance`] gives without Newton).
+pub fn certify_newton_distance(
+    a: &Body,
+    pose_a: &Isometry3,
+    b: &Body,
+    pose_b: &Isometry3,
+    newton: DistanceResult,
+    params: &CertifyParams,
+    mode: CertifyMode,
+) -> CertifiedDistance {
+    let cert = &params.certificate;
+    let nonconvex = is_nonconvex(a, b);
     let newton_ok = newton.status.converged();
     if mode == CertifyMode::NewtonOnly && (nonconvex || !newton_ok) {
         return CertifiedDistance::sdp_needed(newton);

@@ -118,7 +118,7 @@ const TOUCH_GROWTH_TOLERANCE: Real = 1e-9;
 
 /// Iteration cap of the speculative cold Newton run from the interior-point segment (the full
 /// growth-first path follows when it does not converge).
-const SPECULATIVE_ITERATIONS: usize = 30;
+pub(super) const SPECULATIVE_ITERATIONS: usize = 30;
 
 /// Distance between body `a` posed by `pose_a` and body `b` posed by `pose_b` (paper eq. "distance").
 ///
@@ -157,23 +157,11 @@ pub fn distance(
     // the support and the segment's boundary points). A converged KKT point with λ_a, λ_b > 0 is
     // the global minimizer, so separation needs no growth solve.
     if !warm.is_some_and(|w| w.growth.valid) {
-        let (ca, cb) = (ba.interior_point(), bb.interior_point());
-        let apart = spheres_apart(&ba, &bb);
-        // Past 2d = 2 the support points alone start as well as the closer of them and the
-        // segment's points (5.88 vs 5.90 Newton iterations at 2d = 6, 6.03 vs 6.05 at 2d = 8) and
-        // spare two radial look-ups; an ellipsoid keeps the comparison (exact for spheres).
-        let quadric = a.degree() <= 2 || b.degree() <= 2;
-        let start = match (apart && !quadric).then(|| supports_towards(&ba, &bb, &(cb - ca))).flatten() {
-            Some(start) => Some(start),
-            None => segment_start(&ba, &bb, &ca, &cb, apart),
-        };
-        if let Some((x0, y0)) = start {
+        if let Some((x0, y0)) = cold_start(&ba, &bb) {
             let capped = NewtonParams { max_iterations: params.max_iterations.min(SPECULATIVE_ITERATIONS), ..*params };
             let out = kkt_newton(&ba, &bb, x0, y0, None, &capped, false);
             iterations += out.iterations;
-            // Near contact (x ≈ y) the multipliers lose meaning: let the growth test decide.
-            let clear = (out.y - out.x).norm() > 1e-6 * (a.scale() + b.scale());
-            if out.status.converged() && clear {
+            if out.status.converged() && clear_of_contact(&out.x, &out.y, a, b) {
                 return finish(pose_a, &rel, out, iterations, false, &GrowthWarmStart::default(), previous);
             }
         }
@@ -226,10 +214,36 @@ pub fn distance(
     finish(pose_a, &rel, out, iterations, false, &growth_warm, previous)
 }
 
+/// The cold start of the speculative separated Newton run, in the frame of `ba`: when the bounding
+/// spheres are disjoint (and neither body is an ellipsoid), the support points towards each other;
+/// otherwise, when the segment between the interior points shows separation, the closer of the
+/// support and the segment's boundary points ([`segment_start`]); `None` when neither shows
+/// separation (the growth measure decides).
+///
+/// Past 2d = 2 the support points alone start as well as the closer of them and the segment's
+/// points (5.88 vs 5.90 Newton iterations at 2d = 6, 6.03 vs 6.05 at 2d = 8) and spare two radial
+/// look-ups; an ellipsoid keeps the comparison (exact for spheres).
+pub(super) fn cold_start(ba: &PosedBody<'_>, bb: &PosedBody<'_>) -> Option<(Vector3, Vector3)> {
+    let (ca, cb) = (ba.interior_point(), bb.interior_point());
+    let apart = spheres_apart(ba, bb);
+    let quadric = ba.body.degree() <= 2 || bb.body.degree() <= 2;
+    match (apart && !quadric).then(|| supports_towards(ba, bb, &(cb - ca))).flatten() {
+        Some(start) => Some(start),
+        None => segment_start(ba, bb, &ca, &cb, apart),
+    }
+}
+
+/// Whether a converged separated KKT point (x, y) is clear of contact: ‖y − x‖ above 10⁻⁶ of the
+/// bodies' sizes. Near contact (x ≈ y) the multipliers lose meaning and the growth test decides.
+#[inline]
+pub(super) fn clear_of_contact(x: &Vector3, y: &Vector3, a: &Body, b: &Body) -> bool {
+    (y - x).norm() > 1e-6 * (a.scale() + b.scale())
+}
+
 /// The answer of a converged (or last) separated KKT point `out` in the relative frame `rel`, with
 /// its warm start: the trail of `previous` (the last answer and the relative-pose step from it)
 /// extended by that answer (built only here, where it is kept).
-fn finish(
+pub(super) fn finish(
     pose_a: &Isometry3,
     rel: &Isometry3,
     out: KktOut,
@@ -238,18 +252,39 @@ fn finish(
     growth: &GrowthWarmStart,
     previous: Option<(&DistanceWarmStart, [Real; 6])>,
 ) -> DistanceResult {
-    let diff = out.y - out.x;
-    let dist = diff.norm();
-    // One rotation matrix for the three world vectors (a quaternion rotation costs twice a product).
-    let r = pose_a.rotation.to_rotation_matrix();
-    let t = pose_a.translation.vector;
-    let normal = if dist > 0.0 { r * (diff / dist) } else { Vector3::zeros() };
     let b_local = rel.inverse_transform_point(&Point3::from(out.y));
     let valid = out.status.converged();
     let trail = match previous {
         Some((w, step)) if valid => MotionTrail::extend(&w.state(), &w.trail, step),
         _ => MotionTrail::default(),
     };
+    let warm_start = std::sync::Arc::new(DistanceWarmStart {
+        a_local: out.x,
+        b_local: b_local.coords,
+        multipliers: out.lam,
+        valid,
+        growth: *growth,
+        relative_pose: *rel,
+        trail,
+    });
+    separated_answer(pose_a, &out, iterations, warm_started, warm_start)
+}
+
+/// The answer of a separated KKT point `out` (frame of body A, posed by `pose_a`) with the given
+/// warm start.
+pub(super) fn separated_answer(
+    pose_a: &Isometry3,
+    out: &KktOut,
+    iterations: usize,
+    warm_started: bool,
+    warm_start: std::sync::Arc<DistanceWarmStart>,
+) -> DistanceResult {
+    let diff = out.y - out.x;
+    let dist = diff.norm();
+    // One rotation matrix for the three world vectors (a quaternion rotation costs twice a product).
+    let r = pose_a.rotation.to_rotation_matrix();
+    let t = pose_a.translation.vector;
+    let normal = if dist > 0.0 { r * (diff / dist) } else { Vector3::zeros() };
     DistanceResult {
         distance: dist,
         witness_a: Point3::from(r * out.x + t),
@@ -260,15 +295,7 @@ fn finish(
         iterations,
         kkt_residual: out.residual,
         warm_started,
-        warm_start: std::sync::Arc::new(DistanceWarmStart {
-            a_local: out.x,
-            b_local: b_local.coords,
-            multipliers: out.lam,
-            valid,
-            growth: *growth,
-            relative_pose: *rel,
-            trail,
-        }),
+        warm_start,
     }
 }
 
@@ -342,13 +369,15 @@ fn initial_multipliers(ga: &Vector3, gb: &Vector3, x: &Vector3, y: &Vector3) -> 
     [fix(la, ga), fix(lb, gb)]
 }
 
-struct KktOut {
-    x: Vector3,
-    y: Vector3,
-    lam: [Real; 2],
-    status: SolveStatus,
-    iterations: usize,
-    residual: Real,
+/// The end of a separated Newton run: the last point (frame of body A), its multipliers, how the
+/// run ended, its Newton steps and the final ∞-norm of the KKT residual.
+pub(super) struct KktOut {
+    pub(super) x: Vector3,
+    pub(super) y: Vector3,
+    pub(super) lam: [Real; 2],
+    pub(super) status: SolveStatus,
+    pub(super) iterations: usize,
+    pub(super) residual: Real,
 }
 
 type Vec8 = SVector<Real, 8>;

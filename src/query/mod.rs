@@ -28,6 +28,7 @@ macro_rules! avx2_dispatch {
     };
 }
 
+pub mod batch;
 pub mod certified;
 pub mod distance;
 pub(crate) mod fast_eval;
@@ -39,8 +40,8 @@ pub mod sdp_certificate;
 pub mod tree;
 
 pub use certified::{
-    certified_distance, certified_growth, AnswerSource, CertificateKind, CertificateSummary, Certified,
-    CertifiedDistance, CertifiedGrowth, CertifyMode, CertifyParams,
+    certified_distance, certified_growth, certify_newton_distance, AnswerSource, CertificateKind, CertificateSummary,
+    Certified, CertifiedDistance, CertifiedGrowth, CertifyMode, CertifyParams,
 };
 pub use distance::{distance, DistanceResult, DistanceWarmStart};
 pub use gradient::{distance_gradient, growth_gradient, PoseGradient};

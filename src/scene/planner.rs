@@ -20,7 +20,8 @@ use super::catalog::{Catalog, DistanceReply, GrowthReply, PairRef, QueryAnswer, 
 use crate::body::Body;
 use crate::math::{Isometry3, Real};
 use crate::query::{
-    certified_distance, certified_growth, distance_gradient, growth_gradient, AnswerSource, CertifyMode, CertifyParams,
+    certified_distance, certified_growth, certify_newton_distance, distance_gradient, growth_gradient, AnswerSource,
+    CertifyMode, CertifyParams,
 };
 use crate::{Error, Result};
 use std::collections::HashMap;
@@ -75,6 +76,73 @@ pub fn answer_pair(
     cache: &mut WarmStartCache,
     params: &CertifyParams,
 ) -> QueryAnswer {
+    answer_pair_with(pair, a, b, cache, params, None)
+}
+
+/// Whether a query can take the batch solver's SIMD lanes ([`crate::query::batch`]): a cold
+/// distance or collide query (no warm start to keep) outside [`CertifyMode::Certify`], between two
+/// convex single bodies, that the bounding spheres do not decide (collide).
+fn lane_eligible(pair: &PairRef<'_>, a: &Posed, b: &Posed) -> bool {
+    let o = &pair.options;
+    let kind = matches!(pair.kind, QueryKind::Distance | QueryKind::Collide);
+    if !(kind && o.cold && o.mode != CertifyMode::Certify) {
+        return false;
+    }
+    let single_convex = |p: &Posed| p.tree.is_none() && !p.body.report.nonconvex;
+    let decided = || {
+        pair.kind == QueryKind::Collide
+            && sphere_lower_bound(&a.body, &a.pose, &b.body, &b.pose).is_some_and(|lower| lower > pair.margin)
+    };
+    single_convex(a) && single_convex(b) && !decided()
+}
+
+/// Newton's answers of the cold distance solves among `pairs` (each with its two posed instances
+/// from `posed`) that can take the batch solver's lanes ([`lane_eligible`]), solved four pairs per
+/// SIMD pass ([`crate::query::batch::cold_distances`]) in groups of one body pair; `None` for the
+/// other queries and for groups smaller than [`crate::query::batch::MIN_LANE_BATCH`] (answered
+/// one by one by [`answer_pair`]). Give the answers to [`answer_pair_with`].
+pub(crate) fn lane_distances<'p>(
+    pairs: &[PairRef<'_>],
+    posed: impl Fn(usize) -> Option<(&'p Posed, &'p Posed)>,
+    params: &CertifyParams,
+) -> Vec<Option<crate::query::DistanceResult>> {
+    use crate::query::batch::{cold_distances, MIN_LANE_BATCH};
+    let mut out: Vec<Option<crate::query::DistanceResult>> = vec![None; pairs.len()];
+    if pairs.len() < MIN_LANE_BATCH {
+        return out;
+    }
+    // Eligible queries by body pair (the bodies' addresses), in order within each group.
+    let mut groups: HashMap<(*const crate::Body, *const crate::Body), Vec<usize>, foldhash::fast::RandomState> =
+        HashMap::default();
+    for (k, pair) in pairs.iter().enumerate() {
+        if let Some((a, b)) = posed(k).filter(|(a, b)| lane_eligible(pair, a, b)) {
+            groups.entry((Arc::as_ptr(&a.body), Arc::as_ptr(&b.body))).or_default().push(k);
+        }
+    }
+    for members in groups.values().filter(|m| m.len() >= MIN_LANE_BATCH) {
+        let Some((a, b)) = posed(members[0]) else { continue };
+        let poses: Vec<(Isometry3, Isometry3)> =
+            members.iter().filter_map(|&k| posed(k).map(|(a, b)| (a.pose, b.pose))).collect();
+        if poses.len() != members.len() {
+            continue;
+        }
+        for (&k, answer) in members.iter().zip(cold_distances(&a.body, &b.body, &poses, &params.newton, false)) {
+            out[k] = Some(answer);
+        }
+    }
+    out
+}
+
+/// [`answer_pair`] with Newton's answer of a distance or collide query already solved (by
+/// [`lane_distances`]); `None` solves it here.
+pub fn answer_pair_with(
+    pair: PairRef<'_>,
+    a: &Posed,
+    b: &Posed,
+    cache: &mut WarmStartCache,
+    params: &CertifyParams,
+    newton: Option<crate::query::DistanceResult>,
+) -> QueryAnswer {
     if super::compound_pairs::is_compound_pair(a, b) {
         use super::compound_pairs as cp;
         return match pair.kind {
@@ -84,7 +152,7 @@ pub fn answer_pair(
         };
     }
     match pair.kind {
-        QueryKind::Distance => QueryAnswer::Distance(distance_reply(pair, a, b, cache, params)),
+        QueryKind::Distance => QueryAnswer::Distance(distance_reply(pair, a, b, cache, params, newton)),
         QueryKind::Growth => QueryAnswer::Growth(growth_reply(pair, a, b, cache, params)),
         QueryKind::Collide => {
             if let Some(lower) = sphere_lower_bound(&a.body, &a.pose, &b.body, &b.pose) {
@@ -99,7 +167,7 @@ pub fn answer_pair(
                     });
                 }
             }
-            let d = distance_reply(pair, a, b, cache, params);
+            let d = distance_reply(pair, a, b, cache, params, newton);
             let r = &d.answer.result;
             let collides = r.overlapping || r.distance < pair.margin;
             QueryAnswer::Collide(CollideReply {
@@ -120,10 +188,16 @@ fn distance_reply(
     b: &Posed,
     cache: &mut WarmStartCache,
     params: &CertifyParams,
+    newton: Option<crate::query::DistanceResult>,
 ) -> DistanceReply {
     let o = &pair.options;
-    let warm = if o.cold { None } else { cache.distance(pair.first, pair.second) };
-    let r = certified_distance(&a.body, &a.pose, &b.body, &b.pose, warm, params, o.mode);
+    let r = match newton {
+        Some(n) => certify_newton_distance(&a.body, &a.pose, &b.body, &b.pose, n, params, o.mode),
+        None => {
+            let warm = if o.cold { None } else { cache.distance(pair.first, pair.second) };
+            certified_distance(&a.body, &a.pose, &b.body, &b.pose, warm, params, o.mode)
+        }
+    };
     let gradients = (o.with_gradient && r.source != AnswerSource::SdpLowerBound).then(|| distance_gradient(&r.result));
     let precision_limited = super::catalog::precision_limited(&a.body, &a.pose, &b.body, &b.pose);
     let penetration = (o.signed && r.result.overlapping && !r.lower_bound)
@@ -320,17 +394,21 @@ impl QueryView {
         mode: Option<CertifyMode>,
     ) -> PlannerAnswers {
         if request.states.is_empty() {
-            return PlannerAnswers::Single(self.answer_all(&request.queries, posed, params, mode));
+            let mut none = vec![None; request.queries.len()];
+            return PlannerAnswers::Single(self.answer_all(&request.queries, posed, params, mode, &mut none));
         }
+        let mut newton = state_lane_distances(request, posed, params, mode);
+        let nq = request.queries.len();
         let mut out = Vec::with_capacity(request.states.len());
-        for state in &request.states {
+        for (s, state) in request.states.iter().enumerate() {
+            let newton = &mut newton[s * nq..(s + 1) * nq];
             let saved: Vec<(&str, Isometry3)> = state
                 .iter()
                 .filter_map(|(id, pose)| {
                     posed.get_mut(id.as_str()).map(|p| (id.as_str(), std::mem::replace(&mut p.pose, *pose)))
                 })
                 .collect();
-            out.push(self.answer_all(&request.queries, posed, params, mode));
+            out.push(self.answer_all(&request.queries, posed, params, mode, newton));
             for (id, pose) in saved {
                 if let Some(p) = posed.get_mut(id) {
                     p.pose = pose;
@@ -340,25 +418,65 @@ impl QueryView {
         PlannerAnswers::PerState(out)
     }
 
+    /// The queries answered at the poses of `posed`, with Newton's answers already solved where
+    /// `newton` has them (taken from it).
     fn answer_all(
         &mut self,
         queries: &[QueryPair],
         posed: &PosedMap<'_>,
         params: &CertifyParams,
         mode: Option<CertifyMode>,
+        newton: &mut [Option<crate::query::DistanceResult>],
     ) -> Vec<QueryAnswer> {
         queries
             .iter()
-            .filter_map(|q| {
+            .zip(newton)
+            .filter_map(|(q, newton)| {
                 let (a, b) = (posed.get(q.first.as_str())?, posed.get(q.second.as_str())?);
                 let mut pair = q.view();
                 if let Some(mode) = mode {
                     pair.options.mode = mode;
                 }
-                Some(answer_pair(pair, a, b, &mut self.cache, params))
+                Some(answer_pair_with(pair, a, b, &mut self.cache, params, newton.take()))
             })
             .collect()
     }
+}
+
+/// Newton's answers of a request's cold distance and collide queries across its candidate states
+/// from the batch solver's lanes ([`lane_distances`]: each query's pair in every state is one
+/// column of one body pair), entry `s · queries + q` for state s and query q; empty (every
+/// answer solved one by one) with fewer than [`crate::query::batch::MIN_LANE_BATCH`] states or
+/// no such query.
+fn state_lane_distances(
+    request: &PlannerRequest,
+    posed: &PosedMap<'_>,
+    params: &CertifyParams,
+    mode: Option<CertifyMode>,
+) -> Vec<Option<crate::query::DistanceResult>> {
+    let nq = request.queries.len();
+    let columns = |q: &QueryPair| q.options.cold && matches!(q.kind, QueryKind::Distance | QueryKind::Collide);
+    if request.states.len() < crate::query::batch::MIN_LANE_BATCH || !request.queries.iter().any(columns) {
+        return vec![None; request.states.len() * nq];
+    }
+    let mut views = Vec::with_capacity(request.states.len() * nq);
+    let mut snapshot: Vec<Option<(Posed, Posed)>> = Vec::with_capacity(request.states.len() * nq);
+    for state in &request.states {
+        for q in &request.queries {
+            let mut pair = q.view();
+            if let Some(mode) = mode {
+                pair.options.mode = mode;
+            }
+            views.push(pair);
+            let at = |id: &str| {
+                let p = posed.get(id)?;
+                let pose = state.iter().find(|(s, _)| s == id).map_or(p.pose, |(_, pose)| *pose);
+                Some(Posed { body: p.body.clone(), tree: p.tree.clone(), pose })
+            };
+            snapshot.push(if columns(q) { at(&q.first).zip(at(&q.second)) } else { None });
+        }
+    }
+    lane_distances(&views, |k| snapshot[k].as_ref().map(|(a, b)| (a, b)), params)
 }
 
 /// A pair found by [`check_scene`].
@@ -463,27 +581,46 @@ pub fn check_scene(
     let params = catalog.certify_params();
     let options = QueryOptions { cold: true, ..QueryOptions::default() };
     let mut scratch = WarmStartCache::default();
-    for (i, j) in candidates {
-        let (a, b) = (&all[i], &all[j]);
-        if let Some(lower) = sphere_lower_bound(&a.body, &a.pose, &b.body, &b.pose) {
-            if lower > margin {
-                continue;
-            }
-        }
+    // The narrow phase: the candidates the bounding spheres do not clear, as cold distance
+    // queries; those of one body pair solved on the batch solver's lanes first.
+    let solves: Vec<(usize, usize)> = candidates
+        .into_iter()
+        .filter(|&(i, j)| {
+            let (a, b) = (&all[i], &all[j]);
+            sphere_lower_bound(&a.body, &a.pose, &b.body, &b.pose).is_none_or(|lower| lower <= margin)
+        })
+        .collect();
+    let queries: Vec<QueryPair> = solves
+        .iter()
+        .map(|&(i, j)| QueryPair {
+            kind: QueryKind::Distance,
+            first: all[i].id.clone(),
+            second: all[j].id.clone(),
+            options,
+            margin,
+        })
+        .collect();
+    let posed_pairs: Vec<(Posed, Posed)> = solves
+        .iter()
+        .map(|&(i, j)| {
+            let posed = |k: usize| Posed { body: all[k].body.clone(), tree: all[k].tree.clone(), pose: all[k].pose };
+            (posed(i), posed(j))
+        })
+        .collect();
+    let views: Vec<PairRef<'_>> = queries.iter().map(QueryPair::view).collect();
+    let newton = lane_distances(&views, |k| Some((&posed_pairs[k].0, &posed_pairs[k].1)), &params);
+    for ((pair, (pa, pb)), newton) in views.into_iter().zip(&posed_pairs).zip(newton) {
         // An abandoned request (deadline passed) stops here, see `Catalog::batch`.
         crate::fit::cancel::check()?;
         out.narrow_phase_solves += 1;
-        let pair = QueryPair { kind: QueryKind::Distance, first: a.id.clone(), second: b.id.clone(), options, margin };
-        let pa = Posed { body: a.body.clone(), tree: a.tree.clone(), pose: a.pose };
-        let pb = Posed { body: b.body.clone(), tree: b.tree.clone(), pose: b.pose };
-        let d = if super::compound_pairs::is_compound_pair(&pa, &pb) {
-            super::compound_pairs::distance_reply(pair.view(), &pa, &pb, &mut scratch, &params)
+        let d = if super::compound_pairs::is_compound_pair(pa, pb) {
+            super::compound_pairs::distance_reply(pair, pa, pb, &mut scratch, &params)
         } else {
-            distance_reply(pair.view(), &pa, &pb, &mut scratch, &params)
+            distance_reply(pair, pa, pb, &mut scratch, &params, newton)
         };
         let r = &d.answer.result;
         if r.overlapping || r.distance < margin {
-            out.pairs.push(ScenePair { first: a.id.clone(), second: b.id.clone(), distance: d });
+            out.pairs.push(ScenePair { first: pair.first.to_owned(), second: pair.second.to_owned(), distance: d });
         }
     }
     out.pairs.sort_by(|x, y| x.distance.answer.result.distance.total_cmp(&y.distance.answer.result.distance));

@@ -197,6 +197,45 @@ async fn collide_with_margin_and_unary_query() {
     server.stop().await;
 }
 
+/// Cold distance and collide queries over many candidate states run four states per SIMD pass
+/// (`sublevel::query::batch`): every state's answer is still the closed form ‖c₁ − c₂‖ − r₁ − r₂
+/// (0 and a common witness when overlapping), next to warm queries of the same request.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn cold_candidate_states_match_the_closed_form() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(config(dir.path())).await;
+    let mut c = server.client().await;
+    let (scene, i1, i2) = two_spheres(&mut c).await;
+    let cold = |kind, a: &str, b: &str| pb::PlannerQuery { cold: true, ..q(kind, a, b) };
+    let xs: Vec<[f64; 3]> =
+        (0..24).map(|k| [0.4 + 0.15 * k as f64, 0.3 * (k % 3) as f64, -0.2 + 0.05 * k as f64]).collect();
+    let req = pb::QueryRequest {
+        scene_id: scene.clone(),
+        queries: vec![
+            cold(pb::QueryKind::Distance, &i1, &i2),
+            pb::PlannerQuery { cold: true, ..collide(&i1, &i2, 0.5) },
+            q(pb::QueryKind::Distance, &i2, &i1),
+        ],
+        states: xs.iter().map(|&x| pb::CandidateState { poses: vec![pose_of(&i2, x)] }).collect(),
+        ..Default::default()
+    };
+    let r = c.query(req).await.unwrap().into_inner();
+    assert_eq!(r.states.len(), xs.len());
+    let mut overlapping = 0;
+    for (st, x) in r.states.iter().zip(&xs) {
+        let gap = (x[0] * x[0] + x[1] * x[1] + x[2] * x[2]).sqrt() - 0.75;
+        for answer in [distance_of(&st.answers[0]), distance_of(&st.answers[2])] {
+            assert!(answer.solve.as_ref().is_some_and(|s| s.converged), "{answer:?}");
+            assert!((answer.distance - gap.max(0.0)).abs() < 1e-9, "x = {x:?}: {} vs {gap}", answer.distance);
+            assert_eq!(answer.overlapping, gap <= 0.0);
+        }
+        assert_eq!(collide_of(&st.answers[1]).collides, gap < 0.5, "x = {x:?}");
+        overlapping += usize::from(gap <= 0.0);
+    }
+    assert!(overlapping > 0 && overlapping < xs.len(), "the states must cross contact: {overlapping}");
+    server.stop().await;
+}
+
 /// CheckScene on a 10 × 10 grid of spheres (r = 0.2, spacing 1 m, so neighbors are 0.6 m apart
 /// and diagonal ones 1.014 m) plus one sphere overlapping a corner: every pair within the margin,
 /// exactly as brute force over all pairs finds them, with far fewer narrow-phase solves.

@@ -368,15 +368,21 @@ impl Catalog {
             (posed_by_id, scratch)
         };
         let params = self.certify_params();
+        // Cold distance solves of one body pair, four per SIMD pass (see `planner::lane_distances`).
+        let mut newton = planner::lane_distances(
+            pairs,
+            |k| Some((&posed_by_id[pairs[k].first], &posed_by_id[pairs[k].second])),
+            &params,
+        );
         let mut answers = Vec::with_capacity(pairs.len());
-        for p in pairs {
+        for (p, newton) in pairs.iter().zip(newton.iter_mut()) {
             if crate::fit::cancel::is_cancelled() {
                 // The caller abandoned the request (its deadline passed): stop before the next
                 // pair and leave the warm starts as they were.
                 return Err(Error::Cancelled(format!("query of scene `{scene_id}` abandoned by its caller")));
             }
             let (a, b) = (&posed_by_id[p.first], &posed_by_id[p.second]);
-            answers.push(planner::answer_pair(*p, a, b, &mut scratch, &params));
+            answers.push(planner::answer_pair_with(*p, a, b, &mut scratch, &params, newton.take()));
         }
         if !scratch.is_empty() && !answers.iter().any(QueryAnswer::needs_sdp) {
             let mut s = lock(&scene);

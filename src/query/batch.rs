@@ -1,0 +1,767 @@
+//! Batch solvers (issue 15): many cold distance queries between the same two bodies — one pair of
+//! a planner's query across its candidate states, or one body pair of a scene check — solved four
+//! pairs at a time, one pair per SIMD lane.
+//!
+//! ```text
+//! queue of pairs ──► 4 lanes (one pair each) ──► per round, for the 4 trial points at once:
+//!                      p_a at 4 points, p_b at 4 points      SoaPoly: one pass per body
+//!                      gradients, Hessians, KKT residuals    4-lane arithmetic
+//!                      8 × 8 KKT solves (block elimination)  4-lane arithmetic
+//!                    then per lane: accept the trial point or halve its step (backtracking on
+//!                    ‖KKT residual‖₂), converged → answer, the lane takes the next pair
+//! pairs without a separated start, and lanes that stall, reach the iteration cap or end near
+//! contact ──► the single-pair solver ([`distance`]), so their answers are its answers
+//! ```
+//!
+//! The lanes run the single-pair solver's cold separated Newton run ([`distance`]: same start, same
+//! KKT system, same line search and tolerance, same 30-iteration cap) with one difference: every
+//! trial point is evaluated with its Hessians (the four-point kernel evaluates them at no extra
+//! cost), so there are no chord steps. A converged lane's answer is therefore the single-pair
+//! answer to the KKT tolerance (not to the bit); a KKT point with positive multipliers of this
+//! convex program is its global minimizer either way.
+
+use super::distance::{distance, DistanceResult};
+use super::newton::NewtonParams;
+use crate::body::Body;
+use crate::math::Isometry3;
+
+/// Fewest pairs worth the lanes: below this the batch answers pair by pair.
+pub const MIN_LANE_BATCH: usize = 4;
+
+/// Cold distance answers for the pairs `poses` (pose of `a`, pose of `b`; body frame → world) of
+/// the bodies `a` and `b`, in order: the answers [`distance`] gives with no warm start, four pairs
+/// per SIMD pass (see the module docs). Pairs go through [`distance`] one by one when there are
+/// fewer than [`MIN_LANE_BATCH`], when the CPU lacks AVX2 + FMA, or when a body has degree below 2.
+///
+/// With `warm_starts` false, the answers the lanes give share one empty warm start (an invalid
+/// [`super::DistanceWarmStart`]: a query started from it runs cold) instead of one allocation
+/// each: for callers that drop them (cold queries of a planner, scene checks). Measured on the
+/// chair / human cold poses at 2d = 6 (`examples/cold_profile 6 20 batch`), the 848-byte warm
+/// starts of a 300-pair batch are about a fifth of its time.
+///
+/// Never panics on valid bodies; each answer says whether it converged.
+pub fn cold_distances(
+    a: &Body,
+    b: &Body,
+    poses: &[(Isometry3, Isometry3)],
+    params: &NewtonParams,
+    warm_starts: bool,
+) -> Vec<DistanceResult> {
+    #[cfg(target_arch = "x86_64")]
+    if poses.len() >= MIN_LANE_BATCH && a.degree() >= 2 && b.degree() >= 2 && crate::math::cpu_has_avx2_fma() {
+        // SAFETY: the CPU supports AVX2 and FMA (checked just above).
+        return unsafe { lanes::lanes_avx2(a, b, poses, params, warm_starts) };
+    }
+    poses.iter().map(|(pa, pb)| distance(a, pa, b, pb, None, params)).collect()
+}
+
+/// The four-lane solver (x86-64 only: AVX2 + FMA registers).
+#[cfg(target_arch = "x86_64")]
+mod lanes {
+    use super::super::distance::{
+        clear_of_contact, cold_start, distance, finish, separated_answer, DistanceResult, DistanceWarmStart, KktOut,
+        SPECULATIVE_ITERATIONS,
+    };
+    use super::super::growth::GrowthWarmStart;
+    use super::super::newton::{NewtonParams, SolveStatus};
+    use crate::body::{Body, PosedBody};
+    use crate::math::{Isometry3, Real, Vector3};
+    use std::arch::x86_64::*;
+
+    /// [`cold_distances`] on the lanes, compiled for AVX2 + FMA (the 4-lane arithmetic below becomes
+    /// one instruction per operation).
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) fn lanes_avx2(
+        a: &Body,
+        b: &Body,
+        poses: &[(Isometry3, Isometry3)],
+        params: &NewtonParams,
+        warm_starts: bool,
+    ) -> Vec<DistanceResult> {
+        solve_on_lanes(a, b, poses, params, warm_starts)
+    }
+
+    /// Four reals, one per lane, in an AVX register.
+    ///
+    /// Every method runs AVX / AVX2 / FMA instructions: values of this type exist only inside
+    /// [`lanes_avx2`], which runs only on CPUs with AVX2 and FMA (the invariant of the `unsafe` blocks
+    /// below), and the methods are inlined into it.
+    #[derive(Clone, Copy, Debug)]
+    struct F4(__m256d);
+
+    impl Default for F4 {
+        #[inline(always)]
+        fn default() -> Self {
+            Self::splat(0.0)
+        }
+    }
+
+    impl F4 {
+        #[inline(always)]
+        fn splat(v: Real) -> Self {
+            // SAFETY: see the type's docs.
+            Self(unsafe { _mm256_set1_pd(v) })
+        }
+
+        #[inline(always)]
+        fn load(v: &[Real; 4]) -> Self {
+            // SAFETY: `v` is four readable reals; see the type's docs.
+            Self(unsafe { _mm256_loadu_pd(v.as_ptr()) })
+        }
+
+        #[inline(always)]
+        fn to_array(self) -> [Real; 4] {
+            let mut out = [0.0; 4];
+            // SAFETY: `out` is four writable reals; see the type's docs.
+            unsafe { _mm256_storeu_pd(out.as_mut_ptr(), self.0) };
+            out
+        }
+
+        /// self · b + c, fused.
+        #[inline(always)]
+        fn mul_add(self, b: Self, c: Self) -> Self {
+            // SAFETY: see the type's docs.
+            Self(unsafe { _mm256_fmadd_pd(self.0, b.0, c.0) })
+        }
+
+        #[inline(always)]
+        fn abs(self) -> Self {
+            // SAFETY: see the type's docs (clears the sign bits).
+            Self(unsafe { _mm256_andnot_pd(_mm256_set1_pd(-0.0), self.0) })
+        }
+
+        #[inline(always)]
+        fn sqrt(self) -> Self {
+            // SAFETY: see the type's docs.
+            Self(unsafe { _mm256_sqrt_pd(self.0) })
+        }
+
+        /// Lane-wise max without NaN handling (see [`super::fast_eval::max_plain`]).
+        #[inline(always)]
+        fn max(self, o: Self) -> Self {
+            // SAFETY: see the type's docs.
+            Self(unsafe { _mm256_max_pd(self.0, o.0) })
+        }
+
+        /// Lanes where self ≤ o (false where either is NaN).
+        #[inline(always)]
+        fn le(self, o: Self) -> M4 {
+            // SAFETY: see the type's docs.
+            M4(unsafe { _mm256_cmp_pd::<_CMP_LE_OQ>(self.0, o.0) })
+        }
+
+        /// Lanes where self < o (false where either is NaN).
+        #[inline(always)]
+        fn lt(self, o: Self) -> M4 {
+            // SAFETY: see the type's docs.
+            M4(unsafe { _mm256_cmp_pd::<_CMP_LT_OQ>(self.0, o.0) })
+        }
+
+        /// Lanes where self is finite.
+        #[inline(always)]
+        fn finite(self) -> M4 {
+            self.abs().lt(F4::splat(Real::INFINITY))
+        }
+
+        /// `a` where `m`, else `b`.
+        #[inline(always)]
+        fn select(m: M4, a: Self, b: Self) -> Self {
+            // SAFETY: see the type's docs.
+            Self(unsafe { _mm256_blendv_pd(b.0, a.0, m.0) })
+        }
+    }
+
+    macro_rules! f4_op {
+        ($tr:ident, $f:ident, $intrinsic:ident) => {
+            impl std::ops::$tr for F4 {
+                type Output = F4;
+                #[inline(always)]
+                fn $f(self, o: F4) -> F4 {
+                    // SAFETY: see the type's docs.
+                    F4(unsafe { $intrinsic(self.0, o.0) })
+                }
+            }
+        };
+    }
+    f4_op!(Add, add, _mm256_add_pd);
+    f4_op!(Sub, sub, _mm256_sub_pd);
+    f4_op!(Mul, mul, _mm256_mul_pd);
+    f4_op!(Div, div, _mm256_div_pd);
+
+    impl std::ops::Neg for F4 {
+        type Output = F4;
+        #[inline(always)]
+        fn neg(self) -> F4 {
+            // SAFETY: see the type's docs (flips the sign bits).
+            F4(unsafe { _mm256_xor_pd(_mm256_set1_pd(-0.0), self.0) })
+        }
+    }
+
+    /// A lane mask (all bits of a lane set or clear), as the AVX comparisons make it; see [`F4`].
+    #[derive(Clone, Copy, Debug)]
+    struct M4(__m256d);
+
+    impl Default for M4 {
+        #[inline(always)]
+        fn default() -> Self {
+            // SAFETY: see [`F4`]'s docs.
+            Self(unsafe { _mm256_setzero_pd() })
+        }
+    }
+
+    impl M4 {
+        #[inline(always)]
+        fn from_bools(b: [bool; 4]) -> Self {
+            let m = |v: bool| if v { -1i64 } else { 0 };
+            // SAFETY: see [`F4`]'s docs.
+            Self(unsafe { _mm256_castsi256_pd(_mm256_set_epi64x(m(b[3]), m(b[2]), m(b[1]), m(b[0]))) })
+        }
+
+        #[inline(always)]
+        fn and(self, o: Self) -> Self {
+            // SAFETY: see [`F4`]'s docs.
+            Self(unsafe { _mm256_and_pd(self.0, o.0) })
+        }
+
+        #[inline(always)]
+        fn or(self, o: Self) -> Self {
+            // SAFETY: see [`F4`]'s docs.
+            Self(unsafe { _mm256_or_pd(self.0, o.0) })
+        }
+
+        #[inline(always)]
+        fn not(self) -> Self {
+            // SAFETY: see [`F4`]'s docs.
+            Self(unsafe { _mm256_xor_pd(self.0, _mm256_castsi256_pd(_mm256_set1_epi64x(-1))) })
+        }
+
+        /// Bit i set where lane i is.
+        #[inline(always)]
+        fn bits(self) -> u32 {
+            // SAFETY: see [`F4`]'s docs.
+            unsafe { _mm256_movemask_pd(self.0) as u32 }
+        }
+    }
+
+    /// A 3-vector per lane.
+    #[derive(Clone, Copy, Debug, Default)]
+    struct V3([F4; 3]);
+
+    impl V3 {
+        #[inline(always)]
+        fn add(self, o: Self) -> Self {
+            Self([self.0[0] + o.0[0], self.0[1] + o.0[1], self.0[2] + o.0[2]])
+        }
+
+        #[inline(always)]
+        fn sub(self, o: Self) -> Self {
+            Self([self.0[0] - o.0[0], self.0[1] - o.0[1], self.0[2] - o.0[2]])
+        }
+
+        #[inline(always)]
+        fn scale(self, s: F4) -> Self {
+            Self([self.0[0] * s, self.0[1] * s, self.0[2] * s])
+        }
+
+        /// self · s + c, fused.
+        #[inline(always)]
+        fn mul_add(self, s: F4, c: Self) -> Self {
+            Self([self.0[0].mul_add(s, c.0[0]), self.0[1].mul_add(s, c.0[1]), self.0[2].mul_add(s, c.0[2])])
+        }
+
+        #[inline(always)]
+        fn neg(self) -> Self {
+            Self([-self.0[0], -self.0[1], -self.0[2]])
+        }
+
+        #[inline(always)]
+        fn load(v: &[[Real; 4]; 3]) -> Self {
+            Self([F4::load(&v[0]), F4::load(&v[1]), F4::load(&v[2])])
+        }
+
+        #[inline(always)]
+        fn to_arrays(self) -> [[Real; 4]; 3] {
+            [self.0[0].to_array(), self.0[1].to_array(), self.0[2].to_array()]
+        }
+
+        /// `a` where `m`, else `b`.
+        #[inline(always)]
+        fn select(m: M4, a: Self, b: Self) -> Self {
+            Self([F4::select(m, a.0[0], b.0[0]), F4::select(m, a.0[1], b.0[1]), F4::select(m, a.0[2], b.0[2])])
+        }
+
+        #[inline(always)]
+        fn dot(self, o: Self) -> F4 {
+            self.0[2].mul_add(o.0[2], self.0[1].mul_add(o.0[1], self.0[0] * o.0[0]))
+        }
+    }
+
+    /// A symmetric 3 × 3 matrix per lane, upper triangle [xx, xy, xz, yy, yz, zz].
+    type S3 = [F4; 6];
+
+    /// S v.
+    #[inline(always)]
+    fn sym_mul(s: &S3, v: V3) -> V3 {
+        let [xx, xy, xz, yy, yz, zz] = *s;
+        let [x, y, z] = v.0;
+        V3([
+            xz.mul_add(z, xy.mul_add(y, xx * x)),
+            yz.mul_add(z, yy.mul_add(y, xy * x)),
+            zz.mul_add(z, yz.mul_add(y, xz * x)),
+        ])
+    }
+
+    /// A general 3 × 3 matrix per lane, row-major `m[3 i + j]`.
+    type M3 = [F4; 9];
+
+    /// M v.
+    #[inline(always)]
+    fn mat_mul(m: &M3, v: V3) -> V3 {
+        let [x, y, z] = v.0;
+        V3([
+            m[2].mul_add(z, m[1].mul_add(y, m[0] * x)),
+            m[5].mul_add(z, m[4].mul_add(y, m[3] * x)),
+            m[8].mul_add(z, m[7].mul_add(y, m[6] * x)),
+        ])
+    }
+
+    /// Mᵀ v.
+    #[inline(always)]
+    fn mat_t_mul(m: &M3, v: V3) -> V3 {
+        let [x, y, z] = v.0;
+        V3([
+            m[6].mul_add(z, m[3].mul_add(y, m[0] * x)),
+            m[7].mul_add(z, m[4].mul_add(y, m[1] * x)),
+            m[8].mul_add(z, m[5].mul_add(y, m[2] * x)),
+        ])
+    }
+
+    /// Mᵀ H M for a symmetric H (upper triangle; [`super::fast_eval`]'s congruence, per lane).
+    #[inline(always)]
+    fn congruence(m: &M3, h: &S3) -> S3 {
+        let (a0, a1, a2) = (V3([m[0], m[3], m[6]]), V3([m[1], m[4], m[7]]), V3([m[2], m[5], m[8]]));
+        let (h0, h1, h2) = (sym_mul(h, a0), sym_mul(h, a1), sym_mul(h, a2));
+        [a0.dot(h0), a0.dot(h1), a0.dot(h2), a1.dot(h1), a1.dot(h2), a2.dot(h2)]
+    }
+
+    /// `d·I + k·S`.
+    #[inline(always)]
+    fn shifted(s: &S3, k: F4, d: F4) -> S3 {
+        let [xx, xy, xz, yy, yz, zz] = *s;
+        [k.mul_add(xx, d), k * xy, k * xz, k.mul_add(yy, d), k * yz, k.mul_add(zz, d)]
+    }
+
+    /// Inverse of a symmetric 3 × 3 matrix by cofactors per lane, with the lanes where it is (nearly)
+    /// singular marked false ([`super::fast_eval::inverse_sym3`]'s test, per lane).
+    #[inline(always)]
+    fn inverse_sym(m: &S3) -> (S3, M4) {
+        let [a, b, c, d, e, f] = *m;
+        let c00 = d.mul_add(f, -(e * e));
+        let c01 = c.mul_add(e, -(b * f));
+        let c02 = b.mul_add(e, -(c * d));
+        let det = a.mul_add(c00, b.mul_add(c01, c * c02));
+        let s = a.abs().max(b.abs()).max(c.abs().max(d.abs())).max(e.abs().max(f.abs()));
+        let ok = (F4::splat(1e-14) * s * s * s).lt(det.abs()).and(det.finite()).and(F4::default().lt(s));
+        let k = F4::splat(1.0) / det;
+        let inv = [
+            c00 * k,
+            c01 * k,
+            c02 * k,
+            a.mul_add(f, -(c * c)) * k,
+            b.mul_add(c, -(a * e)) * k,
+            a.mul_add(d, -(b * b)) * k,
+        ];
+        (inv, ok)
+    }
+
+    /// The Newton step of the distance KKT system per lane ([`super::fast_eval::solve_kkt8`]'s block
+    /// elimination): (dx, dy, [dλa, dλb]) and the lanes where it exists.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn solve_kkt8(wa: &S3, wb: &S3, ga: V3, gb: V3, ra: V3, rb: V3, ca: F4, cb: F4) -> (V3, V3, [F4; 2], M4) {
+        let two = F4::splat(2.0);
+        let (ai, ok_a) = inverse_sym(wa);
+        let four = F4::splat(4.0);
+        let schur: S3 = [
+            wb[0] - four * ai[0],
+            wb[1] - four * ai[1],
+            wb[2] - four * ai[2],
+            wb[3] - four * ai[3],
+            wb[4] - four * ai[4],
+            wb[5] - four * ai[5],
+        ];
+        let (si, ok_s) = inverse_sym(&schur);
+        let t0 = sym_mul(&ai, ra);
+        let q0 = sym_mul(&si, t0.mul_add(two, rb));
+        let p0 = sym_mul(&ai, q0).mul_add(two, t0);
+        let t1 = sym_mul(&ai, ga);
+        let q1 = sym_mul(&si, t1).scale(two);
+        let p1 = sym_mul(&ai, q1).mul_add(two, t1);
+        let q2 = sym_mul(&si, gb);
+        let p2 = sym_mul(&ai, q2).scale(two);
+        let (s11, s12, s21, s22) = (ga.dot(p1), ga.dot(p2), gb.dot(q1), gb.dot(q2));
+        let det = s11 * s22 - s12 * s21;
+        let scale = (s11.abs() + s12.abs()) * (s21.abs() + s22.abs());
+        let (h1, h2) = (ca - ga.dot(p0), cb - gb.dot(q0));
+        let l1 = (s22 * h1 - s12 * h2) / det;
+        let l2 = (s11 * h2 - s21 * h1) / det;
+        let dx = p1.mul_add(l1, p0);
+        let dx = p2.mul_add(l2, dx);
+        let dy = q1.mul_add(l1, q0);
+        let dy = q2.mul_add(l2, dy);
+        let (dx, dy) = (dx.neg(), dy.neg());
+        let sum = dx.0[0] + dx.0[1] + dx.0[2] + dy.0[0] + dy.0[1] + dy.0[2] + l1 + l2;
+        let ok = ok_a
+            .and(ok_s)
+            .and((F4::splat(1e-14) * scale).lt(det.abs()))
+            .and(F4::default().lt(scale))
+            .and(det.finite())
+            .and(sum.finite());
+        (dx, dy, [l1, l2], ok)
+    }
+
+    /// No pair in the lane.
+    const EMPTY: usize = usize::MAX;
+
+    /// The four lanes' pairs and Newton states (see the module docs), one array entry per lane:
+    /// plain arrays, so that a lane is refilled by scalar stores that have long retired when the
+    /// next round loads the arrays into registers.
+    struct Lanes {
+        /// Index of each lane's pair in the batch, or [`EMPTY`].
+        job: [usize; 4],
+        /// Accepted points (frame of body A) and multipliers.
+        x: [[Real; 4]; 3],
+        y: [[Real; 4]; 3],
+        lam: [[Real; 4]; 2],
+        /// Newton steps from the accepted points, and the step lengths of the next trial points.
+        dx: [[Real; 4]; 3],
+        dy: [[Real; 4]; 3],
+        dl: [[Real; 4]; 2],
+        alpha: [Real; 4],
+        /// ‖KKT residual‖₂ at the accepted points.
+        r0: [Real; 4],
+        /// 1 where the lane's trial point is its start (accepted as it is, multipliers by least
+        /// squares), else 0.
+        start: [Real; 4],
+        /// Newton steps taken, and trial points rejected since the last step (small integers).
+        steps: [Real; 4],
+        rejected: [Real; 4],
+        /// Body B's map to its normalized coordinates u = M y + c (frame of body A), M row-major.
+        mb: [[Real; 4]; 9],
+        cb: [[Real; 4]; 3],
+        /// Pose of B relative to A (pose_a⁻¹ · pose_b).
+        rel: [Isometry3; 4],
+    }
+
+    impl Lanes {
+        /// Puts pair `k` with the relative pose `rel` (B posed as `bb`) into lane `i`, starting at
+        /// (x0, y0).
+        fn fill(&mut self, i: usize, k: usize, rel: &Isometry3, bb: &PosedBody<'_>, x0: &Vector3, y0: &Vector3) {
+            self.job[i] = k;
+            let m = bb.linear();
+            let c = bb.to_normalized(&Vector3::zeros());
+            for r in 0..3 {
+                self.x[r][i] = x0[r];
+                self.y[r][i] = y0[r];
+                self.dx[r][i] = 0.0;
+                self.dy[r][i] = 0.0;
+                self.cb[r][i] = c[r];
+                for col in 0..3 {
+                    self.mb[3 * r + col][i] = m[(r, col)];
+                }
+            }
+            self.dl[0][i] = 0.0;
+            self.dl[1][i] = 0.0;
+            self.alpha[i] = 0.0;
+            self.steps[i] = 0.0;
+            self.rejected[i] = 0.0;
+            self.start[i] = 1.0;
+            self.rel[i] = *rel;
+        }
+    }
+
+    /// max(|v₀|, |v₁|, |v₂|) per lane.
+    #[inline(always)]
+    fn abs_max(v: V3) -> F4 {
+        v.0[0].abs().max(v.0[1].abs()).max(v.0[2].abs())
+    }
+
+    /// The least-squares multiplier `l` where it is finite and positive, else 2‖x − y‖ / ‖g‖
+    /// (`g2` = ‖g‖²), per lane (the single-pair solver's initial multipliers).
+    #[inline(always)]
+    fn positive_multiplier(l: F4, g2: F4, dist: F4) -> F4 {
+        let fallback = F4::splat(2.0) * dist / g2.sqrt().max(F4::splat(1e-300));
+        F4::select(l.finite().and(F4::default().lt(l)), l, fallback)
+    }
+
+    #[inline(always)]
+    fn load6(h: &[[Real; 4]; 6], k: F4) -> S3 {
+        [
+            F4::load(&h[0]) * k,
+            F4::load(&h[1]) * k,
+            F4::load(&h[2]) * k,
+            F4::load(&h[3]) * k,
+            F4::load(&h[4]) * k,
+            F4::load(&h[5]) * k,
+        ]
+    }
+
+    #[inline(always)]
+    fn solve_on_lanes(
+        a: &Body,
+        b: &Body,
+        poses: &[(Isometry3, Isometry3)],
+        params: &NewtonParams,
+        warm_starts: bool,
+    ) -> Vec<DistanceResult> {
+        let (soa_a, soa_b) = (a.soa_polynomial(), b.soa_polynomial());
+        let mut answers: Vec<Option<DistanceResult>> = vec![None; poses.len()];
+        let cap = F4::splat(params.max_iterations.min(SPECULATIVE_ITERATIONS) as Real);
+        let tolerance = F4::splat(params.kkt_tolerance);
+        let (zero, one, two) = (F4::splat(0.0), F4::splat(1.0), F4::splat(2.0));
+        // Body A sits unposed in its own frame: u = x / scale − center / scale for every lane.
+        let ka = 1.0 / a.scale();
+        let c_a = -a.center() * ka;
+        let (ka4, ka2) = (F4::splat(ka), F4::splat(ka * ka));
+        let ca4 = V3([F4::splat(c_a.x), F4::splat(c_a.y), F4::splat(c_a.z)]);
+        let mut lanes = Lanes {
+            job: [EMPTY; 4],
+            x: [[0.0; 4]; 3],
+            y: [[0.0; 4]; 3],
+            lam: [[0.0; 4]; 2],
+            dx: [[0.0; 4]; 3],
+            dy: [[0.0; 4]; 3],
+            dl: [[0.0; 4]; 2],
+            alpha: [0.0; 4],
+            r0: [0.0; 4],
+            start: [0.0; 4],
+            steps: [0.0; 4],
+            rejected: [0.0; 4],
+            mb: [[0.0; 4]; 9],
+            cb: [[0.0; 4]; 3],
+            rel: [Isometry3::identity(); 4],
+        };
+        let empty = std::sync::Arc::new(DistanceWarmStart::default());
+        let mut next = 0usize;
+        let ba = PosedBody::unposed(a);
+        loop {
+            // Refill the empty lanes from the queue; a pair without a separated start is left to the
+            // single-pair solver.
+            for i in 0..4 {
+                while lanes.job[i] == EMPTY && next < poses.len() {
+                    let k = next;
+                    next += 1;
+                    let (pa, pb) = &poses[k];
+                    let rel = pa.inv_mul(pb);
+                    let bb = PosedBody::new(b, &rel);
+                    if let Some((x0, y0)) = cold_start(&ba, &bb) {
+                        lanes.fill(i, k, &rel, &bb, &x0, &y0);
+                    }
+                }
+            }
+            if lanes.job == [EMPTY; 4] {
+                break;
+            }
+            // The trial points of the four lanes, evaluated in one pass per body.
+            let (x, y) = (V3::load(&lanes.x), V3::load(&lanes.y));
+            let lam = [F4::load(&lanes.lam[0]), F4::load(&lanes.lam[1])];
+            let (dx, dy) = (V3::load(&lanes.dx), V3::load(&lanes.dy));
+            let dl = [F4::load(&lanes.dl[0]), F4::load(&lanes.dl[1])];
+            let (al, r0, start) = (F4::load(&lanes.alpha), F4::load(&lanes.r0), zero.lt(F4::load(&lanes.start)));
+            let m = &lanes.mb;
+            let mb: M3 = [
+                F4::load(&m[0]),
+                F4::load(&m[1]),
+                F4::load(&m[2]),
+                F4::load(&m[3]),
+                F4::load(&m[4]),
+                F4::load(&m[5]),
+                F4::load(&m[6]),
+                F4::load(&m[7]),
+                F4::load(&m[8]),
+            ];
+            let xt = dx.mul_add(al, x);
+            let yt = dy.mul_add(al, y);
+            let mut lt = [dl[0].mul_add(al, lam[0]), dl[1].mul_add(al, lam[1])];
+            let ua = xt.mul_add(ka4, ca4);
+            let ub = mat_mul(&mb, yt).add(V3::load(&lanes.cb));
+            let ea = soa_a.eval4_rows(&ua.to_arrays());
+            let eb = soa_b.eval4_rows(&ub.to_arrays());
+            let ga = V3::load(&ea.gradient).scale(ka4);
+            let gb = mat_t_mul(&mb, V3::load(&eb.gradient));
+            let diff = xt.sub(yt);
+            let dist = diff.dot(diff).sqrt();
+            // Least-squares multipliers at a start (the single-pair solver's initial multipliers).
+            if start.bits() != 0 {
+                let (na, nb) = (ga.dot(ga), gb.dot(gb));
+                let tiny = F4::splat(Real::MIN_POSITIVE);
+                let la = -(two * diff.dot(ga)) / na.max(tiny);
+                let lb = two * diff.dot(gb) / nb.max(tiny);
+                lt = [
+                    F4::select(start, positive_multiplier(la, na, dist), lt[0]),
+                    F4::select(start, positive_multiplier(lb, nb, dist), lt[1]),
+                ];
+            }
+            let d2 = diff.scale(two);
+            let ra = ga.mul_add(lt[0], d2);
+            let rb = gb.mul_add(lt[1], d2.neg());
+            let (cva, cvb) = (F4::load(&ea.value) - one, F4::load(&eb.value) - one);
+            let r1 = (ra.dot(ra) + rb.dot(rb) + cva.mul_add(cva, cvb * cvb)).sqrt();
+            let norm_inf = abs_max(ra).max(abs_max(rb)).max(cva.abs().max(cvb.abs()));
+            // The Newton steps from the trial points (taken where a trial point is accepted).
+            let ha = load6(&ea.hessian, ka2);
+            let hb = congruence(&mb, &load6(&eb.hessian, one));
+            let (wa, wb) = (shifted(&ha, lt[0], two), shifted(&hb, lt[1], two));
+            let (sdx, sdy, sdl, solved) = solve_kkt8(&wa, &wb, ga, gb, ra, rb, cva, cvb);
+            // Accepted trial points: the start, or a decrease of the residual (Armijo on ‖r‖₂).
+            let job = &lanes.job;
+            let live = M4::from_bools([job[0] != EMPTY, job[1] != EMPTY, job[2] != EMPTY, job[3] != EMPTY]);
+            let decrease = r1.le((F4::splat(-1e-4) * al + one) * r0).and(r1.finite());
+            let accepted = start.or(decrease).and(live);
+            let stationary = norm_inf.le(tolerance * dist.mul_add(two, one));
+            lanes.x = V3::select(accepted, xt, x).to_arrays();
+            lanes.y = V3::select(accepted, yt, y).to_arrays();
+            lanes.lam =
+                [F4::select(accepted, lt[0], lam[0]).to_array(), F4::select(accepted, lt[1], lam[1]).to_array()];
+            lanes.r0 = F4::select(accepted, r1, r0).to_array();
+            lanes.dx = V3::select(accepted, sdx, dx).to_arrays();
+            lanes.dy = V3::select(accepted, sdy, dy).to_arrays();
+            lanes.dl = [F4::select(accepted, sdl[0], dl[0]).to_array(), F4::select(accepted, sdl[1], dl[1]).to_array()];
+            lanes.alpha = F4::select(accepted, one, al * F4::splat(0.5)).to_array();
+            let rejected = F4::select(accepted, zero, F4::load(&lanes.rejected) + one);
+            lanes.rejected = rejected.to_array();
+            // Lanes that leave: stationary (the answer, or the single-pair solver when a multiplier
+            // is not positive), a nonfinite residual, a singular system, the iteration cap, or 40
+            // rejected trial points in a row (the single-pair line search's limit).
+            let steps = F4::load(&lanes.steps);
+            let done = accepted.and(stationary.or(r1.finite().not()).or(solved.not()).or(cap.le(steps)));
+            let stalled = live.and(accepted.not()).and(F4::splat(40.0).le(rejected));
+            lanes.steps = (steps + F4::select(accepted, one, zero)).to_array();
+            lanes.start = [0.0; 4];
+            let leave = done.or(stalled).bits();
+            if leave == 0 {
+                continue;
+            }
+            let answer = done.and(stationary).and(r1.finite()).bits();
+            let (norm_inf, steps) = (norm_inf.to_array(), steps.to_array());
+            for i in (0..4).filter(|i| leave & (1 << i) != 0) {
+                let k = lanes.job[i];
+                lanes.job[i] = EMPTY;
+                let x = Vector3::new(lanes.x[0][i], lanes.x[1][i], lanes.x[2][i]);
+                let y = Vector3::new(lanes.y[0][i], lanes.y[1][i], lanes.y[2][i]);
+                let lam = [lanes.lam[0][i], lanes.lam[1][i]];
+                // The answer when stationary with positive multipliers and clear of contact; otherwise
+                // the single-pair solver decides (growth test, barrier path).
+                if answer & (1 << i) == 0 || !(lam[0] > 0.0 && lam[1] > 0.0 && clear_of_contact(&x, &y, a, b)) {
+                    continue;
+                }
+                let iterations = steps[i] as usize;
+                let out = KktOut { x, y, lam, status: SolveStatus::Converged, iterations, residual: norm_inf[i] };
+                answers[k] = Some(if warm_starts {
+                    let growth = GrowthWarmStart::default();
+                    finish(&poses[k].0, &lanes.rel[i], out, iterations, false, &growth, None)
+                } else {
+                    separated_answer(&poses[k].0, &out, iterations, false, empty.clone())
+                });
+            }
+        }
+        // The pairs the lanes left: the single-pair solver.
+        answers
+            .into_iter()
+            .zip(poses)
+            .map(|(r, (pa, pb))| r.unwrap_or_else(|| distance(a, pa, b, pb, None, params)))
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::body::ellipsoid;
+    use crate::math::{Real, UnitQuaternion, Vector3};
+    use crate::query::test_bodies::random_body;
+    use rand::{Rng, SeedableRng};
+
+    /// Random poses in a cube of half-width `half` (meters), uniform quaternions.
+    fn poses(n: usize, half: Real, seed: u64) -> Vec<(Isometry3, Isometry3)> {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let pose = |rng: &mut rand_chacha::ChaCha8Rng| {
+            let t = Vector3::from_fn(|_, _| rng.random_range(-half..half));
+            let q = nalgebra::Quaternion::from(nalgebra::Vector4::from_fn(|_, _| rng.random_range(-1.0..1.0)));
+            Isometry3::from_parts(t.into(), UnitQuaternion::new_normalize(q))
+        };
+        (0..n).map(|_| (pose(&mut rng), pose(&mut rng))).collect()
+    }
+
+    #[test]
+    fn spheres_match_the_closed_form_on_every_lane() {
+        // Spheres of radii 0.5 and 0.3 (centers 0.1 off their frames' origins): the distance is
+        // ‖c_a − c_b‖ − 0.8, or 0 when they overlap; 64 poses, a sixth or so overlapping.
+        let (a, b) = (ellipsoid([0.1, 0.0, 0.0], [0.5; 3]).unwrap(), ellipsoid([0.0, -0.1, 0.0], [0.3; 3]).unwrap());
+        let pairs = poses(64, 1.0, 3);
+        let params = NewtonParams::default();
+        let mut overlapping = 0;
+        for warm_starts in [false, true] {
+            for ((pa, pb), d) in pairs.iter().zip(cold_distances(&a, &b, &pairs, &params, warm_starts)) {
+                let gap = (pa * crate::math::Point3::new(0.1, 0.0, 0.0)
+                    - pb * crate::math::Point3::new(0.0, -0.1, 0.0))
+                .norm()
+                    - 0.8;
+                assert!(d.status.converged(), "{d:?}");
+                assert!((d.distance - gap.max(0.0)).abs() < 1e-9, "{} vs {gap}", d.distance);
+                assert_eq!(d.overlapping, gap <= 0.0);
+                overlapping += usize::from(d.overlapping);
+                if !d.overlapping {
+                    // The witnesses lie on the spheres, the normal along the witness segment.
+                    assert!((a.value_at(&(pa.inverse() * d.witness_a)) - 1.0).abs() < 1e-9);
+                    assert!((b.value_at(&(pb.inverse() * d.witness_b)) - 1.0).abs() < 1e-9);
+                    assert!((d.witness_b - d.witness_a - d.normal * d.distance).norm() < 1e-9);
+                    assert_eq!(d.warm_start.valid, warm_starts, "a warm start only when asked for");
+                }
+            }
+        }
+        assert!(overlapping > 4 && overlapping < 100, "{overlapping} overlapping answers of 128");
+    }
+
+    #[test]
+    fn lanes_give_the_single_pair_answers_at_every_degree() {
+        // Nonquadratic sos-convex bodies at 2d = 4, 6, 8, 150 random poses each (some overlapping):
+        // every answer converged, with the single-pair solver's overlap flag, distance (1e-9 m)
+        // and witnesses (1e-6 m; the bodies are strictly convex, so the witnesses are unique).
+        let params = NewtonParams::default();
+        for degree in [4, 6, 8] {
+            let (a, b) = (random_body(degree, 11), random_body(degree, 12));
+            let pairs = poses(150, 1.5, degree as u64);
+            let batch = cold_distances(&a, &b, &pairs, &params, true);
+            let (mut separated, mut worst) = (0, 0.0 as Real);
+            for ((pa, pb), d) in pairs.iter().zip(&batch) {
+                let s = distance(&a, pa, &b, pb, None, &params);
+                assert!(d.status.converged() && s.status.converged());
+                assert_eq!(d.overlapping, s.overlapping);
+                assert!((d.witness_a - s.witness_a).norm() < 1e-6 && (d.witness_b - s.witness_b).norm() < 1e-6);
+                worst = worst.max((d.distance - s.distance).abs());
+                if !d.overlapping {
+                    separated += 1;
+                    // The warm start it keeps restarts the same query converged at once.
+                    assert!(d.warm_start.valid);
+                    let again = distance(&a, pa, &b, pb, Some(&d.warm_start), &params);
+                    assert!(again.warm_started && again.iterations <= 1, "{again:?}");
+                }
+            }
+            assert!(worst < 1e-9, "2d = {degree}: distances differ by {worst:e} m");
+            assert!(separated > 30 && separated < 150, "2d = {degree}: {separated} separated of 150");
+        }
+    }
+
+    #[test]
+    fn small_batches_and_empty_ones_answer_pair_by_pair() {
+        let (a, b) = (random_body(6, 1), random_body(6, 2));
+        let params = NewtonParams::default();
+        assert!(cold_distances(&a, &b, &[], &params, false).is_empty());
+        let pairs = poses(3, 2.0, 5);
+        for ((pa, pb), d) in pairs.iter().zip(cold_distances(&a, &b, &pairs, &params, false)) {
+            let s = distance(&a, pa, &b, pb, None, &params);
+            assert_eq!(d.distance, s.distance);
+        }
+    }
+}
