@@ -452,6 +452,7 @@ fn print_table(rows: &[Row], peer: &PeerRow) {
         );
     }
     println!("x cold / x warm: speed-up of our distance query over the paper's Table 2 (MATLAB fmincon).");
+    println!("fit chair: `-` where the fit was not timed (--fit-degrees); the queries then use the bundled bodies.");
     for r in rows {
         println!(
             "2d = {}: cold distance at all cold poses, {:.3} µs per pair one at a time, {:.3} µs as one batch \
@@ -462,7 +463,6 @@ fn print_table(rows: &[Row], peer: &PeerRow) {
             r.single_us / r.batch_us
         );
     }
-    println!("fit chair: `-` where the fit was not timed (--fit-degrees); the queries then use the bundled bodies.");
     println!();
     let n_sep = peer.exact.iter().filter(|d| **d > 0.0).count();
     println!(

@@ -167,6 +167,39 @@ pub fn distance(
         }
     }
 
+    growth_first(a, pose_a, b, &rel, warm, previous, params, iterations)
+}
+
+/// The cold distance answer of a pair whose cold start shows no separation ([`cold_start`] gave
+/// `None`): the growth-first path of [`distance`], without asking for the start again (the batch
+/// solver's pairs that overlap, [`super::batch`]).
+pub(super) fn distance_growth_first(
+    a: &Body,
+    pose_a: &Isometry3,
+    b: &Body,
+    pose_b: &Isometry3,
+    params: &NewtonParams,
+) -> DistanceResult {
+    growth_first(a, pose_a, b, &pose_a.inv_mul(pose_b), None, None, params, 0)
+}
+
+/// [`distance`] from its overlap test on: the growth measure decides overlap (the touching answer
+/// at its minimizer), else Newton from the growth minimizer, else the barrier path; `iterations`
+/// spent so far.
+#[allow(clippy::too_many_arguments)]
+fn growth_first(
+    a: &Body,
+    pose_a: &Isometry3,
+    b: &Body,
+    rel: &Isometry3,
+    warm: Option<&DistanceWarmStart>,
+    previous: Option<(&DistanceWarmStart, [Real; 6])>,
+    params: &NewtonParams,
+    mut iterations: usize,
+) -> DistanceResult {
+    let rel = *rel;
+    let ba = PosedBody::unposed(a);
+    let bb = PosedBody::new(b, &rel);
     // Overlap test by the growth measure.
     let rel_ba = rel.inverse();
     let start = warm.map(|w| w.growth.towards(&rel_ba, a.scale()));

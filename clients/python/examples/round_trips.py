@@ -10,7 +10,10 @@ Calls timed: Distance (unary); BatchQuery of 1, 5, 19, 100, 400 and 1000 pairs (
 pair); a planner's state check the old way (SetPoses of one instance, then a 19-pair BatchQuery:
 a store write per state); the same state check on a QueryStream (the pose and 19 queries in one
 message, nothing written); the same in columns; a 1000-pair BatchQuery in columns (numpy arrays
-back).
+back); a sampling planner's check of 256 candidate states (the chair at random poses around the
+human, as in ``sublevel bench``'s cold queries) in one Query, with the distance query cold (the
+server then solves four states per SIMD pass) and not cold (each state warm-started from the one
+before).
 """
 
 from __future__ import annotations
@@ -77,6 +80,18 @@ def main() -> None:
         )
     first, second = [a] * 1000, [b] * 1000
     row("BatchQuery in columns, 1000 pairs", lambda: c.batch_columns(scene, "distance", first, second), 1000)
+    # A sampling planner's candidate states: the chair (instance a) at random poses in a 5 m cube
+    # around its stored place, uniform rotations (seed 7).
+    rng = np.random.default_rng(7)
+    states = []
+    for _ in range(256):
+        q = rng.uniform(-1.0, 1.0, 4)
+        t = np.asarray(stored[a].t) + rng.uniform(-2.5, 2.5, 3)
+        states.append({a: Pose(quat=tuple(q / np.linalg.norm(q)), t=t)})
+    for cold in (True, False):
+        queries = [Query.distance(a, b, cold=cold)]
+        name = f"Query, 256 states x 1 distance, {'cold' if cold else 'warm from the last state'}"
+        row(name, lambda q=queries: c.query(scene, queries=q, states=states), 256)
     c.set_poses(scene, {b: pose})  # leave the demo scene as it was
 
     print(f"{args.repeats} calls each against {args.addr} (Python client, one connection)")
