@@ -79,7 +79,7 @@ mod lanes {
     use crate::math::{Isometry3, Real, Vector3};
     use std::arch::x86_64::*;
 
-    /// [`cold_distances`] on the lanes, compiled for AVX2 + FMA (the 4-lane arithmetic below becomes
+    /// [`super::cold_distances`] on the lanes, compiled for AVX2 + FMA (the 4-lane arithmetic below becomes
     /// one instruction per operation).
     #[target_feature(enable = "avx2,fma")]
     pub(super) fn lanes_avx2(
@@ -147,7 +147,7 @@ mod lanes {
             Self(unsafe { _mm256_sqrt_pd(self.0) })
         }
 
-        /// Lane-wise max without NaN handling (see [`super::fast_eval::max_plain`]).
+        /// Lane-wise max without NaN handling (see [`super::super::fast_eval::max_plain`]).
         #[inline(always)]
         fn max(self, o: Self) -> Self {
             // SAFETY: see the type's docs.
@@ -336,18 +336,13 @@ mod lanes {
         ])
     }
 
-    /// Mᵀ v.
+    /// Mᵀ v (the transpose is a renaming of registers).
     #[inline(always)]
     fn mat_t_mul(m: &M3, v: V3) -> V3 {
-        let [x, y, z] = v.0;
-        V3([
-            m[6].mul_add(z, m[3].mul_add(y, m[0] * x)),
-            m[7].mul_add(z, m[4].mul_add(y, m[1] * x)),
-            m[8].mul_add(z, m[5].mul_add(y, m[2] * x)),
-        ])
+        mat_mul(&[m[0], m[3], m[6], m[1], m[4], m[7], m[2], m[5], m[8]], v)
     }
 
-    /// Mᵀ H M for a symmetric H (upper triangle; [`super::fast_eval`]'s congruence, per lane).
+    /// Mᵀ H M for a symmetric H (upper triangle; [`super::super::fast_eval`]'s congruence, per lane).
     #[inline(always)]
     fn congruence(m: &M3, h: &S3) -> S3 {
         let (a0, a1, a2) = (V3([m[0], m[3], m[6]]), V3([m[1], m[4], m[7]]), V3([m[2], m[5], m[8]]));
@@ -363,7 +358,7 @@ mod lanes {
     }
 
     /// Inverse of a symmetric 3 × 3 matrix by cofactors per lane, with the lanes where it is (nearly)
-    /// singular marked false ([`super::fast_eval::inverse_sym3`]'s test, per lane).
+    /// singular marked false ([`super::super::fast_eval::inverse_sym3`]'s test, per lane).
     #[inline(always)]
     fn inverse_sym(m: &S3) -> (S3, M4) {
         let [a, b, c, d, e, f] = *m;
@@ -385,7 +380,7 @@ mod lanes {
         (inv, ok)
     }
 
-    /// The Newton step of the distance KKT system per lane ([`super::fast_eval::solve_kkt8`]'s block
+    /// The Newton step of the distance KKT system per lane ([`super::super::fast_eval::solve_kkt8`]'s block
     /// elimination): (dx, dy, [dλa, dλb]) and the lanes where it exists.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]

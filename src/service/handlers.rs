@@ -543,7 +543,7 @@ impl Sublevel for SublevelService {
                         &c.instance_ids,
                         (&c.first, &c.second),
                         c.kind,
-                        QueryOptions { mode: mode.unwrap_or_default(), ..QueryOptions::default() },
+                        QueryOptions { mode: mode.unwrap_or_default(), cold: c.cold, ..QueryOptions::default() },
                         c.margin,
                     )
                 },

@@ -236,6 +236,58 @@ async fn cold_candidate_states_match_the_closed_form() {
     server.stop().await;
 }
 
+/// A cold BatchQuery in columns (`PairColumns.cold`): twelve pairs of the same two bodies, solved
+/// four per SIMD pass, each the closed form ‖c₁ − c₂‖ − r₁ − r₂ (0 when overlapping), and no warm
+/// start left behind (the next warm query of a pair starts cold).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn cold_columns_match_the_closed_form() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(config(dir.path())).await;
+    let mut c = server.client().await;
+    let big = upload_sphere(&mut c, "r05", [0.0; 3], 0.5).await;
+    let small = upload_sphere(&mut c, "r025", [0.0; 3], 0.25).await;
+    let scene = c.create_scene(pb::CreateSceneRequest { name: "cols".into() }).await.unwrap().into_inner().scene_id;
+    let mut ids = vec![add(&mut c, &scene, &big, at([0.0; 3])).await];
+    let centers: Vec<[f64; 3]> = (0..12).map(|k| [0.3 + 0.2 * k as f64, 0.1 * (k % 4) as f64, -0.3]).collect();
+    for x in &centers {
+        ids.push(add(&mut c, &scene, &small, at(*x)).await);
+    }
+    let columns = pb::PairColumns {
+        kind: pb::QueryKind::Distance as i32,
+        instance_ids: ids.clone(),
+        first: vec![0; centers.len()],
+        second: (1..=centers.len() as u32).collect(),
+        margin: 0.0,
+        cold: true,
+    };
+    let batch = pb::BatchQueryRequest { scene_id: scene.clone(), pairs: vec![], columns: Some(columns) };
+    let cols = c.batch_query(batch).await.unwrap().into_inner().columns.unwrap();
+    let mut overlapping = 0;
+    for (k, x) in centers.iter().enumerate() {
+        let gap = (x[0] * x[0] + x[1] * x[1] + x[2] * x[2]).sqrt() - 0.75;
+        assert!(cols.converged[k], "pair {k}");
+        assert!((cols.value[k] - gap.max(0.0)).abs() < 1e-9, "pair {k}: {} vs {gap}", cols.value[k]);
+        assert_eq!(cols.overlapping[k], gap <= 0.0, "pair {k}");
+        overlapping += usize::from(gap <= 0.0);
+    }
+    assert!(overlapping > 0 && overlapping < centers.len(), "the pairs must cross contact: {overlapping}");
+    // Cold answers keep no warm start: a warm query of the last pair starts cold.
+    let again = c
+        .distance(pb::DistanceRequest {
+            scene_id: scene.clone(),
+            instance_a: ids[0].clone(),
+            instance_b: ids[centers.len()].clone(),
+            ..Default::default()
+        })
+        .await
+        .unwrap()
+        .into_inner()
+        .answer
+        .unwrap();
+    assert!(!again.solve.unwrap().warm_started);
+    server.stop().await;
+}
+
 /// CheckScene on a 10 × 10 grid of spheres (r = 0.2, spacing 1 m, so neighbors are 0.6 m apart
 /// and diagonal ones 1.014 m) plus one sphere overlapping a corner: every pair within the margin,
 /// exactly as brute force over all pairs finds them, with far fewer narrow-phase solves.
@@ -340,6 +392,7 @@ async fn columns_answer_like_pairs_and_name_bad_fields() {
         first,
         second,
         margin,
+        cold: false,
     };
     let batch = |cols: pb::PairColumns| pb::BatchQueryRequest {
         scene_id: scene.clone(),

@@ -153,6 +153,7 @@ async fn compound_chair_and_human_answer_the_brute_force_model_distance_on_every
             first: vec![0, 1],
             second: vec![1, 0],
             margin: 0.0,
+            cold: false,
         };
         let batch = pb::BatchQueryRequest { scene_id: scene.clone(), pairs: vec![], columns: Some(columns) };
         let cols = c.batch_query(batch).await.unwrap().into_inner().columns.unwrap();
@@ -229,6 +230,7 @@ async fn a_single_body_scene_answers_as_before_without_tree_fields() {
         first: vec![0],
         second: vec![1],
         margin: 0.0,
+        cold: false,
     };
     let batch = pb::BatchQueryRequest { scene_id: scene, pairs: vec![], columns: Some(columns) };
     let cols = c.batch_query(batch).await.unwrap().into_inner().columns.unwrap();

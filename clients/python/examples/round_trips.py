@@ -10,7 +10,8 @@ Calls timed: Distance (unary); BatchQuery of 1, 5, 19, 100, 400 and 1000 pairs (
 pair); a planner's state check the old way (SetPoses of one instance, then a 19-pair BatchQuery:
 a store write per state); the same state check on a QueryStream (the pose and 19 queries in one
 message, nothing written); the same in columns; a 1000-pair BatchQuery in columns (numpy arrays
-back); a sampling planner's check of 256 candidate states (the chair at random poses around the
+back), warm (the pair's warm start, the same poses: no Newton step) and cold (every pair solved from
+scratch, four pairs per SIMD pass); a sampling planner's check of 256 candidate states (the chair at random poses around the
 human, as in ``sublevel bench``'s cold queries) in one Query, with the distance query cold (the
 server then solves four states per SIMD pass) and not cold (each state warm-started from the one
 before).
@@ -80,6 +81,11 @@ def main() -> None:
         )
     first, second = [a] * 1000, [b] * 1000
     row("BatchQuery in columns, 1000 pairs", lambda: c.batch_columns(scene, "distance", first, second), 1000)
+    row(
+        "BatchQuery in columns, 1000 pairs, cold",
+        lambda: c.batch_columns(scene, "distance", first, second, cold=True),
+        1000,
+    )
     # A sampling planner's candidate states: the chair (instance a) at random poses in a 5 m cube
     # around its stored place, uniform rotations (seed 7).
     rng = np.random.default_rng(7)

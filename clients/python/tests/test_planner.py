@@ -192,3 +192,23 @@ def test_stream_columns_follow_the_view_and_states(client, balls):
         assert bool(per_state[2].decided_by_bounds[0])
         # The view still holds x = 2.5.
         assert abs(s.check_columns("distance", [a], [b]).value[0] - (2.5 - R1 - R2)) < 1e-8
+
+
+def test_cold_states_in_columns_match_the_closed_form(client, balls):
+    """Cold pairs across many candidate states (solved four states per SIMD pass on the server):
+    every state's distance is the closed form |c_a - c_b| - R1 - R2, 0 where the balls overlap."""
+    scene, a, b = balls
+    centers = [(0.5 + 0.1 * k, 0.05 * (k % 3), -0.1) for k in range(16)]
+    states = [{b: Pose(t=c)} for c in centers]
+    with client.stream(scene) as s:
+        per_state = s.check_columns("distance", [a], [b], states=states, cold=True)
+    assert len(per_state) == len(centers)
+    gaps = [np.linalg.norm(c) - R1 - R2 for c in centers]
+    assert any(g <= 0 for g in gaps) and any(g > 0 for g in gaps)
+    for cols, gap in zip(per_state, gaps):
+        assert bool(cols.converged[0])
+        assert abs(cols.value[0] - max(gap, 0.0)) < 1e-8
+        assert bool(cols.overlapping[0]) == (gap <= 0)
+    # The same pairs as a cold BatchQuery in columns at the stored poses.
+    cols = client.batch_columns(scene, "distance", [a] * 5, [b] * 5, cold=True)
+    np.testing.assert_allclose(cols.value, [1.8 - R1 - R2] * 5, atol=1e-8)

@@ -234,6 +234,7 @@ impl<'a> Task<'a> {
             first: vec![0; second.len()],
             second,
             margin: 0.0,
+            cold: false,
         };
         let stream_columns = pb::PairColumns { kind: kind as i32, margin, ..columns.clone() };
         let queries = plan

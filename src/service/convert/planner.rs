@@ -22,6 +22,8 @@ pub struct PairColumns {
     pub second: Vec<u32>,
     /// COLLIDE: the margin in meters.
     pub margin: Real,
+    /// Cold queries (no warm start read or kept; see `PairColumns.cold`).
+    pub cold: bool,
 }
 
 /// Validates `BatchQueryRequest.columns`.
@@ -70,6 +72,7 @@ pub fn pair_columns_from_proto(c: &pb::PairColumns, max_pairs: usize) -> Result<
         first: c.first.clone(),
         second: c.second.clone(),
         margin: c.margin,
+        cold: c.cold,
     })
 }
 
@@ -199,7 +202,7 @@ pub fn planner_request_from_proto(
                 kind: c.kind,
                 first: c.instance_ids[i as usize].clone(),
                 second: c.instance_ids[j as usize].clone(),
-                options: QueryOptions::default(),
+                options: QueryOptions { cold: c.cold, ..QueryOptions::default() },
                 margin: c.margin,
             })
             .collect();

@@ -155,8 +155,11 @@ def _planner_queries(queries: Iterable[Any]) -> List[pb.PlannerQuery]:
     return out
 
 
-def _pair_columns(kind: str, first: Sequence[str], second: Sequence[str], margin: float) -> pb.PairColumns:
-    """``PairColumns`` of the pairs (first[k], second[k]): each id sent once, pairs as indices."""
+def _pair_columns(
+    kind: str, first: Sequence[str], second: Sequence[str], margin: float, cold: bool = False
+) -> pb.PairColumns:
+    """``PairColumns`` of the pairs (first[k], second[k]): each id sent once, pairs as indices;
+    ``cold`` asks for cold answers (no warm start read or kept)."""
     if kind not in _KINDS:
         raise ValueError(f"`kind`: must be one of {sorted(_KINDS)}, got {kind!r}")
     first, second = list(first), list(second)
@@ -171,6 +174,7 @@ def _pair_columns(kind: str, first: Sequence[str], second: Sequence[str], margin
         first=[index[i] for i in first],
         second=[index[i] for i in second],
         margin=float(margin),
+        cold=bool(cold),
     )
 
 
@@ -410,13 +414,20 @@ class Client:
         return [answer_from_proto(a) for a in r.answers]
 
     def batch_columns(
-        self, scene: str, kind: str, first: Sequence[str], second: Sequence[str], margin: float = 0.0
+        self,
+        scene: str,
+        kind: str,
+        first: Sequence[str],
+        second: Sequence[str],
+        margin: float = 0.0,
+        cold: bool = False,
     ) -> AnswerColumns:
         """Pairs ``(first[k], second[k])`` of one ``kind`` (``"distance"``, ``"growth"`` or
         ``"collide"`` with ``margin`` meters) at the stored poses, in columns both ways: numpy
         arrays back (:class:`AnswerColumns`), no message per pair. The fast form for thousands of
-        pairs."""
-        req = pb.BatchQueryRequest(scene_id=scene, columns=_pair_columns(kind, first, second, margin))
+        pairs. ``cold``: no warm start read or kept; distance / collide pairs of the same two bodies
+        are then solved four per SIMD pass on the server (unrelated poses, e.g. sampled states)."""
+        req = pb.BatchQueryRequest(scene_id=scene, columns=_pair_columns(kind, first, second, margin, cold))
         return AnswerColumns.from_proto(self._call("BatchQuery", req).columns)
 
     def query(
@@ -564,10 +575,13 @@ class PlannerStream:
         margin: float = 0.0,
         poses: PosesLike = None,
         states: Optional[Iterable[PosesLike]] = None,
+        cold: bool = False,
     ) -> Union[AnswerColumns, List[AnswerColumns]]:
         """Like :meth:`check` (or, with ``states``, :meth:`check_states`) for pairs of one kind in
-        columns: returns :class:`AnswerColumns` (one per state with ``states``)."""
-        cols = _pair_columns(kind, first, second, margin)
+        columns: returns :class:`AnswerColumns` (one per state with ``states``). ``cold``: as
+        :meth:`Client.batch_columns` (across ``states``, each pair's states are solved four per
+        SIMD pass)."""
+        cols = _pair_columns(kind, first, second, margin, cold)
         req = pb.QueryRequest(
             scene_id=self.scene, poses=_instance_poses(poses, "poses"), columns=cols, states=_states(states)
         )
