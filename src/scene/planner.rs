@@ -394,8 +394,21 @@ impl QueryView {
         mode: Option<CertifyMode>,
     ) -> PlannerAnswers {
         if request.states.is_empty() {
-            let mut none = vec![None; request.queries.len()];
-            return PlannerAnswers::Single(self.answer_all(&request.queries, posed, params, mode, &mut none));
+            // Cold queries of one body pair among the request's queries: on the batch solver's lanes.
+            let views: Vec<PairRef<'_>> = request
+                .queries
+                .iter()
+                .map(|q| {
+                    let mut pair = q.view();
+                    if let Some(mode) = mode {
+                        pair.options.mode = mode;
+                    }
+                    pair
+                })
+                .collect();
+            let at = |k: usize| posed.get(views[k].first).zip(posed.get(views[k].second));
+            let mut newton = lane_distances(&views, at, params);
+            return PlannerAnswers::Single(self.answer_all(&request.queries, posed, params, mode, &mut newton));
         }
         let mut newton = state_lane_distances(request, posed, params, mode);
         let nq = request.queries.len();

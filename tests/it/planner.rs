@@ -233,6 +233,19 @@ async fn cold_candidate_states_match_the_closed_form() {
         overlapping += usize::from(gap <= 0.0);
     }
     assert!(overlapping > 0 && overlapping < xs.len(), "the states must cross contact: {overlapping}");
+    // Without states: five cold queries of the same pair in one request (one group of lanes).
+    let req = pb::QueryRequest {
+        scene_id: scene.clone(),
+        poses: vec![pose_of(&i2, [1.2, -0.4, 0.3])],
+        queries: (0..5).map(|_| cold(pb::QueryKind::Distance, &i1, &i2)).collect(),
+        ..Default::default()
+    };
+    let r = c.query(req).await.unwrap().into_inner();
+    let gap = (1.2f64 * 1.2 + 0.4 * 0.4 + 0.3 * 0.3).sqrt() - 0.75;
+    assert_eq!(r.answers.len(), 5);
+    for a in &r.answers {
+        assert!((distance_of(a).distance - gap).abs() < 1e-9, "{} vs {gap}", distance_of(a).distance);
+    }
     server.stop().await;
 }
 
