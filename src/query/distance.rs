@@ -167,7 +167,7 @@ pub fn distance(
         }
     }
 
-    growth_first(a, pose_a, b, &rel, warm, previous, params, iterations)
+    growth_first(pose_a, &ba, &bb, warm, previous, params, iterations)
 }
 
 /// The cold distance answer of a pair whose cold start shows no separation ([`cold_start`] gave
@@ -180,30 +180,27 @@ pub(super) fn distance_growth_first(
     pose_b: &Isometry3,
     params: &NewtonParams,
 ) -> DistanceResult {
-    growth_first(a, pose_a, b, &pose_a.inv_mul(pose_b), None, None, params, 0)
+    let rel = pose_a.inv_mul(pose_b);
+    growth_first(pose_a, &PosedBody::unposed(a), &PosedBody::new(b, &rel), None, None, params, 0)
 }
 
-/// [`distance`] from its overlap test on: the growth measure decides overlap (the touching answer
-/// at its minimizer), else Newton from the growth minimizer, else the barrier path; `iterations`
-/// spent so far.
-#[allow(clippy::too_many_arguments)]
+/// [`distance`] from its overlap test on, in the frame of A (`ba` unposed, `bb` posed by
+/// pose_a⁻¹·pose_b): the growth measure decides overlap (the touching answer at its minimizer),
+/// else Newton from the growth minimizer, else the barrier path; `iterations` spent so far.
 fn growth_first(
-    a: &Body,
     pose_a: &Isometry3,
-    b: &Body,
-    rel: &Isometry3,
+    ba: &PosedBody<'_>,
+    bb: &PosedBody<'_>,
     warm: Option<&DistanceWarmStart>,
     previous: Option<(&DistanceWarmStart, [Real; 6])>,
     params: &NewtonParams,
     mut iterations: usize,
 ) -> DistanceResult {
-    let rel = *rel;
-    let ba = PosedBody::unposed(a);
-    let bb = PosedBody::new(b, &rel);
+    let (a, rel) = (ba.body, bb.pose);
     // Overlap test by the growth measure.
     let rel_ba = rel.inverse();
     let start = warm.map(|w| w.growth.towards(&rel_ba, a.scale()));
-    let g = solve_growth(&ba, &bb, start, params);
+    let g = solve_growth(ba, bb, start, params);
     iterations += g.iterations;
     let growth_warm = GrowthWarmStart::after(start, g.x, g.mu, g.status.converged(), rel_ba);
     let touching = |iterations: usize| {
@@ -228,8 +225,8 @@ fn growth_first(
     // Separated: cold start from the growth minimizer on B.
     let y0 = (rel * Point3::from(g.x)).coords;
     // Exact boundary point: near contact the radial table's estimate may lie past y0.
-    let x0 = boundary_on_segment_within(&ba, &ba.interior_point(), &y0, START_BOUNDARY_TOLERANCE);
-    let out = kkt_newton(&ba, &bb, x0, y0, None, params, false);
+    let x0 = boundary_on_segment_within(ba, &ba.interior_point(), &y0, START_BOUNDARY_TOLERANCE);
+    let out = kkt_newton(ba, bb, x0, y0, None, params, false);
     iterations += out.iterations;
     if out.status.converged() {
         return finish(pose_a, &rel, out, iterations, false, &growth_warm, previous);
@@ -240,9 +237,9 @@ fn growth_first(
     if g.status.converged() && g.value <= 1.0 + TOUCH_GROWTH_TOLERANCE {
         return touching(iterations);
     }
-    let (xb, yb, lamb, it_b) = barrier(&ba, &bb, params);
+    let (xb, yb, lamb, it_b) = barrier(ba, bb, params);
     iterations += it_b;
-    let out = kkt_newton(&ba, &bb, xb, yb, Some(lamb), params, false);
+    let out = kkt_newton(ba, bb, xb, yb, Some(lamb), params, false);
     iterations += out.iterations;
     finish(pose_a, &rel, out, iterations, false, &growth_warm, previous)
 }

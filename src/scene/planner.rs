@@ -79,37 +79,54 @@ pub fn answer_pair(
     answer_pair_with(pair, a, b, cache, params, None)
 }
 
-/// Whether a query can take the batch solver's SIMD lanes ([`crate::query::batch`]): a cold
-/// distance or collide query (no warm start to keep) outside [`CertifyMode::Certify`], between two
-/// convex single bodies, that the bounding spheres do not decide (collide).
+/// Whether a query asks for what the batch solver's SIMD lanes give ([`crate::query::batch`]): a
+/// cold distance or collide query (no warm start to keep) outside [`CertifyMode::Certify`].
+fn lane_candidate(kind: QueryKind, options: &QueryOptions) -> bool {
+    matches!(kind, QueryKind::Distance | QueryKind::Collide) && options.cold && options.mode != CertifyMode::Certify
+}
+
+/// Whether a query can take the batch solver's lanes: a [`lane_candidate`] between two convex
+/// single bodies, that the bounding spheres do not decide (collide).
 fn lane_eligible(pair: &PairRef<'_>, a: &Posed, b: &Posed) -> bool {
-    let o = &pair.options;
-    let kind = matches!(pair.kind, QueryKind::Distance | QueryKind::Collide);
-    if !(kind && o.cold && o.mode != CertifyMode::Certify) {
-        return false;
-    }
     let single_convex = |p: &Posed| p.tree.is_none() && !p.body.report.nonconvex;
     let decided = || {
         pair.kind == QueryKind::Collide
             && sphere_lower_bound(&a.body, &a.pose, &b.body, &b.pose).is_some_and(|lower| lower > pair.margin)
     };
-    single_convex(a) && single_convex(b) && !decided()
+    lane_candidate(pair.kind, &pair.options) && single_convex(a) && single_convex(b) && !decided()
+}
+
+/// Whether at least [`crate::query::batch::MIN_LANE_BATCH`] of `queries` are
+/// [`lane_candidate`]s: otherwise no group can reach the lanes and nothing need be gathered.
+fn enough_lane_candidates<'q>(queries: impl Iterator<Item = (QueryKind, &'q QueryOptions)>) -> bool {
+    queries.filter(|(kind, o)| lane_candidate(*kind, o)).nth(crate::query::batch::MIN_LANE_BATCH - 1).is_some()
+}
+
+/// Newton's answers solved ahead on the batch solver's lanes ([`lane_distances`]), by query index;
+/// empty when none was (no allocation on the paths that have no cold queries).
+#[derive(Default)]
+pub(crate) struct LaneAnswers(Vec<Option<crate::query::DistanceResult>>);
+
+impl LaneAnswers {
+    /// The answer of query `k`, if the lanes solved it (taken out).
+    pub(crate) fn take(&mut self, k: usize) -> Option<crate::query::DistanceResult> {
+        self.0.get_mut(k).and_then(Option::take)
+    }
 }
 
 /// Newton's answers of the cold distance solves among `pairs` (each with its two posed instances
 /// from `posed`) that can take the batch solver's lanes ([`lane_eligible`]), solved four pairs per
-/// SIMD pass ([`crate::query::batch::cold_distances`]) in groups of one body pair; `None` for the
+/// SIMD pass ([`crate::query::batch::cold_distances`]) in groups of one body pair; none for the
 /// other queries and for groups smaller than [`crate::query::batch::MIN_LANE_BATCH`] (answered
 /// one by one by [`answer_pair`]). Give the answers to [`answer_pair_with`].
 pub(crate) fn lane_distances<'p>(
     pairs: &[PairRef<'_>],
     posed: impl Fn(usize) -> Option<(&'p Posed, &'p Posed)>,
     params: &CertifyParams,
-) -> Vec<Option<crate::query::DistanceResult>> {
+) -> LaneAnswers {
     use crate::query::batch::{cold_distances, MIN_LANE_BATCH};
-    let mut out: Vec<Option<crate::query::DistanceResult>> = vec![None; pairs.len()];
-    if pairs.len() < MIN_LANE_BATCH {
-        return out;
+    if !enough_lane_candidates(pairs.iter().map(|p| (p.kind, &p.options))) {
+        return LaneAnswers::default();
     }
     // Eligible queries by body pair (the bodies' addresses), in order within each group.
     let mut groups: HashMap<(*const crate::Body, *const crate::Body), Vec<usize>, foldhash::fast::RandomState> =
@@ -119,6 +136,7 @@ pub(crate) fn lane_distances<'p>(
             groups.entry((Arc::as_ptr(&a.body), Arc::as_ptr(&b.body))).or_default().push(k);
         }
     }
+    let mut out = LaneAnswers::default();
     for members in groups.values().filter(|m| m.len() >= MIN_LANE_BATCH) {
         let Some((a, b)) = posed(members[0]) else { continue };
         let poses: Vec<(Isometry3, Isometry3)> =
@@ -126,8 +144,11 @@ pub(crate) fn lane_distances<'p>(
         if poses.len() != members.len() {
             continue;
         }
+        if out.0.is_empty() {
+            out.0 = vec![None; pairs.len()];
+        }
         for (&k, answer) in members.iter().zip(cold_distances(&a.body, &b.body, &poses, &params.newton, false)) {
-            out[k] = Some(answer);
+            out.0[k] = Some(answer);
         }
     }
     out
@@ -393,35 +414,27 @@ impl QueryView {
         params: &CertifyParams,
         mode: Option<CertifyMode>,
     ) -> PlannerAnswers {
+        let nq = request.queries.len();
         if request.states.is_empty() {
             // Cold queries of one body pair among the request's queries: on the batch solver's lanes.
-            let views: Vec<PairRef<'_>> = request
-                .queries
-                .iter()
-                .map(|q| {
-                    let mut pair = q.view();
-                    if let Some(mode) = mode {
-                        pair.options.mode = mode;
-                    }
-                    pair
-                })
-                .collect();
-            let at = |k: usize| posed.get(views[k].first).zip(posed.get(views[k].second));
-            let mut newton = lane_distances(&views, at, params);
-            return PlannerAnswers::Single(self.answer_all(&request.queries, posed, params, mode, &mut newton));
+            let mut newton = LaneAnswers::default();
+            if enough_lane_candidates(request.queries.iter().map(|q| (q.kind, &q.options))) {
+                let views: Vec<PairRef<'_>> = request.queries.iter().map(|q| with_mode(q.view(), mode)).collect();
+                let at = |k: usize| posed.get(views[k].first).zip(posed.get(views[k].second));
+                newton = lane_distances(&views, at, params);
+            }
+            return PlannerAnswers::Single(self.answer_all(&request.queries, posed, params, mode, (&mut newton, 0)));
         }
         let mut newton = state_lane_distances(request, posed, params, mode);
-        let nq = request.queries.len();
         let mut out = Vec::with_capacity(request.states.len());
         for (s, state) in request.states.iter().enumerate() {
-            let newton = &mut newton[s * nq..(s + 1) * nq];
             let saved: Vec<(&str, Isometry3)> = state
                 .iter()
                 .filter_map(|(id, pose)| {
                     posed.get_mut(id.as_str()).map(|p| (id.as_str(), std::mem::replace(&mut p.pose, *pose)))
                 })
                 .collect();
-            out.push(self.answer_all(&request.queries, posed, params, mode, newton));
+            out.push(self.answer_all(&request.queries, posed, params, mode, (&mut newton, s * nq)));
             for (id, pose) in saved {
                 if let Some(p) = posed.get_mut(id) {
                     p.pose = pose;
@@ -432,61 +445,64 @@ impl QueryView {
     }
 
     /// The queries answered at the poses of `posed`, with Newton's answers already solved where
-    /// `newton` has them (taken from it).
+    /// `newton.0` has them (query q at index `newton.1 + q`, taken from it).
     fn answer_all(
         &mut self,
         queries: &[QueryPair],
         posed: &PosedMap<'_>,
         params: &CertifyParams,
         mode: Option<CertifyMode>,
-        newton: &mut [Option<crate::query::DistanceResult>],
+        newton: (&mut LaneAnswers, usize),
     ) -> Vec<QueryAnswer> {
+        let (newton, offset) = newton;
         queries
             .iter()
-            .zip(newton)
-            .filter_map(|(q, newton)| {
-                let (a, b) = (posed.get(q.first.as_str())?, posed.get(q.second.as_str())?);
-                let mut pair = q.view();
-                if let Some(mode) = mode {
-                    pair.options.mode = mode;
-                }
-                Some(answer_pair_with(pair, a, b, &mut self.cache, params, newton.take()))
+            .enumerate()
+            .filter_map(|(q, query)| {
+                let (a, b) = (posed.get(query.first.as_str())?, posed.get(query.second.as_str())?);
+                let pair = with_mode(query.view(), mode);
+                Some(answer_pair_with(pair, a, b, &mut self.cache, params, newton.take(offset + q)))
             })
             .collect()
     }
 }
 
+/// `pair` with its certification mode replaced by `mode` when given.
+fn with_mode(mut pair: PairRef<'_>, mode: Option<CertifyMode>) -> PairRef<'_> {
+    if let Some(mode) = mode {
+        pair.options.mode = mode;
+    }
+    pair
+}
+
 /// Newton's answers of a request's cold distance and collide queries across its candidate states
 /// from the batch solver's lanes ([`lane_distances`]: each query's pair in every state is one
 /// column of one body pair), entry `s · queries + q` for state s and query q; empty (every
-/// answer solved one by one) with fewer than [`crate::query::batch::MIN_LANE_BATCH`] states or
-/// no such query.
+/// answer solved one by one) when fewer than [`crate::query::batch::MIN_LANE_BATCH`] of them are
+/// cold distance or collide queries.
 fn state_lane_distances(
     request: &PlannerRequest,
     posed: &PosedMap<'_>,
     params: &CertifyParams,
     mode: Option<CertifyMode>,
-) -> Vec<Option<crate::query::DistanceResult>> {
-    let nq = request.queries.len();
-    let columns = |q: &QueryPair| q.options.cold && matches!(q.kind, QueryKind::Distance | QueryKind::Collide);
-    if request.states.len() < crate::query::batch::MIN_LANE_BATCH || !request.queries.iter().any(columns) {
-        return vec![None; request.states.len() * nq];
+) -> LaneAnswers {
+    let candidates = request.states.iter().flat_map(|_| request.queries.iter().map(|q| (q.kind, &q.options)));
+    if !enough_lane_candidates(candidates) {
+        return LaneAnswers::default();
     }
-    let mut views = Vec::with_capacity(request.states.len() * nq);
-    let mut snapshot: Vec<Option<(Posed, Posed)>> = Vec::with_capacity(request.states.len() * nq);
+    let n = request.states.len() * request.queries.len();
+    let (mut views, mut snapshot) = (Vec::with_capacity(n), Vec::with_capacity(n));
     for state in &request.states {
         for q in &request.queries {
-            let mut pair = q.view();
-            if let Some(mode) = mode {
-                pair.options.mode = mode;
-            }
-            views.push(pair);
+            let pair = with_mode(q.view(), mode);
             let at = |id: &str| {
                 let p = posed.get(id)?;
                 let pose = state.iter().find(|(s, _)| s == id).map_or(p.pose, |(_, pose)| *pose);
                 Some(Posed { body: p.body.clone(), tree: p.tree.clone(), pose })
             };
-            snapshot.push(if columns(q) { at(&q.first).zip(at(&q.second)) } else { None });
+            let lanes = lane_candidate(pair.kind, &pair.options);
+            snapshot.push(if lanes { at(&q.first).zip(at(&q.second)) } else { None });
+            views.push(pair);
         }
     }
     lane_distances(&views, |k| snapshot[k].as_ref().map(|(a, b)| (a, b)), params)
@@ -621,15 +637,15 @@ pub fn check_scene(
         })
         .collect();
     let views: Vec<PairRef<'_>> = queries.iter().map(QueryPair::view).collect();
-    let newton = lane_distances(&views, |k| Some((&posed_pairs[k].0, &posed_pairs[k].1)), &params);
-    for ((pair, (pa, pb)), newton) in views.into_iter().zip(&posed_pairs).zip(newton) {
+    let mut newton = lane_distances(&views, |k| Some((&posed_pairs[k].0, &posed_pairs[k].1)), &params);
+    for (k, (pair, (pa, pb))) in views.into_iter().zip(&posed_pairs).enumerate() {
         // An abandoned request (deadline passed) stops here, see `Catalog::batch`.
         crate::fit::cancel::check()?;
         out.narrow_phase_solves += 1;
         let d = if super::compound_pairs::is_compound_pair(pa, pb) {
             super::compound_pairs::distance_reply(pair, pa, pb, &mut scratch, &params)
         } else {
-            distance_reply(pair, pa, pb, &mut scratch, &params, newton)
+            distance_reply(pair, pa, pb, &mut scratch, &params, newton.take(k))
         };
         let r = &d.answer.result;
         if r.overlapping || r.distance < margin {

@@ -375,14 +375,14 @@ impl Catalog {
             &params,
         );
         let mut answers = Vec::with_capacity(pairs.len());
-        for (p, newton) in pairs.iter().zip(newton.iter_mut()) {
+        for (k, p) in pairs.iter().enumerate() {
             if crate::fit::cancel::is_cancelled() {
                 // The caller abandoned the request (its deadline passed): stop before the next
                 // pair and leave the warm starts as they were.
                 return Err(Error::Cancelled(format!("query of scene `{scene_id}` abandoned by its caller")));
             }
             let (a, b) = (&posed_by_id[p.first], &posed_by_id[p.second]);
-            answers.push(planner::answer_pair_with(*p, a, b, &mut scratch, &params, newton.take()));
+            answers.push(planner::answer_pair_with(*p, a, b, &mut scratch, &params, newton.take(k)));
         }
         if !scratch.is_empty() && !answers.iter().any(QueryAnswer::needs_sdp) {
             let mut s = lock(&scene);
