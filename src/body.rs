@@ -576,9 +576,10 @@ impl<'a> PosedBody<'a> {
         self.a * x + self.b
     }
 
-    /// World point of normalized coordinates.
+    /// World point of normalized coordinates (through [`Self::to_world`]'s matrix form).
+    #[inline]
     pub fn from_normalized(&self, u: &Vector3) -> Vector3 {
-        self.pose.rotation * (self.body.center + u * self.body.scale) + self.pose.translation.vector
+        self.to_world(&(self.body.center + u * self.body.scale))
     }
 
     /// p'(x) = p(A x + b) at a world point.
