@@ -93,5 +93,90 @@ async fn main() -> Result<(), Box<dyn std::error::Error>> {
             x, da.distance, ga.value, ds.converged, ds.iterations, ds.kkt_residual, ds.warm_started
         );
     }
+    candidate_states(&mut client, &scene.scene_id, &chair.instance_id, &human.instance_id, human_x).await
+}
+
+/// A sampling planner's batch: 256 candidate states of the chair (uniform rotations, positions in
+/// a 5 m cube around the human) checked in one Query with the distance solved cold (four states
+/// per SIMD pass on the server), sent twice: the states as one array of numbers with the answers
+/// in one set of columns (`state_columns`), and the states as messages (`states`). Prints the
+/// median round trip of each over 21 calls and how many states collide.
+async fn candidate_states(
+    client: &mut SublevelClient<tonic::transport::Channel>,
+    scene_id: &str,
+    chair: &str,
+    human: &str,
+    human_x: f64,
+) -> Result<(), Box<dyn std::error::Error>> {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    let n = 256;
+    let mut numbers = Vec::with_capacity(7 * n);
+    for _ in 0..n {
+        let q: [f64; 4] = std::array::from_fn(|_| rng.random_range(-1.0..1.0));
+        let norm = q.iter().map(|v| v * v).sum::<f64>().sqrt();
+        numbers.extend(q.iter().map(|v| v / norm));
+        numbers.extend([
+            human_x + rng.random_range(-2.5..2.5),
+            rng.random_range(-2.5..2.5),
+            rng.random_range(-2.5..2.5),
+        ]);
+    }
+    let columns = pb::PairColumns {
+        kind: pb::QueryKind::Distance as i32,
+        instance_ids: vec![chair.to_owned(), human.to_owned()],
+        first: vec![0],
+        second: vec![1],
+        margin: 0.0,
+        cold: true,
+    };
+    let packed = pb::QueryRequest {
+        scene_id: scene_id.to_owned(),
+        columns: Some(columns),
+        state_columns: Some(pb::StateColumns { instance_ids: vec![chair.to_owned()], poses: numbers.clone() }),
+        ..Default::default()
+    };
+    let messages = pb::QueryRequest {
+        state_columns: None,
+        states: numbers
+            .chunks_exact(7)
+            .map(|v| pb::CandidateState {
+                poses: vec![pb::InstancePose {
+                    instance_id: chair.to_owned(),
+                    pose: Some(pb::Pose {
+                        rotation: Some(pb::Quaternion { w: v[0], x: v[1], y: v[2], z: v[3] }),
+                        translation: Some(pb::Vec3 { x: v[4], y: v[5], z: v[6] }),
+                    }),
+                }],
+            })
+            .collect(),
+        ..packed.clone()
+    };
+    println!(
+        "
+{n} candidate states of the chair in one Query (cold distance to the human):"
+    );
+    for (name, request) in
+        [("states as one array (state_columns)", &packed), ("states as messages (states)", &messages)]
+    {
+        let mut times = Vec::new();
+        let mut colliding = 0;
+        for _ in 0..21 {
+            let start = std::time::Instant::now();
+            let r = client.query(scene_request(scene_id, request.clone())).await?.into_inner();
+            times.push(start.elapsed().as_secs_f64());
+            colliding = match &r.columns {
+                Some(c) => c.overlapping.iter().filter(|&&o| o).count(),
+                None => r.states.iter().filter(|s| s.columns.as_ref().is_some_and(|c| c.overlapping[0])).count(),
+            };
+        }
+        times.sort_by(f64::total_cmp);
+        let median = times[times.len() / 2];
+        println!(
+            "  {name:<38} {:>7.3} ms median ({:>5.2} µs per state), {colliding} states collide",
+            median * 1e3,
+            median * 1e6 / n as f64
+        );
+    }
     Ok(())
 }

@@ -260,6 +260,9 @@ pub struct PlannerRequest {
     /// Candidate states: when non-empty, the queries are answered once per state, with the
     /// state's poses on top of the view.
     pub states: Vec<Vec<(String, Isometry3)>>,
+    /// The states came in columns (`QueryRequest.state_columns`): every state poses the same
+    /// instances, in the same order, and an unknown one is named `state_columns.instance_ids[k]`.
+    pub state_columns: bool,
 }
 
 /// The answers of a [`PlannerRequest`]: one list of answers, or one per candidate state.
@@ -283,11 +286,23 @@ pub struct QueryView {
     cache: WarmStartCache,
 }
 
-fn check_unique(field: &str, poses: &[(String, Isometry3)]) -> Result<()> {
+fn check_unique(field: impl Fn() -> String, poses: &[(String, Isometry3)]) -> Result<()> {
+    let repeated = |k: usize, id: &str| {
+        Err(Error::invalid(format!("{}[{k}].instance_id", field()), format!("instance `{id}` appears twice")))
+    };
+    // A state poses a few instances: pairwise comparison, no set (nor field name) per state.
+    if poses.len() <= 16 {
+        for (k, (id, _)) in poses.iter().enumerate() {
+            if poses[..k].iter().any(|(p, _)| p == id) {
+                return repeated(k, id);
+            }
+        }
+        return Ok(());
+    }
     let mut seen = std::collections::HashSet::new();
     for (k, (id, _)) in poses.iter().enumerate() {
         if !seen.insert(id.as_str()) {
-            return Err(Error::invalid(format!("{field}[{k}].instance_id"), format!("instance `{id}` appears twice")));
+            return repeated(k, id);
         }
     }
     Ok(())
@@ -340,12 +355,28 @@ impl QueryView {
         request: &PlannerRequest,
         newton_only: bool,
     ) -> Result<Option<PlannerAnswers>> {
-        check_unique("poses", &request.poses)?;
+        check_unique(|| "poses".into(), &request.poses)?;
         for (s, state) in request.states.iter().enumerate() {
-            check_unique(&format!("states[{s}].poses"), state)?;
+            if request.state_columns {
+                // The first state's instances, in order, and no others (the columns' contract).
+                let first = &request.states[0];
+                if s > 0 && (state.len() != first.len() || state.iter().zip(first).any(|(a, b)| a.0 != b.0)) {
+                    return Err(Error::invalid(
+                        format!("states[{s}]"),
+                        "states in columns must pose the instances of the first state, in order",
+                    ));
+                }
+                if s > 0 {
+                    continue;
+                }
+            }
+            check_unique(|| format!("states[{s}].poses"), state)?;
         }
         let mut ids: Vec<&str> = request.poses.iter().map(|(id, _)| id.as_str()).collect();
-        ids.extend(request.states.iter().flatten().map(|(id, _)| id.as_str()));
+        // States in columns all pose the instances of the first.
+        let states =
+            if request.state_columns { &request.states[..request.states.len().min(1)] } else { &request.states };
+        ids.extend(states.iter().flatten().map(|(id, _)| id.as_str()));
         ids.extend(request.queries.iter().flat_map(|q| [q.first.as_str(), q.second.as_str()]));
         ids.sort_unstable();
         ids.dedup();
@@ -358,7 +389,12 @@ impl QueryView {
                     .map(|k| format!("poses[{k}].instance_id"))
                     .or_else(|| {
                         request.states.iter().enumerate().find_map(|(s, st)| {
-                            st.iter().position(|(p, _)| *p == id).map(|k| format!("states[{s}].poses[{k}].instance_id"))
+                            let k = st.iter().position(|(p, _)| *p == id)?;
+                            Some(if request.state_columns {
+                                format!("state_columns.instance_ids[{k}]")
+                            } else {
+                                format!("states[{s}].poses[{k}].instance_id")
+                            })
                         })
                     });
                 match field {
@@ -427,15 +463,14 @@ impl QueryView {
         }
         let mut newton = state_lane_distances(request, posed, params, mode);
         let mut out = Vec::with_capacity(request.states.len());
+        // The view's poses a state replaces, restored after it (one buffer for all states).
+        let mut saved: Vec<(&str, Isometry3)> = Vec::new();
         for (s, state) in request.states.iter().enumerate() {
-            let saved: Vec<(&str, Isometry3)> = state
-                .iter()
-                .filter_map(|(id, pose)| {
-                    posed.get_mut(id.as_str()).map(|p| (id.as_str(), std::mem::replace(&mut p.pose, *pose)))
-                })
-                .collect();
+            saved.extend(state.iter().filter_map(|(id, pose)| {
+                posed.get_mut(id.as_str()).map(|p| (id.as_str(), std::mem::replace(&mut p.pose, *pose)))
+            }));
             out.push(self.answer_all(&request.queries, posed, params, mode, (&mut newton, s * nq)));
-            for (id, pose) in saved {
+            for (id, pose) in saved.drain(..) {
                 if let Some(p) = posed.get_mut(id) {
                     p.pose = pose;
                 }
@@ -555,7 +590,7 @@ pub fn check_scene(
     if !(margin.is_finite() && margin >= 0.0) {
         return Err(Error::invalid("margin", format!("must be finite and >= 0 meters, got {margin}")));
     }
-    check_unique("poses", overrides)?;
+    check_unique(|| "poses".into(), overrides)?;
     let mut all = catalog.posed_instances(scene_id, &[])?;
     let index: HashMap<String, usize> = all.iter().enumerate().map(|(k, i)| (i.id.clone(), k)).collect();
     for (k, (id, pose)) in overrides.iter().enumerate() {

@@ -163,7 +163,10 @@ impl QueryStreamState {
         let (back, answers) = run_view(self.catalog.clone(), &self.sdp, current, planner).await;
         self.view = Some(back);
         let columns = cv::columns_kind(&req);
-        answers.map(|a| cv::planner_answers_to_proto(&a, req.request_id, start.elapsed().as_secs_f64(), columns))
+        let state_columns = req.state_columns.is_some();
+        answers.map(|a| {
+            cv::planner_answers_to_proto(&a, req.request_id, start.elapsed().as_secs_f64(), columns, state_columns)
+        })
     }
 }
 
@@ -634,6 +637,7 @@ impl Sublevel for SublevelService {
             req.request_id,
             start.elapsed().as_secs_f64(),
             columns,
+            req.state_columns.is_some(),
         )))
     }
 

@@ -249,6 +249,123 @@ async fn cold_candidate_states_match_the_closed_form() {
     server.stop().await;
 }
 
+/// Candidate states in columns (`QueryRequest.state_columns`): 16 states posing two small spheres
+/// around a big one, three cold pairs each, answered in one `AnswerColumns` (row s·3 + k) that
+/// matches the closed form ‖c₁ − c₂‖ − r₁ − r₂ (0 when overlapping) and the same request sent as
+/// `states`; with `queries`, one StateAnswers per state. Bad columns are refused naming the field.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn state_columns_match_the_closed_form_and_the_states_form() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(config(dir.path())).await;
+    let mut c = server.client().await;
+    let big = upload_sphere(&mut c, "r05", [0.0; 3], 0.5).await;
+    let small = upload_sphere(&mut c, "r025", [0.0; 3], 0.25).await;
+    let scene = c.create_scene(pb::CreateSceneRequest { name: "sc".into() }).await.unwrap().into_inner().scene_id;
+    let b = add(&mut c, &scene, &big, at([0.0; 3])).await;
+    let s1 = add(&mut c, &scene, &small, at([3.0, 0.0, 0.0])).await;
+    let s2 = add(&mut c, &scene, &small, at([0.0, 3.0, 0.0])).await;
+    // State k: s1 on a line through the big sphere, s2 on a circle around it (a rotated pose: the
+    // answers must not depend on the spheres' orientation).
+    let states: Vec<([f64; 3], [f64; 3])> = (0..16)
+        .map(|k| {
+            let t = k as f64;
+            ([0.2 + 0.12 * t, 0.1, -0.05 * t], [1.1 * (0.4 * t).cos(), 1.1 * (0.4 * t).sin(), 0.3])
+        })
+        .collect();
+    let h = std::f64::consts::FRAC_1_SQRT_2;
+    let mut numbers = Vec::new();
+    for (x1, x2) in &states {
+        numbers.extend_from_slice(&[1.0, 0.0, 0.0, 0.0, x1[0], x1[1], x1[2]]);
+        numbers.extend_from_slice(&[h, 0.0, h, 0.0, x2[0], x2[1], x2[2]]);
+    }
+    let packed = pb::StateColumns { instance_ids: vec![s1.clone(), s2.clone()], poses: numbers };
+    let ids = vec![b.clone(), s1.clone(), s2.clone()];
+    let columns = pb::PairColumns {
+        kind: pb::QueryKind::Distance as i32,
+        instance_ids: ids,
+        first: vec![0, 0, 1],
+        second: vec![1, 2, 2],
+        margin: 0.0,
+        cold: true,
+    };
+    let req = pb::QueryRequest {
+        scene_id: scene.clone(),
+        columns: Some(columns.clone()),
+        state_columns: Some(packed.clone()),
+        ..Default::default()
+    };
+    let r = c.query(req.clone()).await.unwrap().into_inner();
+    assert!(r.states.is_empty() && r.answers.is_empty());
+    let cols = r.columns.unwrap();
+    assert_eq!(cols.value.len(), 3 * states.len());
+    let norm =
+        |a: [f64; 3], b: [f64; 3]| ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt();
+    let mut overlapping = 0;
+    for (s, (x1, x2)) in states.iter().enumerate() {
+        let gaps = [norm(*x1, [0.0; 3]) - 0.75, norm(*x2, [0.0; 3]) - 0.75, norm(*x1, *x2) - 0.5];
+        for (k, gap) in gaps.into_iter().enumerate() {
+            let row = 3 * s + k;
+            assert!(cols.converged[row], "state {s}, pair {k}");
+            assert!((cols.value[row] - gap.max(0.0)).abs() < 1e-9, "state {s}, pair {k}: {} vs {gap}", cols.value[row]);
+            assert_eq!(cols.overlapping[row], gap <= 0.0, "state {s}, pair {k}");
+            overlapping += usize::from(gap <= 0.0);
+        }
+    }
+    assert!(overlapping > 0 && overlapping < 3 * states.len(), "the states must cross contact: {overlapping}");
+    // The same states as messages: the same answers, state by state.
+    let as_states: Vec<pb::CandidateState> = states
+        .iter()
+        .map(|(x1, x2)| pb::CandidateState {
+            poses: vec![
+                pose_of(&s1, *x1),
+                pb::InstancePose {
+                    instance_id: s2.clone(),
+                    pose: Some(pb::Pose {
+                        rotation: Some(pb::Quaternion { w: h, x: 0.0, y: h, z: 0.0 }),
+                        translation: Some(pb::Vec3 { x: x2[0], y: x2[1], z: x2[2] }),
+                    }),
+                },
+            ],
+        })
+        .collect();
+    let messages = pb::QueryRequest { state_columns: None, states: as_states, ..req.clone() };
+    let per_state = c.query(messages).await.unwrap().into_inner().states;
+    for (s, st) in per_state.iter().enumerate() {
+        let sc = st.columns.as_ref().unwrap();
+        for k in 0..3 {
+            assert!((sc.value[k] - cols.value[3 * s + k]).abs() < 1e-12, "state {s}, pair {k}");
+        }
+    }
+    // With queries instead of columns: one StateAnswers per state.
+    let with_queries = pb::QueryRequest {
+        columns: None,
+        queries: vec![q(pb::QueryKind::Distance, &b, &s1), collide(&s1, &s2, 0.1)],
+        ..req.clone()
+    };
+    let r = c.query(with_queries).await.unwrap().into_inner();
+    assert_eq!(r.states.len(), states.len());
+    for (st, (x1, x2)) in r.states.iter().zip(&states) {
+        let gap = norm(*x1, [0.0; 3]) - 0.75;
+        assert!((distance_of(&st.answers[0]).distance - gap.max(0.0)).abs() < 1e-9);
+        assert_eq!(st.any_collision, norm(*x1, *x2) - 0.5 < 0.1);
+    }
+    // Refused, naming the field.
+    let refused =
+        |state_columns: pb::StateColumns| pb::QueryRequest { state_columns: Some(state_columns), ..req.clone() };
+    let short = pb::StateColumns { poses: packed.poses[..20].to_vec(), ..packed.clone() };
+    assert_status(c.query(refused(short)).await, Code::InvalidArgument, "state_columns.poses");
+    let repeated = pb::StateColumns { instance_ids: vec![s1.clone(), s1.clone()], ..packed.clone() };
+    assert_status(c.query(refused(repeated)).await, Code::InvalidArgument, "state_columns.instance_ids[1]");
+    let mut unnormed = packed.clone();
+    unnormed.poses[7 * 5] = 2.0;
+    assert_status(c.query(refused(unnormed)).await, Code::InvalidArgument, "state_columns.poses[35] (state 2");
+    let unknown = pb::StateColumns { instance_ids: vec![s1.clone(), "nope".into()], ..packed.clone() };
+    assert_status(c.query(refused(unknown)).await, Code::InvalidArgument, "state_columns.instance_ids[1]");
+    let both = pb::QueryRequest { states: vec![pb::CandidateState::default()], ..req.clone() };
+    assert_status(c.query(both).await, Code::InvalidArgument, "state_columns");
+    server.stop().await;
+}
+
 /// A cold BatchQuery in columns (`PairColumns.cold`): twelve pairs of the same two bodies, solved
 /// four per SIMD pass, each the closed form ‖c₁ − c₂‖ − r₁ − r₂ (0 when overlapping), and no warm
 /// start left behind (the next warm query of a pair starts cold).

@@ -14,7 +14,8 @@ back), warm (the pair's warm start, the same poses: no Newton step) and cold (ev
 scratch, four pairs per SIMD pass); a sampling planner's check of 256 candidate states (the chair at random poses around the
 human, as in ``sublevel bench``'s cold queries) in one Query, with the distance query cold (the
 server then solves four states per SIMD pass) and not cold (each state warm-started from the one
-before).
+before); the same 256 states as one array of poses, answers in one set of columns
+(``Client.query_state_columns``), cold and warm.
 """
 
 from __future__ import annotations
@@ -98,6 +99,11 @@ def main() -> None:
         queries = [Query.distance(a, b, cold=cold)]
         name = f"Query, 256 states x 1 distance, {'cold' if cold else 'warm from the last state'}"
         row(name, lambda q=queries: c.query(scene, queries=q, states=states), 256)
+    # The same states as one array both ways (QueryRequest.state_columns: no message per state).
+    packed = np.array([[[*s[a].quat, *s[a].t]] for s in states])
+    for cold in (True, False):
+        name = f"Query, 256 states as one array, {'cold' if cold else 'warm'}"
+        row(name, lambda cold=cold: c.query_state_columns(scene, "distance", [a], [b], [a], packed, cold=cold), 256)
     c.set_poses(scene, {b: pose})  # leave the demo scene as it was
 
     print(f"{args.repeats} calls each against {args.addr} (Python client, one connection)")

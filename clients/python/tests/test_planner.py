@@ -194,6 +194,33 @@ def test_stream_columns_follow_the_view_and_states(client, balls):
         assert abs(s.check_columns("distance", [a], [b]).value[0] - (2.5 - R1 - R2)) < 1e-8
 
 
+def test_state_columns_match_the_closed_form(client, balls):
+    """Candidate states as one array (QueryRequest.state_columns), answers in one AnswerColumns of
+    S x P rows: every state's distance is the closed form |c_a - c_b| - R1 - R2 (0 where the balls
+    overlap), over a stream and unary; a badly shaped array is refused before sending."""
+    scene, a, b = balls
+    centers = np.array([(0.5 + 0.1 * k, 0.05 * (k % 3), -0.1) for k in range(16)])
+    state_poses = np.zeros((len(centers), 1, 7))
+    state_poses[:, 0, 0] = 1.0  # identity rotation
+    state_poses[:, 0, 4:] = centers
+    gaps = np.linalg.norm(centers, axis=1) - R1 - R2
+    assert (gaps <= 0).any() and (gaps > 0).any()
+    with client.stream(scene) as s:
+        streamed = s.check_state_columns("distance", [a, b], [b, a], [b], state_poses, cold=True)
+    unary = client.query_state_columns(scene, "distance", [a, b], [b, a], [b], state_poses[:, 0, :])
+    for cols in (streamed, unary):
+        assert len(cols) == 2 * len(centers)
+        value = cols.value.reshape(len(centers), 2)
+        assert cols.converged.all()
+        np.testing.assert_allclose(value, np.stack([np.maximum(gaps, 0.0)] * 2, axis=1), atol=1e-8)
+        np.testing.assert_array_equal(cols.overlapping.reshape(-1, 2)[:, 0], gaps <= 0)
+    with pytest.raises(ValueError, match="poses"):
+        client.query_state_columns(scene, "distance", [a], [b], [a, b], state_poses)
+    with pytest.raises(SublevelError) as e:
+        client.query_state_columns(scene, "distance", [a], [b], ["no such instance"], state_poses)
+    assert e.value.code == grpc.StatusCode.INVALID_ARGUMENT and "state_columns.instance_ids[0]" in str(e.value)
+
+
 def test_cold_states_in_columns_match_the_closed_form(client, balls):
     """Cold pairs across many candidate states (solved four states per SIMD pass on the server):
     every state's distance is the closed form |c_a - c_b| - R1 - R2, 0 where the balls overlap."""

@@ -118,7 +118,7 @@ pub(super) fn in_process(args: &LoadtestArgs, layout: &Layout, seconds: Duration
                 let request = PlannerRequest {
                     poses: vec![(local.chair.clone(), isometry(&chair_pose(0, 1, step))?)],
                     queries: queries.clone(),
-                    states: Vec::new(),
+                    ..PlannerRequest::default()
                 };
                 pairs += match view.run(catalog, &request)? {
                     sublevel::scene::planner::PlannerAnswers::Single(a) => a.len() as u64,

@@ -4,7 +4,7 @@
 use super::queries::{answer_to_proto, distance_reply_to_proto, query_options};
 use super::scenes::poses_from_proto;
 use super::{prefix_field, require_id, MAX_ID_BYTES};
-use crate::math::Real;
+use crate::math::{pose_from_parts, Isometry3, Real};
 use crate::scene::{QueryAnswer, QueryKind, QueryOptions};
 use crate::service::pb;
 use crate::{Error, Result};
@@ -79,7 +79,15 @@ pub fn pair_columns_from_proto(c: &pb::PairColumns, max_pairs: usize) -> Result<
 /// Answers of a columns request as `AnswerColumns`: one entry per answer in every column (three
 /// for points), `decided_by_bounds` for COLLIDE only.
 pub fn answers_to_columns(kind: QueryKind, answers: &[QueryAnswer]) -> pb::AnswerColumns {
-    let n = answers.len();
+    rows_to_columns(kind, answers.len(), answers.iter())
+}
+
+/// [`answers_to_columns`] of the `n` answers `answers` (rows in order; iterated twice).
+fn rows_to_columns<'a>(
+    kind: QueryKind,
+    n: usize,
+    answers: impl Iterator<Item = &'a QueryAnswer> + Clone,
+) -> pb::AnswerColumns {
     let mut c = pb::AnswerColumns {
         kind: match kind {
             QueryKind::Distance => pb::QueryKind::Distance,
@@ -101,7 +109,7 @@ pub fn answers_to_columns(kind: QueryKind, answers: &[QueryAnswer]) -> pb::Answe
         QueryAnswer::Growth(g) => g.tree,
         QueryAnswer::Collide(c) => c.tree,
     };
-    let any_tree = answers.iter().any(|a| tree_of(a).is_some());
+    let any_tree = answers.clone().any(|a| tree_of(a).is_some());
     let nan = [Real::NAN; 3];
     for a in answers {
         let (value, pa, pb_, converged, overlapping, lower_bound) = match a {
@@ -163,35 +171,50 @@ pub fn planner_request_from_proto(
     max_answers: usize,
     max_poses: usize,
 ) -> Result<crate::scene::planner::PlannerRequest> {
-    let answers = req.queries.len().saturating_mul(req.states.len().max(1));
+    let (state_count, state_poses) = match &req.state_columns {
+        Some(c) => {
+            if !req.states.is_empty() {
+                return Err(Error::invalid("state_columns", "set either `states` or `state_columns`, not both"));
+            }
+            let n = c.instance_ids.len().max(1);
+            (c.poses.len() / (7 * n), c.poses.len() / 7)
+        }
+        None => (req.states.len(), req.states.iter().map(|s| s.poses.len()).sum::<usize>()),
+    };
+    let states_field = if req.state_columns.is_some() { "state_columns" } else { "states" };
+    let answers = req.queries.len().saturating_mul(state_count.max(1));
     if answers > max_answers {
         return Err(Error::ResourceExhausted(format!(
-            "`queries` × `states`: {} × {} = {answers} answers exceed the limit of {max_answers}",
+            "`queries` × `{states_field}`: {} × {} = {answers} answers exceed the limit of {max_answers}",
             req.queries.len(),
-            req.states.len().max(1)
+            state_count.max(1)
         )));
     }
-    let total_poses = req.poses.len() + req.states.iter().map(|s| s.poses.len()).sum::<usize>();
+    let total_poses = req.poses.len() + state_poses;
     if total_poses > max_poses {
         return Err(Error::ResourceExhausted(format!("{total_poses} poses in all exceed the limit of {max_poses}")));
     }
     let poses = poses_from_proto(&req.poses, max_poses)?;
-    let states = req
-        .states
-        .iter()
-        .enumerate()
-        .map(|(s, st)| poses_from_proto(&st.poses, max_poses).map_err(|e| prefix_field(e, &format!("states[{s}]"))))
-        .collect::<Result<Vec<_>>>()?;
+    let states = match &req.state_columns {
+        Some(c) => state_columns_from_proto(c)?,
+        None => req
+            .states
+            .iter()
+            .enumerate()
+            .map(|(s, st)| poses_from_proto(&st.poses, max_poses).map_err(|e| prefix_field(e, &format!("states[{s}]"))))
+            .collect::<Result<Vec<_>>>()?,
+    };
+    let state_columns = req.state_columns.is_some();
     if let Some(columns) = &req.columns {
         if !req.queries.is_empty() {
             return Err(Error::invalid("columns", "set either `queries` or `columns`, not both"));
         }
         let c = pair_columns_from_proto(columns, max_answers)?;
-        if c.first.len().saturating_mul(req.states.len().max(1)) > max_answers {
+        if c.first.len().saturating_mul(state_count.max(1)) > max_answers {
             return Err(Error::ResourceExhausted(format!(
-                "`columns` × `states`: {} × {} answers exceed the limit of {max_answers}",
+                "`columns` × `{states_field}`: {} × {} answers exceed the limit of {max_answers}",
                 c.first.len(),
-                req.states.len().max(1)
+                state_count.max(1)
             )));
         }
         let queries = c
@@ -206,7 +229,7 @@ pub fn planner_request_from_proto(
                 margin: c.margin,
             })
             .collect();
-        return Ok(crate::scene::planner::PlannerRequest { poses, queries, states });
+        return Ok(crate::scene::planner::PlannerRequest { poses, queries, states, state_columns });
     }
     let queries = req
         .queries
@@ -241,24 +264,81 @@ pub fn planner_request_from_proto(
             })
         })
         .collect::<Result<Vec<_>>>()?;
-    Ok(crate::scene::planner::PlannerRequest { poses, queries, states })
+    Ok(crate::scene::planner::PlannerRequest { poses, queries, states, state_columns })
+}
+
+/// The candidate states of `QueryRequest.state_columns`, validated (the limits on states and
+/// poses are checked by the caller).
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `state_columns.instance_ids` (none, or `[k]`: empty, too
+/// long or repeated), `state_columns.poses` (a length that is no positive multiple of 7 × the
+/// instances) or `state_columns.poses[i]` (the first entry of a pose that is not finite, off the
+/// supported range, or whose quaternion has no unit norm; with its state and instance).
+fn state_columns_from_proto(c: &pb::StateColumns) -> Result<Vec<Vec<(String, Isometry3)>>> {
+    let n = c.instance_ids.len();
+    if n == 0 {
+        return Err(Error::invalid("state_columns.instance_ids", "must name at least one instance"));
+    }
+    for (k, id) in c.instance_ids.iter().enumerate() {
+        require_id("id", id).map_err(|_| {
+            Error::invalid(format!("state_columns.instance_ids[{k}]"), format!("must be 1 to {MAX_ID_BYTES} bytes"))
+        })?;
+        if c.instance_ids[..k].contains(id) {
+            return Err(Error::invalid(format!("state_columns.instance_ids[{k}]"), format!("`{id}` is repeated")));
+        }
+    }
+    if c.poses.is_empty() || !c.poses.len().is_multiple_of(7 * n) {
+        return Err(Error::invalid(
+            "state_columns.poses",
+            format!(
+                "has {} numbers: expected a positive multiple of 7 × {n} (w, x, y, z, tx, ty, tz per instance and state)",
+                c.poses.len()
+            ),
+        ));
+    }
+    c.poses
+        .chunks_exact(7 * n)
+        .enumerate()
+        .map(|(s, state)| {
+            state
+                .chunks_exact(7)
+                .zip(&c.instance_ids)
+                .enumerate()
+                .map(|(k, (v, id))| {
+                    let parts = |field: &str| pose_from_parts(field, [v[0], v[1], v[2], v[3]], [v[4], v[5], v[6]]);
+                    // The field is named only when the pose is refused (no string per pose).
+                    let pose = parts("").or_else(|_| {
+                        parts(&format!("state_columns.poses[{}] (state {s}, instance `{id}`)", 7 * (s * n + k)))
+                    })?;
+                    Ok((id.clone(), pose))
+                })
+                .collect()
+        })
+        .collect()
 }
 
 /// The answers of a planner request as the proto response.
 ///
 /// `columns`: the request asked in columns (`QueryRequest.columns`) of this kind, so the answers
-/// go in `columns` rather than one message each.
+/// go in `columns` rather than one message each; with `state_columns` too (the states came in
+/// `QueryRequest.state_columns`), the answers of all states go in one `columns`, state-major.
 pub fn planner_answers_to_proto(
     answers: &crate::scene::planner::PlannerAnswers,
     request_id: u64,
     server_seconds: f64,
     columns: Option<QueryKind>,
+    state_columns: bool,
 ) -> pb::QueryResponse {
     use crate::scene::planner::PlannerAnswers;
     let mut out = pb::QueryResponse { request_id, server_seconds, ..Default::default() };
     match (answers, columns) {
         (PlannerAnswers::Single(a), None) => out.answers = a.iter().map(answer_to_proto).collect(),
         (PlannerAnswers::Single(a), Some(kind)) => out.columns = Some(answers_to_columns(kind, a)),
+        (PlannerAnswers::PerState(states), Some(kind)) if state_columns => {
+            let n = states.iter().map(Vec::len).sum();
+            out.columns = Some(rows_to_columns(kind, n, states.iter().flatten()));
+        }
         (PlannerAnswers::PerState(states), _) => {
             out.states = states
                 .iter()

@@ -110,6 +110,33 @@ proptest! {
     }
 
     #[test]
+    fn state_columns_are_admitted_exactly_when_every_pose_is_valid(
+        ids in prop::collection::vec("[ab]{1,2}", 0..4),
+        numbers in prop::collection::vec(prop_oneof![4 => Just(0.0), 2 => Just(1.0), 1 => any_number()], 0..60),
+    ) {
+        let columns = pb::StateColumns { instance_ids: ids.clone(), poses: numbers.clone() };
+        let req = pb::QueryRequest { state_columns: Some(columns), ..Default::default() };
+        let n = ids.len();
+        let unique = (0..n).all(|k| !ids[..k].contains(&ids[k]));
+        let shaped = n > 0 && !numbers.is_empty() && numbers.len() % (7 * n) == 0;
+        let poses_ok = shaped
+            && numbers.chunks_exact(7).all(|v| crate::math::pose_from_parts("p", [v[0], v[1], v[2], v[3]], [v[4], v[5], v[6]]).is_ok());
+        match planner_request_from_proto(&req, 1000, 1000) {
+            Ok(r) => {
+                prop_assert!(unique && poses_ok);
+                prop_assert!(r.state_columns);
+                prop_assert_eq!(r.states.len(), numbers.len() / (7 * n));
+                prop_assert!(r.states.iter().all(|s| s.iter().map(|(id, _)| id).eq(ids.iter())));
+            }
+            Err(Error::InvalidArgument { field, .. }) => {
+                prop_assert!(!(unique && poses_ok));
+                prop_assert!(field.starts_with("state_columns"), "{field}");
+            }
+            Err(other) => prop_assert!(false, "unexpected {other:?}"),
+        }
+    }
+
+    #[test]
     fn reports_with_a_non_finite_figure_are_refused_naming_it(
         volume in any_number(),
         seconds in any_number(),

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from typing import Any, Iterable, Iterator, List, Mapping, Optional, Sequence, Tuple, Union
 
 import grpc
+import numpy as np
 
 from ._pb.sublevel.v1 import sublevel_pb2 as pb
 from ._pb.sublevel.v1 import sublevel_pb2_grpc as pb_grpc
@@ -176,6 +177,23 @@ def _pair_columns(
         margin=float(margin),
         cold=bool(cold),
     )
+
+
+def _state_columns(instance_ids: Sequence[str], poses: Any) -> pb.StateColumns:
+    """``StateColumns`` of candidate states given as an array ``poses`` of shape (S, n, 7) (or
+    (S, 7) for one instance): per state and instance of ``instance_ids``, the unit quaternion w, x,
+    y, z and the translation x, y, z in meters."""
+    ids = [instance_ids] if isinstance(instance_ids, str) else list(instance_ids)
+    if not ids or not all(isinstance(i, str) for i in ids):
+        raise ValueError(f"`instance_ids`: expected one or more instance id strings, got {instance_ids!r}")
+    arr = np.asarray(poses, dtype=float)
+    if arr.ndim == 2 and len(ids) == 1:
+        arr = arr[:, None, :]
+    if arr.ndim != 3 or arr.shape[1:] != (len(ids), 7) or arr.shape[0] == 0:
+        raise ValueError(
+            f"`poses`: expected shape (states, {len(ids)}, 7) (w, x, y, z, tx, ty, tz per instance), got {arr.shape}"
+        )
+    return pb.StateColumns(instance_ids=ids, poses=arr.ravel().tolist())
 
 
 def _states(states: Optional[Iterable[PosesLike]]) -> List[pb.CandidateState]:
@@ -449,6 +467,28 @@ class Client:
         req = pb.QueryRequest(scene_id=scene, poses=_instance_poses(poses, "poses"), queries=_planner_queries(queries), states=_states(states))
         return QueryResult.from_proto(self._call("Query", req))
 
+    def query_state_columns(
+        self,
+        scene: str,
+        kind: str,
+        first: Sequence[str],
+        second: Sequence[str],
+        instance_ids: Sequence[str],
+        state_poses: Any,
+        margin: float = 0.0,
+        poses: PosesLike = None,
+        cold: bool = False,
+    ) -> AnswerColumns:
+        """:meth:`PlannerStream.check_state_columns` as one unary Query on a private view of the
+        scene (stored poses, then ``poses``): S × P rows, row s·P + k is pair k in state s."""
+        req = pb.QueryRequest(
+            scene_id=scene,
+            poses=_instance_poses(poses, "poses"),
+            columns=_pair_columns(kind, first, second, margin, cold),
+            state_columns=_state_columns(instance_ids, state_poses),
+        )
+        return QueryResult.from_proto(self._call("Query", req)).columns
+
     def check_scene(
         self,
         scene: str,
@@ -589,6 +629,32 @@ class PlannerStream:
         if states is not None:
             return [s.columns for s in r.states]
         return r.columns
+
+    def check_state_columns(
+        self,
+        kind: str,
+        first: Sequence[str],
+        second: Sequence[str],
+        instance_ids: Sequence[str],
+        state_poses: Any,
+        margin: float = 0.0,
+        poses: PosesLike = None,
+        cold: bool = False,
+    ) -> AnswerColumns:
+        """Candidate states in columns both ways (``QueryRequest.state_columns``): the pairs
+        ``(first[k], second[k])`` of one ``kind`` answered in every state, where state s poses the
+        instances ``instance_ids`` at ``state_poses[s]`` (an array of shape (S, n, 7): per instance,
+        the unit quaternion w, x, y, z and the translation x, y, z in meters) on top of the view.
+        Returns one :class:`AnswerColumns` of S × P rows, state-major: row s·P + k is pair k in
+        state s (``cols.value.reshape(S, P)``). No message per state or pose either way: the fast
+        form for a sampling planner's batch of states. ``cold``: as :meth:`check_columns`."""
+        req = pb.QueryRequest(
+            scene_id=self.scene,
+            poses=_instance_poses(poses, "poses"),
+            columns=_pair_columns(kind, first, second, margin, cold),
+            state_columns=_state_columns(instance_ids, state_poses),
+        )
+        return self._send(req).columns
 
     def check(self, poses: PosesLike = None, queries: Iterable[Any] = ()) -> List[Answer]:
         """Applies ``poses`` ``{instance_id: pose}`` to the stream's view, then answers
