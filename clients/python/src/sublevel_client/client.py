@@ -196,6 +196,19 @@ def _state_columns(instance_ids: Sequence[str], poses: Any) -> pb.StateColumns:
     return pb.StateColumns(instance_ids=ids, poses=arr.ravel().tolist())
 
 
+def _state_columns_query(
+    scene: str, kind: str, first: Sequence[str], second: Sequence[str], instance_ids: Sequence[str], state_poses: Any,
+    margin: float = 0.0, poses: PosesLike = None, cold: bool = False,
+) -> pb.QueryRequest:
+    """The ``QueryRequest`` of :meth:`PlannerStream.check_state_columns` (same arguments)."""
+    return pb.QueryRequest(
+        scene_id=scene,
+        poses=_instance_poses(poses, "poses"),
+        columns=_pair_columns(kind, first, second, margin, cold),
+        state_columns=_state_columns(instance_ids, state_poses),
+    )
+
+
 def _states(states: Optional[Iterable[PosesLike]]) -> List[pb.CandidateState]:
     if states is None:
         return []
@@ -467,26 +480,11 @@ class Client:
         req = pb.QueryRequest(scene_id=scene, poses=_instance_poses(poses, "poses"), queries=_planner_queries(queries), states=_states(states))
         return QueryResult.from_proto(self._call("Query", req))
 
-    def query_state_columns(
-        self,
-        scene: str,
-        kind: str,
-        first: Sequence[str],
-        second: Sequence[str],
-        instance_ids: Sequence[str],
-        state_poses: Any,
-        margin: float = 0.0,
-        poses: PosesLike = None,
-        cold: bool = False,
-    ) -> AnswerColumns:
-        """:meth:`PlannerStream.check_state_columns` as one unary Query on a private view of the
-        scene (stored poses, then ``poses``): S × P rows, row s·P + k is pair k in state s."""
-        req = pb.QueryRequest(
-            scene_id=scene,
-            poses=_instance_poses(poses, "poses"),
-            columns=_pair_columns(kind, first, second, margin, cold),
-            state_columns=_state_columns(instance_ids, state_poses),
-        )
+    def query_state_columns(self, scene: str, *args: Any, **kwargs: Any) -> AnswerColumns:
+        """:meth:`PlannerStream.check_state_columns` (same arguments after ``scene``) as one unary
+        Query on a private view of the scene (stored poses, then ``poses``): S × P rows, row
+        s·P + k is pair k in state s."""
+        req = _state_columns_query(scene, *args, **kwargs)
         return QueryResult.from_proto(self._call("Query", req)).columns
 
     def check_scene(
@@ -648,12 +646,7 @@ class PlannerStream:
         Returns one :class:`AnswerColumns` of S × P rows, state-major: row s·P + k is pair k in
         state s (``cols.value.reshape(S, P)``). No message per state or pose either way: the fast
         form for a sampling planner's batch of states. ``cold``: as :meth:`check_columns`."""
-        req = pb.QueryRequest(
-            scene_id=self.scene,
-            poses=_instance_poses(poses, "poses"),
-            columns=_pair_columns(kind, first, second, margin, cold),
-            state_columns=_state_columns(instance_ids, state_poses),
-        )
+        req = _state_columns_query(self.scene, kind, first, second, instance_ids, state_poses, margin, poses, cold)
         return self._send(req).columns
 
     def check(self, poses: PosesLike = None, queries: Iterable[Any] = ()) -> List[Answer]:
