@@ -196,7 +196,7 @@ pub fn planner_request_from_proto(
     }
     let poses = poses_from_proto(&req.poses, max_poses)?;
     let states = match &req.state_columns {
-        Some(c) => state_columns_from_proto(c)?,
+        Some(c) => state_columns_from_proto(c, max_poses)?,
         None => req
             .states
             .iter()
@@ -274,17 +274,24 @@ pub fn planner_request_from_proto(
 /// [`Error::InvalidArgument`] naming `state_columns.instance_ids` (none, or `[k]`: empty, too
 /// long or repeated), `state_columns.poses` (a length that is no positive multiple of 7 × the
 /// instances) or `state_columns.poses[i]` (the first entry of a pose that is not finite, off the
-/// supported range, or whose quaternion has no unit norm; with its state and instance).
-fn state_columns_from_proto(c: &pb::StateColumns) -> Result<Vec<Vec<(String, Isometry3)>>> {
+/// supported range, or whose quaternion has no unit norm; with its state and instance);
+/// [`Error::ResourceExhausted`] for more than `max_poses` instance ids.
+fn state_columns_from_proto(c: &pb::StateColumns, max_poses: usize) -> Result<Vec<Vec<(String, Isometry3)>>> {
     let n = c.instance_ids.len();
     if n == 0 {
         return Err(Error::invalid("state_columns.instance_ids", "must name at least one instance"));
     }
+    if n > max_poses {
+        return Err(Error::ResourceExhausted(format!(
+            "`state_columns.instance_ids`: {n} entries exceed the limit of {max_poses}"
+        )));
+    }
+    let mut seen = std::collections::HashSet::with_capacity(n);
     for (k, id) in c.instance_ids.iter().enumerate() {
         require_id("id", id).map_err(|_| {
             Error::invalid(format!("state_columns.instance_ids[{k}]"), format!("must be 1 to {MAX_ID_BYTES} bytes"))
         })?;
-        if c.instance_ids[..k].contains(id) {
+        if !seen.insert(id.as_str()) {
             return Err(Error::invalid(format!("state_columns.instance_ids[{k}]"), format!("`{id}` is repeated")));
         }
     }
