@@ -357,18 +357,16 @@ impl QueryView {
     ) -> Result<Option<PlannerAnswers>> {
         check_unique(|| "poses".into(), &request.poses)?;
         for (s, state) in request.states.iter().enumerate() {
-            if request.state_columns {
-                // The first state's instances, in order, and no others (the columns' contract).
+            // States in columns pose the first state's instances, in order, and no others.
+            if request.state_columns && s > 0 {
                 let first = &request.states[0];
-                if s > 0 && (state.len() != first.len() || state.iter().zip(first).any(|(a, b)| a.0 != b.0)) {
+                if state.len() != first.len() || state.iter().zip(first).any(|(a, b)| a.0 != b.0) {
                     return Err(Error::invalid(
                         format!("states[{s}]"),
                         "states in columns must pose the instances of the first state, in order",
                     ));
                 }
-                if s > 0 {
-                    continue;
-                }
+                continue;
             }
             check_unique(|| format!("states[{s}].poses"), state)?;
         }
