@@ -104,6 +104,7 @@ impl DistanceWarmStart {
     /// Start (witness on A in A's frame, witness on B in B's frame, multipliers) after the
     /// relative-pose step `step` from this answer: extrapolated along the motion from the earlier
     /// answers ([`MotionTrail::predict`]), else the last answer.
+    #[inline]
     fn predict(&self, step: &[Real; 6]) -> (Vector3, Vector3, [Real; 2]) {
         if self.trail.is_empty() {
             return (self.a_local, self.b_local, self.multipliers);
@@ -120,11 +121,22 @@ const TOUCH_GROWTH_TOLERANCE: Real = 1e-9;
 /// growth-first path follows when it does not converge).
 pub(super) const SPECULATIVE_ITERATIONS: usize = 30;
 
-/// Distance between body `a` posed by `pose_a` and body `b` posed by `pose_b` (paper eq. "distance").
-///
-/// `warm` is the `warm_start` of a previous answer for the same ordered pair. Never panics on valid
-/// bodies; the answer says whether it converged.
-pub fn distance(
+avx2_dispatch! {
+    /// Distance between body `a` posed by `pose_a` and body `b` posed by `pose_b` (paper eq.
+    /// "distance").
+    ///
+    /// `warm` is the `warm_start` of a previous answer for the same ordered pair. Never panics on
+    /// valid bodies; the answer says whether it converged.
+    pub fn distance, distance_avx2 => distance_body(
+        a: &Body, pose_a: &Isometry3, b: &Body, pose_b: &Isometry3, warm: Option<&DistanceWarmStart>,
+        params: &NewtonParams,
+    ) -> DistanceResult
+}
+
+/// The body of [`distance()`], inlined into each of its builds (`FMA` only selects the build: the
+/// Newton runs it calls dispatch on their own).
+#[inline(always)]
+fn distance_body<const FMA: bool>(
     a: &Body,
     pose_a: &Isometry3,
     b: &Body,
@@ -273,6 +285,7 @@ pub(super) fn clear_of_contact(x: &Vector3, y: &Vector3, a: &Body, b: &Body) -> 
 /// The answer of a converged (or last) separated KKT point `out` in the relative frame `rel`, with
 /// its warm start: the trail of `previous` (the last answer and the relative-pose step from it)
 /// extended by that answer (built only here, where it is kept).
+#[inline]
 pub(super) fn finish(
     pose_a: &Isometry3,
     rel: &Isometry3,
@@ -302,6 +315,7 @@ pub(super) fn finish(
 
 /// The answer of a separated KKT point `out` (frame of body A, posed by `pose_a`) with the given
 /// warm start.
+#[inline]
 pub(super) fn separated_answer(
     pose_a: &Isometry3,
     out: &KktOut,

@@ -125,11 +125,20 @@ impl GrowthWarmStart {
     }
 }
 
-/// d(p₁‖p₂) for body `p1` posed by `pose1` and body `p2` posed by `pose2` (paper eq. "overlap").
-///
-/// `warm` is the `warm_start` of a previous answer for the same ordered pair (any poses). The
-/// answer always says whether it converged; it never panics on valid bodies.
-pub fn growth(
+avx2_dispatch! {
+    /// d(p₁‖p₂) for body `p1` posed by `pose1` and body `p2` posed by `pose2` (paper eq. "overlap").
+    ///
+    /// `warm` is the `warm_start` of a previous answer for the same ordered pair (any poses). The
+    /// answer always says whether it converged; it never panics on valid bodies.
+    pub fn growth, growth_avx2 => growth_body(
+        p1: &Body, pose1: &Isometry3, p2: &Body, pose2: &Isometry3, warm: Option<&GrowthWarmStart>,
+        params: &NewtonParams,
+    ) -> GrowthResult
+}
+
+/// The body of [`growth()`], inlined into each of its builds (`FMA` only selects the build).
+#[inline(always)]
+fn growth_body<const FMA: bool>(
     p1: &Body,
     pose1: &Isometry3,
     p2: &Body,

@@ -103,6 +103,7 @@ pub(crate) fn spheres_apart(b1: &PosedBody<'_>, b2: &PosedBody<'_>) -> bool {
 ///
 /// The rotation vector is taken in its small-angle form 2·sign(w)·(x, y, z) of the step's quaternion
 /// (exact direction; magnitude 2 sin(θ/2) ≈ θ for the small steps that matter here).
+#[inline]
 pub(crate) fn pose_step(from: &Isometry3, to: &Isometry3, length: Real) -> [Real; 6] {
     let q = to.rotation * from.rotation.inverse();
     let s = if q.w < 0.0 { -2.0 * length } else { 2.0 * length };
@@ -119,8 +120,15 @@ fn dot6(a: &[Real; 6], b: &[Real; 6]) -> Real {
 
 /// The step `d` in units of the step `d1` before it, when the two are nearly parallel (cosine ≥ 0.9)
 /// and `d1` is not negligible; `None` otherwise.
+#[cfg(test)]
 fn step_ratio(d1: &[Real; 6], d: &[Real; 6]) -> Option<Real> {
-    let (n1, n) = (dot6(d1, d1), dot6(d, d));
+    step_ratio_with(d1, dot6(d1, d1), d)
+}
+
+/// [`step_ratio`] with ‖d₁‖² given (`n1`), for several steps measured against one d₁.
+#[inline(always)]
+fn step_ratio_with(d1: &[Real; 6], n1: Real, d: &[Real; 6]) -> Option<Real> {
+    let n = dot6(d, d);
     if !(n1 > 1e-24 && n.is_finite()) {
         return None;
     }
@@ -175,6 +183,7 @@ const MAX_EXTRAPOLATION: Real = 2.0;
 impl<const N: usize> MotionTrail<N> {
     /// The trail of an answer whose solve started from the last solution `last` (with its own
     /// trail `trail`) and moved by the relative-pose step `step` to the new answer.
+    #[inline]
     pub(crate) fn extend(last: &[Real; N], trail: &MotionTrail<N>, step: [Real; 6]) -> Self {
         let mut points = [None; TRAIL_LENGTH];
         points[0] = Some(TrailPoint { state: *last, step });
@@ -191,36 +200,43 @@ impl<const N: usize> MotionTrail<N> {
     /// entries from `first_multiplier` on are multipliers, kept at or above half their last value.
     /// The flag says whether a multiplier was raised to that floor (the extrapolation sees it
     /// falling fast: its constraint may be turning inactive).
+    #[inline]
     pub(crate) fn predict(&self, last: &[Real; N], step: &[Real; 6], first_multiplier: usize) -> ([Real; N], bool) {
         let Some(p) = &self.points[0] else { return (*last, false) };
-        let Some(sigma) = step_ratio(&p.step, step).filter(|s| *s <= MAX_EXTRAPOLATION) else {
+        let n1 = dot6(&p.step, &p.step);
+        let Some(sigma) = step_ratio_with(&p.step, n1, step).filter(|s| *s <= MAX_EXTRAPOLATION) else {
             return (*last, false);
         };
         // Nodes: t[0] = 0 (last), t[1] = −1 (previous), then the earlier ones while their steps
-        // stay nearly parallel to the last step and of comparable length.
+        // stay nearly parallel to the last step and of comparable length; states[i] at t[i].
         let mut t = [0.0; TRAIL_LENGTH + 1];
+        let mut states = [last; TRAIL_LENGTH + 1];
         t[1] = -1.0;
+        states[1] = &p.state;
         let mut nodes = 2;
         for q in self.points[1..].iter() {
             let Some(q) = q else { break };
-            match step_ratio(&p.step, &q.step).filter(|r| (0.25..=4.0).contains(r)) {
+            match step_ratio_with(&p.step, n1, &q.step).filter(|r| (0.25..=4.0).contains(r)) {
                 Some(r) => {
                     t[nodes] = t[nodes - 1] - r;
+                    states[nodes] = &q.state;
                     nodes += 1;
                 }
                 None => break,
             }
         }
+        // Lagrange weights wᵢ = Πⱼ≠ᵢ (σ − tⱼ) / Πⱼ≠ᵢ (tᵢ − tⱼ): one division per node.
         let mut out = [0.0; N];
         for i in 0..nodes {
-            let mut w = 1.0;
+            let (mut num, mut den) = (1.0, 1.0);
             for j in 0..nodes {
                 if j != i {
-                    w *= (sigma - t[j]) / (t[i] - t[j]);
+                    num *= sigma - t[j];
+                    den *= t[i] - t[j];
                 }
             }
-            let state = if i == 0 { last } else { self.points[i - 1].as_ref().map_or(last, |q| &q.state) };
-            for (o, s) in out.iter_mut().zip(state.iter()) {
+            let w = num / den;
+            for (o, s) in out.iter_mut().zip(states[i].iter()) {
                 *o += w * s;
             }
         }
