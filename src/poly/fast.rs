@@ -593,102 +593,72 @@ mod x86 {
         dispatch!(d, full_kernel::<F64x4>(Avx2Fma::new(), t, u))
     }
 
-    /// `N` of the ten quantities of a [`SoaPoly`] row (from entry `OFF`) at four points, one point
-    /// per lane: each coefficient is broadcast and multiplied into all four points at once. A
-    /// Horner pass keeps 3N accumulators live (z chain, y and x sums) besides the three
-    /// coordinates, so N ≤ 3 fits the 16 AVX registers: passes of 3, 3, 2, 2 quantities ran
-    /// 21.9 / 48.2 ns per point at 2d = 6 / 8, passes of 5 + 5 spilled (27 / 49 ns), of 4, 4, 2
-    /// 23.1 / 73.6 ns, of 2 × 5 24.4 / 49.3 ns.
-    #[derive(Clone, Copy)]
-    struct SoaAcc<const OFF: usize, const N: usize>([__m256d; N], Avx2Fma);
+    /// Defines the accumulator `$name<OFF, N>`: `N` of the ten quantities of a [`SoaPoly`] row
+    /// type `$row` (from entry `OFF`) at four points, one point per lane, where `$coefficient`
+    /// gives a row's entry `i` in all four lanes (an unsafe AVX load: the accumulator's proof
+    /// `Avx2Fma` is in scope wherever it runs).
+    macro_rules! soa_acc {
+        ($(#[$doc:meta])* $name:ident, $row:ty, |$r:ident, $i:ident| $coefficient:expr) => {
+            $(#[$doc])*
+            #[derive(Clone, Copy)]
+            struct $name<const OFF: usize, const N: usize>([__m256d; N], Avx2Fma);
 
-    impl<const OFF: usize, const N: usize> Acc for SoaAcc<OFF, N> {
-        type Row = [Real; SOA_WIDTH];
-        type Cpu = Avx2Fma;
-        type Coord = F64x4;
+            impl<const OFF: usize, const N: usize> Acc for $name<OFF, N> {
+                type Row = $row;
+                type Cpu = Avx2Fma;
+                type Coord = F64x4;
 
-        #[inline(always)]
-        fn splat(cpu: Avx2Fma, t: Real) -> F64x4 {
-            F64x4::splat(cpu, t)
-        }
+                #[inline(always)]
+                fn splat(cpu: Avx2Fma, t: Real) -> F64x4 {
+                    F64x4::splat(cpu, t)
+                }
 
-        #[inline(always)]
-        fn load(cpu: Avx2Fma, row: &[Real; SOA_WIDTH]) -> Self {
-            // SAFETY: each broadcast reads one `f64` of `row`; `cpu` proves AVX2.
-            Self(std::array::from_fn(|i| unsafe { _mm256_broadcast_sd(&row[OFF + i]) }), cpu)
-        }
+                #[inline(always)]
+                fn load(cpu: Avx2Fma, $r: &$row) -> Self {
+                    // SAFETY: `$coefficient` reads entry `OFF + i` of the row; `cpu` proves AVX2.
+                    Self(std::array::from_fn(|$i| unsafe { $coefficient }), cpu)
+                }
 
-        #[inline(always)]
-        fn mul_add_row(self, t: F64x4, row: &[Real; SOA_WIDTH]) -> Self {
-            // SAFETY: as in `load`; `self.1` proves AVX2 and FMA.
-            Self(
-                std::array::from_fn(|i| unsafe { _mm256_fmadd_pd(self.0[i], t.0, _mm256_broadcast_sd(&row[OFF + i])) }),
-                self.1,
-            )
-        }
+                #[inline(always)]
+                fn mul_add_row(self, t: F64x4, $r: &$row) -> Self {
+                    // SAFETY: as in `load`; `self.1` proves AVX2 and FMA.
+                    Self(std::array::from_fn(|$i| unsafe { _mm256_fmadd_pd(self.0[$i], t.0, $coefficient) }), self.1)
+                }
 
-        #[inline(always)]
-        fn mul_add(self, t: F64x4, c: Self) -> Self {
-            // SAFETY: `self.1` proves AVX2 and FMA.
-            Self(std::array::from_fn(|i| unsafe { _mm256_fmadd_pd(self.0[i], t.0, c.0[i]) }), self.1)
-        }
+                #[inline(always)]
+                fn mul_add(self, t: F64x4, c: Self) -> Self {
+                    // SAFETY: `self.1` proves AVX2 and FMA.
+                    Self(std::array::from_fn(|i| unsafe { _mm256_fmadd_pd(self.0[i], t.0, c.0[i]) }), self.1)
+                }
 
-        #[inline(always)]
-        fn pin(self) -> Self {
-            // SAFETY: `self.1` proves AVX2 (the register class of the barrier).
-            Self(self.0.map(|v| unsafe { pin4(v) }), self.1)
-        }
+                #[inline(always)]
+                fn pin(self) -> Self {
+                    // SAFETY: `self.1` proves AVX2 (the register class of the barrier).
+                    Self(self.0.map(|v| unsafe { pin4(v) }), self.1)
+                }
+            }
+        };
     }
 
-    /// [`SoaAcc`] over the replicated table ([`WideRow`]): each coefficient is read as a
-    /// four-lane vector, the memory operand of its multiply–add, so a row costs one instruction
-    /// per quantity instead of a broadcast and a multiply–add. With no broadcast registers a pass
-    /// of four quantities fits the 16 AVX registers (12 accumulators and the three coordinates):
-    /// passes of 4, 3, 3 quantities ran as fast as 3, 3, 2, 2 (22.2 vs 22.3 ns per point at
-    /// 2d = 6) with one pass fewer.
-    #[derive(Clone, Copy)]
-    struct WideAcc<const OFF: usize, const N: usize>([__m256d; N], Avx2Fma);
+    soa_acc!(
+        /// Each coefficient is broadcast and multiplied into all four points at once. A Horner pass
+        /// keeps 3N accumulators live (z chain, y and x sums) besides the three coordinates, so
+        /// N ≤ 3 fits the 16 AVX registers: passes of 3, 3, 2, 2 quantities ran 21.9 / 48.2 ns per
+        /// point at 2d = 6 / 8, passes of 5 + 5 spilled (27 / 49 ns), of 4, 4, 2 23.1 / 73.6 ns, of
+        /// 2 × 5 24.4 / 49.3 ns.
+        SoaAcc, [Real; SOA_WIDTH], |row, i| _mm256_broadcast_sd(&row[OFF + i])
+    );
 
-    impl<const OFF: usize, const N: usize> Acc for WideAcc<OFF, N> {
-        type Row = WideRow;
-        type Cpu = Avx2Fma;
-        type Coord = F64x4;
-
-        #[inline(always)]
-        fn splat(cpu: Avx2Fma, t: Real) -> F64x4 {
-            F64x4::splat(cpu, t)
-        }
-
-        #[inline(always)]
-        fn load(cpu: Avx2Fma, row: &WideRow) -> Self {
-            // SAFETY: each entry of a `WideRow` is four `f64` at a 32-byte boundary (the row's
-            // alignment, 32 bytes per entry); `cpu` proves AVX2.
-            Self(std::array::from_fn(|i| unsafe { _mm256_load_pd(row.0[OFF + i].as_ptr()) }), cpu)
-        }
-
-        #[inline(always)]
-        fn mul_add_row(self, t: F64x4, row: &WideRow) -> Self {
-            // SAFETY: as in `load`; `self.1` proves AVX2 and FMA.
-            Self(
-                std::array::from_fn(|i| unsafe {
-                    _mm256_fmadd_pd(self.0[i], t.0, _mm256_load_pd(row.0[OFF + i].as_ptr()))
-                }),
-                self.1,
-            )
-        }
-
-        #[inline(always)]
-        fn mul_add(self, t: F64x4, c: Self) -> Self {
-            // SAFETY: `self.1` proves AVX2 and FMA.
-            Self(std::array::from_fn(|i| unsafe { _mm256_fmadd_pd(self.0[i], t.0, c.0[i]) }), self.1)
-        }
-
-        #[inline(always)]
-        fn pin(self) -> Self {
-            // SAFETY: `self.1` proves AVX2 (the register class of the barrier).
-            Self(self.0.map(|v| unsafe { pin4(v) }), self.1)
-        }
-    }
+    soa_acc!(
+        /// [`SoaAcc`] over the replicated table ([`WideRow`]): each coefficient is read as a
+        /// four-lane vector (each entry of a `WideRow` is four `f64` at a 32-byte boundary), the
+        /// memory operand of its multiply–add, so a row costs one instruction per quantity instead
+        /// of a broadcast and a multiply–add. With no broadcast registers a pass of four quantities
+        /// fits the 16 AVX registers (12 accumulators and the three coordinates): passes of 4, 3, 3
+        /// quantities ran as fast as 3, 3, 2, 2 (22.2 vs 22.3 ns per point at 2d = 6) with one pass
+        /// fewer.
+        WideAcc, WideRow, |row, i| _mm256_load_pd(row.0[OFF + i].as_ptr())
+    );
 
     /// [`soa_kernel`] over the replicated table.
     #[inline(always)]

@@ -58,6 +58,26 @@ pub struct Posed {
     pub pose: Isometry3,
 }
 
+impl Posed {
+    /// This instance borrowed, at its pose.
+    #[inline]
+    pub(crate) fn borrowed(&self) -> PosedRef<'_> {
+        PosedRef { body: &self.body, tree: self.tree.as_ref(), pose: self.pose }
+    }
+}
+
+/// A [`Posed`] borrowed, at a pose of its own (a candidate state's): what the batch solver's lanes
+/// read, with no reference count touched.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct PosedRef<'p> {
+    /// The body.
+    body: &'p Arc<Body>,
+    /// A compound body's containment tree.
+    tree: Option<&'p Arc<crate::compound::CompoundBody>>,
+    /// The pose (body frame → world).
+    pose: Isometry3,
+}
+
 /// Lower bound of the distance between two posed bodies from their bounding spheres (0 when the
 /// spheres overlap), or `None` when a body has no proven bound (nonconvex).
 pub fn sphere_lower_bound(a: &Body, pose_a: &Isometry3, b: &Body, pose_b: &Isometry3) -> Option<Real> {
@@ -87,11 +107,11 @@ fn lane_candidate(kind: QueryKind, options: &QueryOptions) -> bool {
 
 /// Whether a query can take the batch solver's lanes: a [`lane_candidate`] between two convex
 /// single bodies, that the bounding spheres do not decide (collide).
-fn lane_eligible(pair: &PairRef<'_>, a: &Posed, b: &Posed) -> bool {
-    let single_convex = |p: &Posed| p.tree.is_none() && !p.body.report.nonconvex;
+fn lane_eligible(pair: &PairRef<'_>, a: &PosedRef<'_>, b: &PosedRef<'_>) -> bool {
+    let single_convex = |p: &PosedRef<'_>| p.tree.is_none() && !p.body.report.nonconvex;
     let decided = || {
         pair.kind == QueryKind::Collide
-            && sphere_lower_bound(&a.body, &a.pose, &b.body, &b.pose).is_some_and(|lower| lower > pair.margin)
+            && sphere_lower_bound(a.body, &a.pose, b.body, &b.pose).is_some_and(|lower| lower > pair.margin)
     };
     lane_candidate(pair.kind, &pair.options) && single_convex(a) && single_convex(b) && !decided()
 }
@@ -121,7 +141,7 @@ impl LaneAnswers {
 /// one by one by [`answer_pair`]). Give the answers to [`answer_pair_with`].
 pub(crate) fn lane_distances<'p>(
     pairs: &[PairRef<'_>],
-    posed: impl Fn(usize) -> Option<(&'p Posed, &'p Posed)>,
+    posed: impl Fn(usize) -> Option<(PosedRef<'p>, PosedRef<'p>)>,
     params: &CertifyParams,
 ) -> LaneAnswers {
     use crate::query::batch::{cold_distances, MIN_LANE_BATCH};
@@ -133,7 +153,7 @@ pub(crate) fn lane_distances<'p>(
         HashMap::default();
     for (k, pair) in pairs.iter().enumerate() {
         if let Some((a, b)) = posed(k).filter(|(a, b)| lane_eligible(pair, a, b)) {
-            groups.entry((Arc::as_ptr(&a.body), Arc::as_ptr(&b.body))).or_default().push(k);
+            groups.entry((Arc::as_ptr(a.body), Arc::as_ptr(b.body))).or_default().push(k);
         }
     }
     let mut out = LaneAnswers::default();
@@ -147,7 +167,7 @@ pub(crate) fn lane_distances<'p>(
         if out.0.is_empty() {
             out.0 = vec![None; pairs.len()];
         }
-        for (&k, answer) in members.iter().zip(cold_distances(&a.body, &b.body, &poses, &params.newton, false)) {
+        for (&k, answer) in members.iter().zip(cold_distances(a.body, b.body, &poses, &params.newton, false)) {
             out.0[k] = Some(answer);
         }
     }
@@ -441,6 +461,7 @@ impl QueryView {
     }
 
     /// The queries answered once, or once per candidate state; `mode` overrides each query's.
+    /// Takes the instances out of `posed`.
     fn answer_states(
         &mut self,
         request: &PlannerRequest,
@@ -449,40 +470,68 @@ impl QueryView {
         mode: Option<CertifyMode>,
     ) -> PlannerAnswers {
         let nq = request.queries.len();
+        // The request's instances by slot, each query's two slots and each state's posed slots
+        // resolved once (by name only for states given as lists), so that no state hashes an id
+        // or touches a reference count.
+        let (ids, mut slots): (Vec<&str>, Vec<Posed>) = posed.drain().unzip();
+        let slot_of: HashMap<&str, usize, foldhash::fast::RandomState> =
+            ids.iter().enumerate().map(|(i, id)| (*id, i)).collect();
+        let slot = |id: &str| slot_of.get(id).copied();
+        let pairs: Vec<Option<(usize, usize)>> =
+            request.queries.iter().map(|q| slot(&q.first).zip(slot(&q.second))).collect();
         if request.states.is_empty() {
             // Cold queries of one body pair among the request's queries: on the batch solver's lanes.
             let mut newton = LaneAnswers::default();
             if enough_lane_candidates(request.queries.iter().map(|q| (q.kind, &q.options))) {
                 let views: Vec<PairRef<'_>> = request.queries.iter().map(|q| with_mode(q.view(), mode)).collect();
-                let at = |k: usize| posed.get(views[k].first).zip(posed.get(views[k].second));
+                let at = |k: usize| pairs[k].map(|(i, j)| (slots[i].borrowed(), slots[j].borrowed()));
                 newton = lane_distances(&views, at, params);
             }
-            return PlannerAnswers::Single(self.answer_all(&request.queries, posed, params, mode, (&mut newton, 0)));
+            return PlannerAnswers::Single(self.answer_slots(
+                &request.queries,
+                &pairs,
+                &slots,
+                params,
+                mode,
+                (&mut newton, 0),
+            ));
         }
-        let mut newton = state_lane_distances(request, posed, params, mode);
+        // States in columns pose the instances of the first state, in order.
+        let columns: Option<Vec<Option<usize>>> = request
+            .state_columns
+            .then(|| request.states.first().map(|s| s.iter().map(|(id, _)| slot(id)).collect()).unwrap_or_default());
+        let state_slots = |buf: &mut Vec<(usize, Isometry3)>, state: &[(String, Isometry3)]| {
+            buf.clear();
+            match &columns {
+                Some(cols) => buf.extend(cols.iter().zip(state).filter_map(|(c, (_, pose))| Some(((*c)?, *pose)))),
+                None => buf.extend(state.iter().filter_map(|(id, pose)| Some((slot(id)?, *pose)))),
+            }
+        };
+        let mut buf = Vec::new();
+        let mut newton =
+            state_lane_distances(request, &slots, &pairs, |s, buf| state_slots(buf, &request.states[s]), params, mode);
         let mut out = Vec::with_capacity(request.states.len());
-        // The view's poses a state replaces, restored after it (one buffer for all states).
-        let mut saved: Vec<(&str, Isometry3)> = Vec::new();
+        // The poses a state replaces, restored after it.
+        let mut saved: Vec<(usize, Isometry3)> = Vec::new();
         for (s, state) in request.states.iter().enumerate() {
-            saved.extend(state.iter().filter_map(|(id, pose)| {
-                posed.get_mut(id.as_str()).map(|p| (id.as_str(), std::mem::replace(&mut p.pose, *pose)))
-            }));
-            out.push(self.answer_all(&request.queries, posed, params, mode, (&mut newton, s * nq)));
-            for (id, pose) in saved.drain(..) {
-                if let Some(p) = posed.get_mut(id) {
-                    p.pose = pose;
-                }
+            state_slots(&mut buf, state);
+            saved.extend(buf.iter().map(|&(i, pose)| (i, std::mem::replace(&mut slots[i].pose, pose))));
+            out.push(self.answer_slots(&request.queries, &pairs, &slots, params, mode, (&mut newton, s * nq)));
+            for (i, pose) in saved.drain(..).rev() {
+                slots[i].pose = pose;
             }
         }
         PlannerAnswers::PerState(out)
     }
 
-    /// The queries answered at the poses of `posed`, with Newton's answers already solved where
-    /// `newton.0` has them (query q at index `newton.1 + q`, taken from it).
-    fn answer_all(
+    /// The queries answered at the poses of the request's instances `slots`: query q between
+    /// `slots[pairs[q].0]` and `slots[pairs[q].1]` (skipped when `None`), with Newton's answers
+    /// already solved where `newton.0` has them (query q at index `newton.1 + q`, taken from it).
+    fn answer_slots(
         &mut self,
         queries: &[QueryPair],
-        posed: &PosedMap<'_>,
+        pairs: &[Option<(usize, usize)>],
+        slots: &[Posed],
         params: &CertifyParams,
         mode: Option<CertifyMode>,
         newton: (&mut LaneAnswers, usize),
@@ -490,11 +539,12 @@ impl QueryView {
         let (newton, offset) = newton;
         queries
             .iter()
+            .zip(pairs)
             .enumerate()
-            .filter_map(|(q, query)| {
-                let (a, b) = (posed.get(query.first.as_str())?, posed.get(query.second.as_str())?);
+            .filter_map(|(q, (query, ij))| {
+                let (i, j) = (*ij)?;
                 let pair = with_mode(query.view(), mode);
-                Some(answer_pair_with(pair, a, b, &mut self.cache, params, newton.take(offset + q)))
+                Some(answer_pair_with(pair, &slots[i], &slots[j], &mut self.cache, params, newton.take(offset + q)))
             })
             .collect()
     }
@@ -512,10 +562,13 @@ fn with_mode(mut pair: PairRef<'_>, mode: Option<CertifyMode>) -> PairRef<'_> {
 /// from the batch solver's lanes ([`lane_distances`]: each query's pair in every state is one
 /// column of one body pair), entry `s · queries + q` for state s and query q; empty (every
 /// answer solved one by one) when fewer than [`crate::query::batch::MIN_LANE_BATCH`] of them are
-/// cold distance or collide queries.
+/// cold distance or collide queries. The request's instances are `slots`, query q's pair is
+/// `pairs[q]` (slot indices) and `state_slots(s, buf)` fills `buf` with state s's (slot, pose).
 fn state_lane_distances(
     request: &PlannerRequest,
-    posed: &PosedMap<'_>,
+    slots: &[Posed],
+    pairs: &[Option<(usize, usize)>],
+    state_slots: impl Fn(usize, &mut Vec<(usize, Isometry3)>),
     params: &CertifyParams,
     mode: Option<CertifyMode>,
 ) -> LaneAnswers {
@@ -525,20 +578,23 @@ fn state_lane_distances(
     }
     let n = request.states.len() * request.queries.len();
     let (mut views, mut snapshot) = (Vec::with_capacity(n), Vec::with_capacity(n));
-    for state in &request.states {
-        for q in &request.queries {
+    let mut buf = Vec::new();
+    for s in 0..request.states.len() {
+        state_slots(s, &mut buf);
+        // Slot i at this state's pose.
+        let at = |i: usize| {
+            let p = &slots[i];
+            let pose = buf.iter().find(|(k, _)| *k == i).map_or(p.pose, |(_, pose)| *pose);
+            PosedRef { pose, ..p.borrowed() }
+        };
+        for (q, ij) in request.queries.iter().zip(pairs) {
             let pair = with_mode(q.view(), mode);
-            let at = |id: &str| {
-                let p = posed.get(id)?;
-                let pose = state.iter().find(|(s, _)| s == id).map_or(p.pose, |(_, pose)| *pose);
-                Some(Posed { body: p.body.clone(), tree: p.tree.clone(), pose })
-            };
             let lanes = lane_candidate(pair.kind, &pair.options);
-            snapshot.push(if lanes { at(&q.first).zip(at(&q.second)) } else { None });
+            snapshot.push(if lanes { ij.map(|(i, j)| (at(i), at(j))) } else { None });
             views.push(pair);
         }
     }
-    lane_distances(&views, |k| snapshot[k].as_ref().map(|(a, b)| (a, b)), params)
+    lane_distances(&views, |k| snapshot[k], params)
 }
 
 /// A pair found by [`check_scene`].
@@ -670,7 +726,8 @@ pub fn check_scene(
         })
         .collect();
     let views: Vec<PairRef<'_>> = queries.iter().map(QueryPair::view).collect();
-    let mut newton = lane_distances(&views, |k| Some((&posed_pairs[k].0, &posed_pairs[k].1)), &params);
+    let mut newton =
+        lane_distances(&views, |k| Some((posed_pairs[k].0.borrowed(), posed_pairs[k].1.borrowed())), &params);
     for (k, (pair, (pa, pb))) in views.into_iter().zip(&posed_pairs).enumerate() {
         // An abandoned request (deadline passed) stops here, see `Catalog::batch`.
         crate::fit::cancel::check()?;

@@ -371,7 +371,7 @@ impl Catalog {
         // Cold distance solves of one body pair, four per SIMD pass (see `planner::lane_distances`).
         let mut newton = planner::lane_distances(
             pairs,
-            |k| Some((&posed_by_id[pairs[k].first], &posed_by_id[pairs[k].second])),
+            |k| Some((posed_by_id[pairs[k].first].borrowed(), posed_by_id[pairs[k].second].borrowed())),
             &params,
         );
         let mut answers = Vec::with_capacity(pairs.len());
