@@ -277,12 +277,50 @@ pub struct PlannerRequest {
     pub poses: Vec<(String, Isometry3)>,
     /// The queries, answered in order.
     pub queries: Vec<QueryPair>,
-    /// Candidate states: when non-empty, the queries are answered once per state, with the
+    /// Candidate states: when there are any, the queries are answered once per state, with the
     /// state's poses on top of the view.
-    pub states: Vec<Vec<(String, Isometry3)>>,
-    /// The states came in columns (`QueryRequest.state_columns`): every state poses the same
-    /// instances, in the same order, and an unknown one is named `state_columns.instance_ids[k]`.
-    pub state_columns: bool,
+    pub states: CandidateStates,
+}
+
+/// The candidate states of a [`PlannerRequest`], as a client sends them.
+#[derive(Clone, Debug)]
+pub enum CandidateStates {
+    /// Each state its own list of (instance id, pose) (`QueryRequest.states`); an unknown or
+    /// repeated instance is named `states[s].poses[k].instance_id`.
+    Lists(Vec<Vec<(String, Isometry3)>>),
+    /// Every state poses the same instances, in order (`QueryRequest.state_columns`): instance
+    /// `instance_ids[k]` of state s is at `poses[s · instance_ids.len() + k]`, so that no state
+    /// carries a name or a list of its own; an unknown or repeated instance is named
+    /// `state_columns.instance_ids[k]`, and a length that is no multiple of the instances
+    /// `state_columns.poses`.
+    Columns {
+        /// The instances every state poses.
+        instance_ids: Vec<String>,
+        /// Their poses, state-major.
+        poses: Vec<Isometry3>,
+    },
+}
+
+impl Default for CandidateStates {
+    /// No candidate state.
+    fn default() -> Self {
+        Self::Lists(Vec::new())
+    }
+}
+
+impl CandidateStates {
+    /// The number of states (0 for columns without instances).
+    pub fn len(&self) -> usize {
+        match self {
+            Self::Lists(states) => states.len(),
+            Self::Columns { instance_ids, poses } => poses.len().checked_div(instance_ids.len()).unwrap_or(0),
+        }
+    }
+
+    /// True when there is no state (the queries are answered once).
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
 }
 
 /// The answers of a [`PlannerRequest`]: one list of answers, or one per candidate state.
@@ -292,6 +330,51 @@ pub enum PlannerAnswers {
     Single(Vec<QueryAnswer>),
     /// Answers per candidate state.
     PerState(Vec<Vec<QueryAnswer>>),
+}
+
+impl PlannerAnswers {
+    /// No answer yet, shaped for `request`: [`PlannerAnswers::Single`] without candidate states,
+    /// else one empty list per state.
+    pub fn for_request(request: &PlannerRequest) -> Self {
+        match request.states.len() {
+            0 => Self::Single(Vec::new()),
+            n => Self::PerState(vec![Vec::new(); n]),
+        }
+    }
+}
+
+/// Where a planner run puts its answers ([`QueryView::run_into`]), as they are solved: a caller
+/// that writes them out at once (e.g. the service's answer columns) never holds them all.
+pub trait AnswerSink {
+    /// Takes the answer of query `query` (its index in [`PlannerRequest::queries`]) in candidate
+    /// state `state` (0 without states). Answers come state by state, queries in order.
+    fn push(&mut self, state: usize, query: usize, answer: QueryAnswer);
+
+    /// Forgets every answer pushed so far (a Newton-only run stopped at an answer that needs the
+    /// SDP, [`QueryView::run_newton_only_into`], is then run again from its start).
+    fn clear(&mut self);
+}
+
+impl AnswerSink for PlannerAnswers {
+    /// Appends to the answers of `state` (a state outside [`PlannerAnswers::for_request`]'s shape
+    /// is ignored).
+    fn push(&mut self, state: usize, _query: usize, answer: QueryAnswer) {
+        match self {
+            Self::Single(a) => a.push(answer),
+            Self::PerState(s) => {
+                if let Some(a) = s.get_mut(state) {
+                    a.push(answer);
+                }
+            }
+        }
+    }
+
+    fn clear(&mut self) {
+        match self {
+            Self::Single(a) => a.clear(),
+            Self::PerState(s) => s.iter_mut().for_each(Vec::clear),
+        }
+    }
 }
 
 /// The posed instances of one request, by id.
@@ -306,26 +389,33 @@ pub struct QueryView {
     cache: WarmStartCache,
 }
 
-fn check_unique(field: impl Fn() -> String, poses: &[(String, Isometry3)]) -> Result<()> {
-    let repeated = |k: usize, id: &str| {
-        Err(Error::invalid(format!("{}[{k}].instance_id", field()), format!("instance `{id}` appears twice")))
-    };
+/// An error naming the first instance id of `ids` that appears twice, as `field(k)`.
+fn check_unique<'a>(
+    field: impl Fn(usize) -> String,
+    ids: impl ExactSizeIterator<Item = &'a str> + Clone,
+) -> Result<()> {
+    let repeated = |k: usize, id: &str| Err(Error::invalid(field(k), format!("instance `{id}` appears twice")));
     // A state poses a few instances: pairwise comparison, no set (nor field name) per state.
-    if poses.len() <= 16 {
-        for (k, (id, _)) in poses.iter().enumerate() {
-            if poses[..k].iter().any(|(p, _)| p == id) {
+    if ids.len() <= 16 {
+        for (k, id) in ids.clone().enumerate() {
+            if ids.clone().take(k).any(|p| p == id) {
                 return repeated(k, id);
             }
         }
         return Ok(());
     }
     let mut seen = std::collections::HashSet::new();
-    for (k, (id, _)) in poses.iter().enumerate() {
-        if !seen.insert(id.as_str()) {
+    for (k, id) in ids.enumerate() {
+        if !seen.insert(id) {
             return repeated(k, id);
         }
     }
     Ok(())
+}
+
+/// The ids of a list of poses.
+fn ids_of(poses: &[(String, Isometry3)]) -> impl ExactSizeIterator<Item = &str> + Clone {
+    poses.iter().map(|(id, _)| id.as_str())
 }
 
 impl QueryView {
@@ -351,9 +441,20 @@ impl QueryView {
     /// naming `poses[k].instance_id` / `states[s].poses[k].instance_id` for an unknown or repeated
     /// instance (the view is then unchanged).
     pub fn run(&mut self, catalog: &Catalog, request: &PlannerRequest) -> Result<PlannerAnswers> {
-        match self.run_with(catalog, request, false)? {
-            Some(answers) => Ok(answers),
-            None => Err(Error::Numerical("an answer needs the SDP outside CertifyMode::NewtonOnly".into())),
+        let mut answers = PlannerAnswers::for_request(request);
+        self.run_into(catalog, request, &mut answers)?;
+        Ok(answers)
+    }
+
+    /// [`QueryView::run`] with each answer handed to `sink` as it is solved.
+    ///
+    /// # Errors
+    /// As [`QueryView::run`] (`sink` then holds no answer).
+    pub fn run_into(&mut self, catalog: &Catalog, request: &PlannerRequest, sink: &mut dyn AnswerSink) -> Result<()> {
+        if self.run_with(catalog, request, false, sink)? {
+            Ok(())
+        } else {
+            Err(Error::Numerical("an answer needs the SDP outside CertifyMode::NewtonOnly".into()))
         }
     }
 
@@ -366,35 +467,59 @@ impl QueryView {
     /// # Errors
     /// As [`QueryView::run`].
     pub fn run_newton_only(&mut self, catalog: &Catalog, request: &PlannerRequest) -> Result<Option<PlannerAnswers>> {
-        self.run_with(catalog, request, true)
+        let mut answers = PlannerAnswers::for_request(request);
+        Ok(self.run_newton_only_into(catalog, request, &mut answers)?.then_some(answers))
     }
 
+    /// [`QueryView::run_newton_only`] with each answer handed to `sink` as it is solved. Returns
+    /// false, with `sink` cleared ([`AnswerSink::clear`]), at the first answer that needs the SDP
+    /// (none of the request's warm starts is kept then).
+    ///
+    /// # Errors
+    /// As [`QueryView::run`].
+    pub fn run_newton_only_into(
+        &mut self,
+        catalog: &Catalog,
+        request: &PlannerRequest,
+        sink: &mut dyn AnswerSink,
+    ) -> Result<bool> {
+        self.run_with(catalog, request, true, sink)
+    }
+
+    /// Validates and resolves `request`, then answers it into `sink`; false (and `sink` cleared)
+    /// when `newton_only` and an answer needs the SDP.
     fn run_with(
         &mut self,
         catalog: &Catalog,
         request: &PlannerRequest,
         newton_only: bool,
-    ) -> Result<Option<PlannerAnswers>> {
-        check_unique(|| "poses".into(), &request.poses)?;
-        for (s, state) in request.states.iter().enumerate() {
-            // States in columns pose the first state's instances, in order, and no others.
-            if request.state_columns && s > 0 {
-                let first = &request.states[0];
-                if state.len() != first.len() || state.iter().zip(first).any(|(a, b)| a.0 != b.0) {
+        sink: &mut dyn AnswerSink,
+    ) -> Result<bool> {
+        check_unique(|k| format!("poses[{k}].instance_id"), ids_of(&request.poses))?;
+        let mut ids: Vec<&str> = ids_of(&request.poses).collect();
+        match &request.states {
+            CandidateStates::Lists(states) => {
+                for (s, state) in states.iter().enumerate() {
+                    check_unique(|k| format!("states[{s}].poses[{k}].instance_id"), ids_of(state))?;
+                }
+                ids.extend(states.iter().flat_map(|s| ids_of(s)));
+            }
+            CandidateStates::Columns { instance_ids, poses } => {
+                let n = instance_ids.len();
+                if n == 0 || !poses.len().is_multiple_of(n) {
                     return Err(Error::invalid(
-                        format!("states[{s}]"),
-                        "states in columns must pose the instances of the first state, in order",
+                        "state_columns.poses",
+                        format!(
+                            "has {} poses: expected a multiple of the {n} instances of `state_columns.instance_ids`",
+                            poses.len()
+                        ),
                     ));
                 }
-                continue;
+                let names = instance_ids.iter().map(String::as_str);
+                check_unique(|k| format!("state_columns.instance_ids[{k}]"), names.clone())?;
+                ids.extend(names);
             }
-            check_unique(|| format!("states[{s}].poses"), state)?;
         }
-        let mut ids: Vec<&str> = request.poses.iter().map(|(id, _)| id.as_str()).collect();
-        // States in columns all pose the instances of the first.
-        let states =
-            if request.state_columns { &request.states[..request.states.len().min(1)] } else { &request.states };
-        ids.extend(states.iter().flatten().map(|(id, _)| id.as_str()));
         ids.extend(request.queries.iter().flat_map(|q| [q.first.as_str(), q.second.as_str()]));
         ids.sort_unstable();
         ids.dedup();
@@ -405,15 +530,15 @@ impl QueryView {
                     .iter()
                     .position(|(p, _)| *p == id)
                     .map(|k| format!("poses[{k}].instance_id"))
-                    .or_else(|| {
-                        request.states.iter().enumerate().find_map(|(s, st)| {
+                    .or_else(|| match &request.states {
+                        CandidateStates::Lists(states) => states.iter().enumerate().find_map(|(s, st)| {
                             let k = st.iter().position(|(p, _)| *p == id)?;
-                            Some(if request.state_columns {
-                                format!("state_columns.instance_ids[{k}]")
-                            } else {
-                                format!("states[{s}].poses[{k}].instance_id")
-                            })
-                        })
+                            Some(format!("states[{s}].poses[{k}].instance_id"))
+                        }),
+                        CandidateStates::Columns { instance_ids, .. } => instance_ids
+                            .iter()
+                            .position(|p| *p == id)
+                            .map(|k| format!("state_columns.instance_ids[{k}]")),
                     });
                 match field {
                     Some(f) => Error::invalid(f, format!("no instance `{id}` in scene `{}`", self.scene_id)),
@@ -439,7 +564,7 @@ impl QueryView {
         }
         let params = catalog.certify_params();
         if !newton_only {
-            return Ok(Some(self.answer_states(request, &mut posed, &params, None)));
+            return Ok(self.answer_states(request, &mut posed, &params, None, sink));
         }
         // The request's warm starts go to a scratch cache, kept only when no answer needs the SDP.
         let mut scratch = WarmStartCache::default();
@@ -447,28 +572,27 @@ impl QueryView {
             self.cache.copy_pair(&mut scratch, super::catalog::warm_kind(q.kind), &q.first, &q.second);
         }
         let saved = std::mem::replace(&mut self.cache, scratch);
-        let out = self.answer_states(request, &mut posed, &params, Some(CertifyMode::NewtonOnly));
+        let done = self.answer_states(request, &mut posed, &params, Some(CertifyMode::NewtonOnly), sink);
         let scratch = std::mem::replace(&mut self.cache, saved);
-        let needs_sdp = match &out {
-            PlannerAnswers::Single(a) => a.iter().any(QueryAnswer::needs_sdp),
-            PlannerAnswers::PerState(s) => s.iter().flatten().any(QueryAnswer::needs_sdp),
-        };
-        if needs_sdp {
-            return Ok(None);
+        if !done {
+            sink.clear();
+            return Ok(false);
         }
         self.cache.merge(scratch, |_| true);
-        Ok(Some(out))
+        Ok(true)
     }
 
-    /// The queries answered once, or once per candidate state; `mode` overrides each query's.
-    /// Takes the instances out of `posed`.
+    /// The queries answered once, or once per candidate state, into `sink`; `mode` overrides each
+    /// query's. Takes the instances out of `posed`. With `mode` [`CertifyMode::NewtonOnly`] it
+    /// stops at the first answer that needs the SDP and returns false.
     fn answer_states(
         &mut self,
         request: &PlannerRequest,
         posed: &mut PosedMap<'_>,
         params: &CertifyParams,
         mode: Option<CertifyMode>,
-    ) -> PlannerAnswers {
+        sink: &mut dyn AnswerSink,
+    ) -> bool {
         let nq = request.queries.len();
         // The request's instances by slot, each query's two slots and each state's posed slots
         // resolved once (by name only for states given as lists), so that no state hashes an id
@@ -487,46 +611,50 @@ impl QueryView {
                 let at = |k: usize| pairs[k].map(|(i, j)| (slots[i].borrowed(), slots[j].borrowed()));
                 newton = lane_distances(&views, at, params);
             }
-            return PlannerAnswers::Single(self.answer_slots(
-                &request.queries,
-                &pairs,
-                &slots,
-                params,
-                mode,
-                (&mut newton, 0),
-            ));
+            return self.answer_slots(&request.queries, &pairs, &slots, params, mode, (&mut newton, 0), sink);
         }
-        // States in columns pose the instances of the first state, in order.
-        let columns: Option<Vec<Option<usize>>> = request
-            .state_columns
-            .then(|| request.states.first().map(|s| s.iter().map(|(id, _)| slot(id)).collect()).unwrap_or_default());
-        let state_slots = |buf: &mut Vec<(usize, Isometry3)>, state: &[(String, Isometry3)]| {
+        // States in columns: the slots of their instances, resolved once.
+        let columns: Vec<Option<usize>> = match &request.states {
+            CandidateStates::Lists(_) => Vec::new(),
+            CandidateStates::Columns { instance_ids, .. } => instance_ids.iter().map(|id| slot(id)).collect(),
+        };
+        let state_slots = |s: usize, buf: &mut Vec<(usize, Isometry3)>| {
             buf.clear();
-            match &columns {
-                Some(cols) => buf.extend(cols.iter().zip(state).filter_map(|(c, (_, pose))| Some(((*c)?, *pose)))),
-                None => buf.extend(state.iter().filter_map(|(id, pose)| Some((slot(id)?, *pose)))),
+            match &request.states {
+                CandidateStates::Lists(states) => {
+                    buf.extend(states[s].iter().filter_map(|(id, pose)| Some((slot(id)?, *pose))));
+                }
+                CandidateStates::Columns { poses, .. } => {
+                    let state = &poses[s * columns.len()..(s + 1) * columns.len()];
+                    buf.extend(columns.iter().zip(state).filter_map(|(c, pose)| Some(((*c)?, *pose))));
+                }
             }
         };
+        let states = request.states.len();
         let mut buf = Vec::new();
-        let mut newton =
-            state_lane_distances(request, &slots, &pairs, |s, buf| state_slots(buf, &request.states[s]), params, mode);
-        let mut out = Vec::with_capacity(request.states.len());
+        let mut newton = state_lane_distances(request, &slots, &pairs, state_slots, params, mode);
         // The poses a state replaces, restored after it.
         let mut saved: Vec<(usize, Isometry3)> = Vec::new();
-        for (s, state) in request.states.iter().enumerate() {
-            state_slots(&mut buf, state);
+        for s in 0..states {
+            state_slots(s, &mut buf);
             saved.extend(buf.iter().map(|&(i, pose)| (i, std::mem::replace(&mut slots[i].pose, pose))));
-            out.push(self.answer_slots(&request.queries, &pairs, &slots, params, mode, (&mut newton, s * nq)));
+            let mut state = StateSink { state: s, sink: &mut *sink };
+            if !self.answer_slots(&request.queries, &pairs, &slots, params, mode, (&mut newton, s * nq), &mut state) {
+                return false;
+            }
             for (i, pose) in saved.drain(..).rev() {
                 slots[i].pose = pose;
             }
         }
-        PlannerAnswers::PerState(out)
+        true
     }
 
-    /// The queries answered at the poses of the request's instances `slots`: query q between
-    /// `slots[pairs[q].0]` and `slots[pairs[q].1]` (skipped when `None`), with Newton's answers
-    /// already solved where `newton.0` has them (query q at index `newton.1 + q`, taken from it).
+    /// The queries answered at the poses of the request's instances `slots`, into `sink` (as
+    /// state 0): query q between `slots[pairs[q].0]` and `slots[pairs[q].1]` (skipped when
+    /// `None`), with Newton's answers already solved where `newton.0` has them (query q at index
+    /// `newton.1 + q`, taken from it). With `mode` [`CertifyMode::NewtonOnly`] it stops at the
+    /// first answer that needs the SDP and returns false.
+    #[allow(clippy::too_many_arguments)]
     fn answer_slots(
         &mut self,
         queries: &[QueryPair],
@@ -535,18 +663,35 @@ impl QueryView {
         params: &CertifyParams,
         mode: Option<CertifyMode>,
         newton: (&mut LaneAnswers, usize),
-    ) -> Vec<QueryAnswer> {
+        sink: &mut dyn AnswerSink,
+    ) -> bool {
         let (newton, offset) = newton;
-        queries
-            .iter()
-            .zip(pairs)
-            .enumerate()
-            .filter_map(|(q, (query, ij))| {
-                let (i, j) = (*ij)?;
-                let pair = with_mode(query.view(), mode);
-                Some(answer_pair_with(pair, &slots[i], &slots[j], &mut self.cache, params, newton.take(offset + q)))
-            })
-            .collect()
+        for (q, (query, ij)) in queries.iter().zip(pairs).enumerate() {
+            let Some((i, j)) = *ij else { continue };
+            let pair = with_mode(query.view(), mode);
+            let answer = answer_pair_with(pair, &slots[i], &slots[j], &mut self.cache, params, newton.take(offset + q));
+            if mode.is_some() && answer.needs_sdp() {
+                return false;
+            }
+            sink.push(0, q, answer);
+        }
+        true
+    }
+}
+
+/// An [`AnswerSink`] that files the answers pushed as state 0 under `state`.
+struct StateSink<'s> {
+    state: usize,
+    sink: &'s mut dyn AnswerSink,
+}
+
+impl AnswerSink for StateSink<'_> {
+    fn push(&mut self, _state: usize, query: usize, answer: QueryAnswer) {
+        self.sink.push(self.state, query, answer);
+    }
+
+    fn clear(&mut self) {
+        self.sink.clear();
     }
 }
 
@@ -572,14 +717,15 @@ fn state_lane_distances(
     params: &CertifyParams,
     mode: Option<CertifyMode>,
 ) -> LaneAnswers {
-    let candidates = request.states.iter().flat_map(|_| request.queries.iter().map(|q| (q.kind, &q.options)));
+    let states = request.states.len();
+    let candidates = (0..states).flat_map(|_| request.queries.iter().map(|q| (q.kind, &q.options)));
     if !enough_lane_candidates(candidates) {
         return LaneAnswers::default();
     }
-    let n = request.states.len() * request.queries.len();
+    let n = states * request.queries.len();
     let (mut views, mut snapshot) = (Vec::with_capacity(n), Vec::with_capacity(n));
     let mut buf = Vec::new();
-    for s in 0..request.states.len() {
+    for s in 0..states {
         state_slots(s, &mut buf);
         // Slot i at this state's pose.
         let at = |i: usize| {
@@ -644,7 +790,7 @@ pub fn check_scene(
     if !(margin.is_finite() && margin >= 0.0) {
         return Err(Error::invalid("margin", format!("must be finite and >= 0 meters, got {margin}")));
     }
-    check_unique(|| "poses".into(), overrides)?;
+    check_unique(|k| format!("poses[{k}].instance_id"), ids_of(overrides))?;
     let mut all = catalog.posed_instances(scene_id, &[])?;
     let index: HashMap<String, usize> = all.iter().enumerate().map(|(k, i)| (i.id.clone(), k)).collect();
     for (k, (id, pose)) in overrides.iter().enumerate() {

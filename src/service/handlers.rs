@@ -9,7 +9,7 @@ use crate::body::BodyFile;
 use crate::fit::mesh::parse_points_limited;
 use crate::fit::sos_convexity::admit_uploaded;
 use crate::query::CertifyMode;
-use crate::scene::planner::{PlannerAnswers, PlannerRequest, QueryView};
+use crate::scene::planner::{AnswerSink, PlannerAnswers, PlannerRequest, QueryView};
 use crate::scene::{Catalog, QueryAnswer, QueryOptions};
 use crate::{Error, Result};
 use std::sync::Arc;
@@ -36,35 +36,73 @@ impl SublevelService {
     }
 }
 
-/// Answers a planner request on a view: inline on the async worker when it holds only Newton
-/// queries (microseconds each), on the blocking pool when one asks for a certificate (an SDP).
-/// Returns the view (moved back out of the blocking pool) with the outcome.
-async fn run_view(
+/// Answers a planner request on a view into `sink`: inline on the async worker when it holds
+/// only Newton queries (microseconds each), on the blocking pool when one asks for a certificate
+/// (an SDP). Returns the view (moved back out of the blocking pool) with the filled sink.
+async fn run_view<S: AnswerSink + Send + 'static>(
     catalog: Arc<Catalog>,
     sdp: &SdpSlots,
     mut view: QueryView,
     request: PlannerRequest,
-) -> (QueryView, Result<PlannerAnswers, Status>) {
+    mut sink: S,
+) -> (QueryView, Result<S, Status>) {
     let certify = request.queries.iter().any(|q| q.options.mode == CertifyMode::Certify);
     let answers = request.queries.len() * request.states.len().max(1);
     if !off_workers(&catalog, view.scene_id(), certify, answers) {
         // Newton only: an answer that needs the SDP sends the whole request to the blocking pool.
-        match view.run_newton_only(&catalog, &request) {
-            Ok(Some(out)) => return (view, Ok(out)),
-            Ok(None) => {}
+        match view.run_newton_only_into(&catalog, &request, &mut sink) {
+            Ok(true) => return (view, Ok(sink)),
+            Ok(false) => {}
             Err(e) => return (view, Err(Status::from(e))),
         }
     }
     let scene = view.scene_id().to_owned();
     match sdp
         .run(move || {
-            let out = view.run(&catalog, &request);
+            let out = view.run_into(&catalog, &request, &mut sink).map(|()| sink);
             Ok((view, out))
         })
         .await
     {
         Ok((view, out)) => (view, out.map_err(Status::from)),
         Err(e) => (QueryView::new(&scene), Err(e)),
+    }
+}
+
+/// Answers planner request `planner` (validated from `req`) on `view` and builds the reply.
+/// States and answers both in columns (the sampling planner's batch) are written to the answer
+/// columns as they are solved; every other request collects its answers first.
+async fn answer_planner(
+    catalog: Arc<Catalog>,
+    sdp: &SdpSlots,
+    view: QueryView,
+    req: &pb::QueryRequest,
+    planner: PlannerRequest,
+    start: std::time::Instant,
+) -> (QueryView, Result<pb::QueryResponse, Status>) {
+    let columns = cv::columns_kind(req);
+    let state_columns = req.state_columns.is_some();
+    match columns {
+        Some(kind) if state_columns => {
+            let rows = planner.queries.len() * planner.states.len();
+            let (view, out) = run_view(catalog, sdp, view, planner, cv::ColumnsSink::new(kind, rows)).await;
+            let reply = out.map(|c| pb::QueryResponse {
+                request_id: req.request_id,
+                server_seconds: start.elapsed().as_secs_f64(),
+                columns: Some(c.finish()),
+                ..Default::default()
+            });
+            (view, reply)
+        }
+        _ => {
+            let answers = PlannerAnswers::for_request(&planner);
+            let (view, out) = run_view(catalog, sdp, view, planner, answers).await;
+            let reply = out.map(|a| {
+                let seconds = start.elapsed().as_secs_f64();
+                cv::planner_answers_to_proto(&a, req.request_id, seconds, columns, state_columns)
+            });
+            (view, reply)
+        }
     }
 }
 
@@ -160,13 +198,9 @@ impl QueryStreamState {
                 return Err(Error::invalid("scene_id", message).into());
             }
         };
-        let (back, answers) = run_view(self.catalog.clone(), &self.sdp, current, planner).await;
+        let (back, reply) = answer_planner(self.catalog.clone(), &self.sdp, current, &req, planner, start).await;
         self.view = Some(back);
-        let columns = cv::columns_kind(&req);
-        let state_columns = req.state_columns.is_some();
-        answers.map(|a| {
-            cv::planner_answers_to_proto(&a, req.request_id, start.elapsed().as_secs_f64(), columns, state_columns)
-        })
+        reply
     }
 }
 
@@ -629,16 +663,8 @@ impl Sublevel for SublevelService {
         let planner =
             cv::planner_request_from_proto(&req, self.config.max_batch_pairs, self.config.max_poses_per_call)?;
         let view = QueryView::new(&req.scene_id);
-        let (_, answers) = run_view(self.catalog.clone(), &self.sdp, view, planner).await;
-        let answers = answers?;
-        let columns = cv::columns_kind(&req);
-        Ok(Response::new(cv::planner_answers_to_proto(
-            &answers,
-            req.request_id,
-            start.elapsed().as_secs_f64(),
-            columns,
-            req.state_columns.is_some(),
-        )))
+        let (_, reply) = answer_planner(self.catalog.clone(), &self.sdp, view, &req, planner, start).await;
+        Ok(Response::new(reply?))
     }
 
     type QueryStreamStream = std::pin::Pin<Box<dyn Stream<Item = Result<pb::QueryResponse, Status>> + Send>>;
@@ -697,7 +723,7 @@ mod tests {
     use crate::body::ellipsoid;
     use crate::math::pose_from_parts;
     use crate::query::{AnswerSource, NewtonParams};
-    use crate::scene::planner::PlannerAnswers;
+    use crate::scene::planner::{CandidateStates, PlannerAnswers};
     use crate::scene::store::MemoryStore;
 
     /// A catalog whose Newton solver stops after one iteration (so it never converges on two
@@ -774,13 +800,35 @@ mod tests {
         );
 
         // The planner path: the view answers the fallback's value too.
-        let (view, out) = run_view(catalog.clone(), &service.sdp, QueryView::new(&s), request_of(&a, &b)).await;
+        let request = request_of(&a, &b);
+        let answers = PlannerAnswers::for_request(&request);
+        let (view, out) = run_view(catalog.clone(), &service.sdp, QueryView::new(&s), request, answers).await;
         let PlannerAnswers::Single(answers) = out.unwrap() else { panic!("one list of answers") };
         let crate::scene::QueryAnswer::Distance(d) = &answers[0] else { panic!("a distance answer") };
         assert_eq!(d.answer.source, AnswerSource::SdpFallback);
         assert!(!d.answer.needs_sdp);
         assert!((d.answer.result.distance - want.answer.result.distance).abs() <= 1e-12);
         assert_eq!(view.warm_starts(), 1, "the blocking run keeps its warm start");
+
+        // States and answers in columns (rows written as solved): the inline run stops at the
+        // first row needing the SDP and clears what it wrote; the blocking run gives the
+        // fallback's distance on the first row, and the rows after it (warm-started from it, so
+        // Newton converges there) agree within 1e-9 m.
+        let pose_b = pose_from_parts("pose", [0.9238795325112867, 0.0, 0.3826834323650898, 0.0], [1.5, 0.3, -0.2]);
+        let states = CandidateStates::Columns { instance_ids: vec![b.clone()], poses: vec![pose_b.unwrap(); 3] };
+        let request = PlannerRequest { states, ..request_of(&a, &b) };
+        let mut sink = cv::ColumnsSink::new(crate::scene::QueryKind::Distance, 3);
+        assert!(!QueryView::new(&s).run_newton_only_into(&catalog, &request, &mut sink).unwrap());
+        assert!(sink.finish().value.is_empty(), "the inline run's rows are cleared");
+        let sink = cv::ColumnsSink::new(crate::scene::QueryKind::Distance, 3);
+        let (_, out) = run_view(catalog.clone(), &service.sdp, QueryView::new(&s), request, sink).await;
+        let rows = out.unwrap().finish();
+        assert_eq!(rows.value.len(), 3);
+        for (k, v) in rows.value.iter().enumerate() {
+            let tol = if k == 0 { 1e-12 } else { 1e-9 };
+            assert!((v - want.answer.result.distance).abs() <= tol, "row {k}: {v} vs {}", want.answer.result.distance);
+            assert!(rows.converged[k] && !rows.lower_bound[k]);
+        }
     }
 
     fn request_of(a: &str, b: &str) -> PlannerRequest {

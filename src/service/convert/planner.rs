@@ -5,6 +5,7 @@ use super::queries::{answer_to_proto, distance_reply_to_proto, query_options};
 use super::scenes::poses_from_proto;
 use super::{prefix_field, require_id, MAX_ID_BYTES};
 use crate::math::{pose_from_parts, Isometry3, Real};
+use crate::scene::planner::CandidateStates;
 use crate::scene::{QueryAnswer, QueryKind, QueryOptions};
 use crate::service::pb;
 use crate::{Error, Result};
@@ -79,39 +80,54 @@ pub fn pair_columns_from_proto(c: &pb::PairColumns, max_pairs: usize) -> Result<
 /// Answers of a columns request as `AnswerColumns`: one entry per answer in every column (three
 /// for points), `decided_by_bounds` for COLLIDE only.
 pub fn answers_to_columns(kind: QueryKind, answers: &[QueryAnswer]) -> pb::AnswerColumns {
-    rows_to_columns(kind, answers.len(), answers.iter())
+    let mut c = ColumnsSink::new(kind, answers.len());
+    answers.iter().for_each(|a| c.push_row(a));
+    c.finish()
 }
 
-/// [`answers_to_columns`] of the `n` answers `answers` (rows in order; iterated twice).
-fn rows_to_columns<'a>(
+/// Answer columns (`AnswerColumns`) filled row by row as a planner run solves them
+/// ([`crate::scene::planner::AnswerSink`]): no answer is kept once its row is written. Rows are
+/// in the order pushed (state-major for candidate states); `upper` and `level` exist once a row
+/// has a tree answer (earlier rows then get their value and level 0).
+#[derive(Debug)]
+pub struct ColumnsSink {
+    columns: pb::AnswerColumns,
     kind: QueryKind,
-    n: usize,
-    answers: impl Iterator<Item = &'a QueryAnswer> + Clone,
-) -> pb::AnswerColumns {
-    let mut c = pb::AnswerColumns {
-        kind: match kind {
-            QueryKind::Distance => pb::QueryKind::Distance,
-            QueryKind::Growth => pb::QueryKind::Growth,
-            QueryKind::Collide => pb::QueryKind::Collide,
-        } as i32,
-        value: Vec::with_capacity(n),
-        point_a: Vec::with_capacity(3 * n),
-        point_b: Vec::with_capacity(3 * n),
-        converged: Vec::with_capacity(n),
-        overlapping: Vec::with_capacity(n),
-        lower_bound: Vec::with_capacity(n),
-        decided_by_bounds: Vec::with_capacity(if kind == QueryKind::Collide { n } else { 0 }),
-        upper: Vec::new(),
-        level: Vec::new(),
-    };
-    let tree_of = |a: &QueryAnswer| match a {
-        QueryAnswer::Distance(d) => d.tree,
-        QueryAnswer::Growth(g) => g.tree,
-        QueryAnswer::Collide(c) => c.tree,
-    };
-    let any_tree = answers.clone().any(|a| tree_of(a).is_some());
-    let nan = [Real::NAN; 3];
-    for a in answers {
+    /// A row had a tree answer: `upper` and `level` are filled.
+    trees: bool,
+}
+
+impl ColumnsSink {
+    /// Empty columns of `kind`, with room for `rows` answers.
+    pub fn new(kind: QueryKind, rows: usize) -> Self {
+        let columns = pb::AnswerColumns {
+            kind: match kind {
+                QueryKind::Distance => pb::QueryKind::Distance,
+                QueryKind::Growth => pb::QueryKind::Growth,
+                QueryKind::Collide => pb::QueryKind::Collide,
+            } as i32,
+            value: Vec::with_capacity(rows),
+            point_a: Vec::with_capacity(3 * rows),
+            point_b: Vec::with_capacity(3 * rows),
+            converged: Vec::with_capacity(rows),
+            overlapping: Vec::with_capacity(rows),
+            lower_bound: Vec::with_capacity(rows),
+            decided_by_bounds: Vec::with_capacity(if kind == QueryKind::Collide { rows } else { 0 }),
+            upper: Vec::new(),
+            level: Vec::new(),
+        };
+        Self { columns, kind, trees: false }
+    }
+
+    /// The columns written so far.
+    pub fn finish(self) -> pb::AnswerColumns {
+        self.columns
+    }
+
+    /// Appends `a` as the next row.
+    fn push_row(&mut self, a: &QueryAnswer) {
+        let c = &mut self.columns;
+        let nan = [Real::NAN; 3];
         let (value, pa, pb_, converged, overlapping, lower_bound) = match a {
             QueryAnswer::Distance(d) => {
                 let (r, w) = (&d.answer.result, &d.answer);
@@ -144,10 +160,20 @@ fn rows_to_columns<'a>(
                 }
             }
         };
-        if any_tree {
-            let t = tree_of(a);
-            c.upper.push(t.map_or(value, |t| t.upper));
-            c.level.push(t.map_or(0, |t| u32::try_from(t.level).unwrap_or(u32::MAX)));
+        let tree = match a {
+            QueryAnswer::Distance(d) => d.tree,
+            QueryAnswer::Growth(g) => g.tree,
+            QueryAnswer::Collide(c) => c.tree,
+        };
+        if tree.is_some() && !self.trees {
+            // The first tree answer: the rows before it were single-body answers.
+            self.trees = true;
+            c.upper.extend_from_slice(&c.value);
+            c.level.resize(c.value.len(), 0);
+        }
+        if self.trees {
+            c.upper.push(tree.map_or(value, |t| t.upper));
+            c.level.push(tree.map_or(0, |t| u32::try_from(t.level).unwrap_or(u32::MAX)));
         }
         c.value.push(value);
         c.point_a.extend_from_slice(&pa);
@@ -156,7 +182,17 @@ fn rows_to_columns<'a>(
         c.overlapping.push(overlapping);
         c.lower_bound.push(lower_bound);
     }
-    c
+}
+
+impl crate::scene::planner::AnswerSink for ColumnsSink {
+    fn push(&mut self, _state: usize, _query: usize, answer: QueryAnswer) {
+        self.push_row(&answer);
+    }
+
+    fn clear(&mut self) {
+        let rows = self.columns.value.capacity();
+        *self = Self::new(self.kind, rows);
+    }
 }
 
 /// Validates a planner request: its poses (`poses[k]`), candidate states
@@ -197,14 +233,16 @@ pub fn planner_request_from_proto(
     let poses = poses_from_proto(&req.poses, max_poses)?;
     let states = match &req.state_columns {
         Some(c) => state_columns_from_proto(c, max_poses)?,
-        None => req
-            .states
-            .iter()
-            .enumerate()
-            .map(|(s, st)| poses_from_proto(&st.poses, max_poses).map_err(|e| prefix_field(e, &format!("states[{s}]"))))
-            .collect::<Result<Vec<_>>>()?,
+        None => CandidateStates::Lists(
+            req.states
+                .iter()
+                .enumerate()
+                .map(|(s, st)| {
+                    poses_from_proto(&st.poses, max_poses).map_err(|e| prefix_field(e, &format!("states[{s}]")))
+                })
+                .collect::<Result<Vec<_>>>()?,
+        ),
     };
-    let state_columns = req.state_columns.is_some();
     if let Some(columns) = &req.columns {
         if !req.queries.is_empty() {
             return Err(Error::invalid("columns", "set either `queries` or `columns`, not both"));
@@ -229,7 +267,7 @@ pub fn planner_request_from_proto(
                 margin: c.margin,
             })
             .collect();
-        return Ok(crate::scene::planner::PlannerRequest { poses, queries, states, state_columns });
+        return Ok(crate::scene::planner::PlannerRequest { poses, queries, states });
     }
     let queries = req
         .queries
@@ -264,7 +302,7 @@ pub fn planner_request_from_proto(
             })
         })
         .collect::<Result<Vec<_>>>()?;
-    Ok(crate::scene::planner::PlannerRequest { poses, queries, states, state_columns })
+    Ok(crate::scene::planner::PlannerRequest { poses, queries, states })
 }
 
 /// The candidate states of `QueryRequest.state_columns`, validated (the limits on states and
@@ -276,7 +314,7 @@ pub fn planner_request_from_proto(
 /// instances) or `state_columns.poses[i]` (the first entry of a pose that is not finite, off the
 /// supported range, or whose quaternion has no unit norm; with its state and instance);
 /// [`Error::ResourceExhausted`] for more than `max_poses` instance ids.
-fn state_columns_from_proto(c: &pb::StateColumns, max_poses: usize) -> Result<Vec<Vec<(String, Isometry3)>>> {
+fn state_columns_from_proto(c: &pb::StateColumns, max_poses: usize) -> Result<CandidateStates> {
     let n = c.instance_ids.len();
     if n == 0 {
         return Err(Error::invalid("state_columns.instance_ids", "must name at least one instance"));
@@ -304,25 +342,21 @@ fn state_columns_from_proto(c: &pb::StateColumns, max_poses: usize) -> Result<Ve
             ),
         ));
     }
-    c.poses
-        .chunks_exact(7 * n)
+    let poses = c
+        .poses
+        .chunks_exact(7)
         .enumerate()
-        .map(|(s, state)| {
-            state
-                .chunks_exact(7)
-                .zip(&c.instance_ids)
-                .enumerate()
-                .map(|(k, (v, id))| {
-                    let parts = |field: &str| pose_from_parts(field, [v[0], v[1], v[2], v[3]], [v[4], v[5], v[6]]);
-                    // The field is named only when the pose is refused (no string per pose).
-                    let pose = parts("").or_else(|_| {
-                        parts(&format!("state_columns.poses[{}] (state {s}, instance `{id}`)", 7 * (s * n + k)))
-                    })?;
-                    Ok((id.clone(), pose))
-                })
-                .collect()
+        .map(|(i, v)| {
+            let parts = |field: &str| pose_from_parts(field, [v[0], v[1], v[2], v[3]], [v[4], v[5], v[6]]);
+            // The field is named only when the pose is refused (no string per pose).
+            parts("").or_else(|_| {
+                let (s, k) = (i / n, i % n);
+                let id = &c.instance_ids[k];
+                parts(&format!("state_columns.poses[{}] (state {s}, instance `{id}`)", 7 * i))
+            })
         })
-        .collect()
+        .collect::<Result<Vec<Isometry3>>>()?;
+    Ok(CandidateStates::Columns { instance_ids: c.instance_ids.clone(), poses })
 }
 
 /// The answers of a planner request as the proto response.
@@ -343,8 +377,9 @@ pub fn planner_answers_to_proto(
         (PlannerAnswers::Single(a), None) => out.answers = a.iter().map(answer_to_proto).collect(),
         (PlannerAnswers::Single(a), Some(kind)) => out.columns = Some(answers_to_columns(kind, a)),
         (PlannerAnswers::PerState(states), Some(kind)) if state_columns => {
-            let n = states.iter().map(Vec::len).sum();
-            out.columns = Some(rows_to_columns(kind, n, states.iter().flatten()));
+            let mut c = ColumnsSink::new(kind, states.iter().map(Vec::len).sum());
+            states.iter().flatten().for_each(|a| c.push_row(a));
+            out.columns = Some(c.finish());
         }
         (PlannerAnswers::PerState(states), _) => {
             out.states = states
@@ -388,5 +423,66 @@ pub fn scene_check_to_proto(c: &crate::scene::planner::SceneCheck, server_second
         narrow_phase_solves: c.narrow_phase_solves,
         all_pairs: c.all_pairs,
         server_seconds,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::planner::{AnswerSink, CollideReply};
+    use crate::scene::TreeInfo;
+
+    /// A collide answer decided by the bounding spheres (no witness points), with `tree` if given.
+    fn bounds_answer(distance: Real, tree: Option<TreeInfo>) -> QueryAnswer {
+        QueryAnswer::Collide(CollideReply {
+            collides: false,
+            distance,
+            decided_by_bounds: true,
+            solve: None,
+            margin: 0.0,
+            tree,
+        })
+    }
+
+    /// Rows written one by one as a run solves them equal the rows of the answers collected first,
+    /// and `upper` / `level` appear at the first tree answer with the earlier rows filled in
+    /// (their value, level 0), as the two-pass rule of `AnswerColumns` says.
+    #[test]
+    fn columns_written_row_by_row_equal_the_collected_answers() {
+        let tree = TreeInfo {
+            lower: 0.8,
+            upper: 0.9,
+            level: 2,
+            leaves: Some((3, 0)),
+            pairs_evaluated: 5,
+            pairs_pruned_by_spheres: 1,
+            within_tolerance: true,
+            needs_sdp: false,
+        };
+        let answers = [bounds_answer(0.7, None), bounds_answer(0.8, Some(tree)), bounds_answer(1.5, None)];
+        let mut sink = ColumnsSink::new(QueryKind::Collide, 0);
+        sink.push(0, 0, bounds_answer(9.0, None));
+        sink.clear();
+        for (k, a) in answers.iter().enumerate() {
+            sink.push(k, 0, a.clone());
+        }
+        let rows = sink.finish();
+        // (Compared as bytes: the witness columns hold NaN.)
+        let collected = answers_to_columns(QueryKind::Collide, &answers);
+        assert_eq!(prost::Message::encode_to_vec(&rows), prost::Message::encode_to_vec(&collected));
+        assert_eq!(rows.value, [0.7, 0.8, 1.5]);
+        assert_eq!(rows.upper, [0.7, 0.9, 1.5]);
+        assert_eq!(rows.level, [0, 2, 0]);
+        assert_eq!(rows.decided_by_bounds, [true, true, true]);
+        assert!(rows.point_a.iter().all(|v| v.is_nan()) && rows.point_a.len() == 9);
+
+        // A tree answer in the first row.
+        let first = answers_to_columns(QueryKind::Collide, &[answers[1].clone(), answers[0].clone()]);
+        assert_eq!((first.upper, first.level), (vec![0.9, 0.7], vec![2, 0]));
+
+        // Without a tree answer there are no tree columns.
+        let plain = answers_to_columns(QueryKind::Collide, &[bounds_answer(0.7, None), bounds_answer(1.5, None)]);
+        assert!(plain.upper.is_empty() && plain.level.is_empty());
+        assert_eq!(plain.value, [0.7, 1.5]);
     }
 }

@@ -124,9 +124,12 @@ proptest! {
         match planner_request_from_proto(&req, 1000, 1000) {
             Ok(r) => {
                 prop_assert!(unique && poses_ok);
-                prop_assert!(r.state_columns);
                 prop_assert_eq!(r.states.len(), numbers.len() / (7 * n));
-                prop_assert!(r.states.iter().all(|s| s.iter().map(|(id, _)| id).eq(ids.iter())));
+                let crate::scene::planner::CandidateStates::Columns { instance_ids, poses } = &r.states else {
+                    return Err(TestCaseError::fail("states in columns must stay columns"));
+                };
+                prop_assert_eq!(instance_ids, &ids);
+                prop_assert_eq!(poses.len(), numbers.len() / 7);
             }
             Err(Error::InvalidArgument { field, .. }) => {
                 prop_assert!(!(unique && poses_ok));
