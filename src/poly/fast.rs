@@ -642,10 +642,12 @@ mod x86 {
 
     soa_acc!(
         /// Each coefficient is broadcast and multiplied into all four points at once. A Horner pass
-        /// keeps 3N accumulators live (z chain, y and x sums) besides the three coordinates, so
-        /// N ≤ 3 fits the 16 AVX registers: passes of 3, 3, 2, 2 quantities ran 21.9 / 48.2 ns per
-        /// point at 2d = 6 / 8, passes of 5 + 5 spilled (27 / 49 ns), of 4, 4, 2 23.1 / 73.6 ns, of
-        /// 2 × 5 24.4 / 49.3 ns.
+        /// keeps 3N accumulators live (z chain, y and x sums) besides the three coordinates and a
+        /// broadcast, so N ≤ 3 fits the 16 AVX registers: passes of 3, 3, 2, 2 quantities ran
+        /// 21.9 / 48.2 ns per point at 2d = 6 / 8, passes of 5 + 5 spilled (27 / 49 ns), of 4, 4, 2
+        /// 23.1 / 73.6 ns, of 2 × 5 24.4 / 49.3 ns. With 13 of 16 registers live, 3, 3, 2, 2 left
+        /// the register allocator no slack: which code shared the kernel's codegen unit decided
+        /// whether it spilled (see `soa_kernel`).
         SoaAcc, [Real; SOA_WIDTH], |row, i| _mm256_broadcast_sd(&row[OFF + i])
     );
 
@@ -693,12 +695,18 @@ mod x86 {
         // SAFETY: each `u[i]` is four readable `f64`; `cpu` proves AVX2.
         let coordinate = |i: usize| F64x4(unsafe { _mm256_loadu_pd(u[i].as_ptr()) }, cpu);
         let p = Point { x: coordinate(0), y: coordinate(1), z: coordinate(2) };
-        // Passes of 3, 3, 2, 2 quantities (see `SoaAcc`).
-        let a = soa_scheme::<D, 0, 3>(cpu, rows, p).0;
-        let b = soa_scheme::<D, 3, 3>(cpu, rows, p).0;
-        let c = soa_scheme::<D, 6, 2>(cpu, rows, p).0;
-        let e = soa_scheme::<D, 8, 2>(cpu, rows, p).0;
-        euler4::<D>(cpu, p, [a[0], a[1], a[2], b[0], b[1]], [b[2], c[0], c[1], e[0], e[1]])
+        // Five passes of 2 quantities (see `SoaAcc`): the kernel of 2d = 8 (lower degrees read the
+        // replicated table). Passes of 3, 3, 2, 2 ran 45.6–46.1 ns per point at 2d = 8 in one build
+        // and 49.8–53.7 ns in another (302 instead of 70 stack accesses), or 68–69 ns with one
+        // codegen unit, as changes elsewhere in the crate moved the codegen units; passes of 2
+        // ran 48.2–49.4 ns with four codegen units and 48.8 with one (`examples/kernel_timing 8`,
+        // alternated in one session).
+        let a = soa_scheme::<D, 0, 2>(cpu, rows, p).0;
+        let b = soa_scheme::<D, 2, 2>(cpu, rows, p).0;
+        let c = soa_scheme::<D, 4, 2>(cpu, rows, p).0;
+        let e = soa_scheme::<D, 6, 2>(cpu, rows, p).0;
+        let f = soa_scheme::<D, 8, 2>(cpu, rows, p).0;
+        euler4::<D>(cpu, p, [a[0], a[1], b[0], b[1], c[0]], [c[1], e[0], e[1], f[0], f[1]])
     }
 
     /// p, ∇p and ∇²p at the four points `p` from the Horner sums `lo` = [xx, xy, xz, yy, yz] and
