@@ -831,6 +831,38 @@ mod tests {
         }
     }
 
+    /// States in columns built in-process (not through the converter) are validated by the view:
+    /// a pose count that is no multiple of the instances, a repeated and an unknown instance are
+    /// refused naming the field, and the view is left unchanged.
+    #[test]
+    fn a_view_refuses_bad_state_columns_naming_the_field() {
+        let (catalog, s, a, b) = one_iteration_scene();
+        let pose = pose_from_parts("pose", [1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 3.0]).unwrap();
+        let columns = |ids: &[&str], poses: usize| PlannerRequest {
+            states: CandidateStates::Columns {
+                instance_ids: ids.iter().map(|id| (*id).to_owned()).collect(),
+                poses: vec![pose; poses],
+            },
+            ..request_of(&a, &b)
+        };
+        let field_of = |request: &PlannerRequest| match QueryView::new(&s).run(&catalog, request) {
+            Err(crate::Error::InvalidArgument { field, .. }) => field,
+            other => panic!("expected INVALID_ARGUMENT, got {other:?}"),
+        };
+        assert_eq!(field_of(&columns(&[&a, &b], 3)), "state_columns.poses");
+        assert_eq!(field_of(&columns(&[], 0)), "state_columns.poses");
+        assert_eq!(field_of(&columns(&[&b, &a, &b], 3)), "state_columns.instance_ids[2]");
+        assert_eq!(field_of(&columns(&[&a, "i-nowhere"], 4)), "state_columns.instance_ids[1]");
+        let mut view = QueryView::new(&s);
+        assert!(view.run(&catalog, &columns(&[&a, "i-nowhere"], 4)).is_err());
+        assert_eq!(view.warm_starts(), 0);
+        // Two valid states: one answer list per state.
+        let PlannerAnswers::PerState(states) = view.run(&catalog, &columns(&[&a, &b], 4)).unwrap() else {
+            panic!("answers per state");
+        };
+        assert_eq!(states.iter().map(Vec::len).collect::<Vec<_>>(), [1, 1]);
+    }
+
     fn request_of(a: &str, b: &str) -> PlannerRequest {
         let pair = crate::scene::QueryPair {
             kind: crate::scene::QueryKind::Distance,
