@@ -611,7 +611,7 @@ impl QueryView {
                 let at = |k: usize| pairs[k].map(|(i, j)| (slots[i].borrowed(), slots[j].borrowed()));
                 newton = lane_distances(&views, at, params);
             }
-            return self.answer_slots(&request.queries, &pairs, &slots, params, mode, (&mut newton, 0), sink);
+            return self.answer_slots(&request.queries, &pairs, &slots, params, mode, (&mut newton, 0, 0), sink);
         }
         // States in columns: the slots of their instances, resolved once.
         let columns: Vec<Option<usize>> = match &request.states {
@@ -638,8 +638,7 @@ impl QueryView {
         for s in 0..states {
             state_slots(s, &mut buf);
             saved.extend(buf.iter().map(|&(i, pose)| (i, std::mem::replace(&mut slots[i].pose, pose))));
-            let mut state = StateSink { state: s, sink: &mut *sink };
-            if !self.answer_slots(&request.queries, &pairs, &slots, params, mode, (&mut newton, s * nq), &mut state) {
+            if !self.answer_slots(&request.queries, &pairs, &slots, params, mode, (&mut newton, s * nq, s), sink) {
                 return false;
             }
             for (i, pose) in saved.drain(..).rev() {
@@ -649,10 +648,10 @@ impl QueryView {
         true
     }
 
-    /// The queries answered at the poses of the request's instances `slots`, into `sink` (as
-    /// state 0): query q between `slots[pairs[q].0]` and `slots[pairs[q].1]` (skipped when
-    /// `None`), with Newton's answers already solved where `newton.0` has them (query q at index
-    /// `newton.1 + q`, taken from it). With `mode` [`CertifyMode::NewtonOnly`] it stops at the
+    /// The queries answered at the poses of the request's instances `slots`, into `sink` as
+    /// candidate state `newton.2` (0 without states): query q between `slots[pairs[q].0]` and
+    /// `slots[pairs[q].1]` (skipped when `None`), with Newton's answers already solved where
+    /// `newton.0` has them (query q at index `newton.1 + q`, taken from it). With `mode` [`CertifyMode::NewtonOnly`] it stops at the
     /// first answer that needs the SDP and returns false.
     #[allow(clippy::too_many_arguments)]
     fn answer_slots(
@@ -662,10 +661,10 @@ impl QueryView {
         slots: &[Posed],
         params: &CertifyParams,
         mode: Option<CertifyMode>,
-        newton: (&mut LaneAnswers, usize),
+        newton: (&mut LaneAnswers, usize, usize),
         sink: &mut dyn AnswerSink,
     ) -> bool {
-        let (newton, offset) = newton;
+        let (newton, offset, state) = newton;
         for (q, (query, ij)) in queries.iter().zip(pairs).enumerate() {
             let Some((i, j)) = *ij else { continue };
             let pair = with_mode(query.view(), mode);
@@ -673,25 +672,9 @@ impl QueryView {
             if mode.is_some() && answer.needs_sdp() {
                 return false;
             }
-            sink.push(0, q, answer);
+            sink.push(state, q, answer);
         }
         true
-    }
-}
-
-/// An [`AnswerSink`] that files the answers pushed as state 0 under `state`.
-struct StateSink<'s> {
-    state: usize,
-    sink: &'s mut dyn AnswerSink,
-}
-
-impl AnswerSink for StateSink<'_> {
-    fn push(&mut self, _state: usize, query: usize, answer: QueryAnswer) {
-        self.sink.push(self.state, query, answer);
-    }
-
-    fn clear(&mut self) {
-        self.sink.clear();
     }
 }
 

@@ -99,7 +99,7 @@ async fn answer_planner(
             let (view, out) = run_view(catalog, sdp, view, planner, answers).await;
             let reply = out.map(|a| {
                 let seconds = start.elapsed().as_secs_f64();
-                cv::planner_answers_to_proto(&a, req.request_id, seconds, columns, state_columns)
+                cv::planner_answers_to_proto(&a, req.request_id, seconds, columns)
             });
             (view, reply)
         }

@@ -92,7 +92,6 @@ pub fn answers_to_columns(kind: QueryKind, answers: &[QueryAnswer]) -> pb::Answe
 #[derive(Debug)]
 pub struct ColumnsSink {
     columns: pb::AnswerColumns,
-    kind: QueryKind,
     /// A row had a tree answer: `upper` and `level` are filled.
     trees: bool,
 }
@@ -116,7 +115,7 @@ impl ColumnsSink {
             upper: Vec::new(),
             level: Vec::new(),
         };
-        Self { columns, kind, trees: false }
+        Self { columns, trees: false }
     }
 
     /// The columns written so far.
@@ -190,8 +189,15 @@ impl crate::scene::planner::AnswerSink for ColumnsSink {
     }
 
     fn clear(&mut self) {
-        let rows = self.columns.value.capacity();
-        *self = Self::new(self.kind, rows);
+        let c = &mut self.columns;
+        for v in [&mut c.value, &mut c.point_a, &mut c.point_b, &mut c.upper] {
+            v.clear();
+        }
+        for v in [&mut c.converged, &mut c.overlapping, &mut c.lower_bound, &mut c.decided_by_bounds] {
+            v.clear();
+        }
+        c.level.clear();
+        self.trees = false;
     }
 }
 
@@ -362,25 +368,20 @@ fn state_columns_from_proto(c: &pb::StateColumns, max_poses: usize) -> Result<Ca
 /// The answers of a planner request as the proto response.
 ///
 /// `columns`: the request asked in columns (`QueryRequest.columns`) of this kind, so the answers
-/// go in `columns` rather than one message each; with `state_columns` too (the states came in
-/// `QueryRequest.state_columns`), the answers of all states go in one `columns`, state-major.
+/// go in `columns` rather than one message each (per state for candidate states). States in
+/// `QueryRequest.state_columns` with answers in columns go in one `columns`, state-major, written
+/// as they are solved by a [`ColumnsSink`] instead.
 pub fn planner_answers_to_proto(
     answers: &crate::scene::planner::PlannerAnswers,
     request_id: u64,
     server_seconds: f64,
     columns: Option<QueryKind>,
-    state_columns: bool,
 ) -> pb::QueryResponse {
     use crate::scene::planner::PlannerAnswers;
     let mut out = pb::QueryResponse { request_id, server_seconds, ..Default::default() };
     match (answers, columns) {
         (PlannerAnswers::Single(a), None) => out.answers = a.iter().map(answer_to_proto).collect(),
         (PlannerAnswers::Single(a), Some(kind)) => out.columns = Some(answers_to_columns(kind, a)),
-        (PlannerAnswers::PerState(states), Some(kind)) if state_columns => {
-            let mut c = ColumnsSink::new(kind, states.iter().map(Vec::len).sum());
-            states.iter().flatten().for_each(|a| c.push_row(a));
-            out.columns = Some(c.finish());
-        }
         (PlannerAnswers::PerState(states), _) => {
             out.states = states
                 .iter()
