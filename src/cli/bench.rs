@@ -23,7 +23,11 @@ use sublevel::{Body, Error, Result};
 /// The last three are the batch solver ([`sublevel::query::batch::cold_distances`]): all cold
 /// poses one at a time and as one batch, alternated `--repeats` times, µs per pair (medians over
 /// the rounds), and single time / batch time (the batch's rate in units of the single-query rate).
-pub const CSV_COLUMNS: [&str; 32] = [
+/// The `collide_*` columns time a planner's cold collide query (margin 0) at all cold poses, one at
+/// a time, alternated with the distance rounds: µs per pair with the bounding spheres alone before
+/// the solve, and with the spheres then the separating axis
+/// ([`sublevel::scene::planner::collide_lower_bound`]), and how many pairs those bounds decided.
+pub const CSV_COLUMNS: [&str; 35] = [
     "degree",
     "fit_chair_s",
     "distance_cold_us",
@@ -56,6 +60,9 @@ pub const CSV_COLUMNS: [&str; 32] = [
     "distance_cold_single_us",
     "distance_cold_batch_us",
     "batch_over_single_rate",
+    "collide_cold_spheres_us",
+    "collide_cold_us",
+    "collide_decided_by_bounds",
 ];
 
 /// The paper's Table 2: distance query times (seconds, MATLAB fmincon) at 2d = 2, 4, 6, 8.
@@ -176,6 +183,21 @@ struct Row {
     /// All cold poses one at a time / as one batch (µs per pair, medians over rounds).
     single_us: Real,
     batch_us: Real,
+    /// Cold collide (margin 0) at all cold poses: µs per pair with the spheres alone and with the
+    /// spheres then the separating axis, and the pairs the latter decided.
+    collide: CollideTimes,
+}
+
+/// A planner's cold collide queries (margin 0) at all cold poses, one at a time: µs per pair
+/// (medians over rounds) with the bounding spheres alone before the distance solve, and with the
+/// spheres then the separating axis ([`sublevel::scene::planner::collide_lower_bound`]); pairs
+/// decided by those bounds.
+#[derive(Clone, Copy, Default)]
+struct CollideTimes {
+    spheres_us: Real,
+    axis_us: Real,
+    decided: usize,
+    pairs: usize,
 }
 
 /// The parry3d-f64 side of the benchmark (degree-independent).
@@ -289,6 +311,9 @@ pub fn run(args: BenchArgs) -> Result<()> {
                 format!("{:.3}", r.single_us),
                 format!("{:.3}", r.batch_us),
                 format!("{:.3}", r.single_us / r.batch_us),
+                format!("{:.3}", r.collide.spheres_us),
+                format!("{:.3}", r.collide.axis_us),
+                r.collide.decided.to_string(),
             ])?;
         }
         eprintln!("wrote {}", csv.finish()?.display());
@@ -394,12 +419,13 @@ fn bench_queries(
         wd = Some(d.warm_start);
         wg = Some(g.warm_start);
     }
-    let (single_us, batch_us) = batch_against_single(args.repeats, chair, human, cold, params);
+    let (single_us, batch_us, collide) = batch_against_single(args.repeats, chair, human, cold, params);
     Row {
         degree,
         fit_chair_s,
         single_us,
         batch_us,
+        collide,
         dist_cold: median(dc),
         dist_warm: median(dw),
         growth_cold: median(gc),
@@ -412,19 +438,40 @@ fn bench_queries(
 
 /// The cold distance queries at all `cold` poses one at a time ([`distance`]) and as one batch
 /// ([`sublevel::query::batch::cold_distances`], no warm starts kept: what a cold batch query of a
-/// planner asks), alternated `repeats` times: µs per pair, medians over the rounds.
+/// planner asks), alternated `repeats` times with the cold collide queries ([`CollideTimes`]): µs
+/// per pair, medians over the rounds.
 fn batch_against_single(
     repeats: usize,
     chair: &Body,
     human: &Body,
     cold: &[Isometry3],
     params: &NewtonParams,
-) -> (Real, Real) {
+) -> (Real, Real, CollideTimes) {
+    use sublevel::scene::planner::{collide_lower_bound, sphere_lower_bound};
     let id = Isometry3::identity();
     let pairs: Vec<(Isometry3, Isometry3)> = cold.iter().map(|p| (*p, id)).collect();
     let n = pairs.len().max(1) as Real;
-    let (mut single, mut batch) = (Vec::new(), Vec::new());
+    // The planner's collide at margin 0 (`answer_pair_with`): a bound above the margin answers
+    // "clear", else the cold distance solve decides.
+    let collides = |p: &Isometry3, bound: Option<Real>| {
+        bound.is_none_or(|lower| lower <= 0.0) && distance(chair, p, human, &id, None, params).overlapping
+    };
+    let spheres = |p: &Isometry3| collides(p, sphere_lower_bound(chair, p, human, &id));
+    let axis = |p: &Isometry3| collides(p, collide_lower_bound(chair, p, human, &id, 0.0));
+    let decided =
+        cold.iter().filter(|p| collide_lower_bound(chair, p, human, &id, 0.0).is_some_and(|l| l > 0.0)).count();
+    let (mut single, mut batch, mut with_spheres, mut with_axis) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for _ in 0..repeats {
+        let t = Instant::now();
+        for p in cold {
+            std::hint::black_box(spheres(p));
+        }
+        with_spheres.push(t.elapsed().as_secs_f64() * 1e6 / n);
+        let t = Instant::now();
+        for p in cold {
+            std::hint::black_box(axis(p));
+        }
+        with_axis.push(t.elapsed().as_secs_f64() * 1e6 / n);
         let t = Instant::now();
         for p in cold {
             std::hint::black_box(distance(chair, p, human, &id, None, params));
@@ -434,7 +481,9 @@ fn batch_against_single(
         std::hint::black_box(sublevel::query::batch::cold_distances(chair, human, &pairs, params, false));
         batch.push(t.elapsed().as_secs_f64() * 1e6 / n);
     }
-    (median(single), median(batch))
+    let collide =
+        CollideTimes { spheres_us: median(with_spheres), axis_us: median(with_axis), decided, pairs: cold.len() };
+    (median(single), median(batch), collide)
 }
 
 fn print_table(rows: &[Row], peer: &PeerRow) {
@@ -461,6 +510,19 @@ fn print_table(rows: &[Row], peer: &PeerRow) {
             r.single_us,
             r.batch_us,
             r.single_us / r.batch_us
+        );
+    }
+    for r in rows {
+        let c = &r.collide;
+        println!(
+            "2d = {}: cold collide (margin 0) at all cold poses, {:.3} µs per pair with the bounding spheres then the \
+             separating axis, {:.3} µs with the spheres alone ({:.2}x); the bounds decide {} of {}",
+            r.degree,
+            c.axis_us,
+            c.spheres_us,
+            c.spheres_us / c.axis_us,
+            c.decided,
+            c.pairs
         );
     }
     println!();

@@ -32,10 +32,11 @@ use std::sync::Arc;
 pub struct CollideReply {
     /// True when the bodies overlap or their distance is below `margin`.
     pub collides: bool,
-    /// The solved distance (meters), or with `decided_by_bounds` a lower bound from the bounding
-    /// spheres.
+    /// The solved distance (meters), or with `decided_by_bounds` a certified lower bound
+    /// ([`collide_lower_bound`]: the bounding spheres, then the separating axis).
     pub distance: Real,
-    /// The bounding spheres decided: no solve ran.
+    /// The cheap bounds decided (the bounding spheres or the separating axis,
+    /// [`collide_lower_bound`]): no solve ran.
     pub decided_by_bounds: bool,
     /// The distance solve, when one ran.
     pub solve: Option<DistanceReply>,
@@ -86,6 +87,24 @@ pub fn sphere_lower_bound(a: &Body, pose_a: &Isometry3, b: &Body, pose_b: &Isome
     Some(((pose_a * ca) - (pose_b * cb)).norm() - ra - rb).map(|d| d.max(0.0))
 }
 
+/// A certified lower bound of the distance between two posed convex single bodies (meters), the
+/// cheapest test first: the bounding spheres' gap ([`sphere_lower_bound`], about 20 ns); when that
+/// does not exceed `margin`, the larger of it and the separating-axis gap along the line between
+/// the bodies' box centers ([`crate::query::tree::axis_lower_bound`], about 0.14 µs, from their
+/// certified support bounds). A collide query whose bound exceeds its margin is answered "clear"
+/// with no solve (`decided_by_bounds`). `None` when a body has no proven bound (nonconvex).
+///
+/// On the 300 cold chair_101 / human_10 poses of `sublevel bench` at 2d = 6 and margin 0, the
+/// spheres decide 161 pairs and the axis 104 of the 139 others, leaving 35 distance solves (22
+/// of them overlapping pairs) instead of 139.
+pub fn collide_lower_bound(a: &Body, pose_a: &Isometry3, b: &Body, pose_b: &Isometry3, margin: Real) -> Option<Real> {
+    let spheres = sphere_lower_bound(a, pose_a, b, pose_b)?;
+    if spheres > margin {
+        return Some(spheres);
+    }
+    Some(crate::query::tree::axis_lower_bound(a, pose_a, b, pose_b).map_or(spheres, |axis| axis.max(spheres)))
+}
+
 /// Answers one query between two posed instances with the given warm-start cache (ids key it);
 /// `options.cold` ignores and leaves no warm start. The core of [`Catalog::batch`] and of
 /// [`QueryView::run`].
@@ -96,7 +115,7 @@ pub fn answer_pair(
     cache: &mut WarmStartCache,
     params: &CertifyParams,
 ) -> QueryAnswer {
-    answer_pair_with(pair, a, b, cache, params, None)
+    answer_pair_with(pair, a, b, cache, params, Ahead::Nothing)
 }
 
 /// Whether a query asks for what the batch solver's SIMD lanes give ([`crate::query::batch`]): a
@@ -105,15 +124,22 @@ fn lane_candidate(kind: QueryKind, options: &QueryOptions) -> bool {
     matches!(kind, QueryKind::Distance | QueryKind::Collide) && options.cold && options.mode != CertifyMode::Certify
 }
 
-/// Whether a query can take the batch solver's lanes: a [`lane_candidate`] between two convex
-/// single bodies, that the bounding spheres do not decide (collide).
-fn lane_eligible(pair: &PairRef<'_>, a: &PosedRef<'_>, b: &PosedRef<'_>) -> bool {
+/// Where a query goes ahead of [`answer_pair_with`]: a [`lane_candidate`] between two convex
+/// single bodies takes the batch solver's lanes (`Some(None)`) unless it is a collide query the
+/// cheap bounds clear (`Some(Some(lower))`, [`collide_lower_bound`]); other queries are answered
+/// one by one (`None`).
+fn lane_role(pair: &PairRef<'_>, a: &PosedRef<'_>, b: &PosedRef<'_>) -> Option<Option<Real>> {
     let single_convex = |p: &PosedRef<'_>| p.tree.is_none() && !p.body.report.nonconvex;
-    let decided = || {
-        pair.kind == QueryKind::Collide
-            && sphere_lower_bound(a.body, &a.pose, b.body, &b.pose).is_some_and(|lower| lower > pair.margin)
-    };
-    lane_candidate(pair.kind, &pair.options) && single_convex(a) && single_convex(b) && !decided()
+    if !(lane_candidate(pair.kind, &pair.options) && single_convex(a) && single_convex(b)) {
+        return None;
+    }
+    if pair.kind == QueryKind::Collide {
+        let lower = collide_lower_bound(a.body, &a.pose, b.body, &b.pose, pair.margin);
+        if let Some(lower) = lower.filter(|lower| *lower > pair.margin) {
+            return Some(Some(lower));
+        }
+    }
+    Some(None)
 }
 
 /// Whether at least [`crate::query::batch::MIN_LANE_BATCH`] of `queries` are
@@ -122,23 +148,50 @@ fn enough_lane_candidates<'q>(queries: impl Iterator<Item = (QueryKind, &'q Quer
     queries.filter(|(kind, o)| lane_candidate(*kind, o)).nth(crate::query::batch::MIN_LANE_BATCH - 1).is_some()
 }
 
-/// Newton's answers solved ahead on the batch solver's lanes ([`lane_distances`]), by query index;
-/// empty when none was (no allocation on the paths that have no cold queries).
+/// What [`lane_distances`] settled of a query ahead of [`answer_pair_with`].
+#[derive(Clone, Debug, Default)]
+pub enum Ahead {
+    /// Nothing: [`answer_pair_with`] answers the query from scratch.
+    #[default]
+    Nothing,
+    /// Newton's answer of a cold distance or collide query, solved on the batch solver's lanes
+    /// ([`crate::query::batch::cold_distances`]; a collide query only when the cheap bounds did
+    /// not clear it).
+    Newton(crate::query::DistanceResult),
+    /// A collide query the cheap bounds cleared: their certified lower bound of the distance
+    /// (meters, above the query's margin; [`collide_lower_bound`]).
+    Clear(Real),
+}
+
+impl Ahead {
+    /// Newton's answer, if the lanes solved it.
+    fn into_newton(self) -> Option<crate::query::DistanceResult> {
+        match self {
+            Ahead::Newton(answer) => Some(answer),
+            _ => None,
+        }
+    }
+}
+
+/// What was settled ahead of the answers ([`lane_distances`]), by query index; empty when nothing
+/// was (no allocation on the paths that have no cold queries).
 #[derive(Default)]
-pub(crate) struct LaneAnswers(Vec<Option<crate::query::DistanceResult>>);
+pub(crate) struct LaneAnswers(Vec<Ahead>);
 
 impl LaneAnswers {
-    /// The answer of query `k`, if the lanes solved it (taken out).
-    pub(crate) fn take(&mut self, k: usize) -> Option<crate::query::DistanceResult> {
-        self.0.get_mut(k).and_then(Option::take)
+    /// What was settled of query `k` (taken out).
+    pub(crate) fn take(&mut self, k: usize) -> Ahead {
+        self.0.get_mut(k).map(std::mem::take).unwrap_or_default()
     }
 }
 
 /// Newton's answers of the cold distance solves among `pairs` (each with its two posed instances
-/// from `posed`) that can take the batch solver's lanes ([`lane_eligible`]), solved four pairs per
-/// SIMD pass ([`crate::query::batch::cold_distances`]) in groups of one body pair; none for the
-/// other queries and for groups smaller than [`crate::query::batch::MIN_LANE_BATCH`] (answered
-/// one by one by [`answer_pair`]). Give the answers to [`answer_pair_with`].
+/// from `posed`) that can take the batch solver's lanes ([`lane_role`]), solved four pairs per
+/// SIMD pass ([`crate::query::batch::cold_distances`]) in groups of one body pair, and the bounds
+/// of the collide queries among them that the cheap bounds clear (asked once here, not again per
+/// answer); nothing for the other queries and for groups smaller than
+/// [`crate::query::batch::MIN_LANE_BATCH`] (answered one by one by [`answer_pair`]). Give them to
+/// [`answer_pair_with`].
 pub(crate) fn lane_distances<'p>(
     pairs: &[PairRef<'_>],
     posed: impl Fn(usize) -> Option<(PosedRef<'p>, PosedRef<'p>)>,
@@ -151,12 +204,20 @@ pub(crate) fn lane_distances<'p>(
     // Eligible queries by body pair (the bodies' addresses), in order within each group.
     let mut groups: HashMap<(*const crate::Body, *const crate::Body), Vec<usize>, foldhash::fast::RandomState> =
         HashMap::default();
+    let mut out = LaneAnswers::default();
     for (k, pair) in pairs.iter().enumerate() {
-        if let Some((a, b)) = posed(k).filter(|(a, b)| lane_eligible(pair, a, b)) {
-            groups.entry((Arc::as_ptr(a.body), Arc::as_ptr(b.body))).or_default().push(k);
+        let Some((a, b)) = posed(k) else { continue };
+        match lane_role(pair, &a, &b) {
+            Some(None) => groups.entry((Arc::as_ptr(a.body), Arc::as_ptr(b.body))).or_default().push(k),
+            Some(Some(lower)) => {
+                if out.0.is_empty() {
+                    out.0 = vec![Ahead::Nothing; pairs.len()];
+                }
+                out.0[k] = Ahead::Clear(lower);
+            }
+            None => {}
         }
     }
-    let mut out = LaneAnswers::default();
     for members in groups.values().filter(|m| m.len() >= MIN_LANE_BATCH) {
         let Some((a, b)) = posed(members[0]) else { continue };
         let poses: Vec<(Isometry3, Isometry3)> =
@@ -165,24 +226,25 @@ pub(crate) fn lane_distances<'p>(
             continue;
         }
         if out.0.is_empty() {
-            out.0 = vec![None; pairs.len()];
+            out.0 = vec![Ahead::Nothing; pairs.len()];
         }
         for (&k, answer) in members.iter().zip(cold_distances(a.body, b.body, &poses, &params.newton, false)) {
-            out.0[k] = Some(answer);
+            out.0[k] = Ahead::Newton(answer);
         }
     }
     out
 }
 
-/// [`answer_pair`] with Newton's answer of a distance or collide query already solved (by
-/// [`lane_distances`]); `None` solves it here.
+/// [`answer_pair`] with what [`lane_distances`] settled ahead ([`Ahead`]: Newton's answer of a
+/// distance or collide query, or a collide query's clearing bound); [`Ahead::Nothing`] answers it
+/// here from scratch.
 pub fn answer_pair_with(
     pair: PairRef<'_>,
     a: &Posed,
     b: &Posed,
     cache: &mut WarmStartCache,
     params: &CertifyParams,
-    newton: Option<crate::query::DistanceResult>,
+    ahead: Ahead,
 ) -> QueryAnswer {
     if super::compound_pairs::is_compound_pair(a, b) {
         use super::compound_pairs as cp;
@@ -192,11 +254,22 @@ pub fn answer_pair_with(
             QueryKind::Collide => QueryAnswer::Collide(cp::collide_reply(pair, a, b, cache, params)),
         };
     }
+    let cleared = match ahead {
+        Ahead::Clear(lower) => Some(lower),
+        _ => None,
+    };
+    let newton = ahead.into_newton();
     match pair.kind {
         QueryKind::Distance => QueryAnswer::Distance(distance_reply(pair, a, b, cache, params, newton)),
         QueryKind::Growth => QueryAnswer::Growth(growth_reply(pair, a, b, cache, params)),
         QueryKind::Collide => {
-            if let Some(lower) = sphere_lower_bound(&a.body, &a.pose, &b.body, &b.pose) {
+            // The cheap bounds, unless asked ahead: the lanes took only what they did not clear.
+            let lower = match (&newton, cleared) {
+                (_, Some(lower)) => Some(lower),
+                (Some(_), None) => None,
+                (None, None) => collide_lower_bound(&a.body, &a.pose, &b.body, &b.pose, pair.margin),
+            };
+            if let Some(lower) = lower {
                 if lower > pair.margin {
                     return QueryAnswer::Collide(CollideReply {
                         collides: false,
@@ -650,9 +723,10 @@ impl QueryView {
 
     /// The queries answered at the poses of the request's instances `slots`, into `sink` as
     /// candidate state `newton.2` (0 without states): query q between `slots[pairs[q].0]` and
-    /// `slots[pairs[q].1]` (skipped when `None`), with Newton's answers already solved where
-    /// `newton.0` has them (query q at index `newton.1 + q`, taken from it). With `mode` [`CertifyMode::NewtonOnly`] it stops at the
-    /// first answer that needs the SDP and returns false.
+    /// `slots[pairs[q].1]` (skipped when `None`), with what was settled ahead (Newton's answers,
+    /// collide bounds) where `newton.0` has it (query q at index `newton.1 + q`, taken from it).
+    /// With `mode` [`CertifyMode::NewtonOnly`] it stops at the first answer that needs the SDP and
+    /// returns false.
     #[allow(clippy::too_many_arguments)]
     fn answer_slots(
         &mut self,
@@ -754,8 +828,9 @@ pub struct SceneCheck {
 
 /// Every pair of a scene (or of `focus` against the rest) that overlaps or lies closer than
 /// `margin` meters, with `overrides` applied to the stored poses (not stored). Broad phase: a BVH
-/// (parry's) over the posed bounding boxes grown by `margin / 2`; then the bounding spheres; then
-/// cold distance solves on what remains. A nonconvex body (no proven bound) is a candidate for
+/// (parry's) over the posed bounding boxes grown by `margin / 2`; then the bounding spheres, and
+/// for two single bodies the separating axis ([`collide_lower_bound`]); then cold distance solves
+/// on what remains. A nonconvex body (no proven bound) is a candidate for
 /// every pair.
 ///
 /// # Errors
@@ -828,13 +903,19 @@ pub fn check_scene(
     let params = catalog.certify_params();
     let options = QueryOptions { cold: true, ..QueryOptions::default() };
     let mut scratch = WarmStartCache::default();
-    // The narrow phase: the candidates the bounding spheres do not clear, as cold distance
-    // queries; those of one body pair solved on the batch solver's lanes first.
+    // The narrow phase: the candidates the cheap bounds do not clear (a compound body's root
+    // sphere; two single bodies' spheres, then their separating axis), as cold distance queries;
+    // those of one body pair solved on the batch solver's lanes first.
     let solves: Vec<(usize, usize)> = candidates
         .into_iter()
         .filter(|&(i, j)| {
             let (a, b) = (&all[i], &all[j]);
-            sphere_lower_bound(&a.body, &a.pose, &b.body, &b.pose).is_none_or(|lower| lower <= margin)
+            let lower = if a.tree.is_none() && b.tree.is_none() {
+                collide_lower_bound(&a.body, &a.pose, &b.body, &b.pose, margin)
+            } else {
+                sphere_lower_bound(&a.body, &a.pose, &b.body, &b.pose)
+            };
+            lower.is_none_or(|lower| lower <= margin)
         })
         .collect();
     let queries: Vec<QueryPair> = solves
@@ -864,7 +945,7 @@ pub fn check_scene(
         let d = if super::compound_pairs::is_compound_pair(pa, pb) {
             super::compound_pairs::distance_reply(pair, pa, pb, &mut scratch, &params)
         } else {
-            distance_reply(pair, pa, pb, &mut scratch, &params, newton.take(k))
+            distance_reply(pair, pa, pb, &mut scratch, &params, newton.take(k).into_newton())
         };
         let r = &d.answer.result;
         if r.overlapping || r.distance < margin {

@@ -121,8 +121,10 @@ async fn query_stream_keeps_a_private_view_with_warm_starts() {
 }
 
 /// Collide-with-margin on spheres 1.25 m apart (gap between surfaces): a small margin is decided
-/// by the bounding spheres alone, a margin near the gap by the solve, a larger one collides;
-/// unary Query answers cold; bad margins and kinds are refused naming the field.
+/// by the bounding spheres alone, a margin 5 cm under the gap by the separating axis (its
+/// certified lower bound is within 10⁻⁸ m of the gap here: the axis is a node direction of the
+/// support bounds), a margin 10⁻¹⁰ m under the gap by the solve, a larger one collides; unary
+/// Query answers cold; bad margins and kinds are refused naming the field.
 #[tokio::test]
 async fn collide_with_margin_and_unary_query() {
     let dir = tempfile::tempdir().unwrap();
@@ -131,7 +133,13 @@ async fn collide_with_margin_and_unary_query() {
     let (scene, i1, i2) = two_spheres(&mut c).await;
     let req = pb::QueryRequest {
         scene_id: scene.clone(),
-        queries: vec![collide(&i1, &i2, 0.05), collide(&i1, &i2, 1.2), collide(&i1, &i2, 1.3), collide(&i1, &i2, 0.0)],
+        queries: vec![
+            collide(&i1, &i2, 0.05),
+            collide(&i1, &i2, 1.25 - 1e-10),
+            collide(&i1, &i2, 1.3),
+            collide(&i1, &i2, 0.0),
+            collide(&i1, &i2, 1.2),
+        ],
         ..Default::default()
     };
     let r = c.query(req.clone()).await.unwrap().into_inner();
@@ -144,6 +152,13 @@ async fn collide_with_margin_and_unary_query() {
     assert!(!got[1].collides && !got[1].decided_by_bounds && (got[1].distance - 1.25).abs() < 1e-9, "{:?}", got[1]);
     assert!(got[2].collides && (got[2].distance - 1.25).abs() < 1e-9, "{:?}", got[2]);
     assert!(!got[3].collides);
+    // The bounding spheres (looser than the bodies) do not decide 1.2; the separating axis does.
+    assert!(
+        !got[4].collides && got[4].decided_by_bounds && got[4].distance > 1.2 && got[4].distance <= 1.25 + 1e-12,
+        "{:?}",
+        got[4]
+    );
+    assert!((got[4].distance - 1.25).abs() < 1e-8 && got[4].solve.is_none(), "{:?}", got[4]);
     // Unary answers are cold every time.
     let r = c.query(pb::QueryRequest { queries: vec![q(pb::QueryKind::Distance, &i1, &i2)], ..req.clone() }).await;
     let d = *distance_of(&r.unwrap().into_inner().answers[0]);
@@ -199,7 +214,9 @@ async fn collide_with_margin_and_unary_query() {
 
 /// Cold distance and collide queries over many candidate states run four states per SIMD pass
 /// (`sublevel::query::batch`): every state's answer is still the closed form ‖c₁ − c₂‖ − r₁ − r₂
-/// (0 and a common witness when overlapping), next to warm queries of the same request.
+/// (0 and a common witness when overlapping), next to warm queries of the same request; a collide
+/// query the cheap bounds clear (settled ahead of the lanes) gives a certified lower bound above
+/// the margin and the same answer, to the bit, as the query asked alone.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn cold_candidate_states_match_the_closed_form() {
     let dir = tempfile::tempdir().unwrap();
@@ -221,7 +238,7 @@ async fn cold_candidate_states_match_the_closed_form() {
     };
     let r = c.query(req).await.unwrap().into_inner();
     assert_eq!(r.states.len(), xs.len());
-    let mut overlapping = 0;
+    let (mut overlapping, mut cleared) = (0, 0);
     for (st, x) in r.states.iter().zip(&xs) {
         let gap = (x[0] * x[0] + x[1] * x[1] + x[2] * x[2]).sqrt() - 0.75;
         for answer in [distance_of(&st.answers[0]), distance_of(&st.answers[2])] {
@@ -229,10 +246,31 @@ async fn cold_candidate_states_match_the_closed_form() {
             assert!((answer.distance - gap.max(0.0)).abs() < 1e-9, "x = {x:?}: {} vs {gap}", answer.distance);
             assert_eq!(answer.overlapping, gap <= 0.0);
         }
-        assert_eq!(collide_of(&st.answers[1]).collides, gap < 0.5, "x = {x:?}");
+        let c1 = collide_of(&st.answers[1]);
+        assert_eq!(c1.collides, gap < 0.5, "x = {x:?}");
+        if c1.decided_by_bounds {
+            // A certified lower bound above the margin, no solve.
+            assert!(c1.distance > 0.5 && c1.distance <= gap + 1e-12 && c1.solve.is_none(), "x = {x:?}: {c1:?}");
+            cleared += 1;
+        } else {
+            assert!((c1.distance - gap.max(0.0)).abs() < 1e-9, "x = {x:?}: {c1:?}");
+        }
+        // The same collide query alone (no lanes: its bounds asked by the answer itself) answers the
+        // same, to the bit.
+        let alone = pb::QueryRequest {
+            scene_id: scene.clone(),
+            poses: vec![pose_of(&i2, *x)],
+            queries: vec![pb::PlannerQuery { cold: true, ..collide(&i1, &i2, 0.5) }],
+            ..Default::default()
+        };
+        let r1 = c.query(alone).await.unwrap().into_inner();
+        let c2 = collide_of(&r1.answers[0]);
+        assert_eq!((c2.collides, c2.decided_by_bounds), (c1.collides, c1.decided_by_bounds), "x = {x:?}");
+        assert_eq!(c2.distance.to_bits(), c1.distance.to_bits(), "x = {x:?}: {c2:?} vs {c1:?}");
         overlapping += usize::from(gap <= 0.0);
     }
     assert!(overlapping > 0 && overlapping < xs.len(), "the states must cross contact: {overlapping}");
+    assert!(cleared > 0 && cleared < xs.len(), "the cheap bounds must clear some states, not all: {cleared}");
     // Without states: five cold queries of the same pair in one request (one group of lanes).
     let req = pb::QueryRequest {
         scene_id: scene.clone(),

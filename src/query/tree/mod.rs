@@ -71,7 +71,8 @@ mod warm;
 
 pub use collide::{tree_collide, TreeCollideResult};
 pub use search::{
-    tree_closer_than, tree_distance, LeafPairAnswer, TreeDistanceResult, TreeMarginResult, TreeQueryParams,
+    axis_lower_bound, tree_closer_than, tree_distance, LeafPairAnswer, TreeDistanceResult, TreeMarginResult,
+    TreeQueryParams,
 };
 pub use warm::TreeWarmStart;
 

@@ -3,6 +3,7 @@
 
 use super::warm::{Cut, CutPair, FarPairs, TreeWarmStart, MAX_CUT_PAIRS};
 use super::{check_tree, BodyTree};
+use crate::body::Body;
 use crate::error::{Error, Result};
 use crate::math::{Isometry3, Real, Vector3};
 use crate::query::sdp_certificate::CertificateParams;
@@ -297,6 +298,21 @@ pub(crate) struct CheapBounds {
 /// Relative slack of the cheap bounds (meters per meter of center distance): rounding of the box
 /// projections never makes a bound exceed the true gap.
 pub(crate) const CHEAP_SLACK: Real = 1e-12;
+
+/// A certified lower bound of the distance between two posed convex bodies (meters), from their
+/// boxes and certified support bounds along the line between the boxes' centers
+/// ([`CheapBounds::gap_axis`]: the larger of the boxes' projected gap and the separating-axis gap
+/// `n·t − h_B(−Rᵀn) − h_A(n)` of [`crate::poly::SupportBound`], less [`CHEAP_SLACK`]); negative
+/// or zero when that axis does not separate them. `None` for a nonconvex body (no certified
+/// bound). About 0.14 µs, against about 2 µs for a cold distance solve at 2d = 6.
+///
+/// On the 300 cold chair_101 / human_10 poses of `sublevel bench`, at margin 0, it shows
+/// separation (bound > 0) for 125 / 104 / 88 (2d = 4 / 6 / 8) of the pairs whose bounding spheres
+/// overlap, of the 139 / 117 / 100 separated ones among them; refining the axis towards the
+/// witnesses (two support look-ups a round, as the tree queries do) showed none more.
+pub fn axis_lower_bound(a: &Body, pose_a: &Isometry3, b: &Body, pose_b: &Isometry3) -> Option<Real> {
+    CheapBounds::new(pose_a, pose_b).gap_axis(a, 0, b, 0).map(|(gap, _)| gap)
+}
 
 /// A cut pair goes to the far group of the next warm start ([`FarPairs`]) when its bound exceeds
 /// the threshold by more than this many times the last step's motion; the group then releases its

@@ -316,9 +316,10 @@ class CollideAnswer:
 
     Attributes:
         collides: overlapping, or distance below the margin.
-        distance: meters: the solved distance, or (decided_by_bounds) a lower bound from the
-            bounding spheres.
-        decided_by_bounds: the bounding spheres alone decided (no solve ran).
+        distance: meters: the solved distance, or (decided_by_bounds) a certified lower bound
+            from the bounding spheres or the separating axis.
+        decided_by_bounds: the cheap bounds (bounding spheres, then the separating axis along
+            the line between the bodies) decided; no solve ran.
         margin: the margin asked for, meters.
         solve: the distance solve's diagnostics when one ran, else None.
         tree: compound pairs: the tree level that decided and the deciding bound, else None.
@@ -394,7 +395,7 @@ class AnswerColumns:
     Attributes:
         kind: ``"distance"``, ``"growth"`` or ``"collide"``.
         value: shape (n,). Distance: meters (0 when overlapping). Growth: d(p1 || p2).
-            Collide: the distance in meters, or the bounding spheres' lower bound when
+            Collide: the distance in meters, or the cheap bounds' certified lower bound when
             ``decided_by_bounds``.
         point_a: shape (n, 3), meters, world frame: the witness on the first body (growth: the
             minimizer); NaN when no solve ran (collide decided by bounds).
@@ -403,8 +404,8 @@ class AnswerColumns:
         overlapping: shape (n,), bool: the bodies overlap (collide: the verdict, closer than the
             margin or overlapping).
         lower_bound: shape (n,), bool: the value is only a lower bound (nonconvex body).
-        decided_by_bounds: shape (n,), bool for collide (the bounding spheres alone decided);
-            empty for other kinds.
+        decided_by_bounds: shape (n,), bool for collide (the cheap bounds decided: bounding
+            spheres or separating axis, no solve); empty for other kinds.
     """
 
     kind: str
