@@ -821,18 +821,8 @@ mod start_quality {
     /// reference distance to 1e-8 m, over the separated ones of the first `count` cold poses of
     /// `sublevel bench` (chair_101 against human_10 at 2d = `degree`).
     fn iterations_from_perturbed_witnesses(degree: usize, count: usize, delta: Real) -> (Real, usize, usize) {
-        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data");
-        let a = Body::load(&dir.join(format!("chair_101.deg{degree}.json"))).unwrap();
-        let b = Body::load(&dir.join(format!("human_10.deg{degree}.json"))).unwrap();
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
-        let mut u = |lo: Real, hi: Real| rng.random_range(lo..hi);
-        let poses: Vec<Isometry3> = (0..count)
-            .map(|_| {
-                let t = Vector3::new(u(-2.5, 2.5), u(-2.5, 2.5), u(-2.5, 2.5));
-                let q = nalgebra::Quaternion::new(u(-1.0, 1.0), u(-1.0, 1.0), u(-1.0, 1.0), u(-1.0, 1.0));
-                Isometry3::from_parts(t.into(), crate::math::UnitQuaternion::new_normalize(q))
-            })
-            .collect();
+        let (a, b) = crate::query::test_bodies::bench_bodies(degree);
+        let poses = crate::query::test_bodies::bench_cold_poses(count);
         let params = NewtonParams::default();
         let id = Isometry3::identity();
         let mut jitter_rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);

@@ -86,6 +86,27 @@ pub(crate) mod test_bodies {
         let center = [rng.random_range(-0.2..0.2), 0.1, -0.1];
         Body::new(p, center, 0.7, FitReport::default()).unwrap()
     }
+
+    /// The first `count` cold poses of `sublevel bench` (its `cold_poses(7, count)`: the chair's
+    /// translation ~ U[−2.5, 2.5]³ m, rotation normalize(U[−1, 1]⁴), the human at the identity).
+    pub fn bench_cold_poses(count: usize) -> Vec<crate::math::Isometry3> {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let mut u = |lo: Real, hi: Real| rng.random_range(lo..hi);
+        (0..count)
+            .map(|_| {
+                let t = Vector3::new(u(-2.5, 2.5), u(-2.5, 2.5), u(-2.5, 2.5));
+                let q = nalgebra::Quaternion::new(u(-1.0, 1.0), u(-1.0, 1.0), u(-1.0, 1.0), u(-1.0, 1.0));
+                crate::math::Isometry3::from_parts(t.into(), crate::math::UnitQuaternion::new_normalize(q))
+            })
+            .collect()
+    }
+
+    /// chair_101 and human_10 fitted at 2d = `degree`, the bundled bodies of `tests/data`.
+    pub fn bench_bodies(degree: usize) -> (Body, Body) {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data");
+        let load = |name: &str| Body::load(&dir.join(format!("{name}.deg{degree}.json"))).unwrap();
+        (load("chair_101"), load("human_10"))
+    }
 }
 
 #[cfg(test)]

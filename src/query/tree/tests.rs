@@ -744,24 +744,10 @@ fn far_groups_carry_over_fine_motion_and_stay_valid() {
 /// (measured: 125 of 139, 104 of 117, 88 of 100; asserted: at least 70 %).
 #[test]
 fn axis_bound_is_below_the_distance_and_shows_most_separations_the_spheres_miss() {
-    let dir = std::path::Path::new("tests/data");
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
-    let poses: Vec<Isometry3> = (0..300)
-        .map(|_| {
-            let t = Vector3::new(rng.random_range(-2.5..2.5), rng.random_range(-2.5..2.5), rng.random_range(-2.5..2.5));
-            let q = nalgebra::Quaternion::new(
-                rng.random_range(-1.0..1.0),
-                rng.random_range(-1.0..1.0),
-                rng.random_range(-1.0..1.0),
-                rng.random_range(-1.0..1.0),
-            );
-            Isometry3::from_parts(t.into(), UnitQuaternion::new_normalize(q))
-        })
-        .collect();
+    let poses = crate::query::test_bodies::bench_cold_poses(300);
     let id = Isometry3::identity();
     for degree in [4usize, 6, 8] {
-        let chair = Body::load(&dir.join(format!("chair_101.deg{degree}.json"))).unwrap();
-        let human = Body::load(&dir.join(format!("human_10.deg{degree}.json"))).unwrap();
+        let (chair, human) = crate::query::test_bodies::bench_bodies(degree);
         let ((ca, ra), (ch, rh)) = (chair.bounding_sphere().unwrap(), human.bounding_sphere().unwrap());
         let (mut missed, mut shown) = (0, 0);
         for p in &poses {
