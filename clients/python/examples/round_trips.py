@@ -15,7 +15,7 @@ scratch, four pairs per SIMD pass); a sampling planner's check of 256 candidate 
 human, as in ``sublevel bench``'s cold queries) in one Query, with the distance query cold (the
 server then solves four states per SIMD pass) and not cold (each state warm-started from the one
 before); the same 256 states as one array of poses, answers in one set of columns
-(``Client.query_state_columns``), cold and warm.
+(``Client.query_state_columns``), cold and warm, and a collide query (margin 0, cold) over them.
 """
 
 from __future__ import annotations
@@ -104,6 +104,13 @@ def main() -> None:
     for cold in (True, False):
         name = f"Query, 256 states as one array, {'cold' if cold else 'warm'}"
         row(name, lambda cold=cold: c.query_state_columns(scene, "distance", [a], [b], [a], packed, cold=cold), 256)
+    # The same states asking COLLIDE (margin 0, cold): the cheap bounds (bounding spheres, then the
+    # separating axis) clear most states without a solve.
+    row(
+        "Query, 256 states as one array, collide, cold",
+        lambda: c.query_state_columns(scene, "collide", [a], [b], [a], packed, margin=0.0, cold=True),
+        256,
+    )
     c.set_poses(scene, {b: pose})  # leave the demo scene as it was
 
     print(f"{args.repeats} calls each against {args.addr} (Python client, one connection)")
