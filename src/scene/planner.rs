@@ -124,22 +124,27 @@ fn lane_candidate(kind: QueryKind, options: &QueryOptions) -> bool {
     matches!(kind, QueryKind::Distance | QueryKind::Collide) && options.cold && options.mode != CertifyMode::Certify
 }
 
-/// Where a query goes ahead of [`answer_pair_with`]: a [`lane_candidate`] between two convex
-/// single bodies takes the batch solver's lanes (`Some(None)`) unless it is a collide query the
-/// cheap bounds clear (`Some(Some(lower))`, [`collide_lower_bound`]); other queries are answered
-/// one by one (`None`).
-fn lane_role(pair: &PairRef<'_>, a: &PosedRef<'_>, b: &PosedRef<'_>) -> Option<Option<Real>> {
+/// Where a [`lane_candidate`] between two convex single bodies goes ahead of
+/// [`answer_pair_with`] ([`lane_role`]).
+enum LaneRole {
+    /// The batch solver's lanes.
+    Lanes,
+    /// A collide query the cheap bounds clear: their lower bound ([`collide_lower_bound`]).
+    Clear(Real),
+}
+
+/// Where a query goes ahead of [`answer_pair_with`] ([`LaneRole`]); `None` for queries answered
+/// one by one (not a [`lane_candidate`], or a body that is compound or nonconvex).
+fn lane_role(pair: &PairRef<'_>, a: &PosedRef<'_>, b: &PosedRef<'_>) -> Option<LaneRole> {
     let single_convex = |p: &PosedRef<'_>| p.tree.is_none() && !p.body.report.nonconvex;
     if !(lane_candidate(pair.kind, &pair.options) && single_convex(a) && single_convex(b)) {
         return None;
     }
-    if pair.kind == QueryKind::Collide {
-        let lower = collide_lower_bound(a.body, &a.pose, b.body, &b.pose, pair.margin);
-        if let Some(lower) = lower.filter(|lower| *lower > pair.margin) {
-            return Some(Some(lower));
-        }
-    }
-    Some(None)
+    let cleared = (pair.kind == QueryKind::Collide)
+        .then(|| collide_lower_bound(a.body, &a.pose, b.body, &b.pose, pair.margin))
+        .flatten()
+        .filter(|lower| *lower > pair.margin);
+    Some(cleared.map_or(LaneRole::Lanes, LaneRole::Clear))
 }
 
 /// Whether at least [`crate::query::batch::MIN_LANE_BATCH`] of `queries` are
@@ -208,8 +213,8 @@ pub(crate) fn lane_distances<'p>(
     for (k, pair) in pairs.iter().enumerate() {
         let Some((a, b)) = posed(k) else { continue };
         match lane_role(pair, &a, &b) {
-            Some(None) => groups.entry((Arc::as_ptr(a.body), Arc::as_ptr(b.body))).or_default().push(k),
-            Some(Some(lower)) => {
+            Some(LaneRole::Lanes) => groups.entry((Arc::as_ptr(a.body), Arc::as_ptr(b.body))).or_default().push(k),
+            Some(LaneRole::Clear(lower)) => {
                 if out.0.is_empty() {
                     out.0 = vec![Ahead::Nothing; pairs.len()];
                 }
@@ -254,20 +259,15 @@ pub fn answer_pair_with(
             QueryKind::Collide => QueryAnswer::Collide(cp::collide_reply(pair, a, b, cache, params)),
         };
     }
-    let cleared = match ahead {
-        Ahead::Clear(lower) => Some(lower),
-        _ => None,
-    };
-    let newton = ahead.into_newton();
     match pair.kind {
-        QueryKind::Distance => QueryAnswer::Distance(distance_reply(pair, a, b, cache, params, newton)),
+        QueryKind::Distance => QueryAnswer::Distance(distance_reply(pair, a, b, cache, params, ahead.into_newton())),
         QueryKind::Growth => QueryAnswer::Growth(growth_reply(pair, a, b, cache, params)),
         QueryKind::Collide => {
             // The cheap bounds, unless asked ahead: the lanes took only what they did not clear.
-            let lower = match (&newton, cleared) {
-                (_, Some(lower)) => Some(lower),
-                (Some(_), None) => None,
-                (None, None) => collide_lower_bound(&a.body, &a.pose, &b.body, &b.pose, pair.margin),
+            let (lower, newton) = match ahead {
+                Ahead::Clear(lower) => (Some(lower), None),
+                Ahead::Newton(answer) => (None, Some(answer)),
+                Ahead::Nothing => (collide_lower_bound(&a.body, &a.pose, &b.body, &b.pose, pair.margin), None),
             };
             if let Some(lower) = lower {
                 if lower > pair.margin {
