@@ -477,8 +477,8 @@ mod x86 {
     use super::*;
     use std::arch::asm;
     use std::arch::x86_64::{
-        __m256d, _mm256_broadcast_sd, _mm256_fmadd_pd, _mm256_load_pd, _mm256_loadu_pd, _mm256_mul_pd, _mm256_set1_pd,
-        _mm256_storeu_pd, _mm256_sub_pd,
+        __m256d, _mm256_fmadd_pd, _mm256_load_pd, _mm256_loadu_pd, _mm256_mul_pd, _mm256_permute2f128_pd,
+        _mm256_permute4x64_pd, _mm256_set1_pd, _mm256_storeu_pd, _mm256_sub_pd,
     };
 
     /// Proof that the CPU runs AVX2 and FMA: its only constructor is compiled with those features,
@@ -641,28 +641,18 @@ mod x86 {
     }
 
     soa_acc!(
-        /// Each coefficient is broadcast and multiplied into all four points at once. A Horner pass
-        /// keeps 3N accumulators live (z chain, y and x sums) besides the three coordinates and a
-        /// broadcast, so N ≤ 3 fits the 16 AVX registers: passes of 3, 3, 2, 2 quantities ran
-        /// 21.9 / 48.2 ns per point at 2d = 6 / 8, passes of 5 + 5 spilled (27 / 49 ns), of 4, 4, 2
-        /// 23.1 / 73.6 ns, of 2 × 5 24.4 / 49.3 ns. With 13 of 16 registers live, 3, 3, 2, 2 left
-        /// the register allocator no slack: which code shared the kernel's codegen unit decided
-        /// whether it spilled (see `soa_kernel`).
-        SoaAcc, [Real; SOA_WIDTH], |row, i| _mm256_broadcast_sd(&row[OFF + i])
-    );
-
-    soa_acc!(
-        /// [`SoaAcc`] over the replicated table ([`WideRow`]): each coefficient is read as a
-        /// four-lane vector (each entry of a `WideRow` is four `f64` at a 32-byte boundary), the
-        /// memory operand of its multiply–add, so a row costs one instruction per quantity instead
-        /// of a broadcast and a multiply–add. With no broadcast registers a pass of four quantities
-        /// fits the 16 AVX registers (12 accumulators and the three coordinates): passes of 4, 3, 3
-        /// quantities ran as fast as 3, 3, 2, 2 (22.2 vs 22.3 ns per point at 2d = 6) with one pass
-        /// fewer.
+        /// `N` quantities of the replicated table ([`WideRow`]) at four points, one point per
+        /// lane: each coefficient is read as a four-lane vector (each entry of a `WideRow` is four
+        /// `f64` at a 32-byte boundary), the memory operand of its multiply–add, so a row costs one
+        /// instruction per quantity instead of a broadcast and a multiply–add (the broadcast table
+        /// it replaced). With no broadcast registers a pass of four quantities fits the 16 AVX
+        /// registers (12 accumulators and the three coordinates): passes of 4, 3, 3 quantities ran
+        /// as fast as 3, 3, 2, 2 (22.2 vs 22.3 ns per point at 2d = 6) with one pass fewer.
         WideAcc, WideRow, |row, i| _mm256_load_pd(row.0[OFF + i].as_ptr())
     );
 
-    /// [`soa_kernel`] over the replicated table.
+    /// [`SoaPoly::eval4`] over the replicated table (2d ≤ 6): three passes, of 4, 3 and 3
+    /// quantities.
     #[inline(always)]
     fn wide_kernel<const D: usize>(cpu: Avx2Fma, rows: &[WideRow], u: &[[Real; 4]; 3]) -> Soa4Eval {
         // SAFETY: each `u[i]` is four readable `f64`; `cpu` proves AVX2.
@@ -689,24 +679,93 @@ mod x86 {
         }
     }
 
-    /// p, ∇p and ∇²p at four points (see [`SoaPoly::eval4`]); `D` ≥ 2 is the degree.
+    /// A coordinate of four points p₀ … p₃ as two registers of two points each, [c₀, c₁, c₀, c₁]
+    /// and [c₂, c₃, c₂, c₃]: the multiplier of a [`PairAcc`].
+    #[derive(Clone, Copy)]
+    struct Coord2(__m256d, __m256d);
+
+    /// Two quantities (the pair `Q` of a [`PairRow`]) at four points: `[q(p₀), q(p₁), q'(p₀),
+    /// q'(p₁)]` and the same for p₂, p₃. Each row entry `[c, c, c', c']` is the memory operand of
+    /// both multiply–adds (no broadcast), and the pass keeps six accumulators (z chain, y and x
+    /// sums) and six coordinate registers live: 12 of the 16 AVX registers.
+    #[derive(Clone, Copy)]
+    struct PairAcc<const Q: usize>([__m256d; 2], Avx2Fma);
+
+    impl<const Q: usize> Acc for PairAcc<Q> {
+        type Row = PairRow;
+        type Cpu = Avx2Fma;
+        type Coord = Coord2;
+
+        #[inline(always)]
+        fn splat(cpu: Avx2Fma, t: Real) -> Coord2 {
+            let v = F64x4::splat(cpu, t).0;
+            Coord2(v, v)
+        }
+
+        #[inline(always)]
+        fn load(cpu: Avx2Fma, row: &PairRow) -> Self {
+            // SAFETY: entry `Q` of a `PairRow` is four `f64` at a 32-byte boundary; `cpu` proves AVX2.
+            let v = unsafe { _mm256_load_pd(row.0[Q].as_ptr()) };
+            Self([v, v], cpu)
+        }
+
+        #[inline(always)]
+        fn mul_add_row(self, t: Coord2, row: &PairRow) -> Self {
+            // SAFETY: as in `load`; `self.1` proves AVX2 and FMA.
+            unsafe {
+                let r = _mm256_load_pd(row.0[Q].as_ptr());
+                Self([_mm256_fmadd_pd(self.0[0], t.0, r), _mm256_fmadd_pd(self.0[1], t.1, r)], self.1)
+            }
+        }
+
+        #[inline(always)]
+        fn mul_add(self, t: Coord2, c: Self) -> Self {
+            // SAFETY: `self.1` proves AVX2 and FMA.
+            unsafe { Self([_mm256_fmadd_pd(self.0[0], t.0, c.0[0]), _mm256_fmadd_pd(self.0[1], t.1, c.0[1])], self.1) }
+        }
+
+        #[inline(always)]
+        fn pin(self) -> Self {
+            // SAFETY: `self.1` proves AVX2 (the register class of the barrier).
+            Self(self.0.map(|v| unsafe { pin4(v) }), self.1)
+        }
+    }
+
+    /// [`SoaPoly::eval4`] over the pair table ([`PairRow`]): five passes, one per quantity pair.
     #[inline(always)]
-    fn soa_kernel<const D: usize>(cpu: Avx2Fma, rows: &[[Real; SOA_WIDTH]], u: &[[Real; 4]; 3]) -> Soa4Eval {
+    fn pair_kernel<const D: usize>(cpu: Avx2Fma, rows: &[PairRow], u: &[[Real; 4]; 3]) -> Soa4Eval {
         // SAFETY: each `u[i]` is four readable `f64`; `cpu` proves AVX2.
         let coordinate = |i: usize| F64x4(unsafe { _mm256_loadu_pd(u[i].as_ptr()) }, cpu);
         let p = Point { x: coordinate(0), y: coordinate(1), z: coordinate(2) };
-        // Five passes of 2 quantities (see `SoaAcc`): the kernel of 2d = 8 (lower degrees read the
-        // replicated table). Passes of 3, 3, 2, 2 ran 45.6–46.1 ns per point at 2d = 8 in one build
-        // and 49.8–53.7 ns in another (302 instead of 70 stack accesses), or 68–69 ns with one
-        // codegen unit, as changes elsewhere in the crate moved the codegen units; passes of 2
-        // ran 48.2–49.4 ns with four codegen units and 48.8 with one (`examples/kernel_timing 8`,
-        // alternated in one session).
-        let a = soa_scheme::<D, 0, 2>(cpu, rows, p).0;
-        let b = soa_scheme::<D, 2, 2>(cpu, rows, p).0;
-        let c = soa_scheme::<D, 4, 2>(cpu, rows, p).0;
-        let e = soa_scheme::<D, 6, 2>(cpu, rows, p).0;
-        let f = soa_scheme::<D, 8, 2>(cpu, rows, p).0;
+        // SAFETY (both closures): `cpu` proves AVX2.
+        let split = |c: F64x4| unsafe {
+            Coord2(_mm256_permute4x64_pd::<0b01_00_01_00>(c.0), _mm256_permute4x64_pd::<0b11_10_11_10>(c.0))
+        };
+        let q = Point { x: split(p.x), y: split(p.y), z: split(p.z) };
+        let unzip = |a: [__m256d; 2]| unsafe {
+            [_mm256_permute2f128_pd::<0x20>(a[0], a[1]), _mm256_permute2f128_pd::<0x31>(a[0], a[1])]
+        };
+        let a = unzip(horner_of_degree!(D - 2, PairAcc<0>, cpu, rows, point = q).0);
+        let b = unzip(horner_of_degree!(D - 2, PairAcc<1>, cpu, rows, point = q).0);
+        let c = unzip(horner_of_degree!(D - 2, PairAcc<2>, cpu, rows, point = q).0);
+        let e = unzip(horner_of_degree!(D - 2, PairAcc<3>, cpu, rows, point = q).0);
+        let f = unzip(horner_of_degree!(D - 2, PairAcc<4>, cpu, rows, point = q).0);
         euler4::<D>(cpu, p, [a[0], a[1], b[0], b[1], c[0]], [c[1], e[0], e[1], f[0], f[1]])
+    }
+
+    /// [`SoaPoly::eval4`] over the pair table, for degree `d` (2..=8).
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) fn eval4_pair(d: usize, rows: &[PairRow], u: &[[Real; 4]; 3]) -> Soa4Eval {
+        let cpu = Avx2Fma::new();
+        match d {
+            2 => pair_kernel::<2>(cpu, rows, u),
+            3 => pair_kernel::<3>(cpu, rows, u),
+            4 => pair_kernel::<4>(cpu, rows, u),
+            5 => pair_kernel::<5>(cpu, rows, u),
+            6 => pair_kernel::<6>(cpu, rows, u),
+            7 => pair_kernel::<7>(cpu, rows, u),
+            _ => pair_kernel::<8>(cpu, rows, u),
+        }
     }
 
     /// p, ∇p and ∇²p at the four points `p` from the Horner sums `lo` = [xx, xy, xz, yy, yz] and
@@ -746,32 +805,6 @@ mod x86 {
             out
         }
     }
-
-    /// The Horner scheme of degree `D` − 2 over the `N` quantities of the SoA rows from entry
-    /// `OFF`, at the four points `p`.
-    #[inline(always)]
-    fn soa_scheme<const D: usize, const OFF: usize, const N: usize>(
-        cpu: Avx2Fma,
-        rows: &[[Real; SOA_WIDTH]],
-        p: Point<F64x4>,
-    ) -> SoaAcc<OFF, N> {
-        horner_of_degree!(D - 2, SoaAcc<OFF, N>, cpu, rows, point = p)
-    }
-
-    /// [`SoaPoly::eval4`] for degree `d` (2..=8), the coordinates of the four points by rows.
-    #[target_feature(enable = "avx2,fma")]
-    pub(super) fn eval4(d: usize, rows: &[[Real; SOA_WIDTH]], u: &[[Real; 4]; 3]) -> Soa4Eval {
-        let cpu = Avx2Fma::new();
-        match d {
-            2 => soa_kernel::<2>(cpu, rows, u),
-            3 => soa_kernel::<3>(cpu, rows, u),
-            4 => soa_kernel::<4>(cpu, rows, u),
-            5 => soa_kernel::<5>(cpu, rows, u),
-            6 => soa_kernel::<6>(cpu, rows, u),
-            7 => soa_kernel::<7>(cpu, rows, u),
-            _ => soa_kernel::<8>(cpu, rows, u),
-        }
-    }
 }
 
 /// Quantities per row of a [`SoaPoly`]: [∂ₓₓp, ∂ₓᵧp, ∂ₓ_zp, ∂ᵧᵧp, ∂ᵧ_zp, ∂_z_zp, r_x, r_y, r_z, w].
@@ -791,71 +824,99 @@ pub struct Soa4Eval {
 /// A polynomial's full-evaluation table laid out for four points per pass: the kernel of the batch
 /// solver ([`crate::query::batch`], four pairs of one body pair per pass). Each row (degree
 /// ≤ 2d − 2, Horner order) holds the ten quantities of [`FastPoly`]'s Euler scheme; a pass
-/// broadcasts each coefficient and multiplies it into four points at once, so the same
-/// multiply–adds serve four points and the Euler combination runs four points per instruction,
-/// with no lane shuffles (AVX2 + FMA; elsewhere, and below 2d = 2, one [`FastPoly::eval`] per
-/// point).
+/// multiplies each coefficient into four points at once, so the same multiply–adds serve four
+/// points and the Euler combination runs four points per instruction (AVX2 + FMA; elsewhere, and
+/// below 2d = 2, one [`FastPoly::eval`] per point). The coefficients are stored replicated, so
+/// that each is the memory operand of its multiply–add (AVX2 has no broadcast operand): four times
+/// up to 2d = 6 ([`WideRow`], one point per lane), twice above ([`PairRow`], two points of two
+/// quantities per register), where four copies no longer fit the first-level cache
+/// ([`WIDE_MAX_ROWS`]).
 ///
 /// Measured per point on this project's machine (`examples/kernel_timing`, AMD EPYC Zen 3,
 /// independent points, medians of three rounds), against [`FastPoly::eval`] one point at a time:
-/// 6.5 vs 8.4 ns at 2d = 2, 10.6 vs 14.5 at 2d = 4, 21.9 vs 32.2 at 2d = 6, 48.2 vs 54.8 at 2d = 8.
-/// The gain shrinks with the degree because AVX2 has no broadcast operand: each multiply–add
-/// needs its own broadcast load, so a pass runs twice the instructions per row of the one-point
-/// kernel, whose rows are the memory operands of its multiply–adds. Up to 2d = 6 the table is
-/// also kept replicated four times ([`WideRow`]), read as memory operands: 22.3 instead of 24.6
-/// ns per point at 2d = 6, at the floor of the two FMA units (350 four-lane multiply–adds per
-/// pass of four points).
+/// 6.5 vs 8.4 ns at 2d = 2, 10.6 vs 14.5 at 2d = 4, 22.3 vs 32.2 at 2d = 6 (at the floor of the
+/// two FMA units: 350 four-lane multiply–adds per pass of four points). At 2d = 8 the table these
+/// replaced, one copy of each coefficient broadcast before each multiply–add, ran 48.2 vs 54.8 ns
+/// in a quiet hour: twice the instructions per row of the one-point kernel. The pair table at
+/// 2d = 8, alternated with that build ten times on a loaded host (issue 15's seventh session): a
+/// median of 60.1 against 85.4 ns per point (fastest runs 43.6 and 50.8 ns, run-by-run ratio
+/// 0.72), and at 2d = 4 and 6 the pair table ran as fast as the replicated one (ratios 1.03 and
+/// 0.96, within the noise), so those keep it.
 #[derive(Clone, Debug)]
 pub struct SoaPoly {
     fast: FastPoly,
-    rows: Vec<[Real; SOA_WIDTH]>,
-    /// `rows` with every coefficient replicated into four lanes, when that table is small
+    /// The rows with every coefficient replicated into four lanes, when that table is small
     /// enough to stay in the first-level cache beside the other body's ([`WIDE_MAX_ROWS`]);
     /// empty otherwise.
     wide: Vec<WideRow>,
+    /// The rows with the quantities in pairs, each coefficient replicated twice ([`PairRow`]),
+    /// when there is no `wide` table; empty otherwise.
+    pair: Vec<PairRow>,
 }
 
+/// A [`SoaPoly`] row as five pairs of quantities, `[c₀, c₀, c₁, c₁]`, `[c₂, c₂, c₃, c₃]`, …
+/// (160 bytes, each entry on a 32-byte boundary): the memory operand of a multiply–add over two
+/// points of two quantities each, at half the replicated table's size ([`WideRow`]): 13 KB per
+/// body at 2d = 8, so two bodies share the 32 KB first-level data cache.
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(32))]
+pub(crate) struct PairRow([[Real; 4]; SOA_WIDTH / 2]);
+
 /// A [`SoaPoly`] row with each of its ten coefficients replicated into four lanes (320 bytes,
-/// each entry on a 32-byte boundary): the four-lane memory operand of a multiply–add, where the
-/// plain row needs a broadcast load before each one.
+/// each entry on a 32-byte boundary): the four-lane memory operand of a multiply–add.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(32))]
 pub(crate) struct WideRow([[Real; 4]; SOA_WIDTH]);
 
-/// Most rows of a replicated table ([`WideRow`]): the 35 rows of 2d = 6 (11 KB; 2d ≤ 6).
+/// Most rows of a replicated table ([`WideRow`]): the 35 rows of 2d = 6 (11 KB; 2d ≤ 6). Larger
+/// tables are stored in pairs ([`PairRow`]).
 ///
 /// Measured on this project's machine (`examples/kernel_timing`, `examples/cold_profile D 20
 /// batch`, the two tables alternated in one session): at 2d = 6, 22.3 instead of 24.6 ns per
-/// point for the kernel and a 300-pair batch about 5 % faster (1.37 vs 1.45 µs per pair on a
-/// loaded host). At 2d = 8 the 84 rows take 27 KB per body: two bodies no longer fit the 32 KB
-/// first-level data cache, and the batch ran 12 % slower (1.75 vs 1.54 µs per pair), so 2d = 8
-/// keeps the broadcast table.
+/// point for the kernel against the broadcast table and a 300-pair batch about 5 % faster (1.37
+/// vs 1.45 µs per pair on a loaded host). At 2d = 8 the 84 rows take 27 KB per body: two bodies
+/// no longer fit the 32 KB first-level data cache, and the batch ran 12 % slower than from the
+/// broadcast table (1.75 vs 1.54 µs per pair).
 const WIDE_MAX_ROWS: usize = 35;
+
+/// The rows of a [`SoaPoly`] (degree ≤ 2d − 2, Horner order; none below 2d = 2): the ten
+/// quantities [∂ₓₓp, ∂ₓᵧp, ∂ₓ_zp, ∂ᵧᵧp, ∂ᵧ_zp, ∂_z_zp, r_x, r_y, r_z, w] of each monomial.
+fn soa_rows(fast: &FastPoly) -> Vec<[Real; SOA_WIDTH]> {
+    let d = fast.degree;
+    let mut rows = Vec::new();
+    if d >= 2 {
+        let folded = fold_exponents(d - 2);
+        for (k, e) in horner_exponents(d - 2).into_iter().enumerate() {
+            let [h, m] = fast.tables.hessian[k];
+            // [r_z, w] of (a, b, c): the even half of the folded row of (a, b, c) or the odd
+            // half of the row of (a − 1, b, c).
+            let even = e[0] % 2 == 0;
+            let key = if even { e } else { [e[0] - 1, e[1], e[2]] };
+            let f = folded.iter().position(|g| *g == key).map_or([0.0; 4], |i| fast.tables.tail[i]);
+            let (rz, w) = if even { (f[0], f[1]) } else { (f[2], f[3]) };
+            rows.push([h[0], h[1], h[2], h[3], m[0], m[1], m[2], m[3], rz, w]);
+        }
+    }
+    rows
+}
+
+/// `rows` with every coefficient replicated four times ([`WideRow`]).
+fn wide_table(rows: &[[Real; SOA_WIDTH]]) -> Vec<WideRow> {
+    rows.iter().map(|r| WideRow(r.map(|c| [c; 4]))).collect()
+}
+
+/// `rows` as pairs of quantities, each coefficient replicated twice ([`PairRow`]).
+fn pair_table(rows: &[[Real; SOA_WIDTH]]) -> Vec<PairRow> {
+    rows.iter().map(|r| PairRow(std::array::from_fn(|k| [r[2 * k], r[2 * k], r[2 * k + 1], r[2 * k + 1]]))).collect()
+}
 
 impl SoaPoly {
     /// The four-point table of `fast` (same polynomial).
     pub fn new(fast: &FastPoly) -> Self {
-        let d = fast.degree;
-        let mut rows = Vec::new();
-        if d >= 2 {
-            let folded = fold_exponents(d - 2);
-            for (k, e) in horner_exponents(d - 2).into_iter().enumerate() {
-                let [h, m] = fast.tables.hessian[k];
-                // [r_z, w] of (a, b, c): the even half of the folded row of (a, b, c) or the odd
-                // half of the row of (a − 1, b, c).
-                let even = e[0] % 2 == 0;
-                let key = if even { e } else { [e[0] - 1, e[1], e[2]] };
-                let f = folded.iter().position(|g| *g == key).map_or([0.0; 4], |i| fast.tables.tail[i]);
-                let (rz, w) = if even { (f[0], f[1]) } else { (f[2], f[3]) };
-                rows.push([h[0], h[1], h[2], h[3], m[0], m[1], m[2], m[3], rz, w]);
-            }
-        }
-        let wide = if rows.len() <= WIDE_MAX_ROWS {
-            rows.iter().map(|r| WideRow(r.map(|c| [c; 4]))).collect()
-        } else {
-            Vec::new()
-        };
-        Self { fast: fast.clone(), rows, wide }
+        let rows = soa_rows(fast);
+        let (wide, pair) =
+            if rows.len() <= WIDE_MAX_ROWS { (wide_table(&rows), Vec::new()) } else { (Vec::new(), pair_table(&rows)) };
+        Self { fast: fast.clone(), wide, pair }
     }
 
     /// p, ∇p and ∇²p at the four points `u` (normalized coordinates).
@@ -871,7 +932,7 @@ impl SoaPoly {
             // SAFETY: the CPU supports AVX2 and FMA (checked at run time just above).
             return unsafe {
                 if self.wide.is_empty() {
-                    x86::eval4(self.fast.degree, &self.rows, u)
+                    x86::eval4_pair(self.fast.degree, &self.pair, u)
                 } else {
                     x86::eval4_wide(self.fast.degree, &self.wide, u)
                 }
@@ -1120,23 +1181,24 @@ mod tests {
 
     #[cfg(target_arch = "x86_64")]
     #[test]
-    fn replicated_table_gives_the_broadcast_tables_answers_to_the_bit() {
-        // Up to 2d = 6 the four-point kernel reads the replicated table; each quantity's Horner
-        // chain is the same sequence of fused multiply–adds as over the broadcast table.
+    fn pair_table_gives_the_replicated_tables_answers_to_the_bit() {
+        // Up to 2d = 6 the four-point kernel reads the replicated table, above it the pair table;
+        // each quantity's Horner chain is the same sequence of fused multiply–adds over either, so
+        // both give the same bits at every degree.
         if !has_fma() {
             return;
         }
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
         for degree in 2..=MAX_DEGREE {
             let coeffs: Vec<Real> = (0..basis_len(3, degree)).map(|_| rng.random_range(-1.0..1.0)).collect();
-            let soa = SoaPoly::new(&FastPoly::new(&Polynomial::from_coefficients(degree, coeffs).unwrap()));
-            assert_eq!(soa.wide.is_empty(), degree > 6, "degree {degree}");
-            if soa.wide.is_empty() {
-                continue;
-            }
+            let fast = FastPoly::new(&Polynomial::from_coefficients(degree, coeffs).unwrap());
+            let soa = SoaPoly::new(&fast);
+            assert_eq!((soa.wide.is_empty(), soa.pair.is_empty()), (degree > 6, degree <= 6), "degree {degree}");
+            let rows = soa_rows(&fast);
+            let (wide, pair) = (wide_table(&rows), pair_table(&rows));
             let u: [[Real; 4]; 3] = std::array::from_fn(|_| std::array::from_fn(|_| rng.random_range(-1.5..1.5)));
             // SAFETY: the CPU runs AVX2 and FMA (checked above).
-            let (a, b) = unsafe { (x86::eval4(degree, &soa.rows, &u), x86::eval4_wide(degree, &soa.wide, &u)) };
+            let (a, b) = unsafe { (x86::eval4_wide(degree, &wide, &u), x86::eval4_pair(degree, &pair, &u)) };
             assert_eq!(format!("{a:?}"), format!("{b:?}"), "degree {degree}");
         }
     }

@@ -27,11 +27,14 @@
 //! Measured on this project's machine (AMD EPYC Zen 3, 2 cores; `sublevel bench`, the 300 cold
 //! chair / human poses, 22 of them overlapping, all poses one at a time and as one batch
 //! alternated 20 times, medians, µs per pair): 1.63 → 0.94 at 2d = 6 (1.73× the single-query
-//! rate), 1.34 → 0.72 at 2d = 4 (1.86×), 2.02 → 1.58 at 2d = 8 (1.28×: the four-point kernel gains
-//! less there, 48 vs 55 ns per point). Per round of four lanes at 2d = 6: two kernel passes of about
-//! 88 ns and about 115 ns of lane arithmetic; outside the rounds, the scalar cold starts (about
-//! 180 ns per pair) and the overlapping pairs on the single-pair path (about a sixth of the batch's
-//! time) bound the gain. Building an 848-byte warm start per answer costs 8–40 % more time
+//! rate), 1.34 → 0.72 at 2d = 4 (1.86×), 2.02 → 1.58 at 2d = 8 (1.28×: the four-point kernel gained
+//! less there, 48 vs 55 ns per point from a table broadcast coefficient by coefficient). The pair
+//! table ([`crate::poly::SoaPoly`], seventh session) lifted 2d = 8 to 1.50× (`examples/cold_profile
+//! 8 15 batch`, medians of 8 runs alternated with the previous build, which gave 1.36×). Per
+//! round of four lanes at 2d = 6: two kernel passes of about 88 ns and about 115 ns of lane
+//! arithmetic; outside the rounds, the scalar cold starts (about 180 ns per pair) and the
+//! overlapping pairs on the single-pair path (about a sixth of the batch's time) bound the gain.
+//! Building an 848-byte warm start per answer costs 8–40 % more time
 //! (`cold_distances(…, true)`; it varies with the allocator's state), so the service's cold
 //! queries, which keep none, ask for none.
 
