@@ -25,9 +25,16 @@ use sublevel::{Body, Error, Result};
 /// the rounds), and single time / batch time (the batch's rate in units of the single-query rate).
 /// The `collide_*` columns time a planner's cold collide query (margin 0) at all cold poses, one at
 /// a time, alternated with the distance rounds: µs per pair with the bounding spheres alone before
-/// the solve, and with the spheres then the separating axis
-/// ([`sublevel::scene::planner::collide_lower_bound`]), and how many pairs those bounds decided.
-pub const CSV_COLUMNS: [&str; 35] = [
+/// the solve (`collide_cold_spheres_us`), with the planner's cheap tests
+/// ([`sublevel::scene::planner::collide_cheap`]: the spheres, the separating axis, then a common
+/// point; `collide_cold_us`), and how many pairs those tests decided (`collide_decided_by_bounds`,
+/// the common point's included); the last two, with the spheres and the axis but no common-point
+/// test (`collide_cold_bounds_only_us`), and the pairs the common point proved overlapping.
+/// The `coal_*collide*` columns come from the collide peer's lines in `--peer`
+/// (`scripts/peer-coal-collide`; empty without them): coal's boolean collide on the hulls, mean µs
+/// per pose, narrow phase alone and behind its broad phase's world AABB test, and ours
+/// (`collide_cold_us`) over the latter.
+pub const CSV_COLUMNS: [&str; 40] = [
     "degree",
     "fit_chair_s",
     "distance_cold_us",
@@ -63,6 +70,11 @@ pub const CSV_COLUMNS: [&str; 35] = [
     "collide_cold_spheres_us",
     "collide_cold_us",
     "collide_decided_by_bounds",
+    "coal_collide_cold_us",
+    "coal_aabb_collide_cold_us",
+    "collide_cold_over_coal",
+    "collide_cold_bounds_only_us",
+    "collide_touching_by_common_point",
 ];
 
 /// The paper's Table 2: distance query times (seconds, MATLAB fmincon) at 2d = 2, 4, 6, 8.
@@ -183,20 +195,23 @@ struct Row {
     /// All cold poses one at a time / as one batch (µs per pair, medians over rounds).
     single_us: Real,
     batch_us: Real,
-    /// Cold collide (margin 0) at all cold poses: µs per pair with the spheres alone and with the
-    /// spheres then the separating axis, and the pairs the latter decided.
+    /// Cold collide (margin 0) at all cold poses ([`CollideTimes`]).
     collide: CollideTimes,
 }
 
 /// A planner's cold collide queries (margin 0) at all cold poses, one at a time: µs per pair
-/// (medians over rounds) with the bounding spheres alone before the distance solve, and with the
-/// spheres then the separating axis ([`sublevel::scene::planner::collide_lower_bound`]); pairs
-/// decided by those bounds.
+/// (medians over rounds) with the bounding spheres alone before the distance solve, with the
+/// spheres then the separating axis ([`sublevel::scene::planner::collide_lower_bound`]), and with
+/// the planner's cheap tests (those bounds, then a common point:
+/// [`sublevel::scene::planner::collide_cheap`]); the pairs the bounds cleared and those the common
+/// point proved overlapping.
 #[derive(Clone, Copy, Default)]
 struct CollideTimes {
     spheres_us: Real,
     axis_us: Real,
+    cheap_us: Real,
     decided: usize,
+    touching: usize,
     pairs: usize,
 }
 
@@ -312,8 +327,13 @@ pub fn run(args: BenchArgs) -> Result<()> {
                 format!("{:.3}", r.batch_us),
                 format!("{:.3}", r.single_us / r.batch_us),
                 format!("{:.3}", r.collide.spheres_us),
+                format!("{:.3}", r.collide.cheap_us),
+                (r.collide.decided + r.collide.touching).to_string(),
+                opt(coal.map(|c| c.collide_us), 3),
+                opt(coal.map(|c| c.aabb_collide_us), 3),
+                opt(coal.map(|c| r.collide.cheap_us / c.aabb_collide_us), 3),
                 format!("{:.3}", r.collide.axis_us),
-                r.collide.decided.to_string(),
+                r.collide.touching.to_string(),
             ])?;
         }
         eprintln!("wrote {}", csv.finish()?.display());
@@ -447,7 +467,7 @@ fn batch_against_single(
     cold: &[Isometry3],
     params: &NewtonParams,
 ) -> (Real, Real, CollideTimes) {
-    use sublevel::scene::planner::{collide_lower_bound, sphere_lower_bound};
+    use sublevel::scene::planner::{collide_cheap, collide_lower_bound, sphere_lower_bound, CheapCollide};
     let id = Isometry3::identity();
     let pairs: Vec<(Isometry3, Isometry3)> = cold.iter().map(|p| (*p, id)).collect();
     let n = pairs.len().max(1) as Real;
@@ -458,9 +478,20 @@ fn batch_against_single(
     };
     let spheres = |p: &Isometry3| collides(p, sphere_lower_bound(chair, p, human, &id));
     let axis = |p: &Isometry3| collides(p, collide_lower_bound(chair, p, human, &id, 0.0));
+    // The planner's path (`answer_pair_with`): a cheap decision, else the solve.
+    let cheap = |p: &Isometry3| match collide_cheap(chair, p, human, &id, 0.0) {
+        Some(CheapCollide::Clear(_)) => false,
+        Some(CheapCollide::Touching(_)) => true,
+        None => distance(chair, p, human, &id, None, params).overlapping,
+    };
     let decided =
         cold.iter().filter(|p| collide_lower_bound(chair, p, human, &id, 0.0).is_some_and(|l| l > 0.0)).count();
+    let touching = cold
+        .iter()
+        .filter(|p| matches!(collide_cheap(chair, p, human, &id, 0.0), Some(CheapCollide::Touching(_))))
+        .count();
     let (mut single, mut batch, mut with_spheres, mut with_axis) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut with_cheap = Vec::new();
     for _ in 0..repeats {
         let t = Instant::now();
         for p in cold {
@@ -474,6 +505,11 @@ fn batch_against_single(
         with_axis.push(t.elapsed().as_secs_f64() * 1e6 / n);
         let t = Instant::now();
         for p in cold {
+            std::hint::black_box(cheap(p));
+        }
+        with_cheap.push(t.elapsed().as_secs_f64() * 1e6 / n);
+        let t = Instant::now();
+        for p in cold {
             std::hint::black_box(distance(chair, p, human, &id, None, params));
         }
         single.push(t.elapsed().as_secs_f64() * 1e6 / n);
@@ -481,8 +517,14 @@ fn batch_against_single(
         std::hint::black_box(sublevel::query::batch::cold_distances(chair, human, &pairs, params, false));
         batch.push(t.elapsed().as_secs_f64() * 1e6 / n);
     }
-    let collide =
-        CollideTimes { spheres_us: median(with_spheres), axis_us: median(with_axis), decided, pairs: cold.len() };
+    let collide = CollideTimes {
+        spheres_us: median(with_spheres),
+        axis_us: median(with_axis),
+        cheap_us: median(with_cheap),
+        decided,
+        touching,
+        pairs: cold.len(),
+    };
     (median(single), median(batch), collide)
 }
 
@@ -515,14 +557,17 @@ fn print_table(rows: &[Row], peer: &PeerRow) {
     for r in rows {
         let c = &r.collide;
         println!(
-            "2d = {}: cold collide (margin 0) at all cold poses, {:.3} µs per pair with the bounding spheres then the \
-             separating axis, {:.3} µs with the spheres alone ({:.2}x); the bounds decide {} of {}",
+            "2d = {}: cold collide (margin 0) at all cold poses, {:.3} µs per pair with the spheres, the separating axis \
+             and a common point; {:.3} µs without the common point, {:.3} µs with the spheres alone ({:.2}x); the \
+             bounds clear {} of {}, the common point proves {} overlapping",
             r.degree,
+            c.cheap_us,
             c.axis_us,
             c.spheres_us,
-            c.spheres_us / c.axis_us,
+            c.spheres_us / c.cheap_us,
             c.decided,
-            c.pairs
+            c.pairs,
+            c.touching
         );
     }
     println!();
@@ -597,6 +642,28 @@ fn print_coal(rows: &[Row], c: &CoalFigures) {
         "/coal: our median over coal's median GJK on the hulls (cold over cold, warm over warm); below 1 is faster. \
          Issue 15's targets: 2d = 6 cold ≤ 0.6x, warm ≤ 0.3x; 2d = 8 cold ≤ 1x."
     );
+    if c.aabb_collide_us.is_nan() {
+        return;
+    }
+    let [decided, colliding, poses] = c.collide_counts;
+    println!(
+        "coal collide (boolean, margin 0, mean over {poses} cold poses, {colliding} touching): narrow phase alone \
+         {:.2} µs; behind its broad phase's world AABB test {:.2} µs (the AABBs decide {decided})",
+        c.collide_us, c.aabb_collide_us
+    );
+    for r in rows {
+        let k = &r.collide;
+        println!(
+            "2d = {}: cold collide {:.3} µs (the cheap tests decide {} of {}) = {:.2}x coal's AABB + GJK, {:.2}x its \
+             narrow phase",
+            r.degree,
+            k.cheap_us,
+            k.decided + k.touching,
+            k.pairs,
+            k.cheap_us / c.aabb_collide_us,
+            k.cheap_us / c.collide_us
+        );
+    }
 }
 
 // ---------------------------------------------------------------------------------------------

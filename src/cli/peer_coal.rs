@@ -8,6 +8,12 @@
 //! hull_err_mean 0.01873          mesh_separated 37
 //! ```
 //!
+//! `bash scripts/peer-coal-collide >> coal.txt` appends coal's boolean collide on the same hulls at
+//! the same cold poses (`benches/peers/coal_collide.cpp`): the narrow phase alone and behind the
+//! world AABB test of coal's broad phase, means over the poses in µs, and how many poses the AABB
+//! test decides (`hull_gjk_collide_cold_us`, `hull_aabb_gjk_collide_cold_us`,
+//! `hull_aabb_gjk_collide_decided`, `hull_gjk_collide_colliding`, `hull_gjk_collide_poses`).
+//!
 //! [`CoalPeer`] holds every line; [`CoalFigures`] is the named view `sublevel bench --peer FILE`
 //! prints beside its own figures with the ratios ours / coal (issue 15), and `sublevel chart
 //! speed-accuracy --peer FILE` adds coal's rows (issue 14). coal's poses follow the bench's recipes
@@ -91,14 +97,25 @@ pub struct CoalFigures {
     pub mesh_us: Real,
     /// Hull vertex counts (`hull_vertices_a`, `hull_vertices_b`); 0 when absent.
     pub hull_vertices: [usize; 2],
+    /// Boolean collide of the hulls at the cold poses, narrow phase alone (GJK with an early break
+    /// at margin 0), mean over the poses (`hull_gjk_collide_cold_us`, from
+    /// `scripts/peer-coal-collide`; NaN when absent).
+    pub collide_us: Real,
+    /// The same behind the world AABB test of coal's broad phase, mean over the poses
+    /// (`hull_aabb_gjk_collide_cold_us`; NaN when absent).
+    pub aabb_collide_us: Real,
+    /// Poses the AABB test alone decides, poses whose hulls touch, and poses timed
+    /// (`hull_aabb_gjk_collide_decided`, `hull_gjk_collide_colliding`, `hull_gjk_collide_poses`);
+    /// 0 when absent.
+    pub collide_counts: [usize; 3],
 }
 
 impl CoalFigures {
     /// The named figures of a parsed run.
     ///
     /// # Errors
-    /// [`Error::InvalidArgument`] naming `--peer` when a time is negative or not finite, or a
-    /// vertex count is not a whole number.
+    /// [`Error::InvalidArgument`] naming `--peer` and the key when a time is negative or not
+    /// finite, or a vertex or pose count is not a whole number.
     pub fn from_peer(peer: &CoalPeer) -> Result<Self> {
         let time = |key: &str| {
             let v = peer.get(key);
@@ -113,7 +130,7 @@ impl CoalFigures {
             match v {
                 v if v.is_nan() => Ok(0),
                 v if v >= 0.0 && v.fract() == 0.0 && v < 1e9 => Ok(v as usize),
-                v => Err(Error::invalid("--peer", format!("{key} = {v} is not a vertex count"))),
+                v => Err(Error::invalid("--peer", format!("{key} = {v} is not a count"))),
             }
         };
         Ok(Self {
@@ -123,6 +140,13 @@ impl CoalFigures {
             nesterov_warm_us: time("hull_nesterov_gjk_warm_us")?,
             mesh_us: time("mesh_bvh_cold_us")?,
             hull_vertices: [count("hull_vertices_a")?, count("hull_vertices_b")?],
+            collide_us: time("hull_gjk_collide_cold_us")?,
+            aabb_collide_us: time("hull_aabb_gjk_collide_cold_us")?,
+            collide_counts: [
+                count("hull_aabb_gjk_collide_decided")?,
+                count("hull_gjk_collide_colliding")?,
+                count("hull_gjk_collide_poses")?,
+            ],
         })
     }
 
@@ -167,8 +191,25 @@ mod tests {
         assert_eq!(f.hull_vertices, [320, 364]);
         assert_eq!((f.gjk_cold_us, f.gjk_warm_us), (1.25, 1.1));
         assert_eq!((f.nesterov_cold_us, f.nesterov_warm_us, f.mesh_us), (2.5, 1.5, 812.4));
+        // Without the collide peer's lines its figures are absent, not zero.
+        assert!(f.collide_us.is_nan() && f.aabb_collide_us.is_nan());
+        assert_eq!(f.collide_counts, [0, 0, 0]);
         let negative = CoalPeer::parse("hull_gjk_cold_us -1\nmesh_bvh_cold_us 3\n").unwrap();
         let e = CoalFigures::from_peer(&negative).unwrap_err().to_string();
         assert!(e.contains("--peer") && e.contains("hull_gjk_cold_us"), "{e}");
+    }
+
+    #[test]
+    fn names_the_collide_figures_the_collide_peer_appends() {
+        // The shared script's lines, then `scripts/peer-coal-collide`'s (as `>>` leaves them).
+        let text = "hull_gjk_cold_us 1.53\nmesh_bvh_cold_us 480.1\nhull_gjk_collide_cold_us 2.6449\n\
+                    hull_gjk_collide_cold_median_us 2.4395\nhull_aabb_gjk_collide_cold_us 0.5882\n\
+                    hull_aabb_gjk_collide_decided 250\nhull_gjk_collide_colliding 14\nhull_gjk_collide_poses 300\n";
+        let f = CoalFigures::from_peer(&CoalPeer::parse(text).unwrap()).unwrap();
+        assert_eq!((f.collide_us, f.aabb_collide_us), (2.6449, 0.5882));
+        assert_eq!(f.collide_counts, [250, 14, 300]);
+        let bad = CoalPeer::parse("hull_gjk_cold_us 1\nmesh_bvh_cold_us 3\nhull_gjk_collide_poses 2.5\n").unwrap();
+        let e = CoalFigures::from_peer(&bad).unwrap_err().to_string();
+        assert!(e.contains("--peer") && e.contains("hull_gjk_collide_poses") && e.contains("not a count"), "{e}");
     }
 }

@@ -651,6 +651,22 @@ mod x86 {
         WideAcc, WideRow, |row, i| _mm256_load_pd(row.0[OFF + i].as_ptr())
     );
 
+    /// `$kernel::<D>(args)` for the runtime degree `$d` (2..=8; larger as 8): the four-point
+    /// kernels' dispatch.
+    macro_rules! four_point {
+        ($d:expr, $kernel:ident($($arg:expr),*)) => {
+            match $d {
+                2 => $kernel::<2>($($arg),*),
+                3 => $kernel::<3>($($arg),*),
+                4 => $kernel::<4>($($arg),*),
+                5 => $kernel::<5>($($arg),*),
+                6 => $kernel::<6>($($arg),*),
+                7 => $kernel::<7>($($arg),*),
+                _ => $kernel::<8>($($arg),*),
+            }
+        };
+    }
+
     /// [`SoaPoly::eval4`] over the replicated table (2d ≤ 6): three passes, of 4, 3 and 3
     /// quantities.
     #[inline(always)]
@@ -667,16 +683,7 @@ mod x86 {
     /// [`SoaPoly::eval4`] over the replicated table, for degree `d` (2..=8).
     #[target_feature(enable = "avx2,fma")]
     pub(super) fn eval4_wide(d: usize, rows: &[WideRow], u: &[[Real; 4]; 3]) -> Soa4Eval {
-        let cpu = Avx2Fma::new();
-        match d {
-            2 => wide_kernel::<2>(cpu, rows, u),
-            3 => wide_kernel::<3>(cpu, rows, u),
-            4 => wide_kernel::<4>(cpu, rows, u),
-            5 => wide_kernel::<5>(cpu, rows, u),
-            6 => wide_kernel::<6>(cpu, rows, u),
-            7 => wide_kernel::<7>(cpu, rows, u),
-            _ => wide_kernel::<8>(cpu, rows, u),
-        }
+        four_point!(d, wide_kernel(Avx2Fma::new(), rows, u))
     }
 
     /// A coordinate of four points p₀ … p₃ as two registers of two points each, [c₀, c₁, c₀, c₁]
@@ -756,16 +763,7 @@ mod x86 {
     /// [`SoaPoly::eval4`] over the pair table, for degree `d` (2..=8).
     #[target_feature(enable = "avx2,fma")]
     pub(super) fn eval4_pair(d: usize, rows: &[PairRow], u: &[[Real; 4]; 3]) -> Soa4Eval {
-        let cpu = Avx2Fma::new();
-        match d {
-            2 => pair_kernel::<2>(cpu, rows, u),
-            3 => pair_kernel::<3>(cpu, rows, u),
-            4 => pair_kernel::<4>(cpu, rows, u),
-            5 => pair_kernel::<5>(cpu, rows, u),
-            6 => pair_kernel::<6>(cpu, rows, u),
-            7 => pair_kernel::<7>(cpu, rows, u),
-            _ => pair_kernel::<8>(cpu, rows, u),
-        }
+        four_point!(d, pair_kernel(Avx2Fma::new(), rows, u))
     }
 
     /// p, ∇p and ∇²p at the four points `p` from the Horner sums `lo` = [xx, xy, xz, yy, yz] and

@@ -275,6 +275,33 @@ pub(super) fn cold_start(ba: &PosedBody<'_>, bb: &PosedBody<'_>) -> Option<(Vect
     }
 }
 
+/// A point common to the two posed bodies (world coordinates, meters), found without a solve on
+/// the segment between their interior points: A's interior point when it lies in B, B's when it
+/// lies in A, else the middle of the stretch where the bodies' radial tables put the segment
+/// inside both. Every candidate is checked by evaluating both polynomials (p_a'(z) ≤ 1 and
+/// p_b'(z) ≤ 1), so a returned point proves that the bodies overlap (distance 0); `None` proves
+/// nothing, and a solver decides. Costs at most four value evaluations and two radial look-ups.
+///
+/// The overlap certificate of a collide query whose cheap lower bounds do not clear it
+/// ([`crate::scene::planner::collide_cheap`]): the overlapping pairs are the costliest ones of a
+/// cold distance solve (a separated run that fails, then the growth measure; paper §IV-A, eq.
+/// "distance"), and an overlap shows no separating axis, so only a common point decides them
+/// cheaply.
+pub fn segment_common_point(a: &Body, pose_a: &Isometry3, b: &Body, pose_b: &Isometry3) -> Option<Point3> {
+    let (ba, bb) = (PosedBody::new(a, pose_a), PosedBody::new(b, pose_b));
+    let (fa, fb) = (FastPosed::new(&ba), FastPosed::new(&bb));
+    let (ca, cb) = (ba.interior_point(), bb.interior_point());
+    let inside_both = |z: &Vector3| fa.value(z) <= 1.0 && fb.value(z) <= 1.0;
+    if let Some(z) = [ca, cb].into_iter().find(|z| inside_both(z)) {
+        return Some(Point3::from(z));
+    }
+    // The segment meets A on about [ca, x0] and B on about [y0, cb]: when B's crossing comes
+    // first, the two stretches overlap around their middle.
+    let (x0, y0) = (ba.boundary_towards(&cb), bb.boundary_towards(&ca));
+    let z = (x0 + y0) * 0.5;
+    ((y0 - ca).norm_squared() < (x0 - ca).norm_squared() && inside_both(&z)).then(|| Point3::from(z))
+}
+
 /// Whether a converged separated KKT point (x, y) is clear of contact: ‖y − x‖ above 10⁻⁶ of the
 /// bodies' sizes. Near contact (x ≈ y) the multipliers lose meaning and the growth test decides.
 #[inline]
@@ -696,6 +723,36 @@ mod tests {
     use super::*;
     use crate::body::ellipsoid;
     use crate::math::pose_from_parts;
+
+    #[test]
+    fn common_points_prove_overlap_and_only_overlap() {
+        // Spheres of radii 0.5 and 0.3 (centers 0.1 off their frames' origins) at center distances
+        // from 0 to 1.2 m along a tilted line: they overlap below 0.8 m. A common point is returned
+        // only for overlapping ones, and lies in both (closed-form membership, 1e-12); nested or
+        // deeply overlapping ones always get one (the segment between the centers meets both).
+        let (a, b) = (ellipsoid([0.1, 0.0, 0.0], [0.5; 3]).unwrap(), ellipsoid([0.0, -0.1, 0.0], [0.3; 3]).unwrap());
+        let pose_a = pose_from_parts("a", [0.8, 0.0, 0.6, 0.0], [1.0, -2.0, 0.5]).unwrap();
+        let center_a = pose_a * Point3::new(0.1, 0.0, 0.0);
+        let dir = Vector3::new(0.6, 0.0, 0.8);
+        let mut found = 0;
+        for k in 0..=60 {
+            let gap = 0.02 * k as Real;
+            let pose_b = pose_from_parts("b", [0.6, 0.8, 0.0, 0.0], [0.0; 3]).unwrap();
+            // Place B's center at center_a + gap · dir.
+            let offset = center_a.coords + dir * gap - pose_b.rotation * Vector3::new(0.0, -0.1, 0.0);
+            let pose_b = Isometry3::from_parts(offset.into(), pose_b.rotation);
+            let center_b = pose_b * Point3::new(0.0, -0.1, 0.0);
+            let z = segment_common_point(&a, &pose_a, &b, &pose_b);
+            if gap >= 0.8 {
+                assert!(z.is_none(), "gap {gap}: no common point for separated spheres, got {z:?}");
+                continue;
+            }
+            let z = z.unwrap_or_else(|| panic!("gap {gap}: overlapping spheres need a common point"));
+            assert!((z - center_a).norm() <= 0.5 + 1e-12 && (z - center_b).norm() <= 0.3 + 1e-12, "gap {gap}: {z:?}");
+            found += 1;
+        }
+        assert_eq!(found, 40);
+    }
 
     #[test]
     fn spheres_match_closed_form_along_a_motion() {

@@ -173,7 +173,10 @@ async fn collide_with_margin_and_unary_query() {
         .await
         .unwrap()
         .into_inner();
-    assert!(collide_of(&r.answers[0]).collides);
+    // Overlapping spheres: a common point on the line of centers decides it, with no solve.
+    let touching = collide_of(&r.answers[0]);
+    assert!(touching.collides && touching.decided_by_bounds && touching.distance == 0.0, "{touching:?}");
+    assert!(touching.solve.is_none(), "{touching:?}");
 
     // Signed distance: spheres r = 0.5, 0.25 with centers 0.6 m apart overlap by 0.15 m; the
     // penetration normal is the center line; the gradient is (∓n, …) as the separated formula.
@@ -216,7 +219,8 @@ async fn collide_with_margin_and_unary_query() {
 /// (`sublevel::query::batch`): every state's answer is still the closed form ‖c₁ − c₂‖ − r₁ − r₂
 /// (0 and a common witness when overlapping), next to warm queries of the same request; a collide
 /// query the cheap bounds clear (settled ahead of the lanes) gives a certified lower bound above
-/// the margin and the same answer, to the bit, as the query asked alone.
+/// the margin, one whose spheres overlap gives distance 0 from a common point with no solve, and
+/// either gives the same answer, to the bit, as the query asked alone.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn cold_candidate_states_match_the_closed_form() {
     let dir = tempfile::tempdir().unwrap();
@@ -238,7 +242,7 @@ async fn cold_candidate_states_match_the_closed_form() {
     };
     let r = c.query(req).await.unwrap().into_inner();
     assert_eq!(r.states.len(), xs.len());
-    let (mut overlapping, mut cleared) = (0, 0);
+    let (mut overlapping, mut cleared, mut touching) = (0, 0, 0);
     for (st, x) in r.states.iter().zip(&xs) {
         let gap = (x[0] * x[0] + x[1] * x[1] + x[2] * x[2]).sqrt() - 0.75;
         for answer in [distance_of(&st.answers[0]), distance_of(&st.answers[2])] {
@@ -248,7 +252,11 @@ async fn cold_candidate_states_match_the_closed_form() {
         }
         let c1 = collide_of(&st.answers[1]);
         assert_eq!(c1.collides, gap < 0.5, "x = {x:?}");
-        if c1.decided_by_bounds {
+        if c1.decided_by_bounds && c1.collides {
+            // A common point proved overlap: distance 0, no solve.
+            assert!(gap <= 1e-12 && c1.distance == 0.0 && c1.solve.is_none(), "x = {x:?}: {c1:?}");
+            touching += 1;
+        } else if c1.decided_by_bounds {
             // A certified lower bound above the margin, no solve.
             assert!(c1.distance > 0.5 && c1.distance <= gap + 1e-12 && c1.solve.is_none(), "x = {x:?}: {c1:?}");
             cleared += 1;
@@ -271,6 +279,7 @@ async fn cold_candidate_states_match_the_closed_form() {
     }
     assert!(overlapping > 0 && overlapping < xs.len(), "the states must cross contact: {overlapping}");
     assert!(cleared > 0 && cleared < xs.len(), "the cheap bounds must clear some states, not all: {cleared}");
+    assert!(touching > 0 && touching <= overlapping, "a common point must decide overlapping states: {touching}");
     // Without states: five cold queries of the same pair in one request (one group of lanes).
     let req = pb::QueryRequest {
         scene_id: scene.clone(),

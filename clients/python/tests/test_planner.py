@@ -177,6 +177,18 @@ def test_check_scene(client):
     assert client.get_scene(scene).instance(ids[3]).pose.t == (10.0, 0.0, 0.0)
 
 
+def test_overlap_is_decided_by_a_common_point(client, balls):
+    """Overlapping balls (centers 0.1 m apart): a point of both on the line between them decides
+    COLLIDE with no solve (collides, distance 0, decided_by_bounds), unary and streamed alike."""
+    scene, a, b = balls
+    r = client.query(scene, queries=[Query.collide(a, b, 0.0)], poses={b: Pose(t=(0.1, 0.0, 0.0))})
+    with client.stream(scene) as s:
+        (streamed,) = s.check(queries=[("collide", a, b, 0.0)], poses={b: Pose(t=(0.1, 0.0, 0.0))})
+    for c in (r.answers[0], streamed):
+        assert isinstance(c, CollideAnswer)
+        assert c.collides and c.decided_by_bounds and c.distance == 0.0 and c.solve is None
+
+
 def test_stream_columns_follow_the_view_and_states(client, balls):
     """The stream in columns: distances of the view's poses (closed form), per-state verdicts."""
     scene, a, b = balls

@@ -317,9 +317,11 @@ class CollideAnswer:
     Attributes:
         collides: overlapping, or distance below the margin.
         distance: meters: the solved distance, or (decided_by_bounds) a certified lower bound
-            from the bounding spheres or the separating axis.
-        decided_by_bounds: the cheap bounds (bounding spheres, then the separating axis along
-            the line between the bodies) decided; no solve ran.
+            from the bounding spheres or the separating axis, or 0 when a common point proved
+            overlap.
+        decided_by_bounds: the cheap tests decided, no solve ran: the bounding spheres, then
+            the separating axis along the line between the bodies (clear of the margin), then
+            a point of both bodies on the segment between their interior points (overlap).
         margin: the margin asked for, meters.
         solve: the distance solve's diagnostics when one ran, else None.
         tree: compound pairs: the tree level that decided and the deciding bound, else None.
@@ -395,8 +397,8 @@ class AnswerColumns:
     Attributes:
         kind: ``"distance"``, ``"growth"`` or ``"collide"``.
         value: shape (n,). Distance: meters (0 when overlapping). Growth: d(p1 || p2).
-            Collide: the distance in meters, or the cheap bounds' certified lower bound when
-            ``decided_by_bounds``.
+            Collide: the distance in meters, or when ``decided_by_bounds`` the cheap bounds'
+            certified lower bound (clear) or 0 (a common point proved overlap).
         point_a: shape (n, 3), meters, world frame: the witness on the first body (growth: the
             minimizer); NaN when no solve ran (collide decided by bounds).
         point_b: shape (n, 3): the witness on the second body (growth: the minimizer again).
@@ -404,8 +406,9 @@ class AnswerColumns:
         overlapping: shape (n,), bool: the bodies overlap (collide: the verdict, closer than the
             margin or overlapping).
         lower_bound: shape (n,), bool: the value is only a lower bound (nonconvex body).
-        decided_by_bounds: shape (n,), bool for collide (the cheap bounds decided: bounding
-            spheres or separating axis, no solve); empty for other kinds.
+        decided_by_bounds: shape (n,), bool for collide (the cheap tests decided, no solve:
+            bounding spheres or separating axis clear it, or a common point proves overlap);
+            empty for other kinds.
     """
 
     kind: str
