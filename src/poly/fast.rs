@@ -843,13 +843,17 @@ pub struct Soa4Eval {
 #[derive(Clone, Debug)]
 pub struct SoaPoly {
     fast: FastPoly,
-    /// The rows with every coefficient replicated into four lanes, when that table is small
-    /// enough to stay in the first-level cache beside the other body's ([`WIDE_MAX_ROWS`]);
-    /// empty otherwise.
-    wide: Vec<WideRow>,
-    /// The rows with the quantities in pairs, each coefficient replicated twice ([`PairRow`]),
-    /// when there is no `wide` table; empty otherwise.
-    pair: Vec<PairRow>,
+    table: SoaTable,
+}
+
+/// The rows of a [`SoaPoly`] in the layout its kernel reads.
+#[derive(Clone, Debug)]
+enum SoaTable {
+    /// Every coefficient replicated into four lanes, when that table is small enough to stay in
+    /// the first-level cache beside the other body's ([`WIDE_MAX_ROWS`]).
+    Wide(Vec<WideRow>),
+    /// The quantities in pairs, each coefficient replicated twice ([`PairRow`]), for larger tables.
+    Pair(Vec<PairRow>),
 }
 
 /// A [`SoaPoly`] row as five pairs of quantities, `[c₀, c₀, c₁, c₁]`, `[c₂, c₂, c₃, c₃]`, …
@@ -912,9 +916,12 @@ impl SoaPoly {
     /// The four-point table of `fast` (same polynomial).
     pub fn new(fast: &FastPoly) -> Self {
         let rows = soa_rows(fast);
-        let (wide, pair) =
-            if rows.len() <= WIDE_MAX_ROWS { (wide_table(&rows), Vec::new()) } else { (Vec::new(), pair_table(&rows)) };
-        Self { fast: fast.clone(), wide, pair }
+        let table = if rows.len() <= WIDE_MAX_ROWS {
+            SoaTable::Wide(wide_table(&rows))
+        } else {
+            SoaTable::Pair(pair_table(&rows))
+        };
+        Self { fast: fast.clone(), table }
     }
 
     /// p, ∇p and ∇²p at the four points `u` (normalized coordinates).
@@ -929,10 +936,9 @@ impl SoaPoly {
         if self.fast.degree >= 2 && has_fma() {
             // SAFETY: the CPU supports AVX2 and FMA (checked at run time just above).
             return unsafe {
-                if self.wide.is_empty() {
-                    x86::eval4_pair(self.fast.degree, &self.pair, u)
-                } else {
-                    x86::eval4_wide(self.fast.degree, &self.wide, u)
+                match &self.table {
+                    SoaTable::Wide(rows) => x86::eval4_wide(self.fast.degree, rows, u),
+                    SoaTable::Pair(rows) => x86::eval4_pair(self.fast.degree, rows, u),
                 }
             };
         }
@@ -1191,7 +1197,7 @@ mod tests {
             let coeffs: Vec<Real> = (0..basis_len(3, degree)).map(|_| rng.random_range(-1.0..1.0)).collect();
             let fast = FastPoly::new(&Polynomial::from_coefficients(degree, coeffs).unwrap());
             let soa = SoaPoly::new(&fast);
-            assert_eq!((soa.wide.is_empty(), soa.pair.is_empty()), (degree > 6, degree <= 6), "degree {degree}");
+            assert_eq!(matches!(soa.table, SoaTable::Pair(_)), degree > 6, "degree {degree}");
             let rows = soa_rows(&fast);
             let (wide, pair) = (wide_table(&rows), pair_table(&rows));
             let u: [[Real; 4]; 3] = std::array::from_fn(|_| std::array::from_fn(|_| rng.random_range(-1.5..1.5)));

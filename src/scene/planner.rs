@@ -189,8 +189,8 @@ pub enum Ahead {
     #[default]
     Nothing,
     /// Newton's answer of a cold distance or collide query, solved on the batch solver's lanes
-    /// ([`crate::query::batch::cold_distances`]; a collide query only when the cheap bounds did
-    /// not clear it).
+    /// ([`crate::query::batch::cold_distances`]; a collide query only when the cheap tests did not
+    /// decide it, [`collide_cheap`]).
     Newton(crate::query::DistanceResult),
     /// A collide query the cheap tests decided ([`collide_cheap`]): clear (a certified lower bound
     /// of the distance above the query's margin) or touching (a common point).
