@@ -454,6 +454,11 @@ impl Body {
         self.polynomial.value(&((x.coords - self.center) / self.scale))
     }
 
+    /// The support map of the body (normalized units; built once in [`Body::new`]).
+    pub fn support_table(&self) -> &SupportTable {
+        &self.support
+    }
+
     /// The radial function of the body about its interior point (normalized units; built once in
     /// [`Body::new`]).
     pub fn radial_table(&self) -> &RadialTable {

@@ -71,6 +71,13 @@ pub(super) fn face_direction(face: usize, a: Real, b: Real) -> Vector3 {
 }
 
 impl RadialTable {
+    /// The radii at the nodes, face-major (node `k = j·(G + 1) + i` of face f at `[f][k]`, G =
+    /// [`RADIAL_GRID`]): the four-lane look-ups of the batch solvers read them directly
+    /// ([`crate::query::batch`]; same cells and interpolation as [`Self::radius`]).
+    pub(crate) fn nodes(&self) -> &[[Real; NODES * NODES]; 6] {
+        &self.radius
+    }
+
     /// Tabulates the radial function of {p ≤ 1} about `center` (normalized coordinates, with
     /// p(center) < 1): 6·(G + 1)² ray solves to |p − 1| ≤ 10⁻⁸.
     pub fn new(p: &FastPoly, center: &Vector3) -> Self {

@@ -42,6 +42,13 @@ pub struct SupportTable {
 }
 
 impl SupportTable {
+    /// The support points at the nodes (normalized units), face-major (node `k = j·(G + 1) + i` of
+    /// face f at `[f][k]`, G = [`SUPPORT_GRID`]): the four-lane look-ups of the batch solvers read
+    /// them directly ([`crate::query::batch`]; same cells and interpolation as [`Self::support`]).
+    pub(crate) fn nodes(&self) -> &[[[Real; 3]; NODES * NODES]; 6] {
+        &self.points
+    }
+
     /// Tabulates the support map of {p ≤ 1} from its radial table about `center` (normalized
     /// coordinates, p(center) < 1). Each node starts from the best candidate boundary point and is
     /// polished by at most 12 Newton steps; a node whose Newton run does not reach a KKT point

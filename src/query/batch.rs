@@ -32,8 +32,18 @@
 //! table ([`crate::poly::SoaPoly`], seventh session) lifted 2d = 8 to 1.50× (`examples/cold_profile
 //! 8 15 batch`, medians of 8 runs alternated with the previous build, which gave 1.36×). Per
 //! round of four lanes at 2d = 6: two kernel passes of about 88 ns and about 115 ns of lane
-//! arithmetic; outside the rounds, the scalar cold starts (about 180 ns per pair) and the
-//! overlapping pairs on the single-pair path (about a sixth of the batch's time) bound the gain.
+//! arithmetic; outside the rounds, the cold starts and the overlapping pairs on the single-pair
+//! path (about a sixth of the batch's time) bound the gain.
+//!
+//! The cold starts are computed four pairs at a time too (eighth session): the posed interior
+//! points, the bounding-sphere test and both bodies' support and radial look-ups (the nodes
+//! gathered from the tables) in 4-lane arithmetic, the same starts as the single-pair solver's up
+//! to rounding. The scalar starts were 12.5 % of a 2d = 6 batch's instructions and 30 % at 2d = 2
+//! (callgrind, about 740 instructions per pair); with the lanes, the instructions per pair of the
+//! 300-pair batch fell 13 / 6.5 / 3.8 % at 2d = 2 / 6 / 8 (4233 → 3668, 5950 → 5565, 10165 →
+//! 9778), and the batch's rate over the single queries rose from 1.99 / 1.97 / 1.82 / 1.42 to
+//! 2.15 / 2.07 / 1.95 / 1.62 at 2d = 2 / 4 / 6 / 8 (medians of 10, the previous build alternated
+//! three times in one run; `examples/cold_profile D 10 batch`).
 //! Building an 848-byte warm start per answer costs 8–40 % more time
 //! (`cold_distances(…, true)`; it varies with the allocator's state), so the service's cold
 //! queries, which keep none, ask for none.
@@ -77,13 +87,17 @@ pub fn cold_distances(
 #[cfg(target_arch = "x86_64")]
 mod lanes {
     use super::super::distance::{
-        clear_of_contact, cold_start, distance_growth_first, finish, separated_answer, DistanceResult,
-        DistanceWarmStart, KktOut, SPECULATIVE_ITERATIONS,
+        clear_of_contact, distance_growth_first, finish, separated_answer, DistanceResult, DistanceWarmStart, KktOut,
+        SPECULATIVE_ITERATIONS,
     };
+    use super::super::fast_eval::FastPosed;
     use super::super::growth::GrowthWarmStart;
     use super::super::newton::{NewtonParams, SolveStatus};
     use crate::body::{Body, PosedBody};
     use crate::math::{Isometry3, Real, Vector3};
+    use crate::poly::radial::RADIAL_GRID;
+    use crate::poly::support::SUPPORT_GRID;
+    use crate::poly::{RadialTable, SupportTable};
     use std::arch::x86_64::*;
 
     /// [`super::cold_distances`] on the lanes, compiled for AVX2 + FMA (the 4-lane arithmetic below becomes
@@ -97,6 +111,16 @@ mod lanes {
         warm_starts: bool,
     ) -> Vec<DistanceResult> {
         solve_on_lanes(a, b, poses, params, warm_starts)
+    }
+
+    /// [`cold_starts`] compiled for AVX2 + FMA, for the tests.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2 and FMA.
+    #[cfg(test)]
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) fn cold_starts_avx2(a: &Body, b: &Body, rels: &[Isometry3]) -> Vec<Option<(Vector3, Vector3)>> {
+        cold_starts(a, b, rels)
     }
 
     /// Four reals, one per lane, in an AVX register.
@@ -152,6 +176,20 @@ mod lanes {
         fn sqrt(self) -> Self {
             // SAFETY: see the type's docs.
             Self(unsafe { _mm256_sqrt_pd(self.0) })
+        }
+
+        /// Lane-wise floor.
+        #[inline(always)]
+        fn floor(self) -> Self {
+            // SAFETY: see the type's docs.
+            Self(unsafe { _mm256_floor_pd(self.0) })
+        }
+
+        /// Lane-wise min without NaN handling (the second operand where either is NaN).
+        #[inline(always)]
+        fn min(self, o: Self) -> Self {
+            // SAFETY: see the type's docs.
+            Self(unsafe { _mm256_min_pd(self.0, o.0) })
         }
 
         /// Lane-wise max without NaN handling (see [`super::super::fast_eval::max_plain`]).
@@ -266,6 +304,18 @@ mod lanes {
     struct V3([F4; 3]);
 
     impl V3 {
+        /// The same vector in every lane.
+        #[inline(always)]
+        fn splat(v: &Vector3) -> Self {
+            Self([F4::splat(v.x), F4::splat(v.y), F4::splat(v.z)])
+        }
+
+        /// Lane `i` as a vector.
+        #[inline(always)]
+        fn lane(a: &[[Real; 4]; 3], i: usize) -> Vector3 {
+            Vector3::new(a[0][i], a[1][i], a[2][i])
+        }
+
         #[inline(always)]
         fn add(self, o: Self) -> Self {
             Self([self.0[0] + o.0[0], self.0[1] + o.0[1], self.0[2] + o.0[2]])
@@ -433,6 +483,218 @@ mod lanes {
         (dx, dy, [l1, l2], ok)
     }
 
+    /// Cells per cube-face side of both tables the cold starts read ([`RADIAL_GRID`] =
+    /// [`SUPPORT_GRID`]: one cell computation serves both look-ups of a direction).
+    const GRID: usize = RADIAL_GRID;
+    const _: () = assert!(RADIAL_GRID == SUPPORT_GRID);
+    /// Nodes per face side, and per face.
+    const NODES: usize = GRID + 1;
+    const FACE_NODES: usize = NODES * NODES;
+
+    /// The cube-map cells of four directions (one per lane): [`crate::poly::radial`]'s face
+    /// coordinates and bilinear interpolation, per lane.
+    struct CubeCells {
+        /// Flat node index `face · (G + 1)² + j · (G + 1) + i` of each cell's first node.
+        k: __m128i,
+        /// The direction's position within its cell (interpolation weights along a and b).
+        ta: F4,
+        tb: F4,
+        /// Lanes whose direction is nonzero and finite (the others read node 0 and are marked).
+        ok: M4,
+    }
+
+    impl CubeCells {
+        /// The cells of the directions `v` (any nonzero length): the face of the largest |vᵢ|
+        /// (faces +x, −x, +y, −y, +z, −z, ties to the earlier axis), face coordinates the other two
+        /// components in cyclic order over its modulus (the scalar look-ups' rules and arithmetic).
+        #[inline(always)]
+        fn new(v: V3) -> Self {
+            let [x, y, z] = v.0;
+            let (ax, ay, az) = (x.abs(), y.abs(), z.abs());
+            let (zero, one) = (F4::splat(0.0), F4::splat(1.0));
+            let on_x = ay.le(ax).and(az.le(ax));
+            let on_y = on_x.not().and(az.le(ay));
+            let pick = |fx: F4, fy: F4, fz: F4| F4::select(on_x, fx, F4::select(on_y, fy, fz));
+            let major = pick(ax, ay, az);
+            let face = pick(zero, F4::splat(2.0), F4::splat(4.0)) + F4::select(pick(x, y, z).lt(zero), one, zero);
+            let (a, b) = (pick(y, z, x) / major, pick(z, x, y) / major);
+            let ok = a.finite().and(b.finite());
+            let half = F4::splat(0.5 * GRID as Real);
+            let fa = F4::select(ok, (a + one) * half, zero);
+            let fb = F4::select(ok, (b + one) * half, zero);
+            let last = F4::splat((GRID - 1) as Real);
+            let (i, j) = (fa.floor().max(zero).min(last), fb.floor().max(zero).min(last));
+            let k = face.mul_add(F4::splat(FACE_NODES as Real), j.mul_add(F4::splat(NODES as Real), i));
+            // SAFETY: see [`F4`]'s docs; `k` holds small nonnegative integers (exact conversion).
+            let k = unsafe { _mm256_cvtpd_epi32(k.0) };
+            Self { k, ta: fa - i, tb: fb - j, ok }
+        }
+
+        /// `table[k + offset]` per lane, from the flat table `base` (`stride` reals per node).
+        ///
+        /// # Safety
+        /// `base` points at 6·(G + 1)² nodes of `stride` reals; `offset` < `stride`·(G + 2).
+        #[inline(always)]
+        unsafe fn gather(&self, base: *const Real, stride: i32, offset: usize) -> F4 {
+            // SAFETY: the node indices are below 6·(G + 1)² − (G + 2) (face ≤ 5, i, j ≤ G − 1), so
+            // with the offset every read stays in the table (the caller's contract).
+            unsafe {
+                let k = _mm_mullo_epi32(self.k, _mm_set1_epi32(stride));
+                F4(_mm256_i32gather_pd::<8>(base.add(offset), k))
+            }
+        }
+
+        /// Bilinear interpolation of the four nodes around each direction, of the node quantity at
+        /// `coordinate` of `stride`-real nodes ([`crate::poly::RadialTable::radius`]'s arithmetic).
+        ///
+        /// # Safety
+        /// As [`Self::gather`], with `coordinate` < `stride`.
+        #[inline(always)]
+        unsafe fn interpolate(&self, base: *const Real, stride: usize, coordinate: usize) -> F4 {
+            // SAFETY: offsets below stride·(G + 2) (the caller's contract).
+            let (s, c) = (stride as i32, coordinate);
+            let [n00, n01, n10, n11] = unsafe {
+                [
+                    self.gather(base, s, c),
+                    self.gather(base, s, stride + c),
+                    self.gather(base, s, stride * NODES + c),
+                    self.gather(base, s, stride * (NODES + 1) + c),
+                ]
+            };
+            let low = n00 + (n01 - n00) * self.ta;
+            let high = n10 + (n11 - n10) * self.ta;
+            low + (high - low) * self.tb
+        }
+
+        /// The radial table's radius per lane (0 where the direction is not `ok`).
+        #[inline(always)]
+        fn radius(&self, table: &RadialTable) -> F4 {
+            // SAFETY: `nodes` is 6·(G + 1)² reals (one per node), coordinate 0 of stride 1.
+            let r = unsafe { self.interpolate(table.nodes().as_ptr().cast(), 1, 0) };
+            F4::select(self.ok, r, F4::splat(0.0))
+        }
+
+        /// The support table's interpolated support point per lane (normalized units; meaningless
+        /// where the direction is not `ok`).
+        #[inline(always)]
+        fn support(&self, table: &SupportTable) -> V3 {
+            let base: *const Real = table.nodes().as_ptr().cast();
+            // SAFETY: `nodes` is 6·(G + 1)² points of three reals; coordinates 0–2 of stride 3.
+            unsafe { V3([self.interpolate(base, 3, 0), self.interpolate(base, 3, 1), self.interpolate(base, 3, 2)]) }
+        }
+    }
+
+    /// The rotation matrix (row-major) of unit quaternions (w, x, y, z) per lane.
+    #[inline(always)]
+    fn rotation_matrix(w: F4, x: F4, y: F4, z: F4) -> M3 {
+        let (one, two) = (F4::splat(1.0), F4::splat(2.0));
+        let (xx, yy, zz) = (x * x, y * y, z * z);
+        let (xy, xz, yz, wx, wy, wz) = (x * y, x * z, y * z, w * x, w * y, w * z);
+        [
+            one - two * (yy + zz),
+            two * (xy - wz),
+            two * (xz + wy),
+            two * (xy + wz),
+            one - two * (xx + zz),
+            two * (yz - wx),
+            two * (xz - wy),
+            two * (yz + wx),
+            one - two * (xx + yy),
+        ]
+    }
+
+    /// The cold starts of the pairs whose relative poses (B in A's frame) are `rels`: the start
+    /// [`cold_start`] gives each (the same tests and choices, at the same points up to rounding),
+    /// computed four pairs at a time: the posed interior points, the bounding-sphere test, both
+    /// bodies' support and radial look-ups (one cube-map cell per body and lane, gathered nodes) in
+    /// 4-lane arithmetic; only the overlap tests of pairs whose spheres meet (two polynomial values)
+    /// stay scalar.
+    #[inline(always)]
+    fn cold_starts(a: &Body, b: &Body, rels: &[Isometry3]) -> Vec<Option<(Vector3, Vector3)>> {
+        let ba = PosedBody::unposed(a);
+        let fa = FastPosed::new(&ba);
+        let ca = ba.interior_point();
+        let ca4 = V3::splat(&ca);
+        let quadric = a.degree() <= 2 || b.degree() <= 2;
+        let spheres = match (a.bounding_sphere(), b.bounding_sphere()) {
+            (Some((c1, r1)), Some((c2, r2))) => Some((V3::splat(&ba.to_world(&c1.coords)), c2.coords, r1 + r2)),
+            _ => None,
+        };
+        let (sa, sb) = (F4::splat(a.scale()), F4::splat(b.scale()));
+        let (center_a, center_b) = (V3::splat(&a.center()), V3::splat(&b.center()));
+        let (inv_sa, neg_inv_sb) = (F4::splat(1.0 / a.scale()), F4::splat(-1.0 / b.scale()));
+        let interior_b = b.interior_point().coords;
+        let (zero, one) = (F4::splat(0.0), F4::splat(1.0));
+        let mut out = Vec::with_capacity(rels.len());
+        for chunk in rels.chunks(4) {
+            // The chunk's poses by lanes (a short chunk repeats its last pose).
+            let (mut q, mut t) = ([[0.0; 4]; 4], [[0.0; 4]; 3]);
+            for i in 0..4 {
+                let rel = &chunk[i.min(chunk.len() - 1)];
+                let r = rel.rotation.quaternion();
+                (q[0][i], q[1][i], q[2][i], q[3][i]) = (r.w, r.i, r.j, r.k);
+                for (c, row) in t.iter_mut().enumerate() {
+                    row[i] = rel.translation.vector[c];
+                }
+            }
+            let rot = rotation_matrix(F4::load(&q[0]), F4::load(&q[1]), F4::load(&q[2]), F4::load(&q[3]));
+            let t4 = V3::load(&t);
+            let to_world = |local: V3| mat_mul(&rot, local).add(t4);
+            let cb = to_world(V3::splat(&interior_b));
+            let apart = match &spheres {
+                Some((c1, c2, rsum)) => {
+                    let d = c1.sub(to_world(V3::splat(c2)));
+                    F4::splat(rsum * rsum).lt(d.dot(d))
+                }
+                None => M4::default(),
+            };
+            // The directions of the look-ups in each body's normalized frame: A's towards B, B's
+            // towards A (A·n for the world direction n = ±(cb − ca)).
+            let axis = cb.sub(ca4);
+            let (du_a, du_b) = (axis.scale(inv_sa), mat_t_mul(&rot, axis).scale(neg_inv_sb));
+            let (cells_a, cells_b) = (CubeCells::new(du_a), CubeCells::new(du_b));
+            let xs = cells_a.support(a.support_table()).mul_add(sa, center_a);
+            let ys = to_world(cells_b.support(b.support_table()).mul_add(sb, center_b));
+            let supports = cells_a.ok.and(cells_b.ok);
+            let facing = if quadric { M4::default() } else { apart.and(supports) };
+            let (xs, ys, cb_lanes) = (xs.to_arrays(), ys.to_arrays(), cb.to_arrays());
+            let (mut x0, mut y0, mut order, mut use_supports) = (xs, ys, 0, 0);
+            if facing.bits() != 0b1111 {
+                // The radial boundary points on the segment between the interior points.
+                let reach = |r: F4, du: V3| {
+                    let n = du.dot(du).sqrt();
+                    F4::select(zero.lt(n), (r / n).min(one), zero)
+                };
+                let x0v = axis.mul_add(reach(cells_a.radius(a.radial_table()), du_a), ca4);
+                let y0v = axis.mul_add(-reach(cells_b.radius(b.radial_table()), du_b), cb);
+                let (ex, ey) = (x0v.sub(ca4), y0v.sub(ca4));
+                order = apart.or(ex.dot(ex).lt(ey.dot(ey))).bits();
+                let (gs, g0) = (V3::load(&ys).sub(V3::load(&xs)), y0v.sub(x0v));
+                use_supports = supports.and(gs.dot(gs).lt(g0.dot(g0))).bits();
+                (x0, y0) = (x0v.to_arrays(), y0v.to_arrays());
+            }
+            let (facing, apart) = (facing.bits(), apart.bits());
+            for (i, rel) in chunk.iter().enumerate() {
+                let bit = 1 << i;
+                let start = if facing & bit != 0 || use_supports & bit != 0 {
+                    (V3::lane(&xs, i), V3::lane(&ys, i))
+                } else {
+                    (V3::lane(&x0, i), V3::lane(&y0, i))
+                };
+                let separated = facing & bit != 0
+                    || (order & bit != 0
+                        && (apart & bit != 0 || {
+                            // Spheres that meet: separated along the segment only when each interior
+                            // point lies outside the other body.
+                            let bb = PosedBody::new(b, rel);
+                            FastPosed::new(&bb).value(&ca) > 1.0 && fa.value(&V3::lane(&cb_lanes, i)) > 1.0
+                        }));
+                out.push(separated.then_some(start));
+            }
+        }
+        out
+    }
+
     /// No pair in the lane.
     const EMPTY: usize = usize::MAX;
 
@@ -556,7 +818,8 @@ mod lanes {
         };
         let empty = std::sync::Arc::new(DistanceWarmStart::default());
         let mut next = 0usize;
-        let ba = PosedBody::unposed(a);
+        let rels: Vec<Isometry3> = poses.iter().map(|(pa, pb)| pa.inv_mul(pb)).collect();
+        let starts = cold_starts(a, b, &rels);
         loop {
             // Refill the empty lanes from the queue; a pair without a separated start is left to the
             // single-pair solver.
@@ -564,11 +827,9 @@ mod lanes {
                 while lanes.job[i] == EMPTY && next < poses.len() {
                     let k = next;
                     next += 1;
-                    let (pa, pb) = &poses[k];
-                    let rel = pa.inv_mul(pb);
-                    let bb = PosedBody::new(b, &rel);
-                    if let Some((x0, y0)) = cold_start(&ba, &bb) {
-                        lanes.fill(i, k, &rel, &bb, &x0, &y0);
+                    if let Some((x0, y0)) = &starts[k] {
+                        let bb = PosedBody::new(b, &rels[k]);
+                        lanes.fill(i, k, &rels[k], &bb, x0, y0);
                     }
                 }
             }
@@ -765,6 +1026,42 @@ mod tests {
             }
             assert!(worst < 1e-9, "2d = {degree}: distances differ by {worst:e} m");
             assert!(separated > 30 && separated < 150, "2d = {degree}: {separated} separated of 150");
+        }
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn four_lane_cold_starts_are_the_single_pair_starts() {
+        // The 4-lane cold starts against the single-pair solver's (`cold_start`), at every degree,
+        // on 203 relative poses (a short last chunk; many pairs overlapping, so every branch runs:
+        // facing support points, the radial segment, overlap tests): the same decision for every
+        // pair, and the same points to 1e-12 of the bodies' sizes (the arithmetic differs only in
+        // rounding: fused multiply-adds, the rotation matrix formula).
+        if !crate::math::cpu_has_avx2_fma() {
+            return;
+        }
+        use super::super::distance::cold_start;
+        use crate::body::PosedBody;
+        for degree in [2, 4, 6, 8] {
+            let (a, b) = (random_body(degree, 21), random_body(degree, 22));
+            let rels: Vec<Isometry3> =
+                poses(203, 1.2, 30 + degree as u64).iter().map(|(pa, pb)| pa.inv_mul(pb)).collect();
+            // SAFETY: the CPU supports AVX2 and FMA (checked above).
+            let lanes = unsafe { lanes::cold_starts_avx2(&a, &b, &rels) };
+            let size = a.scale() + b.scale();
+            let (mut some, mut none) = (0, 0);
+            for (rel, got) in rels.iter().zip(&lanes) {
+                let want = cold_start(&PosedBody::unposed(&a), &PosedBody::new(&b, rel));
+                match (got, want) {
+                    (Some((x, y)), Some((x0, y0))) => {
+                        some += 1;
+                        assert!((x - x0).norm() <= 1e-12 * size && (y - y0).norm() <= 1e-12 * size, "2d = {degree}");
+                    }
+                    (None, None) => none += 1,
+                    _ => panic!("2d = {degree}: {got:?} vs {want:?} at {rel:?}"),
+                }
+            }
+            assert!(some > 50 && none > 10, "2d = {degree}: {some} starts, {none} without");
         }
     }
 

@@ -264,7 +264,9 @@ async fn cold_candidate_states_match_the_closed_form() {
             assert!((c1.distance - gap.max(0.0)).abs() < 1e-9, "x = {x:?}: {c1:?}");
         }
         // The same collide query alone (no lanes: its bounds asked by the answer itself) answers the
-        // same, to the bit.
+        // same: to the bit where the cheap tests decide (the same bounds and common point), to
+        // 1e-12 m where a solve does (the lanes' cold starts are the single-pair starts up to
+        // rounding, and a lane's answer is the single-pair answer to the KKT tolerance).
         let alone = pb::QueryRequest {
             scene_id: scene.clone(),
             poses: vec![pose_of(&i2, *x)],
@@ -274,7 +276,11 @@ async fn cold_candidate_states_match_the_closed_form() {
         let r1 = c.query(alone).await.unwrap().into_inner();
         let c2 = collide_of(&r1.answers[0]);
         assert_eq!((c2.collides, c2.decided_by_bounds), (c1.collides, c1.decided_by_bounds), "x = {x:?}");
-        assert_eq!(c2.distance.to_bits(), c1.distance.to_bits(), "x = {x:?}: {c2:?} vs {c1:?}");
+        if c1.decided_by_bounds {
+            assert_eq!(c2.distance.to_bits(), c1.distance.to_bits(), "x = {x:?}: {c2:?} vs {c1:?}");
+        } else {
+            assert!((c2.distance - c1.distance).abs() <= 1e-12, "x = {x:?}: {c2:?} vs {c1:?}");
+        }
         overlapping += usize::from(gap <= 0.0);
     }
     assert!(overlapping > 0 && overlapping < xs.len(), "the states must cross contact: {overlapping}");
