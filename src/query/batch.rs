@@ -11,7 +11,9 @@
 //!                    ‖KKT residual‖₂), converged → answer, the lane takes the next pair
 //! pairs without a separated start, and lanes that stall, reach the iteration cap or end near
 //! contact ──► the single-pair solver's growth-first path, where its own separated run would hand
-//! them (so they are not solved twice)
+//! them (so they are not solved twice): its growth solve on 4 lanes too (4 × 4 KKT solves),
+//! the overlapping answers from there, the rest (A's minimizer inside B, growth > 1, lanes that
+//! fail) on the single-pair solver
 //! ```
 //!
 //! The lanes run the single-pair solver's cold separated Newton run ([`distance`]: same start, same
@@ -44,6 +46,16 @@
 //! 9778), and the batch's rate over the single queries rose from 1.99 / 1.97 / 1.82 / 1.42 to
 //! 2.15 / 2.07 / 1.95 / 1.62 at 2d = 2 / 4 / 6 / 8 (medians of 10, the previous build alternated
 //! three times in one run; `examples/cold_profile D 10 batch`).
+//!
+//! The overlapping pairs (22 of the 300) then took 12 % of a 2d = 6 batch's instructions and
+//! 18 % at 2d = 2, each on the single-pair growth solver: their growth solves run on four lanes
+//! too (`lanes::solve_growth_on_lanes`, the same start, KKT system, line search and tolerance
+//! as the single-pair growth solve, Hessians at every trial point). Instructions per pair fell a
+//! further 11 / 5.3 / 1.1 % at 2d = 2 / 6 / 8 (3668 → 3257, 5565 → 5270, 9778 → 9667), and the
+//! rate over single queries, alternated three times in one run with both previous builds, went
+//! 1.91 → 2.22 → 2.34 at 2d = 2, 1.92 → 2.18 → 2.50 at 2d = 4, 1.80 → 1.91 → 2.09 at 2d = 6 and
+//! 1.51 → 1.54 → 1.74 at 2d = 8 (medians of three; the host was loaded, single queries varied
+//! 1.1–3.1 µs between runs, so only the ratios within a run count).
 //! Building an 848-byte warm start per answer costs 8–40 % more time
 //! (`cold_distances(…, true)`; it varies with the allocator's state), so the service's cold
 //! queries, which keep none, ask for none.
@@ -695,6 +707,9 @@ mod lanes {
         out
     }
 
+    /// Fewest pairs left without an answer worth the growth lanes (below, the single-pair solver).
+    const MIN_GROWTH_LANES: usize = 2;
+
     /// No pair in the lane.
     const EMPTY: usize = usize::MAX;
 
@@ -779,6 +794,227 @@ mod lanes {
             F4::load(&h[4]) * k,
             F4::load(&h[5]) * k,
         ]
+    }
+
+    /// The four lanes' pairs and Newton states of the growth measure's KKT system (see
+    /// [`solve_growth_on_lanes`]), one array entry per lane (as [`Lanes`]).
+    struct GrowthLanes {
+        /// Index of each lane's pair in the batch, or [`EMPTY`].
+        job: [usize; 4],
+        /// Accepted points (frame of body A) and multipliers.
+        x: [[Real; 4]; 3],
+        mu: [Real; 4],
+        /// Newton steps from the accepted points, and the step lengths of the next trial points.
+        dx: [[Real; 4]; 3],
+        dmu: [Real; 4],
+        alpha: [Real; 4],
+        /// ‖KKT residual‖₂ at the accepted points.
+        r0: [Real; 4],
+        /// 1 where the lane's trial point is its start, else 0.
+        start: [Real; 4],
+        /// Newton steps taken, and trial points rejected since the last step.
+        steps: [Real; 4],
+        rejected: [Real; 4],
+        /// Body B's map to its normalized coordinates u = M x + c (frame of body A), M row-major.
+        mb: [[Real; 4]; 9],
+        cb: [[Real; 4]; 3],
+    }
+
+    impl GrowthLanes {
+        /// Puts pair `k` (B posed as `bb` in A's frame) into lane `i`, starting at `x0`.
+        fn fill(&mut self, i: usize, k: usize, bb: &PosedBody<'_>, x0: &Vector3) {
+            self.job[i] = k;
+            let m = bb.linear();
+            let c = bb.to_normalized(&Vector3::zeros());
+            for r in 0..3 {
+                self.x[r][i] = x0[r];
+                self.dx[r][i] = 0.0;
+                self.cb[r][i] = c[r];
+                for col in 0..3 {
+                    self.mb[3 * r + col][i] = m[(r, col)];
+                }
+            }
+            self.mu[i] = 0.0;
+            self.dmu[i] = 0.0;
+            self.alpha[i] = 0.0;
+            self.steps[i] = 0.0;
+            self.rejected[i] = 0.0;
+            self.start[i] = 1.0;
+        }
+    }
+
+    /// The growth Newton step per lane ([`super::super::fast_eval::solve_kkt4`]'s elimination):
+    /// (dx, dμ) of `[W g; gᵀ 0] [dx; dμ] = −[r; c]` and the lanes where it exists.
+    #[inline(always)]
+    fn solve_kkt4(w: &S3, g: V3, r: V3, c: F4) -> (V3, F4, M4) {
+        let (wi, ok_w) = inverse_sym(w);
+        let (wg, wr) = (sym_mul(&wi, g), sym_mul(&wi, r));
+        let s = g.dot(wg);
+        let dmu = (c - g.dot(wr)) / s;
+        let dx = wg.mul_add(dmu, wr).neg();
+        let sum = dx.0[0] + dx.0[1] + dx.0[2] + dmu;
+        let ok = ok_w.and(F4::splat(1e-300).lt(s.abs())).and(s.finite()).and(sum.finite());
+        (dx, dmu, ok)
+    }
+
+    /// The overlap test of the single-pair solver's growth-first path ([`distance_growth_first`]:
+    /// the growth measure d(p_a‖p_b) = min p_a(x) s.t. p_b(x) ≤ 1, paper §IV-B) for the pairs
+    /// `queue` of the batch, four per SIMD pass, as [`solve_on_lanes`] runs the separated distance:
+    /// the single-pair cold start (A's minimizer inside B is left to the single-pair solver; else
+    /// B's boundary towards A's interior point, or the support point of B facing −∇p_a there when
+    /// p_a is lower at it), the same KKT system, line search (backtracking on ‖KKT residual‖₂, the
+    /// multiplier kept at least halved per step), tolerance and iteration cap, with the Hessians
+    /// at every trial point (no chord steps). A lane that converges with μ > 0 and
+    /// p_a(x) ≤ 1 gives the overlapping answer (the growth minimizer as both witnesses); every
+    /// other pair stays `None` for the single-pair solver.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn solve_growth_on_lanes(
+        a: &Body,
+        b: &Body,
+        poses: &[(Isometry3, Isometry3)],
+        rels: &[Isometry3],
+        queue: &[usize],
+        params: &NewtonParams,
+        warm_starts: bool,
+        answers: &mut [Option<DistanceResult>],
+        empty: &std::sync::Arc<DistanceWarmStart>,
+    ) {
+        let (soa_a, soa_b) = (a.soa_polynomial(), b.soa_polynomial());
+        let cap = F4::splat(params.max_iterations as Real);
+        let tolerance = F4::splat(params.kkt_tolerance);
+        let (zero, one, half) = (F4::splat(0.0), F4::splat(1.0), F4::splat(0.5));
+        let ka = 1.0 / a.scale();
+        let c_a = -a.center() * ka;
+        let (ka4, ka2) = (F4::splat(ka), F4::splat(ka * ka));
+        let ca4 = V3([F4::splat(c_a.x), F4::splat(c_a.y), F4::splat(c_a.z)]);
+        let ba = PosedBody::unposed(a);
+        let fa = FastPosed::new(&ba);
+        let c1 = ba.interior_point();
+        let mut lanes = GrowthLanes {
+            job: [EMPTY; 4],
+            x: [[0.0; 4]; 3],
+            mu: [0.0; 4],
+            dx: [[0.0; 4]; 3],
+            dmu: [0.0; 4],
+            alpha: [0.0; 4],
+            r0: [0.0; 4],
+            start: [0.0; 4],
+            steps: [0.0; 4],
+            rejected: [0.0; 4],
+            mb: [[0.0; 4]; 9],
+            cb: [[0.0; 4]; 3],
+        };
+        let mut next = 0usize;
+        loop {
+            for i in 0..4 {
+                while lanes.job[i] == EMPTY && next < queue.len() {
+                    let k = queue[next];
+                    next += 1;
+                    let bb = PosedBody::new(b, &rels[k]);
+                    // A's minimizer inside B (the inactive constraint) is the single-pair solver's.
+                    if FastPosed::new(&bb).value(&c1) <= 1.0 {
+                        continue;
+                    }
+                    let x0 = bb.boundary_towards(&c1);
+                    let (v0, g1) = fa.value_gradient(&x0);
+                    let x0 = bb.support(&-g1).filter(|x| fa.value(x) < v0).unwrap_or(x0);
+                    lanes.fill(i, k, &bb, &x0);
+                }
+            }
+            if lanes.job == [EMPTY; 4] {
+                break;
+            }
+            let x = V3::load(&lanes.x);
+            let mu = F4::load(&lanes.mu);
+            let dx = V3::load(&lanes.dx);
+            let dmu = F4::load(&lanes.dmu);
+            let (al, r0, start) = (F4::load(&lanes.alpha), F4::load(&lanes.r0), zero.lt(F4::load(&lanes.start)));
+            let m = &lanes.mb;
+            let mb: M3 = std::array::from_fn(|j| F4::load(&m[j]));
+            let xt = dx.mul_add(al, x);
+            let mut mt = dmu.mul_add(al, mu);
+            let ua = xt.mul_add(ka4, ca4);
+            let ub = mat_mul(&mb, xt).add(V3::load(&lanes.cb));
+            let ea = soa_a.eval4_rows(&ua.to_arrays());
+            let eb = soa_b.eval4_rows(&ub.to_arrays());
+            let gf = V3::load(&ea.gradient).scale(ka4);
+            let gg = mat_t_mul(&mb, V3::load(&eb.gradient));
+            // Least-squares multipliers at a start (the single-pair solver's initial multiplier).
+            if start.bits() != 0 {
+                let tiny = F4::splat(Real::MIN_POSITIVE);
+                let (nf, ng) = (gf.dot(gf), gg.dot(gg));
+                let ls = -gf.dot(gg) / ng.max(tiny);
+                let fallback = nf.sqrt() / ng.sqrt().max(tiny);
+                mt = F4::select(start, F4::select(ls.finite().and(zero.lt(ls)), ls, fallback), mt);
+            }
+            let r = gg.mul_add(mt, gf);
+            let c = F4::load(&eb.value) - one;
+            let r1 = r.dot(r).mul_add(one, c * c).sqrt();
+            let norm_inf = abs_max(r).max(c.abs());
+            let stationary = norm_inf.le(tolerance * (one + abs_max(gf)));
+            // The Newton steps from the trial points (taken where a trial point is accepted).
+            let hf = load6(&ea.hessian, ka2);
+            let hg = congruence(&mb, &load6(&eb.hessian, one));
+            let w: S3 = std::array::from_fn(|j| hg[j].mul_add(mt, hf[j]));
+            let (sdx, sdmu, solved) = solve_kkt4(&w, gg, r, c);
+            let job = &lanes.job;
+            let live = M4::from_bools([job[0] != EMPTY, job[1] != EMPTY, job[2] != EMPTY, job[3] != EMPTY]);
+            let decrease = r1.le((F4::splat(-1e-4) * al + one) * r0).and(r1.finite());
+            let accepted = start.or(decrease).and(live);
+            lanes.x = V3::select(accepted, xt, x).to_arrays();
+            lanes.mu = F4::select(accepted, mt, mu).to_array();
+            lanes.r0 = F4::select(accepted, r1, r0).to_array();
+            lanes.dx = V3::select(accepted, sdx, dx).to_arrays();
+            lanes.dmu = F4::select(accepted, sdmu, dmu).to_array();
+            // A cold run keeps μ ≥ μ/2 per step (the KKT points with μ < 0 are not the answer).
+            let halved = zero.lt(mt).and((mt + sdmu).lt(half * mt));
+            let first = F4::select(halved, half * mt / -sdmu, one);
+            lanes.alpha = F4::select(accepted, first, al * half).to_array();
+            let rejected = F4::select(accepted, zero, F4::load(&lanes.rejected) + one);
+            lanes.rejected = rejected.to_array();
+            let steps = F4::load(&lanes.steps);
+            let done = accepted.and(stationary.or(r1.finite().not()).or(solved.not()).or(cap.le(steps)));
+            let stalled = live.and(accepted.not()).and(F4::splat(40.0).le(rejected));
+            lanes.steps = (steps + F4::select(accepted, one, zero)).to_array();
+            lanes.start = [0.0; 4];
+            let leave = done.or(stalled).bits();
+            if leave == 0 {
+                continue;
+            }
+            // The overlapping answers: a KKT point with μ > 0 (the minimizer) and p_a ≤ 1 there.
+            let answer = done.and(stationary).and(r1.finite()).and(zero.lt(mt)).and(F4::load(&ea.value).le(one)).bits();
+            let (norm_inf, steps, mt) = (norm_inf.to_array(), steps.to_array(), mt.to_array());
+            for i in (0..4).filter(|i| leave & (1 << i) != 0) {
+                let k = lanes.job[i];
+                lanes.job[i] = EMPTY;
+                if answer & (1 << i) == 0 {
+                    continue;
+                }
+                let x = V3::lane(&lanes.x, i);
+                let warm_start = if warm_starts {
+                    let rel = &rels[k];
+                    let local = rel.inverse_transform_point(&crate::math::Point3::from(x)).coords;
+                    let growth = GrowthWarmStart::after(None, local, mt[i], true, rel.inverse());
+                    std::sync::Arc::new(DistanceWarmStart { growth, ..Default::default() })
+                } else {
+                    empty.clone()
+                };
+                let p = poses[k].0 * crate::math::Point3::from(x);
+                answers[k] = Some(DistanceResult {
+                    distance: 0.0,
+                    witness_a: p,
+                    witness_b: p,
+                    normal: Vector3::zeros(),
+                    overlapping: true,
+                    status: SolveStatus::Converged,
+                    iterations: steps[i] as usize,
+                    kkt_residual: norm_inf[i],
+                    warm_started: false,
+                    warm_start,
+                });
+            }
+        }
     }
 
     #[inline(always)]
@@ -941,7 +1177,11 @@ mod lanes {
         }
         // The pairs without a separated start, and those the lanes left: the single-pair solver's
         // growth-first path (which is where its own separated run, the same as the lane's, would
-        // hand them).
+        // hand them), its growth solve on the lanes first.
+        let queue: Vec<usize> = (0..poses.len()).filter(|&k| answers[k].is_none()).collect();
+        if queue.len() >= MIN_GROWTH_LANES {
+            solve_growth_on_lanes(a, b, poses, &rels, &queue, params, warm_starts, &mut answers, &empty);
+        }
         answers
             .into_iter()
             .zip(poses)
@@ -987,6 +1227,14 @@ mod tests {
                 assert!((d.distance - gap.max(0.0)).abs() < 1e-9, "{} vs {gap}", d.distance);
                 assert_eq!(d.overlapping, gap <= 0.0);
                 overlapping += usize::from(d.overlapping);
+                let (ca, cb) =
+                    (pa * crate::math::Point3::new(0.1, 0.0, 0.0), pb * crate::math::Point3::new(0.0, -0.1, 0.0));
+                if d.overlapping && (ca - cb).norm() > 0.3 {
+                    // The growth minimizer (both witnesses): the point of B's sphere nearest A's
+                    // center (outside B), in closed form.
+                    let nearest = cb + (ca - cb).normalize() * 0.3;
+                    assert!((d.witness_a - nearest).norm() < 1e-9 && d.witness_b == d.witness_a, "{d:?}");
+                }
                 if !d.overlapping {
                     // The witnesses lie on the spheres, the normal along the witness segment.
                     assert!((a.value_at(&(pa.inverse() * d.witness_a)) - 1.0).abs() < 1e-9);
