@@ -113,15 +113,15 @@ pub enum CheapCollide {
     /// Clear of the margin: a certified lower bound of the distance above it (meters,
     /// [`collide_lower_bound`]).
     Clear(Real),
-    /// Overlapping: a point of both bodies (world, meters;
-    /// [`crate::query::segment_common_point`]) proves distance 0.
+    /// Overlapping: a point of both bodies (world, meters; [`crate::query::common_point`]) proves
+    /// distance 0.
     Touching(crate::math::Point3),
 }
 
 /// The collide query's cheap tests, cheapest first: the lower bounds ([`collide_lower_bound`]),
 /// which clear a pair farther apart than `margin`; then, for a pair they do not clear, a common
-/// point of the two bodies on the segment between their interior points
-/// ([`crate::query::segment_common_point`]), which proves overlap. `None` when neither decides
+/// point of the two bodies on the segment between their interior points or at their facing support
+/// points ([`crate::query::common_point`]), which proves overlap. `None` when neither decides
 /// (a distance solve does), or when a body has no proven bound (nonconvex).
 ///
 /// On the 300 cold chair_101 / human_10 poses of `sublevel bench` at 2d = 6 and margin 0, the
@@ -132,7 +132,7 @@ pub fn collide_cheap(a: &Body, pose_a: &Isometry3, b: &Body, pose_b: &Isometry3,
     if lower > margin {
         return Some(CheapCollide::Clear(lower));
     }
-    crate::query::segment_common_point(a, pose_a, b, pose_b).map(CheapCollide::Touching)
+    crate::query::common_point(a, pose_a, b, pose_b).map(CheapCollide::Touching)
 }
 
 /// Answers one query between two posed instances with the given warm-start cache (ids key it);
