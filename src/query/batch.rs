@@ -40,8 +40,8 @@
 //! The cold starts are computed four pairs at a time too (eighth session): the posed interior
 //! points, the bounding-sphere test and both bodies' support and radial look-ups (the nodes
 //! gathered from the tables) in 4-lane arithmetic, the same starts as the single-pair solver's up
-//! to rounding. The scalar starts were 12.5 % of a 2d = 6 batch's instructions and 30 % at 2d = 2
-//! (callgrind, about 740 instructions per pair); with the lanes, the instructions per pair of the
+//! to rounding. The scalar starts were 18 % of a 2d = 6 batch's instructions and 30 % at 2d = 2
+//! (callgrind, about 1050 instructions per pair); with the lanes, the instructions per pair of the
 //! 300-pair batch fell 13 / 6.5 / 3.8 % at 2d = 2 / 6 / 8 (4233 → 3668, 5950 → 5565, 10165 →
 //! 9778), and the batch's rate over the single queries rose from 1.99 / 1.97 / 1.82 / 1.42 to
 //! 2.15 / 2.07 / 1.95 / 1.62 at 2d = 2 / 4 / 6 / 8 (medians of 10, the previous build alternated
@@ -56,6 +56,13 @@
 //! 1.91 → 2.22 → 2.34 at 2d = 2, 1.92 → 2.18 → 2.50 at 2d = 4, 1.80 → 1.91 → 2.09 at 2d = 6 and
 //! 1.51 → 1.54 → 1.74 at 2d = 8 (medians of three; the host was loaded, single queries varied
 //! 1.1–3.1 µs between runs, so only the ratios within a run count).
+//!
+//! Three closures of the 4-lane cold starts had been compiled out of line, without the AVX target
+//! features (about 280 instructions a call, 5 % of a 2d = 6 batch's instructions); as plain
+//! inlined functions the instructions per pair fell a further 9 / 5.8 / 3.3 % (3257 → 2959,
+//! 5270 → 4965, 9667 → 9349) and the rate over single queries went 2.55 → 3.16× at 2d = 2,
+//! 2.35 → 2.68× at 2d = 4, 2.09 → 2.25× at 2d = 6 and 1.66 → 1.82× at 2d = 8 (the two builds
+//! alternated three times, medians). The lanes' code therefore has no closures over `F4` values.
 //! Building an 848-byte warm start per answer costs 8–40 % more time
 //! (`cold_distances(…, true)`; it varies with the allocator's state), so the service's cold
 //! queries, which keep none, ask for none.
@@ -503,6 +510,12 @@ mod lanes {
     const NODES: usize = GRID + 1;
     const FACE_NODES: usize = NODES * NODES;
 
+    /// `fx` where `on_x`, else `fy` where `on_y`, else `fz`, per lane.
+    #[inline(always)]
+    fn select3(on_x: M4, on_y: M4, fx: F4, fy: F4, fz: F4) -> F4 {
+        F4::select(on_x, fx, F4::select(on_y, fy, fz))
+    }
+
     /// The cube-map cells of four directions (one per lane): [`crate::poly::radial`]'s face
     /// coordinates and bilinear interpolation, per lane.
     struct CubeCells {
@@ -526,10 +539,10 @@ mod lanes {
             let (zero, one) = (F4::splat(0.0), F4::splat(1.0));
             let on_x = ay.le(ax).and(az.le(ax));
             let on_y = on_x.not().and(az.le(ay));
-            let pick = |fx: F4, fy: F4, fz: F4| F4::select(on_x, fx, F4::select(on_y, fy, fz));
-            let major = pick(ax, ay, az);
-            let face = pick(zero, F4::splat(2.0), F4::splat(4.0)) + F4::select(pick(x, y, z).lt(zero), one, zero);
-            let (a, b) = (pick(y, z, x) / major, pick(z, x, y) / major);
+            let major = select3(on_x, on_y, ax, ay, az);
+            let sign = select3(on_x, on_y, x, y, z).lt(zero);
+            let face = select3(on_x, on_y, zero, F4::splat(2.0), F4::splat(4.0)) + F4::select(sign, one, zero);
+            let (a, b) = (select3(on_x, on_y, y, z, x) / major, select3(on_x, on_y, z, x, y) / major);
             let ok = a.finite().and(b.finite());
             let half = F4::splat(0.5 * GRID as Real);
             let fa = F4::select(ok, (a + one) * half, zero);
@@ -596,6 +609,15 @@ mod lanes {
         }
     }
 
+    /// The fraction min(r / ‖du‖, 1) of the way from a body's interior point towards a target
+    /// whose direction in the body's normalized frame is `du`, for the radial table's radius `r`
+    /// there (0 where ‖du‖ is 0 or not a number: [`PosedBody::boundary_towards`]'s rule, per lane).
+    #[inline(always)]
+    fn reach(r: F4, du: V3) -> F4 {
+        let n = du.dot(du).sqrt();
+        F4::select(F4::splat(0.0).lt(n), (r / n).min(F4::splat(1.0)), F4::splat(0.0))
+    }
+
     /// The rotation matrix (row-major) of unit quaternions (w, x, y, z) per lane.
     #[inline(always)]
     fn rotation_matrix(w: F4, x: F4, y: F4, z: F4) -> M3 {
@@ -636,7 +658,6 @@ mod lanes {
         let (center_a, center_b) = (V3::splat(&a.center()), V3::splat(&b.center()));
         let (inv_sa, neg_inv_sb) = (F4::splat(1.0 / a.scale()), F4::splat(-1.0 / b.scale()));
         let interior_b = b.interior_point().coords;
-        let (zero, one) = (F4::splat(0.0), F4::splat(1.0));
         let mut out = Vec::with_capacity(rels.len());
         for chunk in rels.chunks(4) {
             // The chunk's poses by lanes (a short chunk repeats its last pose).
@@ -649,13 +670,14 @@ mod lanes {
                     row[i] = rel.translation.vector[c];
                 }
             }
+            // No closures here: one compiled out of line loses the AVX target features (measured: each
+            // of these was a call of about 280 instructions, 5 % of a 2d = 6 batch).
             let rot = rotation_matrix(F4::load(&q[0]), F4::load(&q[1]), F4::load(&q[2]), F4::load(&q[3]));
             let t4 = V3::load(&t);
-            let to_world = |local: V3| mat_mul(&rot, local).add(t4);
-            let cb = to_world(V3::splat(&interior_b));
+            let cb = mat_mul(&rot, V3::splat(&interior_b)).add(t4);
             let apart = match &spheres {
                 Some((c1, c2, rsum)) => {
-                    let d = c1.sub(to_world(V3::splat(c2)));
+                    let d = c1.sub(mat_mul(&rot, V3::splat(c2)).add(t4));
                     F4::splat(rsum * rsum).lt(d.dot(d))
                 }
                 None => M4::default(),
@@ -666,17 +688,13 @@ mod lanes {
             let (du_a, du_b) = (axis.scale(inv_sa), mat_t_mul(&rot, axis).scale(neg_inv_sb));
             let (cells_a, cells_b) = (CubeCells::new(du_a), CubeCells::new(du_b));
             let xs = cells_a.support(a.support_table()).mul_add(sa, center_a);
-            let ys = to_world(cells_b.support(b.support_table()).mul_add(sb, center_b));
+            let ys = mat_mul(&rot, cells_b.support(b.support_table()).mul_add(sb, center_b)).add(t4);
             let supports = cells_a.ok.and(cells_b.ok);
             let facing = if quadric { M4::default() } else { apart.and(supports) };
             let (xs, ys, cb_lanes) = (xs.to_arrays(), ys.to_arrays(), cb.to_arrays());
             let (mut x0, mut y0, mut order, mut use_supports) = (xs, ys, 0, 0);
             if facing.bits() != 0b1111 {
                 // The radial boundary points on the segment between the interior points.
-                let reach = |r: F4, du: V3| {
-                    let n = du.dot(du).sqrt();
-                    F4::select(zero.lt(n), (r / n).min(one), zero)
-                };
                 let x0v = axis.mul_add(reach(cells_a.radius(a.radial_table()), du_a), ca4);
                 let y0v = axis.mul_add(-reach(cells_b.radius(b.radial_table()), du_b), cb);
                 let (ex, ey) = (x0v.sub(ca4), y0v.sub(ca4));
@@ -931,7 +949,17 @@ mod lanes {
             let dmu = F4::load(&lanes.dmu);
             let (al, r0, start) = (F4::load(&lanes.alpha), F4::load(&lanes.r0), zero.lt(F4::load(&lanes.start)));
             let m = &lanes.mb;
-            let mb: M3 = std::array::from_fn(|j| F4::load(&m[j]));
+            let mb: M3 = [
+                F4::load(&m[0]),
+                F4::load(&m[1]),
+                F4::load(&m[2]),
+                F4::load(&m[3]),
+                F4::load(&m[4]),
+                F4::load(&m[5]),
+                F4::load(&m[6]),
+                F4::load(&m[7]),
+                F4::load(&m[8]),
+            ];
             let xt = dx.mul_add(al, x);
             let mut mt = dmu.mul_add(al, mu);
             let ua = xt.mul_add(ka4, ca4);
@@ -956,7 +984,14 @@ mod lanes {
             // The Newton steps from the trial points (taken where a trial point is accepted).
             let hf = load6(&ea.hessian, ka2);
             let hg = congruence(&mb, &load6(&eb.hessian, one));
-            let w: S3 = std::array::from_fn(|j| hg[j].mul_add(mt, hf[j]));
+            let w: S3 = [
+                hg[0].mul_add(mt, hf[0]),
+                hg[1].mul_add(mt, hf[1]),
+                hg[2].mul_add(mt, hf[2]),
+                hg[3].mul_add(mt, hf[3]),
+                hg[4].mul_add(mt, hf[4]),
+                hg[5].mul_add(mt, hf[5]),
+            ];
             let (sdx, sdmu, solved) = solve_kkt4(&w, gg, r, c);
             let job = &lanes.job;
             let live = M4::from_bools([job[0] != EMPTY, job[1] != EMPTY, job[2] != EMPTY, job[3] != EMPTY]);
