@@ -728,23 +728,13 @@ mod lanes {
     /// Fewest pairs left without an answer worth the growth lanes (below, the single-pair solver).
     const MIN_GROWTH_LANES: usize = 2;
 
-    /// No pair in the lane.
-    const EMPTY: usize = usize::MAX;
-
-    /// The four lanes' pairs and Newton states (see the module docs), one array entry per lane:
-    /// plain arrays, so that a lane is refilled by scalar stores that have long retired when the
-    /// next round loads the arrays into registers.
-    struct Lanes {
+    /// What both solvers' lanes keep besides their Newton iterates, one array entry per lane: plain
+    /// arrays, so that a lane is refilled by scalar stores that have long retired when the next
+    /// round loads them into registers.
+    struct LaneBook {
         /// Index of each lane's pair in the batch, or [`EMPTY`].
         job: [usize; 4],
-        /// Accepted points (frame of body A) and multipliers.
-        x: [[Real; 4]; 3],
-        y: [[Real; 4]; 3],
-        lam: [[Real; 4]; 2],
-        /// Newton steps from the accepted points, and the step lengths of the next trial points.
-        dx: [[Real; 4]; 3],
-        dy: [[Real; 4]; 3],
-        dl: [[Real; 4]; 2],
+        /// Step lengths of the next trial points.
         alpha: [Real; 4],
         /// ‖KKT residual‖₂ at the accepted points.
         r0: [Real; 4],
@@ -757,6 +747,118 @@ mod lanes {
         /// Body B's map to its normalized coordinates u = M y + c (frame of body A), M row-major.
         mb: [[Real; 4]; 9],
         cb: [[Real; 4]; 3],
+    }
+
+    impl LaneBook {
+        /// Four empty lanes.
+        fn new() -> Self {
+            Self {
+                job: [EMPTY; 4],
+                alpha: [0.0; 4],
+                r0: [0.0; 4],
+                start: [0.0; 4],
+                steps: [0.0; 4],
+                rejected: [0.0; 4],
+                mb: [[0.0; 4]; 9],
+                cb: [[0.0; 4]; 3],
+            }
+        }
+
+        /// Gives lane `i` pair `k` (B posed as `bb` in A's frame), at its start.
+        fn fill(&mut self, i: usize, k: usize, bb: &PosedBody<'_>) {
+            self.job[i] = k;
+            let (m, c) = (bb.linear(), bb.to_normalized(&Vector3::zeros()));
+            for r in 0..3 {
+                self.cb[r][i] = c[r];
+                for col in 0..3 {
+                    self.mb[3 * r + col][i] = m[(r, col)];
+                }
+            }
+            self.alpha[i] = 0.0;
+            self.steps[i] = 0.0;
+            self.rejected[i] = 0.0;
+            self.start[i] = 1.0;
+        }
+
+        /// Whether every lane is empty.
+        fn is_empty(&self) -> bool {
+            self.job == [EMPTY; 4]
+        }
+
+        /// The lanes' maps of B as 4-lane registers (M, c).
+        #[inline(always)]
+        fn map(&self) -> (M3, V3) {
+            let m = &self.mb;
+            let mb = [
+                F4::load(&m[0]),
+                F4::load(&m[1]),
+                F4::load(&m[2]),
+                F4::load(&m[3]),
+                F4::load(&m[4]),
+                F4::load(&m[5]),
+                F4::load(&m[6]),
+                F4::load(&m[7]),
+                F4::load(&m[8]),
+            ];
+            (mb, V3::load(&self.cb))
+        }
+
+        /// The lanes holding a pair.
+        #[inline(always)]
+        fn live(&self) -> M4 {
+            let job = &self.job;
+            M4::from_bools([job[0] != EMPTY, job[1] != EMPTY, job[2] != EMPTY, job[3] != EMPTY])
+        }
+
+        /// The bookkeeping of a round: where a trial point was `accepted` (its residual `r1`), a
+        /// step counted, the residual kept and the next step length `first`; where a live lane's was
+        /// not, a rejection counted and the step halved. Returns the lanes done (accepted and `ends`
+        /// — stationary, nonfinite or unsolvable — or at the iteration `cap`), the bits of the lanes
+        /// that leave (done, or 40 rejected trial points in a row: the single-pair line search's
+        /// limit) and the steps taken before this round.
+        #[inline(always)]
+        fn advance(&mut self, accepted: M4, r1: F4, first: F4, ends: M4, cap: F4) -> (M4, u32, F4) {
+            let (zero, one) = (F4::splat(0.0), F4::splat(1.0));
+            let live = self.live();
+            self.r0 = F4::select(accepted, r1, F4::load(&self.r0)).to_array();
+            self.alpha = F4::select(accepted, first, F4::load(&self.alpha) * F4::splat(0.5)).to_array();
+            let rejected = F4::select(accepted, zero, F4::load(&self.rejected) + one);
+            self.rejected = rejected.to_array();
+            let before = F4::load(&self.steps);
+            let done = accepted.and(ends.or(cap.le(before)));
+            let stalled = live.and(accepted.not()).and(F4::splat(40.0).le(rejected));
+            self.steps = (before + F4::select(accepted, one, zero)).to_array();
+            self.start = [0.0; 4];
+            (done, done.or(stalled).bits(), before)
+        }
+    }
+
+    /// Body A's map to its normalized coordinates in its own frame (unposed), u = k·x + c with
+    /// k = 1/scale and c = −center/scale, in every lane: (k, k², c).
+    #[inline(always)]
+    fn unposed_map(a: &Body) -> (F4, F4, V3) {
+        let k = 1.0 / a.scale();
+        let c = -a.center() * k;
+        (F4::splat(k), F4::splat(k * k), V3::splat(&c))
+    }
+
+    /// No pair in the lane.
+    const EMPTY: usize = usize::MAX;
+
+    /// The four lanes' pairs and Newton states (see the module docs), one array entry per lane:
+    /// plain arrays, so that a lane is refilled by scalar stores that have long retired when the
+    /// next round loads the arrays into registers.
+    struct Lanes {
+        /// The lanes' pairs, step lengths, residuals, counters and maps of B.
+        book: LaneBook,
+        /// Accepted points (frame of body A) and multipliers.
+        x: [[Real; 4]; 3],
+        y: [[Real; 4]; 3],
+        lam: [[Real; 4]; 2],
+        /// Newton steps from the accepted points.
+        dx: [[Real; 4]; 3],
+        dy: [[Real; 4]; 3],
+        dl: [[Real; 4]; 2],
         /// Pose of B relative to A (pose_a⁻¹ · pose_b).
         rel: [Isometry3; 4],
     }
@@ -765,25 +867,15 @@ mod lanes {
         /// Puts pair `k` with the relative pose `rel` (B posed as `bb`) into lane `i`, starting at
         /// (x0, y0).
         fn fill(&mut self, i: usize, k: usize, rel: &Isometry3, bb: &PosedBody<'_>, x0: &Vector3, y0: &Vector3) {
-            self.job[i] = k;
-            let m = bb.linear();
-            let c = bb.to_normalized(&Vector3::zeros());
+            self.book.fill(i, k, bb);
             for r in 0..3 {
                 self.x[r][i] = x0[r];
                 self.y[r][i] = y0[r];
                 self.dx[r][i] = 0.0;
                 self.dy[r][i] = 0.0;
-                self.cb[r][i] = c[r];
-                for col in 0..3 {
-                    self.mb[3 * r + col][i] = m[(r, col)];
-                }
             }
             self.dl[0][i] = 0.0;
             self.dl[1][i] = 0.0;
-            self.alpha[i] = 0.0;
-            self.steps[i] = 0.0;
-            self.rejected[i] = 0.0;
-            self.start[i] = 1.0;
             self.rel[i] = *rel;
         }
     }
@@ -817,47 +909,26 @@ mod lanes {
     /// The four lanes' pairs and Newton states of the growth measure's KKT system (see
     /// [`solve_growth_on_lanes`]), one array entry per lane (as [`Lanes`]).
     struct GrowthLanes {
-        /// Index of each lane's pair in the batch, or [`EMPTY`].
-        job: [usize; 4],
+        /// The lanes' pairs, step lengths, residuals, counters and maps of B.
+        book: LaneBook,
         /// Accepted points (frame of body A) and multipliers.
         x: [[Real; 4]; 3],
         mu: [Real; 4],
-        /// Newton steps from the accepted points, and the step lengths of the next trial points.
+        /// Newton steps from the accepted points.
         dx: [[Real; 4]; 3],
         dmu: [Real; 4],
-        alpha: [Real; 4],
-        /// ‖KKT residual‖₂ at the accepted points.
-        r0: [Real; 4],
-        /// 1 where the lane's trial point is its start, else 0.
-        start: [Real; 4],
-        /// Newton steps taken, and trial points rejected since the last step.
-        steps: [Real; 4],
-        rejected: [Real; 4],
-        /// Body B's map to its normalized coordinates u = M x + c (frame of body A), M row-major.
-        mb: [[Real; 4]; 9],
-        cb: [[Real; 4]; 3],
     }
 
     impl GrowthLanes {
         /// Puts pair `k` (B posed as `bb` in A's frame) into lane `i`, starting at `x0`.
         fn fill(&mut self, i: usize, k: usize, bb: &PosedBody<'_>, x0: &Vector3) {
-            self.job[i] = k;
-            let m = bb.linear();
-            let c = bb.to_normalized(&Vector3::zeros());
+            self.book.fill(i, k, bb);
             for r in 0..3 {
                 self.x[r][i] = x0[r];
                 self.dx[r][i] = 0.0;
-                self.cb[r][i] = c[r];
-                for col in 0..3 {
-                    self.mb[3 * r + col][i] = m[(r, col)];
-                }
             }
             self.mu[i] = 0.0;
             self.dmu[i] = 0.0;
-            self.alpha[i] = 0.0;
-            self.steps[i] = 0.0;
-            self.rejected[i] = 0.0;
-            self.start[i] = 1.0;
         }
     }
 
@@ -902,31 +973,16 @@ mod lanes {
         let cap = F4::splat(params.max_iterations as Real);
         let tolerance = F4::splat(params.kkt_tolerance);
         let (zero, one, half) = (F4::splat(0.0), F4::splat(1.0), F4::splat(0.5));
-        let ka = 1.0 / a.scale();
-        let c_a = -a.center() * ka;
-        let (ka4, ka2) = (F4::splat(ka), F4::splat(ka * ka));
-        let ca4 = V3([F4::splat(c_a.x), F4::splat(c_a.y), F4::splat(c_a.z)]);
+        let (ka4, ka2, ca4) = unposed_map(a);
         let ba = PosedBody::unposed(a);
         let fa = FastPosed::new(&ba);
         let c1 = ba.interior_point();
-        let mut lanes = GrowthLanes {
-            job: [EMPTY; 4],
-            x: [[0.0; 4]; 3],
-            mu: [0.0; 4],
-            dx: [[0.0; 4]; 3],
-            dmu: [0.0; 4],
-            alpha: [0.0; 4],
-            r0: [0.0; 4],
-            start: [0.0; 4],
-            steps: [0.0; 4],
-            rejected: [0.0; 4],
-            mb: [[0.0; 4]; 9],
-            cb: [[0.0; 4]; 3],
-        };
+        let mut lanes =
+            GrowthLanes { book: LaneBook::new(), x: [[0.0; 4]; 3], mu: [0.0; 4], dx: [[0.0; 4]; 3], dmu: [0.0; 4] };
         let mut next = 0usize;
         loop {
             for i in 0..4 {
-                while lanes.job[i] == EMPTY && next < queue.len() {
+                while lanes.book.job[i] == EMPTY && next < queue.len() {
                     let k = queue[next];
                     next += 1;
                     let bb = PosedBody::new(b, &rels[k]);
@@ -940,30 +996,20 @@ mod lanes {
                     lanes.fill(i, k, &bb, &x0);
                 }
             }
-            if lanes.job == [EMPTY; 4] {
+            if lanes.book.is_empty() {
                 break;
             }
             let x = V3::load(&lanes.x);
             let mu = F4::load(&lanes.mu);
             let dx = V3::load(&lanes.dx);
             let dmu = F4::load(&lanes.dmu);
-            let (al, r0, start) = (F4::load(&lanes.alpha), F4::load(&lanes.r0), zero.lt(F4::load(&lanes.start)));
-            let m = &lanes.mb;
-            let mb: M3 = [
-                F4::load(&m[0]),
-                F4::load(&m[1]),
-                F4::load(&m[2]),
-                F4::load(&m[3]),
-                F4::load(&m[4]),
-                F4::load(&m[5]),
-                F4::load(&m[6]),
-                F4::load(&m[7]),
-                F4::load(&m[8]),
-            ];
+            let book = &lanes.book;
+            let (al, r0, start) = (F4::load(&book.alpha), F4::load(&book.r0), zero.lt(F4::load(&book.start)));
+            let (mb, cb) = book.map();
             let xt = dx.mul_add(al, x);
             let mut mt = dmu.mul_add(al, mu);
             let ua = xt.mul_add(ka4, ca4);
-            let ub = mat_mul(&mb, xt).add(V3::load(&lanes.cb));
+            let ub = mat_mul(&mb, xt).add(cb);
             let ea = soa_a.eval4_rows(&ua.to_arrays());
             let eb = soa_b.eval4_rows(&ub.to_arrays());
             let gf = V3::load(&ea.gradient).scale(ka4);
@@ -993,27 +1039,17 @@ mod lanes {
                 hg[5].mul_add(mt, hf[5]),
             ];
             let (sdx, sdmu, solved) = solve_kkt4(&w, gg, r, c);
-            let job = &lanes.job;
-            let live = M4::from_bools([job[0] != EMPTY, job[1] != EMPTY, job[2] != EMPTY, job[3] != EMPTY]);
             let decrease = r1.le((F4::splat(-1e-4) * al + one) * r0).and(r1.finite());
-            let accepted = start.or(decrease).and(live);
+            let accepted = start.or(decrease).and(lanes.book.live());
             lanes.x = V3::select(accepted, xt, x).to_arrays();
             lanes.mu = F4::select(accepted, mt, mu).to_array();
-            lanes.r0 = F4::select(accepted, r1, r0).to_array();
             lanes.dx = V3::select(accepted, sdx, dx).to_arrays();
             lanes.dmu = F4::select(accepted, sdmu, dmu).to_array();
             // A cold run keeps μ ≥ μ/2 per step (the KKT points with μ < 0 are not the answer).
             let halved = zero.lt(mt).and((mt + sdmu).lt(half * mt));
             let first = F4::select(halved, half * mt / -sdmu, one);
-            lanes.alpha = F4::select(accepted, first, al * half).to_array();
-            let rejected = F4::select(accepted, zero, F4::load(&lanes.rejected) + one);
-            lanes.rejected = rejected.to_array();
-            let steps = F4::load(&lanes.steps);
-            let done = accepted.and(stationary.or(r1.finite().not()).or(solved.not()).or(cap.le(steps)));
-            let stalled = live.and(accepted.not()).and(F4::splat(40.0).le(rejected));
-            lanes.steps = (steps + F4::select(accepted, one, zero)).to_array();
-            lanes.start = [0.0; 4];
-            let leave = done.or(stalled).bits();
+            let ends = stationary.or(r1.finite().not()).or(solved.not());
+            let (done, leave, steps) = lanes.book.advance(accepted, r1, first, ends, cap);
             if leave == 0 {
                 continue;
             }
@@ -1021,8 +1057,8 @@ mod lanes {
             let answer = done.and(stationary).and(r1.finite()).and(zero.lt(mt)).and(F4::load(&ea.value).le(one)).bits();
             let (norm_inf, steps, mt) = (norm_inf.to_array(), steps.to_array(), mt.to_array());
             for i in (0..4).filter(|i| leave & (1 << i) != 0) {
-                let k = lanes.job[i];
-                lanes.job[i] = EMPTY;
+                let k = lanes.book.job[i];
+                lanes.book.job[i] = EMPTY;
                 if answer & (1 << i) == 0 {
                     continue;
                 }
@@ -1065,26 +1101,15 @@ mod lanes {
         let cap = F4::splat(params.max_iterations.min(SPECULATIVE_ITERATIONS) as Real);
         let tolerance = F4::splat(params.kkt_tolerance);
         let (zero, one, two) = (F4::splat(0.0), F4::splat(1.0), F4::splat(2.0));
-        // Body A sits unposed in its own frame: u = x / scale − center / scale for every lane.
-        let ka = 1.0 / a.scale();
-        let c_a = -a.center() * ka;
-        let (ka4, ka2) = (F4::splat(ka), F4::splat(ka * ka));
-        let ca4 = V3([F4::splat(c_a.x), F4::splat(c_a.y), F4::splat(c_a.z)]);
+        let (ka4, ka2, ca4) = unposed_map(a);
         let mut lanes = Lanes {
-            job: [EMPTY; 4],
+            book: LaneBook::new(),
             x: [[0.0; 4]; 3],
             y: [[0.0; 4]; 3],
             lam: [[0.0; 4]; 2],
             dx: [[0.0; 4]; 3],
             dy: [[0.0; 4]; 3],
             dl: [[0.0; 4]; 2],
-            alpha: [0.0; 4],
-            r0: [0.0; 4],
-            start: [0.0; 4],
-            steps: [0.0; 4],
-            rejected: [0.0; 4],
-            mb: [[0.0; 4]; 9],
-            cb: [[0.0; 4]; 3],
             rel: [Isometry3::identity(); 4],
         };
         let empty = std::sync::Arc::new(DistanceWarmStart::default());
@@ -1095,7 +1120,7 @@ mod lanes {
             // Refill the empty lanes from the queue; a pair without a separated start is left to the
             // single-pair solver.
             for i in 0..4 {
-                while lanes.job[i] == EMPTY && next < poses.len() {
+                while lanes.book.job[i] == EMPTY && next < poses.len() {
                     let k = next;
                     next += 1;
                     if let Some((x0, y0)) = &starts[k] {
@@ -1104,7 +1129,7 @@ mod lanes {
                     }
                 }
             }
-            if lanes.job == [EMPTY; 4] {
+            if lanes.book.is_empty() {
                 break;
             }
             // The trial points of the four lanes, evaluated in one pass per body.
@@ -1112,24 +1137,14 @@ mod lanes {
             let lam = [F4::load(&lanes.lam[0]), F4::load(&lanes.lam[1])];
             let (dx, dy) = (V3::load(&lanes.dx), V3::load(&lanes.dy));
             let dl = [F4::load(&lanes.dl[0]), F4::load(&lanes.dl[1])];
-            let (al, r0, start) = (F4::load(&lanes.alpha), F4::load(&lanes.r0), zero.lt(F4::load(&lanes.start)));
-            let m = &lanes.mb;
-            let mb: M3 = [
-                F4::load(&m[0]),
-                F4::load(&m[1]),
-                F4::load(&m[2]),
-                F4::load(&m[3]),
-                F4::load(&m[4]),
-                F4::load(&m[5]),
-                F4::load(&m[6]),
-                F4::load(&m[7]),
-                F4::load(&m[8]),
-            ];
+            let book = &lanes.book;
+            let (al, r0, start) = (F4::load(&book.alpha), F4::load(&book.r0), zero.lt(F4::load(&book.start)));
+            let (mb, cb) = book.map();
             let xt = dx.mul_add(al, x);
             let yt = dy.mul_add(al, y);
             let mut lt = [dl[0].mul_add(al, lam[0]), dl[1].mul_add(al, lam[1])];
             let ua = xt.mul_add(ka4, ca4);
-            let ub = mat_mul(&mb, yt).add(V3::load(&lanes.cb));
+            let ub = mat_mul(&mb, yt).add(cb);
             let ea = soa_a.eval4_rows(&ua.to_arrays());
             let eb = soa_b.eval4_rows(&ub.to_arrays());
             let ga = V3::load(&ea.gradient).scale(ka4);
@@ -1159,39 +1174,29 @@ mod lanes {
             let (wa, wb) = (shifted(&ha, lt[0], two), shifted(&hb, lt[1], two));
             let (sdx, sdy, sdl, solved) = solve_kkt8(&wa, &wb, ga, gb, ra, rb, cva, cvb);
             // Accepted trial points: the start, or a decrease of the residual (Armijo on ‖r‖₂).
-            let job = &lanes.job;
-            let live = M4::from_bools([job[0] != EMPTY, job[1] != EMPTY, job[2] != EMPTY, job[3] != EMPTY]);
             let decrease = r1.le((F4::splat(-1e-4) * al + one) * r0).and(r1.finite());
-            let accepted = start.or(decrease).and(live);
+            let accepted = start.or(decrease).and(lanes.book.live());
             let stationary = norm_inf.le(tolerance * dist.mul_add(two, one));
             lanes.x = V3::select(accepted, xt, x).to_arrays();
             lanes.y = V3::select(accepted, yt, y).to_arrays();
             lanes.lam =
                 [F4::select(accepted, lt[0], lam[0]).to_array(), F4::select(accepted, lt[1], lam[1]).to_array()];
-            lanes.r0 = F4::select(accepted, r1, r0).to_array();
             lanes.dx = V3::select(accepted, sdx, dx).to_arrays();
             lanes.dy = V3::select(accepted, sdy, dy).to_arrays();
             lanes.dl = [F4::select(accepted, sdl[0], dl[0]).to_array(), F4::select(accepted, sdl[1], dl[1]).to_array()];
-            lanes.alpha = F4::select(accepted, one, al * F4::splat(0.5)).to_array();
-            let rejected = F4::select(accepted, zero, F4::load(&lanes.rejected) + one);
-            lanes.rejected = rejected.to_array();
             // Lanes that leave: stationary (the answer, or the single-pair solver when a multiplier
             // is not positive), a nonfinite residual, a singular system, the iteration cap, or 40
             // rejected trial points in a row (the single-pair line search's limit).
-            let steps = F4::load(&lanes.steps);
-            let done = accepted.and(stationary.or(r1.finite().not()).or(solved.not()).or(cap.le(steps)));
-            let stalled = live.and(accepted.not()).and(F4::splat(40.0).le(rejected));
-            lanes.steps = (steps + F4::select(accepted, one, zero)).to_array();
-            lanes.start = [0.0; 4];
-            let leave = done.or(stalled).bits();
+            let ends = stationary.or(r1.finite().not()).or(solved.not());
+            let (done, leave, steps) = lanes.book.advance(accepted, r1, one, ends, cap);
             if leave == 0 {
                 continue;
             }
             let answer = done.and(stationary).and(r1.finite()).bits();
             let (norm_inf, steps) = (norm_inf.to_array(), steps.to_array());
             for i in (0..4).filter(|i| leave & (1 << i) != 0) {
-                let k = lanes.job[i];
-                lanes.job[i] = EMPTY;
+                let k = lanes.book.job[i];
+                lanes.book.job[i] = EMPTY;
                 let x = Vector3::new(lanes.x[0][i], lanes.x[1][i], lanes.x[2][i]);
                 let y = Vector3::new(lanes.y[0][i], lanes.y[1][i], lanes.y[2][i]);
                 let lam = [lanes.lam[0][i], lanes.lam[1][i]];
