@@ -725,8 +725,11 @@ mod lanes {
         out
     }
 
-    /// Fewest pairs left without an answer worth the growth lanes (below, the single-pair solver).
-    const MIN_GROWTH_LANES: usize = 2;
+    /// Fewest pairs left without an answer worth the growth lanes (below, the single-pair solver):
+    /// as for the distance lanes ([`super::MIN_LANE_BATCH`]), a round costs two four-point passes
+    /// (about 88 ns at 2d = 6) whatever the lanes hold, against two one-point evaluations (about
+    /// 32 ns each) per pair on the single-pair solver, so fewer than three live lanes lose.
+    const MIN_GROWTH_LANES: usize = super::MIN_LANE_BATCH;
 
     /// What both solvers' lanes keep besides their Newton iterates, one array entry per lane: plain
     /// arrays, so that a lane is refilled by scalar stores that have long retired when the next
