@@ -106,8 +106,8 @@ pub fn cold_distances(
 #[cfg(target_arch = "x86_64")]
 mod lanes {
     use super::super::distance::{
-        clear_of_contact, distance_growth_first, finish, separated_answer, DistanceResult, DistanceWarmStart, KktOut,
-        SPECULATIVE_ITERATIONS,
+        clear_of_contact, distance_growth_first, finish, overlapping_answer, separated_answer, DistanceResult,
+        DistanceWarmStart, KktOut, SPECULATIVE_ITERATIONS,
     };
     use super::super::fast_eval::FastPosed;
     use super::super::growth::GrowthWarmStart;
@@ -641,12 +641,11 @@ mod lanes {
     /// [`cold_start`] gives each (the same tests and choices, at the same points up to rounding),
     /// computed four pairs at a time: the posed interior points, the bounding-sphere test, both
     /// bodies' support and radial look-ups (one cube-map cell per body and lane, gathered nodes) in
-    /// 4-lane arithmetic; only the overlap tests of pairs whose spheres meet (two polynomial values)
-    /// stay scalar.
+    /// 4-lane arithmetic; only the overlap tests of pairs whose spheres meet (two polynomial values,
+    /// at points mapped on the lanes) stay scalar.
     #[inline(always)]
     fn cold_starts(a: &Body, b: &Body, rels: &[Isometry3]) -> Vec<Option<(Vector3, Vector3)>> {
         let ba = PosedBody::unposed(a);
-        let fa = FastPosed::new(&ba);
         let ca = ba.interior_point();
         let ca4 = V3::splat(&ca);
         let quadric = a.degree() <= 2 || b.degree() <= 2;
@@ -703,8 +702,11 @@ mod lanes {
                 use_supports = supports.and(gs.dot(gs).lt(g0.dot(g0))).bits();
                 (x0, y0) = (x0v.to_arrays(), y0v.to_arrays());
             }
+            // Each interior point in the other body's normalized coordinates (the overlap tests).
+            let ca_in_b = mat_t_mul(&rot, ca4.sub(t4)).sub(center_b).scale(-neg_inv_sb).to_arrays();
+            let cb_in_a = V3::load(&cb_lanes).sub(center_a).scale(inv_sa).to_arrays();
             let (facing, apart) = (facing.bits(), apart.bits());
-            for (i, rel) in chunk.iter().enumerate() {
+            for i in 0..chunk.len() {
                 let bit = 1 << i;
                 let start = if facing & bit != 0 || use_supports & bit != 0 {
                     (V3::lane(&xs, i), V3::lane(&ys, i))
@@ -716,8 +718,8 @@ mod lanes {
                         && (apart & bit != 0 || {
                             // Spheres that meet: separated along the segment only when each interior
                             // point lies outside the other body.
-                            let bb = PosedBody::new(b, rel);
-                            FastPosed::new(&bb).value(&ca) > 1.0 && fa.value(&V3::lane(&cb_lanes, i)) > 1.0
+                            b.fast_polynomial().value(&V3::lane(&ca_in_b, i)) > 1.0
+                                && a.fast_polynomial().value(&V3::lane(&cb_in_a, i)) > 1.0
                         }));
                 out.push(separated.then_some(start));
             }
@@ -1075,18 +1077,9 @@ mod lanes {
                     empty.clone()
                 };
                 let p = poses[k].0 * crate::math::Point3::from(x);
-                answers[k] = Some(DistanceResult {
-                    distance: 0.0,
-                    witness_a: p,
-                    witness_b: p,
-                    normal: Vector3::zeros(),
-                    overlapping: true,
-                    status: SolveStatus::Converged,
-                    iterations: steps[i] as usize,
-                    kkt_residual: norm_inf[i],
-                    warm_started: false,
-                    warm_start,
-                });
+                let iterations = steps[i] as usize;
+                answers[k] =
+                    Some(overlapping_answer(p, SolveStatus::Converged, iterations, norm_inf[i], false, warm_start));
             }
         }
     }
