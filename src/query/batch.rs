@@ -690,6 +690,23 @@ mod lanes {
             let ys = mat_mul(&rot, cells_b.support(b.support_table()).mul_add(sb, center_b)).add(t4);
             let supports = cells_a.ok.and(cells_b.ok);
             let facing = if quadric { M4::default() } else { apart.and(supports) };
+            // Facing lanes: one bisector refinement (`distance::bisector_start`), the support
+            // points for n = (y − x)/‖y − x‖ + axis/‖axis‖ where they are closer to each other.
+            let (xs, ys) = if facing.bits() != 0 {
+                let d = ys.sub(xs);
+                let dd = d.dot(d);
+                let one = F4::splat(1.0);
+                let n = d.scale(one / dd.sqrt()).add(axis.scale(one / axis.dot(axis).sqrt()));
+                let (du_a, du_b) = (n.scale(inv_sa), mat_t_mul(&rot, n).scale(neg_inv_sb));
+                let (cells_a, cells_b) = (CubeCells::new(du_a), CubeCells::new(du_b));
+                let xr = cells_a.support(a.support_table()).mul_add(sa, center_a);
+                let yr = mat_mul(&rot, cells_b.support(b.support_table()).mul_add(sb, center_b)).add(t4);
+                let dr = yr.sub(xr);
+                let closer = facing.and(cells_a.ok).and(cells_b.ok).and(dr.dot(dr).lt(dd));
+                (V3::select(closer, xr, xs), V3::select(closer, yr, ys))
+            } else {
+                (xs, ys)
+            };
             let (xs, ys, cb_lanes) = (xs.to_arrays(), ys.to_arrays(), cb.to_arrays());
             let (mut x0, mut y0, mut order, mut use_supports) = (xs, ys, 0, 0);
             if facing.bits() != 0b1111 {

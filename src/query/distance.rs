@@ -272,8 +272,9 @@ fn growth_first(
 }
 
 /// The cold start of the speculative separated Newton run, in the frame of `ba`: when the bounding
-/// spheres are disjoint (and neither body is an ellipsoid), the support points towards each other;
-/// otherwise, when the segment between the interior points shows separation, the closer of the
+/// spheres are disjoint (and neither body is an ellipsoid), the support points towards each other,
+/// refined once towards the optimal normal ([`bisector_start`]); otherwise, when the segment
+/// between the interior points shows separation, the closer of the
 /// support and the segment's boundary points ([`segment_start`]); `None` when neither shows
 /// separation (the growth measure decides).
 ///
@@ -284,8 +285,9 @@ pub(super) fn cold_start(ba: &PosedBody<'_>, bb: &PosedBody<'_>) -> Option<(Vect
     let (ca, cb) = (ba.interior_point(), bb.interior_point());
     let apart = spheres_apart(ba, bb);
     let quadric = ba.body.degree() <= 2 || bb.body.degree() <= 2;
-    match (apart && !quadric).then(|| supports_towards(ba, bb, &(cb - ca))).flatten() {
-        Some(start) => Some(start),
+    let axis = cb - ca;
+    match (apart && !quadric).then(|| supports_towards(ba, bb, &axis)).flatten() {
+        Some(start) => Some(bisector_start(ba, bb, start, &axis)),
         None => segment_start(ba, bb, &ca, &cb, apart),
     }
 }
@@ -424,6 +426,32 @@ pub(super) fn separated_answer(
 /// bodies have them.
 fn supports_towards(ba: &PosedBody<'_>, bb: &PosedBody<'_>, axis: &Vector3) -> Option<(Vector3, Vector3)> {
     Some((ba.support(axis)?, bb.support(&-axis)?))
+}
+
+/// One refinement of the facing support points `start` = (h_A(n), h_B(−n)) for n = `axis`: the
+/// support points for the bisector of n and the direction y − x between them, kept when they are
+/// closer to each other (the optimal normal makes y − x parallel to n; the bisector damps the
+/// fixed-point step n ← y − x, which overshoots on the interpolated support map).
+///
+/// Measured on the chair / human cold poses of `sublevel bench` (`examples/cold_profile`,
+/// callgrind): 5.20 instead of 5.68 Newton iterations per separated cold distance query at 2d = 6
+/// (5.36 vs 5.87 at 2d = 8, 4.95 vs 5.44 at 2d = 4) and 2.8 % (3.7 %) fewer instructions per
+/// query. The step n ← y − x itself saves 0.07 iterations; a second bisector round 0.15 more at
+/// equal instructions; more rounds nothing (table points at the exact optimal normal take 4.97
+/// iterations: past one round the table's interpolation, not the direction, limits the start).
+#[inline]
+fn bisector_start(
+    ba: &PosedBody<'_>,
+    bb: &PosedBody<'_>,
+    start: (Vector3, Vector3),
+    axis: &Vector3,
+) -> (Vector3, Vector3) {
+    let d = start.1 - start.0;
+    let n = d / d.norm() + axis / axis.norm();
+    match supports_towards(ba, bb, &n) {
+        Some(s) if (s.1 - s.0).norm_squared() < d.norm_squared() => s,
+        _ => start,
+    }
 }
 
 /// The cold start of a pair shown separated — by disjoint bounding spheres (`apart`), else by the
