@@ -554,6 +554,7 @@ impl<'a> PosedBody<'a> {
     }
 
     /// Precomputes the world → normalized map `u = A x + b`.
+    #[inline(always)]
     pub fn new(body: &'a Body, pose: &Isometry3) -> Self {
         let rt = pose.rotation.to_rotation_matrix().matrix().transpose();
         let inv_s = 1.0 / body.scale;
@@ -602,6 +603,7 @@ impl<'a> PosedBody<'a> {
     }
 
     /// The interior point (minimizer of p') in world coordinates.
+    #[inline(always)]
     pub fn interior_point(&self) -> Vector3 {
         self.from_normalized(&self.body.interior_u)
     }
@@ -609,6 +611,7 @@ impl<'a> PosedBody<'a> {
     /// The boundary point on the ray from the interior point towards `target` (world, meters), read
     /// off the body's [`RadialTable`] (within a few percent of the boundary; a start for Newton,
     /// not an answer), or `target` itself when the table puts it inside the body.
+    #[inline(always)]
     pub fn boundary_towards(&self, target: &Vector3) -> Vector3 {
         let c = self.interior_point();
         let d = target - c;
@@ -623,7 +626,7 @@ impl<'a> PosedBody<'a> {
     /// The body's support point in the world direction `n` (any nonzero length): the point of the
     /// body maximizing n·x, read off its [`SupportTable`] (interpolated between tabulated
     /// directions: a start for Newton, not an answer). `None` for a zero or non-finite `n`.
-    #[inline]
+    #[inline(always)]
     pub fn support(&self, n: &Vector3) -> Option<Vector3> {
         // n·x = scale·(Rᵀn)·u + const, and A n = Rᵀn/scale points the same way.
         Some(self.from_normalized(&self.body.support.support(&(self.a * n))?))

@@ -40,7 +40,7 @@ pub struct RadialTable {
 
 /// Face and face coordinates (a, b) ∈ [−1, 1]² of a direction: faces +x, −x, +y, −y, +z, −z; the
 /// face coordinates are the other two components (in cyclic order) over the largest one's modulus.
-#[inline]
+#[inline(always)]
 pub(super) fn face_coordinates(v: &Vector3) -> (usize, Real, Real) {
     let (ax, ay, az) = (v.x.abs(), v.y.abs(), v.z.abs());
     if ax >= ay && ax >= az {
@@ -93,7 +93,7 @@ impl RadialTable {
 
     /// r along the direction of `v` (any nonzero length; normalized units): bilinear
     /// interpolation on the cube map. Returns 0 for a zero or non-finite `v`.
-    #[inline]
+    #[inline(always)]
     pub fn radius(&self, v: &Vector3) -> Real {
         let (face, a, b) = face_coordinates(v);
         if !(a.is_finite() && b.is_finite()) {

@@ -75,7 +75,7 @@ impl SupportTable {
 
     /// The (interpolated) support point in the direction of `m` (any nonzero length; normalized
     /// units). Returns `None` for a zero or non-finite `m`.
-    #[inline]
+    #[inline(always)]
     pub fn support(&self, m: &Vector3) -> Option<Vector3> {
         let (face, a, b) = face_coordinates(m);
         if !(a.is_finite() && b.is_finite()) {
@@ -231,7 +231,7 @@ impl SupportBound {
 /// The cell of a grid coordinate `f ∈ [0, G]`, clamped into `0..G`. Through i32: f64 → i32 is
 /// one instruction, f64 → usize a branchy saturating sequence (measured 31 of the 128
 /// instructions of [`SupportBound::upper`]).
-#[inline]
+#[inline(always)]
 fn grid_cell(f: Real) -> usize {
     (f as i32).clamp(0, SUPPORT_GRID as i32 - 1) as usize
 }

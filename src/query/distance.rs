@@ -104,7 +104,7 @@ impl DistanceWarmStart {
     /// Start (witness on A in A's frame, witness on B in B's frame, multipliers) after the
     /// relative-pose step `step` from this answer: extrapolated along the motion from the earlier
     /// answers ([`MotionTrail::predict`]), else the last answer.
-    #[inline]
+    #[inline(always)]
     fn predict(&self, step: &[Real; 6]) -> (Vector3, Vector3, [Real; 2]) {
         if self.trail.is_empty() {
             return (self.a_local, self.b_local, self.multipliers);
@@ -281,6 +281,13 @@ fn growth_first(
 /// Past 2d = 2 the support points alone start as well as the closer of them and the segment's
 /// points (5.88 vs 5.90 Newton iterations at 2d = 6, 6.03 vs 6.05 at 2d = 8) and spare two radial
 /// look-ups; an ellipsoid keeps the comparison (exact for spheres).
+///
+/// Inlined, with its look-ups, into each build of [`distance()`]: out of line it was compiled for
+/// the baseline x86-64 target (SSE2, no FMA) even inside the AVX2 build, a call per look-up. The
+/// same arithmetic, so the same starts to the bit; on the bench's cold poses 2.8 % fewer
+/// instructions per cold distance query at 2d = 6 and 0.93× the time (`perf` had put 7 % of the
+/// time in the out-of-line support look-ups, 1.9 % of the instructions).
+#[inline(always)]
 pub(super) fn cold_start(ba: &PosedBody<'_>, bb: &PosedBody<'_>) -> Option<(Vector3, Vector3)> {
     let (ca, cb) = (ba.interior_point(), bb.interior_point());
     let apart = spheres_apart(ba, bb);
@@ -364,7 +371,7 @@ pub(super) fn clear_of_contact(x: &Vector3, y: &Vector3, a: &Body, b: &Body) -> 
 /// The answer of a converged (or last) separated KKT point `out` in the relative frame `rel`, with
 /// its warm start: the trail of `previous` (the last answer and the relative-pose step from it)
 /// extended by that answer (built only here, where it is kept).
-#[inline]
+#[inline(always)]
 pub(super) fn finish(
     pose_a: &Isometry3,
     rel: &Isometry3,
@@ -394,7 +401,7 @@ pub(super) fn finish(
 
 /// The answer of a separated KKT point `out` (frame of body A, posed by `pose_a`) with the given
 /// warm start.
-#[inline]
+#[inline(always)]
 pub(super) fn separated_answer(
     pose_a: &Isometry3,
     out: &KktOut,
@@ -424,6 +431,7 @@ pub(super) fn separated_answer(
 
 /// The support points h_A(n) and h_B(−n) for n = `axis` ([`PosedBody::support`]), when both
 /// bodies have them.
+#[inline(always)]
 fn supports_towards(ba: &PosedBody<'_>, bb: &PosedBody<'_>, axis: &Vector3) -> Option<(Vector3, Vector3)> {
     Some((ba.support(axis)?, bb.support(&-axis)?))
 }
@@ -439,7 +447,7 @@ fn supports_towards(ba: &PosedBody<'_>, bb: &PosedBody<'_>, axis: &Vector3) -> O
 /// query. The step n ← y − x itself saves 0.07 iterations; a second bisector round 0.15 more at
 /// equal instructions; more rounds nothing (table points at the exact optimal normal take 4.97
 /// iterations: past one round the table's interpolation, not the direction, limits the start).
-#[inline]
+#[inline(always)]
 fn bisector_start(
     ba: &PosedBody<'_>,
     bb: &PosedBody<'_>,
@@ -457,6 +465,7 @@ fn bisector_start(
 /// The cold start of a pair shown separated — by disjoint bounding spheres (`apart`), else by the
 /// segment between its interior points `ca`, `cb` (each outside the other body, and A's boundary
 /// crossing before B's) — through [`support_start`]; `None` when neither shows it.
+#[inline(always)]
 fn segment_start(
     ba: &PosedBody<'_>,
     bb: &PosedBody<'_>,
@@ -492,6 +501,7 @@ fn segment_start(
 /// gain); a safeguarded Newton ascent of the dual n·(y(n) − x(n)) on the tables (finite-difference
 /// support-map derivatives, 3 rounds, 16-cell grid) reached 5.13 iterations but cost 25 % more
 /// instructions per query (6 look-ups of ~200 instructions a round, more failed runs).
+#[inline(always)]
 fn support_start(
     ba: &PosedBody<'_>,
     bb: &PosedBody<'_>,

@@ -175,9 +175,19 @@ pub(crate) struct GrowthCore {
     pub warm_started: bool,
 }
 
-/// Solves d(p₁‖p₂) with both bodies posed in one common frame, from the warm start `start` (its
-/// `local` is in body 2's frame) when given.
-pub(crate) fn solve_growth(
+avx2_dispatch! {
+    /// Solves d(p₁‖p₂) with both bodies posed in one common frame, from the warm start `start` (its
+    /// `local` is in body 2's frame) when given.
+    pub(crate) fn solve_growth, solve_growth_avx2 => solve_growth_body(
+        b1: &PosedBody<'_>, b2: &PosedBody<'_>, start: Option<GrowthStart<'_>>, params: &NewtonParams,
+    ) -> GrowthCore
+}
+
+/// The body of [`solve_growth`], inlined into each of its builds. `FMA` only selects the build
+/// (the AVX2 one compiles the starts and tests with VEX encoding and inlines their look-ups); the
+/// arithmetic is the same in both, so are the answers, bit for bit.
+#[inline(always)]
+fn solve_growth_body<const FMA: bool>(
     b1: &PosedBody<'_>,
     b2: &PosedBody<'_>,
     start: Option<GrowthStart<'_>>,

@@ -89,6 +89,7 @@ pub(crate) fn boundary_on_segment_within(
 /// builds alternated three times). The test itself is about 90 instructions (the spheres are
 /// cached in the body, the centers mapped through the posed bodies' matrices). The growth solver's one evaluation it would spare (p₂ at p₁'s
 /// minimizer) costs about what this test does, so it does not ask.
+#[inline(always)]
 pub(crate) fn spheres_apart(b1: &PosedBody<'_>, b2: &PosedBody<'_>) -> bool {
     match (b1.body.bounding_sphere(), b2.body.bounding_sphere()) {
         (Some((c1, r1)), Some((c2, r2))) => {
@@ -103,7 +104,7 @@ pub(crate) fn spheres_apart(b1: &PosedBody<'_>, b2: &PosedBody<'_>) -> bool {
 ///
 /// The rotation vector is taken in its small-angle form 2·sign(w)·(x, y, z) of the step's quaternion
 /// (exact direction; magnitude 2 sin(θ/2) ≈ θ for the small steps that matter here).
-#[inline]
+#[inline(always)]
 pub(crate) fn pose_step(from: &Isometry3, to: &Isometry3, length: Real) -> [Real; 6] {
     let q = to.rotation * from.rotation.inverse();
     let s = if q.w < 0.0 { -2.0 * length } else { 2.0 * length };
@@ -183,7 +184,7 @@ const MAX_EXTRAPOLATION: Real = 2.0;
 impl<const N: usize> MotionTrail<N> {
     /// The trail of an answer whose solve started from the last solution `last` (with its own
     /// trail `trail`) and moved by the relative-pose step `step` to the new answer.
-    #[inline]
+    #[inline(always)]
     pub(crate) fn extend(last: &[Real; N], trail: &MotionTrail<N>, step: [Real; 6]) -> Self {
         let mut points = [None; TRAIL_LENGTH];
         points[0] = Some(TrailPoint { state: *last, step });
@@ -200,7 +201,7 @@ impl<const N: usize> MotionTrail<N> {
     /// entries from `first_multiplier` on are multipliers, kept at or above half their last value.
     /// The flag says whether a multiplier was raised to that floor (the extrapolation sees it
     /// falling fast: its constraint may be turning inactive).
-    #[inline]
+    #[inline(always)]
     pub(crate) fn predict(&self, last: &[Real; N], step: &[Real; 6], first_multiplier: usize) -> ([Real; N], bool) {
         let Some(p) = &self.points[0] else { return (*last, false) };
         let n1 = dot6(&p.step, &p.step);
