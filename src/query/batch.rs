@@ -473,24 +473,23 @@ mod lanes {
             wb[5] - four * ai[5],
         ];
         let (si, ok_s) = inverse_sym(&schur);
+        // The scalar step's six products (see its comments): no p₀, p₁, p₂, and s₂₁ = s₁₂.
         let t0 = sym_mul(&ai, ra);
-        let q0 = sym_mul(&si, t0.mul_add(two, rb));
-        let p0 = sym_mul(&ai, q0).mul_add(two, t0);
         let t1 = sym_mul(&ai, ga);
+        let q0 = sym_mul(&si, t0.mul_add(two, rb));
         let q1 = sym_mul(&si, t1).scale(two);
-        let p1 = sym_mul(&ai, q1).mul_add(two, t1);
         let q2 = sym_mul(&si, gb);
-        let p2 = sym_mul(&ai, q2).scale(two);
-        let (s11, s12, s21, s22) = (ga.dot(p1), ga.dot(p2), gb.dot(q1), gb.dot(q2));
-        let det = s11 * s22 - s12 * s21;
-        let scale = (s11.abs() + s12.abs()) * (s21.abs() + s22.abs());
-        let (h1, h2) = (ca - ga.dot(p0), cb - gb.dot(q0));
+        let (s11, s12, s22) = (q1.mul_add(two, ga).dot(t1), two * t1.dot(q2), gb.dot(q2));
+        let det = s11 * s22 - s12 * s12;
+        let scale = (s11.abs() + s12.abs()) * (s12.abs() + s22.abs());
+        let (h1, h2) = (ca - (ga.dot(t0) + two * t1.dot(q0)), cb - gb.dot(q0));
         let l1 = (s22 * h1 - s12 * h2) / det;
-        let l2 = (s11 * h2 - s21 * h1) / det;
-        let dx = p1.mul_add(l1, p0);
-        let dx = p2.mul_add(l2, dx);
+        let l2 = (s11 * h2 - s12 * h1) / det;
+        // −dy = q₀ + dλa q₁ + dλb q₂; −dx = t₀ + dλa t₁ + 2 Ai (−dy) (Wa dx − 2dy + ga dλa = −ra).
         let dy = q1.mul_add(l1, q0);
         let dy = q2.mul_add(l2, dy);
+        let dx = t1.mul_add(l1, t0);
+        let dx = sym_mul(&ai, dy).mul_add(two, dx);
         let (dx, dy) = (dx.neg(), dy.neg());
         let sum = dx.0[0] + dx.0[1] + dx.0[2] + dy.0[0] + dy.0[1] + dy.0[2] + l1 + l2;
         let ok = ok_a

@@ -313,28 +313,30 @@ pub(crate) fn solve_kkt8<const FMA: bool>(
     let ai = inverse_sym3::<FMA>(wa)?;
     let si = inverse_sym3::<FMA>(&sym_add_scaled::<FMA>(wb, -4.0, &ai))?;
     let (am, sm) = (|v: &Vector3| sym_mat_vec::<FMA>(&ai, v), |v: &Vector3| sym_mat_vec::<FMA>(&si, v));
-    // M⁻¹ [f; g] = [p; q] with q = Si (g + 2 Ai f), p = Ai f + 2 Ai q; the two constraint columns
-    // have a zero half each, so eight 3 × 3 products in all.
+    // M⁻¹ [f; g] = [p; q] with q = Si (g + 2 Ai f), p = Ai (f + 2q). For t₀ = Ai ra, t₁ = Ai ga,
+    // q₀ = Si (rb + 2t₀), q₁ = 2 Si t₁, q₂ = Si gb, the constraints' 2 × 2 block and right-hand
+    // side need no p (Ai and Si are symmetric): s₁₁ = (ga + 2q₁)·t₁, s₁₂ = s₂₁ = 2 t₁·q₂,
+    // s₂₂ = gb·q₂, ga·p₀ = ga·t₀ + 2 t₁·q₀; and dx comes from the first block row. Six 3 × 3
+    // products instead of eight (1.3 % less time per cold distance query at 2d = 6, 0.5 % at 2d = 8,
+    // `cold_profile`, three alternated runs).
     let t0 = am(ra);
-    let q0 = sm(&(rb + t0 * 2.0));
-    let p0 = t0 + am(&q0) * 2.0;
     let t1 = am(ga);
+    let q0 = sm(&(rb + t0 * 2.0));
     let q1 = sm(&t1) * 2.0;
-    let p1 = t1 + am(&q1) * 2.0;
     let q2 = sm(gb);
-    let p2 = am(&q2) * 2.0;
     let d = |a: &Vector3, b: &Vector3| dot::<FMA>(a, b);
-    let (s11, s12, s21, s22) = (d(ga, &p1), d(ga, &p2), d(gb, &q1), d(gb, &q2));
-    let det = s11 * s22 - s12 * s21;
-    let scale = (s11.abs() + s12.abs()) * (s21.abs() + s22.abs());
+    let (s11, s12, s22) = (d(&(ga + q1 * 2.0), &t1), 2.0 * d(&t1, &q2), d(gb, &q2));
+    let det = s11 * s22 - s12 * s12;
+    let scale = (s11.abs() + s12.abs()) * (s12.abs() + s22.abs());
     if !(det.is_finite() && det.abs() > 1e-14 * scale && scale > 0.0) {
         return None;
     }
-    let (h1, h2) = (ca - d(ga, &p0), cb - d(gb, &q0));
+    let (h1, h2) = (ca - (d(ga, &t0) + 2.0 * d(&t1, &q0)), cb - d(gb, &q0));
     let l1 = (s22 * h1 - s12 * h2) / det;
-    let l2 = (s11 * h2 - s21 * h1) / det;
-    let dx = -(p0 + p1 * l1 + p2 * l2);
+    let l2 = (s11 * h2 - s12 * h1) / det;
     let dy = -(q0 + q1 * l1 + q2 * l2);
+    // Wa dx − 2dy + ga dλa = −ra.
+    let dx = am(&dy) * 2.0 - t0 - t1 * l1;
     // One sum carries any NaN or infinity of the eight components.
     let ok = (dx.sum() + dy.sum() + l1 + l2).is_finite();
     ok.then_some((dx, dy, [l1, l2]))
