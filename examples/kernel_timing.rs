@@ -2,7 +2,8 @@
 //! degree, 1024 points inside it, each evaluated 200 times per round; prints ns per evaluation for
 //! a full evaluation (p, ∇p, ∇²p) on independent points, on a chain where each point depends on
 //! the previous answer (the Newton solvers' pattern), for value + gradient, and for full
-//! evaluations four points per pass (`SoaPoly::eval4`, per point):
+//! evaluations four points per pass (`SoaPoly::eval4`, per point), and the same in single precision
+//! (`SoaPoly::eval4_rows_f32`):
 //!
 //! ```text
 //! cargo build --release --example kernel_timing
@@ -27,6 +28,22 @@ fn main() -> sublevel::Result<()> {
         })
         .collect();
     let per_eval = |t: Instant| t.elapsed().as_secs_f64() * 1e9 / (200.0 * points.len() as f64);
+    // The single-precision kernel's largest error on these points, relative to max(1, |q|) for
+    // each quantity q of p, ∇p, ∇²p.
+    let mut worst: Real = 0.0;
+    for q in points.chunks_exact(4) {
+        let rows: [[Real; 4]; 3] = std::array::from_fn(|i| [q[0][i], q[1][i], q[2][i], q[3][i]]);
+        let (e, s) = (soa.eval4_rows(&rows), soa.eval4_rows_f32(&rows));
+        let mut pairs = vec![(e.value, s.value)];
+        pairs.extend(e.gradient.iter().zip(&s.gradient).map(|(a, b)| (*a, *b)));
+        pairs.extend(e.hessian.iter().zip(&s.hessian).map(|(a, b)| (*a, *b)));
+        for (a, b) in pairs {
+            for k in 0..4 {
+                worst = worst.max((a[k] - b[k]).abs() / a[k].abs().max(1.0));
+            }
+        }
+    }
+    println!("2d = {degree}: single-precision kernel, largest relative error {worst:.1e}");
     for round in 0..3 {
         let t = Instant::now();
         let mut sum = 0.0;
@@ -64,9 +81,21 @@ fn main() -> sublevel::Result<()> {
             }
         }
         let four = per_eval(t);
+        // The same in single precision (`SoaPoly::eval4_rows_f32`).
+        let rows: Vec<[[Real; 4]; 3]> =
+            points.chunks_exact(4).map(|q| std::array::from_fn(|i| [q[0][i], q[1][i], q[2][i], q[3][i]])).collect();
+        let t = Instant::now();
+        for _ in 0..200 {
+            for r in &rows {
+                let e = soa.eval4_rows_f32(std::hint::black_box(r));
+                sum += e.value[0] + e.hessian[0][3];
+            }
+        }
+        let single = per_eval(t);
         println!(
             "2d = {degree}, round {round}: full {independent:.1} ns independent, {dependent:.1} ns dependent; \
-             value + gradient {gradient:.1} ns; full, four points per pass {four:.1} ns (checksum {:.6e})",
+             value + gradient {gradient:.1} ns; full, four points per pass {four:.1} ns, in f32 {single:.1} ns \
+             (checksum {:.6e})",
             sum + u.x
         );
     }

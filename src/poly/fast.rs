@@ -477,8 +477,10 @@ mod x86 {
     use super::*;
     use std::arch::asm;
     use std::arch::x86_64::{
-        __m256d, _mm256_fmadd_pd, _mm256_load_pd, _mm256_loadu_pd, _mm256_mul_pd, _mm256_permute2f128_pd,
-        _mm256_permute4x64_pd, _mm256_set1_pd, _mm256_storeu_pd, _mm256_sub_pd,
+        __m256, __m256d, _mm256_castps256_ps128, _mm256_cvtpd_ps, _mm256_cvtps_pd, _mm256_extractf128_ps,
+        _mm256_fmadd_pd, _mm256_fmadd_ps, _mm256_load_pd, _mm256_load_ps, _mm256_loadu_pd, _mm256_mul_pd,
+        _mm256_permute2f128_pd, _mm256_permute4x64_pd, _mm256_set1_pd, _mm256_set1_ps, _mm256_set_m128,
+        _mm256_storeu_pd, _mm256_sub_pd,
     };
 
     /// Proof that the CPU runs AVX2 and FMA: its only constructor is compiled with those features,
@@ -766,6 +768,98 @@ mod x86 {
         four_point!(d, pair_kernel(Avx2Fma::new(), rows, u))
     }
 
+    /// An empty `asm!` barrier for an eight-lane `f32` register (see `simd_acc!`).
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn pin8(mut v: __m256) -> __m256 {
+        // SAFETY: the template is an assembler comment: no instruction runs, no memory or flag is
+        // touched and `v` stays in its register.
+        unsafe { asm!("/* {0} */", inout(ymm_reg) v, options(nostack, preserves_flags)) };
+        v
+    }
+
+    /// A coordinate of four points in single precision, twice: [c₀, c₁, c₂, c₃, c₀, c₁, c₂, c₃],
+    /// the multiplier of a [`Pair32Acc`].
+    #[derive(Clone, Copy)]
+    struct Coord32(__m256);
+
+    /// `N` quantity pairs of a [`PairRow32`] (from pair `OFF`) at four points in single precision:
+    /// each register holds `[q(p₀), …, q(p₃), q'(p₀), …, q'(p₃)]`, and each row entry
+    /// `[c, c, c, c, c', c', c', c']` is the memory operand of its multiply–add. Half the
+    /// multiply–adds of the double-precision pair table ([`PairAcc`]) for the same four points.
+    #[derive(Clone, Copy)]
+    struct Pair32Acc<const OFF: usize, const N: usize>([__m256; N], Avx2Fma);
+
+    impl<const OFF: usize, const N: usize> Acc for Pair32Acc<OFF, N> {
+        type Row = PairRow32;
+        type Cpu = Avx2Fma;
+        type Coord = Coord32;
+
+        #[inline(always)]
+        fn splat(_cpu: Avx2Fma, t: Real) -> Coord32 {
+            // SAFETY: `_cpu` proves AVX2.
+            Coord32(unsafe { _mm256_set1_ps(t as f32) })
+        }
+
+        #[inline(always)]
+        fn load(cpu: Avx2Fma, row: &PairRow32) -> Self {
+            // SAFETY: entry `OFF + i` of a `PairRow32` is eight `f32` at a 32-byte boundary; `cpu`
+            // proves AVX2.
+            Self(std::array::from_fn(|i| unsafe { _mm256_load_ps(row.0[OFF + i].as_ptr()) }), cpu)
+        }
+
+        #[inline(always)]
+        fn mul_add_row(self, t: Coord32, row: &PairRow32) -> Self {
+            // SAFETY: as in `load`; `self.1` proves AVX2 and FMA.
+            Self(
+                std::array::from_fn(|i| unsafe {
+                    _mm256_fmadd_ps(self.0[i], t.0, _mm256_load_ps(row.0[OFF + i].as_ptr()))
+                }),
+                self.1,
+            )
+        }
+
+        #[inline(always)]
+        fn mul_add(self, t: Coord32, c: Self) -> Self {
+            // SAFETY: `self.1` proves AVX2 and FMA.
+            Self(std::array::from_fn(|i| unsafe { _mm256_fmadd_ps(self.0[i], t.0, c.0[i]) }), self.1)
+        }
+
+        #[inline(always)]
+        fn pin(self) -> Self {
+            // SAFETY: `self.1` proves AVX2 (the register class of the barrier).
+            Self(self.0.map(|v| unsafe { pin8(v) }), self.1)
+        }
+    }
+
+    /// [`SoaPoly::eval4_rows_f32`] over the single-precision pair table: two passes (three and two
+    /// quantity pairs), the sums widened to `f64` for Euler's identity.
+    #[inline(always)]
+    fn pair32_kernel<const D: usize>(cpu: Avx2Fma, rows: &[PairRow32], u: &[[Real; 4]; 3]) -> Soa4Eval {
+        // SAFETY: each `u[i]` is four readable `f64`; `cpu` proves AVX2.
+        let coordinate = |i: usize| F64x4(unsafe { _mm256_loadu_pd(u[i].as_ptr()) }, cpu);
+        let p = Point { x: coordinate(0), y: coordinate(1), z: coordinate(2) };
+        // SAFETY (both closures): `cpu` proves AVX2.
+        let narrow = |c: F64x4| unsafe {
+            let h = _mm256_cvtpd_ps(c.0);
+            Coord32(_mm256_set_m128(h, h))
+        };
+        let q = Point { x: narrow(p.x), y: narrow(p.y), z: narrow(p.z) };
+        let widen = |v: __m256| unsafe {
+            [_mm256_cvtps_pd(_mm256_castps256_ps128(v)), _mm256_cvtps_pd(_mm256_extractf128_ps::<1>(v))]
+        };
+        let a = horner_of_degree!(D - 2, Pair32Acc<0, 3>, cpu, rows, point = q).0;
+        let b = horner_of_degree!(D - 2, Pair32Acc<3, 2>, cpu, rows, point = q).0;
+        let (a0, a1, a2, b0, b1) = (widen(a[0]), widen(a[1]), widen(a[2]), widen(b[0]), widen(b[1]));
+        euler4::<D>(cpu, p, [a0[0], a0[1], a1[0], a1[1], a2[0]], [a2[1], b0[0], b0[1], b1[0], b1[1]])
+    }
+
+    /// [`SoaPoly::eval4_rows_f32`] over the single-precision pair table, for degree `d` (2..=8).
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) fn eval4_pair32(d: usize, rows: &[PairRow32], u: &[[Real; 4]; 3]) -> Soa4Eval {
+        four_point!(d, pair32_kernel(Avx2Fma::new(), rows, u))
+    }
+
     /// p, ∇p and ∇²p at the four points `p` from the Horner sums `lo` = [xx, xy, xz, yy, yz] and
     /// `hi` = [zz, r_x, r_y, r_z, w] of a [`SoaPoly`] row table: Euler's identity as in
     /// `full_kernel`, four points per instruction.
@@ -840,10 +934,15 @@ pub struct Soa4Eval {
 /// median of 60.1 against 85.4 ns per point (fastest runs 43.6 and 50.8 ns, run-by-run ratio
 /// 0.72), and at 2d = 4 and 6 the pair table ran as fast as the replicated one (ratios 1.03 and
 /// 0.96, within the noise), so those keep it.
+///
+/// A third table holds the rows rounded to `f32` for [`SoaPoly::eval4_rows_f32`] (the batch
+/// solver's coarse stage): 13 KB per body at 2d = 8.
 #[derive(Clone, Debug)]
 pub struct SoaPoly {
     fast: FastPoly,
     table: SoaTable,
+    /// The rows rounded to single precision, in pairs ([`PairRow32`]).
+    single: Vec<PairRow32>,
 }
 
 /// The rows of a [`SoaPoly`] in the layout its kernel reads.
@@ -863,6 +962,13 @@ enum SoaTable {
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(32))]
 pub(crate) struct PairRow([[Real; 4]; SOA_WIDTH / 2]);
+
+/// A [`SoaPoly`] row in single precision as five pairs of quantities, `[c₀ ×4, c₁ ×4]`,
+/// `[c₂ ×4, c₃ ×4]`, … (160 bytes, each entry on a 32-byte boundary): the memory operand of an
+/// eight-lane `f32` multiply–add over four points of two quantities ([`SoaPoly::eval4_rows_f32`]).
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(32))]
+pub(crate) struct PairRow32([[f32; 8]; SOA_WIDTH / 2]);
 
 /// A [`SoaPoly`] row with each of its ten coefficients replicated into four lanes (320 bytes,
 /// each entry on a 32-byte boundary): the four-lane memory operand of a multiply–add.
@@ -907,6 +1013,12 @@ fn wide_table(rows: &[[Real; SOA_WIDTH]]) -> Vec<WideRow> {
     rows.iter().map(|r| WideRow(r.map(|c| [c; 4]))).collect()
 }
 
+/// `rows` rounded to `f32`, as pairs of quantities, each coefficient replicated four times
+/// ([`PairRow32`]).
+fn pair32_table(rows: &[[Real; SOA_WIDTH]]) -> Vec<PairRow32> {
+    rows.iter().map(|r| PairRow32(std::array::from_fn(|k| std::array::from_fn(|i| r[2 * k + i / 4] as f32)))).collect()
+}
+
 /// `rows` as pairs of quantities, each coefficient replicated twice ([`PairRow`]).
 fn pair_table(rows: &[[Real; SOA_WIDTH]]) -> Vec<PairRow> {
     rows.iter().map(|r| PairRow(std::array::from_fn(|k| [r[2 * k], r[2 * k], r[2 * k + 1], r[2 * k + 1]]))).collect()
@@ -921,7 +1033,22 @@ impl SoaPoly {
         } else {
             SoaTable::Pair(pair_table(&rows))
         };
-        Self { fast: fast.clone(), table }
+        Self { fast: fast.clone(), table, single: pair32_table(&rows) }
+    }
+
+    /// [`SoaPoly::eval4_rows`] in single precision: the coefficients and the points rounded to
+    /// `f32`, the Horner sums run in eight-lane `f32` registers (two quantities of four points per
+    /// multiply–add: half the multiply–adds), then widened for Euler's identity. Relative errors of
+    /// order 10⁻⁶ (the tables' `f32` rounding times their cancellation): for the early Newton
+    /// steps of the batch solver, far from the answer ([`crate::query::batch`]), never for an
+    /// answer. Elsewhere than on AVX2 + FMA, the double-precision [`SoaPoly::eval4_rows`].
+    pub fn eval4_rows_f32(&self, u: &[[Real; 4]; 3]) -> Soa4Eval {
+        #[cfg(target_arch = "x86_64")]
+        if self.fast.degree >= 2 && has_fma() {
+            // SAFETY: the CPU supports AVX2 and FMA (checked at run time just above).
+            return unsafe { x86::eval4_pair32(self.fast.degree, &self.single, u) };
+        }
+        self.eval4_rows(u)
     }
 
     /// p, ∇p and ∇²p at the four points `u` (normalized coordinates).
@@ -1184,6 +1311,47 @@ mod tests {
     }
 
     #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn single_precision_table_is_within_f32_rounding_of_the_reference() {
+        // SoaPoly::eval4_rows_f32 against the reference evaluator at every degree 2–8, random
+        // coefficients in [−1, 1] and points in [−1.5, 1.5]³. Its error is rounding: at most a few
+        // units of f32 (6·10⁻⁸) per multiply–add of a Horner chain (3·2d deep) times the sum of
+        // the terms' magnitudes, which the polynomial with |c_α| evaluated at |u| gives. Asserted:
+        // 10⁻⁶ of that bound (value, gradient, Hessian; measured 1.5·10⁻⁷); and the rounding is single precision
+        // indeed where the AVX2 kernel runs (some error above 10⁻¹² of it).
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+        let mut largest: Real = 0.0;
+        for degree in 2..=MAX_DEGREE {
+            let coeffs: Vec<Real> = (0..basis_len(3, degree)).map(|_| rng.random_range(-1.0..1.0)).collect();
+            let magnitudes = Polynomial::from_coefficients(degree, coeffs.iter().map(|c| c.abs()).collect()).unwrap();
+            let p = Polynomial::from_coefficients(degree, coeffs).unwrap();
+            let soa = SoaPoly::new(&FastPoly::new(&p));
+            for _ in 0..20 {
+                let u: [[Real; 4]; 3] = std::array::from_fn(|_| std::array::from_fn(|_| rng.random_range(-1.5..1.5)));
+                let e = soa.eval4_rows_f32(&u);
+                for (i, value) in e.value.iter().enumerate() {
+                    let point = Vector3::new(u[0][i], u[1][i], u[2][i]);
+                    let (r, m) = (p.eval(&point), magnitudes.eval(&point.abs()));
+                    let bound = 1.0 + m.value + m.gradient.amax() + m.hessian.amax();
+                    let mut worst = (r.value - value).abs();
+                    for j in 0..3 {
+                        worst = worst.max((r.gradient[j] - e.gradient[j][i]).abs());
+                    }
+                    for (k, (a, b)) in [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)].into_iter().enumerate() {
+                        worst = worst.max((r.hessian[(a, b)] - e.hessian[k][i]).abs());
+                    }
+                    assert!(worst <= 1e-6 * bound, "degree {degree}: error {worst:e} of bound {bound:e}");
+                    largest = largest.max(worst / bound);
+                }
+            }
+        }
+        // (Without AVX2 + FMA the double-precision kernel answers: no such rounding.)
+        #[cfg(target_arch = "x86_64")]
+        if has_fma() {
+            assert!(largest > 1e-12, "no single-precision rounding seen ({largest:e})");
+        }
+    }
+
     #[test]
     fn pair_table_gives_the_replicated_tables_answers_to_the_bit() {
         // Up to 2d = 6 the four-point kernel reads the replicated table, above it the pair table;

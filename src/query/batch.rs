@@ -16,6 +16,24 @@
 //! fail) on the single-pair solver
 //! ```
 //!
+//! Pairs with a body of degree 2d ≥ 6 run in two stages (twelfth session). The **coarse stage**
+//! evaluates the trial points in single precision ([`crate::poly::SoaPoly::eval4_rows_f32`]: two
+//! quantities of four points per eight-lane `f32` multiply–add, half the multiply–adds, 16.7
+//! instead of 32.4 ns per point at 2d = 8 and 8.1 instead of 17.5 at 2d = 6 in
+//! `examples/kernel_timing`) until a lane's residual is below 10⁻³ of the stationarity scale; the
+//! lane hands its point, multipliers and Newton step to the **fine stage**, which goes on in double
+//! precision from that step's trial point to the same tolerance. The single-precision kernel errs
+//! by at most 1.1·10⁻⁵ relative on the project's bodies (`kernel_timing` prints it), so the coarse
+//! steps are Newton steps, and two double-precision steps finish a pair as before; answers agree
+//! with the single-pair ones to the KKT tolerance (2·10⁻¹¹ m on the chair / human poses). When the
+//! coarse queue runs dry the lanes still running hand off as they are and run first in the fine
+//! stage, beside the others (one slow pair took 85 rounds alone otherwise). Measured on the
+//! chair / human cold poses (`examples/cold_profile D 20 batch`, the previous build alternated
+//! twice in one session, Intel Xeon): the rate over single queries went 1.61–1.64 → 1.82–1.83× at
+//! 2d = 8 and 1.89–1.93 → 2.04–2.15× at 2d = 6; instructions per pair (callgrind) 8740 → 7297 and
+//! 4600 → 4472. At 2d = 2 the stage cost more than it saved (0.249–0.253 against 0.230–0.239 µs per
+//! pair) and at 2d = 4 as much, so pairs of lower degree run the fine stage alone.
+//!
 //! The lanes run the single-pair solver's cold separated Newton run ([`distance`]: same start, same
 //! KKT system, same line search and tolerance, same 30-iteration cap) with one difference: every
 //! trial point is evaluated with its Hessians (the four-point kernel evaluates them at no extra
@@ -901,6 +919,109 @@ mod lanes {
         }
     }
 
+    /// A lane's Newton state where its coarse stage ends ([`COARSE_RESIDUAL`]): the accepted point
+    /// (frame of body A), its multipliers, the Newton step from it, its ‖KKT residual‖₂ and the
+    /// steps taken; the fine stage goes on from its trial point at step length 1.
+    #[derive(Clone, Copy)]
+    struct Handoff {
+        x: [Real; 3],
+        y: [Real; 3],
+        lam: [Real; 2],
+        /// The step, its length so far and the residual in single precision: computed from
+        /// single-precision evaluations, they carry no more digits (a smaller record).
+        dx: [f32; 3],
+        dy: [f32; 3],
+        dl: [f32; 2],
+        r0: f32,
+        alpha: f32,
+        /// Newton steps taken and trial points rejected since the last one (small integers).
+        steps: u16,
+        rejected: u16,
+    }
+
+    /// Where a pair stands between the two stages of [`solve_on_lanes`].
+    #[derive(Clone, Copy)]
+    enum Stage {
+        /// Not yet in a lane, or taken out before its first evaluation: starts from its cold start.
+        Cold,
+        /// Goes on from where the coarse stage left it.
+        Resume(Handoff),
+        /// The same, for a pair the coarse stage took out of its lane when its queue ran dry (first
+        /// in the fine stage's queue).
+        Drained(Handoff),
+        /// Left the lanes without a hand-off (as the single-stage lanes would have: stalled, the
+        /// iteration cap, a nonfinite residual or a singular system): the single-pair solver's
+        /// growth-first path answers it.
+        Left,
+    }
+
+    impl Lanes {
+        /// Lane `i`'s state as a [`Handoff`], its residual raised by [`COARSE_NOISE`] times the
+        /// stationarity scale: the fine stage's first trial point is accepted where its residual in
+        /// double precision falls below that bound on the single-precision residual.
+        fn handoff(&self, i: usize) -> Handoff {
+            let gap =
+                Vector3::new(self.x[0][i] - self.y[0][i], self.x[1][i] - self.y[1][i], self.x[2][i] - self.y[2][i]);
+            Handoff {
+                x: std::array::from_fn(|r| self.x[r][i]),
+                y: std::array::from_fn(|r| self.y[r][i]),
+                lam: [self.lam[0][i], self.lam[1][i]],
+                dx: std::array::from_fn(|r| self.dx[r][i] as f32),
+                dy: std::array::from_fn(|r| self.dy[r][i] as f32),
+                dl: [self.dl[0][i] as f32, self.dl[1][i] as f32],
+                r0: (self.book.r0[i] + COARSE_NOISE * (1.0 + 2.0 * gap.norm())) as f32,
+                alpha: self.book.alpha[i] as f32,
+                steps: self.book.steps[i] as u16,
+                rejected: self.book.rejected[i] as u16,
+            }
+        }
+
+        /// Puts pair `k` (relative pose `rel`, B posed as `bb`) into lane `i` where its coarse stage
+        /// left it (`h`): the next trial point is its Newton step from there at the step length it
+        /// had reached.
+        fn resume(&mut self, i: usize, k: usize, rel: &Isometry3, bb: &PosedBody<'_>, h: &Handoff) {
+            self.book.fill(i, k, bb);
+            self.book.start[i] = 0.0;
+            self.book.alpha[i] = h.alpha.into();
+            self.book.rejected[i] = h.rejected.into();
+            self.book.r0[i] = h.r0.into();
+            self.book.steps[i] = h.steps.into();
+            for r in 0..3 {
+                self.x[r][i] = h.x[r];
+                self.y[r][i] = h.y[r];
+                self.dx[r][i] = h.dx[r].into();
+                self.dy[r][i] = h.dy[r].into();
+            }
+            self.lam[0][i] = h.lam[0];
+            self.lam[1][i] = h.lam[1];
+            self.dl[0][i] = h.dl[0].into();
+            self.dl[1][i] = h.dl[1].into();
+            self.rel[i] = *rel;
+        }
+    }
+
+    /// ‖KKT residual‖₂ relative to the stationarity scale 1 + 2‖x − y‖ below which a lane leaves the
+    /// coarse stage (its points evaluated in single precision, [`crate::poly::SoaPoly::eval4_rows_f32`])
+    /// for the fine one (double precision): the `f32` kernel's relative errors on the project's
+    /// bodies are at most 2.4·10⁻⁵ (2d = 8, value, gradient and Hessian; 10⁻⁷–10⁻⁶ at 2d ≤ 6),
+    /// 40 times below this, so the coarse steps are Newton steps to that accuracy, and from a
+    /// residual of 10⁻³ two double-precision steps reach the tolerance.
+    const COARSE_RESIDUAL: Real = 1e-3;
+
+    /// Bound on the error of a coarse-stage residual relative to the stationarity scale: 4 times the
+    /// `f32` kernel's largest relative error on the project's bodies (2.4·10⁻⁵ at 2d = 8), which
+    /// scales terms of size 2‖x − y‖. Without it a pair that starts at its answer (spheres: the
+    /// radial start is exact) compares its double-precision residuals with a single-precision one
+    /// at the rounding level, and its line search stalls.
+    const COARSE_NOISE: Real = 1e-4;
+
+    /// Least degree 2d of the higher-degree body of a pair for which the batch runs the coarse
+    /// stage. Below it the kernels are a smaller part of a round and the stage's bookkeeping costs
+    /// more than the single-precision passes save (measured with `examples/cold_profile D 20 batch`,
+    /// three alternations: 0.249–0.253 against 0.230–0.239 µs per pair at 2d = 2, the same time at
+    /// 2d = 4).
+    const COARSE_MIN_DEGREE: usize = 6;
+
     /// max(|v₀|, |v₁|, |v₂|) per lane.
     #[inline(always)]
     fn abs_max(v: V3) -> F4 {
@@ -1125,106 +1246,173 @@ mod lanes {
             rel: [Isometry3::identity(); 4],
         };
         let empty = std::sync::Arc::new(DistanceWarmStart::default());
-        let mut next = 0usize;
+        let mut next;
         let rels: Vec<Isometry3> = poses.iter().map(|(pa, pb)| pa.inv_mul(pb)).collect();
         let starts = cold_starts(a, b, &rels);
-        loop {
-            // Refill the empty lanes from the queue; a pair without a separated start is left to the
-            // single-pair solver.
-            for i in 0..4 {
-                while lanes.book.job[i] == EMPTY && next < poses.len() {
-                    let k = next;
-                    next += 1;
-                    if let Some((x0, y0)) = &starts[k] {
-                        let bb = PosedBody::new(b, &rels[k]);
-                        lanes.fill(i, k, &rels[k], &bb, x0, y0);
-                    }
-                }
-            }
-            if lanes.book.is_empty() {
-                break;
-            }
-            // The trial points of the four lanes, evaluated in one pass per body.
-            let (x, y) = (V3::load(&lanes.x), V3::load(&lanes.y));
-            let lam = [F4::load(&lanes.lam[0]), F4::load(&lanes.lam[1])];
-            let (dx, dy) = (V3::load(&lanes.dx), V3::load(&lanes.dy));
-            let dl = [F4::load(&lanes.dl[0]), F4::load(&lanes.dl[1])];
-            let book = &lanes.book;
-            let (al, r0, start) = (F4::load(&book.alpha), F4::load(&book.r0), zero.lt(F4::load(&book.start)));
-            let (mb, cb) = book.map();
-            let xt = dx.mul_add(al, x);
-            let yt = dy.mul_add(al, y);
-            let mut lt = [dl[0].mul_add(al, lam[0]), dl[1].mul_add(al, lam[1])];
-            let ua = xt.mul_add(ka4, ca4);
-            let ub = mat_mul(&mb, yt).add(cb);
-            let ea = soa_a.eval4_rows(&ua.to_arrays());
-            let eb = soa_b.eval4_rows(&ub.to_arrays());
-            let ga = V3::load(&ea.gradient).scale(ka4);
-            let gb = mat_t_mul(&mb, V3::load(&eb.gradient));
-            let diff = xt.sub(yt);
-            let dist = diff.dot(diff).sqrt();
-            // Least-squares multipliers at a start (the single-pair solver's initial multipliers).
-            if start.bits() != 0 {
-                let (na, nb) = (ga.dot(ga), gb.dot(gb));
-                let tiny = F4::splat(Real::MIN_POSITIVE);
-                let la = -(two * diff.dot(ga)) / na.max(tiny);
-                let lb = two * diff.dot(gb) / nb.max(tiny);
-                lt = [
-                    F4::select(start, positive_multiplier(la, na, dist), lt[0]),
-                    F4::select(start, positive_multiplier(lb, nb, dist), lt[1]),
-                ];
-            }
-            let d2 = diff.scale(two);
-            let ra = ga.mul_add(lt[0], d2);
-            let rb = gb.mul_add(lt[1], d2.neg());
-            let (cva, cvb) = (F4::load(&ea.value) - one, F4::load(&eb.value) - one);
-            let r1 = (ra.dot(ra) + rb.dot(rb) + cva.mul_add(cva, cvb * cvb)).sqrt();
-            let norm_inf = abs_max(ra).max(abs_max(rb)).max(cva.abs().max(cvb.abs()));
-            // The Newton steps from the trial points (taken where a trial point is accepted).
-            let ha = load6(&ea.hessian, ka2);
-            let hb = congruence(&mb, &load6(&eb.hessian, one));
-            let (wa, wb) = (shifted(&ha, lt[0], two), shifted(&hb, lt[1], two));
-            let (sdx, sdy, sdl, solved) = solve_kkt8(&wa, &wb, ga, gb, ra, rb, cva, cvb);
-            // Accepted trial points: the start, or a decrease of the residual (Armijo on ‖r‖₂).
-            let decrease = r1.le((F4::splat(-1e-4) * al + one) * r0).and(r1.finite());
-            let accepted = start.or(decrease).and(lanes.book.live());
-            let stationary = norm_inf.le(tolerance * dist.mul_add(two, one));
-            lanes.x = V3::select(accepted, xt, x).to_arrays();
-            lanes.y = V3::select(accepted, yt, y).to_arrays();
-            lanes.lam =
-                [F4::select(accepted, lt[0], lam[0]).to_array(), F4::select(accepted, lt[1], lam[1]).to_array()];
-            lanes.dx = V3::select(accepted, sdx, dx).to_arrays();
-            lanes.dy = V3::select(accepted, sdy, dy).to_arrays();
-            lanes.dl = [F4::select(accepted, sdl[0], dl[0]).to_array(), F4::select(accepted, sdl[1], dl[1]).to_array()];
-            // Lanes that leave: stationary (the answer, or the single-pair solver when a multiplier
-            // is not positive), a nonfinite residual, a singular system, the iteration cap, or 40
-            // rejected trial points in a row (the single-pair line search's limit).
-            let ends = stationary.or(r1.finite().not()).or(solved.not());
-            let (done, leave, steps) = lanes.book.advance(accepted, r1, one, ends, cap);
-            if leave == 0 {
+        // Where each pair stands between the stages; the coarse stage's queue is the batch in order,
+        // the fine stage's the pairs the coarse one drained (the slow ones, first: they run beside
+        // the others), then the others.
+        // Where each pair stands between the stages (none without a coarse stage: every pair cold);
+        // the coarse stage's queue is the batch in order, the fine stage's the pairs the coarse one
+        // drained (the slow ones, first: they run beside the others), then the others.
+        let coarse = a.degree().max(b.degree()) >= COARSE_MIN_DEGREE;
+        let mut stage = if coarse { vec![Stage::Cold; poses.len()] } else { Vec::new() };
+        let mut queue: Vec<usize> = (0..poses.len()).collect();
+        let mut drained: Vec<usize> = Vec::new();
+        let coarse_residual = F4::splat(COARSE_RESIDUAL);
+        for fine in [false, true] {
+            if !coarse && !fine {
                 continue;
             }
-            let answer = done.and(stationary).and(r1.finite()).bits();
-            let (norm_inf, steps) = (norm_inf.to_array(), steps.to_array());
-            for i in (0..4).filter(|i| leave & (1 << i) != 0) {
-                let k = lanes.book.job[i];
-                lanes.book.job[i] = EMPTY;
-                let x = Vector3::new(lanes.x[0][i], lanes.x[1][i], lanes.x[2][i]);
-                let y = Vector3::new(lanes.y[0][i], lanes.y[1][i], lanes.y[2][i]);
-                let lam = [lanes.lam[0][i], lanes.lam[1][i]];
-                // The answer when stationary with positive multipliers and clear of contact; otherwise
-                // the single-pair solver decides (growth test, barrier path).
-                if answer & (1 << i) == 0 || !(lam[0] > 0.0 && lam[1] > 0.0 && clear_of_contact(&x, &y, a, b)) {
+            if coarse && fine {
+                // The drained pairs (marked `Drained` or `Cold`) first, then the others that go on;
+                // `Left` ones drop out.
+                for &k in &drained {
+                    if let Stage::Resume(h) = stage[k] {
+                        stage[k] = Stage::Drained(h);
+                    }
+                }
+                queue.retain(|&k| matches!(stage[k], Stage::Resume(_)));
+                drained.append(&mut queue);
+                std::mem::swap(&mut queue, &mut drained);
+            }
+            next = 0;
+            loop {
+                // Refill the empty lanes from the queue; a pair without a separated start is left to the
+                // single-pair solver.
+                for i in 0..4 {
+                    while lanes.book.job[i] == EMPTY && next < queue.len() {
+                        let k = queue[next];
+                        next += 1;
+                        if let Some((x0, y0)) = &starts[k] {
+                            let bb = PosedBody::new(b, &rels[k]);
+                            match stage.get(k) {
+                                Some(Stage::Resume(h) | Stage::Drained(h)) if fine => {
+                                    lanes.resume(i, k, &rels[k], &bb, h)
+                                }
+                                Some(Stage::Left) => {}
+                                _ => lanes.fill(i, k, &rels[k], &bb, x0, y0),
+                            }
+                        }
+                    }
+                }
+                if lanes.book.is_empty() {
+                    break;
+                }
+                // The coarse stage ends when its queue runs dry: the lanes still running go on in the
+                // fine stage, first in its queue (no lane waits for the slowest one).
+                if !fine && next >= queue.len() && lanes.book.live().bits() != 0b1111 {
+                    for i in 0..4 {
+                        let k = lanes.book.job[i];
+                        if k != EMPTY {
+                            stage[k] =
+                                if lanes.book.start[i] != 0.0 { Stage::Cold } else { Stage::Resume(lanes.handoff(i)) };
+                            drained.push(k);
+                            lanes.book.job[i] = EMPTY;
+                        }
+                    }
+                    break;
+                }
+                // The trial points of the four lanes, evaluated in one pass per body.
+                let (x, y) = (V3::load(&lanes.x), V3::load(&lanes.y));
+                let lam = [F4::load(&lanes.lam[0]), F4::load(&lanes.lam[1])];
+                let (dx, dy) = (V3::load(&lanes.dx), V3::load(&lanes.dy));
+                let dl = [F4::load(&lanes.dl[0]), F4::load(&lanes.dl[1])];
+                let book = &lanes.book;
+                let (al, r0, start) = (F4::load(&book.alpha), F4::load(&book.r0), zero.lt(F4::load(&book.start)));
+                let (mb, cb) = book.map();
+                let xt = dx.mul_add(al, x);
+                let yt = dy.mul_add(al, y);
+                let mut lt = [dl[0].mul_add(al, lam[0]), dl[1].mul_add(al, lam[1])];
+                let ua = xt.mul_add(ka4, ca4);
+                let ub = mat_mul(&mb, yt).add(cb);
+                let (ea, eb) = if fine {
+                    (soa_a.eval4_rows(&ua.to_arrays()), soa_b.eval4_rows(&ub.to_arrays()))
+                } else {
+                    (soa_a.eval4_rows_f32(&ua.to_arrays()), soa_b.eval4_rows_f32(&ub.to_arrays()))
+                };
+                let ga = V3::load(&ea.gradient).scale(ka4);
+                let gb = mat_t_mul(&mb, V3::load(&eb.gradient));
+                let diff = xt.sub(yt);
+                let dist = diff.dot(diff).sqrt();
+                // Least-squares multipliers at a start (the single-pair solver's initial multipliers).
+                if start.bits() != 0 {
+                    let (na, nb) = (ga.dot(ga), gb.dot(gb));
+                    let tiny = F4::splat(Real::MIN_POSITIVE);
+                    let la = -(two * diff.dot(ga)) / na.max(tiny);
+                    let lb = two * diff.dot(gb) / nb.max(tiny);
+                    lt = [
+                        F4::select(start, positive_multiplier(la, na, dist), lt[0]),
+                        F4::select(start, positive_multiplier(lb, nb, dist), lt[1]),
+                    ];
+                }
+                let d2 = diff.scale(two);
+                let ra = ga.mul_add(lt[0], d2);
+                let rb = gb.mul_add(lt[1], d2.neg());
+                let (cva, cvb) = (F4::load(&ea.value) - one, F4::load(&eb.value) - one);
+                let r1 = (ra.dot(ra) + rb.dot(rb) + cva.mul_add(cva, cvb * cvb)).sqrt();
+                let norm_inf = abs_max(ra).max(abs_max(rb)).max(cva.abs().max(cvb.abs()));
+                // The Newton steps from the trial points (taken where a trial point is accepted).
+                let ha = load6(&ea.hessian, ka2);
+                let hb = congruence(&mb, &load6(&eb.hessian, one));
+                let (wa, wb) = (shifted(&ha, lt[0], two), shifted(&hb, lt[1], two));
+                let (sdx, sdy, sdl, solved) = solve_kkt8(&wa, &wb, ga, gb, ra, rb, cva, cvb);
+                // Accepted trial points: the start, or a decrease of the residual (Armijo on ‖r‖₂).
+                let decrease = r1.le((F4::splat(-1e-4) * al + one) * r0).and(r1.finite());
+                let accepted = start.or(decrease).and(lanes.book.live());
+                let stationary = norm_inf.le(tolerance * dist.mul_add(two, one));
+                lanes.x = V3::select(accepted, xt, x).to_arrays();
+                lanes.y = V3::select(accepted, yt, y).to_arrays();
+                lanes.lam =
+                    [F4::select(accepted, lt[0], lam[0]).to_array(), F4::select(accepted, lt[1], lam[1]).to_array()];
+                lanes.dx = V3::select(accepted, sdx, dx).to_arrays();
+                lanes.dy = V3::select(accepted, sdy, dy).to_arrays();
+                lanes.dl =
+                    [F4::select(accepted, sdl[0], dl[0]).to_array(), F4::select(accepted, sdl[1], dl[1]).to_array()];
+                // Lanes that leave: stationary (the answer, or the single-pair solver when a multiplier
+                // is not positive), a nonfinite residual, a singular system, the iteration cap, or 40
+                // rejected trial points in a row (the single-pair line search's limit).
+                let ends = stationary.or(r1.finite().not()).or(solved.not());
+                // The coarse stage also ends where the residual is small enough for the fine one.
+                let near = r1.le(coarse_residual * dist.mul_add(two, one));
+                let ends = if fine { ends } else { ends.or(near) };
+                let (done, leave, steps) = lanes.book.advance(accepted, r1, one, ends, cap);
+                if leave == 0 {
                     continue;
                 }
-                let iterations = steps[i] as usize;
-                let out = KktOut { x, y, lam, status: SolveStatus::Converged, iterations, residual: norm_inf[i] };
-                answers[k] = Some(if warm_starts {
-                    let growth = GrowthWarmStart::default();
-                    finish(&poses[k].0, &lanes.rel[i], out, iterations, false, &growth, None)
-                } else {
-                    separated_answer(&poses[k].0, &out, iterations, false, empty.clone())
-                });
+                if !fine {
+                    // Hand-offs (accepted near the answer with a step from there); the lanes that end
+                    // otherwise leave as the single-stage lanes would.
+                    let handoff = done.and(near).and(solved).and(r1.finite()).bits();
+                    for i in (0..4).filter(|i| leave & (1 << i) != 0) {
+                        let k = lanes.book.job[i];
+                        lanes.book.job[i] = EMPTY;
+                        stage[k] = if handoff & (1 << i) != 0 { Stage::Resume(lanes.handoff(i)) } else { Stage::Left };
+                    }
+                    continue;
+                }
+                let answer = done.and(stationary).and(r1.finite()).bits();
+                let (norm_inf, steps) = (norm_inf.to_array(), steps.to_array());
+                for i in (0..4).filter(|i| leave & (1 << i) != 0) {
+                    let k = lanes.book.job[i];
+                    lanes.book.job[i] = EMPTY;
+                    let x = Vector3::new(lanes.x[0][i], lanes.x[1][i], lanes.x[2][i]);
+                    let y = Vector3::new(lanes.y[0][i], lanes.y[1][i], lanes.y[2][i]);
+                    let lam = [lanes.lam[0][i], lanes.lam[1][i]];
+                    // The answer when stationary with positive multipliers and clear of contact; otherwise
+                    // the single-pair solver decides (growth test, barrier path).
+                    if answer & (1 << i) == 0 || !(lam[0] > 0.0 && lam[1] > 0.0 && clear_of_contact(&x, &y, a, b)) {
+                        continue;
+                    }
+                    let iterations = steps[i] as usize;
+                    let out = KktOut { x, y, lam, status: SolveStatus::Converged, iterations, residual: norm_inf[i] };
+                    answers[k] = Some(if warm_starts {
+                        let growth = GrowthWarmStart::default();
+                        finish(&poses[k].0, &lanes.rel[i], out, iterations, false, &growth, None)
+                    } else {
+                        separated_answer(&poses[k].0, &out, iterations, false, empty.clone())
+                    });
+                }
             }
         }
         // The pairs without a separated start, and those the lanes left: the single-pair solver's
