@@ -496,13 +496,11 @@ mod x86 {
         }
     }
 
-    /// Defines the accumulator `$name` of `$n` lanes in one `$reg` register (`$vec`, loaded and
-    /// broadcast by `$load` / `$set1`, fused by `$fmadd`) with its scheduling barrier `$pin`: an
-    /// empty `asm!` the compiler must compute the value before (and may assume touches memory, so
-    /// no later table load moves ahead of it). No instruction: the template is an assembler
-    /// comment.
-    macro_rules! simd_acc {
-        ($(#[$doc:meta])* $name:ident, $vec:ty, $n:literal, $reg:ident, $set1:ident, $load:ident, $fmadd:ident, $pin:ident) => {
+    /// Defines the scheduling barrier `$pin` for a `$vec` register of class `$reg`: an empty `asm!`
+    /// the compiler must compute the value before (and may assume touches memory, so no later
+    /// table load moves ahead of it). No instruction: the template is an assembler comment.
+    macro_rules! pin_fn {
+        ($pin:ident, $vec:ty, $reg:ident) => {
             #[target_feature(enable = "avx2,fma")]
             #[inline]
             fn $pin(mut v: $vec) -> $vec {
@@ -511,6 +509,15 @@ mod x86 {
                 unsafe { asm!("/* {0} */", inout($reg) v, options(nostack, preserves_flags)) };
                 v
             }
+        };
+    }
+
+    /// Defines the accumulator `$name` of `$n` lanes in one `$reg` register (`$vec`, loaded and
+    /// broadcast by `$load` / `$set1`, fused by `$fmadd`) with its scheduling barrier `$pin`
+    /// (`pin_fn!`).
+    macro_rules! simd_acc {
+        ($(#[$doc:meta])* $name:ident, $vec:ty, $n:literal, $reg:ident, $set1:ident, $load:ident, $fmadd:ident, $pin:ident) => {
+            pin_fn!($pin, $vec, $reg);
 
             $(#[$doc])*
             #[derive(Clone, Copy)]
@@ -768,15 +775,7 @@ mod x86 {
         four_point!(d, pair_kernel(Avx2Fma::new(), rows, u))
     }
 
-    /// An empty `asm!` barrier for an eight-lane `f32` register (see `simd_acc!`).
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    fn pin8(mut v: __m256) -> __m256 {
-        // SAFETY: the template is an assembler comment: no instruction runs, no memory or flag is
-        // touched and `v` stays in its register.
-        unsafe { asm!("/* {0} */", inout(ymm_reg) v, options(nostack, preserves_flags)) };
-        v
-    }
+    pin_fn!(pin8, __m256, ymm_reg);
 
     /// A coordinate of four points in single precision, twice: [c₀, c₁, c₂, c₃, c₀, c₁, c₂, c₃],
     /// the multiplier of a [`Pair32Acc`].

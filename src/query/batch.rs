@@ -1246,37 +1246,29 @@ mod lanes {
             rel: [Isometry3::identity(); 4],
         };
         let empty = std::sync::Arc::new(DistanceWarmStart::default());
-        let mut next;
         let rels: Vec<Isometry3> = poses.iter().map(|(pa, pb)| pa.inv_mul(pb)).collect();
         let starts = cold_starts(a, b, &rels);
-        // Where each pair stands between the stages; the coarse stage's queue is the batch in order,
-        // the fine stage's the pairs the coarse one drained (the slow ones, first: they run beside
-        // the others), then the others.
         // Where each pair stands between the stages (none without a coarse stage: every pair cold);
         // the coarse stage's queue is the batch in order, the fine stage's the pairs the coarse one
         // drained (the slow ones, first: they run beside the others), then the others.
         let coarse = a.degree().max(b.degree()) >= COARSE_MIN_DEGREE;
         let mut stage = if coarse { vec![Stage::Cold; poses.len()] } else { Vec::new() };
         let mut queue: Vec<usize> = (0..poses.len()).collect();
-        let mut drained: Vec<usize> = Vec::new();
         let coarse_residual = F4::splat(COARSE_RESIDUAL);
         for fine in [false, true] {
             if !coarse && !fine {
                 continue;
             }
             if coarse && fine {
-                // The drained pairs (marked `Drained` or `Cold`) first, then the others that go on;
-                // `Left` ones drop out.
-                for &k in &drained {
-                    if let Stage::Resume(h) = stage[k] {
-                        stage[k] = Stage::Drained(h);
-                    }
-                }
-                queue.retain(|&k| matches!(stage[k], Stage::Resume(_)));
-                drained.append(&mut queue);
-                std::mem::swap(&mut queue, &mut drained);
+                // The drained pairs (and the cold ones: taken out before their first evaluation, or
+                // without a start, which the refill skips) first, then the others that go on; `Left`
+                // ones drop out.
+                let first = |s: &Stage| matches!(s, Stage::Drained(_) | Stage::Cold);
+                queue.clear();
+                queue.extend((0..poses.len()).filter(|&k| first(&stage[k])));
+                queue.extend((0..poses.len()).filter(|&k| matches!(stage[k], Stage::Resume(_))));
             }
-            next = 0;
+            let mut next = 0;
             loop {
                 // Refill the empty lanes from the queue; a pair without a separated start is left to the
                 // single-pair solver.
@@ -1306,8 +1298,7 @@ mod lanes {
                         let k = lanes.book.job[i];
                         if k != EMPTY {
                             stage[k] =
-                                if lanes.book.start[i] != 0.0 { Stage::Cold } else { Stage::Resume(lanes.handoff(i)) };
-                            drained.push(k);
+                                if lanes.book.start[i] != 0.0 { Stage::Cold } else { Stage::Drained(lanes.handoff(i)) };
                             lanes.book.job[i] = EMPTY;
                         }
                     }
