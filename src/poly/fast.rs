@@ -660,6 +660,15 @@ mod x86 {
         WideAcc, WideRow, |row, i| _mm256_load_pd(row.0[OFF + i].as_ptr())
     );
 
+    /// The four points of the four-point kernels (`u[i]`: coordinate i of each point), one point
+    /// per lane.
+    #[inline(always)]
+    fn four_points(cpu: Avx2Fma, u: &[[Real; 4]; 3]) -> Point<F64x4> {
+        // SAFETY: each `u[i]` is four readable `f64`; `cpu` proves AVX2.
+        let coordinate = |i: usize| F64x4(unsafe { _mm256_loadu_pd(u[i].as_ptr()) }, cpu);
+        Point { x: coordinate(0), y: coordinate(1), z: coordinate(2) }
+    }
+
     /// `$kernel::<D>(args)` for the runtime degree `$d` (2..=8; larger as 8): the four-point
     /// kernels' dispatch.
     macro_rules! four_point {
@@ -680,9 +689,7 @@ mod x86 {
     /// quantities.
     #[inline(always)]
     fn wide_kernel<const D: usize>(cpu: Avx2Fma, rows: &[WideRow], u: &[[Real; 4]; 3]) -> Soa4Eval {
-        // SAFETY: each `u[i]` is four readable `f64`; `cpu` proves AVX2.
-        let coordinate = |i: usize| F64x4(unsafe { _mm256_loadu_pd(u[i].as_ptr()) }, cpu);
-        let p = Point { x: coordinate(0), y: coordinate(1), z: coordinate(2) };
+        let p = four_points(cpu, u);
         let a = horner_of_degree!(D - 2, WideAcc<0, 4>, cpu, rows, point = p).0;
         let b = horner_of_degree!(D - 2, WideAcc<4, 3>, cpu, rows, point = p).0;
         let c = horner_of_degree!(D - 2, WideAcc<7, 3>, cpu, rows, point = p).0;
@@ -750,9 +757,7 @@ mod x86 {
     /// [`SoaPoly::eval4`] over the pair table ([`PairRow`]): five passes, one per quantity pair.
     #[inline(always)]
     fn pair_kernel<const D: usize>(cpu: Avx2Fma, rows: &[PairRow], u: &[[Real; 4]; 3]) -> Soa4Eval {
-        // SAFETY: each `u[i]` is four readable `f64`; `cpu` proves AVX2.
-        let coordinate = |i: usize| F64x4(unsafe { _mm256_loadu_pd(u[i].as_ptr()) }, cpu);
-        let p = Point { x: coordinate(0), y: coordinate(1), z: coordinate(2) };
+        let p = four_points(cpu, u);
         // SAFETY (both closures): `cpu` proves AVX2.
         let split = |c: F64x4| unsafe {
             Coord2(_mm256_permute4x64_pd::<0b01_00_01_00>(c.0), _mm256_permute4x64_pd::<0b11_10_11_10>(c.0))
@@ -835,9 +840,7 @@ mod x86 {
     /// quantity pairs), the sums widened to `f64` for Euler's identity.
     #[inline(always)]
     fn pair32_kernel<const D: usize>(cpu: Avx2Fma, rows: &[PairRow32], u: &[[Real; 4]; 3]) -> Soa4Eval {
-        // SAFETY: each `u[i]` is four readable `f64`; `cpu` proves AVX2.
-        let coordinate = |i: usize| F64x4(unsafe { _mm256_loadu_pd(u[i].as_ptr()) }, cpu);
-        let p = Point { x: coordinate(0), y: coordinate(1), z: coordinate(2) };
+        let p = four_points(cpu, u);
         // SAFETY (both closures): `cpu` proves AVX2.
         let narrow = |c: F64x4| unsafe {
             let h = _mm256_cvtpd_ps(c.0);
