@@ -478,9 +478,9 @@ mod x86 {
     use std::arch::asm;
     use std::arch::x86_64::{
         __m256, __m256d, _mm256_castps256_ps128, _mm256_cvtpd_ps, _mm256_cvtps_pd, _mm256_extractf128_ps,
-        _mm256_fmadd_pd, _mm256_fmadd_ps, _mm256_load_pd, _mm256_load_ps, _mm256_loadu_pd, _mm256_mul_pd,
-        _mm256_permute2f128_pd, _mm256_permute4x64_pd, _mm256_set1_pd, _mm256_set1_ps, _mm256_set_m128,
-        _mm256_storeu_pd, _mm256_sub_pd,
+        _mm256_fmadd_pd, _mm256_fmadd_ps, _mm256_load_pd, _mm256_load_ps, _mm256_loadu_pd, _mm256_loadu_ps,
+        _mm256_mul_pd, _mm256_permute2f128_pd, _mm256_permute2f128_ps, _mm256_permute4x64_pd, _mm256_set1_pd,
+        _mm256_set1_ps, _mm256_set_m128, _mm256_storeu_pd, _mm256_storeu_ps, _mm256_sub_pd,
     };
 
     /// Proof that the CPU runs AVX2 and FMA: its only constructor is compiled with those features,
@@ -862,12 +862,57 @@ mod x86 {
         four_point!(d, pair32_kernel(Avx2Fma::new(), rows, u))
     }
 
-    /// p, ∇p and ∇²p at the four points `p` from the Horner sums `lo` = [xx, xy, xz, yy, yz] and
+    /// The Horner sums of the five quantity pairs of a single-precision pair table at four points
+    /// (`q`: each coordinate twice, [`Coord32`]): the passes of [`SoaPoly::eval4_rows_f32`], three
+    /// and two quantity pairs ([`Pair32Acc`]). Not inlined: inlined twice into one kernel, LLVM
+    /// interleaves the two groups' passes beyond the 16 AVX registers and spills (the batch ran
+    /// 15–30 % slower so).
+    #[target_feature(enable = "avx2,fma")]
+    #[inline(never)]
+    fn pair32_sums<const D: usize>(rows: &[PairRow32], q: &Point<Coord32>) -> [__m256; 5] {
+        let cpu = Avx2Fma::new();
+        let a = horner_of_degree!(D - 2, Pair32Acc<0, 3>, cpu, rows, point = *q).0;
+        let b = horner_of_degree!(D - 2, Pair32Acc<3, 2>, cpu, rows, point = *q).0;
+        [a[0], a[1], a[2], b[0], b[1]]
+    }
+
+    /// [`SoaPoly::eval8_rows_f32`] over the single-precision pair table: [`pair32_sums`] for
+    /// points 0–3 and 4–7, then Euler's identity in eight `f32` lanes.
+    #[inline(always)]
+    fn pair32x8_kernel<const D: usize>(cpu: Avx2Fma, rows: &[PairRow32], u: &[[f32; 8]; 3]) -> Soa8Eval32 {
+        // SAFETY (all four closures): each `u[i]` is eight readable `f32`; `cpu` proves AVX2.
+        let coordinate = |i: usize| unsafe { _mm256_loadu_ps(u[i].as_ptr()) };
+        let (x, y, z) = (coordinate(0), coordinate(1), coordinate(2));
+        let lo = |c: __m256| Coord32(unsafe { _mm256_permute2f128_ps::<0x00>(c, c) });
+        let hi = |c: __m256| Coord32(unsafe { _mm256_permute2f128_ps::<0x11>(c, c) });
+        // SAFETY: `cpu` proves AVX2 and FMA.
+        let s0 = unsafe { pair32_sums::<D>(rows, &Point { x: lo(x), y: lo(y), z: lo(z) }) };
+        // SAFETY: as above.
+        let s1 = unsafe { pair32_sums::<D>(rows, &Point { x: hi(x), y: hi(y), z: hi(z) }) };
+        // [q(p₀…₃), q'(p₀…₃)] and [q(p₄…₇), q'(p₄…₇)] → [q(p₀…₇)], [q'(p₀…₇)].
+        let unzip = |k: usize| unsafe {
+            [_mm256_permute2f128_ps::<0x20>(s0[k], s1[k]), _mm256_permute2f128_ps::<0x31>(s0[k], s1[k])]
+        };
+        let (a, b, c, e, f) = (unzip(0), unzip(1), unzip(2), unzip(3), unzip(4));
+        euler8::<D>(cpu, [x, y, z], [a[0], a[1], b[0], b[1], c[0]], [c[1], e[0], e[1], f[0], f[1]])
+    }
+
+    /// [`SoaPoly::eval8_rows_f32`] over the single-precision pair table, for degree `d` (2..=8).
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) fn eval8_pair32(d: usize, rows: &[PairRow32], u: &[[f32; 8]; 3]) -> Soa8Eval32 {
+        four_point!(d, pair32x8_kernel(Avx2Fma::new(), rows, u))
+    }
+
+    /// p and ∇p at the four points (x, y, z) from the Horner sums `lo` = [xx, xy, xz, yy, yz] and
     /// `hi` = [zz, r_x, r_y, r_z, w] of a [`SoaPoly`] row table: Euler's identity as in
     /// `full_kernel`, four points per instruction.
     #[inline(always)]
-    fn euler4<const D: usize>(_cpu: Avx2Fma, p: Point<F64x4>, lo: [__m256d; 5], hi: [__m256d; 5]) -> Soa4Eval {
-        let (x, y, z) = (p.x.0, p.y.0, p.z.0);
+    fn euler_value_gradient<const D: usize>(
+        _cpu: Avx2Fma,
+        [x, y, z]: [__m256d; 3],
+        lo: [__m256d; 5],
+        hi: [__m256d; 5],
+    ) -> (__m256d, [__m256d; 3]) {
         // SAFETY: `_cpu` proves AVX2 and FMA.
         unsafe {
             let (xx, xy, xz, yy, yz, zz) = (lo[0], lo[1], lo[2], lo[3], lo[4], hi[0]);
@@ -886,6 +931,17 @@ mod x86 {
                 k2,
                 hi[4],
             );
+            (value, g)
+        }
+    }
+
+    /// p, ∇p and ∇²p at the four points `p` from the Horner sums `lo` and `hi`
+    /// ([`euler_value_gradient`]).
+    #[inline(always)]
+    fn euler4<const D: usize>(cpu: Avx2Fma, p: Point<F64x4>, lo: [__m256d; 5], hi: [__m256d; 5]) -> Soa4Eval {
+        let (value, g) = euler_value_gradient::<D>(cpu, [p.x.0, p.y.0, p.z.0], lo, hi);
+        // SAFETY: `cpu` proves AVX2.
+        unsafe {
             // Element by element, no array `map`: a closure called through `map` may be compiled
             // out of line without AVX (measured: 42 instead of 22 ns per point at 2d = 6).
             let mut out = Soa4Eval::default();
@@ -893,8 +949,48 @@ mod x86 {
             for (o, v) in out.gradient.iter_mut().zip(g) {
                 _mm256_storeu_pd(o.as_mut_ptr(), v);
             }
-            for (o, v) in out.hessian.iter_mut().zip([xx, xy, xz, yy, yz, zz]) {
+            for (o, v) in out.hessian.iter_mut().zip([lo[0], lo[1], lo[2], lo[3], lo[4], hi[0]]) {
                 _mm256_storeu_pd(o.as_mut_ptr(), v);
+            }
+            out
+        }
+    }
+
+    /// p, ∇p and ∇²p at eight points in single precision from the `f32` Horner sums `lo` and `hi`
+    /// (eight lanes each): the Hessian as summed, p and ∇p by [`euler_value_gradient`] in double
+    /// precision, four points at a time, then rounded. (Euler's identity in `f32` cancels: its
+    /// hand-offs cost the batch's fine stage 8 % more double-precision evaluations at 2d = 8.)
+    #[inline(always)]
+    fn euler8<const D: usize>(cpu: Avx2Fma, p: [__m256; 3], lo: [__m256; 5], hi: [__m256; 5]) -> Soa8Eval32 {
+        // SAFETY: `cpu` proves AVX2 (all three closures and the block).
+        let widen = |v: __m256| unsafe {
+            [_mm256_cvtps_pd(_mm256_castps256_ps128(v)), _mm256_cvtps_pd(_mm256_extractf128_ps::<1>(v))]
+        };
+        let narrow = |a: __m256d, b: __m256d| unsafe { _mm256_set_m128(_mm256_cvtpd_ps(b), _mm256_cvtpd_ps(a)) };
+        // Written out (no array `map` over registers, see `euler4`).
+        let (x, y, z) = (widen(p[0]), widen(p[1]), widen(p[2]));
+        let l = [widen(lo[0]), widen(lo[1]), widen(lo[2]), widen(lo[3]), widen(lo[4])];
+        let h = [widen(hi[0]), widen(hi[1]), widen(hi[2]), widen(hi[3]), widen(hi[4])];
+        let (v0, g0) = euler_value_gradient::<D>(
+            cpu,
+            [x[0], y[0], z[0]],
+            [l[0][0], l[1][0], l[2][0], l[3][0], l[4][0]],
+            [h[0][0], h[1][0], h[2][0], h[3][0], h[4][0]],
+        );
+        let (v1, g1) = euler_value_gradient::<D>(
+            cpu,
+            [x[1], y[1], z[1]],
+            [l[0][1], l[1][1], l[2][1], l[3][1], l[4][1]],
+            [h[0][1], h[1][1], h[2][1], h[3][1], h[4][1]],
+        );
+        unsafe {
+            let mut out = Soa8Eval32::default();
+            _mm256_storeu_ps(out.value.as_mut_ptr(), narrow(v0, v1));
+            for (k, o) in out.gradient.iter_mut().enumerate() {
+                _mm256_storeu_ps(o.as_mut_ptr(), narrow(g0[k], g1[k]));
+            }
+            for (o, v) in out.hessian.iter_mut().zip([lo[0], lo[1], lo[2], lo[3], lo[4], hi[0]]) {
+                _mm256_storeu_ps(o.as_mut_ptr(), v);
             }
             out
         }
@@ -913,6 +1009,18 @@ pub struct Soa4Eval {
     pub gradient: [[Real; 4]; 3],
     /// ∂ₓₓp, ∂ₓᵧp, ∂ₓ_zp, ∂ᵧᵧp, ∂ᵧ_zp, ∂_z_zp, each at the four points.
     pub hessian: [[Real; 4]; 6],
+}
+
+/// p, ∇p and ∇²p at eight points in single precision, one array entry per point (structure of
+/// arrays): [`SoaPoly::eval8_rows_f32`].
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Soa8Eval32 {
+    /// p at each point.
+    pub value: [f32; 8],
+    /// ∂ₓp, ∂ᵧp, ∂_zp, each at the eight points.
+    pub gradient: [[f32; 8]; 3],
+    /// ∂ₓₓp, ∂ₓᵧp, ∂ₓ_zp, ∂ᵧᵧp, ∂ᵧ_zp, ∂_z_zp, each at the eight points.
+    pub hessian: [[f32; 8]; 6],
 }
 
 /// A polynomial's full-evaluation table laid out for four points per pass: the kernel of the batch
@@ -1051,6 +1159,35 @@ impl SoaPoly {
             return unsafe { x86::eval4_pair32(self.fast.degree, &self.single, u) };
         }
         self.eval4_rows(u)
+    }
+
+    /// p, ∇p and ∇²p at the eight points `u` (normalized coordinates, `u[i]`: coordinate i of
+    /// each point) in single precision throughout: the single-precision table's Horner sums for
+    /// two groups of four points per eight-lane multiply–add (the multiply–adds of
+    /// [`SoaPoly::eval4_rows_f32`] per point), Euler's identity in eight `f32` lanes. Relative
+    /// errors of order 10⁻⁶–10⁻⁵ on the project's bodies: for the batch solver's coarse stage
+    /// ([`crate::query::batch`]), never for an answer. Elsewhere than on AVX2 + FMA, two
+    /// double-precision [`SoaPoly::eval4_rows`] rounded to `f32`.
+    pub fn eval8_rows_f32(&self, u: &[[f32; 8]; 3]) -> Soa8Eval32 {
+        #[cfg(target_arch = "x86_64")]
+        if self.fast.degree >= 2 && has_fma() {
+            // SAFETY: the CPU supports AVX2 and FMA (checked at run time just above).
+            return unsafe { x86::eval8_pair32(self.fast.degree, &self.single, u) };
+        }
+        let mut out = Soa8Eval32::default();
+        for half in 0..2 {
+            let e = self.eval4_rows(&std::array::from_fn(|c| std::array::from_fn(|i| u[c][4 * half + i].into())));
+            for i in 0..4 {
+                out.value[4 * half + i] = e.value[i] as f32;
+                for c in 0..3 {
+                    out.gradient[c][4 * half + i] = e.gradient[c][i] as f32;
+                }
+                for c in 0..6 {
+                    out.hessian[c][4 * half + i] = e.hessian[c][i] as f32;
+                }
+            }
+        }
+        out
     }
 
     /// p, ∇p and ∇²p at the four points `u` (normalized coordinates).
@@ -1351,6 +1488,39 @@ mod tests {
         #[cfg(target_arch = "x86_64")]
         if has_fma() {
             assert!(largest > 1e-12, "no single-precision rounding seen ({largest:e})");
+        }
+    }
+
+    #[test]
+    fn eight_point_single_precision_kernel_is_within_f32_rounding_of_the_reference() {
+        // SoaPoly::eval8_rows_f32 (the batch's coarse stage) against the reference evaluator at
+        // every degree 2–8, random coefficients in [−1, 1] and points in [−1.5, 1.5]³ (given in
+        // f32, so the reference is taken at the rounded points): within 10⁻⁶ of the terms'
+        // magnitude bound, as `single_precision_table_is_within_f32_rounding_of_the_reference`
+        // asserts for the four-point kernel (value, gradient, Hessian at all eight lanes).
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(10);
+        for degree in 2..=MAX_DEGREE {
+            let coeffs: Vec<Real> = (0..basis_len(3, degree)).map(|_| rng.random_range(-1.0..1.0)).collect();
+            let magnitudes = Polynomial::from_coefficients(degree, coeffs.iter().map(|c| c.abs()).collect()).unwrap();
+            let p = Polynomial::from_coefficients(degree, coeffs).unwrap();
+            let soa = SoaPoly::new(&FastPoly::new(&p));
+            for _ in 0..10 {
+                let u: [[f32; 8]; 3] = std::array::from_fn(|_| std::array::from_fn(|_| rng.random_range(-1.5..1.5)));
+                let e = soa.eval8_rows_f32(&u);
+                for (i, value) in e.value.iter().enumerate() {
+                    let point = Vector3::new(u[0][i].into(), u[1][i].into(), u[2][i].into());
+                    let (r, m) = (p.eval(&point), magnitudes.eval(&point.abs()));
+                    let bound = 1.0 + m.value + m.gradient.amax() + m.hessian.amax();
+                    let mut worst = (r.value - Real::from(*value)).abs();
+                    for j in 0..3 {
+                        worst = worst.max((r.gradient[j] - Real::from(e.gradient[j][i])).abs());
+                    }
+                    for (k, (a, b)) in [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)].into_iter().enumerate() {
+                        worst = worst.max((r.hessian[(a, b)] - Real::from(e.hessian[k][i])).abs());
+                    }
+                    assert!(worst <= 1e-6 * bound, "degree {degree}, lane {i}: error {worst:e} of bound {bound:e}");
+                }
+            }
         }
     }
 

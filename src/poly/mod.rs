@@ -22,7 +22,7 @@ pub mod radial;
 pub mod support;
 
 pub(crate) use fast::SymEval;
-pub use fast::{FastPoly, Soa4Eval, SoaPoly};
+pub use fast::{FastPoly, Soa4Eval, Soa8Eval32, SoaPoly};
 pub use polynomial::{Eval, Polynomial, MAX_DEGREE};
 pub use radial::RadialTable;
 pub use support::{SupportBound, SupportTable};

@@ -16,23 +16,44 @@
 //! fail) on the single-pair solver
 //! ```
 //!
-//! Pairs with a body of degree 2d ≥ 6 run in two stages (twelfth session). The **coarse stage**
-//! evaluates the trial points in single precision ([`crate::poly::SoaPoly::eval4_rows_f32`]: two
-//! quantities of four points per eight-lane `f32` multiply–add, half the multiply–adds, 16.7
-//! instead of 32.4 ns per point at 2d = 8 and 8.1 instead of 17.5 at 2d = 6 in
-//! `examples/kernel_timing`) until a lane's residual is below 10⁻³ of the stationarity scale; the
-//! lane hands its point, multipliers and Newton step to the **fine stage**, which goes on in double
-//! precision from that step's trial point to the same tolerance. The single-precision kernel errs
-//! by at most 1.1·10⁻⁵ relative on the project's bodies (`kernel_timing` prints it), so the coarse
-//! steps are Newton steps, and two double-precision steps finish a pair as before; answers agree
-//! with the single-pair ones to the KKT tolerance (2·10⁻¹¹ m on the chair / human poses). When the
-//! coarse queue runs dry the lanes still running hand off as they are and run first in the fine
-//! stage, beside the others (one slow pair took 85 rounds alone otherwise). Measured on the
-//! chair / human cold poses (`examples/cold_profile D 20 batch`, the previous build alternated
-//! twice in one session, Intel Xeon): the rate over single queries went 1.61–1.64 → 1.82–1.83× at
-//! 2d = 8 and 1.89–1.93 → 2.04–2.15× at 2d = 6; instructions per pair (callgrind) 8740 → 7297 and
-//! 4600 → 4472. At 2d = 2 the stage cost more than it saved (0.249–0.253 against 0.230–0.239 µs per
-//! pair) and at 2d = 4 as much, so pairs of lower degree run the fine stage alone.
+//! Pairs with a body of degree 2d ≥ 4 run in two stages (2d = 2: the fine stage alone, see
+//! `lanes::COARSE_MIN_DEGREE`). The **coarse stage** (`lanes::coarse`, fourteenth session) takes
+//! eight pairs per pass: its lane arithmetic runs in eight-lane `f32` registers (the same
+//! instructions as four-lane `f64` ones, twice the pairs) and its points are evaluated in single
+//! precision ([`crate::poly::SoaPoly::eval8_rows_f32`]: the single-precision table's Horner sums,
+//! two quantities of four points per eight-lane multiply–add, half the multiply–adds of the
+//! double-precision kernel; p and ∇p from them by Euler's identity in double precision), until a
+//! lane's residual is below 10⁻³ of the stationarity scale. The lane then hands its point,
+//! multipliers and Newton step to the **fine stage** (four `f64` lanes, the double-precision
+//! kernel), which goes on from that step's trial point to the same tolerance. The single-precision
+//! kernel errs by at most 1.1·10⁻⁵ relative on the project's bodies (`kernel_timing` prints it),
+//! so the coarse steps are Newton steps, and two or three double-precision steps finish a pair;
+//! answers agree with the single-pair ones to the KKT tolerance (2·10⁻¹¹ m on the chair / human
+//! poses). When the coarse queue runs dry the lanes still running hand off as they are and run
+//! first in the fine stage, beside the others (one slow pair took 85 rounds alone otherwise); a
+//! lane that ends the coarse stage otherwise (nonfinite, singular, stalled, at the cap) starts
+//! again in the fine stage from its cold start, so single precision never decides a pair.
+//!
+//! A pair's last point needs no Hessians: it is only checked. Where a fine-stage lane accepts a
+//! point at a residual below 10⁻⁵ of the stationarity scale (`lanes::VERIFY_RESIDUAL`), Newton's
+//! quadratic convergence puts its next trial point below the tolerance, so that point is checked
+//! at once, for that lane alone, by the single-pair solver's value + gradient kernels
+//! (`Lanes::verify`: 19 instead of 32 ns per point at 2d = 8), and the lane gives its answer and
+//! takes the next pair; a trial point that fails the check (10 of about 1440 per 300-pair batch at
+//! 2d = 8) is evaluated with its Hessians in the next round as before. On the chair / human poses
+//! this took the fine stage from 171 to 100 rounds per batch at 2d = 8 (149 to 77 at 2d = 6) and
+//! the batch's instructions down 6.7 % at 2d = 8 (callgrind). Only pairs with a body of 2d = 8
+//! run the checks: below, the four-point kernel is cheap beside a check's scalar work
+//! (`lanes::VERIFY_MIN_DEGREE`).
+//!
+//! History of the stages (`examples/cold_profile D 20 batch`, Intel Xeon, builds alternated in one
+//! session): the twelfth session's coarse stage ran four pairs per pass with `f64` lane arithmetic
+//! and took the batch's rate over single queries from 1.61–1.64 to 1.82–1.83× at 2d = 8 and from
+//! 1.89–1.93 to 2.04–2.15× at 2d = 6 (instructions per pair 8740 → 7297 and 4600 → 4472); at
+//! 2d = 2 and 4 it cost as much as it saved, so lower degrees ran the fine stage alone. On eight
+//! `f32` lanes the stage pays from 2d = 4 (see `lanes::coarse` for the figures). Euler's
+//! identity in `f32` instead of `f64` saved kernel work but its hand-offs cost the fine stage 8 %
+//! more double-precision evaluations at 2d = 8 (the batch ran 5 % slower).
 //!
 //! The lanes run the single-pair solver's cold separated Newton run ([`distance`]: same start, same
 //! KKT system, same line search and tolerance, same 30-iteration cap) with one difference: every
@@ -137,6 +158,10 @@ mod lanes {
     use crate::poly::{RadialTable, SupportTable};
     use std::arch::x86_64::*;
 
+    mod coarse;
+    mod simd;
+    use simd::*;
+
     /// [`super::cold_distances`] on the lanes, compiled for AVX2 + FMA (the 4-lane arithmetic below becomes
     /// one instruction per operation).
     #[target_feature(enable = "avx2,fma")]
@@ -158,365 +183,6 @@ mod lanes {
     #[target_feature(enable = "avx2,fma")]
     pub(super) fn cold_starts_avx2(a: &Body, b: &Body, rels: &[Isometry3]) -> Vec<Option<(Vector3, Vector3)>> {
         cold_starts(a, b, rels)
-    }
-
-    /// Four reals, one per lane, in an AVX register.
-    ///
-    /// Every method runs AVX / AVX2 / FMA instructions: values of this type exist only inside
-    /// [`lanes_avx2`], which runs only on CPUs with AVX2 and FMA (the invariant of the `unsafe` blocks
-    /// below), and the methods are inlined into it.
-    #[derive(Clone, Copy, Debug)]
-    struct F4(__m256d);
-
-    impl Default for F4 {
-        #[inline(always)]
-        fn default() -> Self {
-            Self::splat(0.0)
-        }
-    }
-
-    impl F4 {
-        #[inline(always)]
-        fn splat(v: Real) -> Self {
-            // SAFETY: see the type's docs.
-            Self(unsafe { _mm256_set1_pd(v) })
-        }
-
-        #[inline(always)]
-        fn load(v: &[Real; 4]) -> Self {
-            // SAFETY: `v` is four readable reals; see the type's docs.
-            Self(unsafe { _mm256_loadu_pd(v.as_ptr()) })
-        }
-
-        #[inline(always)]
-        fn to_array(self) -> [Real; 4] {
-            let mut out = [0.0; 4];
-            // SAFETY: `out` is four writable reals; see the type's docs.
-            unsafe { _mm256_storeu_pd(out.as_mut_ptr(), self.0) };
-            out
-        }
-
-        /// self · b + c, fused.
-        #[inline(always)]
-        fn mul_add(self, b: Self, c: Self) -> Self {
-            // SAFETY: see the type's docs.
-            Self(unsafe { _mm256_fmadd_pd(self.0, b.0, c.0) })
-        }
-
-        #[inline(always)]
-        fn abs(self) -> Self {
-            // SAFETY: see the type's docs (clears the sign bits).
-            Self(unsafe { _mm256_andnot_pd(_mm256_set1_pd(-0.0), self.0) })
-        }
-
-        #[inline(always)]
-        fn sqrt(self) -> Self {
-            // SAFETY: see the type's docs.
-            Self(unsafe { _mm256_sqrt_pd(self.0) })
-        }
-
-        /// Lane-wise floor.
-        #[inline(always)]
-        fn floor(self) -> Self {
-            // SAFETY: see the type's docs.
-            Self(unsafe { _mm256_floor_pd(self.0) })
-        }
-
-        /// Lane-wise min without NaN handling (the second operand where either is NaN).
-        #[inline(always)]
-        fn min(self, o: Self) -> Self {
-            // SAFETY: see the type's docs.
-            Self(unsafe { _mm256_min_pd(self.0, o.0) })
-        }
-
-        /// Lane-wise max without NaN handling (see [`super::super::fast_eval::max_plain`]).
-        #[inline(always)]
-        fn max(self, o: Self) -> Self {
-            // SAFETY: see the type's docs.
-            Self(unsafe { _mm256_max_pd(self.0, o.0) })
-        }
-
-        /// Lanes where self ≤ o (false where either is NaN).
-        #[inline(always)]
-        fn le(self, o: Self) -> M4 {
-            // SAFETY: see the type's docs.
-            M4(unsafe { _mm256_cmp_pd::<_CMP_LE_OQ>(self.0, o.0) })
-        }
-
-        /// Lanes where self < o (false where either is NaN).
-        #[inline(always)]
-        fn lt(self, o: Self) -> M4 {
-            // SAFETY: see the type's docs.
-            M4(unsafe { _mm256_cmp_pd::<_CMP_LT_OQ>(self.0, o.0) })
-        }
-
-        /// Lanes where self is finite.
-        #[inline(always)]
-        fn finite(self) -> M4 {
-            self.abs().lt(F4::splat(Real::INFINITY))
-        }
-
-        /// `a` where `m`, else `b`.
-        #[inline(always)]
-        fn select(m: M4, a: Self, b: Self) -> Self {
-            // SAFETY: see the type's docs.
-            Self(unsafe { _mm256_blendv_pd(b.0, a.0, m.0) })
-        }
-    }
-
-    macro_rules! f4_op {
-        ($tr:ident, $f:ident, $intrinsic:ident) => {
-            impl std::ops::$tr for F4 {
-                type Output = F4;
-                #[inline(always)]
-                fn $f(self, o: F4) -> F4 {
-                    // SAFETY: see the type's docs.
-                    F4(unsafe { $intrinsic(self.0, o.0) })
-                }
-            }
-        };
-    }
-    f4_op!(Add, add, _mm256_add_pd);
-    f4_op!(Sub, sub, _mm256_sub_pd);
-    f4_op!(Mul, mul, _mm256_mul_pd);
-    f4_op!(Div, div, _mm256_div_pd);
-
-    impl std::ops::Neg for F4 {
-        type Output = F4;
-        #[inline(always)]
-        fn neg(self) -> F4 {
-            // SAFETY: see the type's docs (flips the sign bits).
-            F4(unsafe { _mm256_xor_pd(_mm256_set1_pd(-0.0), self.0) })
-        }
-    }
-
-    /// A lane mask (all bits of a lane set or clear), as the AVX comparisons make it; see [`F4`].
-    #[derive(Clone, Copy, Debug)]
-    struct M4(__m256d);
-
-    impl Default for M4 {
-        #[inline(always)]
-        fn default() -> Self {
-            // SAFETY: see [`F4`]'s docs.
-            Self(unsafe { _mm256_setzero_pd() })
-        }
-    }
-
-    impl M4 {
-        #[inline(always)]
-        fn from_bools(b: [bool; 4]) -> Self {
-            let m = |v: bool| if v { -1i64 } else { 0 };
-            // SAFETY: see [`F4`]'s docs.
-            Self(unsafe { _mm256_castsi256_pd(_mm256_set_epi64x(m(b[3]), m(b[2]), m(b[1]), m(b[0]))) })
-        }
-
-        #[inline(always)]
-        fn and(self, o: Self) -> Self {
-            // SAFETY: see [`F4`]'s docs.
-            Self(unsafe { _mm256_and_pd(self.0, o.0) })
-        }
-
-        #[inline(always)]
-        fn or(self, o: Self) -> Self {
-            // SAFETY: see [`F4`]'s docs.
-            Self(unsafe { _mm256_or_pd(self.0, o.0) })
-        }
-
-        #[inline(always)]
-        fn not(self) -> Self {
-            // SAFETY: see [`F4`]'s docs.
-            Self(unsafe { _mm256_xor_pd(self.0, _mm256_castsi256_pd(_mm256_set1_epi64x(-1))) })
-        }
-
-        /// Bit i set where lane i is.
-        #[inline(always)]
-        fn bits(self) -> u32 {
-            // SAFETY: see [`F4`]'s docs.
-            unsafe { _mm256_movemask_pd(self.0) as u32 }
-        }
-    }
-
-    /// A 3-vector per lane.
-    #[derive(Clone, Copy, Debug, Default)]
-    struct V3([F4; 3]);
-
-    impl V3 {
-        /// The same vector in every lane.
-        #[inline(always)]
-        fn splat(v: &Vector3) -> Self {
-            Self([F4::splat(v.x), F4::splat(v.y), F4::splat(v.z)])
-        }
-
-        /// Lane `i` as a vector.
-        #[inline(always)]
-        fn lane(a: &[[Real; 4]; 3], i: usize) -> Vector3 {
-            Vector3::new(a[0][i], a[1][i], a[2][i])
-        }
-
-        #[inline(always)]
-        fn add(self, o: Self) -> Self {
-            Self([self.0[0] + o.0[0], self.0[1] + o.0[1], self.0[2] + o.0[2]])
-        }
-
-        #[inline(always)]
-        fn sub(self, o: Self) -> Self {
-            Self([self.0[0] - o.0[0], self.0[1] - o.0[1], self.0[2] - o.0[2]])
-        }
-
-        #[inline(always)]
-        fn scale(self, s: F4) -> Self {
-            Self([self.0[0] * s, self.0[1] * s, self.0[2] * s])
-        }
-
-        /// self · s + c, fused.
-        #[inline(always)]
-        fn mul_add(self, s: F4, c: Self) -> Self {
-            Self([self.0[0].mul_add(s, c.0[0]), self.0[1].mul_add(s, c.0[1]), self.0[2].mul_add(s, c.0[2])])
-        }
-
-        #[inline(always)]
-        fn neg(self) -> Self {
-            Self([-self.0[0], -self.0[1], -self.0[2]])
-        }
-
-        #[inline(always)]
-        fn load(v: &[[Real; 4]; 3]) -> Self {
-            Self([F4::load(&v[0]), F4::load(&v[1]), F4::load(&v[2])])
-        }
-
-        #[inline(always)]
-        fn to_arrays(self) -> [[Real; 4]; 3] {
-            [self.0[0].to_array(), self.0[1].to_array(), self.0[2].to_array()]
-        }
-
-        /// `a` where `m`, else `b`.
-        #[inline(always)]
-        fn select(m: M4, a: Self, b: Self) -> Self {
-            Self([F4::select(m, a.0[0], b.0[0]), F4::select(m, a.0[1], b.0[1]), F4::select(m, a.0[2], b.0[2])])
-        }
-
-        #[inline(always)]
-        fn dot(self, o: Self) -> F4 {
-            self.0[2].mul_add(o.0[2], self.0[1].mul_add(o.0[1], self.0[0] * o.0[0]))
-        }
-    }
-
-    /// A symmetric 3 × 3 matrix per lane, upper triangle [xx, xy, xz, yy, yz, zz].
-    type S3 = [F4; 6];
-
-    /// S v.
-    #[inline(always)]
-    fn sym_mul(s: &S3, v: V3) -> V3 {
-        let [xx, xy, xz, yy, yz, zz] = *s;
-        let [x, y, z] = v.0;
-        V3([
-            xz.mul_add(z, xy.mul_add(y, xx * x)),
-            yz.mul_add(z, yy.mul_add(y, xy * x)),
-            zz.mul_add(z, yz.mul_add(y, xz * x)),
-        ])
-    }
-
-    /// A general 3 × 3 matrix per lane, row-major `m[3 i + j]`.
-    type M3 = [F4; 9];
-
-    /// M v.
-    #[inline(always)]
-    fn mat_mul(m: &M3, v: V3) -> V3 {
-        let [x, y, z] = v.0;
-        V3([
-            m[2].mul_add(z, m[1].mul_add(y, m[0] * x)),
-            m[5].mul_add(z, m[4].mul_add(y, m[3] * x)),
-            m[8].mul_add(z, m[7].mul_add(y, m[6] * x)),
-        ])
-    }
-
-    /// Mᵀ v (the transpose is a renaming of registers).
-    #[inline(always)]
-    fn mat_t_mul(m: &M3, v: V3) -> V3 {
-        mat_mul(&[m[0], m[3], m[6], m[1], m[4], m[7], m[2], m[5], m[8]], v)
-    }
-
-    /// Mᵀ H M for a symmetric H (upper triangle; [`super::super::fast_eval`]'s congruence, per lane).
-    #[inline(always)]
-    fn congruence(m: &M3, h: &S3) -> S3 {
-        let (a0, a1, a2) = (V3([m[0], m[3], m[6]]), V3([m[1], m[4], m[7]]), V3([m[2], m[5], m[8]]));
-        let (h0, h1, h2) = (sym_mul(h, a0), sym_mul(h, a1), sym_mul(h, a2));
-        [a0.dot(h0), a0.dot(h1), a0.dot(h2), a1.dot(h1), a1.dot(h2), a2.dot(h2)]
-    }
-
-    /// `d·I + k·S`.
-    #[inline(always)]
-    fn shifted(s: &S3, k: F4, d: F4) -> S3 {
-        let [xx, xy, xz, yy, yz, zz] = *s;
-        [k.mul_add(xx, d), k * xy, k * xz, k.mul_add(yy, d), k * yz, k.mul_add(zz, d)]
-    }
-
-    /// Inverse of a symmetric 3 × 3 matrix by cofactors per lane, with the lanes where it is (nearly)
-    /// singular marked false ([`super::super::fast_eval::inverse_sym3`]'s test, per lane).
-    #[inline(always)]
-    fn inverse_sym(m: &S3) -> (S3, M4) {
-        let [a, b, c, d, e, f] = *m;
-        let c00 = d.mul_add(f, -(e * e));
-        let c01 = c.mul_add(e, -(b * f));
-        let c02 = b.mul_add(e, -(c * d));
-        let det = a.mul_add(c00, b.mul_add(c01, c * c02));
-        let s = a.abs().max(b.abs()).max(c.abs().max(d.abs())).max(e.abs().max(f.abs()));
-        let ok = (F4::splat(1e-14) * s * s * s).lt(det.abs()).and(det.finite()).and(F4::default().lt(s));
-        let k = F4::splat(1.0) / det;
-        let inv = [
-            c00 * k,
-            c01 * k,
-            c02 * k,
-            a.mul_add(f, -(c * c)) * k,
-            b.mul_add(c, -(a * e)) * k,
-            a.mul_add(d, -(b * b)) * k,
-        ];
-        (inv, ok)
-    }
-
-    /// The Newton step of the distance KKT system per lane ([`super::super::fast_eval::solve_kkt8`]'s block
-    /// elimination): (dx, dy, [dλa, dλb]) and the lanes where it exists.
-    #[allow(clippy::too_many_arguments)]
-    #[inline(always)]
-    fn solve_kkt8(wa: &S3, wb: &S3, ga: V3, gb: V3, ra: V3, rb: V3, ca: F4, cb: F4) -> (V3, V3, [F4; 2], M4) {
-        let two = F4::splat(2.0);
-        let (ai, ok_a) = inverse_sym(wa);
-        let four = F4::splat(4.0);
-        let schur: S3 = [
-            wb[0] - four * ai[0],
-            wb[1] - four * ai[1],
-            wb[2] - four * ai[2],
-            wb[3] - four * ai[3],
-            wb[4] - four * ai[4],
-            wb[5] - four * ai[5],
-        ];
-        let (si, ok_s) = inverse_sym(&schur);
-        // The scalar step's six products (see its comments): no p₀, p₁, p₂, and s₂₁ = s₁₂.
-        let t0 = sym_mul(&ai, ra);
-        let t1 = sym_mul(&ai, ga);
-        let q0 = sym_mul(&si, t0.mul_add(two, rb));
-        let q1 = sym_mul(&si, t1).scale(two);
-        let q2 = sym_mul(&si, gb);
-        let (s11, s12, s22) = (q1.mul_add(two, ga).dot(t1), two * t1.dot(q2), gb.dot(q2));
-        let det = s11 * s22 - s12 * s12;
-        let scale = (s11.abs() + s12.abs()) * (s12.abs() + s22.abs());
-        let (h1, h2) = (ca - (ga.dot(t0) + two * t1.dot(q0)), cb - gb.dot(q0));
-        let l1 = (s22 * h1 - s12 * h2) / det;
-        let l2 = (s11 * h2 - s12 * h1) / det;
-        // −dy = q₀ + dλa q₁ + dλb q₂; −dx = t₀ + dλa t₁ + 2 Ai (−dy) (Wa dx − 2dy + ga dλa = −ra).
-        let dy = q1.mul_add(l1, q0);
-        let dy = q2.mul_add(l2, dy);
-        let dx = t1.mul_add(l1, t0);
-        let dx = sym_mul(&ai, dy).mul_add(two, dx);
-        let (dx, dy) = (dx.neg(), dy.neg());
-        let sum = dx.0[0] + dx.0[1] + dx.0[2] + dy.0[0] + dy.0[1] + dy.0[2] + l1 + l2;
-        let ok = ok_a
-            .and(ok_s)
-            .and((F4::splat(1e-14) * scale).lt(det.abs()))
-            .and(F4::default().lt(scale))
-            .and(det.finite())
-            .and(sum.finite());
-        (dx, dy, [l1, l2], ok)
     }
 
     /// Cells per cube-face side of both tables the cold starts read ([`RADIAL_GRID`] =
@@ -761,6 +427,25 @@ mod lanes {
         out
     }
 
+    /// The separated answer of a lane's converged run `out` (frame of body A, whose pose is
+    /// `pose_a`; `rel`: B's pose in A's frame): with its warm start, or sharing `empty`. Inlined:
+    /// out of line it would run without the AVX target features.
+    #[inline(always)]
+    fn lane_answer(
+        pose_a: &Isometry3,
+        rel: &Isometry3,
+        out: KktOut,
+        warm_starts: bool,
+        empty: &std::sync::Arc<DistanceWarmStart>,
+    ) -> DistanceResult {
+        let iterations = out.iterations;
+        if warm_starts {
+            finish(pose_a, rel, out, iterations, false, &GrowthWarmStart::default(), None)
+        } else {
+            separated_answer(pose_a, &out, iterations, false, empty.clone())
+        }
+    }
+
     /// Fewest pairs left without an answer worth the growth lanes (below, the single-pair solver):
     /// as for the distance lanes ([`super::MIN_LANE_BATCH`]), a round costs two four-point passes
     /// (about 88 ns at 2d = 6) whatever the lanes hold, against two one-point evaluations (about
@@ -919,6 +604,73 @@ mod lanes {
         }
     }
 
+    impl Lanes {
+        /// Lane `i`'s trial point at step length 1 from its accepted point, checked by value +
+        /// gradient evaluations of both bodies (the single-pair kernels, double precision): the
+        /// point, its multipliers and ∞-norm KKT residual as a converged run's end
+        /// (`iterations` Newton steps) when it is stationary (the single-pair solver's test:
+        /// ‖r‖∞ ≤ `tolerance`·(1 + 2‖x − y‖)), else `None` (the lane goes on as it was).
+        #[inline(always)]
+        fn verify(&self, i: usize, a: &Body, b: &Body, iterations: usize, tolerance: Real) -> Option<KktOut> {
+            let lane = |v: &[[Real; 4]; 3], d: &[[Real; 4]; 3]| {
+                Vector3::new(v[0][i] + d[0][i], v[1][i] + d[1][i], v[2][i] + d[2][i])
+            };
+            let (x, y) = (lane(&self.x, &self.dx), lane(&self.y, &self.dy));
+            let lam = [self.lam[0][i] + self.dl[0][i], self.lam[1][i] + self.dl[1][i]];
+            let (book, k) = (&self.book, 1.0 / a.scale());
+            let m = nalgebra::Matrix3::from_fn(|r, c| book.mb[3 * r + c][i]);
+            let ub = m * y + Vector3::new(book.cb[0][i], book.cb[1][i], book.cb[2][i]);
+            // SAFETY: the lanes run only on CPUs with AVX2 and FMA (`lanes_avx2`).
+            let ((va, ga), (vb, gb)) = unsafe {
+                (
+                    a.fast_polynomial().value_gradient_avx2(&((x - a.center()) * k)),
+                    b.fast_polynomial().value_gradient_avx2(&ub),
+                )
+            };
+            let d2 = (x - y) * 2.0;
+            let (ra, rb) = (ga * (k * lam[0]) + d2, m.tr_mul(&gb) * lam[1] - d2);
+            let residual = ra.amax().max(rb.amax()).max((va - 1.0).abs()).max((vb - 1.0).abs());
+            let stationary = residual <= tolerance * (1.0 + 2.0 * (x - y).norm());
+            stationary.then_some(KktOut { x, y, lam, status: SolveStatus::Converged, iterations, residual })
+        }
+
+        /// [`Self::verify`] for the lanes set in `verify` (Newton steps taken so far: `steps`): a
+        /// lane whose trial point is stationary leaves, with its answer in `answers` when both
+        /// multipliers are positive and the bodies clear of contact (else the single-pair solver
+        /// decides, as for the lanes that end in a round). Compiled apart from the rounds (not
+        /// inlined): inlined, its scalar code made the rounds spill (4 % more instructions per
+        /// batch at 2d = 2, callgrind).
+        ///
+        /// # Safety
+        /// The CPU must support AVX2 and FMA.
+        #[allow(clippy::too_many_arguments)]
+        #[target_feature(enable = "avx2,fma")]
+        #[inline(never)]
+        unsafe fn verify_lanes(
+            &mut self,
+            verify: u32,
+            steps: &[Real; 4],
+            a: &Body,
+            b: &Body,
+            poses: &[(Isometry3, Isometry3)],
+            params: &NewtonParams,
+            warm_starts: bool,
+            answers: &mut [Option<DistanceResult>],
+            empty: &std::sync::Arc<DistanceWarmStart>,
+        ) {
+            for i in (0..4).filter(|i| verify & (1 << i) != 0) {
+                let Some(out) = self.verify(i, a, b, steps[i] as usize + 1, params.kkt_tolerance) else {
+                    continue;
+                };
+                let k = self.book.job[i];
+                self.book.job[i] = EMPTY;
+                if out.lam[0] > 0.0 && out.lam[1] > 0.0 && clear_of_contact(&out.x, &out.y, a, b) {
+                    answers[k] = Some(lane_answer(&poses[k].0, &self.rel[i], out, warm_starts, empty));
+                }
+            }
+        }
+    }
+
     /// A lane's Newton state where its coarse stage ends ([`COARSE_RESIDUAL`]): the accepted point
     /// (frame of body A), its multipliers, the Newton step from it, its ‖KKT residual‖₂ and the
     /// steps taken; the fine stage goes on from its trial point at step length 1.
@@ -942,40 +694,19 @@ mod lanes {
     /// Where a pair stands between the two stages of [`solve_on_lanes`].
     #[derive(Clone, Copy)]
     enum Stage {
-        /// Not yet in a lane, or taken out before its first evaluation: starts from its cold start.
+        /// Starts the fine stage from its cold start: not in a lane of the coarse stage (no
+        /// separated start), taken out before its first evaluation, or ended there without a
+        /// hand-off (nonfinite, singular, stalled or at the cap in single precision; the
+        /// double-precision lanes then decide it as they would without the coarse stage).
         Cold,
         /// Goes on from where the coarse stage left it.
         Resume(Handoff),
         /// The same, for a pair the coarse stage took out of its lane when its queue ran dry (first
         /// in the fine stage's queue).
         Drained(Handoff),
-        /// Left the lanes without a hand-off (as the single-stage lanes would have: stalled, the
-        /// iteration cap, a nonfinite residual or a singular system): the single-pair solver's
-        /// growth-first path answers it.
-        Left,
     }
 
     impl Lanes {
-        /// Lane `i`'s state as a [`Handoff`], its residual raised by [`COARSE_NOISE`] times the
-        /// stationarity scale: the fine stage's first trial point is accepted where its residual in
-        /// double precision falls below that bound on the single-precision residual.
-        fn handoff(&self, i: usize) -> Handoff {
-            let gap =
-                Vector3::new(self.x[0][i] - self.y[0][i], self.x[1][i] - self.y[1][i], self.x[2][i] - self.y[2][i]);
-            Handoff {
-                x: std::array::from_fn(|r| self.x[r][i]),
-                y: std::array::from_fn(|r| self.y[r][i]),
-                lam: [self.lam[0][i], self.lam[1][i]],
-                dx: std::array::from_fn(|r| self.dx[r][i] as f32),
-                dy: std::array::from_fn(|r| self.dy[r][i] as f32),
-                dl: [self.dl[0][i] as f32, self.dl[1][i] as f32],
-                r0: (self.book.r0[i] + COARSE_NOISE * (1.0 + 2.0 * gap.norm())) as f32,
-                alpha: self.book.alpha[i] as f32,
-                steps: self.book.steps[i] as u16,
-                rejected: self.book.rejected[i] as u16,
-            }
-        }
-
         /// Puts pair `k` (relative pose `rel`, B posed as `bb`) into lane `i` where its coarse stage
         /// left it (`h`): the next trial point is its Newton step from there at the step length it
         /// had reached.
@@ -1001,11 +732,11 @@ mod lanes {
     }
 
     /// ‖KKT residual‖₂ relative to the stationarity scale 1 + 2‖x − y‖ below which a lane leaves the
-    /// coarse stage (its points evaluated in single precision, [`crate::poly::SoaPoly::eval4_rows_f32`])
-    /// for the fine one (double precision): the `f32` kernel's relative errors on the project's
-    /// bodies are at most 2.4·10⁻⁵ (2d = 8, value, gradient and Hessian; 10⁻⁷–10⁻⁶ at 2d ≤ 6),
-    /// 40 times below this, so the coarse steps are Newton steps to that accuracy, and from a
-    /// residual of 10⁻³ two double-precision steps reach the tolerance.
+    /// coarse stage (single precision, [`coarse`]) for the fine one (double precision): the `f32`
+    /// kernel's relative errors on the project's bodies are at most 2.4·10⁻⁵ (2d = 8, value,
+    /// gradient and Hessian; 10⁻⁷–10⁻⁶ at 2d ≤ 6), 40 times below this, so the coarse steps are
+    /// Newton steps to that accuracy, and from a residual of 10⁻³ two or three double-precision
+    /// steps reach the tolerance. (Hand-offs at 3·10⁻³ and 3·10⁻⁴ ran as fast on eight lanes.)
     const COARSE_RESIDUAL: Real = 1e-3;
 
     /// Bound on the error of a coarse-stage residual relative to the stationarity scale: 4 times the
@@ -1016,25 +747,27 @@ mod lanes {
     const COARSE_NOISE: Real = 1e-4;
 
     /// Least degree 2d of the higher-degree body of a pair for which the batch runs the coarse
-    /// stage. Below it the kernels are a smaller part of a round and the stage's bookkeeping costs
-    /// more than the single-precision passes save (measured with `examples/cold_profile D 20 batch`,
-    /// three alternations: 0.249–0.253 against 0.230–0.239 µs per pair at 2d = 2, the same time at
-    /// 2d = 4).
-    const COARSE_MIN_DEGREE: usize = 6;
+    /// stage. At 2d = 2 the single-precision kernel saves less than the stage's bookkeeping costs
+    /// (6.4 % more instructions per batch, callgrind; `examples/cold_profile 2 20 batch` 2.66
+    /// against 2.75× the single-query rate, alternated five times); at 2d = 4 the instructions are
+    /// the same and the eight lanes make the batch faster (2.56 against 2.44×).
+    const COARSE_MIN_DEGREE: usize = 4;
 
-    /// max(|v₀|, |v₁|, |v₂|) per lane.
-    #[inline(always)]
-    fn abs_max(v: V3) -> F4 {
-        v.0[0].abs().max(v.0[1].abs()).max(v.0[2].abs())
-    }
+    /// Least degree 2d of the higher-degree body of a pair for which the fine stage checks predicted
+    /// last points by value + gradient evaluations ([`Lanes::verify`]). Below it the four-point
+    /// kernel is cheap beside a check's scalar work: `examples/cold_profile D 20 batch`, with and
+    /// without the checks alternated, gave 2.00–2.05 against 1.96–1.98× the single-query rate at
+    /// 2d = 8, the same at 2d = 6 (2.26–2.34 against 2.29–2.38×), and less at 2d = 4 (2.53–2.57
+    /// against 2.63–2.70×) and 2d = 2 (2.50–2.58 against 2.76–2.81×).
+    const VERIFY_MIN_DEGREE: usize = 8;
 
-    /// The least-squares multiplier `l` where it is finite and positive, else 2‖x − y‖ / ‖g‖
-    /// (`g2` = ‖g‖²), per lane (the single-pair solver's initial multipliers).
-    #[inline(always)]
-    fn positive_multiplier(l: F4, g2: F4, dist: F4) -> F4 {
-        let fallback = F4::splat(2.0) * dist / g2.sqrt().max(F4::splat(1e-300));
-        F4::select(l.finite().and(F4::default().lt(l)), l, fallback)
-    }
+    /// ‖KKT residual‖₂ relative to the stationarity scale at an accepted point below which the fine
+    /// stage checks the next trial point by value + gradient evaluations ([`Lanes::verify`]):
+    /// Newton's quadratic convergence then lands below the tolerance. Measured on the chair /
+    /// human poses at 2d = 8 (callgrind, instructions per batch): 5·10⁻⁶, 10⁻⁵ and 3·10⁻⁵ the
+    /// same (−6.7 %; 10 or 15 of about 1440 checks fail), 2·10⁻⁶ less (the first fine step's
+    /// residual, about 10⁻⁵ at 2d = 8, is then never checked early).
+    const VERIFY_RESIDUAL: Real = 1e-5;
 
     #[inline(always)]
     fn load6(h: &[[Real; 4]; 6], k: F4) -> S3 {
@@ -1072,20 +805,6 @@ mod lanes {
             self.mu[i] = 0.0;
             self.dmu[i] = 0.0;
         }
-    }
-
-    /// The growth Newton step per lane ([`super::super::fast_eval::solve_kkt4`]'s elimination):
-    /// (dx, dμ) of `[W g; gᵀ 0] [dx; dμ] = −[r; c]` and the lanes where it exists.
-    #[inline(always)]
-    fn solve_kkt4(w: &S3, g: V3, r: V3, c: F4) -> (V3, F4, M4) {
-        let (wi, ok_w) = inverse_sym(w);
-        let (wg, wr) = (sym_mul(&wi, g), sym_mul(&wi, r));
-        let s = g.dot(wg);
-        let dmu = (c - g.dot(wr)) / s;
-        let dx = wg.mul_add(dmu, wr).neg();
-        let sum = dx.0[0] + dx.0[1] + dx.0[2] + dmu;
-        let ok = ok_w.and(F4::splat(1e-300).lt(s.abs())).and(s.finite()).and(sum.finite());
-        (dx, dmu, ok)
     }
 
     /// The overlap test of the single-pair solver's growth-first path ([`distance_growth_first`]:
@@ -1233,6 +952,9 @@ mod lanes {
         let mut answers: Vec<Option<DistanceResult>> = vec![None; poses.len()];
         let cap = F4::splat(params.max_iterations.min(SPECULATIVE_ITERATIONS) as Real);
         let tolerance = F4::splat(params.kkt_tolerance);
+        // Checks of predicted last points only where they pay (see `VERIFY_MIN_DEGREE`).
+        let verify_level = F4::splat(VERIFY_RESIDUAL);
+        let verifying = a.degree().max(b.degree()) >= VERIFY_MIN_DEGREE;
         let (zero, one, two) = (F4::splat(0.0), F4::splat(1.0), F4::splat(2.0));
         let (ka4, ka2, ca4) = unposed_map(a);
         let mut lanes = Lanes {
@@ -1248,162 +970,129 @@ mod lanes {
         let empty = std::sync::Arc::new(DistanceWarmStart::default());
         let rels: Vec<Isometry3> = poses.iter().map(|(pa, pb)| pa.inv_mul(pb)).collect();
         let starts = cold_starts(a, b, &rels);
-        // Where each pair stands between the stages (none without a coarse stage: every pair cold);
-        // the coarse stage's queue is the batch in order, the fine stage's the pairs the coarse one
-        // drained (the slow ones, first: they run beside the others), then the others.
-        let coarse = a.degree().max(b.degree()) >= COARSE_MIN_DEGREE;
-        let mut stage = if coarse { vec![Stage::Cold; poses.len()] } else { Vec::new() };
-        let mut queue: Vec<usize> = (0..poses.len()).collect();
-        let coarse_residual = F4::splat(COARSE_RESIDUAL);
-        for fine in [false, true] {
-            if !coarse && !fine {
+        // The coarse stage (eight single-precision lanes; none below `COARSE_MIN_DEGREE`: every pair
+        // cold, in order) records where each pair stands; the fine stage's queue is the pairs it
+        // drained and the cold ones (the slow ones first: they run beside the others; pairs without
+        // a start are skipped by the refill), then the others.
+        let (stage, queue) = if a.degree().max(b.degree()) >= COARSE_MIN_DEGREE {
+            let mut stage = vec![Stage::Cold; poses.len()];
+            let cap = params.max_iterations.min(SPECULATIVE_ITERATIONS);
+            // SAFETY: the lanes run only on CPUs with AVX2 and FMA (`lanes_avx2`).
+            unsafe { coarse::coarse_stage8(a, b, &rels, &starts, cap, &mut stage) };
+            let first = |s: &Stage| matches!(s, Stage::Drained(_) | Stage::Cold);
+            let mut queue: Vec<usize> = (0..poses.len()).filter(|&k| first(&stage[k])).collect();
+            queue.extend((0..poses.len()).filter(|&k| matches!(stage[k], Stage::Resume(_))));
+            (stage, queue)
+        } else {
+            (Vec::new(), (0..poses.len()).collect())
+        };
+        let mut next = 0;
+        loop {
+            // Refill the empty lanes from the queue; a pair without a separated start is left to the
+            // single-pair solver.
+            for i in 0..4 {
+                while lanes.book.job[i] == EMPTY && next < queue.len() {
+                    let k = queue[next];
+                    next += 1;
+                    if let Some((x0, y0)) = &starts[k] {
+                        let bb = PosedBody::new(b, &rels[k]);
+                        match stage.get(k) {
+                            Some(Stage::Resume(h) | Stage::Drained(h)) => lanes.resume(i, k, &rels[k], &bb, h),
+                            _ => lanes.fill(i, k, &rels[k], &bb, x0, y0),
+                        }
+                    }
+                }
+            }
+            if lanes.book.is_empty() {
+                break;
+            }
+            // The trial points of the four lanes, evaluated in one pass per body.
+            let (x, y) = (V3::load(&lanes.x), V3::load(&lanes.y));
+            let lam = [F4::load(&lanes.lam[0]), F4::load(&lanes.lam[1])];
+            let (dx, dy) = (V3::load(&lanes.dx), V3::load(&lanes.dy));
+            let dl = [F4::load(&lanes.dl[0]), F4::load(&lanes.dl[1])];
+            let book = &lanes.book;
+            let (al, r0, start) = (F4::load(&book.alpha), F4::load(&book.r0), zero.lt(F4::load(&book.start)));
+            let (mb, cb) = book.map();
+            let xt = dx.mul_add(al, x);
+            let yt = dy.mul_add(al, y);
+            let mut lt = [dl[0].mul_add(al, lam[0]), dl[1].mul_add(al, lam[1])];
+            let ua = xt.mul_add(ka4, ca4);
+            let ub = mat_mul(&mb, yt).add(cb);
+            let (ea, eb) = (soa_a.eval4_rows(&ua.to_arrays()), soa_b.eval4_rows(&ub.to_arrays()));
+            let ga = V3::load(&ea.gradient).scale(ka4);
+            let gb = mat_t_mul(&mb, V3::load(&eb.gradient));
+            let diff = xt.sub(yt);
+            let dist = diff.dot(diff).sqrt();
+            // Least-squares multipliers at a start (the single-pair solver's initial multipliers).
+            if start.bits() != 0 {
+                let (na, nb) = (ga.dot(ga), gb.dot(gb));
+                let tiny = F4::splat(Real::MIN_POSITIVE);
+                let la = -(two * diff.dot(ga)) / na.max(tiny);
+                let lb = two * diff.dot(gb) / nb.max(tiny);
+                lt = [
+                    F4::select(start, positive_multiplier(la, na, dist), lt[0]),
+                    F4::select(start, positive_multiplier(lb, nb, dist), lt[1]),
+                ];
+            }
+            let d2 = diff.scale(two);
+            let ra = ga.mul_add(lt[0], d2);
+            let rb = gb.mul_add(lt[1], d2.neg());
+            let (cva, cvb) = (F4::load(&ea.value) - one, F4::load(&eb.value) - one);
+            let r1 = (ra.dot(ra) + rb.dot(rb) + cva.mul_add(cva, cvb * cvb)).sqrt();
+            let norm_inf = abs_max(ra).max(abs_max(rb)).max(cva.abs().max(cvb.abs()));
+            // The Newton steps from the trial points (taken where a trial point is accepted).
+            let ha = load6(&ea.hessian, ka2);
+            let hb = congruence(&mb, &load6(&eb.hessian, one));
+            let (wa, wb) = (shifted(&ha, lt[0], two), shifted(&hb, lt[1], two));
+            let (sdx, sdy, sdl, solved) = solve_kkt8(&wa, &wb, ga, gb, ra, rb, cva, cvb);
+            // Accepted trial points: the start, or a decrease of the residual (Armijo on ‖r‖₂).
+            let decrease = r1.le((F4::splat(-1e-4) * al + one) * r0).and(r1.finite());
+            let accepted = start.or(decrease).and(lanes.book.live());
+            let scale = dist.mul_add(two, one);
+            let stationary = norm_inf.le(tolerance * scale);
+            lanes.x = V3::select(accepted, xt, x).to_arrays();
+            lanes.y = V3::select(accepted, yt, y).to_arrays();
+            lanes.lam =
+                [F4::select(accepted, lt[0], lam[0]).to_array(), F4::select(accepted, lt[1], lam[1]).to_array()];
+            lanes.dx = V3::select(accepted, sdx, dx).to_arrays();
+            lanes.dy = V3::select(accepted, sdy, dy).to_arrays();
+            lanes.dl = [F4::select(accepted, sdl[0], dl[0]).to_array(), F4::select(accepted, sdl[1], dl[1]).to_array()];
+            // Lanes that leave: stationary (the answer, or the single-pair solver when a multiplier
+            // is not positive), a nonfinite residual, a singular system, the iteration cap, or 40
+            // rejected trial points in a row (the single-pair line search's limit).
+            let ends = stationary.or(r1.finite().not()).or(solved.not());
+            // Lanes whose next trial point is predicted to be their answer (accepted here at a
+            // residual whose Newton step, converging quadratically, lands below the tolerance, and
+            // not done): that point is checked now, one lane at a time, by value + gradient
+            // evaluations (no Hessians, which a last point does not need), instead of in the next
+            // round's pass.
+            let last = if verifying { accepted.and(solved).and(r1.le(verify_level * scale)) } else { M4::default() };
+            let (done, leave, steps) = lanes.book.advance(accepted, r1, one, ends, cap);
+            let verify = last.and(done.not()).bits();
+            if leave | verify == 0 {
                 continue;
             }
-            if coarse && fine {
-                // The drained pairs (and the cold ones: taken out before their first evaluation, or
-                // without a start, which the refill skips) first, then the others that go on; `Left`
-                // ones drop out.
-                let first = |s: &Stage| matches!(s, Stage::Drained(_) | Stage::Cold);
-                queue.clear();
-                queue.extend((0..poses.len()).filter(|&k| first(&stage[k])));
-                queue.extend((0..poses.len()).filter(|&k| matches!(stage[k], Stage::Resume(_))));
+            let (norm_inf, steps) = (norm_inf.to_array(), steps.to_array());
+            if verify != 0 {
+                // SAFETY: the lanes run only on CPUs with AVX2 and FMA (`lanes_avx2`).
+                unsafe { lanes.verify_lanes(verify, &steps, a, b, poses, params, warm_starts, &mut answers, &empty) };
             }
-            let mut next = 0;
-            loop {
-                // Refill the empty lanes from the queue; a pair without a separated start is left to the
-                // single-pair solver.
-                for i in 0..4 {
-                    while lanes.book.job[i] == EMPTY && next < queue.len() {
-                        let k = queue[next];
-                        next += 1;
-                        if let Some((x0, y0)) = &starts[k] {
-                            let bb = PosedBody::new(b, &rels[k]);
-                            match stage.get(k) {
-                                Some(Stage::Resume(h) | Stage::Drained(h)) if fine => {
-                                    lanes.resume(i, k, &rels[k], &bb, h)
-                                }
-                                Some(Stage::Left) => {}
-                                _ => lanes.fill(i, k, &rels[k], &bb, x0, y0),
-                            }
-                        }
-                    }
-                }
-                if lanes.book.is_empty() {
-                    break;
-                }
-                // The coarse stage ends when its queue runs dry: the lanes still running go on in the
-                // fine stage, first in its queue (no lane waits for the slowest one).
-                if !fine && next >= queue.len() && lanes.book.live().bits() != 0b1111 {
-                    for i in 0..4 {
-                        let k = lanes.book.job[i];
-                        if k != EMPTY {
-                            stage[k] =
-                                if lanes.book.start[i] != 0.0 { Stage::Cold } else { Stage::Drained(lanes.handoff(i)) };
-                            lanes.book.job[i] = EMPTY;
-                        }
-                    }
-                    break;
-                }
-                // The trial points of the four lanes, evaluated in one pass per body.
-                let (x, y) = (V3::load(&lanes.x), V3::load(&lanes.y));
-                let lam = [F4::load(&lanes.lam[0]), F4::load(&lanes.lam[1])];
-                let (dx, dy) = (V3::load(&lanes.dx), V3::load(&lanes.dy));
-                let dl = [F4::load(&lanes.dl[0]), F4::load(&lanes.dl[1])];
-                let book = &lanes.book;
-                let (al, r0, start) = (F4::load(&book.alpha), F4::load(&book.r0), zero.lt(F4::load(&book.start)));
-                let (mb, cb) = book.map();
-                let xt = dx.mul_add(al, x);
-                let yt = dy.mul_add(al, y);
-                let mut lt = [dl[0].mul_add(al, lam[0]), dl[1].mul_add(al, lam[1])];
-                let ua = xt.mul_add(ka4, ca4);
-                let ub = mat_mul(&mb, yt).add(cb);
-                let (ea, eb) = if fine {
-                    (soa_a.eval4_rows(&ua.to_arrays()), soa_b.eval4_rows(&ub.to_arrays()))
-                } else {
-                    (soa_a.eval4_rows_f32(&ua.to_arrays()), soa_b.eval4_rows_f32(&ub.to_arrays()))
-                };
-                let ga = V3::load(&ea.gradient).scale(ka4);
-                let gb = mat_t_mul(&mb, V3::load(&eb.gradient));
-                let diff = xt.sub(yt);
-                let dist = diff.dot(diff).sqrt();
-                // Least-squares multipliers at a start (the single-pair solver's initial multipliers).
-                if start.bits() != 0 {
-                    let (na, nb) = (ga.dot(ga), gb.dot(gb));
-                    let tiny = F4::splat(Real::MIN_POSITIVE);
-                    let la = -(two * diff.dot(ga)) / na.max(tiny);
-                    let lb = two * diff.dot(gb) / nb.max(tiny);
-                    lt = [
-                        F4::select(start, positive_multiplier(la, na, dist), lt[0]),
-                        F4::select(start, positive_multiplier(lb, nb, dist), lt[1]),
-                    ];
-                }
-                let d2 = diff.scale(two);
-                let ra = ga.mul_add(lt[0], d2);
-                let rb = gb.mul_add(lt[1], d2.neg());
-                let (cva, cvb) = (F4::load(&ea.value) - one, F4::load(&eb.value) - one);
-                let r1 = (ra.dot(ra) + rb.dot(rb) + cva.mul_add(cva, cvb * cvb)).sqrt();
-                let norm_inf = abs_max(ra).max(abs_max(rb)).max(cva.abs().max(cvb.abs()));
-                // The Newton steps from the trial points (taken where a trial point is accepted).
-                let ha = load6(&ea.hessian, ka2);
-                let hb = congruence(&mb, &load6(&eb.hessian, one));
-                let (wa, wb) = (shifted(&ha, lt[0], two), shifted(&hb, lt[1], two));
-                let (sdx, sdy, sdl, solved) = solve_kkt8(&wa, &wb, ga, gb, ra, rb, cva, cvb);
-                // Accepted trial points: the start, or a decrease of the residual (Armijo on ‖r‖₂).
-                let decrease = r1.le((F4::splat(-1e-4) * al + one) * r0).and(r1.finite());
-                let accepted = start.or(decrease).and(lanes.book.live());
-                let stationary = norm_inf.le(tolerance * dist.mul_add(two, one));
-                lanes.x = V3::select(accepted, xt, x).to_arrays();
-                lanes.y = V3::select(accepted, yt, y).to_arrays();
-                lanes.lam =
-                    [F4::select(accepted, lt[0], lam[0]).to_array(), F4::select(accepted, lt[1], lam[1]).to_array()];
-                lanes.dx = V3::select(accepted, sdx, dx).to_arrays();
-                lanes.dy = V3::select(accepted, sdy, dy).to_arrays();
-                lanes.dl =
-                    [F4::select(accepted, sdl[0], dl[0]).to_array(), F4::select(accepted, sdl[1], dl[1]).to_array()];
-                // Lanes that leave: stationary (the answer, or the single-pair solver when a multiplier
-                // is not positive), a nonfinite residual, a singular system, the iteration cap, or 40
-                // rejected trial points in a row (the single-pair line search's limit).
-                let ends = stationary.or(r1.finite().not()).or(solved.not());
-                // The coarse stage also ends where the residual is small enough for the fine one.
-                let near = r1.le(coarse_residual * dist.mul_add(two, one));
-                let ends = if fine { ends } else { ends.or(near) };
-                let (done, leave, steps) = lanes.book.advance(accepted, r1, one, ends, cap);
-                if leave == 0 {
+            let answer = done.and(stationary).and(r1.finite()).bits();
+            for i in (0..4).filter(|i| leave & (1 << i) != 0) {
+                let k = lanes.book.job[i];
+                lanes.book.job[i] = EMPTY;
+                let x = Vector3::new(lanes.x[0][i], lanes.x[1][i], lanes.x[2][i]);
+                let y = Vector3::new(lanes.y[0][i], lanes.y[1][i], lanes.y[2][i]);
+                let lam = [lanes.lam[0][i], lanes.lam[1][i]];
+                // The answer when stationary with positive multipliers and clear of contact; otherwise
+                // the single-pair solver decides (growth test, barrier path).
+                if answer & (1 << i) == 0 || !(lam[0] > 0.0 && lam[1] > 0.0 && clear_of_contact(&x, &y, a, b)) {
                     continue;
                 }
-                if !fine {
-                    // Hand-offs (accepted near the answer with a step from there); the lanes that end
-                    // otherwise leave as the single-stage lanes would.
-                    let handoff = done.and(near).and(solved).and(r1.finite()).bits();
-                    for i in (0..4).filter(|i| leave & (1 << i) != 0) {
-                        let k = lanes.book.job[i];
-                        lanes.book.job[i] = EMPTY;
-                        stage[k] = if handoff & (1 << i) != 0 { Stage::Resume(lanes.handoff(i)) } else { Stage::Left };
-                    }
-                    continue;
-                }
-                let answer = done.and(stationary).and(r1.finite()).bits();
-                let (norm_inf, steps) = (norm_inf.to_array(), steps.to_array());
-                for i in (0..4).filter(|i| leave & (1 << i) != 0) {
-                    let k = lanes.book.job[i];
-                    lanes.book.job[i] = EMPTY;
-                    let x = Vector3::new(lanes.x[0][i], lanes.x[1][i], lanes.x[2][i]);
-                    let y = Vector3::new(lanes.y[0][i], lanes.y[1][i], lanes.y[2][i]);
-                    let lam = [lanes.lam[0][i], lanes.lam[1][i]];
-                    // The answer when stationary with positive multipliers and clear of contact; otherwise
-                    // the single-pair solver decides (growth test, barrier path).
-                    if answer & (1 << i) == 0 || !(lam[0] > 0.0 && lam[1] > 0.0 && clear_of_contact(&x, &y, a, b)) {
-                        continue;
-                    }
-                    let iterations = steps[i] as usize;
-                    let out = KktOut { x, y, lam, status: SolveStatus::Converged, iterations, residual: norm_inf[i] };
-                    answers[k] = Some(if warm_starts {
-                        let growth = GrowthWarmStart::default();
-                        finish(&poses[k].0, &lanes.rel[i], out, iterations, false, &growth, None)
-                    } else {
-                        separated_answer(&poses[k].0, &out, iterations, false, empty.clone())
-                    });
-                }
+                let iterations = steps[i] as usize;
+                let out = KktOut { x, y, lam, status: SolveStatus::Converged, iterations, residual: norm_inf[i] };
+                answers[k] = Some(lane_answer(&poses[k].0, &lanes.rel[i], out, warm_starts, &empty));
             }
         }
         // The pairs without a separated start, and those the lanes left: the single-pair solver's
@@ -1480,11 +1169,12 @@ mod tests {
 
     #[test]
     fn lanes_give_the_single_pair_answers_at_every_degree() {
-        // Nonquadratic sos-convex bodies at 2d = 4, 6, 8, 150 random poses each (some overlapping):
+        // Ellipsoids (2d = 2) and nonquadratic sos-convex bodies at 2d = 4, 6, 8, 150 random poses
+        // each (some overlapping; 2d ≥ 4 through the single-precision coarse stage):
         // every answer converged, with the single-pair solver's overlap flag, distance (1e-9 m)
         // and witnesses (1e-6 m; the bodies are strictly convex, so the witnesses are unique).
         let params = NewtonParams::default();
-        for degree in [4, 6, 8] {
+        for degree in [2, 4, 6, 8] {
             let (a, b) = (random_body(degree, 11), random_body(degree, 12));
             let pairs = poses(150, 1.5, degree as u64);
             let batch = cold_distances(&a, &b, &pairs, &params, true);
