@@ -547,7 +547,7 @@ fn print_table(rows: &[Row], peer: &PeerRow) {
     for r in rows {
         println!(
             "2d = {}: cold distance at all cold poses, {:.3} µs per pair one at a time, {:.3} µs as one batch \
-             (4 pairs per SIMD pass): {:.2}x the single-query rate",
+             (8 pairs per SIMD pass in single precision, then 4): {:.2}x the single-query rate",
             r.degree,
             r.single_us,
             r.batch_us,

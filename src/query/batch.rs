@@ -1,14 +1,19 @@
 //! Batch solvers (issue 15): many cold distance queries between the same two bodies — one pair of
-//! a planner's query across its candidate states, or one body pair of a scene check — solved four
-//! pairs at a time, one pair per SIMD lane.
+//! a planner's query across its candidate states, or one body pair of a scene check — solved
+//! several pairs at a time, one pair per SIMD lane.
 //!
 //! ```text
-//! queue of pairs ──► 4 lanes (one pair each) ──► per round, for the 4 trial points at once:
+//! queue of pairs ──► coarse stage, 8 f32 lanes (2d ≥ 4): per round, for 8 trial points at once
+//!                      p_a, p_b at 8 points in single precision, gradients, Hessians, KKT
+//!                      residuals and 8 × 8 KKT solves in 8-lane f32 arithmetic; until a lane's
+//!                      residual is below 10⁻³ of the scale: its state handed to
+//!                ──► fine stage, 4 f64 lanes (one pair each): per round, for the 4 trial points
 //!                      p_a at 4 points, p_b at 4 points      SoaPoly: one pass per body
 //!                      gradients, Hessians, KKT residuals    4-lane arithmetic
 //!                      8 × 8 KKT solves (block elimination)  4-lane arithmetic
 //!                    then per lane: accept the trial point or halve its step (backtracking on
 //!                    ‖KKT residual‖₂), converged → answer, the lane takes the next pair
+//!                    (2d = 8: a predicted last point checked at once without Hessians)
 //! pairs without a separated start, and lanes that stall, reach the iteration cap or end near
 //! contact ──► the single-pair solver's growth-first path, where its own separated run would hand
 //! them (so they are not solved twice): its growth solve on 4 lanes too (4 × 4 KKT solves),
@@ -115,8 +120,8 @@ use crate::math::Isometry3;
 pub const MIN_LANE_BATCH: usize = 4;
 
 /// Cold distance answers for the pairs `poses` (pose of `a`, pose of `b`; body frame → world) of
-/// the bodies `a` and `b`, in order: the answers [`distance`] gives with no warm start, four pairs
-/// per SIMD pass (see the module docs). Pairs go through [`distance`] one by one when there are
+/// the bodies `a` and `b`, in order: the answers [`distance`] gives with no warm start, eight or
+/// four pairs per SIMD pass (see the module docs). Pairs go through [`distance`] one by one when there are
 /// fewer than [`MIN_LANE_BATCH`], when the CPU lacks AVX2 + FMA, or when a body has degree below 2.
 ///
 /// With `warm_starts` false, the answers the lanes give share one empty warm start (an invalid

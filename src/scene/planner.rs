@@ -220,7 +220,7 @@ impl LaneAnswers {
 }
 
 /// Newton's answers of the cold distance solves among `pairs` (each with its two posed instances
-/// from `posed`) that can take the batch solver's lanes ([`lane_role`]), solved four pairs per
+/// from `posed`) that can take the batch solver's lanes ([`lane_role`]), solved several pairs per
 /// SIMD pass ([`crate::query::batch::cold_distances`]) in groups of one body pair, and the
 /// decisions of the collide queries among them that the cheap tests decide ([`collide_cheap`],
 /// asked once here, not again per answer); nothing for the other queries and for groups smaller than

@@ -368,7 +368,8 @@ impl Catalog {
             (posed_by_id, scratch)
         };
         let params = self.certify_params();
-        // Cold distance solves of one body pair, four per SIMD pass (see `planner::lane_distances`).
+        // Cold distance solves of one body pair on the batch solver's lanes (see
+        // `planner::lane_distances`).
         let mut newton = planner::lane_distances(
             pairs,
             |k| Some((posed_by_id[pairs[k].first].borrowed(), posed_by_id[pairs[k].second].borrowed())),
