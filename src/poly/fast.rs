@@ -1149,9 +1149,10 @@ impl SoaPoly {
     /// [`SoaPoly::eval4_rows`] in single precision: the coefficients and the points rounded to
     /// `f32`, the Horner sums run in eight-lane `f32` registers (two quantities of four points per
     /// multiply–add: half the multiply–adds), then widened for Euler's identity. Relative errors of
-    /// order 10⁻⁶ (the tables' `f32` rounding times their cancellation): for the early Newton
-    /// steps of the batch solver, far from the answer ([`crate::query::batch`]), never for an
-    /// answer. Elsewhere than on AVX2 + FMA, the double-precision [`SoaPoly::eval4_rows`].
+    /// order 10⁻⁶ (the tables' `f32` rounding times their cancellation): for Newton steps far from
+    /// the answer, never for an answer (the batch solver's coarse stage runs the same sums eight
+    /// points at a time, [`SoaPoly::eval8_rows_f32`]; `examples/kernel_timing` times and checks
+    /// this one). Elsewhere than on AVX2 + FMA, the double-precision [`SoaPoly::eval4_rows`].
     pub fn eval4_rows_f32(&self, u: &[[Real; 4]; 3]) -> Soa4Eval {
         #[cfg(target_arch = "x86_64")]
         if self.fast.degree >= 2 && has_fma() {
