@@ -774,6 +774,64 @@ mod lanes {
     /// residual, about 10⁻⁵ at 2d = 8, is then never checked early).
     const VERIFY_RESIDUAL: Real = 1e-5;
 
+    /// The distance KKT system at the lanes' trial points (frame of body A) and its Newton step,
+    /// shared by the fine stage (four `f64` lanes) and the coarse one (eight `f32` lanes).
+    struct KktRound<F: Lane> {
+        /// The multipliers (least squares where the lane is at its start, else as given).
+        lt: [F; 2],
+        /// ‖x − y‖.
+        dist: F,
+        /// Stationarity residuals 2(x − y) + λa∇p_a, −2(x − y) + λb∇p_b, constraints p − 1.
+        ra: V3<F>,
+        rb: V3<F>,
+        cva: F,
+        cvb: F,
+        /// ‖KKT residual‖₂.
+        r1: F,
+        /// The Newton step (dx, dy, [dλa, dλb]) and the lanes where it exists ([`solve_kkt8`]).
+        step: (V3<F>, V3<F>, [F; 2], F::Mask),
+    }
+
+    /// [`KktRound`] at the trial points `xt`, `yt` with multipliers `lt` (replaced by the
+    /// single-pair solver's least-squares multipliers in the lanes of `start`; `tiny` the least
+    /// squared gradient norm they divide by), from both bodies' gradients `g`, values `v` and
+    /// Hessians `h` there (frame of body A).
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn kkt_round<F: Lane>(
+        xt: V3<F>,
+        yt: V3<F>,
+        mut lt: [F; 2],
+        start: F::Mask,
+        tiny: F,
+        [ga, gb]: [V3<F>; 2],
+        [va, vb]: [F; 2],
+        [ha, hb]: [&S3<F>; 2],
+    ) -> KktRound<F> {
+        let (one, two) = (F::splat(1.0), F::splat(2.0));
+        let diff = xt.sub(yt);
+        let dist = diff.dot(diff).sqrt();
+        // Least-squares multipliers at a start (the single-pair solver's initial multipliers).
+        if start.bits() != 0 {
+            let (na, nb) = (ga.dot(ga), gb.dot(gb));
+            let la = -(two * diff.dot(ga)) / na.max(tiny);
+            let lb = two * diff.dot(gb) / nb.max(tiny);
+            lt = [
+                F::select(start, positive_multiplier(la, na, dist), lt[0]),
+                F::select(start, positive_multiplier(lb, nb, dist), lt[1]),
+            ];
+        }
+        let d2 = diff.scale(two);
+        let ra = ga.mul_add(lt[0], d2);
+        let rb = gb.mul_add(lt[1], d2.neg());
+        let (cva, cvb) = (va - one, vb - one);
+        let r1 = (ra.dot(ra) + rb.dot(rb) + cva.mul_add(cva, cvb * cvb)).sqrt();
+        // The Newton steps from the trial points (taken where a trial point is accepted).
+        let (wa, wb) = (shifted(ha, lt[0], two), shifted(hb, lt[1], two));
+        let step = solve_kkt8(&wa, &wb, ga, gb, ra, rb, cva, cvb);
+        KktRound { lt, dist, ra, rb, cva, cvb, r1, step }
+    }
+
     #[inline(always)]
     fn load6(h: &[[Real; 4]; 6], k: F4) -> S3 {
         [
@@ -1021,36 +1079,19 @@ mod lanes {
             let (mb, cb) = book.map();
             let xt = dx.mul_add(al, x);
             let yt = dy.mul_add(al, y);
-            let mut lt = [dl[0].mul_add(al, lam[0]), dl[1].mul_add(al, lam[1])];
+            let lt = [dl[0].mul_add(al, lam[0]), dl[1].mul_add(al, lam[1])];
             let ua = xt.mul_add(ka4, ca4);
             let ub = mat_mul(&mb, yt).add(cb);
             let (ea, eb) = (soa_a.eval4_rows(&ua.to_arrays()), soa_b.eval4_rows(&ub.to_arrays()));
             let ga = V3::load(&ea.gradient).scale(ka4);
             let gb = mat_t_mul(&mb, V3::load(&eb.gradient));
-            let diff = xt.sub(yt);
-            let dist = diff.dot(diff).sqrt();
-            // Least-squares multipliers at a start (the single-pair solver's initial multipliers).
-            if start.bits() != 0 {
-                let (na, nb) = (ga.dot(ga), gb.dot(gb));
-                let tiny = F4::splat(Real::MIN_POSITIVE);
-                let la = -(two * diff.dot(ga)) / na.max(tiny);
-                let lb = two * diff.dot(gb) / nb.max(tiny);
-                lt = [
-                    F4::select(start, positive_multiplier(la, na, dist), lt[0]),
-                    F4::select(start, positive_multiplier(lb, nb, dist), lt[1]),
-                ];
-            }
-            let d2 = diff.scale(two);
-            let ra = ga.mul_add(lt[0], d2);
-            let rb = gb.mul_add(lt[1], d2.neg());
-            let (cva, cvb) = (F4::load(&ea.value) - one, F4::load(&eb.value) - one);
-            let r1 = (ra.dot(ra) + rb.dot(rb) + cva.mul_add(cva, cvb * cvb)).sqrt();
+            let (va, vb) = (F4::load(&ea.value), F4::load(&eb.value));
+            let (ha, hb) = (load6(&ea.hessian, ka2), congruence(&mb, &load6(&eb.hessian, one)));
+            let tiny = F4::splat(Real::MIN_POSITIVE);
+            let KktRound { lt, dist, ra, rb, cva, cvb, r1, step } =
+                kkt_round(xt, yt, lt, start, tiny, [ga, gb], [va, vb], [&ha, &hb]);
+            let (sdx, sdy, sdl, solved) = step;
             let norm_inf = abs_max(ra).max(abs_max(rb)).max(cva.abs().max(cvb.abs()));
-            // The Newton steps from the trial points (taken where a trial point is accepted).
-            let ha = load6(&ea.hessian, ka2);
-            let hb = congruence(&mb, &load6(&eb.hessian, one));
-            let (wa, wb) = (shifted(&ha, lt[0], two), shifted(&hb, lt[1], two));
-            let (sdx, sdy, sdl, solved) = solve_kkt8(&wa, &wb, ga, gb, ra, rb, cva, cvb);
             // Accepted trial points: the start, or a decrease of the residual (Armijo on ‖r‖₂).
             let decrease = r1.le((F4::splat(-1e-4) * al + one) * r0).and(r1.finite());
             let accepted = start.or(decrease).and(lanes.book.live());

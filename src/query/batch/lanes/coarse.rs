@@ -24,10 +24,8 @@
 //! 2d = 8 (instructions per batch −7.7 %). Newton iterations per pair rise by 0.04 (5.64 instead
 //! of 5.60 at 2d = 8): single-precision arithmetic near the hand-off.
 
-use super::simd::{
-    congruence, mat_mul, mat_t_mul, positive_multiplier, shifted, solve_kkt8, Lane, LaneMask, F8, M3, M8, S3, V3,
-};
-use super::{Handoff, Stage, COARSE_NOISE, COARSE_RESIDUAL, EMPTY};
+use super::simd::{congruence, mat_mul, mat_t_mul, Lane, LaneMask, F8, M3, M8, S3, V3};
+use super::{kkt_round, Handoff, KktRound, Stage, COARSE_NOISE, COARSE_RESIDUAL, EMPTY};
 use crate::body::{Body, PosedBody};
 use crate::math::{Isometry3, Real, Vector3};
 use crate::poly::SoaPoly;
@@ -225,33 +223,17 @@ pub(super) unsafe fn coarse_stage8(
         let cb = V3::load32(&lanes.cb);
         let xt = dx.mul_add(al, x);
         let yt = dy.mul_add(al, y);
-        let mut lt = [dl[0].mul_add(al, lam[0]), dl[1].mul_add(al, lam[1])];
+        let lt = [dl[0].mul_add(al, lam[0]), dl[1].mul_add(al, lam[1])];
         let ea = eval8(soa_a, xt.mul_add(ka8, ca8));
         let eb = eval8(soa_b, mat_mul(&mb, yt).add(cb));
         let ga = ea.gradient.scale(ka8);
         let gb = mat_t_mul(&mb, eb.gradient);
-        let diff = xt.sub(yt);
-        let dist = diff.dot(diff).sqrt();
-        // Least-squares multipliers at a start (the single-pair solver's initial multipliers).
-        if start.bits() != 0 {
-            let (na, nb) = (ga.dot(ga), gb.dot(gb));
-            let la = -(two * diff.dot(ga)) / na.max(tiny);
-            let lb = two * diff.dot(gb) / nb.max(tiny);
-            lt = [
-                F8::select(start, positive_multiplier(la, na, dist), lt[0]),
-                F8::select(start, positive_multiplier(lb, nb, dist), lt[1]),
-            ];
-        }
-        let d2 = diff.scale(two);
-        let ra = ga.mul_add(lt[0], d2);
-        let rb = gb.mul_add(lt[1], d2.neg());
-        let (cva, cvb) = (ea.value - one, eb.value - one);
-        let r1 = (ra.dot(ra) + rb.dot(rb) + cva.mul_add(cva, cvb * cvb)).sqrt();
         let h = &ea.hessian;
         let ha: S3<F8> = [h[0] * ka2, h[1] * ka2, h[2] * ka2, h[3] * ka2, h[4] * ka2, h[5] * ka2];
         let hb = congruence(&mb, &eb.hessian);
-        let (wa, wb) = (shifted(&ha, lt[0], two), shifted(&hb, lt[1], two));
-        let (sdx, sdy, sdl, solved) = solve_kkt8(&wa, &wb, ga, gb, ra, rb, cva, cvb);
+        let KktRound { lt, dist, r1, step, .. } =
+            kkt_round(xt, yt, lt, start, tiny, [ga, gb], [ea.value, eb.value], [&ha, &hb]);
+        let (sdx, sdy, sdl, solved) = step;
         // Accepted trial points: the start, or a decrease of the residual (Armijo on ‖r‖₂).
         let finite = r1.finite();
         let decrease = r1.le(armijo.mul_add(al, one) * r0).and(finite);
