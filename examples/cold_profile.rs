@@ -9,6 +9,9 @@
 //! perf record -g target/release/examples/cold_profile 6 400 distance && perf report
 //! ```
 //!
+//! The third argument `scales` checks and times the batch where single precision runs short (the
+//! pair rescaled to 3 mm / 100 m and moved 1 km from a frame's origin; see `scales`).
+//!
 //! The third argument `warm` times the warm queries instead: the 500-step slide and turn of
 //! `sublevel bench` (each step's distance and growth query repeated from the previous step's warm
 //! starts), so `--toggle-collect` on `distance` / `growth` profiles warm queries.
@@ -63,6 +66,9 @@ fn main() -> sublevel::Result<()> {
     }
     if which == "batch" {
         return batch(&chair, &human, &poses, degree, repeats, &params);
+    }
+    if which == "scales" {
+        return scales(&chair, &human, &poses, degree, repeats, &params);
     }
     let (mut sep, mut ovl, mut it_sep, mut it_ovl, mut conv) = (0usize, 0usize, 0usize, 0usize, 0usize);
     let mut hist = [0usize; 12];
@@ -145,6 +151,8 @@ fn warm(chair: &Body, human: &Body, degree: usize, repeats: usize, params: &Newt
     let id = Isometry3::identity();
     let (mut td, mut tg, mut warm_d, mut warm_g, mut conv) = (Vec::new(), Vec::new(), 0usize, 0usize, 0usize);
     let (mut wd, mut wg) = (None, None);
+    // Newton iterations of the warm-started answers (0..=5, 6+), distance and growth.
+    let (mut hist_d, mut hist_g) = ([0usize; 7], [0usize; 7]);
     for k in 0..500 {
         let s = k as Real / 499.0;
         let pose = Isometry3::from_parts(
@@ -165,12 +173,19 @@ fn warm(chair: &Body, human: &Body, degree: usize, repeats: usize, params: &Newt
         tg.push(t.elapsed().as_secs_f64() * 1e6 / repeats as Real);
         warm_d += usize::from(d.warm_started);
         warm_g += usize::from(g.warm_started);
+        if d.warm_started {
+            hist_d[d.iterations.min(6)] += 1;
+        }
+        if g.warm_started {
+            hist_g[g.iterations.min(6)] += 1;
+        }
         conv += usize::from(d.status.converged()) + usize::from(g.status.converged());
         wd = Some(d.warm_start);
         wg = Some(g.warm_start);
     }
     println!("2d = {degree}: distance warm median {:.3} µs, growth warm median {:.3} µs", median(td), median(tg));
     println!("warm-started: distance {warm_d} / 500, growth {warm_g} / 500; converged {conv} / 1000");
+    println!("warm-started iterations (0..=5, 6+): distance {hist_d:?}, growth {hist_g:?}");
     Ok(())
 }
 
@@ -232,6 +247,80 @@ fn batch(
         it_s as Real / n,
         it_b as Real / n
     );
+    Ok(())
+}
+
+/// The batch where single precision runs short: the chair / human pair rescaled and moved (a
+/// 3 mm chair; the chair's center 1 km from its frame's origin, posed where it was; a 100 m chair
+/// against a 1.7 cm human, the poses' translations × 100). Checks every batch answer against the
+/// single-pair one (as `batch`) and prints the batch's rate over single queries for each case.
+fn scales(
+    chair: &Body,
+    human: &Body,
+    poses: &[Isometry3],
+    degree: usize,
+    repeats: usize,
+    params: &NewtonParams,
+) -> sublevel::Result<()> {
+    use sublevel::query::batch::cold_distances;
+    let id = Isometry3::identity();
+    let rescaled = |body: &Body, k: Real, shift: Vector3| {
+        let c = body.center() * k + shift;
+        Body::new(body.polynomial().clone(), [c.x, c.y, c.z], body.scale() * k, Default::default())
+    };
+    let o = Vector3::new(800.0, -500.0, 300.0);
+    let moved = Isometry3::translation(-o.x, -o.y, -o.z);
+    let cases = [
+        (
+            "3 mm chair",
+            rescaled(chair, 0.003, Vector3::zeros())?,
+            human.clone(),
+            poses.iter().map(|p| (*p, id)).collect::<Vec<_>>(),
+        ),
+        (
+            "chair's center 1 km out",
+            rescaled(chair, 1.0, o)?,
+            human.clone(),
+            poses.iter().map(|p| (p * moved, id)).collect(),
+        ),
+        (
+            "100 m chair, 1.7 cm human",
+            rescaled(chair, 100.0, Vector3::zeros())?,
+            rescaled(human, 0.01, Vector3::zeros())?,
+            poses
+                .iter()
+                .map(|p| (Isometry3::from_parts((p.translation.vector * 100.0).into(), p.rotation), id))
+                .collect(),
+        ),
+    ];
+    for (name, a, b, pairs) in &cases {
+        let mut worst: Real = 0.0;
+        let batch = cold_distances(a, b, pairs, params, false);
+        for ((pa, pb), d) in pairs.iter().zip(&batch) {
+            let s = distance(a, pa, b, pb, None, params);
+            assert!(d.status.converged() && s.overlapping == d.overlapping, "{name}: {s:?} vs {d:?}");
+            worst = worst.max((s.distance - d.distance).abs() / (1.0 + s.distance));
+        }
+        assert!(worst <= 1e-9, "{name}: batch answers differ by {worst:e} of 1 + the distance");
+        let (mut ts, mut tb) = (Vec::new(), Vec::new());
+        let n = pairs.len() as Real;
+        for _ in 0..repeats {
+            let t = Instant::now();
+            for (pa, pb) in pairs {
+                std::hint::black_box(distance(a, pa, b, pb, None, params));
+            }
+            ts.push(t.elapsed().as_secs_f64() * 1e6 / n);
+            let t = Instant::now();
+            std::hint::black_box(cold_distances(a, b, pairs, params, false));
+            tb.push(t.elapsed().as_secs_f64() * 1e6 / n);
+        }
+        let (ms, mb) = (median(ts), median(tb));
+        println!(
+            "2d = {degree}, {name}: cold distance per pair one at a time {ms:.3} µs, batch {mb:.3} µs ({:.2}× the \
+             single-query rate); largest difference {worst:.1e} of 1 + the distance",
+            ms / mb
+        );
+    }
     Ok(())
 }
 

@@ -37,7 +37,11 @@
 //! poses). When the coarse queue runs dry the lanes still running hand off as they are and run
 //! first in the fine stage, beside the others (one slow pair took 85 rounds alone otherwise); a
 //! lane that ends the coarse stage otherwise (nonfinite, singular, stalled, at the cap) starts
-//! again in the fine stage from its cold start, so single precision never decides a pair.
+//! again in the fine stage from its cold start, so single precision never decides a pair. The
+//! coarse lanes hold their points as displacements from each pair's start points (fifteenth
+//! session), so single precision does not depend on where the bodies sit in A's frame or on how
+//! their sizes compare (a 100 m body against a 1.7 cm one, a body 1 km from its frame's origin:
+//! see `lanes::coarse`).
 //!
 //! A pair's last point needs no Hessians: it is only checked. Where a fine-stage lane accepts a
 //! point at a residual below 10⁻⁵ of the stationarity scale (`lanes::VERIFY_RESIDUAL`), Newton's
@@ -1241,6 +1245,65 @@ mod tests {
             }
             assert!(worst < 1e-9, "2d = {degree}: distances differ by {worst:e} m");
             assert!(separated > 30 && separated < 150, "2d = {degree}: {separated} separated of 150");
+        }
+    }
+
+    /// `body` scaled by `k` about its frame's origin: {x : p((x − k·c)/(k·s)) ≤ 1}.
+    fn scaled(body: &Body, k: Real) -> Body {
+        let c = body.center() * k;
+        Body::new(body.polynomial().clone(), [c.x, c.y, c.z], body.scale() * k, Default::default()).unwrap()
+    }
+
+    #[test]
+    fn lanes_give_the_single_pair_answers_at_extreme_scales_and_offsets() {
+        // Where single precision runs out (the coarse stage's points are `f32` in A's frame): a
+        // 2 mm body against a 1 m one up to 5 m away, a 1 m body whose center is 1 km from its
+        // frame's origin (B posed next to it), and a 100 m body against a 1 cm one. At 2d = 4, 6, 8 (the degrees with a coarse stage),
+        // every batch answer converged with the single-pair solver's overlap flag and distance
+        // (to 1e-9 of 1 + the distance, meters) and witnesses (to 1e-6 of the larger body's size):
+        // a lane whose single-precision stage stalls starts again in double precision.
+        let params = NewtonParams::default();
+        for degree in [4, 6, 8] {
+            let (unit_a, unit_b) = (random_body(degree, 31), random_body(degree, 32));
+            // A with its center moved `o` meters from its frame's origin (a body fitted in map
+            // coordinates) and B posed near it again: pb ← pa·T(o)·pa⁻¹·pb.
+            let o = Vector3::new(800.0, -500.0, 300.0);
+            let far_a = {
+                let c = unit_a.center() + o;
+                Body::new(unit_a.polynomial().clone(), [c.x, c.y, c.z], unit_a.scale(), Default::default()).unwrap()
+            };
+            let far = |pairs: Vec<(Isometry3, Isometry3)>| -> Vec<(Isometry3, Isometry3)> {
+                let m = Isometry3::translation(o.x, o.y, o.z);
+                pairs.into_iter().map(|(pa, pb)| (pa, pa * m * pa.inv_mul(&pb))).collect()
+            };
+            let cases = [
+                ("2 mm against 1 m", scaled(&unit_a, 0.003), unit_b.clone(), poses(40, 2.5, 100 + degree as u64)),
+                ("A's center 1 km from its origin", far_a, unit_b.clone(), far(poses(40, 1.5, 200 + degree as u64))),
+                (
+                    "100 m against 1 cm",
+                    scaled(&unit_a, 140.0),
+                    scaled(&unit_b, 0.014),
+                    poses(40, 150.0, 300 + degree as u64),
+                ),
+            ];
+            for (name, a, b, pairs) in cases {
+                let size = a.scale().max(b.scale());
+                let batch = cold_distances(&a, &b, &pairs, &params, false);
+                for ((pa, pb), d) in pairs.iter().zip(&batch) {
+                    let s = distance(&a, pa, &b, pb, None, &params);
+                    assert!(d.status.converged() && s.status.converged(), "2d = {degree}, {name}: {d:?} {s:?}");
+                    assert_eq!(d.overlapping, s.overlapping, "2d = {degree}, {name}");
+                    let gap = (d.distance - s.distance).abs();
+                    assert!(
+                        gap <= 1e-9 * (1.0 + s.distance),
+                        "2d = {degree}, {name}: {} vs {}",
+                        d.distance,
+                        s.distance
+                    );
+                    let w = (d.witness_a - s.witness_a).norm().max((d.witness_b - s.witness_b).norm());
+                    assert!(w <= 1e-6 * size, "2d = {degree}, {name}: witnesses {w:e} m apart");
+                }
+            }
         }
     }
 
