@@ -28,6 +28,13 @@
 //! point and is a lower bound of any squared distance, so it is optimal; the SDP then only has to
 //! not contradict it (bound ≤ `AGREEMENT_ABSOLUTE`). This covers overlaps where the SDP ends
 //! `AlmostSolved` a few 1e-9 below 0 with an unverifiable a-posteriori bound.
+//! A growth answer whose constraint is inactive (multiplier 0: p₁'s unconstrained minimizer lies
+//! in body 2, [`super::growth`] case 1) is certified the same way: p₁ is convex, so a stationary
+//! point is its global minimum, and it lies in body 2, so that minimum is d(p₁‖p₂). The SDP then
+//! only has to not contradict it: the smaller of its bound and its verified bound at most
+//! `AGREEMENT_ABSOLUTE` above the value. On the stability suite's 1 × 1 × 10⁻³ m slab (p₁'s
+//! coefficients up to 10⁶) Clarabel ended `AlmostSolved` with a bound 2.4·10⁻⁹ above the value 0
+//! and a verified bound −4·10⁻⁸ on one host (its BLAS kernels) and agreed on another.
 //!
 //! # Verified SDP
 //!
@@ -248,6 +255,14 @@ fn distance_summary(c: &DistanceCertificate, newton: Option<Real>) -> Certificat
 
 fn growth_summary(c: &GrowthCertificate, newton: Option<Real>) -> CertificateSummary {
     summary(c.value, c.verified_value, c.gram_min_eigenvalue, c.solve_seconds, c.solver_status, newton)
+}
+
+/// The agreement rule for a growth answer whose constraint is inactive (module docs): the SDP's
+/// lower bound does not exceed Newton's `value` by more than [`AGREEMENT_ABSOLUTE`], judged by the
+/// smaller of its bound and its a-posteriori verified bound (the rigorous one: on badly scaled
+/// bodies Clarabel may end `AlmostSolved` with a bound a few 10⁻⁹ too high).
+fn inactive_growth_agrees(s: &CertificateSummary, value: Real) -> bool {
+    s.bound.min(s.verified_bound) <= value + AGREEMENT_ABSOLUTE
 }
 
 /// Whether `x` (world frame) lies in both posed bodies up to [`OVERLAP_POINT_TOLERANCE`]: a primal
@@ -554,7 +569,14 @@ pub fn certified_growth(
     let Ok(c) = certify_growth_with_params(p1, pose1, p2, pose2, cert) else {
         return CertifiedGrowth::newton(newton, None, newton_ok);
     };
-    let s = growth_summary(&c, Some(newton.value));
+    let mut s = growth_summary(&c, Some(newton.value));
+    let in_body2 = |x: &Point3| p2.value_at(&(pose2.inverse() * x)) <= 1.0 + OVERLAP_POINT_TOLERANCE;
+    if newton_ok && newton.multiplier == 0.0 && in_body2(&newton.minimizer) {
+        // The inactive constraint: the value is p₁'s own minimum (module docs), attained at a point
+        // of body 2; the SDP only has to not contradict it.
+        s.agrees = inactive_growth_agrees(&s, newton.value);
+        s.relative_gap = 0.0;
+    }
     if newton_ok && (s.agrees || !s.verified) {
         return CertifiedGrowth::newton(newton, Some(s), true);
     }
@@ -773,5 +795,45 @@ mod tests {
         assert_eq!(g.source, AnswerSource::SdpFallback);
         assert!(g.converged);
         assert!((g.result.value - g_ref.result.value).abs() < 1e-6 * g_ref.result.value, "{g:?}");
+    }
+
+    #[test]
+    fn inactive_growth_answers_are_judged_by_the_rigorous_bound() {
+        // The numbers of the stability suite's slab (1 × 1 × 10⁻³ m) on a host where Clarabel
+        // ended `AlmostSolved`: Newton's value 0 (the slab's own minimum, its center inside the
+        // other body); the SDP's bound 2.4·10⁻⁹ above it, its verified bound −4·10⁻⁸ below it.
+        let summary = |bound: Real, verified_bound: Real| CertificateSummary {
+            bound,
+            verified_bound,
+            agrees: false,
+            relative_gap: 1.0,
+            gram_min_eigenvalue: -2.4e-9,
+            solve_seconds: 0.0,
+            solver_status: SdpStatus::AlmostSolved,
+            kind: CertificateKind::Level0,
+            verified: false,
+            newton_value: Some(0.0),
+        };
+        assert!(inactive_growth_agrees(&summary(2.4287605829478495e-9, -4.023593409991625e-8), 0.0));
+        assert!(inactive_growth_agrees(&summary(5e-10, 5e-10), 0.0));
+        // A rigorous bound above the attained value by more than the absolute tolerance contradicts it.
+        assert!(!inactive_growth_agrees(&summary(2e-3, 1e-3), 0.0));
+        assert!(!inactive_growth_agrees(&summary(0.31, 0.31), 0.3));
+    }
+
+    #[test]
+    fn inactive_growth_is_certified_at_the_first_bodys_minimum() {
+        // A small ellipsoid whose center (p₁ = 0 there) lies inside a larger one: d(p₁‖p₂) = 0 with
+        // multiplier 0, certified whatever the SDP's last digits.
+        let small = ellipsoid([0.0; 3], [0.2, 0.1, 0.05]).unwrap();
+        let large = ellipsoid([0.0; 3], [1.0, 0.8, 0.6]).unwrap();
+        let pose = pose_from_parts("p", [0.9, 0.1, 0.3, 0.3], [0.2, -0.1, 0.1]).unwrap();
+        let id = Isometry3::identity();
+        let g = certified_growth(&small, &pose, &large, &id, None, &CertifyParams::default(), CertifyMode::Certify);
+        assert_eq!(g.source, AnswerSource::Newton);
+        assert!(g.converged && g.result.multiplier == 0.0 && g.result.value.abs() <= 1e-12, "{g:?}");
+        assert!((g.result.minimizer - Point3::new(0.2, -0.1, 0.1)).norm() <= 1e-12, "{g:?}");
+        let c = g.certificate.expect("Certify mode attaches the SDP");
+        assert!(c.agrees && c.bound <= 1e-9 && c.relative_gap == 0.0, "{c:?}");
     }
 }

