@@ -54,3 +54,41 @@ fn every_hard_case_is_certified_or_flagged_with_a_verified_fallback() {
     // The fallback is the exception: most answers are Newton's, checked.
     assert!(certified * 10 >= total * 8, "only {certified} of {total} certified");
 }
+
+#[test]
+fn the_batch_answers_every_hard_case_as_one_pair_at_a_time() {
+    // The batch solver (eight single-precision lanes, then four double-precision ones) on the
+    // suite's hard configurations, each pair repeated 12 times in one batch, at 2d = 4, 6, 8:
+    // every answer with the single-pair solver's convergence, overlap flag, distance (to 1e-9 of
+    // 1 + the distance, meters) and witnesses (to 1e-6 of the bodies' sizes).
+    use sublevel::query::{batch::cold_distances, distance, NewtonParams};
+    let bodies: Vec<Body> = [
+        "chair_101.deg4.json",
+        "human_10.deg4.json",
+        "chair_101.deg6.json",
+        "human_10.deg6.json",
+        "chair_101.deg8.json",
+        "human_10.deg8.json",
+    ]
+    .map(load)
+    .into();
+    let params = NewtonParams::default();
+    let mut checked = 0;
+    for case in stability_cases(&bodies, &[], 2, 11).unwrap() {
+        for p in &case.pairs {
+            let single = distance(&p.a, &p.pose_a, &p.b, &p.pose_b, None, &params);
+            let batch = cold_distances(&p.a, &p.b, &vec![(p.pose_a, p.pose_b); 12], &params, false);
+            for d in &batch {
+                let what = format!("{}: batch {d:?}\nsingle {single:?}", case.name);
+                assert_eq!(d.status.converged(), single.status.converged(), "{what}");
+                assert_eq!(d.overlapping, single.overlapping, "{what}");
+                assert!((d.distance - single.distance).abs() <= 1e-9 * (1.0 + single.distance), "{what}");
+                let size = p.a.scale() + p.b.scale();
+                let apart = (d.witness_a - single.witness_a).norm().max((d.witness_b - single.witness_b).norm());
+                assert!(apart <= 1e-6 * size, "{what}");
+                checked += 1;
+            }
+        }
+    }
+    assert!(checked >= 12 * 30, "{checked} answers checked");
+}
