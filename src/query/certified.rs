@@ -268,8 +268,12 @@ fn inactive_growth_agrees(s: &CertificateSummary, value: Real) -> bool {
 /// Whether `x` (world frame) lies in both posed bodies up to [`OVERLAP_POINT_TOLERANCE`]: a primal
 /// certificate that the distance is 0.
 fn common_point_certifies_overlap(a: &Body, pose_a: &Isometry3, b: &Body, pose_b: &Isometry3, x: &Point3) -> bool {
-    let inside = |body: &Body, pose: &Isometry3| body.value_at(&(pose.inverse() * x)) <= 1.0 + OVERLAP_POINT_TOLERANCE;
-    inside(a, pose_a) && inside(b, pose_b)
+    in_body(a, pose_a, x) && in_body(b, pose_b, x)
+}
+
+/// Whether `x` (world frame) lies in `body` posed by `pose`, up to [`OVERLAP_POINT_TOLERANCE`].
+fn in_body(body: &Body, pose: &Isometry3, x: &Point3) -> bool {
+    body.value_at(&(pose.inverse() * x)) <= 1.0 + OVERLAP_POINT_TOLERANCE
 }
 
 fn is_nonconvex(a: &Body, b: &Body) -> bool {
@@ -570,8 +574,7 @@ pub fn certified_growth(
         return CertifiedGrowth::newton(newton, None, newton_ok);
     };
     let mut s = growth_summary(&c, Some(newton.value));
-    let in_body2 = |x: &Point3| p2.value_at(&(pose2.inverse() * x)) <= 1.0 + OVERLAP_POINT_TOLERANCE;
-    if newton_ok && newton.multiplier == 0.0 && in_body2(&newton.minimizer) {
+    if newton_ok && newton.multiplier == 0.0 && in_body(p2, pose2, &newton.minimizer) {
         // The inactive constraint: the value is p₁'s own minimum (module docs), attained at a point
         // of body 2; the SDP only has to not contradict it.
         s.agrees = inactive_growth_agrees(&s, newton.value);

@@ -125,11 +125,11 @@ impl Lanes8 {
         }
     }
 
-    /// Gives lane `i` pair `k` (B posed as `bb` in A's frame) at its start (x0, y0), which
-    /// becomes the lane's origins; `ua0` is A's normalized coordinates at x0.
-    fn fill(&mut self, i: usize, k: usize, bb: &PosedBody<'_>, x0: &Vector3, y0: &Vector3, ua0: &Vector3) {
+    /// Gives lane `i` pair `k` (A unposed as `ba`, B posed as `bb` in A's frame) at its start
+    /// (x0, y0), which becomes the lane's origins.
+    fn fill(&mut self, i: usize, k: usize, ba: &PosedBody<'_>, bb: &PosedBody<'_>, x0: &Vector3, y0: &Vector3) {
         self.job[i] = k;
-        let (m, c) = (bb.linear(), bb.to_normalized(y0));
+        let (m, c, ua0) = (bb.linear(), bb.to_normalized(y0), ba.to_normalized(x0));
         for r in 0..3 {
             self.cb[r][i] = c[r] as f32;
             for col in 0..3 {
@@ -205,7 +205,7 @@ pub(super) unsafe fn coarse_stage8(
     let (zero, one, two) = (F8::splat(0.0), F8::splat(1.0), F8::splat(2.0));
     let ka = 1.0 / a.scale();
     let (ka8, ka2) = (F8::splat(ka), F8::splat(ka * ka));
-    let ca = a.center();
+    let ba = PosedBody::unposed(a);
     let near_level = F8::splat(COARSE_RESIDUAL);
     let armijo = F8::splat(-1e-4);
     let tiny = F8::splat(F8::TINY);
@@ -217,7 +217,7 @@ pub(super) unsafe fn coarse_stage8(
                 let k = next;
                 next += 1;
                 if let Some((x0, y0)) = &starts[k] {
-                    lanes.fill(i, k, &PosedBody::new(b, &rels[k]), x0, y0, &((x0 - ca) * ka));
+                    lanes.fill(i, k, &ba, &PosedBody::new(b, &rels[k]), x0, y0);
                 }
             }
         }
