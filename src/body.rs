@@ -546,11 +546,27 @@ pub struct PosedBody<'a> {
 
 impl<'a> PosedBody<'a> {
     /// The body under the identity pose (`A = I/scale`, `b = −center/scale`), without the
-    /// quaternion → matrix work of [`Self::new`]: the frame body of every query.
+    /// quaternion → matrix work of [`Self::new`]: the frame body of a query solved in that body's
+    /// own frame (far from that frame's origin a query translates it, [`Self::translated`]).
     #[inline]
     pub fn unposed(body: &'a Body) -> Self {
         let inv_s = 1.0 / body.scale;
         Self { body, pose: Isometry3::identity(), a: Matrix3::from_diagonal_element(inv_s), b: -body.center * inv_s }
+    }
+
+    /// The body translated by `offset` (meters, no rotation): [`Self::unposed`] in a working frame
+    /// whose origin is the body frame's point −`offset`, again without quaternion → matrix work
+    /// (`A = I/scale`, `b = −(center + offset)/scale`, with center + offset formed first, so the
+    /// map stays exact to the rounding of the working frame's small coordinates).
+    #[inline]
+    pub fn translated(body: &'a Body, offset: &Vector3) -> Self {
+        let inv_s = 1.0 / body.scale;
+        Self {
+            body,
+            pose: Isometry3::translation(offset.x, offset.y, offset.z),
+            a: Matrix3::from_diagonal_element(inv_s),
+            b: -(body.center + offset) * inv_s,
+        }
     }
 
     /// Precomputes the world → normalized map `u = A x + b`.

@@ -145,8 +145,7 @@ fn distance_body<const FMA: bool>(
     params: &NewtonParams,
 ) -> DistanceResult {
     let rel = pose_a.inv_mul(pose_b);
-    let ba = PosedBody::unposed(a);
-    let bb = PosedBody::new(b, &rel);
+    let (o, ba, bb) = working_frame(a, b, &rel);
     let mut iterations = 0;
 
     // The trail of this answer: the last separated answer and its own trail, with the step from it.
@@ -156,10 +155,10 @@ fn distance_body<const FMA: bool>(
         let (a0, b0, lam0) = w.predict(step);
         let y0 = bb.to_world(&b0);
         let capped = NewtonParams { max_iterations: params.max_iterations.min(WARM_ITERATIONS), ..*params };
-        let out = kkt_newton(&ba, &bb, a0, y0, Some(lam0), &capped, true);
+        let out = kkt_newton(&ba, &bb, a0 - o, y0, Some(lam0), &capped, true);
         iterations += out.iterations;
         if out.status.converged() {
-            return finish(pose_a, &rel, out, iterations, true, &w.growth, previous);
+            return finish(pose_a, &rel, out.moved(&o), iterations, true, &w.growth, previous);
         }
     }
 
@@ -174,12 +173,41 @@ fn distance_body<const FMA: bool>(
             let out = kkt_newton(&ba, &bb, x0, y0, None, &capped, false);
             iterations += out.iterations;
             if out.status.converged() && clear_of_contact(&out.x, &out.y, a, b) {
-                return finish(pose_a, &rel, out, iterations, false, &GrowthWarmStart::default(), previous);
+                return finish(pose_a, &rel, out.moved(&o), iterations, false, &GrowthWarmStart::default(), previous);
             }
         }
     }
 
-    growth_first(pose_a, &ba, &bb, warm, previous, params, iterations)
+    growth_first(pose_a, &rel, &o, &ba, &bb, warm, previous, params, iterations)
+}
+
+/// Coordinates (meters) up to this multiple of the smaller body's size keep a query in A's frame
+/// ([`working_frame`]).
+const FRAME_SHIFT_RATIO: Real = 1e3;
+
+/// The working frame of a query between body `a` (frame of reference) and body `b` posed by `rel`
+/// in A's frame: A's frame moved to the origin `o` (meters, A's frame), the interior point of the
+/// smaller body, with both bodies posed in it. Returns (o, A, B).
+///
+/// Newton's iterates and the bodies' normalized coordinates are then exact to the rounding of
+/// coordinates about as large as the bodies and their gap, not of A's frame: a 1 mm body next to
+/// a 1 m body whose center lies 1 km from its own frame's origin (a body fitted in site
+/// coordinates) has its points at ~10³ m in A's frame, where rounding (10⁻¹³ m) is 10⁻¹⁰ of its
+/// size, the KKT tolerance; most such queries ran hundreds of iterations and ended unconverged.
+/// A translation keeps A unrotated (its gradients and Hessians scaled, not rotated).
+///
+/// Where coordinates stay below [`FRAME_SHIFT_RATIO`] times the smaller body's size (bounded by
+/// |t_rel|₁ + |c_a|₁ + |c_b|₁, the bodies' centers in their frames) the frame is A's own (o = 0):
+/// rounding is then below 10⁻¹³ of either body's size, and the common query skips the shift.
+#[inline(always)]
+pub(super) fn working_frame<'a>(a: &'a Body, b: &'a Body, rel: &Isometry3) -> (Vector3, PosedBody<'a>, PosedBody<'a>) {
+    let reach = rel.translation.vector.abs().sum() + a.center().abs().sum() + b.center().abs().sum();
+    if reach <= FRAME_SHIFT_RATIO * a.scale().min(b.scale()) {
+        return (Vector3::zeros(), PosedBody::unposed(a), PosedBody::new(b, rel));
+    }
+    let o = if a.scale() <= b.scale() { a.interior_point().coords } else { (rel * b.interior_point()).coords };
+    let moved = Isometry3::from_parts((rel.translation.vector - o).into(), rel.rotation);
+    (o, PosedBody::translated(a, &-o), PosedBody::new(b, &moved))
 }
 
 /// The answer for overlapping (or touching) bodies: distance 0, both witnesses at the growth
@@ -218,14 +246,19 @@ pub(super) fn distance_growth_first(
     params: &NewtonParams,
 ) -> DistanceResult {
     let rel = pose_a.inv_mul(pose_b);
-    growth_first(pose_a, &PosedBody::unposed(a), &PosedBody::new(b, &rel), None, None, params, 0)
+    let (o, ba, bb) = working_frame(a, b, &rel);
+    growth_first(pose_a, &rel, &o, &ba, &bb, None, None, params, 0)
 }
 
-/// [`distance`] from its overlap test on, in the frame of A (`ba` unposed, `bb` posed by
-/// pose_a⁻¹·pose_b): the growth measure decides overlap (the touching answer at its minimizer),
-/// else Newton from the growth minimizer, else the barrier path; `iterations` spent so far.
+/// [`distance`] from its overlap test on, in the working frame `o` of A and B posed by `rel` =
+/// pose_a⁻¹·pose_b ([`working_frame`]: `ba`, `bb`): the growth measure decides overlap (the
+/// touching answer at its minimizer), else Newton from the growth minimizer, else the barrier
+/// path; `iterations` spent so far.
+#[allow(clippy::too_many_arguments)]
 fn growth_first(
     pose_a: &Isometry3,
+    rel: &Isometry3,
+    o: &Vector3,
     ba: &PosedBody<'_>,
     bb: &PosedBody<'_>,
     warm: Option<&DistanceWarmStart>,
@@ -233,7 +266,7 @@ fn growth_first(
     params: &NewtonParams,
     mut iterations: usize,
 ) -> DistanceResult {
-    let (a, rel) = (ba.body, bb.pose);
+    let a = ba.body;
     // Overlap test by the growth measure.
     let rel_ba = rel.inverse();
     let start = warm.map(|w| w.growth.towards(&rel_ba, a.scale()));
@@ -249,14 +282,14 @@ fn growth_first(
         return touching(iterations);
     }
 
-    // Separated: cold start from the growth minimizer on B.
-    let y0 = (rel * Point3::from(g.x)).coords;
+    // Separated: cold start from the growth minimizer on B (g.x in B's frame).
+    let y0 = bb.to_world(&g.x);
     // Exact boundary point: near contact the radial table's estimate may lie past y0.
     let x0 = boundary_on_segment_within(ba, &ba.interior_point(), &y0, START_BOUNDARY_TOLERANCE);
     let out = kkt_newton(ba, bb, x0, y0, None, params, false);
     iterations += out.iterations;
     if out.status.converged() {
-        return finish(pose_a, &rel, out, iterations, false, &growth_warm, previous);
+        return finish(pose_a, rel, out.moved(o), iterations, false, &growth_warm, previous);
     }
     // Touching within the growth solve's tolerance: at exact tangency the separated KKT system is
     // degenerate (x = y, λ → 0), so Newton cannot converge there; the growth answer is the
@@ -268,7 +301,7 @@ fn growth_first(
     iterations += it_b;
     let out = kkt_newton(ba, bb, xb, yb, Some(lamb), params, false);
     iterations += out.iterations;
-    finish(pose_a, &rel, out, iterations, false, &growth_warm, previous)
+    finish(pose_a, rel, out.moved(o), iterations, false, &growth_warm, previous)
 }
 
 /// The cold start of the speculative separated Newton run, in the frame of `ba`: when the bounding
@@ -537,6 +570,17 @@ pub(super) struct KktOut {
     pub(super) status: SolveStatus,
     pub(super) iterations: usize,
     pub(super) residual: Real,
+}
+
+impl KktOut {
+    /// The run's points moved by `o` (meters): from a query's working frame back to A's frame
+    /// ([`working_frame`]).
+    #[inline(always)]
+    pub(super) fn moved(mut self, o: &Vector3) -> Self {
+        self.x += o;
+        self.y += o;
+        self
+    }
 }
 
 type Vec8 = SVector<Real, 8>;
@@ -970,6 +1014,89 @@ mod tests {
         let r = distance(&n1, &Isometry3::identity(), &n2, &pose_b, None, &NewtonParams::default());
         assert!(r.status.converged());
         assert!((r.distance - 0.2).abs() < 1e-9, "{}", r.distance);
+    }
+
+    /// Distance from the point `z` (relative to the center) to the axis-aligned ellipsoid with
+    /// semi-axes `r`, for `z` outside it: the closest point is x_i = z_i r_i² / (r_i² + t) with
+    /// t ≥ 0 the root of Σ (x_i / r_i)² = 1 (decreasing in t), found by bisection.
+    fn point_to_ellipsoid(z: &Vector3, r: &[Real; 3]) -> Real {
+        let x = |t: Real| Vector3::from_fn(|i, _| z[i] * r[i] * r[i] / (r[i] * r[i] + t));
+        let f = |t: Real| (0..3).map(|i| (x(t)[i] / r[i]).powi(2)).sum::<Real>() - 1.0;
+        let (mut lo, mut hi) = (0.0, 1.0);
+        while f(hi) > 0.0 {
+            hi *= 2.0;
+        }
+        for _ in 0..200 {
+            let mid = 0.5 * (lo + hi);
+            if f(mid) > 0.0 {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        (z - x(hi)).norm()
+    }
+
+    #[test]
+    fn small_bodies_far_from_the_frame_origin_converge_to_the_closed_form() {
+        // A 0.9 × 0.3 × 0.5 m ellipsoid whose center lies 10 km (and 1 km) from its own frame's
+        // origin (a body fitted in site coordinates), posed anywhere, and a 1 mm / 1 cm sphere 0.1
+        // mm to 1 cm from it. In A's frame the points lie ~10⁴ m out, where rounding (~10⁻¹² m) is
+        // 10⁻⁹ of the sphere: before the query's working frame moved to the smaller body, about
+        // half of these ran hundreds of iterations and ended unconverged. Every answer converges
+        // to the closed form (point-to-ellipsoid distance minus the radius, 1e-9 m), and the
+        // growth measure of two spheres (1 m and 1 mm, 10 km out) matches (|c₁ − c₂| − r₂)²/r₁²
+        // inside and outside, to 1e-9 relative.
+        let params = NewtonParams::default();
+        let radii = [0.9, 0.3, 0.5];
+        let pose_a = pose_from_parts("a", [0.8, 0.0, 0.6, 0.0], [3.0, -1.0, 2.0]).unwrap();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(17);
+        let mut runs = 0;
+        for offset in [1e4, 1e3] {
+            let center = Vector3::new(offset, -0.6 * offset, 0.3 * offset);
+            let a = ellipsoid([center.x, center.y, center.z], radii).unwrap();
+            for radius in [1e-3, 1e-2] {
+                let b = ellipsoid([0.0; 3], [radius; 3]).unwrap();
+                for gap in [1e-4, 1e-3, 1e-2] {
+                    for _ in 0..20 {
+                        let m = Vector3::from_fn(|_, _| rng.random_range(-1.0..1.0)).normalize();
+                        // A's boundary point along m (A's frame), then B's center `gap + radius` out
+                        // along the normal there.
+                        let s = 1.0 / (0..3).map(|i| (m[i] / radii[i]).powi(2)).sum::<Real>().sqrt();
+                        let n = Vector3::from_fn(|i, _| m[i] * s / (radii[i] * radii[i])).normalize();
+                        let z = m * s + n * (gap + radius);
+                        let q = Vector3::from_fn(|_, _| rng.random_range(-1.0..1.0));
+                        let rot = UnitQuaternion::new_normalize(nalgebra::Quaternion::new(q.x, q.y, q.z, 0.5));
+                        let pose_b = pose_a * Isometry3::from_parts((center + z).into(), rot);
+                        let expected = point_to_ellipsoid(&z, &radii) - radius;
+                        let d = distance(&a, &pose_a, &b, &pose_b, None, &params);
+                        assert!(d.status.converged() && !d.overlapping, "offset {offset}, radius {radius}: {d:?}");
+                        assert!(
+                            (d.distance - expected).abs() <= 1e-9,
+                            "offset {offset}, radius {radius}, gap {gap}: {} vs {expected}",
+                            d.distance
+                        );
+                        assert!(((d.witness_b - d.witness_a).norm() - d.distance).abs() <= 1e-9);
+                        // The reversed pair (the small body as the frame of reference).
+                        let r = distance(&b, &pose_b, &a, &pose_a, None, &params);
+                        assert!(r.status.converged() && (r.distance - expected).abs() <= 1e-9, "{r:?}");
+                        runs += 1;
+                    }
+                }
+            }
+        }
+        assert_eq!(runs, 240);
+        let center = Vector3::new(1e4, -6e3, 3e3);
+        let big = ellipsoid([center.x, center.y, center.z], [1.0; 3]).unwrap();
+        let small = ellipsoid([0.0; 3], [1e-3; 3]).unwrap();
+        for along in [0.5, 0.999, 1.0005, 1.01] {
+            let m = Vector3::new(0.48, -0.6, 0.64);
+            let pose_b = Isometry3::translation(center.x + along * m.x, center.y + along * m.y, center.z + along * m.z);
+            let g = crate::query::growth::growth(&big, &Isometry3::identity(), &small, &pose_b, None, &params);
+            let expected = (along - 1e-3) * (along - 1e-3);
+            assert!(g.status.converged(), "along {along}: {g:?}");
+            assert!((g.value - expected).abs() <= 1e-9 * expected.max(1.0), "along {along}: {} vs {expected}", g.value);
+        }
     }
 
     #[test]

@@ -147,8 +147,9 @@ fn growth_body<const FMA: bool>(
     params: &NewtonParams,
 ) -> GrowthResult {
     let rel = pose2.inverse() * pose1;
-    let b1 = PosedBody::new(p1, &rel);
-    let b2 = PosedBody::unposed(p2);
+    // Body 2's frame moved to the smaller body's interior point (core.x comes back in body 2's
+    // frame through b2's pose).
+    let (_, b2, b1) = super::distance::working_frame(p2, p1, &rel);
     let start = warm.map(|w| w.towards(&rel, p1.scale()));
     let core = solve_growth(&b1, &b2, start, params);
     GrowthResult {
