@@ -189,7 +189,6 @@ fn warm(chair: &Body, human: &Body, degree: usize, repeats: usize, params: &Newt
     Ok(())
 }
 
-/// Median of the per-pose times (NaN when none were taken, e.g. growth in `distance` mode).
 /// The 300 cold poses as one batch ([`sublevel::query::batch::cold_distances`], four pairs per
 /// SIMD pass; with and without warm starts) against the same poses one [`distance`] at a time:
 /// `repeats` rounds, the three alternated; prints the median time per pair of each and the ratios,
@@ -217,22 +216,8 @@ fn batch(
         }
     }
     assert!(worst <= 1e-9, "batch answers differ by {worst:e} m");
-    let (mut ts, mut tw, mut tb) = (Vec::new(), Vec::new(), Vec::new());
+    let (ms, [mw, mb]) = single_and_batch_times(chair, human, &pairs, params, repeats, [true, false]);
     let n = pairs.len() as Real;
-    for _ in 0..repeats {
-        let t = Instant::now();
-        for p in poses {
-            std::hint::black_box(distance(chair, p, human, &id, None, params));
-        }
-        ts.push(t.elapsed().as_secs_f64() * 1e6 / n);
-        let t = Instant::now();
-        std::hint::black_box(cold_distances(chair, human, &pairs, params, true));
-        tw.push(t.elapsed().as_secs_f64() * 1e6 / n);
-        let t = Instant::now();
-        std::hint::black_box(cold_distances(chair, human, &pairs, params, false));
-        tb.push(t.elapsed().as_secs_f64() * 1e6 / n);
-    }
-    let (ms, mw, mb) = (median(ts), median(tw), median(tb));
     let batch = cold_distances(chair, human, &pairs, params, false);
     let it_s: usize = singles.iter().map(|d| d.iterations).sum();
     let it_b: usize = batch.iter().map(|d| d.iterations).sum();
@@ -302,19 +287,7 @@ fn scales(
             worst = worst.max((s.distance - d.distance).abs() / (1.0 + s.distance));
         }
         assert!(worst <= 1e-9, "{name}: batch answers differ by {worst:e} of 1 + the distance");
-        let (mut ts, mut tb) = (Vec::new(), Vec::new());
-        let n = pairs.len() as Real;
-        for _ in 0..repeats {
-            let t = Instant::now();
-            for (pa, pb) in pairs {
-                std::hint::black_box(distance(a, pa, b, pb, None, params));
-            }
-            ts.push(t.elapsed().as_secs_f64() * 1e6 / n);
-            let t = Instant::now();
-            std::hint::black_box(cold_distances(a, b, pairs, params, false));
-            tb.push(t.elapsed().as_secs_f64() * 1e6 / n);
-        }
-        let (ms, mb) = (median(ts), median(tb));
+        let (ms, [mb]) = single_and_batch_times(a, b, pairs, params, repeats, [false]);
         println!(
             "2d = {degree}, {name}: cold distance per pair one at a time {ms:.3} µs, batch {mb:.3} µs ({:.2}× the \
              single-query rate); largest difference {worst:.1e} of 1 + the distance",
@@ -324,6 +297,35 @@ fn scales(
     Ok(())
 }
 
+/// Median µs per pair of the `pairs` solved one [`distance`] at a time, and as one batch
+/// ([`sublevel::query::batch::cold_distances`]) for each warm-start setting of `batches`: `repeats`
+/// rounds, the runs of a round one after the other (alternated, so a slow minute slows them all).
+fn single_and_batch_times<const K: usize>(
+    a: &Body,
+    b: &Body,
+    pairs: &[(Isometry3, Isometry3)],
+    params: &NewtonParams,
+    repeats: usize,
+    batches: [bool; K],
+) -> (Real, [Real; K]) {
+    let n = pairs.len() as Real;
+    let (mut single, mut batch) = (Vec::new(), std::array::from_fn::<Vec<Real>, K, _>(|_| Vec::new()));
+    for _ in 0..repeats {
+        let t = Instant::now();
+        for (pa, pb) in pairs {
+            std::hint::black_box(distance(a, pa, b, pb, None, params));
+        }
+        single.push(t.elapsed().as_secs_f64() * 1e6 / n);
+        for (times, warm_starts) in batch.iter_mut().zip(batches) {
+            let t = Instant::now();
+            std::hint::black_box(sublevel::query::batch::cold_distances(a, b, pairs, params, warm_starts));
+            times.push(t.elapsed().as_secs_f64() * 1e6 / n);
+        }
+    }
+    (median(single), batch.map(median))
+}
+
+/// Median of the per-pose times (NaN when none were taken, e.g. growth in `distance` mode).
 fn median(mut v: Vec<Real>) -> Real {
     v.sort_by(|a, b| a.total_cmp(b));
     v.get(v.len() / 2).copied().unwrap_or(Real::NAN)

@@ -550,8 +550,7 @@ impl<'a> PosedBody<'a> {
     /// own frame (far from that frame's origin a query translates it, [`Self::translated`]).
     #[inline]
     pub fn unposed(body: &'a Body) -> Self {
-        let inv_s = 1.0 / body.scale;
-        Self { body, pose: Isometry3::identity(), a: Matrix3::from_diagonal_element(inv_s), b: -body.center * inv_s }
+        Self::translated(body, &Vector3::zeros())
     }
 
     /// The body translated by `offset` (meters, no rotation): [`Self::unposed`] in a working frame

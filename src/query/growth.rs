@@ -149,7 +149,7 @@ fn growth_body<const FMA: bool>(
     let rel = pose2.inverse() * pose1;
     // Body 2's frame moved to the smaller body's interior point (core.x comes back in body 2's
     // frame through b2's pose).
-    let (_, b2, b1) = super::distance::working_frame(p2, p1, &rel);
+    let (_, b2, b1) = super::newton::working_frame(p2, p1, &rel);
     let start = warm.map(|w| w.towards(&rel, p1.scale()));
     let core = solve_growth(&b1, &b2, start, params);
     GrowthResult {

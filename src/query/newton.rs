@@ -16,10 +16,39 @@
 //! A KKT point with nonnegative multipliers of a convex program is its global minimizer, so a
 //! converged answer is the answer.
 
-use crate::body::PosedBody;
+use crate::body::{Body, PosedBody};
 use crate::math::{Isometry3, Real, Vector3, NEWTON_KKT_TOLERANCE, NEWTON_MAX_ITERATIONS};
 use crate::poly::radial::ray_crossing;
 use serde::{Deserialize, Serialize};
+
+/// Coordinates (meters) up to this multiple of the smaller body's size keep a query in A's frame
+/// ([`working_frame`]).
+const FRAME_SHIFT_RATIO: Real = 1e3;
+
+/// The working frame of a query between body `a` (frame of reference) and body `b` posed by `rel`
+/// in A's frame: A's frame moved to the origin `o` (meters, A's frame), the interior point of the
+/// smaller body, with both bodies posed in it. Returns (o, A, B).
+///
+/// Newton's iterates and the bodies' normalized coordinates are then exact to the rounding of
+/// coordinates about as large as the bodies and their gap, not of A's frame: a 1 mm body next to
+/// a 1 m body whose center lies 1 km from its own frame's origin (a body fitted in site
+/// coordinates) has its points at ~10³ m in A's frame, where rounding (10⁻¹³ m) is 10⁻¹⁰ of its
+/// size, the KKT tolerance; most such queries ran hundreds of iterations and ended unconverged.
+/// A translation keeps A unrotated (its gradients and Hessians scaled, not rotated).
+///
+/// Where coordinates stay below [`FRAME_SHIFT_RATIO`] times the smaller body's size (bounded by
+/// |t_rel|₁ + |c_a|₁ + |c_b|₁, the bodies' centers in their frames) the frame is A's own (o = 0):
+/// rounding is then below 10⁻¹³ of either body's size, and the common query skips the shift.
+#[inline(always)]
+pub(crate) fn working_frame<'a>(a: &'a Body, b: &'a Body, rel: &Isometry3) -> (Vector3, PosedBody<'a>, PosedBody<'a>) {
+    let reach = rel.translation.vector.abs().sum() + a.center().abs().sum() + b.center().abs().sum();
+    if reach <= FRAME_SHIFT_RATIO * a.scale().min(b.scale()) {
+        return (Vector3::zeros(), PosedBody::unposed(a), PosedBody::new(b, rel));
+    }
+    let o = if a.scale() <= b.scale() { a.interior_point().coords } else { (rel * b.interior_point()).coords };
+    let moved = Isometry3::from_parts((rel.translation.vector - o).into(), rel.rotation);
+    (o, PosedBody::translated(a, &-o), PosedBody::new(b, &moved))
+}
 
 /// How a query solve ended (a value, not an error; paper §IV).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
