@@ -5,7 +5,7 @@ mod cli;
 /// The binary's allocator: mimalloc keeps freed pages for the next request, where glibc's arenas
 /// grew and trimmed (and faulted fresh pages) on every large one: 4096 candidate states in one
 /// Query took 16.8 ms of server time with glibc's allocator, 8.9 ms with its trimming turned off
-/// (README, "Issue 15, fifth session").
+/// (docs/performance-log.md, "Issue 15, fifth session").
 #[global_allocator]
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
