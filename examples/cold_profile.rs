@@ -10,7 +10,8 @@
 //! ```
 //!
 //! The third argument `scales` checks and times the batch where single precision runs short (the
-//! pair rescaled to 3 mm / 100 m and moved 1 km from a frame's origin; see `scales`).
+//! pair rescaled to 3 mm / 100 m / 1 cm and moved 1 km or 10 km from a frame's origin; see
+//! `scales`), with the Newton iterations of both solvers.
 //!
 //! The third argument `warm` times the warm queries instead: the 500-step slide and turn of
 //! `sublevel bench` (each step's distance and growth query repeated from the previous step's warm
@@ -237,8 +238,10 @@ fn batch(
 
 /// The batch where single precision runs short: the chair / human pair rescaled and moved (a
 /// 3 mm chair; the chair's center 1 km from its frame's origin, posed where it was; a 100 m chair
-/// against a 1.7 cm human, the poses' translations × 100). Checks every batch answer against the
-/// single-pair one (as `batch`) and prints the batch's rate over single queries for each case.
+/// against a 1.7 cm human, the poses' translations × 100; both 1 cm, the poses' translations ×
+/// 0.01, and so with the chair's center 10 km from its frame's origin). Checks every batch answer
+/// against the single-pair one (as `batch`) and prints the batch's rate over single queries and
+/// both solvers' Newton iterations for each case.
 fn scales(
     chair: &Body,
     human: &Body,
@@ -255,6 +258,8 @@ fn scales(
     };
     let o = Vector3::new(800.0, -500.0, 300.0);
     let moved = Isometry3::translation(-o.x, -o.y, -o.z);
+    let far = Vector3::new(8000.0, -5000.0, 3000.0);
+    let far_moved = Isometry3::translation(-far.x, -far.y, -far.z);
     let cases = [
         (
             "3 mm chair",
@@ -277,20 +282,41 @@ fn scales(
                 .map(|p| (Isometry3::from_parts((p.translation.vector * 100.0).into(), p.rotation), id))
                 .collect(),
         ),
+        (
+            "1 cm bodies",
+            rescaled(chair, 0.01, Vector3::zeros())?,
+            rescaled(human, 0.01, Vector3::zeros())?,
+            poses
+                .iter()
+                .map(|p| (Isometry3::from_parts((p.translation.vector * 0.01).into(), p.rotation), id))
+                .collect(),
+        ),
+        (
+            "1 cm bodies, the chair's center 10 km from its frame's origin",
+            rescaled(chair, 0.01, far)?,
+            rescaled(human, 0.01, Vector3::zeros())?,
+            poses
+                .iter()
+                .map(|p| (Isometry3::from_parts((p.translation.vector * 0.01).into(), p.rotation) * far_moved, id))
+                .collect(),
+        ),
     ];
     for (name, a, b, pairs) in &cases {
         let mut worst: Real = 0.0;
         let batch = cold_distances(a, b, pairs, params, false);
+        let (mut single_iterations, mut batch_iterations) = (0, 0);
         for ((pa, pb), d) in pairs.iter().zip(&batch) {
             let s = distance(a, pa, b, pb, None, params);
             assert!(d.status.converged() && s.overlapping == d.overlapping, "{name}: {s:?} vs {d:?}");
             worst = worst.max((s.distance - d.distance).abs() / (1.0 + s.distance));
+            (single_iterations, batch_iterations) = (single_iterations + s.iterations, batch_iterations + d.iterations);
         }
         assert!(worst <= 1e-9, "{name}: batch answers differ by {worst:e} of 1 + the distance");
         let (ms, [mb]) = single_and_batch_times(a, b, pairs, params, repeats, [false]);
         println!(
             "2d = {degree}, {name}: cold distance per pair one at a time {ms:.3} µs, batch {mb:.3} µs ({:.2}× the \
-             single-query rate); largest difference {worst:.1e} of 1 + the distance",
+             single-query rate); Newton iterations {single_iterations} one at a time, {batch_iterations} in the \
+             batch; largest difference {worst:.1e} of 1 + the distance",
             ms / mb
         );
     }

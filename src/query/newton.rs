@@ -7,7 +7,9 @@
 //!
 //! ```text
 //! 1. active-set Newton on the KKT system with every constraint active, from a warm start or a
-//!    geometric cold start; globalized by a backtracking line search on ‖KKT residual‖;
+//!    geometric cold start; globalized by a backtracking line search on ‖KKT residual‖ (the
+//!    distance solver's with stationarity in units of the smaller body's size, so that a run
+//!    does not depend on the bodies' size: `distance::merit_length`);
 //! 2. if that does not converge to a KKT point with positive multipliers, a primal log-barrier
 //!    path (always globally convergent on these convex problems, started from the bodies'
 //!    interior points), then the active-set Newton polish from the barrier's point.
@@ -41,13 +43,29 @@ const FRAME_SHIFT_RATIO: Real = 1e3;
 /// rounding is then below 10⁻¹³ of either body's size, and the common query skips the shift.
 #[inline(always)]
 pub(crate) fn working_frame<'a>(a: &'a Body, b: &'a Body, rel: &Isometry3) -> (Vector3, PosedBody<'a>, PosedBody<'a>) {
+    match frame_origin(a, b, rel) {
+        None => (Vector3::zeros(), PosedBody::unposed(a), PosedBody::new(b, rel)),
+        Some(o) => (o, PosedBody::translated(a, &-o), PosedBody::new(b, &shifted_pose(rel, &o))),
+    }
+}
+
+/// The origin of [`working_frame`] in A's frame: `None` where A's own frame serves (coordinates
+/// below [`FRAME_SHIFT_RATIO`] times the smaller body's size), else the smaller body's interior
+/// point.
+#[inline(always)]
+pub(crate) fn frame_origin(a: &Body, b: &Body, rel: &Isometry3) -> Option<Vector3> {
     let reach = rel.translation.vector.abs().sum() + a.center().abs().sum() + b.center().abs().sum();
     if reach <= FRAME_SHIFT_RATIO * a.scale().min(b.scale()) {
-        return (Vector3::zeros(), PosedBody::unposed(a), PosedBody::new(b, rel));
+        return None;
     }
-    let o = if a.scale() <= b.scale() { a.interior_point().coords } else { (rel * b.interior_point()).coords };
-    let moved = Isometry3::from_parts((rel.translation.vector - o).into(), rel.rotation);
-    (o, PosedBody::translated(a, &-o), PosedBody::new(b, &moved))
+    Some(if a.scale() <= b.scale() { a.interior_point().coords } else { (rel * b.interior_point()).coords })
+}
+
+/// B's pose `rel` (in A's frame) in the working frame with origin `o` (A's frame): the translation
+/// less `o`, the same rotation.
+#[inline(always)]
+pub(crate) fn shifted_pose(rel: &Isometry3, o: &Vector3) -> Isometry3 {
+    Isometry3::from_parts((rel.translation.vector - o).into(), rel.rotation)
 }
 
 /// How a query solve ended (a value, not an error; paper §IV).

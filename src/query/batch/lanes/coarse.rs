@@ -5,8 +5,8 @@
 //! ([`crate::poly::SoaPoly::eval8_rows_f32`], one eight-point pass per body).
 //!
 //! The steps are the single-pair solver's (same start, KKT system, least-squares multipliers at
-//! the start, backtracking on ‖KKT residual‖₂, iteration cap) until a lane's residual is below
-//! [`COARSE_RESIDUAL`] of the stationarity scale; it then hands its point, multipliers and Newton
+//! the start, backtracking on the same merit, iteration cap) until a lane's merit is below
+//! [`COARSE_RESIDUAL`] of its scale; it then hands its point, multipliers and Newton
 //! step to the fine stage (double precision, four lanes), as the twelfth session's four-lane
 //! coarse stage did. In single precision the residuals carry relative errors of about 10⁻⁵ (the
 //! kernel's) and the steps a little more, far below the hand-off level, so the steps are Newton
@@ -39,7 +39,7 @@
 //! of 5.60 at 2d = 8): single-precision arithmetic near the hand-off.
 
 use super::simd::{congruence, mat_mul, mat_t_mul, Lane, LaneMask, F8, M3, M8, S3, V3};
-use super::{kkt_round, Handoff, KktRound, Stage, COARSE_NOISE, COARSE_RESIDUAL, EMPTY};
+use super::{kkt_round, merit_length, Handoff, KktRound, Stage, COARSE_NOISE, COARSE_RESIDUAL, EMPTY};
 use crate::body::{Body, PosedBody};
 use crate::math::{Isometry3, Real, Vector3};
 use crate::poly::SoaPoly;
@@ -71,7 +71,7 @@ fn eval8(p: &SoaPoly, u: V3<F8>) -> Eval8 {
 struct Lanes8 {
     /// Index of each lane's pair in the batch, or [`EMPTY`].
     job: [usize; L],
-    /// Step lengths of the next trial points, ‖KKT residual‖₂ at the accepted points, 1 where the
+    /// Step lengths of the next trial points, the merit ([`KktRound`]) at the accepted points, 1 where the
     /// trial point is the lane's start, Newton steps taken and trial points rejected since the last.
     alpha: [f32; L],
     r0: [f32; L],
@@ -161,8 +161,8 @@ impl Lanes8 {
     }
 
     /// Lane `i`'s state as a [`Handoff`] (its residual raised by [`COARSE_NOISE`] times the
-    /// stationarity scale, as the four-lane coarse stage's).
-    fn handoff(&self, i: usize) -> Handoff {
+    /// merit's scale 1 + 2‖x − y‖/L, L = `len` ([`merit_length`])).
+    fn handoff(&self, i: usize, len: Real) -> Handoff {
         let x = std::array::from_fn(|r| self.oa[r][i] + Real::from(self.x[r][i]));
         let y = std::array::from_fn(|r| self.ob[r][i] + Real::from(self.y[r][i]));
         let gap = Vector3::from(x) - Vector3::from(y);
@@ -173,7 +173,7 @@ impl Lanes8 {
             dx: std::array::from_fn(|r| self.dx[r][i]),
             dy: std::array::from_fn(|r| self.dy[r][i]),
             dl: [self.dl[0][i], self.dl[1][i]],
-            r0: (Real::from(self.r0[i]) + COARSE_NOISE * (1.0 + 2.0 * gap.norm())) as f32,
+            r0: (Real::from(self.r0[i]) + COARSE_NOISE * (1.0 + 2.0 * gap.norm() / len)) as f32,
             alpha: self.alpha[i],
             steps: self.steps[i] as u16,
             rejected: self.rejected[i] as u16,
@@ -202,11 +202,14 @@ pub(super) unsafe fn coarse_stage8(
 ) {
     let (soa_a, soa_b) = (a.soa_polynomial(), b.soa_polynomial());
     let cap = F8::splat(max_iterations as Real);
-    let (zero, one, two) = (F8::splat(0.0), F8::splat(1.0), F8::splat(2.0));
+    let (zero, one) = (F8::splat(0.0), F8::splat(1.0));
     let ka = 1.0 / a.scale();
     let (ka8, ka2) = (F8::splat(ka), F8::splat(ka * ka));
     let ba = PosedBody::unposed(a);
     let near_level = F8::splat(COARSE_RESIDUAL);
+    // The merit's length L and its weight 1/L² ([`merit_length`]).
+    let len = merit_length(a, b);
+    let (w2, two_over_len) = (F8::splat(1.0 / (len * len)), F8::splat(2.0 / len));
     let armijo = F8::splat(-1e-4);
     let tiny = F8::splat(F8::TINY);
     let mut lanes = Lanes8::new();
@@ -231,7 +234,7 @@ pub(super) unsafe fn coarse_stage8(
             for i in 0..L {
                 let k = lanes.job[i];
                 if k != EMPTY {
-                    stage[k] = if lanes.start[i] != 0.0 { Stage::Cold } else { Stage::Drained(lanes.handoff(i)) };
+                    stage[k] = if lanes.start[i] != 0.0 { Stage::Cold } else { Stage::Drained(lanes.handoff(i, len)) };
                 }
             }
             break;
@@ -265,10 +268,19 @@ pub(super) unsafe fn coarse_stage8(
         let h = &ea.hessian;
         let ha: S3<F8> = [h[0] * ka2, h[1] * ka2, h[2] * ka2, h[3] * ka2, h[4] * ka2, h[5] * ka2];
         let hb = congruence(&mb, &eb.hessian);
-        let KktRound { lt, dist, r1, step, .. } =
-            kkt_round(xt.add(V3::load32(&lanes.d0)), yt, lt, start, tiny, [ga, gb], [ea.value, eb.value], [&ha, &hb]);
+        let KktRound { lt, dist, r1, step, .. } = kkt_round(
+            xt.add(V3::load32(&lanes.d0)),
+            yt,
+            lt,
+            start,
+            tiny,
+            w2,
+            [ga, gb],
+            [ea.value, eb.value],
+            [&ha, &hb],
+        );
         let (sdx, sdy, sdl, solved) = step;
-        // Accepted trial points: the start, or a decrease of the residual (Armijo on ‖r‖₂).
+        // Accepted trial points: the start, or a decrease of the merit (Armijo).
         let finite = r1.finite();
         let decrease = r1.le(armijo.mul_add(al, one) * r0).and(finite);
         let accepted = start.or(decrease).and(live);
@@ -279,7 +291,7 @@ pub(super) unsafe fn coarse_stage8(
         lanes.dy = V3::select(accepted, sdy, dy).to_arrays32();
         lanes.dl = [F8::select(accepted, sdl[0], dl[0]).to_array(), F8::select(accepted, sdl[1], dl[1]).to_array()];
         // The bookkeeping: a step counted where accepted, else a rejection and the step halved.
-        let near = r1.le(near_level * dist.mul_add(two, one));
+        let near = r1.le(near_level * dist.mul_add(two_over_len, one));
         let ends = near.or(finite.not()).or(solved.not());
         lanes.r0 = F8::select(accepted, r1, r0).to_array();
         lanes.alpha = F8::select(accepted, one, al * F8::splat(0.5)).to_array();
@@ -300,7 +312,7 @@ pub(super) unsafe fn coarse_stage8(
         for i in (0..L).filter(|i| leave & (1 << i) != 0) {
             let k = lanes.job[i];
             lanes.job[i] = EMPTY;
-            stage[k] = if handoff & (1 << i) != 0 { Stage::Resume(lanes.handoff(i)) } else { Stage::Cold };
+            stage[k] = if handoff & (1 << i) != 0 { Stage::Resume(lanes.handoff(i, len)) } else { Stage::Cold };
         }
     }
 }
