@@ -1,8 +1,8 @@
 //! The stability suite: query configurations where collision methods are known to fail (tiny
 //! gaps, exact tangency, deep / concentric overlap, containment, identical bodies, flat and needle
-//! bodies, large coordinates, warm starts across huge pose jumps, rotations near 180°), each
-//! answered by [`certified_distance`] / [`certified_growth`] in [`CertifyMode::Certify`] and
-//! classified against the level-0 SDP.
+//! bodies, large coordinates, warm starts across huge pose jumps, rotations near 180°, bodies
+//! scaled to 1 cm), each answered by [`certified_distance`] / [`certified_growth`] in
+//! [`CertifyMode::Certify`] and classified against the level-0 SDP.
 //!
 //! # Classification of one query
 //!
@@ -237,6 +237,25 @@ pub fn stability_cases(
             .collect();
         cases.push(StabilityCase { name: "degree 8 (gaps 1e-3, 1e-7, overlap)".into(), pairs });
     }
+
+    // The bodies scaled to 1 cm (a gripper's finger, a small part): gaps 1e-3 and 1e-7 of their
+    // size, and overlap. The solvers' line search measures stationarity in units of the smaller
+    // body's size, so these runs are the unit-size ones in other units.
+    let small = bodies
+        .iter()
+        .map(|b| {
+            let c = b.center() * 0.01;
+            Body::new(b.polynomial().clone(), [c.x, c.y, c.z], 0.01 * b.scale(), Default::default())
+        })
+        .collect::<Result<Vec<Body>>>()?;
+    let pairs = (0..pairs_per_case)
+        .flat_map(|k| {
+            let t = touching_pairs(&mut rng, &small, k);
+            let size = t.a.scale().min(t.b.scale());
+            [t.at(t.s_touch + 1e-3 * size), t.at(t.s_touch + 1e-7 * size), t.at(0.5 * t.s_touch)]
+        })
+        .collect();
+    cases.push(StabilityCase { name: "1 cm bodies (gaps 1e-3, 1e-7 of size, overlap)".into(), pairs });
     Ok(cases)
 }
 

@@ -3,9 +3,10 @@
 //!
 //! Every query of every case (tiny gaps 1e-9 … 1e-1, tangency, deep and concentric overlap,
 //! containment, identical bodies, slabs and needles with axis ratio 1e-3, 1e4 m offsets, warm
-//! starts across huge pose jumps, rotations near 180°) must be either **certified** (Newton agrees
-//! with the level-0 SDP: |n − s| ≤ 1e-6·|s| or ≤ 1e-9 absolute, on the squared distance in m² and
-//! on d(p₁‖p₂)) or **flagged** (answered by a verified SDP fallback).
+//! starts across huge pose jumps, rotations near 180°, bodies scaled to 1 cm) must be either
+//! **certified** (Newton agrees with the level-0 SDP: |n − s| ≤ 1e-6·|s| or ≤ 1e-9 absolute, on
+//! the squared distance in m² and on d(p₁‖p₂)) or **flagged** (answered by a verified SDP
+//! fallback).
 
 use super::suite::{run_case, stability_cases};
 use std::path::PathBuf;
