@@ -155,12 +155,12 @@ pub fn cold_distances(
 #[cfg(target_arch = "x86_64")]
 mod lanes {
     use super::super::distance::{
-        clear_of_contact, distance_growth_first, finish, merit_length, overlapping_answer, separated_answer,
-        DistanceResult, DistanceWarmStart, KktOut, SPECULATIVE_ITERATIONS,
+        clear_of_contact, distance_growth_first, finish, overlapping_answer, separated_answer, DistanceResult,
+        DistanceWarmStart, KktOut, SPECULATIVE_ITERATIONS,
     };
     use super::super::fast_eval::FastPosed;
     use super::super::growth::GrowthWarmStart;
-    use super::super::newton::{frame_origin, shifted_pose, working_frame, NewtonParams, SolveStatus};
+    use super::super::newton::{frame_origin, merit_length, shifted_pose, working_frame, NewtonParams, SolveStatus};
     use crate::body::{Body, PosedBody};
     use crate::math::{Isometry3, Real, Vector3};
     use crate::poly::radial::RADIAL_GRID;
@@ -925,7 +925,7 @@ mod lanes {
     /// `queue` of the batch, four per SIMD pass, as [`solve_on_lanes`] runs the separated distance:
     /// the single-pair cold start (A's minimizer inside B is left to the single-pair solver; else
     /// B's boundary towards A's interior point, or the support point of B facing −∇p_a there when
-    /// p_a is lower at it), the same KKT system, line search (backtracking on ‖KKT residual‖₂, the
+    /// p_a is lower at it), the same KKT system, line search (backtracking on its merit, the
     /// multiplier kept at least halved per step), tolerance and iteration cap, with the Hessians
     /// at every trial point (no chord steps). A lane that converges with μ > 0 and
     /// p_a(x) ≤ 1 gives the overlapping answer (the growth minimizer as both witnesses); every
@@ -948,6 +948,8 @@ mod lanes {
         let tolerance = F4::splat(params.kkt_tolerance);
         let (zero, one, half) = (F4::splat(0.0), F4::splat(1.0), F4::splat(0.5));
         let (ka4, ka2, _) = unposed_map(a);
+        let len = merit_length(a, b);
+        let l2 = F4::splat(len * len);
         let c1 = PosedBody::unposed(a).interior_point();
         let mut lanes = GrowthLanes {
             book: LaneBook::new(),
@@ -1006,7 +1008,8 @@ mod lanes {
             }
             let r = gg.mul_add(mt, gf);
             let c = F4::load(&eb.value) - one;
-            let r1 = r.dot(r).mul_add(one, c * c).sqrt();
+            // The single-pair solver's merit ‖(L·r, c)‖₂ ([`merit_length`]).
+            let r1 = r.dot(r).mul_add(l2, c * c).sqrt();
             let norm_inf = abs_max(r).max(c.abs());
             let stationary = norm_inf.le(tolerance * (one + abs_max(gf)));
             // The Newton steps from the trial points (taken where a trial point is accepted).

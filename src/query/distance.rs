@@ -28,8 +28,8 @@
 use super::fast_eval::{abs_max, max_plain, shifted, solve_kkt8, FastPosed, PosedEval, CHORD_RESIDUAL};
 use super::growth::{solve_growth, GrowthWarmStart};
 use super::newton::{
-    boundary_on_segment_within, pose_step, spheres_apart, working_frame, MotionTrail, NewtonParams, SolveStatus,
-    START_BOUNDARY_TOLERANCE, WARM_ITERATIONS,
+    boundary_on_segment_within, merit_length, pose_step, spheres_apart, working_frame, MotionTrail, NewtonParams,
+    SolveStatus, START_BOUNDARY_TOLERANCE, WARM_ITERATIONS,
 };
 use crate::body::{Body, PosedBody};
 use crate::math::{Isometry3, Matrix3, Point3, Real, Sym3, Vector3};
@@ -112,25 +112,6 @@ impl DistanceWarmStart {
         let s = self.trail.predict(&self.state(), step, 6).0;
         (Vector3::new(s[0], s[1], s[2]), Vector3::new(s[3], s[4], s[5]), [s[6], s[7]])
     }
-}
-
-/// The length L (meters) by which the distance Newton runs' line search measures stationarity:
-/// the smaller body's normalization scale.
-///
-/// The KKT residual mixes stationarity 2(x − y) + λ∇p' (meters) with the constraints p' − 1
-/// (dimensionless). Scaling a problem by k scales Newton's iterates by k (Newton's method is
-/// invariant under a change of units) but the stationarity residuals by k as well, so a merit
-/// ‖r‖₂ in meters weighs them k times less against the constraints: on the chair / human cold
-/// poses of `sublevel bench` scaled to 1 cm bodies 1–2.5 cm apart, backtracking on it then cut
-/// nearly every step to 1/32 to reduce |p' − 1| alone, and separated cold queries took 1.7× the
-/// Newton iterations of the 1 m problem (3.9× at 1 mm; up to 51 instead of 7). Stationarity in
-/// units of L = min(scale_a, scale_b) — the body whose constraint is the stiffest — makes the
-/// merit, and the run, the same at every size (1642 against 1657 iterations at 1 mm, 1 cm and
-/// 10 cm; the convergence test stays in meters). The bench bodies have scales near 1, where the
-/// runs are the unit-length ones'.
-#[inline(always)]
-pub(crate) fn merit_length(a: &Body, b: &Body) -> Real {
-    a.scale().min(b.scale())
 }
 
 /// d(p_a‖p_b) − 1 below which a pair whose separated Newton solve fails is answered as touching.
@@ -1105,26 +1086,32 @@ mod tests {
     #[test]
     fn cold_runs_do_not_depend_on_the_bodies_size() {
         // The bench's chair / human pair (2d = 6) at its first 100 cold poses, scaled by k: the
-        // same problem in other units (a 1 mm, 1 cm, 10 cm and 10 m chair). Reference: the unit
-        // problem's answers, each k times the scaled one's (distances to 1e-9 of k(1 + d),
-        // witnesses to 1e-7·k), and its Newton iterations: the scaled runs take within 3 % of them
-        // (measured on 300 poses: 1642 against 1657 at k ≤ 0.1, 1668 at k = 10). With ‖r‖₂ in
-        // meters as the line search's merit, 1 cm bodies took 1.7× and 1 mm bodies 3.9× the
-        // iterations (up to 51 instead of 7 on one pose).
+        // same problem in other units (a 1 mm, 1 cm, 10 cm, 10 m and 1 km chair). Reference: the
+        // unit problem's answers — each distance k times the scaled one's (to 1e-9 of k(1 + d)),
+        // witnesses to 1e-7·k, growth values equal (dimensionless, to 1e-9 of max(1, value)) — and
+        // its Newton iterations: the scaled runs of each query take within 3 % of them (measured
+        // on 300 poses: distance 1642 / 1657 / 1668 at k ≤ 0.1 / 1 / 10³, growth 1561–1572
+        // against 1570). With ‖r‖₂ as the line searches' merit, 1 cm bodies took 1.7× and 1 mm
+        // bodies 3.9× the distance iterations, 1 km bodies 1.27× the growth iterations.
+        use crate::query::growth::{growth, GrowthResult};
         let (chair, human) = crate::query::test_bodies::bench_bodies(6);
         let poses = crate::query::test_bodies::bench_cold_poses(100);
         let params = NewtonParams::default();
         let id = Isometry3::identity();
-        let unit: Vec<DistanceResult> = poses.iter().map(|p| distance(&chair, p, &human, &id, None, &params)).collect();
-        let unit_iterations: usize = unit.iter().map(|d| d.iterations).sum();
+        let unit: Vec<(DistanceResult, GrowthResult)> = poses
+            .iter()
+            .map(|p| (distance(&chair, p, &human, &id, None, &params), growth(&chair, p, &human, &id, None, &params)))
+            .collect();
+        let unit_iterations = |pick: fn(&(DistanceResult, GrowthResult)) -> usize| unit.iter().map(pick).sum::<usize>();
+        let (unit_d, unit_g) = (unit_iterations(|u| u.0.iterations), unit_iterations(|u| u.1.iterations));
         let rescaled = |body: &Body, k: Real| {
             let c = body.center() * k;
             Body::new(body.polynomial().clone(), [c.x, c.y, c.z], body.scale() * k, Default::default()).unwrap()
         };
-        for k in [1e-3, 1e-2, 1e-1, 10.0] {
+        for k in [1e-3, 1e-2, 1e-1, 10.0, 1e3] {
             let (a, b) = (rescaled(&chair, k), rescaled(&human, k));
-            let mut iterations = 0;
-            for (p, u) in poses.iter().zip(&unit) {
+            let (mut iterations_d, mut iterations_g) = (0, 0);
+            for (p, (u, ug)) in poses.iter().zip(&unit) {
                 let pk = Isometry3::from_parts((p.translation.vector * k).into(), p.rotation);
                 let d = distance(&a, &pk, &b, &id, None, &params);
                 assert!(d.status.converged() && d.overlapping == u.overlapping, "k = {k}: {d:?}");
@@ -1134,13 +1121,16 @@ mod tests {
                 );
                 let w = (d.witness_a.coords - u.witness_a.coords * k).norm();
                 assert!(w <= 1e-7 * k, "k = {k}: witness on A {w:e} m off");
-                iterations += d.iterations;
+                let g = growth(&a, &pk, &b, &id, None, &params);
+                assert!(g.status.converged(), "k = {k}: {g:?}");
+                assert!((g.value - ug.value).abs() <= 1e-9 * ug.value.max(1.0), "k = {k}: {} vs {}", g.value, ug.value);
+                iterations_d += d.iterations;
+                iterations_g += g.iterations;
             }
-            let ratio = iterations as Real / unit_iterations as Real;
-            assert!(
-                (0.97..=1.03).contains(&ratio),
-                "k = {k}: {iterations} against {unit_iterations} Newton iterations"
-            );
+            for (what, n, unit_n) in [("distance", iterations_d, unit_d), ("growth", iterations_g, unit_g)] {
+                let ratio = n as Real / unit_n as Real;
+                assert!((0.97..=1.03).contains(&ratio), "k = {k}: {n} against {unit_n} {what} Newton iterations");
+            }
         }
     }
 

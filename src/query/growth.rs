@@ -18,7 +18,7 @@
 //!    the KKT polish.
 
 use super::fast_eval::{abs_max, max_plain, solve_kkt4, sym_add_scaled, FastPosed, PosedEval, CHORD_RESIDUAL};
-use super::newton::{pose_step, MotionTrail, NewtonParams, SolveStatus, WARM_ITERATIONS};
+use super::newton::{merit_length, pose_step, MotionTrail, NewtonParams, SolveStatus, WARM_ITERATIONS};
 use crate::body::{Body, PosedBody};
 use crate::math::{Isometry3, Matrix3, Point3, Real, Sym3, Vector3};
 
@@ -351,9 +351,12 @@ impl KktPoint {
         max_plain(abs_max(&self.r), self.c.abs())
     }
 
+    /// The line search's merit ‖(L·r, p₂' − 1)‖₂ for `l2` = L² ([`merit_length`]): stationarity
+    /// (1/m) times L, so that it weighs the same against the (dimensionless) constraint whatever
+    /// the bodies' size. NaN or infinite with any residual.
     #[inline(always)]
-    fn norm2(&self) -> Real {
-        (self.r.norm_squared() + self.c * self.c).sqrt()
+    fn merit(&self, l2: Real) -> Real {
+        (self.r.norm_squared() * l2 + self.c * self.c).sqrt()
     }
 }
 
@@ -383,7 +386,8 @@ fn newton_step_lu(w: &Sym3, pt: &KktPoint) -> Option<(Vector3, Real)> {
 
 avx2_dispatch! {
     /// Active-set Newton on `∇f + μ∇g = 0, g = 0` from x0 and the multiplier `mu0` (least squares at
-    /// the start when `None`), globalized by backtracking on ‖r‖₂; a `warm` run gives up (Stalled)
+    /// the start when `None`), globalized by backtracking on the merit ‖(L·r, p₂' − 1)‖₂
+    /// ([`merit_length`]); a `warm` run gives up (Stalled)
     /// when μ turns nonpositive. Every point is evaluated once; near the solution (residual below
     /// [`CHORD_RESIDUAL`]) trial points skip the Hessians and a further step reuses the last ones
     /// (chord step), refreshed when it stalls.
@@ -417,9 +421,14 @@ fn kkt_newton_body<const FMA: bool>(
     // Scale stationarity by the objective's gradient so far-apart bodies (large p₁) are judged fairly.
     let scale = |pt: &KktPoint| 1.0 + abs_max(&pt.e1.gradient);
     let stationary = |pt: &KktPoint| pt.norm_inf() <= params.kkt_tolerance * scale(pt);
+    // The line search's merit weighs stationarity (1/m) by L and its level by the same L
+    // ([`merit_length`]), so the run does not depend on the bodies' size.
+    let len = merit_length(b1.body, b2.body);
+    let l2 = len * len;
+    let merit_scale = |pt: &KktPoint| 1.0 + len * abs_max(&pt.e1.gradient);
     while it < params.max_iterations {
         // The 2-norm carries any NaN or infinity of the residual (the ∞-norm's plain maxima do not).
-        let r0 = pt.norm2();
+        let r0 = pt.merit(l2);
         if !r0.is_finite() {
             status = SolveStatus::Stalled;
             break;
@@ -448,7 +457,7 @@ fn kkt_newton_body<const FMA: bool>(
             status = SolveStatus::Stalled;
             break;
         };
-        let cheap = r0 <= CHORD_RESIDUAL * scale(&pt);
+        let cheap = r0 <= CHORD_RESIDUAL * merit_scale(&pt);
         // A cold run keeps μ ≥ μ/2 per step: the KKT points with μ < 0 (maxima and saddles of p₁
         // on body 2's boundary) attract Newton from some starts and are not the answer.
         let mut alpha = if !warm && mu > 0.0 && mu + dmu < 0.5 * mu { 0.5 * mu / -dmu } else { 1.0 };
@@ -457,7 +466,7 @@ fn kkt_newton_body<const FMA: bool>(
             let xt = x + dx * alpha;
             let mt = mu + dmu * alpha;
             let tr = KktPoint::new(&f1, &f2, &xt, mt, !cheap);
-            let r1 = tr.norm2();
+            let r1 = tr.merit(l2);
             // A chord step must at least halve the residual; otherwise refresh the Hessians here.
             let bound = if fresh { (1.0 - 1e-4 * alpha) * r0 } else { 0.5 * r0 };
             if r1.is_finite() && r1 <= bound {
@@ -485,7 +494,7 @@ fn kkt_newton_body<const FMA: bool>(
             break;
         }
     }
-    if status == SolveStatus::MaxIterations && mu > 0.0 && stationary(&pt) && pt.norm2().is_finite() {
+    if status == SolveStatus::MaxIterations && mu > 0.0 && stationary(&pt) && pt.merit(l2).is_finite() {
         status = SolveStatus::Converged;
     }
     KktOut { x, mu, value: pt.e1.value, status, iterations: it, residual: pt.norm_inf() }
