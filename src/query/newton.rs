@@ -7,9 +7,9 @@
 //!
 //! ```text
 //! 1. active-set Newton on the KKT system with every constraint active, from a warm start or a
-//!    geometric cold start; globalized by a backtracking line search on ‖KKT residual‖ (the
-//!    distance solver's with stationarity in units of the smaller body's size, so that a run
-//!    does not depend on the bodies' size: `distance::merit_length`);
+//!    geometric cold start; globalized by a backtracking line search on ‖KKT residual‖ with
+//!    stationarity in units of the smaller body's size, so that a run does not depend on the
+//!    bodies' size ([`merit_length`]);
 //! 2. if that does not converge to a KKT point with positive multipliers, a primal log-barrier
 //!    path (always globally convergent on these convex problems, started from the bodies'
 //!    interior points), then the active-set Newton polish from the barrier's point.
