@@ -260,6 +260,10 @@ fn scales(
     let moved = Isometry3::translation(-o.x, -o.y, -o.z);
     let far = Vector3::new(8000.0, -5000.0, 3000.0);
     let far_moved = Isometry3::translation(-far.x, -far.y, -far.z);
+    // The cold poses with their translations × k, then moved by `m` (in the chair's frame).
+    let scaled = |k: Real, m: &Isometry3| -> Vec<(Isometry3, Isometry3)> {
+        poses.iter().map(|p| (Isometry3::from_parts((p.translation.vector * k).into(), p.rotation) * m, id)).collect()
+    };
     let cases = [
         (
             "3 mm chair",
@@ -277,28 +281,19 @@ fn scales(
             "100 m chair, 1.7 cm human",
             rescaled(chair, 100.0, Vector3::zeros())?,
             rescaled(human, 0.01, Vector3::zeros())?,
-            poses
-                .iter()
-                .map(|p| (Isometry3::from_parts((p.translation.vector * 100.0).into(), p.rotation), id))
-                .collect(),
+            scaled(100.0, &id),
         ),
         (
             "1 cm bodies",
             rescaled(chair, 0.01, Vector3::zeros())?,
             rescaled(human, 0.01, Vector3::zeros())?,
-            poses
-                .iter()
-                .map(|p| (Isometry3::from_parts((p.translation.vector * 0.01).into(), p.rotation), id))
-                .collect(),
+            scaled(0.01, &id),
         ),
         (
             "1 cm bodies, the chair's center 10 km from its frame's origin",
             rescaled(chair, 0.01, far)?,
             rescaled(human, 0.01, Vector3::zeros())?,
-            poses
-                .iter()
-                .map(|p| (Isometry3::from_parts((p.translation.vector * 0.01).into(), p.rotation) * far_moved, id))
-                .collect(),
+            scaled(0.01, &far_moved),
         ),
     ];
     for (name, a, b, pairs) in &cases {

@@ -160,7 +160,7 @@ mod lanes {
     };
     use super::super::fast_eval::FastPosed;
     use super::super::growth::GrowthWarmStart;
-    use super::super::newton::{frame_origin, merit_length, shifted_pose, working_frame, NewtonParams, SolveStatus};
+    use super::super::newton::{frame_origin, merit_length, posed_in_frame, working_frame, NewtonParams, SolveStatus};
     use crate::body::{Body, PosedBody};
     use crate::math::{Isometry3, Real, Vector3};
     use crate::poly::radial::RADIAL_GRID;
@@ -568,13 +568,19 @@ mod lanes {
         }
     }
 
-    /// Body A's map to its normalized coordinates in its own frame (unposed), u = k·x + c with
-    /// k = 1/scale and c = −center/scale, in every lane: (k, k², c).
+    /// The linear part of body A's map to its normalized coordinates, u = k·x + c with
+    /// k = 1/scale, in every lane: (k, k²).
     #[inline(always)]
-    fn unposed_map(a: &Body) -> (F4, F4, V3) {
+    fn scale_map(a: &Body) -> (F4, F4) {
         let k = 1.0 / a.scale();
-        let c = -a.center() * k;
-        (F4::splat(k), F4::splat(k * k), V3::splat(&c))
+        (F4::splat(k), F4::splat(k * k))
+    }
+
+    /// The offset c = −(center − o)/scale of body A's map to its normalized coordinates in a
+    /// working frame with origin `o` (A's frame; [`working_frame`]).
+    #[inline(always)]
+    fn offset_map(a: &Body, o: &Vector3) -> Vector3 {
+        -(a.center() - o) * (1.0 / a.scale())
     }
 
     /// No pair in the lane.
@@ -597,11 +603,9 @@ mod lanes {
         /// Pose of B relative to A (pose_a⁻¹ · pose_b).
         rel: [Isometry3; 4],
         /// Each lane's working frame ([`working_frame`]): its origin `o` in A's frame (zero unless
-        /// the pair's coordinates could exceed 10³ of the smaller body's size), and A's center
-        /// relative to it, `center_a − o`; the lane's points are relative to `o`.
+        /// the pair's coordinates could exceed 10³ of the smaller body's size; the lane's points
+        /// are relative to it), and the offset of A's normalized map there ([`offset_map`]).
         o: [[Real; 4]; 3],
-        center_a: [[Real; 4]; 3],
-        /// A's map to its normalized coordinates in each lane's frame, u = k·x + c: c = −(center_a − o)·k.
         ca: [[Real; 4]; 3],
     }
 
@@ -611,17 +615,11 @@ mod lanes {
         /// case) sets the lane exactly as without a working frame.
         #[inline(always)]
         fn frame(&mut self, i: usize, k: usize, a: &Body, b: &Body, rel: &Isometry3) -> Vector3 {
-            let o = frame_origin(a, b, rel);
-            let (o, bb) = match o {
-                None => (Vector3::zeros(), PosedBody::new(b, rel)),
-                Some(o) => (o, PosedBody::new(b, &shifted_pose(rel, &o))),
-            };
+            let (o, bb) = posed_in_frame(b, rel, frame_origin(a, b, rel));
             self.book.fill(i, k, &bb);
-            let center = a.center() - o;
-            let c = -center * (1.0 / a.scale());
+            let c = offset_map(a, &o);
             for r in 0..3 {
                 self.o[r][i] = o[r];
-                self.center_a[r][i] = center[r];
                 self.ca[r][i] = c[r];
             }
             self.rel[i] = *rel;
@@ -663,7 +661,7 @@ mod lanes {
             let (x, y) = (lane(&self.x, &self.dx), lane(&self.y, &self.dy));
             let lam = [self.lam[0][i] + self.dl[0][i], self.lam[1][i] + self.dl[1][i]];
             let (book, k) = (&self.book, 1.0 / a.scale());
-            let center = Vector3::new(self.center_a[0][i], self.center_a[1][i], self.center_a[2][i]);
+            let center = a.center() - self.origin(i);
             let m = nalgebra::Matrix3::from_fn(|r, c| book.mb[3 * r + c][i]);
             let ub = m * y + Vector3::new(book.cb[0][i], book.cb[1][i], book.cb[2][i]);
             // SAFETY: the lanes run only on CPUs with AVX2 and FMA (`lanes_avx2`).
@@ -947,7 +945,7 @@ mod lanes {
         let cap = F4::splat(params.max_iterations as Real);
         let tolerance = F4::splat(params.kkt_tolerance);
         let (zero, one, half) = (F4::splat(0.0), F4::splat(1.0), F4::splat(0.5));
-        let (ka4, ka2, _) = unposed_map(a);
+        let (ka4, ka2) = scale_map(a);
         let len = merit_length(a, b);
         let l2 = F4::splat(len * len);
         let c1 = PosedBody::unposed(a).interior_point();
@@ -976,8 +974,7 @@ mod lanes {
                     let x0 = bb.boundary_towards(&c1);
                     let (v0, g1) = fa.value_gradient(&x0);
                     let x0 = bb.support(&-g1).filter(|x| fa.value(x) < v0).unwrap_or(x0);
-                    let ca = -(a.center() - o) * (1.0 / a.scale());
-                    lanes.fill(i, k, &bb, &o, &ca, &x0);
+                    lanes.fill(i, k, &bb, &o, &offset_map(a, &o), &x0);
                 }
             }
             if lanes.book.is_empty() {
@@ -1083,7 +1080,7 @@ mod lanes {
         let (w2, two_over_len) = (F4::splat(1.0 / (len * len)), F4::splat(2.0 / len));
         let verifying = a.degree().max(b.degree()) >= VERIFY_MIN_DEGREE;
         let (zero, one, two) = (F4::splat(0.0), F4::splat(1.0), F4::splat(2.0));
-        let (ka4, ka2, _) = unposed_map(a);
+        let (ka4, ka2) = scale_map(a);
         let mut lanes = Lanes {
             book: LaneBook::new(),
             x: [[0.0; 4]; 3],
@@ -1094,7 +1091,6 @@ mod lanes {
             dl: [[0.0; 4]; 2],
             rel: [Isometry3::identity(); 4],
             o: [[0.0; 4]; 3],
-            center_a: [[0.0; 4]; 3],
             ca: [[0.0; 4]; 3],
         };
         let empty = std::sync::Arc::new(DistanceWarmStart::default());

@@ -43,10 +43,8 @@ const FRAME_SHIFT_RATIO: Real = 1e3;
 /// rounding is then below 10⁻¹³ of either body's size, and the common query skips the shift.
 #[inline(always)]
 pub(crate) fn working_frame<'a>(a: &'a Body, b: &'a Body, rel: &Isometry3) -> (Vector3, PosedBody<'a>, PosedBody<'a>) {
-    match frame_origin(a, b, rel) {
-        None => (Vector3::zeros(), PosedBody::unposed(a), PosedBody::new(b, rel)),
-        Some(o) => (o, PosedBody::translated(a, &-o), PosedBody::new(b, &shifted_pose(rel, &o))),
-    }
+    let (o, bb) = posed_in_frame(b, rel, frame_origin(a, b, rel));
+    (o, PosedBody::translated(a, &-o), bb)
 }
 
 /// The length L (meters) by which the Newton runs' line searches measure stationarity: the smaller
@@ -82,11 +80,14 @@ pub(crate) fn frame_origin(a: &Body, b: &Body, rel: &Isometry3) -> Option<Vector
     Some(if a.scale() <= b.scale() { a.interior_point().coords } else { (rel * b.interior_point()).coords })
 }
 
-/// B's pose `rel` (in A's frame) in the working frame with origin `o` (A's frame): the translation
-/// less `o`, the same rotation.
+/// The working frame's origin (zero for `None`, [`frame_origin`]) and B posed in it: `rel` (B's
+/// pose in A's frame) with the translation less the origin, the same rotation.
 #[inline(always)]
-pub(crate) fn shifted_pose(rel: &Isometry3, o: &Vector3) -> Isometry3 {
-    Isometry3::from_parts((rel.translation.vector - o).into(), rel.rotation)
+pub(crate) fn posed_in_frame<'a>(b: &'a Body, rel: &Isometry3, origin: Option<Vector3>) -> (Vector3, PosedBody<'a>) {
+    match origin {
+        None => (Vector3::zeros(), PosedBody::new(b, rel)),
+        Some(o) => (o, PosedBody::new(b, &Isometry3::from_parts((rel.translation.vector - o).into(), rel.rotation))),
+    }
 }
 
 /// How a query solve ended (a value, not an error; paper §IV).
