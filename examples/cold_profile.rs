@@ -13,6 +13,12 @@
 //! pair rescaled to 3 mm / 100 m / 1 cm and moved 1 km or 10 km from a frame's origin; see
 //! `scales`), with the Newton iterations of both solvers.
 //!
+//! The third argument `steps` times warm starts against cold ones by the size of the pose step
+//! from the warm start's answer (random steps of relative size s from each cold pose; what
+//! `query::newton::WARM_REACH` is set from), and `chain` the cold poses asked in a row, each
+//! warm-started from the answer at the pose before (a request of random candidate states that are
+//! not marked cold).
+//!
 //! The third argument `warm` times the warm queries instead: the 500-step slide and turn of
 //! `sublevel bench` (each step's distance and growth query repeated from the previous step's warm
 //! starts), so `--toggle-collect` on `distance` / `growth` profiles warm queries.
@@ -70,6 +76,12 @@ fn main() -> sublevel::Result<()> {
     }
     if which == "scales" {
         return scales(&chair, &human, &poses, degree, repeats, &params);
+    }
+    if which == "steps" {
+        return steps(&chair, &human, &poses, degree, repeats, &params);
+    }
+    if which == "chain" {
+        return chain(&chair, &human, &poses, degree, repeats, &params);
     }
     let (mut sep, mut ovl, mut it_sep, mut it_ovl, mut conv) = (0usize, 0usize, 0usize, 0usize, 0usize);
     let mut hist = [0usize; 12];
@@ -140,6 +152,129 @@ fn main() -> sublevel::Result<()> {
         }
         println!("answers: {compared} compared with {path}, largest relative difference {worst:.2e}");
         assert!(worst <= 1e-9 && compared > 0, "answers changed");
+    }
+    Ok(())
+}
+
+/// The cold poses asked in a row with warm starts, each from the answer at the pose before (what a
+/// request of many candidate states asks when its queries are not cold: each state warm-started
+/// from the last), against the same poses cold: median µs, iterations and warm-started answers.
+fn chain(
+    chair: &Body,
+    human: &Body,
+    poses: &[Isometry3],
+    degree: usize,
+    repeats: usize,
+    params: &NewtonParams,
+) -> sublevel::Result<()> {
+    let id = Isometry3::identity();
+    let (mut tc, mut tw, mut it_c, mut it_w, mut warm, mut worst) = (Vec::new(), Vec::new(), 0, 0, 0, 0.0 as Real);
+    let mut last: Option<std::sync::Arc<sublevel::query::DistanceWarmStart>> = None;
+    for p in poses {
+        let t = Instant::now();
+        let mut c = distance(chair, p, human, &id, None, params);
+        for _ in 1..repeats {
+            c = std::hint::black_box(distance(chair, p, human, &id, None, params));
+        }
+        tc.push(t.elapsed().as_secs_f64() * 1e6 / repeats as Real);
+        let t = Instant::now();
+        let mut w = distance(chair, p, human, &id, last.as_deref(), params);
+        for _ in 1..repeats {
+            w = std::hint::black_box(distance(chair, p, human, &id, last.as_deref(), params));
+        }
+        tw.push(t.elapsed().as_secs_f64() * 1e6 / repeats as Real);
+        it_c += c.iterations;
+        it_w += w.iterations;
+        warm += usize::from(w.warm_started);
+        worst = worst.max((w.distance - c.distance).abs());
+        last = Some(w.warm_start);
+    }
+    let n = poses.len();
+    println!(
+        "2d = {degree}: cold {:.3} µs ({:.2} it/query); warm-started from the pose before {:.3} µs ({:.2} it/query, {warm} / {n} warm-started); largest difference {worst:.1e} m",
+        median(tc.clone()),
+        it_c as Real / n as Real,
+        median(tw.clone()),
+        it_w as Real / n as Real,
+    );
+    let mean = |v: &[Real]| v.iter().sum::<Real>() / v.len() as Real;
+    println!("means: cold {:.3} µs, chained {:.3} µs", mean(&tc), mean(&tw));
+    Ok(())
+}
+
+/// Warm starts against cold starts by the size of the pose step from the warm start's answer: at
+/// each cold pose, the chair moved by a random step of relative size s (translation s·L/√2 m,
+/// rotation s/√2 rad, L the sum of the bodies' scales), distance and growth from the answer
+/// before the step against cold: median µs and iterations per s.
+fn steps(
+    chair: &Body,
+    human: &Body,
+    poses: &[Isometry3],
+    degree: usize,
+    repeats: usize,
+    params: &NewtonParams,
+) -> sublevel::Result<()> {
+    let id = Isometry3::identity();
+    let len = chair.scale() + human.scale();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+    let mut unit = || {
+        let v = Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
+        v.normalize()
+    };
+    let time = |f: &mut dyn FnMut()| {
+        let t = Instant::now();
+        for _ in 0..repeats {
+            f();
+        }
+        t.elapsed().as_secs_f64() * 1e6 / repeats as Real
+    };
+    let mean = |v: &[Real]| v.iter().sum::<Real>() / v.len() as Real;
+    for s in [0.01, 0.1, 0.2, 0.3, 0.4, 0.5, 0.7, 1.0, 2.0] {
+        let (mut dc, mut dw, mut gc, mut gw) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let (mut idc, mut idw, mut igc, mut igw, mut warm_d, mut warm_g) = (0, 0, 0, 0, 0, 0);
+        for p in poses {
+            let step = Isometry3::from_parts(
+                (unit() * (s * len / 2f64.sqrt())).into(),
+                UnitQuaternion::from_scaled_axis(unit() * (s / 2f64.sqrt())),
+            );
+            let q = step * p;
+            let d0 = distance(chair, p, human, &id, None, params);
+            let g0 = growth(chair, p, human, &id, None, params);
+            let (mut c, mut w) = (None, None);
+            dc.push(time(&mut || c = Some(std::hint::black_box(distance(chair, &q, human, &id, None, params)))));
+            dw.push(time(&mut || {
+                w = Some(std::hint::black_box(distance(chair, &q, human, &id, Some(&d0.warm_start), params)))
+            }));
+            let (c, w) = (c.unwrap(), w.unwrap());
+            idc += c.iterations;
+            idw += w.iterations;
+            warm_d += usize::from(w.warm_started);
+            let (mut c, mut w) = (None, None);
+            gc.push(time(&mut || c = Some(std::hint::black_box(growth(chair, &q, human, &id, None, params)))));
+            gw.push(time(&mut || {
+                w = Some(std::hint::black_box(growth(chair, &q, human, &id, Some(&g0.warm_start), params)))
+            }));
+            let (c, w) = (c.unwrap(), w.unwrap());
+            igc += c.iterations;
+            igw += w.iterations;
+            warm_g += usize::from(w.warm_started);
+        }
+        let n = poses.len() as Real;
+        println!(
+            "2d = {degree}, step {s:5.3}: distance cold {:.3} / warm {:.3} µs, means {:.3} / {:.3} ({:.2} / {:.2} it, {warm_d} warm-started); growth cold {:.3} / warm {:.3} µs, means {:.3} / {:.3} ({:.2} / {:.2} it, {warm_g})",
+            median(dc.clone()),
+            median(dw.clone()),
+            mean(&dc),
+            mean(&dw),
+            idc as Real / n,
+            idw as Real / n,
+            median(gc.clone()),
+            median(gw.clone()),
+            mean(&gc),
+            mean(&gw),
+            igc as Real / n,
+            igw as Real / n,
+        );
     }
     Ok(())
 }

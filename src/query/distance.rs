@@ -26,10 +26,10 @@
 //! fallback. A KKT point with λ_a, λ_b > 0 is the global minimizer of this convex program.
 
 use super::fast_eval::{abs_max, max_plain, shifted, solve_kkt8, FastPosed, PosedEval, CHORD_RESIDUAL};
-use super::growth::{solve_growth, GrowthWarmStart};
+use super::growth::{solve_growth, GrowthStart, GrowthWarmStart};
 use super::newton::{
-    boundary_on_segment_within, merit_length, pose_step, spheres_apart, working_frame, MotionTrail, NewtonParams,
-    SolveStatus, START_BOUNDARY_TOLERANCE, WARM_ITERATIONS,
+    boundary_on_segment_within, merit_length, pose_step, spheres_apart, within_warm_reach, working_frame, MotionTrail,
+    NewtonParams, SolveStatus, START_BOUNDARY_TOLERANCE, WARM_ITERATIONS,
 };
 use crate::body::{Body, PosedBody};
 use crate::math::{Isometry3, Matrix3, Point3, Real, Sym3, Vector3};
@@ -114,6 +114,28 @@ impl DistanceWarmStart {
     }
 }
 
+impl DistanceWarmStart {
+    /// Whether [`distance()`] between `a` and `b` at relative pose `rel` = pose_a⁻¹·pose_b starts
+    /// from this warm start (its separated answer or its overlap test's growth answer) rather
+    /// than cold: a warm start whose answer lies more than half the bodies' summed scales away
+    /// costs more than a cold start and is not used (`query::newton::WARM_REACH`).
+    pub fn reaches(&self, a: &Body, b: &Body, rel: &Isometry3) -> bool {
+        let length = a.scale() + b.scale();
+        (self.valid && within_warm_reach(&pose_step(&self.relative_pose, rel, length), length))
+            || (self.growth.valid && within_warm_reach(&self.growth.towards(&rel.inverse(), a.scale()).step, length))
+    }
+}
+
+/// Whether the warm start of a [`distance()`] answer between `a` and `b` at relative pose `from`
+/// would be used by a query at relative pose `to` (both pose_a⁻¹·pose_b): the step between them
+/// is within half the bodies' summed scales (`query::newton::WARM_REACH`), else the query starts
+/// cold. What a request of many candidate states asks to decide which states gain from the
+/// state before.
+pub fn warm_start_reaches(a: &Body, b: &Body, from: &Isometry3, to: &Isometry3) -> bool {
+    let length = a.scale() + b.scale();
+    within_warm_reach(&pose_step(from, to, length), length)
+}
+
 /// d(p_a‖p_b) − 1 below which a pair whose separated Newton solve fails is answered as touching.
 const TOUCH_GROWTH_TOLERANCE: Real = 1e-9;
 
@@ -148,9 +170,14 @@ fn distance_body<const FMA: bool>(
     let (o, ba, bb) = working_frame(a, b, &rel);
     let mut iterations = 0;
 
-    // The trail of this answer: the last separated answer and its own trail, with the step from it.
+    // The trail of this answer: the last separated answer and its own trail, with the step from it,
+    // unless that answer lies more than WARM_REACH of the bodies' size away (a warm start from
+    // there costs more than a cold start).
     let length = a.scale() + b.scale();
-    let previous = warm.filter(|w| w.valid).map(|w| (w, pose_step(&w.relative_pose, &rel, length)));
+    let previous = warm
+        .filter(|w| w.valid)
+        .map(|w| (w, pose_step(&w.relative_pose, &rel, length)))
+        .filter(|(_, step)| within_warm_reach(step, length));
     if let Some((w, step)) = &previous {
         let (a0, b0, lam0) = w.predict(step);
         let y0 = bb.to_world(&b0);
@@ -167,7 +194,11 @@ fn distance_body<const FMA: bool>(
     // points (both outside the other body, A's crossing before B's: then Newton from the closer of
     // the support and the segment's boundary points). A converged KKT point with λ_a, λ_b > 0 is
     // the global minimizer, so separation needs no growth solve.
-    if !warm.is_some_and(|w| w.growth.valid) {
+    let growth_start = warm
+        .filter(|w| w.growth.valid)
+        .map(|w| w.growth.towards(&rel.inverse(), a.scale()))
+        .filter(|s| within_warm_reach(&s.step, length));
+    if growth_start.is_none() {
         if let Some((x0, y0)) = cold_start(&ba, &bb) {
             let capped = NewtonParams { max_iterations: params.max_iterations.min(SPECULATIVE_ITERATIONS), ..*params };
             let out = kkt_newton(&ba, &bb, x0, y0, None, &capped, false);
@@ -178,7 +209,7 @@ fn distance_body<const FMA: bool>(
         }
     }
 
-    growth_first(pose_a, &rel, &o, &ba, &bb, warm, previous, params, iterations)
+    growth_first(pose_a, &rel, &o, &ba, &bb, growth_start, previous, params, iterations)
 }
 
 /// The answer for overlapping (or touching) bodies: distance 0, both witnesses at the growth
@@ -222,9 +253,9 @@ pub(super) fn distance_growth_first(
 }
 
 /// [`distance`] from its overlap test on, in the working frame `o` of A and B posed by `rel` =
-/// pose_a⁻¹·pose_b ([`working_frame`]: `ba`, `bb`): the growth measure decides overlap (the
-/// touching answer at its minimizer), else Newton from the growth minimizer, else the barrier
-/// path; `iterations` spent so far.
+/// pose_a⁻¹·pose_b ([`working_frame`]: `ba`, `bb`): the growth measure (from the warm start
+/// `start`, if any) decides overlap (the touching answer at its minimizer), else Newton from the
+/// growth minimizer, else the barrier path; `iterations` spent so far.
 #[allow(clippy::too_many_arguments)]
 fn growth_first(
     pose_a: &Isometry3,
@@ -232,15 +263,13 @@ fn growth_first(
     o: &Vector3,
     ba: &PosedBody<'_>,
     bb: &PosedBody<'_>,
-    warm: Option<&DistanceWarmStart>,
+    start: Option<GrowthStart<'_>>,
     previous: Option<(&DistanceWarmStart, [Real; 6])>,
     params: &NewtonParams,
     mut iterations: usize,
 ) -> DistanceResult {
-    let a = ba.body;
     // Overlap test by the growth measure.
     let rel_ba = rel.inverse();
-    let start = warm.map(|w| w.growth.towards(&rel_ba, a.scale()));
     let g = solve_growth(ba, bb, start, params);
     iterations += g.iterations;
     let growth_warm = GrowthWarmStart::after(start, g.x, g.mu, g.status.converged(), rel_ba);
@@ -986,6 +1015,46 @@ mod tests {
             warm = Some(*w.warm_start);
         }
         assert!(warm_it < cold_it, "warm {warm_it} vs cold {cold_it}");
+    }
+
+    /// A warm start whose answer lies past `WARM_REACH` (half the bodies' summed scales, here
+    /// 0.5 · (0.9 + 1.0) = 0.95 m) is not used: distance and growth then run exactly as cold (the
+    /// same answer to the bit, the same iterations, not warm-started; before, warm starts from
+    /// random poses cost 2.8× a cold query: `examples/cold_profile 6 20 chain`); one 5 cm away is used
+    /// and agrees with the cold answer to 10⁻⁹. `DistanceWarmStart::reaches` and
+    /// `warm_start_reaches` say the same.
+    #[test]
+    fn warm_starts_past_their_reach_are_not_used() {
+        use crate::query::growth::growth;
+        let e1 = ellipsoid([0.0; 3], [0.9, 0.3, 0.5]).unwrap();
+        let e2 = ellipsoid([0.1, 0.0, 0.0], [0.4, 1.0, 0.2]).unwrap();
+        let (id, params) = (Isometry3::identity(), NewtonParams::default());
+        let p0 = pose_from_parts("b", [1.0, 0.0, 0.0, 0.0], [2.5, 0.4, 0.1]).unwrap();
+        let (s, c) = (0.01 as Real).sin_cos();
+        let near = pose_from_parts("b", [c, s, 0.0, 0.0], [2.46, 0.42, 0.1]).unwrap();
+        let far = pose_from_parts("b", [0.8, 0.0, 0.6, 0.0], [-1.5, 1.2, 0.3]).unwrap();
+        let d0 = distance(&e1, &id, &e2, &p0, None, &params);
+        let g0 = growth(&e1, &id, &e2, &p0, None, &params);
+        for (pose, used) in [(near, true), (far, false)] {
+            let (w, c) = (
+                distance(&e1, &id, &e2, &pose, Some(&d0.warm_start), &params),
+                distance(&e1, &id, &e2, &pose, None, &params),
+            );
+            assert!(w.status.converged() && c.status.converged());
+            assert_eq!((w.warm_started, d0.warm_start.reaches(&e1, &e2, &pose)), (used, used));
+            assert_eq!(warm_start_reaches(&e1, &e2, &p0, &pose), used);
+            let (gw, gc) = (
+                growth(&e1, &id, &e2, &pose, Some(&g0.warm_start), &params),
+                growth(&e1, &id, &e2, &pose, None, &params),
+            );
+            assert_eq!(gw.warm_started, used);
+            if used {
+                assert!((w.distance - c.distance).abs() < 1e-9 && (gw.value - gc.value).abs() < 1e-9 * gc.value);
+            } else {
+                assert_eq!((w.distance.to_bits(), w.iterations), (c.distance.to_bits(), c.iterations));
+                assert_eq!((gw.value.to_bits(), gw.iterations), (gc.value.to_bits(), gc.iterations));
+            }
+        }
     }
 
     #[test]

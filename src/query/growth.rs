@@ -18,7 +18,9 @@
 //!    the KKT polish.
 
 use super::fast_eval::{abs_max, max_plain, solve_kkt4, sym_add_scaled, FastPosed, PosedEval, CHORD_RESIDUAL};
-use super::newton::{merit_length, pose_step, MotionTrail, NewtonParams, SolveStatus, WARM_ITERATIONS};
+use super::newton::{
+    merit_length, pose_step, within_warm_reach, MotionTrail, NewtonParams, SolveStatus, WARM_ITERATIONS,
+};
 use crate::body::{Body, PosedBody};
 use crate::math::{Isometry3, Matrix3, Point3, Real, Sym3, Vector3};
 
@@ -150,7 +152,9 @@ fn growth_body<const FMA: bool>(
     // Body 2's frame moved to the smaller body's interior point (core.x comes back in body 2's
     // frame through b2's pose).
     let (_, b2, b1) = super::newton::working_frame(p2, p1, &rel);
-    let start = warm.map(|w| w.towards(&rel, p1.scale()));
+    // A warm start past WARM_REACH of the bodies' size costs more than a cold start: none then.
+    let reach = p1.scale() + p2.scale();
+    let start = warm.map(|w| w.towards(&rel, p1.scale())).filter(|s| within_warm_reach(&s.step, reach));
     let core = solve_growth(&b1, &b2, start, params);
     GrowthResult {
         value: core.value,

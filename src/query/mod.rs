@@ -50,7 +50,9 @@ pub use certified::{
     certified_distance, certified_growth, certify_newton_distance, AnswerSource, CertificateKind, CertificateSummary,
     Certified, CertifiedDistance, CertifiedGrowth, CertifyMode, CertifyParams,
 };
-pub use distance::{common_point, distance, segment_common_point, DistanceResult, DistanceWarmStart};
+pub use distance::{
+    common_point, distance, segment_common_point, warm_start_reaches, DistanceResult, DistanceWarmStart,
+};
 pub use gradient::{distance_gradient, growth_gradient, PoseGradient};
 pub use growth::{growth, GrowthResult, GrowthWarmStart};
 pub use newton::{NewtonParams, SolveStatus};

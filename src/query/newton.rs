@@ -6,8 +6,8 @@
 //! (paper §IV-A, §IV-B). The solvers share one strategy:
 //!
 //! ```text
-//! 1. active-set Newton on the KKT system with every constraint active, from a warm start or a
-//!    geometric cold start; globalized by a backtracking line search on ‖KKT residual‖ with
+//! 1. active-set Newton on the KKT system with every constraint active, from a warm start (when
+//!    its answer lies within [`WARM_REACH`] of the bodies' size) or a geometric cold start; globalized by a backtracking line search on ‖KKT residual‖ with
 //!    stationarity in units of the smaller body's size, so that a run does not depend on the
 //!    bodies' size ([`merit_length`]);
 //! 2. if that does not converge to a KKT point with positive multipliers, a primal log-barrier
@@ -246,6 +246,29 @@ pub struct MotionTrail<const N: usize> {
 /// e.g. a growth constraint turning inactive or bodies starting to overlap) and the cold path is
 /// cheaper than pressing on.
 pub(crate) const WARM_ITERATIONS: usize = 8;
+
+/// Largest relative-pose step from a warm start's answer, in units of the two bodies' summed
+/// scales, at which the warm start is used; past it a query starts cold ([`within_warm_reach`]).
+///
+/// Measured on the chair / human cold poses of `sublevel bench`, each moved by a random step of
+/// relative size s from a converged answer (`examples/cold_profile D 10 steps`): warm and cold
+/// queries cost the same near s = 0.5 (2d = 6: distance medians 0.80 / 0.81 µs, means 0.92 / 0.90
+/// µs; growth 0.71 / 0.72 µs), the warm start wins below (0.57 / 0.82 µs at s = 0.1) and loses
+/// above (1.03 / 0.79 µs at s = 1, 1.31 / 0.72 µs at s = 2: warm runs from far answers fail and
+/// the growth measure then starts from a far minimizer); 2d = 4 and 8 likewise. Candidate states
+/// of a sampling planner asked in a row without `cold` (each warm-started from the state before)
+/// cost 2.8× a cold query without this limit (2.22 against 0.79 µs at 2d = 6,
+/// `cold_profile 6 20 chain`).
+pub const WARM_REACH: Real = 0.5;
+
+/// Whether a relative-pose step ([`pose_step`]) from a warm start's answer is small enough for
+/// the warm start to beat a cold start ([`WARM_REACH`] of `length`, the bodies' summed scales,
+/// meters); false for a NaN step.
+#[inline(always)]
+pub(crate) fn within_warm_reach(step: &[Real; 6], length: Real) -> bool {
+    let reach = WARM_REACH * length;
+    dot6(step, step) <= reach * reach
+}
 
 /// Largest extrapolation σ of a predictor (in units of the last step).
 const MAX_EXTRAPOLATION: Real = 2.0;

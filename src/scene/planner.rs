@@ -230,6 +230,7 @@ pub(crate) fn lane_distances<'p>(
     pairs: &[PairRef<'_>],
     posed: impl Fn(usize) -> Option<(PosedRef<'p>, PosedRef<'p>)>,
     params: &CertifyParams,
+    warm_starts: bool,
 ) -> LaneAnswers {
     use crate::query::batch::{cold_distances, MIN_LANE_BATCH};
     if !enough_lane_candidates(pairs.iter().map(|p| (p.kind, &p.options))) {
@@ -262,7 +263,7 @@ pub(crate) fn lane_distances<'p>(
         if out.0.is_empty() {
             out.0 = vec![Ahead::Nothing; pairs.len()];
         }
-        for (&k, answer) in members.iter().zip(cold_distances(a.body, b.body, &poses, &params.newton, false)) {
+        for (&k, answer) in members.iter().zip(cold_distances(a.body, b.body, &poses, &params.newton, warm_starts)) {
             out.0[k] = Ahead::Newton(answer);
         }
     }
@@ -713,7 +714,7 @@ impl QueryView {
             if enough_lane_candidates(request.queries.iter().map(|q| (q.kind, &q.options))) {
                 let views: Vec<PairRef<'_>> = request.queries.iter().map(|q| with_mode(q.view(), mode)).collect();
                 let at = |k: usize| pairs[k].map(|(i, j)| (slots[i].borrowed(), slots[j].borrowed()));
-                newton = lane_distances(&views, at, params);
+                newton = lane_distances(&views, at, params, false);
             }
             return self.answer_slots(&request.queries, &pairs, &slots, params, mode, (&mut newton, 0, 0), sink);
         }
@@ -736,7 +737,7 @@ impl QueryView {
         };
         let states = request.states.len();
         let mut buf = Vec::new();
-        let mut newton = state_lane_distances(request, &slots, &pairs, state_slots, params, mode);
+        let mut newton = state_lane_distances(request, &slots, &pairs, state_slots, params, mode, &self.cache);
         // The poses a state replaces, restored after it.
         let mut saved: Vec<(usize, Isometry3)> = Vec::new();
         for s in 0..states {
@@ -791,12 +792,18 @@ fn with_mode(mut pair: PairRef<'_>, mode: Option<CertifyMode>) -> PairRef<'_> {
     pair
 }
 
-/// Newton's answers of a request's cold distance and collide queries across its candidate states
-/// from the batch solver's lanes ([`lane_distances`]: each query's pair in every state is one
-/// column of one body pair), entry `s · queries + q` for state s and query q; empty (every
-/// answer solved one by one) when fewer than [`crate::query::batch::MIN_LANE_BATCH`] of them are
-/// cold distance or collide queries. The request's instances are `slots`, query q's pair is
-/// `pairs[q]` (slot indices) and `state_slots(s, buf)` fills `buf` with state s's (slot, pose).
+/// Newton's answers of a request's distance and collide queries across its candidate states from
+/// the batch solver's lanes ([`lane_distances`]: each query's pair in every state is one column
+/// of one body pair), entry `s · queries + q` for state s and query q: the cold ones, and the
+/// others whose warm start would not be used ([`crate::query::warm_start_reaches`]: for state 0
+/// the pair's cached warm start, for a later state the pair's relative pose in the state before,
+/// more than half the bodies' summed scales away, as between a sampling planner's random
+/// candidates), solved on lanes that keep warm starts for the cache. Empty (every answer solved one
+/// by one) when fewer than [`crate::query::batch::MIN_LANE_BATCH`] of them are. The request's
+/// instances are `slots`, query q's pair is `pairs[q]` (slot indices), `state_slots(s, buf)` fills
+/// `buf` with state s's (slot, pose) and `cache` holds the warm starts the queries would start
+/// from.
+#[allow(clippy::too_many_arguments)]
 fn state_lane_distances(
     request: &PlannerRequest,
     slots: &[Posed],
@@ -804,15 +811,23 @@ fn state_lane_distances(
     state_slots: impl Fn(usize, &mut Vec<(usize, Isometry3)>),
     params: &CertifyParams,
     mode: Option<CertifyMode>,
+    cache: &WarmStartCache,
 ) -> LaneAnswers {
     let states = request.states.len();
+    // Distance and collide queries outside Certify mode, cold or not.
+    let lane_kind = |kind: QueryKind, o: &QueryOptions| {
+        matches!(kind, QueryKind::Distance | QueryKind::Collide) && o.mode != CertifyMode::Certify
+    };
     let candidates = (0..states).flat_map(|_| request.queries.iter().map(|q| (q.kind, &q.options)));
-    if !enough_lane_candidates(candidates) {
+    if candidates.filter(|(kind, o)| lane_kind(*kind, o)).nth(crate::query::batch::MIN_LANE_BATCH - 1).is_none() {
         return LaneAnswers::default();
     }
     let n = states * request.queries.len();
     let (mut views, mut snapshot) = (Vec::with_capacity(n), Vec::with_capacity(n));
     let mut buf = Vec::new();
+    // Each query's relative pose pose_a⁻¹·pose_b in the state before.
+    let mut before: Vec<Option<Isometry3>> = vec![None; request.queries.len()];
+    let mut warm_lanes = false;
     for s in 0..states {
         state_slots(s, &mut buf);
         // Slot i at this state's pose.
@@ -821,14 +836,30 @@ fn state_lane_distances(
             let pose = buf.iter().find(|(k, _)| *k == i).map_or(p.pose, |(_, pose)| *pose);
             PosedRef { pose, ..p.borrowed() }
         };
-        for (q, ij) in request.queries.iter().zip(pairs) {
-            let pair = with_mode(q.view(), mode);
-            let lanes = lane_candidate(pair.kind, &pair.options);
-            snapshot.push(if lanes { ij.map(|(i, j)| (at(i), at(j))) } else { None });
+        for ((q, query), ij) in request.queries.iter().enumerate().zip(pairs) {
+            let mut pair = with_mode(query.view(), mode);
+            let posed = ij.map(|(i, j)| (at(i), at(j)));
+            let rel = posed.as_ref().map(|(a, b)| a.pose.inv_mul(&b.pose));
+            let far = || match (&posed, &rel, &before[q]) {
+                (Some((a, b)), Some(rel), Some(prev)) => !crate::query::warm_start_reaches(a.body, b.body, prev, rel),
+                (Some((a, b)), Some(rel), None) => {
+                    !cache.distance(pair.first, pair.second).is_some_and(|w| w.reaches(a.body, b.body, rel))
+                }
+                _ => false,
+            };
+            let cold = lane_candidate(pair.kind, &pair.options);
+            let lanes = cold || (lane_kind(pair.kind, &pair.options) && far());
+            if lanes && !cold {
+                // Routed like a cold query; the lanes keep its warm start for the cache.
+                pair.options.cold = true;
+                warm_lanes = true;
+            }
+            before[q] = rel;
+            snapshot.push(if lanes { posed } else { None });
             views.push(pair);
         }
     }
-    lane_distances(&views, |k| snapshot[k], params)
+    lane_distances(&views, |k| snapshot[k], params, warm_lanes)
 }
 
 /// A pair found by [`check_scene`].
@@ -968,7 +999,7 @@ pub fn check_scene(
         .collect();
     let views: Vec<PairRef<'_>> = queries.iter().map(QueryPair::view).collect();
     let mut newton =
-        lane_distances(&views, |k| Some((posed_pairs[k].0.borrowed(), posed_pairs[k].1.borrowed())), &params);
+        lane_distances(&views, |k| Some((posed_pairs[k].0.borrowed(), posed_pairs[k].1.borrowed())), &params, false);
     for (k, (pair, (pa, pb))) in views.into_iter().zip(&posed_pairs).enumerate() {
         // An abandoned request (deadline passed) stops here, see `Catalog::batch`.
         crate::fit::cancel::check()?;
@@ -985,4 +1016,81 @@ pub fn check_scene(
     }
     out.pairs.sort_by(|x, y| x.distance.answer.result.distance.total_cmp(&y.distance.answer.result.distance));
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::body::ellipsoid;
+    use crate::math::Vector3;
+
+    /// Spheres r = 0.5 at the origin ("a") and r = 0.25 ("b", moved by the states), a non-cold
+    /// distance query a → b over states putting b at `xs`: the routed answers (state s at index s)
+    /// with the cache `cache`.
+    fn routed(xs: &[[Real; 3]], cache: &WarmStartCache) -> Vec<Ahead> {
+        let big = Arc::new(ellipsoid([0.0; 3], [0.5; 3]).unwrap());
+        let small = Arc::new(ellipsoid([0.0; 3], [0.25; 3]).unwrap());
+        let slots = vec![
+            Posed { body: big, tree: None, pose: Isometry3::identity() },
+            Posed { body: small, tree: None, pose: Isometry3::identity() },
+        ];
+        let at = |x: &[Real; 3]| Isometry3::translation(x[0], x[1], x[2]);
+        let request = PlannerRequest {
+            queries: vec![QueryPair {
+                kind: QueryKind::Distance,
+                first: "a".into(),
+                second: "b".into(),
+                options: QueryOptions::default(),
+                margin: 0.0,
+            }],
+            states: CandidateStates::Lists(xs.iter().map(|x| vec![("b".to_string(), at(x))]).collect()),
+            ..Default::default()
+        };
+        let state_slots = |s: usize, buf: &mut Vec<(usize, Isometry3)>| {
+            buf.clear();
+            buf.push((1, at(&xs[s])));
+        };
+        let params = CertifyParams::default();
+        let mut lanes = state_lane_distances(&request, &slots, &[Some((0, 1))], state_slots, &params, None, cache);
+        (0..xs.len()).map(|s| lanes.take(s)).collect()
+    }
+
+    /// Candidate states far apart (steps of 0.94 m between spheres of summed scale 0.75 m: past the
+    /// warm start's reach) take the lanes although the query is not cold, and their answers match
+    /// the closed form ‖c_b‖ − 0.75 (10⁻⁹ m) and keep valid warm starts for the cache; a trajectory
+    /// of 5 cm steps stays off the lanes (each state warm-started from the one before: only the
+    /// first, without a cached warm start, would take them, and one pair is no batch); a cached
+    /// warm start near the first state keeps that state off them.
+    #[test]
+    fn far_candidate_states_take_the_lanes_and_a_trajectory_does_not() {
+        let far: Vec<[Real; 3]> = (0..8).map(|k| [1.5 + 0.5 * k as Real, 0.8 * (k % 2) as Real, 0.0]).collect();
+        let answers = routed(&far, &WarmStartCache::default());
+        for (x, a) in far.iter().zip(&answers) {
+            let Ahead::Newton(d) = a else { panic!("state at {x:?} did not take the lanes: {a:?}") };
+            let gap = Vector3::from(*x).norm() - 0.75;
+            assert!((d.distance - gap).abs() < 1e-9, "{x:?}: {} vs {gap}", d.distance);
+            assert!(d.status.converged() && d.warm_start.valid, "{x:?}: {d:?}");
+        }
+        let near: Vec<[Real; 3]> = (0..8).map(|k| [1.5 + 0.05 * k as Real, 0.0, 0.0]).collect();
+        assert!(routed(&near, &WarmStartCache::default()).iter().all(|a| matches!(a, Ahead::Nothing)));
+        // With a cached warm start near the first state: still none.
+        let (big, small) = (ellipsoid([0.0; 3], [0.5; 3]).unwrap(), ellipsoid([0.0; 3], [0.25; 3]).unwrap());
+        let id = Isometry3::identity();
+        let d = crate::query::distance(
+            &big,
+            &id,
+            &small,
+            &Isometry3::translation(1.45, 0.0, 0.0),
+            None,
+            &Default::default(),
+        );
+        let mut cache = WarmStartCache::default();
+        cache.put_distance("a", "b", d.warm_start);
+        assert!(routed(&near, &cache).iter().all(|a| matches!(a, Ahead::Nothing)));
+        // The far states with that cache: the first starts from the cached warm start 5 cm away,
+        // the rest take the lanes.
+        let answers = routed(&far, &cache);
+        assert!(matches!(answers[0], Ahead::Nothing));
+        assert!(answers[1..].iter().all(|a| matches!(a, Ahead::Newton(_))));
+    }
 }

@@ -53,7 +53,8 @@ async fn round_trip_spheres_match_closed_forms_and_warm_start() {
     assert_eq!(view.instances.len(), 2);
 
     let mut warm_seen = 0;
-    for (k, c2) in [[4.0, 6.1, 0.0], [3.8, 5.9, 0.1], [3.5, 5.5, 0.2], [3.0, 5.0, 0.3]].into_iter().enumerate() {
+    // Steps of 0.3 m: within the warm start's reach (half the summed scales, 0.4 m).
+    for (k, c2) in [[4.0, 6.1, 0.0], [3.8, 5.9, 0.1], [3.6, 5.7, 0.2], [3.4, 5.5, 0.3]].into_iter().enumerate() {
         let c2 = Vector3::from(c2);
         if k > 0 {
             set_pose(&mut c, &scene, &i2, at([c2.x, c2.y, c2.z])).await;
@@ -79,7 +80,7 @@ async fn round_trip_spheres_match_closed_forms_and_warm_start() {
     assert_eq!(warm_seen, 3);
 
     // Batch: both kinds, both orders, against the same closed forms.
-    let c2 = Vector3::new(3.0, 5.0, 0.3);
+    let c2 = Vector3::new(3.4, 5.5, 0.3);
     let pair = |kind: pb::QueryKind, a: &str, b: &str| pb::QueryPair {
         kind: kind as i32,
         first: a.into(),

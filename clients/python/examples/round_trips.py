@@ -14,7 +14,8 @@ back), warm (the pair's warm start, the same poses: no Newton step) and cold (ev
 scratch, four pairs per SIMD pass); a sampling planner's check of 256 candidate states (the chair at random poses around the
 human, as in ``sublevel bench``'s cold queries) in one Query, with the distance query cold (the
 server then solves four states per SIMD pass) and not cold (each state warm-started from the one
-before); the same 256 states as one array of poses, answers in one set of columns
+before where that is near; random states are farther apart than the warm starts' reach, so the server
+solves them like cold ones and keeps their warm starts); the same 256 states as one array of poses, answers in one set of columns
 (``Client.query_state_columns``), cold and warm, and a collide query (margin 0, cold) over them.
 """
 

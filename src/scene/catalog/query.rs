@@ -374,6 +374,7 @@ impl Catalog {
             pairs,
             |k| Some((posed_by_id[pairs[k].first].borrowed(), posed_by_id[pairs[k].second].borrowed())),
             &params,
+            false,
         );
         let mut answers = Vec::with_capacity(pairs.len());
         for (k, p) in pairs.iter().enumerate() {

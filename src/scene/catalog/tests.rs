@@ -29,13 +29,14 @@ fn catalog_persists_and_warm_starts_follow_the_pair() {
         let d = c.distance(&scene, &i1, &i2).unwrap();
         assert!((d.distance - 1.25).abs() < 1e-9, "{}", d.distance);
         assert!(!d.warm_started);
-        c.set_poses(&scene, &[(i2.clone(), at(1.5))]).unwrap();
+        // A step of 0.2 m, within the warm start's reach (half the summed scales).
+        c.set_poses(&scene, &[(i2.clone(), at(1.8))]).unwrap();
         let d = c.distance(&scene, &i1, &i2).unwrap();
-        assert!((d.distance - 0.75).abs() < 1e-9, "{}", d.distance);
+        assert!((d.distance - 1.05).abs() < 1e-9, "{}", d.distance);
         assert!(d.warm_started);
         // Growth of spheres: (‖c₁ − c₂‖ − r₂)² / r₁².
         let g = c.growth(&scene, &i1, &i2).unwrap();
-        assert!((g.value - (1.25f64 / 0.5).powi(2)).abs() < 1e-9, "{}", g.value);
+        assert!((g.value - (1.55f64 / 0.5).powi(2)).abs() < 1e-9, "{}", g.value);
         assert_eq!(c.cached_warm_starts(&scene).unwrap(), 2);
         // A bad batch entry changes nothing; an unknown instance is NotFound.
         let err = c.set_poses(&scene, &[(i2.clone(), at(9.0)), ("i-nope".into(), at(0.0))]).unwrap_err();
@@ -50,10 +51,10 @@ fn catalog_persists_and_warm_starts_follow_the_pair() {
     let v = c.get_scene(&scene).unwrap();
     assert_eq!(v.instances.len(), 2);
     let p2 = v.instances.iter().find(|i| i.id == i2).unwrap().pose;
-    assert!((p2.translation.vector.x - 1.5).abs() < 1e-15, "the failed batch must not have moved i2");
+    assert!((p2.translation.vector.x - 1.8).abs() < 1e-15, "the failed batch must not have moved i2");
     assert_eq!(c.cached_warm_starts(&scene).unwrap(), 0, "warm starts are memory only");
     let d = c.distance(&scene, &i1, &i2).unwrap();
-    assert!((d.distance - 0.75).abs() < 1e-9);
+    assert!((d.distance - 1.05).abs() < 1e-9);
     c.remove_instance(&scene, &i1).unwrap();
     assert_eq!(c.cached_warm_starts(&scene).unwrap(), 0);
     c.delete_scene(&scene).unwrap();
