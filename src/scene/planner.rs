@@ -151,7 +151,13 @@ pub fn answer_pair(
 /// Whether a query asks for what the batch solver's SIMD lanes give ([`crate::query::batch`]): a
 /// cold distance or collide query (no warm start to keep) outside [`CertifyMode::Certify`].
 fn lane_candidate(kind: QueryKind, options: &QueryOptions) -> bool {
-    matches!(kind, QueryKind::Distance | QueryKind::Collide) && options.cold && options.mode != CertifyMode::Certify
+    lane_kind(kind, options) && options.cold
+}
+
+/// Whether a query is of a kind the lanes solve, cold or not: distance or collide outside
+/// [`CertifyMode::Certify`].
+fn lane_kind(kind: QueryKind, options: &QueryOptions) -> bool {
+    matches!(kind, QueryKind::Distance | QueryKind::Collide) && options.mode != CertifyMode::Certify
 }
 
 /// Where a [`lane_candidate`] between two convex single bodies goes ahead of
@@ -814,10 +820,6 @@ fn state_lane_distances(
     cache: &WarmStartCache,
 ) -> LaneAnswers {
     let states = request.states.len();
-    // Distance and collide queries outside Certify mode, cold or not.
-    let lane_kind = |kind: QueryKind, o: &QueryOptions| {
-        matches!(kind, QueryKind::Distance | QueryKind::Collide) && o.mode != CertifyMode::Certify
-    };
     let candidates = (0..states).flat_map(|_| request.queries.iter().map(|q| (q.kind, &q.options)));
     if candidates.filter(|(kind, o)| lane_kind(*kind, o)).nth(crate::query::batch::MIN_LANE_BATCH - 1).is_none() {
         return LaneAnswers::default();

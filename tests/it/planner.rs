@@ -108,6 +108,35 @@ async fn query_stream_keeps_a_private_view_with_warm_starts() {
     let view = c.get_scene(pb::GetSceneRequest { scene_id: scene.clone() }).await.unwrap().into_inner();
     let stored = view.instances.iter().find(|i| i.instance_id == i2).unwrap();
     assert_eq!(stored.pose.as_ref().unwrap().translation.as_ref().unwrap().x, 2.0);
+    // Eight states 0.94 m apart (past the warm starts' reach, half of 0.75 m), the distance query
+    // not cold: solved like cold ones (on the batch's lanes), the closed form, and the last state's
+    // warm start kept for the pair: a query 5 cm from it starts warm.
+    let far: Vec<[f64; 3]> = (0..8).map(|k| [1.5 + 0.5 * k as f64, 0.8 * (k % 2) as f64, 0.0]).collect();
+    let req = pb::QueryRequest {
+        queries: vec![q(pb::QueryKind::Distance, &i1, &i2)],
+        states: far.iter().map(|&x| pb::CandidateState { poses: vec![pose_of(&i2, x)] }).collect(),
+        ..Default::default()
+    };
+    tx.send(req).await.unwrap();
+    let r = answers.message().await.unwrap().unwrap();
+    for (st, x) in r.states.iter().zip(&far) {
+        let gap = (x[0] * x[0] + x[1] * x[1]).sqrt() - 0.75;
+        let d = distance_of(&st.answers[0]);
+        assert!((d.distance - gap).abs() < 1e-9 && d.solve.as_ref().unwrap().converged, "{x:?}: {d:?}");
+        assert!(!d.solve.as_ref().unwrap().warm_started, "{x:?}: {d:?}");
+    }
+    let last = far[7];
+    let req = pb::QueryRequest {
+        poses: vec![pose_of(&i2, [last[0] + 0.05, last[1], 0.0])],
+        queries: vec![q(pb::QueryKind::Distance, &i1, &i2)],
+        ..Default::default()
+    };
+    tx.send(req).await.unwrap();
+    let r = answers.message().await.unwrap().unwrap();
+    let d = distance_of(&r.answers[0]);
+    let gap = ((last[0] + 0.05).powi(2) + last[1] * last[1]).sqrt() - 0.75;
+    assert!((d.distance - gap).abs() < 1e-9, "{d:?}");
+    assert!(d.solve.as_ref().unwrap().warm_started, "the lanes keep the last state's warm start: {d:?}");
 
     // A bad request ends the stream with a status naming the field.
     let req = pb::QueryRequest { poses: vec![pose_of("i-nope", [0.0; 3])], ..Default::default() };
