@@ -156,6 +156,54 @@ fn main() -> sublevel::Result<()> {
     Ok(())
 }
 
+/// `f` called `repeats` times (at least once): µs per call, and the last call's result.
+fn timed<R>(repeats: usize, mut f: impl FnMut() -> R) -> (Real, R) {
+    let t = Instant::now();
+    let mut r = f();
+    for _ in 1..repeats {
+        r = std::hint::black_box(f());
+    }
+    (t.elapsed().as_secs_f64() * 1e6 / repeats.max(1) as Real, r)
+}
+
+/// One query kind solved cold and warm-started at the same poses: µs per query and Newton
+/// iterations of each, and how many warm-started answers kept their warm start.
+#[derive(Default)]
+struct ColdWarm {
+    cold: Vec<Real>,
+    warm: Vec<Real>,
+    cold_iterations: usize,
+    warm_iterations: usize,
+    warm_started: usize,
+}
+
+impl ColdWarm {
+    /// One pose: the cold (µs, iterations) and the warm-started (µs, iterations, warm-started).
+    fn add(&mut self, cold: (Real, usize), warm: (Real, usize, bool)) {
+        self.cold.push(cold.0);
+        self.cold_iterations += cold.1;
+        self.warm.push(warm.0);
+        self.warm_iterations += warm.1;
+        self.warm_started += usize::from(warm.2);
+    }
+
+    /// Medians and means (µs), iterations per query and the warm-started count.
+    fn summary(&self) -> String {
+        let n = self.cold.len().max(1) as Real;
+        let mean = |v: &[Real]| v.iter().sum::<Real>() / n;
+        format!(
+            "cold {:.3} / warm {:.3} µs, means {:.3} / {:.3} ({:.2} / {:.2} it, {} warm-started)",
+            median(self.cold.clone()),
+            median(self.warm.clone()),
+            mean(&self.cold),
+            mean(&self.warm),
+            self.cold_iterations as Real / n,
+            self.warm_iterations as Real / n,
+            self.warm_started,
+        )
+    }
+}
+
 /// The cold poses asked in a row with warm starts, each from the answer at the pose before (what a
 /// request of many candidate states asks when its queries are not cold: each state warm-started
 /// from the last), against the same poses cold: median µs, iterations and warm-started answers.
@@ -168,37 +216,19 @@ fn chain(
     params: &NewtonParams,
 ) -> sublevel::Result<()> {
     let id = Isometry3::identity();
-    let (mut tc, mut tw, mut it_c, mut it_w, mut warm, mut worst) = (Vec::new(), Vec::new(), 0, 0, 0, 0.0 as Real);
+    let (mut tally, mut worst) = (ColdWarm::default(), 0.0 as Real);
     let mut last: Option<std::sync::Arc<sublevel::query::DistanceWarmStart>> = None;
     for p in poses {
-        let t = Instant::now();
-        let mut c = distance(chair, p, human, &id, None, params);
-        for _ in 1..repeats {
-            c = std::hint::black_box(distance(chair, p, human, &id, None, params));
-        }
-        tc.push(t.elapsed().as_secs_f64() * 1e6 / repeats as Real);
-        let t = Instant::now();
-        let mut w = distance(chair, p, human, &id, last.as_deref(), params);
-        for _ in 1..repeats {
-            w = std::hint::black_box(distance(chair, p, human, &id, last.as_deref(), params));
-        }
-        tw.push(t.elapsed().as_secs_f64() * 1e6 / repeats as Real);
-        it_c += c.iterations;
-        it_w += w.iterations;
-        warm += usize::from(w.warm_started);
+        let (tc, c) = timed(repeats, || distance(chair, p, human, &id, None, params));
+        let (tw, w) = timed(repeats, || distance(chair, p, human, &id, last.as_deref(), params));
+        tally.add((tc, c.iterations), (tw, w.iterations, w.warm_started));
         worst = worst.max((w.distance - c.distance).abs());
         last = Some(w.warm_start);
     }
-    let n = poses.len();
     println!(
-        "2d = {degree}: cold {:.3} µs ({:.2} it/query); warm-started from the pose before {:.3} µs ({:.2} it/query, {warm} / {n} warm-started); largest difference {worst:.1e} m",
-        median(tc.clone()),
-        it_c as Real / n as Real,
-        median(tw.clone()),
-        it_w as Real / n as Real,
+        "2d = {degree}, each pose warm-started from the answer at the pose before: distance {}; largest difference {worst:.1e} m",
+        tally.summary()
     );
-    let mean = |v: &[Real]| v.iter().sum::<Real>() / v.len() as Real;
-    println!("means: cold {:.3} µs, chained {:.3} µs", mean(&tc), mean(&tw));
     Ok(())
 }
 
@@ -221,17 +251,8 @@ fn steps(
         let v = Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
         v.normalize()
     };
-    let time = |f: &mut dyn FnMut()| {
-        let t = Instant::now();
-        for _ in 0..repeats {
-            f();
-        }
-        t.elapsed().as_secs_f64() * 1e6 / repeats as Real
-    };
-    let mean = |v: &[Real]| v.iter().sum::<Real>() / v.len() as Real;
     for s in [0.01, 0.1, 0.2, 0.3, 0.4, 0.5, 0.7, 1.0, 2.0] {
-        let (mut dc, mut dw, mut gc, mut gw) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-        let (mut idc, mut idw, mut igc, mut igw, mut warm_d, mut warm_g) = (0, 0, 0, 0, 0, 0);
+        let (mut d, mut g) = (ColdWarm::default(), ColdWarm::default());
         for p in poses {
             let step = Isometry3::from_parts(
                 (unit() * (s * len / 2f64.sqrt())).into(),
@@ -240,41 +261,14 @@ fn steps(
             let q = step * p;
             let d0 = distance(chair, p, human, &id, None, params);
             let g0 = growth(chair, p, human, &id, None, params);
-            let (mut c, mut w) = (None, None);
-            dc.push(time(&mut || c = Some(std::hint::black_box(distance(chair, &q, human, &id, None, params)))));
-            dw.push(time(&mut || {
-                w = Some(std::hint::black_box(distance(chair, &q, human, &id, Some(&d0.warm_start), params)))
-            }));
-            let (c, w) = (c.unwrap(), w.unwrap());
-            idc += c.iterations;
-            idw += w.iterations;
-            warm_d += usize::from(w.warm_started);
-            let (mut c, mut w) = (None, None);
-            gc.push(time(&mut || c = Some(std::hint::black_box(growth(chair, &q, human, &id, None, params)))));
-            gw.push(time(&mut || {
-                w = Some(std::hint::black_box(growth(chair, &q, human, &id, Some(&g0.warm_start), params)))
-            }));
-            let (c, w) = (c.unwrap(), w.unwrap());
-            igc += c.iterations;
-            igw += w.iterations;
-            warm_g += usize::from(w.warm_started);
+            let (tc, c) = timed(repeats, || distance(chair, &q, human, &id, None, params));
+            let (tw, w) = timed(repeats, || distance(chair, &q, human, &id, Some(&d0.warm_start), params));
+            d.add((tc, c.iterations), (tw, w.iterations, w.warm_started));
+            let (tc, c) = timed(repeats, || growth(chair, &q, human, &id, None, params));
+            let (tw, w) = timed(repeats, || growth(chair, &q, human, &id, Some(&g0.warm_start), params));
+            g.add((tc, c.iterations), (tw, w.iterations, w.warm_started));
         }
-        let n = poses.len() as Real;
-        println!(
-            "2d = {degree}, step {s:5.3}: distance cold {:.3} / warm {:.3} µs, means {:.3} / {:.3} ({:.2} / {:.2} it, {warm_d} warm-started); growth cold {:.3} / warm {:.3} µs, means {:.3} / {:.3} ({:.2} / {:.2} it, {warm_g})",
-            median(dc.clone()),
-            median(dw.clone()),
-            mean(&dc),
-            mean(&dw),
-            idc as Real / n,
-            idw as Real / n,
-            median(gc.clone()),
-            median(gw.clone()),
-            mean(&gc),
-            mean(&gw),
-            igc as Real / n,
-            igw as Real / n,
-        );
+        println!("2d = {degree}, step {s:5.3}: distance {}; growth {}", d.summary(), g.summary());
     }
     Ok(())
 }

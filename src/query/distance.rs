@@ -121,8 +121,29 @@ impl DistanceWarmStart {
     /// costs more than a cold start and is not used (`query::newton::WARM_REACH`).
     pub fn reaches(&self, a: &Body, b: &Body, rel: &Isometry3) -> bool {
         let length = a.scale() + b.scale();
-        (self.valid && within_warm_reach(&pose_step(&self.relative_pose, rel, length), length))
-            || (self.growth.valid && within_warm_reach(&self.growth.towards(&rel.inverse(), a.scale()).step, length))
+        self.separated_step(rel, length).is_some() || self.growth_start(rel, a.scale(), length).is_some()
+    }
+
+    /// The relative-pose step ([`pose_step`], rotations weighted by `length`, the bodies' summed
+    /// scales) from this warm start's separated answer to `rel`, when that answer is valid and
+    /// within [`WARM_REACH`](super::newton::WARM_REACH) of `length`.
+    #[inline(always)]
+    fn separated_step(&self, rel: &Isometry3, length: Real) -> Option<[Real; 6]> {
+        if !self.valid {
+            return None;
+        }
+        let step = pose_step(&self.relative_pose, rel, length);
+        within_warm_reach(&step, length).then_some(step)
+    }
+
+    /// The overlap test's warm start for a query at `rel` (its growth measure runs at rel⁻¹, A's
+    /// scale `a_scale` weighing rotations), when valid and within reach of `length`.
+    #[inline(always)]
+    fn growth_start(&self, rel: &Isometry3, a_scale: Real, length: Real) -> Option<GrowthStart<'_>> {
+        if !self.growth.valid {
+            return None;
+        }
+        Some(self.growth.towards(&rel.inverse(), a_scale)).filter(|s| within_warm_reach(&s.step, length))
     }
 }
 
@@ -174,10 +195,7 @@ fn distance_body<const FMA: bool>(
     // unless that answer lies more than WARM_REACH of the bodies' size away (a warm start from
     // there costs more than a cold start).
     let length = a.scale() + b.scale();
-    let previous = warm
-        .filter(|w| w.valid)
-        .map(|w| (w, pose_step(&w.relative_pose, &rel, length)))
-        .filter(|(_, step)| within_warm_reach(step, length));
+    let previous = warm.and_then(|w| Some((w, w.separated_step(&rel, length)?)));
     if let Some((w, step)) = &previous {
         let (a0, b0, lam0) = w.predict(step);
         let y0 = bb.to_world(&b0);
@@ -194,10 +212,7 @@ fn distance_body<const FMA: bool>(
     // points (both outside the other body, A's crossing before B's: then Newton from the closer of
     // the support and the segment's boundary points). A converged KKT point with λ_a, λ_b > 0 is
     // the global minimizer, so separation needs no growth solve.
-    let growth_start = warm
-        .filter(|w| w.growth.valid)
-        .map(|w| w.growth.towards(&rel.inverse(), a.scale()))
-        .filter(|s| within_warm_reach(&s.step, length));
+    let growth_start = warm.and_then(|w| w.growth_start(&rel, a.scale(), length));
     if growth_start.is_none() {
         if let Some((x0, y0)) = cold_start(&ba, &bb) {
             let capped = NewtonParams { max_iterations: params.max_iterations.min(SPECULATIVE_ITERATIONS), ..*params };
