@@ -24,7 +24,7 @@ use crate::query::{
     CertifyMode, CertifyParams,
 };
 use crate::{Error, Result};
-use std::collections::{HashMap, HashSet};
+use std::collections::HashMap;
 use std::sync::Arc;
 
 /// The answer of a collide-with-margin query.
@@ -276,48 +276,6 @@ pub(crate) fn lane_distances<'p>(
     out
 }
 
-/// Newton's answers of a batch of `pairs` on the scene's poses (each with its two posed instances
-/// from `posed`) from the batch solver's lanes ([`lane_distances`]): the cold distance and
-/// collide queries, and the others whose warm start in `cache` would not be used — none cached
-/// for the pair, or its answer more than half the bodies' summed scales from the pair's relative
-/// pose ([`crate::query::DistanceWarmStart::reaches`]: a pair's first query, or poses set at
-/// random between requests) — on lanes that keep warm starts for the cache. Only a pair's first
-/// query in the request counts: a repeat starts from that one's answer. Empty (every answer solved
-/// one by one) unless at least [`crate::query::batch::MIN_LANE_BATCH`] queries of one body pair
-/// qualify.
-pub(crate) fn batch_lane_distances<'p>(
-    pairs: &[PairRef<'_>],
-    posed: impl Fn(usize) -> Option<(PosedRef<'p>, PosedRef<'p>)>,
-    params: &CertifyParams,
-    cache: &WarmStartCache,
-) -> LaneAnswers {
-    if pairs.iter().filter(|p| lane_kind(p.kind, &p.options)).nth(crate::query::batch::MIN_LANE_BATCH - 1).is_none() {
-        return LaneAnswers::default();
-    }
-    let mut asked: HashSet<(&str, &str), foldhash::fast::RandomState> = HashSet::default();
-    let mut warm_lanes = false;
-    let views: Vec<PairRef<'_>> = pairs
-        .iter()
-        .enumerate()
-        .map(|(k, p)| {
-            let mut view = *p;
-            let first_ask = asked.insert((p.first, p.second));
-            if first_ask && lane_kind(p.kind, &p.options) && !p.options.cold {
-                if let Some((a, b)) = posed(k) {
-                    let rel = a.pose.inv_mul(&b.pose);
-                    if !cache.distance(p.first, p.second).is_some_and(|w| w.reaches(a.body, b.body, &rel)) {
-                        // Routed like a cold query; the lanes keep its warm start for the cache.
-                        view.options.cold = true;
-                        warm_lanes = true;
-                    }
-                }
-            }
-            view
-        })
-        .collect();
-    lane_distances(&views, posed, params, warm_lanes)
-}
-
 /// [`answer_pair`] with what [`lane_distances`] settled ahead ([`Ahead`]: Newton's answer of a
 /// distance or collide query, or a collide query's cheap decision); [`Ahead::Nothing`] answers it
 /// here from scratch.
@@ -557,7 +515,7 @@ fn check_unique<'a>(
         }
         return Ok(());
     }
-    let mut seen = HashSet::new();
+    let mut seen = std::collections::HashSet::new();
     for (k, id) in ids.enumerate() {
         if !seen.insert(id) {
             return repeated(k, id);
@@ -1134,67 +1092,6 @@ mod tests {
         // The far states with that cache: the first starts from the cached warm start 5 cm away,
         // the rest take the lanes.
         let answers = routed(&far, &cache);
-        assert!(matches!(answers[0], Ahead::Nothing));
-        assert!(answers[1..].iter().all(|a| matches!(a, Ahead::Newton(_))));
-    }
-
-    /// A batch of non-cold distance queries between a sphere r = 0.5 at the origin ("a") and
-    /// spheres r = 0.25 ("b0" … "b5") at `xs`, asked in the order `order` (indices into `xs`):
-    /// what [`batch_lane_distances`] settled, by query, with the cache `cache`.
-    fn batch_routed(xs: &[[Real; 3]], order: &[usize], cache: &WarmStartCache) -> Vec<Ahead> {
-        let big = Arc::new(ellipsoid([0.0; 3], [0.5; 3]).unwrap());
-        let small = Arc::new(ellipsoid([0.0; 3], [0.25; 3]).unwrap());
-        let a = Posed { body: big, tree: None, pose: Isometry3::identity() };
-        let bs: Vec<Posed> = xs
-            .iter()
-            .map(|x| Posed { body: small.clone(), tree: None, pose: Isometry3::translation(x[0], x[1], x[2]) })
-            .collect();
-        let names: Vec<String> = (0..xs.len()).map(|k| format!("b{k}")).collect();
-        let pairs: Vec<PairRef<'_>> = order
-            .iter()
-            .map(|&k| PairRef {
-                kind: QueryKind::Distance,
-                first: "a",
-                second: &names[k],
-                options: QueryOptions::default(),
-                margin: 0.0,
-            })
-            .collect();
-        let params = CertifyParams::default();
-        let mut lanes = batch_lane_distances(&pairs, |q| Some((a.borrowed(), bs[order[q]].borrowed())), &params, cache);
-        (0..order.len()).map(|q| lanes.take(q)).collect()
-    }
-
-    /// A batch (no candidate states) of non-cold distance queries whose pairs have no warm start
-    /// in reach takes the lanes like cold ones: the closed form ‖c_b‖ − 0.75 (10⁻⁹ m) with valid
-    /// warm starts for the cache; a pair asked twice takes them once (the repeat starts from the
-    /// first answer); a pair whose cached warm start lies 5 cm away stays off them, and so does a
-    /// whole batch of such pairs.
-    #[test]
-    fn batch_pairs_without_a_warm_start_in_reach_take_the_lanes() {
-        let xs: Vec<[Real; 3]> = (0..6).map(|k| [1.5 + 0.5 * k as Real, 0.8 * (k % 2) as Real, 0.0]).collect();
-        let order = [0, 1, 2, 3, 4, 5, 0];
-        let answers = batch_routed(&xs, &order, &WarmStartCache::default());
-        for (&k, a) in order[..6].iter().zip(&answers) {
-            let Ahead::Newton(d) = a else { panic!("pair b{k} did not take the lanes: {a:?}") };
-            let gap = Vector3::from(xs[k]).norm() - 0.75;
-            assert!((d.distance - gap).abs() < 1e-9, "b{k}: {} vs {gap}", d.distance);
-            assert!(d.status.converged() && d.warm_start.valid, "b{k}: {d:?}");
-        }
-        assert!(matches!(answers[6], Ahead::Nothing), "the repeat of b0 must start from its first answer");
-        // Warm starts 5 cm from each pair's pose: none takes the lanes.
-        let (big, small) = (ellipsoid([0.0; 3], [0.5; 3]).unwrap(), ellipsoid([0.0; 3], [0.25; 3]).unwrap());
-        let mut cache = WarmStartCache::default();
-        for (k, x) in xs.iter().enumerate() {
-            let near = Isometry3::translation(x[0] - 0.05, x[1], x[2]);
-            let d = crate::query::distance(&big, &Isometry3::identity(), &small, &near, None, &Default::default());
-            cache.put_distance("a", &format!("b{k}"), d.warm_start);
-        }
-        assert!(batch_routed(&xs, &order, &cache).iter().all(|a| matches!(a, Ahead::Nothing)));
-        // Only b0 near its warm start: b1 … b5 still take the lanes.
-        let mut one = WarmStartCache::default();
-        one.put_distance("a", "b0", Arc::new(*cache.distance("a", "b0").unwrap()));
-        let answers = batch_routed(&xs, &order[..6], &one);
         assert!(matches!(answers[0], Ahead::Nothing));
         assert!(answers[1..].iter().all(|a| matches!(a, Ahead::Newton(_))));
     }

@@ -1,7 +1,7 @@
 //! Integration tests: the planner API (Query, QueryStream, CheckScene) against closed forms for
 //! spheres and brute force over all pairs.
 
-use crate::util::{add, assert_status, at, config, distance, set_pose, upload_sphere, Server};
+use crate::util::{add, assert_status, at, config, upload_sphere, Server};
 use sublevel::service::pb::{self, sublevel_client::SublevelClient};
 use tonic::transport::Channel;
 use tonic::Code;
@@ -448,22 +448,21 @@ async fn state_columns_match_the_closed_form_and_the_states_form() {
     server.stop().await;
 }
 
-/// A scene of a sphere r = 0.5 at the origin and twelve spheres r = 0.25 around it (some
-/// overlapping it), asked as one distance BatchQuery in columns (`cold` as given): asserts every
-/// answer converged to the closed form ‖c₁ − c₂‖ − r₁ − r₂ (0 when overlapping, 10⁻⁹ m) with the
-/// right overlap flag, and that the pairs cross contact; returns the scene, its instance ids (the
-/// big sphere first) and the small spheres' centers.
-async fn twelve_sphere_pairs_in_columns(
-    c: &mut SublevelClient<Channel>,
-    cold: bool,
-) -> (String, Vec<String>, Vec<[f64; 3]>) {
-    let big = upload_sphere(c, "r05", [0.0; 3], 0.5).await;
-    let small = upload_sphere(c, "r025", [0.0; 3], 0.25).await;
+/// A cold BatchQuery in columns (`PairColumns.cold`): twelve pairs of the same two bodies, solved
+/// four per SIMD pass, each the closed form ‖c₁ − c₂‖ − r₁ − r₂ (0 when overlapping), and no warm
+/// start left behind (the next warm query of a pair starts cold).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn cold_columns_match_the_closed_form() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(config(dir.path())).await;
+    let mut c = server.client().await;
+    let big = upload_sphere(&mut c, "r05", [0.0; 3], 0.5).await;
+    let small = upload_sphere(&mut c, "r025", [0.0; 3], 0.25).await;
     let scene = c.create_scene(pb::CreateSceneRequest { name: "cols".into() }).await.unwrap().into_inner().scene_id;
-    let mut ids = vec![add(c, &scene, &big, at([0.0; 3])).await];
+    let mut ids = vec![add(&mut c, &scene, &big, at([0.0; 3])).await];
     let centers: Vec<[f64; 3]> = (0..12).map(|k| [0.3 + 0.2 * k as f64, 0.1 * (k % 4) as f64, -0.3]).collect();
     for x in &centers {
-        ids.push(add(c, &scene, &small, at(*x)).await);
+        ids.push(add(&mut c, &scene, &small, at(*x)).await);
     }
     let columns = pb::PairColumns {
         kind: pb::QueryKind::Distance as i32,
@@ -471,7 +470,7 @@ async fn twelve_sphere_pairs_in_columns(
         first: vec![0; centers.len()],
         second: (1..=centers.len() as u32).collect(),
         margin: 0.0,
-        cold,
+        cold: true,
     };
     let batch = pb::BatchQueryRequest { scene_id: scene.clone(), pairs: vec![], columns: Some(columns) };
     let cols = c.batch_query(batch).await.unwrap().into_inner().columns.unwrap();
@@ -484,18 +483,6 @@ async fn twelve_sphere_pairs_in_columns(
         overlapping += usize::from(gap <= 0.0);
     }
     assert!(overlapping > 0 && overlapping < centers.len(), "the pairs must cross contact: {overlapping}");
-    (scene, ids, centers)
-}
-
-/// A cold BatchQuery in columns (`PairColumns.cold`): twelve pairs of the same two bodies, solved
-/// four per SIMD pass, each the closed form ‖c₁ − c₂‖ − r₁ − r₂ (0 when overlapping), and no warm
-/// start left behind (the next warm query of a pair starts cold).
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn cold_columns_match_the_closed_form() {
-    let dir = tempfile::tempdir().unwrap();
-    let server = Server::start(config(dir.path())).await;
-    let mut c = server.client().await;
-    let (scene, ids, centers) = twelve_sphere_pairs_in_columns(&mut c, true).await;
     // Cold answers keep no warm start: a warm query of the last pair starts cold.
     let again = c
         .distance(pb::DistanceRequest {
@@ -510,27 +497,6 @@ async fn cold_columns_match_the_closed_form() {
         .answer
         .unwrap();
     assert!(!again.solve.unwrap().warm_started);
-    server.stop().await;
-}
-
-/// A BatchQuery in columns, not cold, of twelve pairs of the same two bodies with no warm start
-/// yet (a scene's first query): solved like cold ones on the batch's lanes, each the closed form
-/// ‖c₁ − c₂‖ − r₁ − r₂ (0 when overlapping), and their warm starts kept: a query of a pair moved
-/// 5 cm starts warm (it would not if the lanes kept none).
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn first_batch_in_columns_takes_the_lanes_and_keeps_warm_starts() {
-    let dir = tempfile::tempdir().unwrap();
-    let server = Server::start(config(dir.path())).await;
-    let mut c = server.client().await;
-    let (scene, ids, centers) = twelve_sphere_pairs_in_columns(&mut c, false).await;
-    // The last pair (separated by 1.78 m) moved 5 cm: warm-started from the batch's answer.
-    let last = *centers.last().unwrap();
-    let moved = [last[0] + 0.05, last[1], last[2]];
-    set_pose(&mut c, &scene, &ids[centers.len()], at(moved)).await;
-    let again = distance(&mut c, &scene, &ids[0], &ids[centers.len()]).await;
-    let gap = (moved[0] * moved[0] + moved[1] * moved[1] + moved[2] * moved[2]).sqrt() - 0.75;
-    assert!((again.distance - gap).abs() < 1e-9, "{again:?}");
-    assert!(again.solve.unwrap().warm_started, "the lanes must keep the pair's warm start");
     server.stop().await;
 }
 

@@ -368,13 +368,13 @@ impl Catalog {
             (posed_by_id, scratch)
         };
         let params = self.certify_params();
-        // Distance solves of one body pair that start cold (asked cold, or with no warm start in
-        // reach) on the batch solver's lanes (see `planner::batch_lane_distances`).
-        let mut newton = planner::batch_lane_distances(
+        // Cold distance solves of one body pair on the batch solver's lanes (see
+        // `planner::lane_distances`).
+        let mut newton = planner::lane_distances(
             pairs,
             |k| Some((posed_by_id[pairs[k].first].borrowed(), posed_by_id[pairs[k].second].borrowed())),
             &params,
-            &scratch,
+            false,
         );
         let mut answers = Vec::with_capacity(pairs.len());
         for (k, p) in pairs.iter().enumerate() {

@@ -457,9 +457,7 @@ class Client:
         ``"collide"`` with ``margin`` meters) at the stored poses, in columns both ways: numpy
         arrays back (:class:`AnswerColumns`), no message per pair. The fast form for thousands of
         pairs. ``cold``: no warm start read or kept; distance / collide pairs of the same two bodies
-        are then solved four per SIMD pass on the server (unrelated poses, e.g. sampled states).
-        Without ``cold``, pairs whose warm start is missing or out of reach (a pair's first query,
-        or instances moved at random) are solved that way too, and keep their warm starts."""
+        are then solved four per SIMD pass on the server (unrelated poses, e.g. sampled states)."""
         req = pb.BatchQueryRequest(scene_id=scene, columns=_pair_columns(kind, first, second, margin, cold))
         return AnswerColumns.from_proto(self._call("BatchQuery", req).columns)
 
