@@ -160,7 +160,7 @@ async fn candidate_states(
         ..packed.clone()
     };
     // The same array without `cold`: each state would start from the state before, but random
-    // states lie past the warm starts' reach (`query::newton::WARM_REACH`), so the server solves
+    // states lie past the warm starts' reach (`NewtonParams::warm_reach`), so the server solves
     // them like cold ones (on the lanes) and keeps their warm starts.
     let mut not_cold = packed.clone();
     if let Some(c) = not_cold.columns.as_mut() {

@@ -1,11 +1,13 @@
-//! The `sublevel` command: `serve`, `fit`, `query`, `bench`, `chart`.
+//! The `sublevel` command: `serve`, `fit`, `group`, `query`, `health`, `loadtest`, `shard-probe`.
+//! The paper's reproduction, benchmarks and charts are the `sublevel-lab` command (crates/lab).
+
+#![forbid(unsafe_code)]
 
 mod cli;
 
 /// The binary's allocator: mimalloc keeps freed pages for the next request, where glibc's arenas
-/// grew and trimmed (and faulted fresh pages) on every large one: 4096 candidate states in one
-/// Query took 16.8 ms of server time with glibc's allocator, 8.9 ms with its trimming turned off
-/// (docs/performance-log.md, "Issue 15, fifth session").
+/// grow and trim (and fault fresh pages) on every large one: 4096 candidate states in one Query
+/// took 16.8 ms of server time with glibc's allocator, 8.9 ms with mimalloc.
 #[global_allocator]
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
@@ -29,16 +31,6 @@ enum Command {
     Group(cli::group::GroupArgs),
     /// Run a distance or growth query between two body files.
     Query(cli::query::QueryArgs),
-    /// Benchmark fits and queries on the paper's shapes.
-    Bench(cli::bench::BenchArgs),
-    /// Run the stability suite (hard query configurations, Newton vs the SDP) and print a table.
-    Stability(cli::stability::StabilityArgs),
-    /// Reproduce the paper's Table 1 (bounding volumes of the five shapes) next to its numbers.
-    Table1(cli::table1::Table1Args),
-    /// Fit time against degree, log det P vs log det H (the paper's construction-time figure).
-    FitTime(cli::fit_time::FitTimeArgs),
-    /// Charts: speed against accuracy per model, Newton tolerance against time and error.
-    Chart(cli::chart::ChartArgs),
     /// Load-test a running server over gRPC: latency histograms, throughput, errors by status.
     Loadtest(cli::loadtest::LoadtestArgs),
     /// Check a server's gRPC health (exit 0 when SERVING), for container healthchecks.
@@ -57,11 +49,6 @@ fn main() -> std::process::ExitCode {
         Command::Fit(a) => cli::fit::run(a),
         Command::Group(a) => cli::group::run(a),
         Command::Query(a) => cli::query::run(a),
-        Command::Bench(a) => cli::bench::run(a),
-        Command::Stability(a) => cli::stability::run(a),
-        Command::Table1(a) => cli::table1::run(a),
-        Command::FitTime(a) => cli::fit_time::run(a),
-        Command::Chart(a) => cli::chart::run(a),
         Command::Loadtest(a) => cli::loadtest::run(a),
         Command::Health(a) => cli::health::run(a),
         Command::ShardProbe(a) => cli::shard_probe::run(a),

@@ -67,14 +67,14 @@ pub struct FitArgs {
     pub seed: u64,
     /// With --parts: the leaf-excess tolerance T in meters (`--parts auto` keeps the fewest parts
     /// whose max leaf excess is ≤ T, and each part the lowest degree within T). Without --parts:
-    /// Clarabel's gap tolerance, as before (same as --solver-tolerance).
+    /// Clarabel's gap tolerance (same as --solver-tolerance).
     #[arg(long)]
     pub tolerance: Option<f64>,
     /// Clarabel's gap and feasibility tolerance (see `FitSettings::solver_tolerance`; default 1e-6).
     #[arg(long)]
     pub solver_tolerance: Option<f64>,
     /// Fit a compound body: at most N convex parts (VHACD), or `auto` (needs --tolerance). The
-    /// mesh must be an OFF file with faces. Without it, one body is fitted as before.
+    /// mesh must be an OFF file with faces. Without it, one body is fitted.
     #[arg(long)]
     pub parts: Option<String>,
     /// With --parts: boundary samples per node for the excess (one-sided Hausdorff, meters).

@@ -1,6 +1,6 @@
 //! `sublevel fit MESH.off --parts auto --tolerance T --output X.json` (or `--parts N`): fit a
 //! compound body — a convex decomposition fitted part by part under a containment tree
-//! ([`sublevel::compound`], issue 14 part 1) — and write its compound file. The report (stdout,
+//! ([`sublevel::compound`]) — and write its compound file. The report (stdout,
 //! and the file's `report`) lists every part count tried and every node: degree, triangles,
 //! excess, fit time. Then the conservativeness check: triangles not inside any leaf (must be 0).
 

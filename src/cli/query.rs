@@ -2,10 +2,10 @@
 //! [--gradient]`:
 //! one query between two body files, for scripts and debugging.
 //!
-//! Compound body files (`sublevel.compound.v1`, issue 14) are answered by branch and bound over the
+//! Compound body files (`sublevel.compound.v1`) are answered by branch and bound over the
 //! two containment trees ([`sublevel::query::tree`]): the same fields, plus `compound`, the bounds
 //! `lower` / `upper`, the `level` reached, the active `leaves` pair and `pairs_evaluated`. A file
-//! holding one body (or a one-node compound) behaves exactly as before.
+//! holding one body (or a one-node compound) is answered as a single body.
 
 use serde_json::json;
 use sublevel::compound::CompoundBody;
@@ -214,7 +214,7 @@ fn compound(
     })
 }
 
-/// The query between two single bodies, as before compound bodies.
+/// The query between two single bodies.
 fn single(
     args: &QueryArgs,
     a: &sublevel::Body,

@@ -36,9 +36,8 @@ pub struct ServeArgs {
     demo: bool,
     /// Async worker threads (connections, HTTP/2, small queries). Default: one less than the
     /// CPUs, at least one — the rest is left to the blocking pool (certificates, fits, large
-    /// batches) and to co-located clients. On this project's 2-core machine one worker answers a
-    /// planner's 20-pair stream step in ~100 µs p50 against ~150 µs with two (README, "Service
-    /// benchmark").
+    /// batches) and to co-located clients. On a 2-core machine one worker answers a planner's 20-pair
+    /// stream step in ~100 µs p50 against ~150 µs with two (docs/performance.md).
     #[arg(long, env = "SUBLEVEL_ASYNC_WORKERS")]
     async_workers: Option<usize>,
     /// Shutdown grace, TLS and authentication (`cli::serve_ops`).

@@ -6,9 +6,9 @@
 //! works too); an unknown key is an error, so a typo never passes silently. The address, data
 //! directory, demo and worker flags are flags and variables only.
 //!
-//! The README's "Configuration" table is [`config_table`] (printed by
+//! The "Configuration" table of docs/operations.md is [`config_table`] (printed by
 //! `sublevel serve --print-config-table`), built from the same clap definitions as `--help`; a
-//! unit test fails when the README's copy differs.
+//! unit test fails when that copy differs.
 
 use super::serve::ServeArgs;
 use clap::parser::ValueSource;
@@ -39,7 +39,7 @@ pub struct OpsArgs {
     /// TOML file of settings below the flags and environment (keys: flag names without `--`).
     #[arg(long, env = "SUBLEVEL_CONFIG")]
     pub config: Option<PathBuf>,
-    /// Print the Markdown table of every `serve` setting (the README's) and exit.
+    /// Print the Markdown table of every `serve` setting (docs/operations.md's) and exit.
     #[arg(long)]
     #[serde(skip)]
     pub print_config_table: bool,
@@ -274,7 +274,7 @@ mod tests {
         assert!(e.contains("--max-fit-queue") && e.contains("at least 1"), "{e}");
     }
 
-    /// The README's Configuration table is exactly `sublevel serve --print-config-table`.
+    /// docs/operations.md's Configuration table is exactly `sublevel serve --print-config-table`.
     #[test]
     fn the_readme_holds_the_generated_table() {
         let table = config_table();
@@ -283,10 +283,10 @@ mod tests {
              RESOURCE_EXHAUSTED) |"
         ));
         assert!(table.contains("| `--addr` | `SUBLEVEL_ADDR` |  | `127.0.0.1:50051` |"), "{table}");
-        let readme = include_str!("../../README.md");
+        let readme = include_str!("../../docs/operations.md");
         assert!(
             readme.contains(&table),
-            "README.md's table differs from `sublevel serve --print-config-table`:\n{table}"
+            "docs/operations.md's table differs from `sublevel serve --print-config-table`:\n{table}"
         );
     }
 }

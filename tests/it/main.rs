@@ -14,6 +14,5 @@ mod security;
 mod service;
 mod service_compound;
 mod service_jobs;
-mod table;
 mod transport;
 mod util;

@@ -1,0 +1,33 @@
+//! # sublevel-core
+//!
+//! The core of Sublevel: bodies modeled as 1-sublevel sets of sos-convex polynomials,
+//! `{x ∈ ℝ³ : p(x) ≤ 1}`, following Ahmadi, Hall, Makadia and Sindhwani, *Geometry of 3D
+//! Environments and Sum of Squares Polynomials*, Robotics: Science and Systems XIII (RSS 2017);
+//! equation labels in the docs are those of the paper's LaTeX source (version 7).
+//!
+//! - [`math`]: `Real = f64`, point / vector / pose aliases, tolerances, CPU feature detection.
+//! - [`error`]: the one error enum of the Sublevel crates.
+//! - [`cancel`]: cancellation scopes for long solves (fits, certificates, scene checks).
+//! - [`poly`]: monomial basis, polynomials with exact derivatives, Gram forms (paper §II), the
+//!   fast evaluation kernels and the support / radial tables.
+//! - [`conic`]: a small builder for Clarabel cone programs (shared by fits and certificates).
+//! - [`report`]: what a fit reports about its body (paper §III).
+//! - [`body`]: a fitted body and the same body under a pose (paper §IV-C).
+//! - [`compound`]: compound bodies, a containment tree of bodies (paper §V), and its file format.
+//!
+//! The fits live in `sublevel-fit`, the queries in `sublevel-query`.
+
+#![warn(missing_docs)]
+#![forbid(unsafe_code)]
+
+pub mod body;
+pub mod cancel;
+pub mod compound;
+pub mod conic;
+pub mod error;
+pub mod math;
+pub mod poly;
+pub mod report;
+
+pub use body::{Body, PosedBody};
+pub use error::{Error, Result};

@@ -1,0 +1,605 @@
+//! Fitting a compound body to a triangle mesh: decomposition, one fit per part, the containment
+//! tree, and the search over part counts.
+//!
+//! ```text
+//! for N in (fixed N) or (1, 2, 4, 8 until max leaf excess ≤ T):
+//!     parts  = decompose(mesh, N)                                          (decompose.rs)
+//!     leaf j = fit of the vertices of part j's triangles (paper §III-A, log det P):
+//!              with T: the lowest candidate degree whose excess ≤ T (else the smallest excess)
+//!              without: the degree `--degree auto` picks (fit::auto, volume tolerance τ)
+//! auto, last N, still above T: refine — split the leaf of largest excess > T (VHACD on its own
+//!       sub-mesh, else a median cut of its triangles; decompose::split_part) and fit the pieces,
+//!       until every leaf ≤ T or max_parts leaves
+//! tree: level by level, pair the nodes greedily by the diagonal of their union's bounding box;
+//!       each pair gets a parent body containing both bodies (paper §V, S-procedure,
+//!       fit::containment::contain_bodies), or the ellipsoid through the corners of the
+//!       children's bounding box when that is tighter or the solver fails at every degree
+//!       (box_ellipsoid); a node left out moves up alone; until one root
+//! excess of every node: sampled one-sided Hausdorff excess over the mesh          (surface.rs)
+//! ```
+//!
+//! Each leaf contains the vertices of its triangles, hence (convexity) its triangles; each parent
+//! contains its children's bodies; so every triangle lies in one body at every level of the tree
+//! (checked by [`super::check::uncovered_triangles`]). A part whose own vertices are degenerate
+//! (flat) is fitted with its VHACD hull points added (then it reaches up to about one voxel beyond
+//! the mesh).
+
+use super::decompose::{decompose, split_part, Part, DEFAULT_RESOLUTION, MAX_PARTS};
+use super::surface::{MeshSurface, DEFAULT_EXCESS_SAMPLES};
+use super::{CompoundBody, CompoundNode, CompoundReport};
+use crate::containment::{contain_bodies, ContainmentSettings};
+use crate::mesh::OffMesh;
+use crate::{auto, fit_points, FitProgress, FitSettings, FitStage, PartProgress};
+use crate::{Error, Result};
+use std::time::Instant;
+use sublevel_core::body::Body;
+use sublevel_core::math::{Isometry3, Point3, Real};
+
+/// Part counts `--parts auto` tries, in order (VHACD may return fewer than asked); the last
+/// one is refined (its parts above the tolerance split again) up to
+/// [`CompoundSettings::max_parts`]. Asking VHACD for more than 8 gains little: parry's VHACD
+/// returns at most about 14 parts on the bundled meshes however many are asked.
+pub const AUTO_PART_COUNTS: [usize; 4] = [1, 2, 4, 8];
+
+/// Default cap on the part count reached by refinement.
+pub const DEFAULT_MAX_PARTS: usize = 32;
+
+/// How many parts to decompose into.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PartCount {
+    /// At most this many parts (VHACD may return fewer).
+    Fixed(usize),
+    /// The fewest of [`AUTO_PART_COUNTS`] whose max leaf excess is ≤ the excess tolerance.
+    Auto,
+}
+
+impl std::str::FromStr for PartCount {
+    type Err = Error;
+
+    fn from_str(s: &str) -> Result<Self> {
+        if s.eq_ignore_ascii_case("auto") {
+            return Ok(PartCount::Auto);
+        }
+        s.parse::<usize>()
+            .map(PartCount::Fixed)
+            .map_err(|_| Error::invalid("parts", format!("expected a part count or auto, got {s:?}")))
+    }
+}
+
+/// Settings of [`fit_compound`].
+#[derive(Clone, Debug)]
+pub struct CompoundSettings {
+    /// Settings of every leaf fit (its `degree` is ignored: see `degrees`).
+    pub fit: FitSettings,
+    /// Candidate leaf degrees 2d, strictly increasing (default 2, 4, 6).
+    pub degrees: Vec<usize>,
+    /// Relative volume tolerance τ of the degree choice when `excess_tolerance` is None (as
+    /// `--degree auto`).
+    pub volume_tolerance: Real,
+    /// Leaf-excess tolerance T in meters: the lowest degree whose excess is ≤ T per part, and
+    /// the fewest parts whose max leaf excess is ≤ T with [`PartCount::Auto`] (required there).
+    pub excess_tolerance: Option<Real>,
+    /// Degree 2d of the parent bodies (2, 4 or 6; lowered to (lowest child degree + 2) when the
+    /// S-procedure multipliers would need a degree above 2).
+    pub parent_degree: usize,
+    /// Settings of the containment fits (degree and multiplier degree are set per parent).
+    pub containment: ContainmentSettings,
+    /// VHACD voxel resolution.
+    pub resolution: u32,
+    /// Boundary samples per node for the excess.
+    pub excess_samples: usize,
+    /// Most leaves refinement may reach with [`PartCount::Auto`] (2..=[`MAX_PARTS`]).
+    pub max_parts: usize,
+}
+
+impl Default for CompoundSettings {
+    fn default() -> Self {
+        Self {
+            fit: FitSettings { volume_samples: 50_000, ..FitSettings::default() },
+            degrees: vec![2, 4, 6],
+            volume_tolerance: 0.05,
+            excess_tolerance: None,
+            parent_degree: 4,
+            containment: ContainmentSettings::default().with_volume_samples(50_000),
+            resolution: DEFAULT_RESOLUTION,
+            excess_samples: DEFAULT_EXCESS_SAMPLES,
+            max_parts: DEFAULT_MAX_PARTS,
+        }
+    }
+}
+
+impl CompoundSettings {
+    /// Checks every field.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `degrees`, `volume_tolerance`, `tolerance` (the excess
+    /// tolerance: finite, > 0), `parent_degree`, `resolution` or `excess_samples`.
+    pub fn validate(&self) -> Result<()> {
+        auto::validate_auto(&self.degrees, self.volume_tolerance)?;
+        if let Some(t) = self.excess_tolerance {
+            if !(t.is_finite() && t > 0.0) {
+                return Err(Error::invalid("tolerance", format!("must be a finite number > 0 meters, got {t}")));
+            }
+        }
+        if ![2, 4, 6].contains(&self.parent_degree) {
+            return Err(Error::invalid("parent_degree", format!("must be 2, 4 or 6, got {}", self.parent_degree)));
+        }
+        if !(8..=512).contains(&self.resolution) {
+            return Err(Error::invalid("resolution", format!("must be in 8..=512, got {}", self.resolution)));
+        }
+        if !(16..=100_000).contains(&self.excess_samples) {
+            return Err(Error::invalid(
+                "excess_samples",
+                format!("must be in 16..=100000, got {}", self.excess_samples),
+            ));
+        }
+        if !(2..=MAX_PARTS).contains(&self.max_parts) {
+            return Err(Error::invalid("max_parts", format!("must be in 2..={MAX_PARTS}, got {}", self.max_parts)));
+        }
+        Ok(())
+    }
+}
+
+/// Fits a compound body to a triangle mesh (meters; see the module docs). Progress messages say
+/// which part / parent is being fitted ("parts 8, part 3/8: degree 4: …"), stages and fractions
+/// as in [`crate::fit_points`]. `mesh_name` goes into the report.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming a settings field, `parts` (0, too many, or `auto` without a
+/// tolerance) or `mesh` (no triangles, bad indices); [`Error::Numerical`] when the decomposition
+/// or a fit fails (naming the part); [`Error::Cancelled`] when cancelled ([`crate::cancel`]).
+pub fn fit_compound(
+    mesh: &OffMesh,
+    mesh_name: Option<&str>,
+    parts: PartCount,
+    settings: &CompoundSettings,
+    progress: &mut dyn FnMut(&FitProgress),
+) -> Result<CompoundBody> {
+    let start = Instant::now();
+    settings.validate()?;
+    let counts: Vec<usize> = match parts {
+        PartCount::Fixed(n) => vec![n],
+        PartCount::Auto => {
+            if settings.excess_tolerance.is_none() {
+                return Err(Error::invalid("parts", "`auto` needs an excess tolerance (--tolerance T meters)"));
+            }
+            AUTO_PART_COUNTS.to_vec()
+        }
+    };
+    let surface = MeshSurface::new(&mesh.vertices, &mesh.triangles)?;
+    // Overall fraction: the attempts (decomposition and part fits) up to `attempts_end`, the
+    // refinement up to `leaves_end`, the tree (parents, the slowest stage) up to 1.
+    let refining = parts == PartCount::Auto && settings.excess_tolerance.is_some();
+    let (attempts_end, leaves_end) = if refining { (0.15, 0.4) } else { (0.4, 0.4) };
+    let mut attempts = Vec::new();
+    let mut best: Option<(Vec<CompoundNode>, Real, Real)> = None; // (leaves, decomposition s, max excess)
+    let mut notes = Vec::new();
+    for (a, &n) in counts.iter().enumerate() {
+        let t0 = Instant::now();
+        let frac = |f: Real| attempts_end * (a as Real + f) / counts.len() as Real;
+        report(progress, FitStage::Hull, frac(0.0), format!("parts {n}: convex decomposition (VHACD)"));
+        let decomposition = decompose(&mesh.vertices, &mesh.triangles, n, settings.resolution)?;
+        let decomposition_seconds = t0.elapsed().as_secs_f64();
+        let got = decomposition.len();
+        let mut leaves = Vec::with_capacity(got);
+        for (j, part) in decomposition.iter().enumerate() {
+            let mut inner = |p: &FitProgress| {
+                progress(&FitProgress {
+                    stage: p.stage,
+                    fraction: frac((j as Real + p.fraction) / got as Real).min(1.0),
+                    message: format!("parts {n}, part {}/{got}: {}", j + 1, p.message),
+                    part: Some(PartProgress { index: j + 1, count: got }),
+                })
+            };
+            leaves.push(fit_leaf(mesh, part, j, &surface, settings, &mut inner)?);
+        }
+        if let (PartCount::Auto, Some(t)) = (parts, settings.excess_tolerance) {
+            if a + 1 == counts.len() {
+                let before = leaves.len();
+                refine(mesh, decomposition, &mut leaves, t, &surface, settings, (attempts_end, leaves_end), progress)?;
+                if leaves.len() > before {
+                    notes.push(format!(
+                        "{before} VHACD parts refined to {}: parts with excess above {t} m split again",
+                        leaves.len()
+                    ));
+                }
+            }
+        }
+        let max_excess = leaves.iter().map(|l| l.excess).fold(0.0, Real::max);
+        attempts.push((n, leaves.len(), max_excess, t0.elapsed().as_secs_f64()));
+        let better = best.as_ref().is_none_or(|b| max_excess < b.2);
+        if better {
+            best = Some((leaves, decomposition_seconds, max_excess));
+        }
+        if let Some(t) = settings.excess_tolerance {
+            if max_excess <= t {
+                if parts == PartCount::Auto {
+                    notes.push(format!(
+                        "{got} parts kept: the fewest tried whose max leaf excess {max_excess:.4} m is ≤ {t} m"
+                    ));
+                }
+                break;
+            }
+            if a + 1 == counts.len() {
+                notes.push(format!(
+                    "no part count tried reached the excess tolerance {t} m; kept the smallest max leaf excess"
+                ));
+            }
+        }
+    }
+    let Some((leaves, decomposition_seconds, _)) = best else {
+        return Err(Error::invalid("parts", "no part count to try"));
+    };
+    let leaf_fit_seconds = leaves.iter().map(|l| l.fit_seconds).sum();
+    let t_tree = Instant::now();
+    let nodes = build_tree(leaves, &surface, settings, leaves_end, progress)?;
+    let tree_fit_seconds = t_tree.elapsed().as_secs_f64();
+    let root = nodes.len() - 1;
+    let report = CompoundReport {
+        mesh: mesh_name.map(str::to_owned),
+        mesh_triangles: mesh.triangles.len(),
+        tolerance: settings.excess_tolerance,
+        attempts,
+        decomposition_seconds,
+        leaf_fit_seconds,
+        tree_fit_seconds,
+        total_seconds: start.elapsed().as_secs_f64(),
+        excess_samples: settings.excess_samples,
+        notes,
+    };
+    let mut nodes = nodes;
+    set_depths(&mut nodes, root);
+    let body = CompoundBody::new(nodes, root, report)?;
+    report_done(progress, &body);
+    Ok(body)
+}
+
+fn report(progress: &mut dyn FnMut(&FitProgress), stage: FitStage, fraction: Real, message: String) {
+    progress(&FitProgress { stage, fraction: fraction.min(1.0), message, part: None });
+}
+
+fn report_done(progress: &mut dyn FnMut(&FitProgress), body: &CompoundBody) {
+    report(
+        progress,
+        FitStage::Done,
+        1.0,
+        format!(
+            "{} parts, {} nodes, max leaf excess {:.4} m, root excess {:.4} m",
+            body.leaf_count(),
+            body.node_count(),
+            body.max_leaf_excess(),
+            body.node(body.root()).excess
+        ),
+    );
+}
+
+/// Fits one part (see the module docs); the node's depth is set later.
+fn fit_leaf(
+    mesh: &OffMesh,
+    part: &Part,
+    index: usize,
+    surface: &MeshSurface,
+    settings: &CompoundSettings,
+    progress: &mut dyn FnMut(&FitProgress),
+) -> Result<CompoundNode> {
+    let t0 = Instant::now();
+    let own: Vec<Point3> = part.vertices.iter().map(|&i| mesh.vertices[i as usize]).collect();
+    let (body, excess) = match fit_leaf_points(&own, surface, settings, progress) {
+        Err(Error::InvalidArgument { field, reason }) if field == "points" && !part.hull.is_empty() => {
+            // A flat part: its VHACD hull gives it volume.
+            let mut with_hull = own.clone();
+            with_hull.extend_from_slice(&part.hull);
+            let (mut b, e) =
+                fit_leaf_points(&with_hull, surface, settings, progress).map_err(|e| name_part(e, index))?;
+            b.report.notes.push(format!(
+                "part {index}: its vertices alone were degenerate ({reason}); its VHACD hull points were added"
+            ));
+            (b, e)
+        }
+        other => other.map_err(|e| name_part(e, index))?,
+    };
+    Ok(CompoundNode {
+        body,
+        children: Vec::new(),
+        depth: 0,
+        excess,
+        triangles: part.triangles.len(),
+        fit_seconds: t0.elapsed().as_secs_f64(),
+    })
+}
+
+fn name_part(e: Error, index: usize) -> Error {
+    match e {
+        Error::Numerical(m) => Error::Numerical(format!("part {index}: {m}")),
+        other => other,
+    }
+}
+
+/// Largest |coefficient| a leaf fit of degree above the lowest candidate may have (normalized
+/// coordinates, where the body's boundary is p = 1): about 7 of the 16 digits of a value near the
+/// boundary survive cancellation.
+pub const MAX_LEAF_COEFFICIENT: Real = 1e9;
+
+fn max_coefficient(body: &Body) -> Real {
+    body.polynomial().coefficients().iter().fold(0.0, |m: Real, c| m.max(c.abs()))
+}
+
+/// The body of one part and its excess: the lowest degree within the excess tolerance, or the
+/// `--degree auto` choice without one; with a tolerance, higher degrees whose coefficients exceed
+/// [`MAX_LEAF_COEFFICIENT`] are not tried further.
+fn fit_leaf_points(
+    points: &[Point3],
+    surface: &MeshSurface,
+    settings: &CompoundSettings,
+    progress: &mut dyn FnMut(&FitProgress),
+) -> Result<(Body, Real)> {
+    let Some(t) = settings.excess_tolerance else {
+        let body = auto::fit_auto(points, &settings.fit, &settings.degrees, settings.volume_tolerance, progress)?;
+        let e = surface.excess(&body, settings.excess_samples)?;
+        return Ok((body, e));
+    };
+    let mut best: Option<(Body, Real)> = None;
+    for &degree in &settings.degrees {
+        let s = FitSettings { degree, ..settings.fit.clone() };
+        let body = match fit_points(points, &s, progress) {
+            Ok(b) => b,
+            Err(Error::Numerical(_)) if best.is_some() => break,
+            Err(e) => return Err(e),
+        };
+        // A nearly flat part can give a higher degree a polynomial of huge coefficients (1e15 on
+        // chair_101's seat at 2d = 6): its values near the boundary lose most of their digits to
+        // cancellation, so such a fit is not a candidate when a lower degree has one.
+        if best.is_some() && max_coefficient(&body) > MAX_LEAF_COEFFICIENT {
+            break;
+        }
+        let e = surface.excess(&body, settings.excess_samples)?;
+        let done = e <= t;
+        if best.as_ref().is_none_or(|b| e < b.1) {
+            best = Some((body, e));
+        }
+        if done {
+            break;
+        }
+    }
+    let (mut body, e) = best.ok_or_else(|| Error::invalid("degrees", "need at least one candidate degree"))?;
+    body.report.notes.push(format!("degree {} chosen by excess {e:.4} m against the tolerance {t} m", body.degree()));
+    Ok((body, e))
+}
+
+/// Refinement: while a leaf's excess is above `t` and fewer than `settings.max_parts` leaves
+/// exist, the leaf of largest excess is split ([`split_part`]) and its pieces fitted anew; a
+/// leaf that cannot split (one triangle, or a piece the solver fails on) stays. `leaves[j]` is the fit of `parts[j]`.
+/// Progress fractions run over `span` as the leaf count goes to `settings.max_parts`.
+#[allow(clippy::too_many_arguments)]
+fn refine(
+    mesh: &OffMesh,
+    parts: Vec<Part>,
+    leaves: &mut Vec<CompoundNode>,
+    t: Real,
+    surface: &MeshSurface,
+    settings: &CompoundSettings,
+    span: (Real, Real),
+    progress: &mut dyn FnMut(&FitProgress),
+) -> Result<()> {
+    let first = leaves.len();
+    let room = settings.max_parts.saturating_sub(first).max(1) as Real;
+    let mut parts: Vec<(Part, bool)> = parts.into_iter().map(|p| (p, true)).collect();
+    while leaves.len() < settings.max_parts {
+        let worst = (0..leaves.len())
+            .filter(|&j| parts[j].1 && leaves[j].excess > t)
+            .max_by(|&a, &b| leaves[a].excess.total_cmp(&leaves[b].excess));
+        let Some(j) = worst else { break };
+        let pieces = split_part(&mesh.vertices, &mesh.triangles, &parts[j].0, settings.resolution);
+        if pieces.len() < 2 || leaves.len() + pieces.len() - 1 > settings.max_parts {
+            parts[j].1 = false;
+            continue;
+        }
+        let n = leaves.len();
+        let count = n + pieces.len() - 1;
+        let mut fitted = Vec::with_capacity(pieces.len());
+        for (k, piece) in pieces.iter().enumerate() {
+            let mut inner = |p: &FitProgress| {
+                let within = (k as Real + p.fraction) / pieces.len() as Real;
+                let done = ((n - first) as Real + (pieces.len() - 1) as Real * within) / room;
+                progress(&FitProgress {
+                    stage: p.stage,
+                    fraction: (span.0 + (span.1 - span.0) * done).min(span.1),
+                    message: format!(
+                        "refining ({n} parts), piece {}/{} of part {j}: {}",
+                        k + 1,
+                        pieces.len(),
+                        p.message
+                    ),
+                    // The piece becomes leaf j (the first) or a new leaf after the others.
+                    part: Some(PartProgress { index: if k == 0 { j + 1 } else { n + k }, count }),
+                })
+            };
+            match fit_leaf(mesh, piece, n + k, surface, settings, &mut inner) {
+                Ok(leaf) => fitted.push(leaf),
+                // A piece the solver cannot fit: the part stays whole (its fit is valid).
+                Err(Error::Numerical(_)) => break,
+                Err(e) => return Err(e),
+            }
+        }
+        if fitted.len() < pieces.len() {
+            parts[j].1 = false;
+            continue;
+        }
+        let mut pieces = pieces.into_iter();
+        let mut fitted = fitted.into_iter();
+        if let (Some(p), Some(l)) = (pieces.next(), fitted.next()) {
+            parts[j] = (p, true);
+            leaves[j] = l;
+        }
+        parts.extend(pieces.map(|p| (p, true)));
+        leaves.extend(fitted);
+    }
+    Ok(())
+}
+
+/// Diagonal (meters) of the box around two nodes' bounding boxes (a convex body always has one).
+fn union_diagonal(a: &Body, b: &Body) -> Real {
+    let id = Isometry3::identity();
+    match (a.world_aabb(&id), b.world_aabb(&id)) {
+        (Some((la, ha)), Some((lb, hb))) => (ha.sup(&hb) - la.inf(&lb)).norm(),
+        _ => Real::INFINITY,
+    }
+}
+
+/// Groups the leaves bottom-up into parents (see the module docs); returns every node, leaves
+/// first, the root last.
+/// Progress fractions run from `start` to 1.
+fn build_tree(
+    mut nodes: Vec<CompoundNode>,
+    surface: &MeshSurface,
+    settings: &CompoundSettings,
+    start: Real,
+    progress: &mut dyn FnMut(&FitProgress),
+) -> Result<Vec<CompoundNode>> {
+    let parents_total = nodes.len().saturating_sub(1).max(1) as Real;
+    let mut level: Vec<usize> = (0..nodes.len()).collect();
+    let mut made = 0usize;
+    while level.len() > 1 {
+        let mut pairs: Vec<(Real, usize, usize)> = Vec::new();
+        for (x, &i) in level.iter().enumerate() {
+            for &j in &level[x + 1..] {
+                pairs.push((union_diagonal(&nodes[i].body, &nodes[j].body), i, j));
+            }
+        }
+        pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let mut used = vec![false; nodes.len()];
+        let mut next = Vec::new();
+        let mut failure = None;
+        for (_, i, j) in pairs {
+            if used[i] || used[j] {
+                continue;
+            }
+            made += 1;
+            let mut inner = |p: &FitProgress| {
+                progress(&FitProgress {
+                    stage: p.stage,
+                    fraction: (start + (1.0 - start) * (made as Real - 1.0 + p.fraction) / parents_total).min(1.0),
+                    message: format!("parent {made}: {}", p.message),
+                    part: None,
+                })
+            };
+            // A pair the solver cannot contain is skipped: its nodes pair otherwise, or move up.
+            let parent = match fit_parent(&nodes, [i, j], surface, settings, &mut inner) {
+                Ok(p) => p,
+                Err(Error::Numerical(m)) => {
+                    made -= 1;
+                    failure = Some(m);
+                    continue;
+                }
+                Err(e) => return Err(e),
+            };
+            used[i] = true;
+            used[j] = true;
+            nodes.push(parent);
+            next.push(nodes.len() - 1);
+        }
+        if next.is_empty() {
+            return Err(Error::Numerical(failure.unwrap_or_else(|| "no pair of nodes could be contained".into())));
+        }
+        next.extend(level.iter().copied().filter(|&i| !used[i]));
+        level = next;
+    }
+    Ok(nodes)
+}
+
+/// One parent around two nodes (paper §V containment), degree lowered if the multipliers would
+/// need degree > 2, and retried at degree 2 when the solver fails.
+fn fit_parent(
+    nodes: &[CompoundNode],
+    children: [usize; 2],
+    surface: &MeshSurface,
+    settings: &CompoundSettings,
+    progress: &mut dyn FnMut(&FitProgress),
+) -> Result<CompoundNode> {
+    let t0 = Instant::now();
+    let id = Isometry3::identity();
+    let bodies: Vec<(&Body, Isometry3)> = children.iter().map(|&c| (&nodes[c].body, id)).collect();
+    let lowest = bodies.iter().map(|(b, _)| b.degree()).min().unwrap_or(2);
+    let degree = settings.parent_degree.min(lowest + 2);
+    let attempt = |degree: usize, progress: &mut dyn FnMut(&FitProgress)| {
+        let s = settings.containment.clone().with_degree(degree).with_multiplier_degree(degree.saturating_sub(lowest));
+        contain_bodies(&bodies, &s, progress)
+    };
+    let mut body = match attempt(degree, progress) {
+        Ok(b) => b,
+        Err(Error::Numerical(m)) => {
+            let retried = if degree > 2 { attempt(2, progress) } else { Err(Error::Numerical(m.clone())) };
+            match retried {
+                Ok(mut b) => {
+                    b.report.notes.push(format!("degree {degree} containment failed ({m}); degree 2 kept"));
+                    b
+                }
+                Err(Error::Numerical(m2)) => {
+                    let mut b = box_ellipsoid(&bodies)?;
+                    b.report.notes.push(format!(
+                        "containment SDP failed ({m}; at degree 2: {m2}): the parent is the ellipsoid through the corners of the children's bounding box"
+                    ));
+                    b
+                }
+                Err(e) => return Err(e),
+            }
+        }
+        Err(e) => return Err(e),
+    };
+    let mut excess = surface.excess(&body, settings.excess_samples)?;
+    // A §V parent can come out far looser than the box ellipsoid (a poorly scaled solve: up to
+    // kilometers of excess on chair_101); the tighter of the two is kept.
+    if let Ok(mut fallback) = box_ellipsoid(&bodies) {
+        let e = surface.excess(&fallback, settings.excess_samples)?;
+        if e < excess {
+            fallback.report.notes.push(format!(
+                "the ellipsoid through the corners of the children's bounding box (excess {e:.4} m) kept: tighter than the degree-{} containment fit (excess {excess:.4} m)",
+                body.degree()
+            ));
+            excess = e;
+            body = fallback;
+        }
+    }
+    Ok(CompoundNode {
+        body,
+        children: children.to_vec(),
+        depth: 0,
+        excess,
+        triangles: children.iter().map(|&c| nodes[c].triangles).sum(),
+        fit_seconds: t0.elapsed().as_secs_f64(),
+    })
+}
+
+/// The ellipsoid through the corners of the box around the children's bounding boxes
+/// (semi-axes √3 × the box's half extents, widened by 1e-9 relative): it contains the box, hence
+/// the children's bodies, exactly (convexity). The parent when the containment SDP fails at every
+/// degree, and whenever it is tighter than the §V fit (by sampled excess).
+///
+/// # Errors
+/// [`Error::Numerical`] when a child has no bounding box (not convex).
+pub(super) fn box_ellipsoid(bodies: &[(&Body, Isometry3)]) -> Result<Body> {
+    let mut lo = sublevel_core::math::Vector3::repeat(Real::INFINITY);
+    let mut hi = sublevel_core::math::Vector3::repeat(Real::NEG_INFINITY);
+    for (b, pose) in bodies {
+        let (l, h) = b
+            .world_aabb(pose)
+            .ok_or_else(|| Error::Numerical("a child of the parent has no bounding box (not convex)".into()))?;
+        lo = lo.inf(&l);
+        hi = hi.sup(&h);
+    }
+    let c = (lo + hi) * 0.5;
+    let radii = ((hi - lo) * (0.5 * 3.0_f64.sqrt() * (1.0 + 1e-9))).map(|r| r.max(1e-9));
+    sublevel_core::body::ellipsoid([c.x, c.y, c.z], [radii.x, radii.y, radii.z])
+        .map_err(|e| Error::Numerical(format!("the box ellipsoid of a parent: {e}")))
+}
+
+/// Sets every node's depth from the root down.
+fn set_depths(nodes: &mut [CompoundNode], root: usize) {
+    let mut stack = vec![(root, 0)];
+    while let Some((i, d)) = stack.pop() {
+        nodes[i].depth = d;
+        for &c in &nodes[i].children.clone() {
+            stack.push((c, d + 1));
+        }
+    }
+}

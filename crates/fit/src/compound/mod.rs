@@ -1,0 +1,21 @@
+//! Building compound bodies (paper §V): a nonconvex mesh is split into convex parts by a convex
+//! decomposition, each part is fitted as a sos-convex body, and the parts are grouped bottom-up
+//! into a containment tree whose parents contain their children by the S-procedure
+//! ([`crate::containment`]). The tree type and its file format are `sublevel_core::compound`,
+//! re-exported here.
+//!
+//! Files: [`decompose`] (VHACD parts of whole triangles), [`build`] (leaf fits, the tree, the
+//! part-count search: [`fit_compound`]), [`surface`] (the Hausdorff excess of a node over the
+//! mesh), [`check`] (every triangle covered).
+
+pub use sublevel_core::compound::*;
+
+pub mod build;
+pub mod check;
+pub mod decompose;
+pub mod surface;
+
+#[cfg(test)]
+mod build_tests;
+
+pub use build::{fit_compound, CompoundSettings, PartCount};

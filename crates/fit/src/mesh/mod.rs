@@ -1,0 +1,178 @@
+//! Mesh and point-cloud loading: OFF, OBJ, STL (ASCII and binary), PLY (ASCII and binary), XYZ.
+//!
+//! Only vertices are returned (faces are irrelevant to a fit: the convex hull is recomputed),
+//! except by [`parse_off_mesh`], which also reads an OFF file's faces (the exact mesh–mesh
+//! distance of `sublevel-lab bench` and `chart` needs them).
+//!
+//! ```text
+//! off   "OFF" header line (also "OFF nV nF nE" on one line), then "nV nF nE", nV lines "x y z",
+//!       faces ignored; '#' comments and blank lines skipped                       (off.rs)
+//! obj   `v x y z [w]` lines of every object; faces and the rest skipped           (obj.rs)
+//! stl   ASCII or binary; shared vertices merged by stl_io           (stl.rs, via stl_io)
+//! ply   the `vertex` element's x, y, z properties (any numeric type),             (ply.rs)
+//!       ascii, binary_little_endian or binary_big_endian; other elements are checked and skipped
+//! xyz   one "x y z" per line (commas allowed, extra columns ignored)               (xyz.rs)
+//! ```
+//!
+//! # Untrusted input
+//!
+//! The bytes come from clients, so no count a file declares is trusted. Before anything is
+//! reserved or handed to a third-party parser, every format checks its counts
+//! ([`parse_points_limited`]):
+//!
+//! - against the input's size: a header promising more items than the bytes after it can hold
+//!   is [`sublevel_core::Error::InvalidArgument`] naming `mesh` (PLY, every element: the sum of its property sizes
+//!   per binary item, 2 bytes per property per ascii line; binary STL: 50 bytes per triangle;
+//!   OFF: 6 bytes per vertex line, where nothing is reserved and the error names the first bad
+//!   line or where the file ends);
+//! - against `max_points`: more declared vertices (OFF, PLY), more `v` lines (OBJ), more point
+//!   lines (XYZ) or more than 3 × `max_points` triangles (STL) is [`sublevel_core::Error::ResourceExhausted`]
+//!   naming `mesh`; the parsed vertex count is checked again afterwards (STL merges vertices).
+//!
+//! The PLY header is bounded ([`MAX_PLY_HEADER_BYTES`], at most 64 elements of at most 256
+//! properties each); list properties are skipped, never stored.
+//!
+//! PLY and OBJ are read here, not by ply-rs and tobj: ply-rs trusts the header (it stores every
+//! declared item as a map with cloned property names, and panics on a count beyond `u64`) and
+//! reports `Debug` text; tobj stores every face before returning positions, returns none for a
+//! point cloud without faces, and panics (overflow) on some relative normal indices (found by
+//! fuzzing, `fuzz/regressions/mesh_obj`). stl_io, given only counts checked above, runs under
+//! `catch_unwind`, so malformed bytes never panic the server.
+//!
+//! Error messages are plain sentences with the line number where there is one, and repeat at
+//! most a few dozen bytes of the client's text.
+//!
+//! The limits, error constructors and the clipping of client text every format shares live in
+//! `limits.rs`.
+
+mod limits;
+mod obj;
+mod off;
+mod ply;
+mod stl;
+#[cfg(test)]
+mod tests;
+mod xyz;
+
+pub use off::{parse_off_mesh, OffMesh};
+pub use ply::MAX_PLY_HEADER_BYTES;
+
+use limits::{echo, exhausted, guarded, invalid};
+use sublevel_core::math::Point3;
+use sublevel_core::Result;
+
+/// The `max_points` of [`parse_points`] and [`load_points`].
+pub const DEFAULT_MAX_MESH_POINTS: usize = 10_000_000;
+
+/// A mesh or point-cloud file format.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum MeshFormat {
+    /// Object File Format (Princeton Shape Benchmark): `OFF`, counts, vertices, faces.
+    Off,
+    /// Wavefront OBJ: `v x y z` lines (faces optional).
+    Obj,
+    /// STL, binary or ASCII.
+    Stl,
+    /// PLY, ASCII or binary.
+    Ply,
+    /// One `x y z` line per point (also `.txt`, `.pts`).
+    Xyz,
+}
+
+impl MeshFormat {
+    /// Every format.
+    pub const ALL: [MeshFormat; 5] =
+        [MeshFormat::Off, MeshFormat::Obj, MeshFormat::Stl, MeshFormat::Ply, MeshFormat::Xyz];
+
+    /// The lower-case name (`"off"`, `"obj"`, `"stl"`, `"ply"`, `"xyz"`).
+    pub fn name(&self) -> &'static str {
+        match self {
+            MeshFormat::Off => "off",
+            MeshFormat::Obj => "obj",
+            MeshFormat::Stl => "stl",
+            MeshFormat::Ply => "ply",
+            MeshFormat::Xyz => "xyz",
+        }
+    }
+
+    /// The format of a file name's extension (case-insensitive; `txt` and `pts` are `xyz`).
+    ///
+    /// # Errors
+    /// As [`MeshFormat::from_str`](std::str::FromStr) for an unknown or missing extension.
+    pub fn of_path(path: &std::path::Path) -> Result<Self> {
+        path.extension().and_then(|e| e.to_str()).unwrap_or("").parse()
+    }
+}
+
+impl std::str::FromStr for MeshFormat {
+    type Err = sublevel_core::Error;
+
+    /// Parses a format name: `off`, `obj`, `stl`, `ply`, or `xyz` / `txt` / `pts`
+    /// (case-insensitive, a leading dot is ignored).
+    ///
+    /// # Errors
+    /// [`sublevel_core::Error::InvalidArgument`] naming `mesh` for any other name.
+    fn from_str(s: &str) -> Result<Self> {
+        match s.trim().trim_start_matches('.').to_ascii_lowercase().as_str() {
+            "off" => Ok(MeshFormat::Off),
+            "obj" => Ok(MeshFormat::Obj),
+            "stl" => Ok(MeshFormat::Stl),
+            "ply" => Ok(MeshFormat::Ply),
+            "xyz" | "txt" | "pts" => Ok(MeshFormat::Xyz),
+            other => Err(invalid(format!("unknown format `{}`; expected one of off, obj, stl, ply, xyz", echo(other)))),
+        }
+    }
+}
+
+/// Reads the vertices of a mesh file; the format follows the extension (case-insensitive).
+///
+/// # Errors
+/// [`sublevel_core::Error::Io`] when the file cannot be read; otherwise as [`parse_points`].
+pub fn load_points(path: &std::path::Path) -> Result<Vec<Point3>> {
+    let format = MeshFormat::of_path(path)?;
+    let bytes = std::fs::read(path)?;
+    parse_points(&bytes, format)
+}
+
+/// [`parse_points_limited`] with [`DEFAULT_MAX_MESH_POINTS`].
+///
+/// # Errors
+/// As [`parse_points_limited`].
+pub fn parse_points(bytes: &[u8], format: MeshFormat) -> Result<Vec<Point3>> {
+    parse_points_limited(bytes, format, DEFAULT_MAX_MESH_POINTS)
+}
+
+/// Parses mesh bytes in the given format, returning at most `max_points` vertices. Declared counts are checked against `max_points` and against the size of `bytes`
+/// before anything is allocated (see the module documentation).
+///
+/// # Errors
+/// [`sublevel_core::Error::InvalidArgument`] naming `mesh` for unparsable bytes, a header
+/// that declares more than the bytes can hold, a non-finite coordinate, or a file without
+/// vertices; [`sublevel_core::Error::ResourceExhausted`] naming `mesh` when the file declares or holds more than
+/// `max_points` vertices.
+pub fn parse_points_limited(bytes: &[u8], format: MeshFormat, max_points: usize) -> Result<Vec<Point3>> {
+    let fmt = format.name();
+    let points = match format {
+        MeshFormat::Off => off::read_off(bytes, max_points, false)?.vertices,
+        MeshFormat::Xyz => xyz::parse_xyz(bytes, max_points)?,
+        MeshFormat::Obj => obj::parse_obj(bytes, max_points)?,
+        MeshFormat::Stl => {
+            stl::check_stl_counts(bytes, max_points)?;
+            guarded("stl", || stl::parse_stl(bytes))?
+        }
+        MeshFormat::Ply => ply::parse_ply(bytes, max_points)?,
+    };
+    if points.is_empty() {
+        return Err(invalid(format!("the {fmt} file has no vertices")));
+    }
+    if points.len() > max_points {
+        return Err(exhausted(format!(
+            "the {fmt} file has {} vertices, which exceeds the limit of {max_points} points",
+            points.len()
+        )));
+    }
+    if let Some(i) = points.iter().position(|p| !p.coords.iter().all(|c| c.is_finite())) {
+        return Err(invalid(format!("vertex {i} has a non-finite coordinate")));
+    }
+    Ok(points)
+}

@@ -1,0 +1,596 @@
+//! The in-memory catalog of bodies and scenes, written through to a [`Store`].
+//!
+//! ```text
+//! mod.rs        the catalog's state and locks; opening a store; jobs, bodies, scenes, instances
+//! query.rs      the query methods: single queries and batches, answered on a snapshot
+//! grouping.rs   reading a scene's posed bodies and replacing instances by their container (§V)
+//! ```
+
+mod grouping;
+mod query;
+#[cfg(all(test, feature = "store"))]
+mod tests;
+
+pub use grouping::PosedInstance;
+
+use super::cache::WarmStartCache;
+use super::store::Store;
+use super::{BodyRecord, InstanceRecord, JobRecord, JobRecordState, SceneMeta, StoredPose};
+use crate::{Error, Result};
+use std::collections::BTreeMap;
+use std::sync::{Arc, Mutex, MutexGuard, RwLock, RwLockReadGuard, RwLockWriteGuard};
+use sublevel_core::body::Body;
+use sublevel_core::compound::CompoundBody;
+use sublevel_core::math::Isometry3;
+use sublevel_query::NewtonParams;
+
+/// Longest accepted body or scene name, in bytes.
+pub const MAX_NAME_BYTES: usize = 256;
+
+/// A stored body, parsed once and shared with every query that uses it.
+#[derive(Debug)]
+pub struct BodyEntry {
+    /// The body's id.
+    pub id: String,
+    /// Its name.
+    pub name: String,
+    /// The validated body; for a compound body its root node's body (which contains every other
+    /// node's body, paper §V), so bounding boxes, spheres and grouping see the whole model.
+    pub body: Arc<Body>,
+    /// The containment tree of a compound body (more than one node); `None` for a
+    /// single body, which stays on the single-body query path.
+    pub tree: Option<Arc<CompoundBody>>,
+}
+
+impl BodyEntry {
+    /// The entry of a stored record: a single body, or a compound body when the record holds a
+    /// compound file (see [`BodyRecord`]).
+    ///
+    /// # Errors
+    /// The validation errors of [`Body::from_file`] / [`CompoundBody::from_file`], naming the
+    /// field.
+    fn from_record(id: &str, rec: BodyRecord) -> Result<Self> {
+        let (body, tree) = match rec.compound {
+            None => (Arc::new(Body::from_file(rec.body)?), None),
+            Some(file) => {
+                let tree = CompoundBody::from_file(file)?;
+                (Arc::new(tree.body(tree.root()).clone()), Some(Arc::new(tree)))
+            }
+        };
+        Ok(Self { id: id.to_owned(), name: rec.name, body, tree })
+    }
+
+    /// Number of nodes of the body's containment tree (1 for a single body).
+    pub fn node_count(&self) -> usize {
+        self.tree.as_ref().map_or(1, |t| t.node_count())
+    }
+}
+
+/// An instance as seen from outside: its body and pose.
+#[derive(Clone, Debug)]
+pub struct InstanceView {
+    /// The instance's id.
+    pub id: String,
+    /// The instantiated body's id.
+    pub body_id: String,
+    /// Its pose.
+    pub pose: Isometry3,
+}
+
+/// A scene as seen from outside.
+#[derive(Clone, Debug)]
+pub struct SceneView {
+    /// The scene's id.
+    pub id: String,
+    /// Its name.
+    pub name: String,
+    /// Its instances, ordered by id.
+    pub instances: Vec<InstanceView>,
+}
+
+#[derive(Debug)]
+struct Instance {
+    body_id: String,
+    body: Arc<Body>,
+    /// The body's containment tree when it is a compound body (see [`BodyEntry::tree`]).
+    tree: Option<Arc<CompoundBody>>,
+    pose: Isometry3,
+}
+
+impl Instance {
+    fn of(entry: &BodyEntry, pose: Isometry3) -> Self {
+        Self { body_id: entry.id.clone(), body: entry.body.clone(), tree: entry.tree.clone(), pose }
+    }
+}
+
+#[derive(Debug)]
+struct SceneState {
+    id: String,
+    name: String,
+    instances: BTreeMap<String, Instance>,
+    cache: WarmStartCache,
+    /// Set (under this scene's lock) when the scene is deleted, so a request that fetched the
+    /// scene just before cannot write it back to the store.
+    deleted: bool,
+}
+
+/// Bodies and scenes in memory, written through to a [`Store`].
+///
+/// Locks are std locks, not async ones: every critical section is short (a map lookup, a
+/// microsecond query, or one store transaction) and never awaits. Lock order, to rule out
+/// deadlocks: `bodies` → `scenes` → one scene's mutex.
+pub struct Catalog {
+    store: Box<dyn Store>,
+    bodies: RwLock<BTreeMap<String, Arc<BodyEntry>>>,
+    scenes: RwLock<BTreeMap<String, Arc<Mutex<SceneState>>>>,
+    jobs: RwLock<BTreeMap<String, JobRecord>>,
+    quarantined: usize,
+    params: NewtonParams,
+}
+
+/// Most job records kept; beyond it the oldest finished ones are deleted.
+pub const MAX_JOB_RECORDS: usize = 1024;
+
+impl std::fmt::Debug for Catalog {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Catalog").field("params", &self.params).finish_non_exhaustive()
+    }
+}
+
+// A panic while holding a lock cannot leave these maps half-updated (every update is a single
+// insert/remove after the store committed), so a poisoned lock is safe to keep using.
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
+}
+fn read<T>(m: &RwLock<T>) -> RwLockReadGuard<'_, T> {
+    m.read().unwrap_or_else(|e| e.into_inner())
+}
+fn write<T>(m: &RwLock<T>) -> RwLockWriteGuard<'_, T> {
+    m.write().unwrap_or_else(|e| e.into_inner())
+}
+
+/// A fresh random id with a kind prefix, e.g. `b-3f29c0d1a4e5b6c7`. Ids never contain `/`.
+pub(crate) fn new_id(prefix: &str) -> String {
+    format!("{prefix}-{:016x}", rand::random::<u64>())
+}
+
+/// Rejects a body or scene name longer than [`MAX_NAME_BYTES`].
+fn check_name(field: &str, name: &str) -> Result<()> {
+    if name.len() > MAX_NAME_BYTES {
+        return Err(Error::invalid(field, format!("at most {MAX_NAME_BYTES} bytes, got {}", name.len())));
+    }
+    Ok(())
+}
+
+impl Catalog {
+    /// Loads every body, scene and job record of `store` into memory.
+    ///
+    /// The store always opens: a stored body that no longer validates, or an instance whose pose
+    /// does not, is moved to the store's quarantine with the reason (see
+    /// [`super::store`]) and counted in [`Catalog::quarantined`]; an instance whose body is
+    /// missing is skipped with a warning (and kept). A job record still `running` was
+    /// interrupted by the previous stop and is marked `interrupted`.
+    ///
+    /// # Errors
+    /// [`Error::Storage`] when the store cannot be read.
+    pub fn open(store: Box<dyn Store>, params: NewtonParams) -> Result<Self> {
+        let mut bodies = BTreeMap::new();
+        for (id, rec) in store.list_bodies()? {
+            match BodyEntry::from_record(&id, rec) {
+                Ok(entry) => {
+                    bodies.insert(id, Arc::new(entry));
+                }
+                Err(e) => {
+                    tracing::warn!(body_id = %id, error = %e, "quarantining stored body that does not validate");
+                    store.quarantine("bodies", &id, &format!("does not validate: {e}"))?;
+                }
+            }
+        }
+        let mut scenes = BTreeMap::new();
+        for (id, rec) in store.list_scenes()? {
+            let mut instances = BTreeMap::new();
+            for (iid, inst) in rec.instances {
+                let Some(entry) = bodies.get(&inst.body_id) else {
+                    tracing::warn!(scene_id = %id, instance_id = %iid, body_id = %inst.body_id, "skipping instance of missing body");
+                    continue;
+                };
+                match inst.pose.to_isometry("pose") {
+                    Ok(pose) => {
+                        instances.insert(iid, Instance::of(entry, pose));
+                    }
+                    Err(e) => {
+                        tracing::warn!(scene_id = %id, instance_id = %iid, error = %e, "quarantining instance");
+                        store.quarantine("instances", &format!("{id}/{iid}"), &format!("does not validate: {e}"))?;
+                    }
+                }
+            }
+            let state = SceneState {
+                id: id.clone(),
+                name: rec.meta.name,
+                instances,
+                cache: WarmStartCache::default(),
+                deleted: false,
+            };
+            scenes.insert(id, Arc::new(Mutex::new(state)));
+        }
+        let mut jobs = BTreeMap::new();
+        for (id, mut rec) in store.list_jobs()? {
+            if rec.state == JobRecordState::Running {
+                rec.state = JobRecordState::Interrupted;
+                rec.error =
+                    "interrupted: the server stopped while the job was queued or running; no body was stored".into();
+                store.put_job(&id, &rec)?;
+            }
+            jobs.insert(id, rec);
+        }
+        let quarantined = store.quarantined()?.len();
+        if quarantined > 0 {
+            tracing::warn!(records = quarantined, "the store's quarantine holds records that could not be loaded");
+        }
+        tracing::info!(bodies = bodies.len(), scenes = scenes.len(), jobs = jobs.len(), quarantined, "catalog loaded");
+        Ok(Self {
+            store,
+            bodies: RwLock::new(bodies),
+            scenes: RwLock::new(scenes),
+            jobs: RwLock::new(jobs),
+            quarantined,
+            params,
+        })
+    }
+
+    /// Number of records in the store's quarantine when the catalog was opened (unreadable or
+    /// invalid records kept aside; see [`super::store`]). Health reports them.
+    pub fn quarantined(&self) -> usize {
+        self.quarantined
+    }
+
+    /// Writes a job's record (and prunes the oldest finished records beyond
+    /// [`MAX_JOB_RECORDS`]).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] when the record does not survive its JSON round trip;
+    /// [`Error::Storage`].
+    pub fn record_job(&self, id: &str, record: &JobRecord) -> Result<()> {
+        self.store.put_job(id, record)?;
+        let mut jobs = write(&self.jobs);
+        jobs.insert(id.to_owned(), record.clone());
+        if jobs.len() > MAX_JOB_RECORDS {
+            let mut done: Vec<(u64, String)> = jobs
+                .iter()
+                .filter(|(_, r)| r.state != JobRecordState::Running)
+                .map(|(k, r)| (r.created_unix_ms, k.clone()))
+                .collect();
+            done.sort();
+            let excess = jobs.len() - MAX_JOB_RECORDS;
+            let old: Vec<String> = done.into_iter().take(excess).map(|(_, k)| k).collect();
+            let refs: Vec<&str> = old.iter().map(String::as_str).collect();
+            self.store.delete_jobs(&refs)?;
+            for k in &old {
+                jobs.remove(k);
+            }
+        }
+        Ok(())
+    }
+
+    /// A job's stored record, if any.
+    pub fn job(&self, id: &str) -> Option<JobRecord> {
+        read(&self.jobs).get(id).cloned()
+    }
+
+    /// Every stored job record with its id, ordered by id (at most [`MAX_JOB_RECORDS`]).
+    pub fn jobs(&self) -> Vec<(String, JobRecord)> {
+        read(&self.jobs).iter().map(|(id, r)| (id.clone(), r.clone())).collect()
+    }
+
+    /// The Newton parameters every query uses.
+    pub fn params(&self) -> &NewtonParams {
+        &self.params
+    }
+
+    // ----------------------------------------------------------------------------------------
+    // Bodies
+    // ----------------------------------------------------------------------------------------
+
+    /// Stores a validated body under a fresh id and returns the id.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `name` for an over-long name; [`Error::Storage`].
+    pub fn add_body(&self, name: &str, body: Body) -> Result<String> {
+        check_name("name", name)?;
+        let id = new_id("b");
+        self.store.put_body(&id, &BodyRecord::single(name, body.to_file()))?;
+        let entry = BodyEntry { id: id.clone(), name: name.to_owned(), body: Arc::new(body), tree: None };
+        write(&self.bodies).insert(id.clone(), Arc::new(entry));
+        Ok(id)
+    }
+
+    /// Stores a validated compound body under a fresh id and returns the id. A
+    /// one-node tree is stored as the single body it is (one-node tree semantics: its queries
+    /// stay on the single-body path); a larger tree is stored as a compound record
+    /// ([`BodyRecord`]: the root's body plus the compound file).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `name` for an over-long name; [`Error::Storage`].
+    pub fn add_compound_body(&self, name: &str, tree: CompoundBody) -> Result<String> {
+        if tree.node_count() == 1 {
+            return self.add_body(name, tree.body(tree.root()).clone());
+        }
+        check_name("name", name)?;
+        let id = new_id("b");
+        let root = tree.body(tree.root()).clone();
+        let rec = BodyRecord { name: name.to_owned(), body: root.to_file(), compound: Some(tree.to_file()) };
+        self.store.put_body(&id, &rec)?;
+        let entry =
+            BodyEntry { id: id.clone(), name: name.to_owned(), body: Arc::new(root), tree: Some(Arc::new(tree)) };
+        write(&self.bodies).insert(id.clone(), Arc::new(entry));
+        Ok(id)
+    }
+
+    /// The body with id `id`.
+    ///
+    /// # Errors
+    /// [`Error::NotFound`] (kind `body`).
+    pub fn body(&self, id: &str) -> Result<Arc<BodyEntry>> {
+        if let Some(entry) = read(&self.bodies).get(id).cloned() {
+            return Ok(entry);
+        }
+        self.load_body(id)?.ok_or_else(|| Error::not_found("body", id))
+    }
+
+    /// A body another replica stored in a shared store ([`Store::shared`]) since this catalog
+    /// was opened, now held here too; `None` when the store has none (or is not shared).
+    fn load_body(&self, id: &str) -> Result<Option<Arc<BodyEntry>>> {
+        if !self.store.shared() {
+            return Ok(None);
+        }
+        let Some(rec) = self.store.get_body(id)? else { return Ok(None) };
+        let entry = BodyEntry::from_record(id, rec).map_err(|e| Error::Storage(format!("stored body `{id}`: {e}")))?;
+        let entry = Arc::new(entry);
+        Ok(Some(write(&self.bodies).entry(id.to_owned()).or_insert(entry).clone()))
+    }
+
+    /// A scene written by another replica to a shared store ([`Store::shared`]), loaded with its
+    /// instances (scale-out: the replica that owns a scene loads it on first use, see
+    /// `deploy/SCALING.md`); `None` when the store has none (or is not shared).
+    fn load_scene(&self, id: &str) -> Result<Option<Arc<Mutex<SceneState>>>> {
+        if !self.store.shared() {
+            return Ok(None);
+        }
+        let Some(rec) = self.store.get_scene(id)? else { return Ok(None) };
+        let mut instances = BTreeMap::new();
+        for (iid, inst) in rec.instances {
+            let (Ok(entry), Ok(pose)) = (self.body(&inst.body_id), inst.pose.to_isometry("pose")) else {
+                tracing::warn!(scene_id = %id, instance_id = %iid, "skipping an instance that does not load");
+                continue;
+            };
+            instances.insert(iid, Instance::of(&entry, pose));
+        }
+        let state = SceneState {
+            id: id.to_owned(),
+            name: rec.meta.name,
+            instances,
+            cache: WarmStartCache::default(),
+            deleted: false,
+        };
+        tracing::info!(scene_id = %id, "scene loaded from the shared store");
+        Ok(Some(write(&self.scenes).entry(id.to_owned()).or_insert_with(|| Arc::new(Mutex::new(state))).clone()))
+    }
+
+    /// All bodies, ordered by id.
+    pub fn bodies(&self) -> Vec<Arc<BodyEntry>> {
+        read(&self.bodies).values().cloned().collect()
+    }
+
+    /// Deletes a body that no instance uses.
+    ///
+    /// # Errors
+    /// [`Error::NotFound`]; [`Error::FailedPrecondition`] while an instance uses it;
+    /// [`Error::Storage`].
+    pub fn delete_body(&self, id: &str) -> Result<()> {
+        let mut bodies = write(&self.bodies);
+        if !bodies.contains_key(id) {
+            return Err(Error::not_found("body", id));
+        }
+        for scene in read(&self.scenes).values() {
+            let s = lock(scene);
+            if let Some((iid, _)) = s.instances.iter().find(|(_, inst)| inst.body_id == id) {
+                return Err(Error::FailedPrecondition(format!(
+                    "body `{id}` is used by instance `{iid}` of scene `{}`; remove the instance first",
+                    s.id
+                )));
+            }
+        }
+        self.store.delete_body(id)?;
+        bodies.remove(id);
+        Ok(())
+    }
+
+    // ----------------------------------------------------------------------------------------
+    // Scenes
+    // ----------------------------------------------------------------------------------------
+
+    /// Creates an empty scene and returns its id.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `name` for an over-long name; [`Error::Storage`].
+    pub fn create_scene(&self, name: &str) -> Result<String> {
+        check_name("name", name)?;
+        let id = new_id("s");
+        self.store.put_scene(&id, &SceneMeta { name: name.to_owned() })?;
+        let state = SceneState {
+            id: id.clone(),
+            name: name.to_owned(),
+            instances: BTreeMap::new(),
+            cache: WarmStartCache::default(),
+            deleted: false,
+        };
+        write(&self.scenes).insert(id.clone(), Arc::new(Mutex::new(state)));
+        Ok(id)
+    }
+
+    /// The scene `id` (its lock not taken; see [`Catalog::with_scene`]).
+    fn scene(&self, id: &str) -> Result<Arc<Mutex<SceneState>>> {
+        if let Some(scene) = read(&self.scenes).get(id).cloned() {
+            return Ok(scene);
+        }
+        self.load_scene(id)?.ok_or_else(|| Error::not_found("scene", id))
+    }
+
+    /// Locks a live scene (one that was not deleted meanwhile).
+    fn with_scene<T>(&self, id: &str, f: impl FnOnce(&mut SceneState) -> Result<T>) -> Result<T> {
+        let scene = self.scene(id)?;
+        let mut s = lock(&scene);
+        if s.deleted {
+            return Err(Error::not_found("scene", id));
+        }
+        f(&mut s)
+    }
+
+    /// A scene with its instances.
+    ///
+    /// # Errors
+    /// [`Error::NotFound`] (kind `scene`).
+    pub fn get_scene(&self, id: &str) -> Result<SceneView> {
+        self.with_scene(id, |s| Ok(view(s)))
+    }
+
+    /// All scenes, ordered by id.
+    pub fn scenes(&self) -> Vec<SceneView> {
+        read(&self.scenes).values().map(|s| view(&lock(s))).collect()
+    }
+
+    /// Whether any instance of the scene is a nonconvex body, whose queries solve an SDP lower
+    /// bound (milliseconds): the service runs such queries off its async workers. False for an
+    /// unknown scene (the query itself then reports it).
+    pub fn has_nonconvex(&self, scene_id: &str) -> bool {
+        let nonconvex = |i: &Instance| {
+            i.body.report.nonconvex
+                || i.tree.as_ref().is_some_and(|t| t.nodes().iter().any(|n| n.body.report.nonconvex))
+        };
+        self.scene(scene_id).map(|sc| lock(&sc).instances.values().any(nonconvex)).unwrap_or(false)
+    }
+
+    /// Whether any instance of the scene is a compound body (its queries run the tree queries,
+    /// tens of µs each). False for an unknown scene.
+    pub fn has_compound(&self, scene_id: &str) -> bool {
+        self.scene(scene_id).map(|sc| lock(&sc).instances.values().any(|i| i.tree.is_some())).unwrap_or(false)
+    }
+
+    /// Deletes a scene with its instances and warm starts.
+    ///
+    /// # Errors
+    /// [`Error::NotFound`]; [`Error::Storage`].
+    pub fn delete_scene(&self, id: &str) -> Result<()> {
+        let mut scenes = write(&self.scenes);
+        let scene = scenes.get(id).cloned().ok_or_else(|| Error::not_found("scene", id))?;
+        let mut s = lock(&scene);
+        self.store.delete_scene(id)?;
+        s.deleted = true;
+        drop(s);
+        scenes.remove(id);
+        Ok(())
+    }
+
+    /// Adds an instance of body `body_id` to scene `scene_id` under `pose`; returns its id.
+    ///
+    /// # Errors
+    /// [`Error::NotFound`] for the scene or the body; [`Error::Storage`].
+    pub fn add_instance(&self, scene_id: &str, body_id: &str, pose: Isometry3) -> Result<String> {
+        // Load it first if another replica stored it (shared store); then hold the bodies lock
+        // so the body cannot be deleted between the check and the insert.
+        self.body(body_id)?;
+        self.scene(scene_id)?;
+        let bodies = read(&self.bodies);
+        let entry = bodies.get(body_id).ok_or_else(|| Error::not_found("body", body_id))?.clone();
+        self.with_scene(scene_id, |s| {
+            let id = new_id("i");
+            let rec = InstanceRecord { body_id: body_id.to_owned(), pose: StoredPose::from_isometry(&pose) };
+            self.store.put_instances(scene_id, &[(&id, &rec)], false)?;
+            s.instances.insert(id.clone(), Instance::of(&entry, pose));
+            Ok(id)
+        })
+    }
+
+    /// Sets the poses of many instances of one scene: all or nothing.
+    ///
+    /// Poses must already be validated (see [`sublevel_core::math::pose_from_parts`]); `poses[k].0` is
+    /// the instance id. Returns the number of instances updated.
+    ///
+    /// # Errors
+    /// [`Error::NotFound`] for the scene; [`Error::InvalidArgument`] naming `poses[k].instance_id`
+    /// for an unknown or repeated instance (nothing changes then); [`Error::Storage`].
+    pub fn set_poses(&self, scene_id: &str, poses: &[(String, Isometry3)]) -> Result<usize> {
+        self.with_scene(scene_id, |s| {
+            let mut seen = std::collections::HashSet::new();
+            let mut records = Vec::with_capacity(poses.len());
+            for (k, (iid, pose)) in poses.iter().enumerate() {
+                let field = format!("poses[{k}].instance_id");
+                let inst = s
+                    .instances
+                    .get(iid)
+                    .ok_or_else(|| Error::invalid(&field, format!("no instance `{iid}` in scene `{scene_id}`")))?;
+                if !seen.insert(iid.as_str()) {
+                    return Err(Error::invalid(field, format!("instance `{iid}` appears twice")));
+                }
+                records.push(InstanceRecord { body_id: inst.body_id.clone(), pose: StoredPose::from_isometry(pose) });
+            }
+            let rows: Vec<(&str, &InstanceRecord)> =
+                poses.iter().zip(records.iter()).map(|((iid, _), rec)| (iid.as_str(), rec)).collect();
+            self.store.put_instances(scene_id, &rows, true)?;
+            for (iid, pose) in poses {
+                if let Some(inst) = s.instances.get_mut(iid) {
+                    inst.pose = *pose;
+                }
+            }
+            Ok(poses.len())
+        })
+    }
+
+    /// Removes an instance and every warm start involving it.
+    ///
+    /// # Errors
+    /// [`Error::NotFound`] for the scene or the instance; [`Error::Storage`].
+    pub fn remove_instance(&self, scene_id: &str, instance_id: &str) -> Result<()> {
+        self.with_scene(scene_id, |s| {
+            if !s.instances.contains_key(instance_id) {
+                return Err(Error::not_found("instance", instance_id));
+            }
+            self.store.delete_instance(scene_id, instance_id)?;
+            s.instances.remove(instance_id);
+            s.cache.invalidate_instance(instance_id);
+            Ok(())
+        })
+    }
+
+    /// Number of warm starts cached for a scene (for monitoring and tests).
+    ///
+    /// # Errors
+    /// [`Error::NotFound`] for the scene.
+    pub fn cached_warm_starts(&self, scene_id: &str) -> Result<usize> {
+        self.with_scene(scene_id, |s| Ok(s.cache.len()))
+    }
+}
+
+/// A scene as seen from outside (ids, names, poses).
+fn view(s: &SceneState) -> SceneView {
+    SceneView {
+        id: s.id.clone(),
+        name: s.name.clone(),
+        instances: s
+            .instances
+            .iter()
+            .map(|(id, i)| InstanceView { id: id.clone(), body_id: i.body_id.clone(), pose: i.pose })
+            .collect(),
+    }
+}
+
+/// The instance `id` of a locked scene.
+fn instance<'a>(s: &'a SceneState, id: &str) -> Result<&'a Instance> {
+    s.instances.get(id).ok_or_else(|| Error::not_found("instance", id))
+}
+
+/// The instance `id` of a locked scene as a posed body (the body shared, the pose copied).
+fn posed(s: &SceneState, id: &str) -> Result<crate::answer::Posed> {
+    let inst = instance(s, id)?;
+    Ok(crate::answer::Posed { body: inst.body.clone(), tree: inst.tree.clone(), pose: inst.pose })
+}

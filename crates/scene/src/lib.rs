@@ -1,0 +1,175 @@
+//! # sublevel-scene
+//!
+//! Scenes: instances of bodies under rigid poses, warm-start caches, and the persistent store.
+//!
+//! A *scene* is a set of *instances*; each instance is a stored [`Body`](sublevel_core::Body) placed in the
+//! world by a pose `x ↦ R x + t` (unit quaternion `(w, x, y, z)`, translation in meters; paper
+//! §IV-C). Queries always run between two instances of one scene:
+//!
+//! ```text
+//! distance(a, b)  = min ‖x − y‖   s.t. p_a'(x) ≤ 1, p_b'(y) ≤ 1      (eq. "distance")
+//! growth(1, 2)    = min p_1'(x)   s.t. p_2'(x) ≤ 1                   (eq. "overlap")
+//! ```
+//!
+//! A moving scene asks the same pairs again and again with slightly different poses, so every
+//! answer leaves a warm start in a per-scene [`cache::WarmStartCache`], keyed by the ordered pair
+//! and the query kind. Warm starts live in body frames, so they stay meaningful when poses change;
+//! they are dropped when an instance is removed (or its scene deleted).
+//!
+//! The modules, each using only those listed before it:
+//!
+//! - [`store`]: the [`store::Store`] trait (bodies, scenes, instances with their poses; put / get /
+//!   list / delete) and its redb implementation [`store::RedbStore`]. Bodies are stored as their
+//!   JSON body file, scenes and instances as serde JSON. Every write is one transaction.
+//! - [`cache`]: the warm-start cache.
+//! - `answer`: one query between two posed instances ([`QueryKind`], [`QueryOptions`], the
+//!   replies, [`planner::answer_pair`]), on the path [`sublevel_query::dispatch`] picks, with the
+//!   pair's warm start from a cache.
+//! - [`Catalog`]: the in-memory state the service works on — parsed bodies (`Arc<Body>`, so
+//!   queries never touch the database), scenes with their instances and caches — written through
+//!   to the store. Input is validated before anything is written, and memory changes only after
+//!   the store committed, so bad input never loses or half-writes data.
+//! - [`planner`]: what a motion planner asks of a scene — private views with pose overrides and
+//!   warm starts of their own, candidate states, scene-wide checks with a broad phase.
+//!
+//! This crate knows nothing of gRPC, tokio or prost; `sublevel-server` translates.
+
+#![warn(missing_docs)]
+#![forbid(unsafe_code)]
+
+pub use sublevel_core::{Error, Result};
+
+mod answer;
+pub mod cache;
+mod catalog;
+pub mod planner;
+pub mod store;
+
+pub use answer::{
+    precision_limited, DistanceReply, GrowthReply, PairRef, QueryAnswer, QueryKind, QueryOptions, QueryPair, TreeInfo,
+    PRECISION_LIMIT,
+};
+pub use catalog::{BodyEntry, Catalog, InstanceView, PosedInstance, SceneView, MAX_JOB_RECORDS, MAX_NAME_BYTES};
+
+use serde::{Deserialize, Serialize};
+use sublevel_core::body::BodyFile;
+use sublevel_core::math::{pose_from_parts, pose_to_parts, Isometry3, Real};
+
+/// A pose as stored: unit quaternion `[w, x, y, z]` and translation `[tx, ty, tz]` in meters.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StoredPose {
+    /// Unit quaternion `[w, x, y, z]`.
+    pub rotation: [Real; 4],
+    /// Translation in meters.
+    pub translation: [Real; 3],
+}
+
+impl StoredPose {
+    /// The stored form of a pose.
+    pub fn from_isometry(pose: &Isometry3) -> Self {
+        let (rotation, translation) = pose_to_parts(pose);
+        Self { rotation, translation }
+    }
+
+    /// The pose, validated as by [`pose_from_parts`].
+    ///
+    /// # Errors
+    /// [`sublevel_core::Error::InvalidArgument`] naming `field` for a non-finite entry or non-unit quaternion.
+    pub fn to_isometry(&self, field: &str) -> Result<Isometry3> {
+        pose_from_parts(field, self.rotation, self.translation)
+    }
+}
+
+/// A body as stored: its name and its JSON body file, plus the whole containment tree for a
+/// compound body.
+///
+/// Record forms (JSON): `{name, body}` is a single body; `{name, body, compound}` is a compound body,
+/// `body` then holding its root node's body (so a reader that ignores `compound` still sees a
+/// body containing the whole model) and `compound` the compound file
+/// ([`sublevel_core::compound::CompoundFile`], format `sublevel.compound.v1`) with every node.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct BodyRecord {
+    /// Human-readable name (not necessarily unique).
+    pub name: String,
+    /// The body file (degree, exponents, coefficients, center, scale, fit report); for a compound
+    /// body, its root node's.
+    pub body: BodyFile,
+    /// The compound file of a compound body (with more than one node); absent for a single body.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub compound: Option<sublevel_core::compound::CompoundFile>,
+}
+
+impl BodyRecord {
+    /// The record of a single body.
+    pub fn single(name: &str, body: BodyFile) -> Self {
+        Self { name: name.to_owned(), body, compound: None }
+    }
+}
+
+/// A scene's own fields as stored (its instances are stored separately, one record each, so a
+/// pose update writes only the instances that moved).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SceneMeta {
+    /// Human-readable name (not necessarily unique).
+    pub name: String,
+}
+
+/// An instance as stored.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct InstanceRecord {
+    /// Id of the instantiated body.
+    pub body_id: String,
+    /// Its pose.
+    pub pose: StoredPose,
+}
+
+/// A scene with all its instances, as read back from the store.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SceneRecord {
+    /// The scene's own fields.
+    pub meta: SceneMeta,
+    /// Instances by id.
+    pub instances: std::collections::BTreeMap<String, InstanceRecord>,
+}
+
+/// The lifecycle state of a stored job record.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum JobRecordState {
+    /// Queued or running (a record still in this state when the server starts was interrupted).
+    Running,
+    /// Finished; `body_id` names the stored body.
+    Succeeded,
+    /// Finished without a body; `error` says why.
+    Failed,
+    /// The server stopped (or crashed) while the job was queued or running; no body was stored.
+    Interrupted,
+    /// Cancelled (by a client, or by a server shutting down) before it stored a body.
+    Cancelled,
+}
+
+/// A fit or grouping job as stored, so that its outcome outlives the process that ran it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct JobRecord {
+    /// `fit` or `group`.
+    pub kind: String,
+    /// Name of the body the job stores.
+    pub name: String,
+    /// Lifecycle state.
+    pub state: JobRecordState,
+    /// Id of the stored body once `Succeeded`; empty before.
+    #[serde(default)]
+    pub body_id: String,
+    /// Why the job failed or was interrupted; empty otherwise.
+    #[serde(default)]
+    pub error: String,
+    /// Last progress or final message.
+    #[serde(default)]
+    pub message: String,
+    /// When the job was created, in milliseconds since the Unix epoch.
+    #[serde(default)]
+    pub created_unix_ms: u64,
+    /// When the job finished, in milliseconds since the Unix epoch; 0 while it runs.
+    #[serde(default)]
+    pub finished_unix_ms: u64,
+}

@@ -1,0 +1,347 @@
+//! Queries: `Distance`, `Growth`, `BatchQuery`, `Query`, `QueryStream`, `CheckScene`, and where
+//! their work runs: inline on the async workers when it is microseconds of Newton solves, on the
+//! SDP slots of the blocking pool otherwise ([`off_workers`]).
+
+use super::{Handled, SublevelService};
+use crate::convert::{self as cv, require_id, to_status};
+use crate::limits::SdpSlots;
+use crate::pb;
+use crate::runtime::cancellable_blocking;
+use crate::{Error, Result};
+use std::sync::Arc;
+use sublevel_query::CertifyMode;
+use sublevel_scene::planner::{AnswerSink, PlannerAnswers, PlannerRequest, QueryView};
+use sublevel_scene::{Catalog, QueryAnswer, QueryOptions};
+use tokio_stream::Stream;
+use tonic::{Request, Response, Status};
+
+/// The response stream of `QueryStream`: driven by the connection itself (see [`query_stream`]).
+pub(super) type QueryStream = std::pin::Pin<Box<dyn Stream<Item = Result<pb::QueryResponse, Status>> + Send>>;
+
+/// Answers a planner request on a view into `sink`: inline on the async worker when it holds
+/// only Newton queries (microseconds each), on the blocking pool when one asks for a certificate
+/// (an SDP). Returns the view (moved back out of the blocking pool) with the filled sink.
+pub(super) async fn run_view<S: AnswerSink + Send + 'static>(
+    catalog: Arc<Catalog>,
+    sdp: &SdpSlots,
+    mut view: QueryView,
+    request: PlannerRequest,
+    mut sink: S,
+) -> (QueryView, Result<S, Status>) {
+    let certify = request.queries.iter().any(|q| q.options.mode == CertifyMode::Certify);
+    let answers = request.queries.len() * request.states.len().max(1);
+    if !off_workers(&catalog, view.scene_id(), certify, answers) {
+        // Newton only: an answer that needs the SDP sends the whole request to the blocking pool.
+        match view.run_newton_only_into(&catalog, &request, &mut sink) {
+            Ok(true) => return (view, Ok(sink)),
+            Ok(false) => {}
+            Err(e) => return (view, Err(to_status(e))),
+        }
+    }
+    let scene = view.scene_id().to_owned();
+    match sdp
+        .run(move || {
+            let out = view.run_into(&catalog, &request, &mut sink).map(|()| sink);
+            Ok((view, out))
+        })
+        .await
+    {
+        Ok((view, out)) => (view, out.map_err(to_status)),
+        Err(e) => (QueryView::new(&scene), Err(e)),
+    }
+}
+
+/// Answers planner request `planner` (validated from `req`) on `view` and builds the reply.
+/// States and answers both in columns (the sampling planner's batch) are written to the answer
+/// columns as they are solved; every other request collects its answers first.
+async fn answer_planner(
+    catalog: Arc<Catalog>,
+    sdp: &SdpSlots,
+    view: QueryView,
+    req: &pb::QueryRequest,
+    planner: PlannerRequest,
+    start: std::time::Instant,
+) -> (QueryView, Result<pb::QueryResponse, Status>) {
+    let columns = cv::columns_kind(req);
+    let state_columns = req.state_columns.is_some();
+    match columns {
+        Some(kind) if state_columns => {
+            let rows = planner.queries.len() * planner.states.len();
+            let (view, out) = run_view(catalog, sdp, view, planner, cv::ColumnsSink::new(kind, rows)).await;
+            let reply = out.map(|c| pb::QueryResponse {
+                request_id: req.request_id,
+                server_seconds: start.elapsed().as_secs_f64(),
+                columns: Some(c.finish()),
+                ..Default::default()
+            });
+            (view, reply)
+        }
+        _ => {
+            let answers = PlannerAnswers::for_request(&planner);
+            let (view, out) = run_view(catalog, sdp, view, planner, answers).await;
+            let reply = out.map(|a| {
+                let seconds = start.elapsed().as_secs_f64();
+                cv::planner_answers_to_proto(&a, req.request_id, seconds, columns)
+            });
+            (view, reply)
+        }
+    }
+}
+
+/// Most answers a query request computes inline on an async worker (about 1 µs each); larger
+/// requests run on the blocking pool so they never hold up other connections.
+const INLINE_ANSWERS: usize = 256;
+
+/// Cost of one answer between compound bodies in units of a single-body answer: a tree query
+/// solves a few to a few tens of node pairs (tens of µs), so a request with a compound body goes
+/// to the blocking pool from [`INLINE_ANSWERS`] / this many answers on.
+const COMPOUND_ANSWER_COST: usize = 32;
+
+/// Whether a query request is slow work, to run off the async workers: it asks for certificates
+/// (an SDP each), its scene holds a nonconvex body (SDP lower bounds), or it has more than
+/// [`INLINE_ANSWERS`] answers (counting [`COMPOUND_ANSWER_COST`] per answer in a scene with a
+/// compound body). A compound query that needs an SDP (a leaf pair Newton did not resolve) is
+/// re-run on the SDP slots as any `needs_sdp` answer is.
+fn off_workers(catalog: &Catalog, scene_id: &str, certify: bool, answers: usize) -> bool {
+    certify
+        || answers > INLINE_ANSWERS
+        || catalog.has_nonconvex(scene_id)
+        || (answers.saturating_mul(COMPOUND_ANSWER_COST) > INLINE_ANSWERS && catalog.has_compound(scene_id))
+}
+
+/// Runs query work `f` inline when it is microseconds, else on the blocking pool (see
+/// [`off_workers`]). `f` gets the certification mode to use instead of the queries' own: inline
+/// [`CertifyMode::NewtonOnly`] (no SDP ever runs on an async worker); when `needs_sdp` says an
+/// answer needed the SDP fallback, `f` runs again on the blocking pool with the queries' own modes
+/// (`None`), which gives the answers a first run there would have given.
+async fn query_work<T: Send + 'static>(
+    catalog: &Arc<Catalog>,
+    sdp: &SdpSlots,
+    scene_id: &str,
+    certify: bool,
+    answers: usize,
+    f: impl Fn(&Catalog, Option<CertifyMode>) -> Result<T> + Send + 'static,
+    needs_sdp: impl Fn(&T) -> bool,
+) -> Result<T, Status> {
+    if !off_workers(catalog, scene_id, certify, answers) {
+        let out = f(catalog, Some(CertifyMode::NewtonOnly)).map_err(to_status)?;
+        if !needs_sdp(&out) {
+            return Ok(out);
+        }
+    }
+    let catalog = catalog.clone();
+    sdp.run(move || f(&catalog, None)).await
+}
+
+/// One QueryStream: its requests, its private view of the scene (from the first request on).
+struct QueryStreamState {
+    inbound: tonic::Streaming<pb::QueryRequest>,
+    catalog: Arc<Catalog>,
+    sdp: SdpSlots,
+    view: Option<QueryView>,
+    /// (most answers, most poses) of one request.
+    limits: (usize, usize),
+    done: bool,
+}
+
+impl QueryStreamState {
+    /// Answers one request of the stream on its view (created by the first request; later ones
+    /// may repeat its scene id or leave it empty).
+    async fn answer(&mut self, req: pb::QueryRequest) -> Result<pb::QueryResponse, Status> {
+        let start = std::time::Instant::now();
+        let planner = cv::planner_request_from_proto(&req, self.limits.0, self.limits.1).map_err(to_status)?;
+        let current = match self.view.take() {
+            None => QueryView::new(require_id("scene_id", &req.scene_id).map_err(to_status)?),
+            Some(v) if req.scene_id.is_empty() || req.scene_id == v.scene_id() => v,
+            Some(v) => {
+                let message = format!(
+                    "a stream answers one scene: `{}` after `{}`",
+                    sublevel_core::error::clip(&req.scene_id),
+                    v.scene_id()
+                );
+                self.view = Some(v);
+                return Err(to_status(Error::invalid("scene_id", message)));
+            }
+        };
+        let (back, reply) = answer_planner(self.catalog.clone(), &self.sdp, current, &req, planner, start).await;
+        self.view = Some(back);
+        reply
+    }
+}
+
+/// `Distance`: the certified distance between two instances ([`query_work`]).
+pub(super) async fn distance(
+    svc: &SublevelService,
+    request: Request<pb::DistanceRequest>,
+) -> Handled<pb::DistanceResponse> {
+    let req = request.into_inner();
+    require_id("scene_id", &req.scene_id)?;
+    require_id("instance_a", &req.instance_a)?;
+    require_id("instance_b", &req.instance_b)?;
+    let tolerance = cv::tree_tolerance("tolerance", req.tolerance)?;
+    let options = sublevel_scene::QueryOptions {
+        signed: req.signed,
+        tolerance,
+        ..cv::query_options(req.certify, req.with_gradient)
+    };
+    let scene = req.scene_id.clone();
+    let r = query_work(
+        &svc.catalog,
+        &svc.sdp,
+        &scene,
+        req.certify,
+        1,
+        move |c, mode| {
+            let options = QueryOptions { mode: mode.unwrap_or(options.mode), ..options };
+            c.distance_with(&req.scene_id, &req.instance_a, &req.instance_b, &options)
+        },
+        |r| r.answer.needs_sdp,
+    )
+    .await?;
+    let answer = cv::distance_reply_to_proto(&r);
+    crate::metrics::query_answer("distance", answer.solve.as_ref(), answer.source);
+    Ok(Response::new(pb::DistanceResponse { answer: Some(answer) }))
+}
+
+/// `Growth`: the certified growth measure between two instances ([`query_work`]).
+pub(super) async fn growth(svc: &SublevelService, request: Request<pb::GrowthRequest>) -> Handled<pb::GrowthResponse> {
+    let req = request.into_inner();
+    require_id("scene_id", &req.scene_id)?;
+    require_id("instance_1", &req.instance_1)?;
+    require_id("instance_2", &req.instance_2)?;
+    let options = cv::query_options(req.certify, req.with_gradient);
+    let scene = req.scene_id.clone();
+    let r = query_work(
+        &svc.catalog,
+        &svc.sdp,
+        &scene,
+        req.certify,
+        1,
+        move |c, mode| {
+            let options = QueryOptions { mode: mode.unwrap_or(options.mode), ..options };
+            c.growth_with(&req.scene_id, &req.instance_1, &req.instance_2, &options)
+        },
+        |r| r.answer.needs_sdp,
+    )
+    .await?;
+    let answer = cv::growth_reply_to_proto(&r);
+    crate::metrics::query_answer("growth", answer.solve.as_ref(), answer.source);
+    Ok(Response::new(pb::GrowthResponse { answer: Some(answer) }))
+}
+
+/// `BatchQuery`: many queries of one scene, as pairs or as columns ([`query_work`]).
+pub(super) async fn batch_query(
+    svc: &SublevelService,
+    request: Request<pb::BatchQueryRequest>,
+) -> Handled<pb::BatchQueryResponse> {
+    let req = request.into_inner();
+    require_id("scene_id", &req.scene_id)?;
+    if let Some(columns) = req.columns {
+        if !req.pairs.is_empty() {
+            return Err(Error::invalid("columns", "set either `pairs` or `columns`, not both").into());
+        }
+        let c = cv::pair_columns_from_proto(&columns, svc.config.max_batch_pairs)?;
+        let (scene, n, kind) = (req.scene_id.clone(), c.first.len(), c.kind);
+        let answers = query_work(
+            &svc.catalog,
+            &svc.sdp,
+            &scene,
+            false,
+            n,
+            move |catalog, mode| {
+                catalog.batch_columns(
+                    &req.scene_id,
+                    &c.instance_ids,
+                    (&c.first, &c.second),
+                    c.kind,
+                    QueryOptions { mode: mode.unwrap_or_default(), cold: c.cold, ..QueryOptions::default() },
+                    c.margin,
+                )
+            },
+            |a| a.iter().any(QueryAnswer::needs_sdp),
+        )
+        .await?;
+        let columns = Some(cv::answers_to_columns(kind, &answers));
+        return Ok(Response::new(pb::BatchQueryResponse { answers: Vec::new(), columns }));
+    }
+    let pairs = cv::pairs_from_proto(&req.pairs, svc.config.max_batch_pairs)?;
+    let certify = pairs.iter().any(|p| p.options.mode == CertifyMode::Certify);
+    let (scene, n) = (req.scene_id.clone(), pairs.len());
+    let answers = query_work(
+        &svc.catalog,
+        &svc.sdp,
+        &scene,
+        certify,
+        n,
+        move |c, mode| c.batch_with(&req.scene_id, &pairs, mode),
+        |a| a.iter().any(QueryAnswer::needs_sdp),
+    )
+    .await?;
+    let answers: Vec<pb::QueryAnswer> = answers.iter().map(cv::answer_to_proto).collect();
+    crate::metrics::batch_answers(&answers);
+    Ok(Response::new(pb::BatchQueryResponse { answers, columns: None }))
+}
+
+/// `Query`: a planner request on a fresh view of the scene ([`answer_planner`]).
+pub(super) async fn query(svc: &SublevelService, request: Request<pb::QueryRequest>) -> Handled<pb::QueryResponse> {
+    let start = std::time::Instant::now();
+    let req = request.into_inner();
+    require_id("scene_id", &req.scene_id)?;
+    let planner = cv::planner_request_from_proto(&req, svc.config.max_batch_pairs, svc.config.max_poses_per_call)?;
+    let view = QueryView::new(&req.scene_id);
+    let (_, reply) = answer_planner(svc.catalog.clone(), &svc.sdp, view, &req, planner, start).await;
+    Ok(Response::new(reply?))
+}
+
+/// `QueryStream`: planner requests on one view of a scene for the stream's lifetime.
+pub(super) async fn query_stream(
+    svc: &SublevelService,
+    request: Request<tonic::Streaming<pb::QueryRequest>>,
+) -> Handled<QueryStream> {
+    // The response stream is driven by the connection itself: each poll reads the next
+    // request and answers it (no task and channel between them, so a planner step costs no
+    // thread hand-over). It ends after the client's last request or the first error.
+    let state = QueryStreamState {
+        inbound: request.into_inner(),
+        catalog: svc.catalog.clone(),
+        sdp: svc.sdp.clone(),
+        view: None,
+        limits: (svc.config.max_batch_pairs, svc.config.max_poses_per_call),
+        done: false,
+    };
+    let out = futures_util::stream::unfold(state, |mut st| async move {
+        if st.done {
+            return None;
+        }
+        let reply = match st.inbound.message().await {
+            Ok(Some(req)) => st.answer(req).await,
+            Ok(None) => return None,
+            Err(status) => Err(status),
+        };
+        st.done = reply.is_err();
+        Some((reply, st))
+    });
+    Ok(Response::new(Box::pin(out)))
+}
+
+/// `CheckScene`: every pair of a scene closer than a margin, off the async workers and cancelled
+/// with the request.
+pub(super) async fn check_scene(
+    svc: &SublevelService,
+    request: Request<pb::CheckSceneRequest>,
+) -> Handled<pb::CheckSceneResponse> {
+    let start = std::time::Instant::now();
+    let req = request.into_inner();
+    require_id("scene_id", &req.scene_id)?;
+    for (k, id) in req.instance_ids.iter().enumerate() {
+        require_id(&format!("instance_ids[{k}]"), id)?;
+    }
+    let overrides = cv::poses_from_proto(&req.poses, svc.config.max_poses_per_call)?;
+    let catalog = svc.catalog.clone();
+    // Up to n(n−1)/2 solves: off the async workers, cancelled with the request.
+    let check = cancellable_blocking(move || {
+        sublevel_scene::planner::check_scene(&catalog, &req.scene_id, req.margin, &req.instance_ids, &overrides)
+    })
+    .await?;
+    Ok(Response::new(cv::scene_check_to_proto(&check, start.elapsed().as_secs_f64())))
+}

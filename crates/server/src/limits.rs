@@ -1,0 +1,186 @@
+//! The operator's limits on what the server holds and runs (see [`super::ServerConfig`] and the
+//! "Configuration" table of docs/operations.md, which `sublevel serve --print-config-table`
+//! generates).
+//!
+//! Count limits (scenes, bodies, instances per scene, queued fit jobs) are checked before the
+//! write that would exceed them and answer RESOURCE_EXHAUSTED naming the limit, its flag and its
+//! environment variable. The check reads the catalog and the write follows, so concurrent
+//! creations may overshoot a limit by at most the number of calls in flight — a soft limit that
+//! protects memory and disk, not an invariant.
+//!
+//! SDP work of queries (certificates, nonconvex scenes) runs in [`SdpSlots`]: at most
+//! [`super::ServerConfig::max_concurrent_sdp`] blocking solves at a time, the rest wait for a slot
+//! (asynchronously, holding no thread), so a burst of `certify` calls cannot take every thread
+//! of the blocking pool.
+
+use crate::runtime::cancellable_blocking;
+use crate::{Error, Result};
+use std::sync::Arc;
+use tokio::sync::Semaphore;
+use tonic::Status;
+
+/// One named count limit: what is counted, its `serve` flag and environment variable.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Limit {
+    /// What is counted, e.g. `scenes` (plural, for the message).
+    pub(crate) what: &'static str,
+    /// The `sublevel serve` flag that sets it, e.g. `--max-scenes`.
+    pub(crate) flag: &'static str,
+    /// Its environment variable, e.g. `SUBLEVEL_MAX_SCENES`.
+    pub(crate) env: &'static str,
+}
+
+/// `--max-scenes`.
+pub(crate) const SCENES: Limit = Limit { what: "scenes", flag: "--max-scenes", env: "SUBLEVEL_MAX_SCENES" };
+/// `--max-bodies`.
+pub(crate) const BODIES: Limit = Limit { what: "bodies", flag: "--max-bodies", env: "SUBLEVEL_MAX_BODIES" };
+/// `--max-instances-per-scene`.
+pub(crate) const INSTANCES: Limit = Limit {
+    what: "instances in the scene",
+    flag: "--max-instances-per-scene",
+    env: "SUBLEVEL_MAX_INSTANCES_PER_SCENE",
+};
+/// `--max-fit-queue`.
+pub(crate) const FIT_QUEUE: Limit =
+    Limit { what: "fit and group jobs queued or running", flag: "--max-fit-queue", env: "SUBLEVEL_MAX_FIT_QUEUE" };
+
+/// Checks that one more item fits under `limit`: `Ok` while `current < max`.
+///
+/// # Errors
+/// [`Error::ResourceExhausted`] (RESOURCE_EXHAUSTED) naming the limit, its value, its flag and its
+/// environment variable when `current >= max`.
+pub(crate) fn check_room(limit: Limit, current: usize, max: usize) -> Result<()> {
+    if current < max {
+        return Ok(());
+    }
+    Err(exhausted(limit, current, max))
+}
+
+/// The RESOURCE_EXHAUSTED error of a full `limit` holding `current` of at most `max` items.
+pub(crate) fn exhausted(limit: Limit, current: usize, max: usize) -> Error {
+    Error::ResourceExhausted(format!(
+        "limit reached: {current} {} of at most {max} (set by {} / {})",
+        limit.what, limit.flag, limit.env
+    ))
+}
+
+/// Slots for blocking SDP work: a semaphore in front of tokio's blocking pool.
+#[derive(Clone, Debug)]
+pub(crate) struct SdpSlots {
+    /// Permits = the configured SDP concurrency (at least 1).
+    slots: Arc<Semaphore>,
+}
+
+impl SdpSlots {
+    /// `n` slots (0 is taken as 1: no SDP at all would make certify calls wait forever).
+    pub(crate) fn new(n: usize) -> Self {
+        Self { slots: Arc::new(Semaphore::new(n.max(1))) }
+    }
+
+    /// Runs `f` on the blocking pool once a slot is free; the slot is held until `f` returns.
+    ///
+    /// `f` runs in a [`sublevel_core::cancel::cancellable`] scope whose flag is set when the returned
+    /// future is dropped before `f` finished (the request's deadline passed, the client went
+    /// away): Clarabel solves inside stop at their next iteration and batches before their next
+    /// pair (see [`super::deadline`]), so an abandoned request frees its slot at once instead of
+    /// finishing work nobody reads.
+    ///
+    /// # Errors
+    /// `f`'s error as a status; INTERNAL when the worker panicked.
+    pub(crate) async fn run<T: Send + 'static>(
+        &self,
+        f: impl FnOnce() -> Result<T> + Send + 'static,
+    ) -> Result<T, Status> {
+        let permit =
+            self.slots.clone().acquire_owned().await.map_err(|_| Status::unavailable("the server is shutting down"))?;
+        cancellable_blocking(move || {
+            let _permit = permit;
+            f()
+        })
+        .await
+    }
+
+    /// Slots free right now (for tests and metrics).
+    #[cfg(test)]
+    pub(crate) fn available(&self) -> usize {
+        self.slots.available_permits()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+
+    #[test]
+    fn a_full_limit_names_its_flag_and_variable() {
+        assert!(check_room(SCENES, 2, 3).is_ok());
+        let e = check_room(SCENES, 3, 3).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "resource exhausted: limit reached: 3 scenes of at most 3 (set by --max-scenes / SUBLEVEL_MAX_SCENES)"
+        );
+        assert_eq!(crate::convert::to_status(e).code(), tonic::Code::ResourceExhausted);
+    }
+
+    /// Eight 20 ms jobs in two slots: never more than two at once.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn sdp_slots_bound_the_concurrent_blocking_work() {
+        let slots = SdpSlots::new(2);
+        let running = Arc::new(AtomicUsize::new(0));
+        let peak = Arc::new(AtomicUsize::new(0));
+        let mut tasks = Vec::new();
+        for _ in 0..8 {
+            let (slots, running, peak) = (slots.clone(), running.clone(), peak.clone());
+            tasks.push(tokio::spawn(async move {
+                slots
+                    .run(move || {
+                        let now = running.fetch_add(1, Ordering::SeqCst) + 1;
+                        peak.fetch_max(now, Ordering::SeqCst);
+                        std::thread::sleep(std::time::Duration::from_millis(20));
+                        running.fetch_sub(1, Ordering::SeqCst);
+                        Ok(())
+                    })
+                    .await
+            }));
+        }
+        for t in tasks {
+            t.await.unwrap().unwrap();
+        }
+        assert_eq!(peak.load(Ordering::SeqCst), 2);
+    }
+
+    /// A dropped caller cancels its blocking work: the work sees the flag, returns early and its
+    /// slot is free again.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn dropping_the_caller_cancels_the_work_and_frees_the_slot() {
+        let slots = SdpSlots::new(1);
+        let (tx, rx) = std::sync::mpsc::channel();
+        let work = slots.run(move || {
+            let start = std::time::Instant::now();
+            while !sublevel_core::cancel::is_cancelled() {
+                assert!(start.elapsed() < std::time::Duration::from_secs(10), "never cancelled");
+                std::thread::sleep(std::time::Duration::from_millis(1));
+            }
+            tx.send(start.elapsed()).unwrap();
+            Ok(())
+        });
+        let out = tokio::time::timeout(std::time::Duration::from_millis(30), work).await;
+        assert!(out.is_err(), "the work ran past the timeout");
+        let ran = tokio::task::spawn_blocking(move || rx.recv_timeout(std::time::Duration::from_secs(5)))
+            .await
+            .unwrap()
+            .expect("the work saw the cancel flag");
+        assert!(ran >= std::time::Duration::from_millis(25), "{ran:?}");
+        // The permit is released when the closure returns, just after it reported.
+        for _ in 0..500 {
+            if slots.available() == 1 {
+                break;
+            }
+            tokio::time::sleep(std::time::Duration::from_millis(2)).await;
+        }
+        assert_eq!(slots.available(), 1);
+        let after = slots.run(|| Ok(sublevel_core::cancel::is_cancelled())).await.unwrap();
+        assert!(!after, "a new request starts uncancelled");
+    }
+}
