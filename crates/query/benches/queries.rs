@@ -4,7 +4,7 @@
 //! `cargo bench -p sublevel-query --bench queries` (add `-- distance/6` to filter). Targets (2d = 6,
 //! medians): warm growth ≤ 0.5 µs, warm distance ≤ 0.7 µs, cold distance ≤ 2.5 µs. Each measured
 //! iteration runs the query at all 16 poses of [`poses`], so divide the reported time by 16 for one
-//! query (`sublevel bench` prints per-query medians).
+//! query (`sublevel-lab bench` prints per-query medians).
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use std::hint::black_box;

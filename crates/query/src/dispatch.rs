@@ -150,7 +150,7 @@ pub fn sphere_lower_bound(a: &Body, pose_a: &Isometry3, b: &Body, pose_b: &Isome
 /// certified support bounds). A collide query whose bound exceeds its margin is answered "clear"
 /// with no solve. `None` when a body has no proven bound (nonconvex).
 ///
-/// On the 300 cold chair_101 / human_10 poses of `sublevel bench` at 2d = 6 and margin 0, the
+/// On the 300 cold chair_101 / human_10 poses of `sublevel-lab bench` at 2d = 6 and margin 0, the
 /// spheres decide 161 pairs and the axis 104 of the 139 others, leaving 35 distance solves (22
 /// of them overlapping pairs) instead of 139.
 pub fn collide_lower_bound(a: &Body, pose_a: &Isometry3, b: &Body, pose_b: &Isometry3, margin: Real) -> Option<Real> {
@@ -191,7 +191,7 @@ pub enum CheapCollide {
 /// at their facing support points ([`crate::common_point`]), which proves overlap. `None` when
 /// neither decides (a distance solve does), or when a body has no proven bound (nonconvex).
 ///
-/// On the 300 cold chair_101 / human_10 poses of `sublevel bench` at 2d = 6 and margin 0, the
+/// On the 300 cold chair_101 / human_10 poses of `sublevel-lab bench` at 2d = 6 and margin 0, the
 /// bounds leave 35 pairs, 22 of them overlapping; the common point decides most of those, whose
 /// solves (a failed separated run, then the growth measure) cost the most.
 pub fn collide_cheap(a: &Body, pose_a: &Isometry3, b: &Body, pose_b: &Isometry3, margin: Real) -> Option<CheapCollide> {

@@ -117,7 +117,7 @@ pub(crate) mod test_bodies {
         Body::new(p, center, 0.7, FitReport::default()).unwrap()
     }
 
-    /// The first `count` cold poses of `sublevel bench` (its `cold_poses(7, count)`: the chair's
+    /// The first `count` cold poses of `sublevel-lab bench` (its `cold_poses(7, count)`: the chair's
     /// translation ~ U[−2.5, 2.5]³ m, rotation normalize(U[−1, 1]⁴), the human at the identity).
     pub fn bench_cold_poses(count: usize) -> Vec<sublevel_core::math::Isometry3> {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);

@@ -51,7 +51,7 @@ fn segment_candidates(
 ///
 /// Where bodies overlap off the segment between their interior points (elongated or bent shapes
 /// meeting at an angle), the facing support points often lie in the other body: on the cold
-/// chair_101 / human_10 poses of `sublevel bench` they prove most of the overlapping pairs the
+/// chair_101 / human_10 poses of `sublevel-lab bench` they prove most of the overlapping pairs the
 /// segment misses, each of which a collide query would otherwise solve (a failed separated run and
 /// the growth measure, the costliest cold solves).
 pub fn common_point(a: &Body, pose_a: &Isometry3, b: &Body, pose_b: &Isometry3) -> Option<Point3> {

@@ -46,7 +46,7 @@ fn supports_towards(ba: &PosedBody<'_>, bb: &PosedBody<'_>, axis: &Vector3) -> O
 /// fixed-point step n ← y − x, which overshoots on the interpolated support map).
 ///
 /// One round saves about half a Newton iteration per separated cold query on the chair / human
-/// cold poses of `sublevel bench`; past it the table's interpolation, not the direction, limits
+/// cold poses of `sublevel-lab bench`; past it the table's interpolation, not the direction, limits
 /// the start.
 #[inline(always)]
 fn bisector_start(
@@ -91,7 +91,7 @@ fn segment_start(
 /// read off the bodies' support tables ([`PosedBody::support`]), when they are closer to each other
 /// than the radial start (`x0`, `y0`), else the radial start.
 ///
-/// On the chair / human cold poses of `sublevel bench` this start takes about one Newton iteration
+/// On the chair / human cold poses of `sublevel-lab bench` this start takes about one Newton iteration
 /// fewer than the radial start. One look-up per body: further alternations n ← y − x overshoot on
 /// the interpolated support map, and the table's interpolation, not only the direction, limits the
 /// start.

@@ -402,7 +402,7 @@ mod start_quality {
 
     /// Mean Newton iterations from witnesses perturbed by `delta`, and how many runs reached the
     /// reference distance to 1e-8 m, over the separated ones of the first `count` cold poses of
-    /// `sublevel bench` (chair_101 against human_10 at 2d = `degree`).
+    /// `sublevel-lab bench` (chair_101 against human_10 at 2d = `degree`).
     fn iterations_from_perturbed_witnesses(degree: usize, count: usize, delta: Real) -> (Real, usize, usize) {
         let (a, b) = crate::test_bodies::bench_bodies(degree);
         let poses = crate::test_bodies::bench_cold_poses(count);

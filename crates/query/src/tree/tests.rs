@@ -621,7 +621,7 @@ fn check_cut(
     assert_eq!(covered.len(), leaf.len(), "{what}: the cut misses leaf pairs");
 }
 
-/// The chair's pose at `s ∈ [0, 1]` of the slide-and-turn through the human of `sublevel bench`
+/// The chair's pose at `s ∈ [0, 1]` of the slide-and-turn through the human of `sublevel-lab bench`
 /// (`crates/lab/examples/tree_profile.rs`).
 fn slide_pose(s: Real) -> Isometry3 {
     let axis = nalgebra::Unit::new_normalize(Vector3::new(0.2, 1.0, 0.1));
@@ -743,7 +743,7 @@ fn far_groups_carry_over_fine_motion_and_stay_valid() {
 
 /// The separating-axis bound of two single bodies ([`axis_lower_bound`]) against the exact
 /// distance (the cold Newton answer, converged) on the cold chair_101 / human_10 poses of
-/// `sublevel bench` at 2d = 4, 6, 8: it never exceeds the distance (10⁻⁹ m), is ≤ 0 for every
+/// `sublevel-lab bench` at 2d = 4, 6, 8: it never exceeds the distance (10⁻⁹ m), is ≤ 0 for every
 /// overlapping pair, and shows separation for most separated pairs whose bounding spheres overlap
 /// (125 of 139, 104 of 117 and 88 of 100; the test asserts at least 70 %).
 #[test]

@@ -40,7 +40,7 @@ pub(crate) struct CheapBounds {
 /// or zero when that axis does not separate them. `None` for a nonconvex body (no certified
 /// bound). About 0.14 µs, against about 2 µs for a cold distance solve at 2d = 6.
 ///
-/// On the cold chair_101 / human_10 poses of `sublevel bench` it shows separation (bound > 0) for
+/// On the cold chair_101 / human_10 poses of `sublevel-lab bench` it shows separation (bound > 0) for
 /// most of the separated pairs whose bounding spheres overlap (about nine in ten at 2d = 4 to 8);
 /// refining the axis towards the witnesses (two support look-ups a round, as the tree queries do)
 /// shows no more.
