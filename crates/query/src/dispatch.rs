@@ -16,7 +16,7 @@
 //!                       → common_point: a point inside both bodies answers "touching"
 //!                       (collide_cheap; no Newton solve runs for a decided pair)
 //! 3. batch lanes        cold distance and collide queries (PairAsk::lane_candidate) of one body
-//!                       pair, at least batch::MIN_LANE_BATCH of them
+//!                       pair, at least `BatchSettings::min_lane_batch` of them
 //!                       → batch::cold_distances: several pairs per SIMD pass (lane_distances)
 //! 4. one by one         everything else: one warm-started Newton / active-set solve
 //!                       (certified_distance, certified_growth), certified or with the SDP
@@ -35,7 +35,7 @@
 //! answers ([`crate::batch`]), and a cheap decision only says what a solve would say (a certified
 //! lower bound above the margin, or a proven common point).
 
-use crate::batch::{cold_distances, MIN_LANE_BATCH};
+use crate::batch::cold_distances;
 use crate::tree::{BodyTree, TreeQueryParams};
 use crate::{CertifyMode, CertifyParams, DistanceResult, DistanceWarmStart, NewtonParams};
 use sublevel_core::body::Body;
@@ -294,10 +294,11 @@ fn lane_role(ask: &PairAsk, a: &PosedRef<'_>, b: &PosedRef<'_>) -> Option<LaneRo
     Some(cheap.map_or(LaneRole::Lanes, LaneRole::Cheap))
 }
 
-/// Whether at least [`MIN_LANE_BATCH`] of `asks` are [`PairAsk::lane_candidate`]s: otherwise no
+/// Whether at least `min_lane_batch` ([`crate::BatchSettings::min_lane_batch`]) of `asks` are
+/// [`PairAsk::lane_candidate`]s: otherwise no
 /// group can reach the lanes and nothing need be gathered.
-pub fn enough_lane_candidates(asks: impl Iterator<Item = PairAsk>) -> bool {
-    asks.filter(PairAsk::lane_candidate).nth(MIN_LANE_BATCH - 1).is_some()
+pub fn enough_lane_candidates(asks: impl Iterator<Item = PairAsk>, min_lane_batch: usize) -> bool {
+    asks.filter(PairAsk::lane_candidate).nth(min_lane_batch.max(1) - 1).is_some()
 }
 
 /// Steps 2 and 3 of the module docs ahead of a request's answers: Newton's answers of the cold
@@ -307,14 +308,14 @@ pub fn enough_lane_candidates(asks: impl Iterator<Item = PairAsk>) -> bool {
 /// groups of one body pair (the same two [`Body`] values, by address), and the decisions of the
 /// collide queries among them that the cheap tests decide ([`collide_cheap`], asked once here,
 /// not again per answer). Nothing for the other queries and for groups smaller than
-/// [`MIN_LANE_BATCH`] (answered one by one).
+/// `newton.batch.min_lane_batch` (answered one by one).
 pub fn lane_distances<'p>(
     asks: impl ExactSizeIterator<Item = PairAsk> + Clone,
     posed: impl Fn(usize) -> Option<(PosedRef<'p>, PosedRef<'p>)>,
     newton: &NewtonParams,
     warm_starts: bool,
 ) -> LaneAnswers {
-    if !enough_lane_candidates(asks.clone()) {
+    if !enough_lane_candidates(asks.clone(), newton.batch.min_lane_batch) {
         return LaneAnswers::default();
     }
     let n = asks.len();
@@ -333,7 +334,7 @@ pub fn lane_distances<'p>(
         }
     }
     lanes.sort_unstable();
-    for members in lanes.chunk_by(|x, y| x.0 == y.0).filter(|m| m.len() >= MIN_LANE_BATCH) {
+    for members in lanes.chunk_by(|x, y| x.0 == y.0).filter(|m| m.len() >= newton.batch.min_lane_batch) {
         let Some((a, b)) = posed(members[0].1) else { continue };
         let poses: Vec<(Isometry3, Isometry3)> =
             members.iter().filter_map(|&(_, k)| posed(k).map(|(a, b)| (a.pose, b.pose))).collect();
@@ -394,6 +395,7 @@ pub fn state_route<'w>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::batch::MIN_LANE_BATCH;
     use sublevel_core::body::ellipsoid;
     use sublevel_core::math::Vector3;
 
@@ -417,8 +419,8 @@ mod tests {
         assert!(!ask(Distance, Certify, true).lane_kind());
         assert!(!ask(Growth, Newton, true).lane_kind());
         let three = [ask(Distance, Newton, true); 3];
-        assert!(!enough_lane_candidates(three.into_iter()));
-        assert!(enough_lane_candidates(three.into_iter().chain([ask(Collide, Newton, true)])));
+        assert!(!enough_lane_candidates(three.into_iter(), MIN_LANE_BATCH));
+        assert!(enough_lane_candidates(three.into_iter().chain([ask(Collide, Newton, true)]), MIN_LANE_BATCH));
     }
 
     /// Two spheres r = 0.5: far apart the cheap bound clears a collide query (a lower bound of the

@@ -120,7 +120,7 @@ avx2_dispatch! {
     ///
     /// `warm` is the `warm_start` of a previous answer for the same ordered pair (any poses). The
     /// answer always says whether it converged; it never panics on valid bodies.
-    pub fn growth, growth_avx2 => growth_body(
+    pub fn growth => growth_body(
         p1: &Body, pose1: &Isometry3, p2: &Body, pose2: &Isometry3, warm: Option<&GrowthWarmStart>,
         params: &NewtonParams,
     ) -> GrowthResult
@@ -171,7 +171,7 @@ pub(crate) struct GrowthCore {
 avx2_dispatch! {
     /// Solves d(p₁‖p₂) with both bodies posed in one common frame, from the warm start `start` (its
     /// `local` is in body 2's frame) when given.
-    pub(crate) fn solve_growth, solve_growth_avx2 => solve_growth_body(
+    pub(crate) fn solve_growth => solve_growth_body(
         b1: &PosedBody<'_>, b2: &PosedBody<'_>, start: Option<GrowthStart<'_>>, params: &NewtonParams,
     ) -> GrowthCore
 }
@@ -382,7 +382,7 @@ avx2_dispatch! {
     /// when μ turns nonpositive. Every point is evaluated once; near the solution (residual below
     /// [`NewtonParams::chord_residual`]) trial points skip the Hessians and a further step reuses
     /// the last ones (chord step), refreshed when it stalls.
-    fn kkt_newton, kkt_newton_avx2 => kkt_newton_body(
+    fn kkt_newton => kkt_newton_body(
         b1: &PosedBody<'_>, b2: &PosedBody<'_>, x0: Vector3, mu0: Option<Real>, params: &NewtonParams,
         warm: bool,
     ) -> KktOut

@@ -48,7 +48,7 @@ pub use sublevel_core::{Error, Result};
 /// with three-operand AVX instructions too (it has no fused arithmetic: LLVM does not contract
 /// a·b + c, so its answers are bit-identical to the portable build's).
 macro_rules! avx2_dispatch {
-    ($(#[$meta:meta])* $vis:vis fn $name:ident, $avx2:ident => $body:ident($($arg:ident: $ty:ty),* $(,)?) -> $ret:ty) => {
+    ($(#[$meta:meta])* $vis:vis fn $name:ident => $body:ident($($arg:ident: $ty:ty),* $(,)?) -> $ret:ty) => {
         $(#[$meta])*
         $vis fn $name($($arg: $ty),*) -> $ret {
             #[cfg(target_arch = "x86_64")]

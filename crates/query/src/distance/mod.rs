@@ -85,7 +85,7 @@ avx2_dispatch! {
     ///
     /// `warm` is the `warm_start` of a previous answer for the same ordered pair. Never panics on
     /// valid bodies; the answer says whether it converged.
-    pub fn distance, distance_avx2 => distance_body(
+    pub fn distance => distance_body(
         a: &Body, pose_a: &Isometry3, b: &Body, pose_b: &Isometry3, warm: Option<&DistanceWarmStart>,
         params: &NewtonParams,
     ) -> DistanceResult
@@ -214,7 +214,7 @@ avx2_dispatch! {
     /// (Stalled) when a multiplier turns nonpositive. Every point is evaluated once; near the
     /// solution (residual below [`NewtonParams::chord_residual`]) trial points skip the Hessians
     /// and a further step reuses the last ones (chord step), refreshed when it stalls.
-    fn kkt_newton, kkt_newton_avx2 => kkt_newton_body(
+    fn kkt_newton => kkt_newton_body(
         ba: &PosedBody<'_>, bb: &PosedBody<'_>, x0: Vector3, y0: Vector3, lam0: Option<[Real; 2]>,
         params: &NewtonParams, warm: bool,
     ) -> KktOut

@@ -210,7 +210,10 @@ impl QueryView {
         if request.states.is_empty() {
             // Cold queries of one body pair among the request's queries: on the batch solver's lanes.
             let mut newton = LaneAnswers::default();
-            if dispatch::enough_lane_candidates(request.queries.iter().map(|q| q.view().ask())) {
+            if dispatch::enough_lane_candidates(
+                request.queries.iter().map(|q| q.view().ask()),
+                params.newton.batch.min_lane_batch,
+            ) {
                 let views: Vec<PairRef<'_>> = request.queries.iter().map(|q| with_mode(q.view(), mode)).collect();
                 let at = |k: usize| pairs[k].map(|(i, j)| (slots[i].borrowed(), slots[j].borrowed()));
                 newton = answer::lane_distances(&views, at, params, false);
@@ -299,7 +302,7 @@ fn with_mode(mut pair: PairRef<'_>, mode: Option<CertifyMode>) -> PairRef<'_> {
 /// later state the pair's relative pose in the state before, more than half the bodies' summed
 /// scales away, as between a sampling planner's random candidates), solved on lanes that keep
 /// warm starts for the cache. Empty (every answer solved one by one) when fewer than
-/// [`sublevel_query::batch::MIN_LANE_BATCH`] of them are. The request's instances are `slots`,
+/// `params.newton.batch.min_lane_batch` of them are. The request's instances are `slots`,
 /// query q's pair is `pairs[q]` (slot indices), `state_slots(s, buf)` fills `buf` with state s's
 /// (slot, pose) and `cache` holds the warm starts the queries would start from.
 #[allow(clippy::too_many_arguments)]
@@ -314,7 +317,7 @@ pub(super) fn state_lane_distances(
 ) -> LaneAnswers {
     let states = request.states.len();
     let candidates = (0..states).flat_map(|_| request.queries.iter().map(|q| q.view().ask()));
-    if candidates.filter(PairAsk::lane_kind).nth(sublevel_query::batch::MIN_LANE_BATCH - 1).is_none() {
+    if candidates.filter(PairAsk::lane_kind).nth(params.newton.batch.min_lane_batch.max(1) - 1).is_none() {
         return LaneAnswers::default();
     }
     let n = states * request.queries.len();
