@@ -51,6 +51,14 @@ impl Avx2Fma {
         Self(())
     }
 
+    /// The proof, for the lane types of [`crate::lanes`] whose values were made with one (a lane
+    /// value reads its proof back, [`crate::lanes::Lane::cpu`]).
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    pub(crate) fn proven() -> Self {
+        Self(())
+    }
+
     /// Runs `f` compiled for AVX2 and FMA: `f` is inlined into a function with those target
     /// features, and with it every `#[inline(always)]` function it calls, so a solver written once
     /// (generic over a `const FMA: bool` that selects fused arithmetic) is compiled whole for

@@ -9,6 +9,8 @@
 //!   per pass (the query hot path, paper §IV);
 //! - [`cpu`]: CPU feature detection, [`Avx2Fma`] (the proof that AVX2 and FMA code may run) and
 //!   [`Avx2Fma::run`], which compiles a solver written once for AVX2 + FMA;
+//! - [`lanes`]: the lane types the query solvers are written in once ([`Scalar`], and on x86-64
+//!   [`F4`] and [`F8`], AVX registers made only with an [`Avx2Fma`] proof);
 //! - [`Sym3`] and [`Eval`]: the kernels' symmetric-matrix and evaluation types.
 //!
 //! Every `unsafe` block states why it is sound (`// SAFETY:`); each rests on one of two facts: an
@@ -19,10 +21,14 @@
 
 pub mod cpu;
 pub mod fast;
+pub mod lanes;
 pub mod monomial;
 
 pub use cpu::{cpu_has_avx2_fma, Avx2Fma};
 pub use fast::{FastPoly, Soa4Eval, Soa8Eval32, SoaPoly, SymEval};
+pub use lanes::{Lane, LaneMask, Scalar};
+#[cfg(target_arch = "x86_64")]
+pub use lanes::{F4, F8, M4, M8};
 
 /// The floating-point type of every computation (as `sublevel_core::math::Real`).
 pub type Real = f64;

@@ -2,13 +2,15 @@
 //! body's precomputed derivative tables ([`sublevel_core::poly::FastPoly`]), with the Hessian computed
 //! only when a Newton step needs it (`∇ₓ = Aᵀ∇ᵤ`, `∇²ₓ = Aᵀ∇²ᵤA`, A = Rᵀ/scale).
 //!
-//! Also the closed-form small linear algebra of the KKT systems (3 × 3 inverses by cofactors,
-//! block elimination of the 4 × 4 growth and 8 × 8 distance systems).
+//! Also the single-pair solvers' entry points to the KKT systems' small linear algebra
+//! ([`crate::lane_algebra`] on one lane: 3 × 3 inverses by cofactors, block elimination of the
+//! 4 × 4 growth and 8 × 8 distance systems).
 
+use crate::lane_algebra::{self, S3, V3};
 use sublevel_core::body::PosedBody;
 use sublevel_core::math::{Matrix3, Real, Sym3, Vector3};
 use sublevel_core::poly::{FastPoly, SymEval};
-use sublevel_kernels::Avx2Fma;
+use sublevel_kernels::{Avx2Fma, Scalar};
 
 /// a·b + c, fused when `FMA` (the solvers' AVX2 + FMA builds, see
 /// [`sublevel_core::math::cpu_has_avx2_fma`]); two roundings otherwise, never a library call.
@@ -39,11 +41,35 @@ pub(crate) fn sym_mat_vec<const FMA: bool>(s: &Sym3, v: &Vector3) -> Vector3 {
     )
 }
 
-/// `d·I + k·S`, fused where `FMA` (the KKT blocks `2I + λ∇²p'`).
+/// `d·I + k·S`, fused where `FMA` (the KKT blocks `2I + λ∇²p'`; [`lane_algebra::shifted`] on
+/// one lane).
 #[inline(always)]
 pub(crate) fn shifted<const FMA: bool>(s: &Sym3, k: Real, d: Real) -> Sym3 {
-    let [xx, xy, xz, yy, yz, zz] = s.0;
-    Sym3([fmadd::<FMA>(k, xx, d), k * xy, k * xz, fmadd::<FMA>(k, yy, d), k * yz, fmadd::<FMA>(k, zz, d)])
+    from_lane_sym(lane_algebra::shifted(&lane_sym::<FMA>(s), Scalar(k), Scalar(d)))
+}
+
+/// A vector as one lane of [`lane_algebra`].
+#[inline(always)]
+fn lane_vector<const FMA: bool>(v: &Vector3) -> V3<Scalar<FMA>> {
+    V3([Scalar(v.x), Scalar(v.y), Scalar(v.z)])
+}
+
+/// One lane of [`lane_algebra`] as a vector.
+#[inline(always)]
+fn from_lane_vector<const FMA: bool>(v: V3<Scalar<FMA>>) -> Vector3 {
+    Vector3::new(v.0[0].0, v.0[1].0, v.0[2].0)
+}
+
+/// A symmetric matrix as one lane of [`lane_algebra`].
+#[inline(always)]
+fn lane_sym<const FMA: bool>(s: &Sym3) -> S3<Scalar<FMA>> {
+    s.0.map(Scalar)
+}
+
+/// One lane of [`lane_algebra`] as a symmetric matrix.
+#[inline(always)]
+fn from_lane_sym<const FMA: bool>(s: S3<Scalar<FMA>>) -> Sym3 {
+    Sym3(s.map(|v| v.0))
 }
 
 /// `a + k·b` entrywise, fused where `FMA`.
@@ -239,41 +265,23 @@ pub(crate) fn max_plain(a: Real, b: Real) -> Real {
 }
 
 /// Inverse of a symmetric 3 × 3 matrix by cofactors (six cofactors instead of nine); `None` when
-/// (nearly) singular relative to its entries (|det| ≤ 10⁻¹⁴ max|mᵢⱼ|³, or non-finite). The KKT
-/// blocks `2I + λ∇²p'` and their Schur complements are symmetric.
+/// (nearly) singular relative to its entries (|det| ≤ 10⁻¹⁴ max|mᵢⱼ|³, or non-finite):
+/// [`lane_algebra::inverse_sym`] on one lane. The KKT blocks `2I + λ∇²p'` and their Schur
+/// complements are symmetric.
+#[cfg(test)]
 #[inline(always)]
 pub(crate) fn inverse_sym3<const FMA: bool>(m: &Sym3) -> Option<Sym3> {
-    let [a, b, c, d, e, f] = m.0;
-    let c00 = fmadd::<FMA>(d, f, -e * e);
-    let c01 = fmadd::<FMA>(c, e, -b * f);
-    let c02 = fmadd::<FMA>(b, e, -c * d);
-    let det = fmadd::<FMA>(a, c00, fmadd::<FMA>(b, c01, c * c02));
-    // Any NaN entry makes `det` NaN, so the plain maxima need not see it.
-    let s = max_plain(max_plain(max_plain(a.abs(), b.abs()), max_plain(c.abs(), d.abs())), max_plain(e.abs(), f.abs()));
-    if !(det.is_finite() && det.abs() > 1e-14 * s * s * s && s > 0.0) {
-        return None;
-    }
-    let k = 1.0 / det;
-    let (i00, i01, i02) = (c00 * k, c01 * k, c02 * k);
-    let (i11, i12, i22) =
-        (fmadd::<FMA>(a, f, -c * c) * k, fmadd::<FMA>(b, c, -a * e) * k, fmadd::<FMA>(a, d, -b * b) * k);
-    Some(Sym3([i00, i01, i02, i11, i12, i22]))
+    let (inv, ok) = lane_algebra::inverse_sym(&lane_sym::<FMA>(m));
+    ok.then(|| from_lane_sym(inv))
 }
 
 /// Solves the growth KKT system `[W g; gᵀ 0] [dx; dμ] = −[r; c]` by eliminating dx
-/// (dμ = (c − gᵀW⁻¹r)/(gᵀW⁻¹g)); `None` when W or the Schur complement is singular.
+/// (dμ = (c − gᵀW⁻¹r)/(gᵀW⁻¹g)): [`lane_algebra::solve_kkt4`] on one lane; `None` when W or the
+/// Schur complement is singular, or the step is not finite.
 #[inline(always)]
 pub(crate) fn solve_kkt4<const FMA: bool>(w: &Sym3, g: &Vector3, r: &Vector3, c: Real) -> Option<(Vector3, Real)> {
-    let wi = inverse_sym3::<FMA>(w)?;
-    let wg = sym_mat_vec::<FMA>(&wi, g);
-    let wr = sym_mat_vec::<FMA>(&wi, r);
-    let s = dot::<FMA>(g, &wg);
-    if !(s.is_finite() && s.abs() > 1e-300) {
-        return None;
-    }
-    let dmu = (c - dot::<FMA>(g, &wr)) / s;
-    let dx = -(wr + wg * dmu);
-    (dx.iter().all(|v| v.is_finite()) && dmu.is_finite()).then_some((dx, dmu))
+    let (dx, dmu, ok) = lane_algebra::solve_kkt4(&lane_sym::<FMA>(w), lane_vector(g), lane_vector(r), Scalar(c));
+    ok.then(|| (from_lane_vector(dx), dmu.0))
 }
 
 /// Solves the distance KKT system (8 × 8)
@@ -285,8 +293,8 @@ pub(crate) fn solve_kkt4<const FMA: bool>(w: &Sym3, g: &Vector3, r: &Vector3, c:
 /// [ 0   gbᵀ  0   0 ] [dλb]    [cb]
 /// ```
 ///
-/// by block elimination: the 6 × 6 block M = [[Wa, −2I], [−2I, Wb]] through Wa⁻¹ and the Schur
-/// complement Wb − 4Wa⁻¹, then the 2 × 2 Schur complement GᵀM⁻¹G of the constraints.
+/// by block elimination ([`lane_algebra::solve_kkt8`] on one lane); `None` when a block is
+/// singular or the step is not finite.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 pub(crate) fn solve_kkt8<const FMA: bool>(
@@ -299,35 +307,9 @@ pub(crate) fn solve_kkt8<const FMA: bool>(
     ca: Real,
     cb: Real,
 ) -> Option<(Vector3, Vector3, [Real; 2])> {
-    let ai = inverse_sym3::<FMA>(wa)?;
-    let si = inverse_sym3::<FMA>(&sym_add_scaled::<FMA>(wb, -4.0, &ai))?;
-    let (am, sm) = (|v: &Vector3| sym_mat_vec::<FMA>(&ai, v), |v: &Vector3| sym_mat_vec::<FMA>(&si, v));
-    // M⁻¹ [f; g] = [p; q] with q = Si (g + 2 Ai f), p = Ai (f + 2q). For t₀ = Ai ra, t₁ = Ai ga,
-    // q₀ = Si (rb + 2t₀), q₁ = 2 Si t₁, q₂ = Si gb, the constraints' 2 × 2 block and right-hand
-    // side need no p (Ai and Si are symmetric): s₁₁ = (ga + 2q₁)·t₁, s₁₂ = s₂₁ = 2 t₁·q₂,
-    // s₂₂ = gb·q₂, ga·p₀ = ga·t₀ + 2 t₁·q₀; and dx comes from the first block row: six 3 × 3
-    // products instead of eight (about 1 % of a cold distance query at 2d = 6).
-    let t0 = am(ra);
-    let t1 = am(ga);
-    let q0 = sm(&(rb + t0 * 2.0));
-    let q1 = sm(&t1) * 2.0;
-    let q2 = sm(gb);
-    let d = |a: &Vector3, b: &Vector3| dot::<FMA>(a, b);
-    let (s11, s12, s22) = (d(&(ga + q1 * 2.0), &t1), 2.0 * d(&t1, &q2), d(gb, &q2));
-    let det = s11 * s22 - s12 * s12;
-    let scale = (s11.abs() + s12.abs()) * (s12.abs() + s22.abs());
-    if !(det.is_finite() && det.abs() > 1e-14 * scale && scale > 0.0) {
-        return None;
-    }
-    let (h1, h2) = (ca - (d(ga, &t0) + 2.0 * d(&t1, &q0)), cb - d(gb, &q0));
-    let l1 = (s22 * h1 - s12 * h2) / det;
-    let l2 = (s11 * h2 - s12 * h1) / det;
-    let dy = -(q0 + q1 * l1 + q2 * l2);
-    // Wa dx − 2dy + ga dλa = −ra.
-    let dx = am(&dy) * 2.0 - t0 - t1 * l1;
-    // One sum carries any NaN or infinity of the eight components.
-    let ok = (dx.sum() + dy.sum() + l1 + l2).is_finite();
-    ok.then_some((dx, dy, [l1, l2]))
+    let (l, v) = (lane_sym::<FMA>, lane_vector::<FMA>);
+    let (dx, dy, dl, ok) = lane_algebra::solve_kkt8(&l(wa), &l(wb), v(ga), v(gb), v(ra), v(rb), Scalar(ca), Scalar(cb));
+    ok.then(|| (from_lane_vector(dx), from_lane_vector(dy), [dl[0].0, dl[1].0]))
 }
 
 #[cfg(test)]

@@ -31,9 +31,9 @@
 //! [`certified::AGREEMENT_ABSOLUTE`] name two defaults for callers that hold no settings.
 
 #![warn(missing_docs)]
-// Only the batch solver's SIMD lanes (`batch::lanes`) hold `unsafe` code in this crate; the
-// evaluation kernels and the AVX2 + FMA dispatch live in `sublevel-kernels`.
-#![deny(unsafe_code)]
+// No `unsafe` code: the evaluation kernels, the SIMD lane types and the AVX2 + FMA dispatch live in
+// `sublevel-kernels`.
+#![forbid(unsafe_code)]
 
 pub use sublevel_core::{Error, Result};
 
@@ -67,6 +67,7 @@ pub mod distance;
 pub(crate) mod fast_eval;
 pub mod gradient;
 pub mod growth;
+pub(crate) mod lane_algebra;
 pub mod newton;
 pub mod penetration;
 pub mod sdp_certificate;

@@ -190,7 +190,6 @@ pub fn cold_distances(
 
 /// The four-lane solver (x86-64 only: AVX2 + FMA registers).
 #[cfg(target_arch = "x86_64")]
-#[allow(unsafe_code)]
 mod lanes;
 
 #[cfg(test)]

@@ -30,13 +30,14 @@
 //! from 2d = 4 on ([`BatchSettings::coarse_min_degree`]); docs/performance.md has the batch's
 //! rates.
 
-use super::simd::{congruence, mat_mul, mat_t_mul, Lane, LaneMask, F8, M3, M8, S3, V3};
 use super::{kkt_round, merit_length, Handoff, KktRound, NewtonParams, Stage, EMPTY};
 #[cfg(doc)]
 use crate::batch::BatchSettings;
+use crate::lane_algebra::{congruence, mat_mul, mat_t_mul, M3, S3, V3};
 use sublevel_core::body::{Body, PosedBody};
 use sublevel_core::math::{Isometry3, Real, Vector3};
 use sublevel_core::poly::SoaPoly;
+use sublevel_kernels::{Avx2Fma, Lane, LaneMask, F8, M8};
 
 /// Lanes of the coarse stage.
 const L: usize = 8;
@@ -51,12 +52,30 @@ struct Eval8 {
 /// `p` at the eight points `u` in single precision ([`SoaPoly::eval8_rows_f32`]).
 #[inline(always)]
 fn eval8(p: &SoaPoly, u: V3<F8>) -> Eval8 {
+    let cpu = u.0[0].cpu();
     let e = p.eval8_rows_f32(&u.to_arrays32());
     let h = &e.hessian;
     Eval8 {
-        value: F8::load(&e.value),
-        gradient: V3::load32(&e.gradient),
-        hessian: [F8::load(&h[0]), F8::load(&h[1]), F8::load(&h[2]), F8::load(&h[3]), F8::load(&h[4]), F8::load(&h[5])],
+        value: F8::load(cpu, &e.value),
+        gradient: V3::load32(cpu, &e.gradient),
+        hessian: h.each_ref().map(
+            #[inline(always)]
+            |row| F8::load(cpu, row),
+        ),
+    }
+}
+
+impl V3<F8> {
+    /// The vectors of eight lanes, coordinates by rows.
+    #[inline(always)]
+    fn load32(cpu: Avx2Fma, v: &[[f32; 8]; 3]) -> Self {
+        Self([F8::load(cpu, &v[0]), F8::load(cpu, &v[1]), F8::load(cpu, &v[2])])
+    }
+
+    /// The coordinates by rows.
+    #[inline(always)]
+    fn to_arrays32(self) -> [[f32; 8]; 3] {
+        [self.0[0].to_array(), self.0[1].to_array(), self.0[2].to_array()]
     }
 }
 
@@ -121,6 +140,7 @@ impl Lanes8 {
 
     /// Gives lane `i` pair `k` (A unposed as `ba`, B posed as `bb` in A's frame) at its start
     /// (x0, y0), which becomes the lane's origins.
+    #[inline(always)]
     fn fill(&mut self, i: usize, k: usize, ba: &PosedBody<'_>, bb: &PosedBody<'_>, x0: &Vector3, y0: &Vector3) {
         self.job[i] = k;
         let (m, c, ua0) = (bb.linear(), bb.to_normalized(y0), ba.to_normalized(x0));
@@ -150,13 +170,14 @@ impl Lanes8 {
 
     /// The lanes holding a pair.
     #[inline(always)]
-    fn live(&self) -> M8 {
-        M8::from_bools(self.job.map(|k| k != EMPTY))
+    fn live(&self, cpu: Avx2Fma) -> M8 {
+        M8::from_bools(cpu, self.job.map(|k| k != EMPTY))
     }
 
     /// Lane `i`'s state as a [`Handoff`] (its residual raised by `noise`
     /// ([`BatchSettings::coarse_noise`]) times the merit's scale 1 + 2‖x − y‖/L, L = `len`
     /// ([`merit_length`])).
+    #[inline(always)]
     fn handoff(&self, i: usize, len: Real, noise: Real) -> Handoff {
         let x = std::array::from_fn(|r| self.oa[r][i] + Real::from(self.x[r][i]));
         let y = std::array::from_fn(|r| self.ob[r][i] + Real::from(self.y[r][i]));
@@ -182,13 +203,10 @@ impl Lanes8 {
 /// the queue ran dry, [`Stage::Cold`] for a pair the fine stage takes from its start (no start,
 /// or the coarse run ended without a hand-off). The iteration cap, line-search limit and hand-off
 /// thresholds come from `params` (the speculative run's cap, [`BatchSettings`]). Compiled apart
-/// from the fine stage (not inlined into it), for AVX2 + FMA.
-///
-/// # Safety
-/// The CPU must support AVX2 and FMA.
-#[target_feature(enable = "avx2,fma")]
+/// from the fine stage (not inlined into it), for AVX2 + FMA (`cpu`: the proof that it may run).
 #[inline(never)]
-pub(super) unsafe fn coarse_stage8(
+pub(super) fn coarse_stage8(
+    cpu: Avx2Fma,
     a: &Body,
     b: &Body,
     rels: &[Isometry3],
@@ -196,122 +214,133 @@ pub(super) unsafe fn coarse_stage8(
     params: &NewtonParams,
     stage: &mut [Stage],
 ) {
-    let (soa_a, soa_b) = (a.soa_polynomial(), b.soa_polynomial());
-    let cap = F8::splat(params.max_iterations.min(params.speculative_iterations) as Real);
-    let stall = F8::splat(params.line_search_steps as Real);
-    let noise = params.batch.coarse_noise;
-    let (zero, one) = (F8::splat(0.0), F8::splat(1.0));
-    let ka = 1.0 / a.scale();
-    let (ka8, ka2) = (F8::splat(ka), F8::splat(ka * ka));
-    let ba = PosedBody::unposed(a);
-    let near_level = F8::splat(params.batch.coarse_residual);
-    // The merit's length L and its weight 1/L² ([`merit_length`]).
-    let len = merit_length(a, b);
-    let (w2, two_over_len) = (F8::splat(1.0 / (len * len)), F8::splat(2.0 / len));
-    let armijo = F8::splat(-1e-4);
-    let tiny = F8::splat(F8::TINY);
-    let mut lanes = Lanes8::new();
-    let mut next = 0;
-    loop {
-        for i in 0..L {
-            while lanes.job[i] == EMPTY && next < rels.len() {
-                let k = next;
-                next += 1;
-                if let Some((x0, y0)) = &starts[k] {
-                    lanes.fill(i, k, &ba, &PosedBody::new(b, &rels[k]), x0, y0);
+    cpu.run(
+        #[inline(always)]
+        || {
+            let (soa_a, soa_b) = (a.soa_polynomial(), b.soa_polynomial());
+            let cap = F8::splat(cpu, params.max_iterations.min(params.speculative_iterations) as Real);
+            let stall = F8::splat(cpu, params.line_search_steps as Real);
+            let noise = params.batch.coarse_noise;
+            let (zero, one) = (F8::splat(cpu, 0.0), F8::splat(cpu, 1.0));
+            let ka = 1.0 / a.scale();
+            let (ka8, ka2) = (F8::splat(cpu, ka), F8::splat(cpu, ka * ka));
+            let ba = PosedBody::unposed(a);
+            let near_level = F8::splat(cpu, params.batch.coarse_residual);
+            // The merit's length L and its weight 1/L² ([`merit_length`]).
+            let len = merit_length(a, b);
+            let (w2, two_over_len) = (F8::splat(cpu, 1.0 / (len * len)), F8::splat(cpu, 2.0 / len));
+            let armijo = F8::splat(cpu, -1e-4);
+            let tiny = F8::splat(cpu, F8::TINY);
+            let mut lanes = Lanes8::new();
+            let mut next = 0;
+            loop {
+                for i in 0..L {
+                    while lanes.job[i] == EMPTY && next < rels.len() {
+                        let k = next;
+                        next += 1;
+                        if let Some((x0, y0)) = &starts[k] {
+                            lanes.fill(i, k, &ba, &PosedBody::new(b, &rels[k]), x0, y0);
+                        }
+                    }
                 }
-            }
-        }
-        let live = lanes.live();
-        if live.bits() == 0 {
-            break;
-        }
-        // When the queue runs dry the lanes still running go on in the fine stage, first in its
-        // queue (no lane waits for the slowest one).
-        if next >= rels.len() && live.bits() != 0xff {
-            for i in 0..L {
-                let k = lanes.job[i];
-                if k != EMPTY {
+                let live = lanes.live(cpu);
+                if live.bits() == 0 {
+                    break;
+                }
+                // When the queue runs dry the lanes still running go on in the fine stage, first in its
+                // queue (no lane waits for the slowest one).
+                if next >= rels.len() && live.bits() != 0xff {
+                    for i in 0..L {
+                        let k = lanes.job[i];
+                        if k != EMPTY {
+                            stage[k] = if lanes.start[i] != 0.0 {
+                                Stage::Cold
+                            } else {
+                                Stage::Drained(lanes.handoff(i, len, noise))
+                            };
+                        }
+                    }
+                    break;
+                }
+                let (x, y) = (V3::load32(cpu, &lanes.x), V3::load32(cpu, &lanes.y));
+                let lam = [F8::load(cpu, &lanes.lam[0]), F8::load(cpu, &lanes.lam[1])];
+                let (dx, dy) = (V3::load32(cpu, &lanes.dx), V3::load32(cpu, &lanes.dy));
+                let dl = [F8::load(cpu, &lanes.dl[0]), F8::load(cpu, &lanes.dl[1])];
+                let (al, r0) = (F8::load(cpu, &lanes.alpha), F8::load(cpu, &lanes.r0));
+                let start = zero.lt(F8::load(cpu, &lanes.start));
+                let m = &lanes.mb;
+                let mb: M3<F8> = [
+                    F8::load(cpu, &m[0]),
+                    F8::load(cpu, &m[1]),
+                    F8::load(cpu, &m[2]),
+                    F8::load(cpu, &m[3]),
+                    F8::load(cpu, &m[4]),
+                    F8::load(cpu, &m[5]),
+                    F8::load(cpu, &m[6]),
+                    F8::load(cpu, &m[7]),
+                    F8::load(cpu, &m[8]),
+                ];
+                let cb = V3::load32(cpu, &lanes.cb);
+                let xt = dx.mul_add(al, x);
+                let yt = dy.mul_add(al, y);
+                let lt = [dl[0].mul_add(al, lam[0]), dl[1].mul_add(al, lam[1])];
+                let ea = eval8(soa_a, xt.mul_add(ka8, V3::load32(cpu, &lanes.ca)));
+                let eb = eval8(soa_b, mat_mul(&mb, yt).add(cb));
+                let ga = ea.gradient.scale(ka8);
+                let gb = mat_t_mul(&mb, eb.gradient);
+                let h = &ea.hessian;
+                let ha: S3<F8> = [h[0] * ka2, h[1] * ka2, h[2] * ka2, h[3] * ka2, h[4] * ka2, h[5] * ka2];
+                let hb = congruence(&mb, &eb.hessian);
+                let KktRound { lt, dist, r1, step, .. } = kkt_round(
+                    xt.add(V3::load32(cpu, &lanes.d0)),
+                    yt,
+                    lt,
+                    start,
+                    tiny,
+                    w2,
+                    [ga, gb],
+                    [ea.value, eb.value],
+                    [&ha, &hb],
+                );
+                let (sdx, sdy, sdl, solved) = step;
+                // Accepted trial points: the start, or a decrease of the merit (Armijo).
+                let finite = r1.finite();
+                let decrease = r1.le(armijo.mul_add(al, one) * r0).and(finite);
+                let accepted = start.or(decrease).and(live);
+                lanes.x = V3::select(accepted, xt, x).to_arrays32();
+                lanes.y = V3::select(accepted, yt, y).to_arrays32();
+                lanes.lam =
+                    [F8::select(accepted, lt[0], lam[0]).to_array(), F8::select(accepted, lt[1], lam[1]).to_array()];
+                lanes.dx = V3::select(accepted, sdx, dx).to_arrays32();
+                lanes.dy = V3::select(accepted, sdy, dy).to_arrays32();
+                lanes.dl =
+                    [F8::select(accepted, sdl[0], dl[0]).to_array(), F8::select(accepted, sdl[1], dl[1]).to_array()];
+                // The bookkeeping: a step counted where accepted, else a rejection and the step halved.
+                let near = r1.le(near_level * dist.mul_add(two_over_len, one));
+                let ends = near.or(finite.not()).or(solved.not());
+                lanes.r0 = F8::select(accepted, r1, r0).to_array();
+                lanes.alpha = F8::select(accepted, one, al * F8::splat(cpu, 0.5)).to_array();
+                let rejected = F8::select(accepted, zero, F8::load(cpu, &lanes.rejected) + one);
+                lanes.rejected = rejected.to_array();
+                let before = F8::load(cpu, &lanes.steps);
+                lanes.steps = (before + F8::select(accepted, one, zero)).to_array();
+                lanes.start = [0.0; L];
+                let done = accepted.and(ends.or(cap.le(before)));
+                let stalled = live.and(accepted.not()).and(stall.le(rejected));
+                let leave = done.or(stalled).bits();
+                if leave == 0 {
+                    continue;
+                }
+                // Hand-offs (accepted near the answer, with a step from there); the other lanes that
+                // leave start again in the fine stage.
+                let handoff = done.and(near).and(solved).and(finite).bits();
+                for i in (0..L).filter(|i| leave & (1 << i) != 0) {
+                    let k = lanes.job[i];
+                    lanes.job[i] = EMPTY;
                     stage[k] =
-                        if lanes.start[i] != 0.0 { Stage::Cold } else { Stage::Drained(lanes.handoff(i, len, noise)) };
+                        if handoff & (1 << i) != 0 { Stage::Resume(lanes.handoff(i, len, noise)) } else { Stage::Cold };
                 }
             }
-            break;
-        }
-        let (x, y) = (V3::load32(&lanes.x), V3::load32(&lanes.y));
-        let lam = [F8::load(&lanes.lam[0]), F8::load(&lanes.lam[1])];
-        let (dx, dy) = (V3::load32(&lanes.dx), V3::load32(&lanes.dy));
-        let dl = [F8::load(&lanes.dl[0]), F8::load(&lanes.dl[1])];
-        let (al, r0) = (F8::load(&lanes.alpha), F8::load(&lanes.r0));
-        let start = zero.lt(F8::load(&lanes.start));
-        let m = &lanes.mb;
-        let mb: M3<F8> = [
-            F8::load(&m[0]),
-            F8::load(&m[1]),
-            F8::load(&m[2]),
-            F8::load(&m[3]),
-            F8::load(&m[4]),
-            F8::load(&m[5]),
-            F8::load(&m[6]),
-            F8::load(&m[7]),
-            F8::load(&m[8]),
-        ];
-        let cb = V3::load32(&lanes.cb);
-        let xt = dx.mul_add(al, x);
-        let yt = dy.mul_add(al, y);
-        let lt = [dl[0].mul_add(al, lam[0]), dl[1].mul_add(al, lam[1])];
-        let ea = eval8(soa_a, xt.mul_add(ka8, V3::load32(&lanes.ca)));
-        let eb = eval8(soa_b, mat_mul(&mb, yt).add(cb));
-        let ga = ea.gradient.scale(ka8);
-        let gb = mat_t_mul(&mb, eb.gradient);
-        let h = &ea.hessian;
-        let ha: S3<F8> = [h[0] * ka2, h[1] * ka2, h[2] * ka2, h[3] * ka2, h[4] * ka2, h[5] * ka2];
-        let hb = congruence(&mb, &eb.hessian);
-        let KktRound { lt, dist, r1, step, .. } = kkt_round(
-            xt.add(V3::load32(&lanes.d0)),
-            yt,
-            lt,
-            start,
-            tiny,
-            w2,
-            [ga, gb],
-            [ea.value, eb.value],
-            [&ha, &hb],
-        );
-        let (sdx, sdy, sdl, solved) = step;
-        // Accepted trial points: the start, or a decrease of the merit (Armijo).
-        let finite = r1.finite();
-        let decrease = r1.le(armijo.mul_add(al, one) * r0).and(finite);
-        let accepted = start.or(decrease).and(live);
-        lanes.x = V3::select(accepted, xt, x).to_arrays32();
-        lanes.y = V3::select(accepted, yt, y).to_arrays32();
-        lanes.lam = [F8::select(accepted, lt[0], lam[0]).to_array(), F8::select(accepted, lt[1], lam[1]).to_array()];
-        lanes.dx = V3::select(accepted, sdx, dx).to_arrays32();
-        lanes.dy = V3::select(accepted, sdy, dy).to_arrays32();
-        lanes.dl = [F8::select(accepted, sdl[0], dl[0]).to_array(), F8::select(accepted, sdl[1], dl[1]).to_array()];
-        // The bookkeeping: a step counted where accepted, else a rejection and the step halved.
-        let near = r1.le(near_level * dist.mul_add(two_over_len, one));
-        let ends = near.or(finite.not()).or(solved.not());
-        lanes.r0 = F8::select(accepted, r1, r0).to_array();
-        lanes.alpha = F8::select(accepted, one, al * F8::splat(0.5)).to_array();
-        let rejected = F8::select(accepted, zero, F8::load(&lanes.rejected) + one);
-        lanes.rejected = rejected.to_array();
-        let before = F8::load(&lanes.steps);
-        lanes.steps = (before + F8::select(accepted, one, zero)).to_array();
-        lanes.start = [0.0; L];
-        let done = accepted.and(ends.or(cap.le(before)));
-        let stalled = live.and(accepted.not()).and(stall.le(rejected));
-        let leave = done.or(stalled).bits();
-        if leave == 0 {
-            continue;
-        }
-        // Hand-offs (accepted near the answer, with a step from there); the other lanes that
-        // leave start again in the fine stage.
-        let handoff = done.and(near).and(solved).and(finite).bits();
-        for i in (0..L).filter(|i| leave & (1 << i) != 0) {
-            let k = lanes.job[i];
-            lanes.job[i] = EMPTY;
-            stage[k] = if handoff & (1 << i) != 0 { Stage::Resume(lanes.handoff(i, len, noise)) } else { Stage::Cold };
-        }
-    }
+        },
+    )
 }

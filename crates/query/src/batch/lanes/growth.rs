@@ -48,6 +48,7 @@ impl GrowthLanes {
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 pub(super) fn solve_growth_on_lanes(
+    cpu: Avx2Fma,
     a: &Body,
     b: &Body,
     poses: &[(Isometry3, Isometry3)],
@@ -59,13 +60,13 @@ pub(super) fn solve_growth_on_lanes(
     empty: &std::sync::Arc<DistanceWarmStart>,
 ) {
     let (soa_a, soa_b) = (a.soa_polynomial(), b.soa_polynomial());
-    let cap = F4::splat(params.max_iterations as Real);
-    let stall = F4::splat(params.line_search_steps as Real);
-    let tolerance = F4::splat(params.kkt_tolerance);
-    let (zero, one, half) = (F4::splat(0.0), F4::splat(1.0), F4::splat(0.5));
-    let (ka4, ka2) = scale_map(a);
+    let cap = F4::splat(cpu, params.max_iterations as Real);
+    let stall = F4::splat(cpu, params.line_search_steps as Real);
+    let tolerance = F4::splat(cpu, params.kkt_tolerance);
+    let (zero, one, half) = (F4::splat(cpu, 0.0), F4::splat(cpu, 1.0), F4::splat(cpu, 0.5));
+    let (ka4, ka2) = scale_map(cpu, a);
     let len = merit_length(a, b);
-    let l2 = F4::splat(len * len);
+    let l2 = F4::splat(cpu, len * len);
     let c1 = PosedBody::unposed(a).interior_point();
     let mut lanes = GrowthLanes {
         book: LaneBook::new(),
@@ -98,31 +99,32 @@ pub(super) fn solve_growth_on_lanes(
         if lanes.book.is_empty() {
             break;
         }
-        let x = V3::load(&lanes.x);
-        let mu = F4::load(&lanes.mu);
-        let dx = V3::load(&lanes.dx);
-        let dmu = F4::load(&lanes.dmu);
+        let x = V3::load(cpu, &lanes.x);
+        let mu = F4::load(cpu, &lanes.mu);
+        let dx = V3::load(cpu, &lanes.dx);
+        let dmu = F4::load(cpu, &lanes.dmu);
         let book = &lanes.book;
-        let (al, r0, start) = (F4::load(&book.alpha), F4::load(&book.r0), zero.lt(F4::load(&book.start)));
-        let (mb, cb) = book.map();
+        let (al, r0, start) =
+            (F4::load(cpu, &book.alpha), F4::load(cpu, &book.r0), zero.lt(F4::load(cpu, &book.start)));
+        let (mb, cb) = book.map(cpu);
         let xt = dx.mul_add(al, x);
         let mut mt = dmu.mul_add(al, mu);
-        let ua = xt.mul_add(ka4, V3::load(&lanes.ca));
+        let ua = xt.mul_add(ka4, V3::load(cpu, &lanes.ca));
         let ub = mat_mul(&mb, xt).add(cb);
         let ea = soa_a.eval4_rows(&ua.to_arrays());
         let eb = soa_b.eval4_rows(&ub.to_arrays());
-        let gf = V3::load(&ea.gradient).scale(ka4);
-        let gg = mat_t_mul(&mb, V3::load(&eb.gradient));
+        let gf = V3::load(cpu, &ea.gradient).scale(ka4);
+        let gg = mat_t_mul(&mb, V3::load(cpu, &eb.gradient));
         // Least-squares multipliers at a start (the single-pair solver's initial multiplier).
         if start.bits() != 0 {
-            let tiny = F4::splat(Real::MIN_POSITIVE);
+            let tiny = F4::splat(cpu, Real::MIN_POSITIVE);
             let (nf, ng) = (gf.dot(gf), gg.dot(gg));
             let ls = -gf.dot(gg) / ng.max(tiny);
             let fallback = nf.sqrt() / ng.sqrt().max(tiny);
             mt = F4::select(start, F4::select(ls.finite().and(zero.lt(ls)), ls, fallback), mt);
         }
         let r = gg.mul_add(mt, gf);
-        let c = F4::load(&eb.value) - one;
+        let c = F4::load(cpu, &eb.value) - one;
         // The single-pair solver's merit ‖(L·r, c)‖₂ ([`merit_length`]).
         let r1 = r.dot(r).mul_add(l2, c * c).sqrt();
         let norm_inf = abs_max(r).max(c.abs());
@@ -130,7 +132,7 @@ pub(super) fn solve_growth_on_lanes(
         // The Newton steps from the trial points (taken where a trial point is accepted).
         let hf = load6(&ea.hessian, ka2);
         let hg = congruence(&mb, &load6(&eb.hessian, one));
-        let w: S3 = [
+        let w: S3<F4> = [
             hg[0].mul_add(mt, hf[0]),
             hg[1].mul_add(mt, hf[1]),
             hg[2].mul_add(mt, hf[2]),
@@ -139,8 +141,8 @@ pub(super) fn solve_growth_on_lanes(
             hg[5].mul_add(mt, hf[5]),
         ];
         let (sdx, sdmu, solved) = solve_kkt4(&w, gg, r, c);
-        let decrease = r1.le((F4::splat(-1e-4) * al + one) * r0).and(r1.finite());
-        let accepted = start.or(decrease).and(lanes.book.live());
+        let decrease = r1.le((F4::splat(cpu, -1e-4) * al + one) * r0).and(r1.finite());
+        let accepted = start.or(decrease).and(lanes.book.live(cpu));
         lanes.x = V3::select(accepted, xt, x).to_arrays();
         lanes.mu = F4::select(accepted, mt, mu).to_array();
         lanes.dx = V3::select(accepted, sdx, dx).to_arrays();
@@ -154,7 +156,8 @@ pub(super) fn solve_growth_on_lanes(
             continue;
         }
         // The overlapping answers: a KKT point with μ > 0 (the minimizer) and p_a ≤ 1 there.
-        let answer = done.and(stationary).and(r1.finite()).and(zero.lt(mt)).and(F4::load(&ea.value).le(one)).bits();
+        let answer =
+            done.and(stationary).and(r1.finite()).and(zero.lt(mt)).and(F4::load(cpu, &ea.value).le(one)).bits();
         let (norm_inf, steps, mt) = (norm_inf.to_array(), steps.to_array(), mt.to_array());
         for i in (0..4).filter(|i| leave & (1 << i) != 0) {
             let k = lanes.book.job[i];

@@ -1,5 +1,5 @@
-//! The four-lane solver (x86-64 only: AVX2 + FMA registers): the crate's one module with
-//! `unsafe` code (the lanes' intrinsics and the table gathers, each with its `SAFETY` argument).
+//! The four-lane solver (x86-64 only: AVX2 + FMA registers, [`F4`] and [`F8`] lanes of
+//! `sublevel-kernels`, made with the [`Avx2Fma`] proof that the solver runs with).
 
 use super::super::distance::{
     clear_of_contact, distance_growth_first, finish, overlapping_answer, separated_answer, DistanceResult,
@@ -10,23 +10,22 @@ use super::super::growth::GrowthWarmStart;
 use super::super::newton::{frame_origin, merit_length, posed_in_frame, working_frame, NewtonParams, SolveStatus};
 #[cfg(doc)]
 use super::BatchSettings;
-use std::arch::x86_64::*;
+use crate::lane_algebra::*;
 use sublevel_core::body::{Body, PosedBody};
 use sublevel_core::math::{Isometry3, Real, Vector3};
 use sublevel_core::poly::radial::RADIAL_GRID;
 use sublevel_core::poly::support::SUPPORT_GRID;
 use sublevel_core::poly::{RadialTable, SupportTable};
-use sublevel_kernels::Avx2Fma;
+use sublevel_kernels::{Avx2Fma, Lane, LaneMask, F4, M4};
 
 mod coarse;
 mod growth;
-mod simd;
 mod starts;
 use growth::solve_growth_on_lanes;
-use simd::*;
 use starts::cold_starts;
 
-/// [`super::cold_distances`] on the lanes (`cpu`: the proof that they may run).
+/// [`super::cold_distances`] on the lanes (`cpu`: the proof that they may run), compiled for
+/// AVX2 + FMA (the lane arithmetic becomes one instruction per operation).
 pub(super) fn solve(
     cpu: Avx2Fma,
     a: &Body,
@@ -35,22 +34,10 @@ pub(super) fn solve(
     params: &NewtonParams,
     warm_starts: bool,
 ) -> Vec<DistanceResult> {
-    let _ = cpu;
-    // SAFETY: `cpu` proves that the CPU runs AVX2 and FMA.
-    unsafe { lanes_avx2(a, b, poses, params, warm_starts) }
-}
-
-/// [`super::cold_distances`] on the lanes, compiled for AVX2 + FMA (the 4-lane arithmetic below becomes
-/// one instruction per operation).
-#[target_feature(enable = "avx2,fma")]
-fn lanes_avx2(
-    a: &Body,
-    b: &Body,
-    poses: &[(Isometry3, Isometry3)],
-    params: &NewtonParams,
-    warm_starts: bool,
-) -> Vec<DistanceResult> {
-    solve_on_lanes(a, b, poses, params, warm_starts)
+    cpu.run(
+        #[inline(always)]
+        || solve_on_lanes(cpu, a, b, poses, params, warm_starts),
+    )
 }
 
 /// [`cold_starts`] compiled for AVX2 + FMA, for the tests (`cpu`: the proof that it may run).
@@ -61,14 +48,30 @@ pub(super) fn cold_starts_on_lanes(
     b: &Body,
     rels: &[Isometry3],
 ) -> Vec<Option<(Vector3, Vector3)>> {
-    /// The build with AVX2 and FMA.
-    #[target_feature(enable = "avx2,fma")]
-    fn build(a: &Body, b: &Body, rels: &[Isometry3]) -> Vec<Option<(Vector3, Vector3)>> {
-        cold_starts(a, b, rels)
+    cpu.run(
+        #[inline(always)]
+        || cold_starts(cpu, a, b, rels),
+    )
+}
+
+impl V3<F4> {
+    /// Lane `i` as a vector.
+    #[inline(always)]
+    fn lane(a: &[[Real; 4]; 3], i: usize) -> Vector3 {
+        Vector3::new(a[0][i], a[1][i], a[2][i])
     }
-    let _ = cpu;
-    // SAFETY: `cpu` proves that the CPU runs AVX2 and FMA.
-    unsafe { build(a, b, rels) }
+
+    /// The vectors of four lanes, coordinates by rows.
+    #[inline(always)]
+    fn load(cpu: Avx2Fma, v: &[[Real; 4]; 3]) -> Self {
+        Self([F4::load(cpu, &v[0]), F4::load(cpu, &v[1]), F4::load(cpu, &v[2])])
+    }
+
+    /// The coordinates by rows.
+    #[inline(always)]
+    fn to_arrays(self) -> [[Real; 4]; 3] {
+        [self.0[0].to_array(), self.0[1].to_array(), self.0[2].to_array()]
+    }
 }
 
 /// The separated answer of a lane's converged run `out` (frame of body A, whose pose is
@@ -128,6 +131,7 @@ impl LaneBook {
     }
 
     /// Gives lane `i` pair `k` (B posed as `bb` in A's frame), at its start.
+    #[inline(always)]
     fn fill(&mut self, i: usize, k: usize, bb: &PosedBody<'_>) {
         self.job[i] = k;
         let (m, c) = (bb.linear(), bb.to_normalized(&Vector3::zeros()));
@@ -150,27 +154,27 @@ impl LaneBook {
 
     /// The lanes' maps of B as 4-lane registers (M, c).
     #[inline(always)]
-    fn map(&self) -> (M3, V3) {
+    fn map(&self, cpu: Avx2Fma) -> (M3<F4>, V3<F4>) {
         let m = &self.mb;
         let mb = [
-            F4::load(&m[0]),
-            F4::load(&m[1]),
-            F4::load(&m[2]),
-            F4::load(&m[3]),
-            F4::load(&m[4]),
-            F4::load(&m[5]),
-            F4::load(&m[6]),
-            F4::load(&m[7]),
-            F4::load(&m[8]),
+            F4::load(cpu, &m[0]),
+            F4::load(cpu, &m[1]),
+            F4::load(cpu, &m[2]),
+            F4::load(cpu, &m[3]),
+            F4::load(cpu, &m[4]),
+            F4::load(cpu, &m[5]),
+            F4::load(cpu, &m[6]),
+            F4::load(cpu, &m[7]),
+            F4::load(cpu, &m[8]),
         ];
-        (mb, V3::load(&self.cb))
+        (mb, V3::load(cpu, &self.cb))
     }
 
     /// The lanes holding a pair.
     #[inline(always)]
-    fn live(&self) -> M4 {
+    fn live(&self, cpu: Avx2Fma) -> M4 {
         let job = &self.job;
-        M4::from_bools([job[0] != EMPTY, job[1] != EMPTY, job[2] != EMPTY, job[3] != EMPTY])
+        M4::from_bools(cpu, [job[0] != EMPTY, job[1] != EMPTY, job[2] != EMPTY, job[3] != EMPTY])
     }
 
     /// The bookkeeping of a round: where a trial point was `accepted` (its residual `r1`), a
@@ -181,13 +185,14 @@ impl LaneBook {
     /// limit, [`NewtonParams::line_search_steps`]) and the steps taken before this round.
     #[inline(always)]
     fn advance(&mut self, accepted: M4, r1: F4, first: F4, ends: M4, cap: F4, stall: F4) -> (M4, u32, F4) {
-        let (zero, one) = (F4::splat(0.0), F4::splat(1.0));
-        let live = self.live();
-        self.r0 = F4::select(accepted, r1, F4::load(&self.r0)).to_array();
-        self.alpha = F4::select(accepted, first, F4::load(&self.alpha) * F4::splat(0.5)).to_array();
-        let rejected = F4::select(accepted, zero, F4::load(&self.rejected) + one);
+        let cpu = r1.cpu();
+        let (zero, one) = (F4::splat(cpu, 0.0), F4::splat(cpu, 1.0));
+        let live = self.live(cpu);
+        self.r0 = F4::select(accepted, r1, F4::load(cpu, &self.r0)).to_array();
+        self.alpha = F4::select(accepted, first, F4::load(cpu, &self.alpha) * F4::splat(cpu, 0.5)).to_array();
+        let rejected = F4::select(accepted, zero, F4::load(cpu, &self.rejected) + one);
         self.rejected = rejected.to_array();
-        let before = F4::load(&self.steps);
+        let before = F4::load(cpu, &self.steps);
         let done = accepted.and(ends.or(cap.le(before)));
         let stalled = live.and(accepted.not()).and(stall.le(rejected));
         self.steps = (before + F4::select(accepted, one, zero)).to_array();
@@ -199,9 +204,9 @@ impl LaneBook {
 /// The linear part of body A's map to its normalized coordinates, u = k·x + c with
 /// k = 1/scale, in every lane: (k, k²).
 #[inline(always)]
-fn scale_map(a: &Body) -> (F4, F4) {
+fn scale_map(cpu: Avx2Fma, a: &Body) -> (F4, F4) {
     let k = 1.0 / a.scale();
-    (F4::splat(k), F4::splat(k * k))
+    (F4::splat(cpu, k), F4::splat(cpu, k * k))
 }
 
 /// The offset c = −(center − o)/scale of body A's map to its normalized coordinates in a
@@ -265,6 +270,7 @@ impl Lanes {
     /// Puts pair `k` with the relative pose `rel` into lane `i`, starting at (x0, y0) (A's
     /// frame).
     #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
     fn fill(&mut self, i: usize, k: usize, a: &Body, b: &Body, rel: &Isometry3, x0: &Vector3, y0: &Vector3) {
         let o = self.frame(i, k, a, b, rel);
         for r in 0..3 {
@@ -308,15 +314,13 @@ impl Lanes {
     /// lane whose trial point is stationary leaves, with its answer in `answers` when both
     /// multipliers are positive and the bodies clear of contact (else the single-pair solver
     /// decides, as for the lanes that end in a round). Compiled apart from the rounds (not
-    /// inlined): inlined, its scalar code makes the rounds spill registers.
-    ///
-    /// # Safety
-    /// The CPU must support AVX2 and FMA.
+    /// inlined, its body compiled for AVX2 + FMA by `cpu`): inlined, its scalar code makes the
+    /// rounds spill registers.
     #[allow(clippy::too_many_arguments)]
-    #[target_feature(enable = "avx2,fma")]
     #[inline(never)]
-    unsafe fn verify_lanes(
+    fn verify_lanes(
         &mut self,
+        cpu: Avx2Fma,
         verify: u32,
         steps: &[Real; 4],
         a: &Body,
@@ -327,18 +331,22 @@ impl Lanes {
         answers: &mut [Option<DistanceResult>],
         empty: &std::sync::Arc<DistanceWarmStart>,
     ) {
-        let cpu = Avx2Fma::enabled();
-        for i in (0..4).filter(|i| verify & (1 << i) != 0) {
-            let Some(out) = self.verify(cpu, i, a, b, steps[i] as usize + 1, params.kkt_tolerance) else {
-                continue;
-            };
-            let k = self.book.job[i];
-            self.book.job[i] = EMPTY;
-            if out.lam[0] > 0.0 && out.lam[1] > 0.0 && clear_of_contact(&out.x, &out.y, a, b) {
-                let out = out.moved(&self.origin(i));
-                answers[k] = Some(lane_answer(&poses[k].0, &self.rel[i], out, warm_starts, empty));
-            }
-        }
+        cpu.run(
+            #[inline(always)]
+            || {
+                for i in (0..4).filter(|i| verify & (1 << i) != 0) {
+                    let Some(out) = self.verify(cpu, i, a, b, steps[i] as usize + 1, params.kkt_tolerance) else {
+                        continue;
+                    };
+                    let k = self.book.job[i];
+                    self.book.job[i] = EMPTY;
+                    if out.lam[0] > 0.0 && out.lam[1] > 0.0 && clear_of_contact(&out.x, &out.y, a, b) {
+                        let out = out.moved(&self.origin(i));
+                        answers[k] = Some(lane_answer(&poses[k].0, &self.rel[i], out, warm_starts, empty));
+                    }
+                }
+            },
+        )
     }
 }
 
@@ -381,6 +389,7 @@ impl Lanes {
     /// Puts pair `k` (relative pose `rel`, B posed as `bb`) into lane `i` where its coarse stage
     /// left it (`h`): the next trial point is its Newton step from there at the step length it
     /// had reached.
+    #[inline(always)]
     fn resume(&mut self, i: usize, k: usize, a: &Body, b: &Body, rel: &Isometry3, h: &Handoff) {
         let o = self.frame(i, k, a, b, rel);
         self.book.start[i] = 0.0;
@@ -437,7 +446,7 @@ fn kkt_round<F: Lane>(
     [va, vb]: [F; 2],
     [ha, hb]: [&S3<F>; 2],
 ) -> KktRound<F> {
-    let (one, two) = (F::splat(1.0), F::splat(2.0));
+    let (one, two) = (tiny.constant(1.0), tiny.constant(2.0));
     let diff = xt.sub(yt);
     let dist = diff.dot(diff).sqrt();
     // Least-squares multipliers at a start (the single-pair solver's initial multipliers).
@@ -462,19 +471,21 @@ fn kkt_round<F: Lane>(
 }
 
 #[inline(always)]
-fn load6(h: &[[Real; 4]; 6], k: F4) -> S3 {
+fn load6(h: &[[Real; 4]; 6], k: F4) -> S3<F4> {
+    let cpu = k.cpu();
     [
-        F4::load(&h[0]) * k,
-        F4::load(&h[1]) * k,
-        F4::load(&h[2]) * k,
-        F4::load(&h[3]) * k,
-        F4::load(&h[4]) * k,
-        F4::load(&h[5]) * k,
+        F4::load(cpu, &h[0]) * k,
+        F4::load(cpu, &h[1]) * k,
+        F4::load(cpu, &h[2]) * k,
+        F4::load(cpu, &h[3]) * k,
+        F4::load(cpu, &h[4]) * k,
+        F4::load(cpu, &h[5]) * k,
     ]
 }
 
 #[inline(always)]
 fn solve_on_lanes(
+    cpu: Avx2Fma,
     a: &Body,
     b: &Body,
     poses: &[(Isometry3, Isometry3)],
@@ -484,17 +495,17 @@ fn solve_on_lanes(
     let (soa_a, soa_b) = (a.soa_polynomial(), b.soa_polynomial());
     let mut answers: Vec<Option<DistanceResult>> = vec![None; poses.len()];
     let batch = &params.batch;
-    let cap = F4::splat(params.max_iterations.min(params.speculative_iterations) as Real);
-    let stall = F4::splat(params.line_search_steps as Real);
-    let tolerance = F4::splat(params.kkt_tolerance);
+    let cap = F4::splat(cpu, params.max_iterations.min(params.speculative_iterations) as Real);
+    let stall = F4::splat(cpu, params.line_search_steps as Real);
+    let tolerance = F4::splat(cpu, params.kkt_tolerance);
     // Checks of predicted last points only where they pay (see `BatchSettings::verify_min_degree`).
-    let verify_level = F4::splat(batch.verify_residual);
+    let verify_level = F4::splat(cpu, batch.verify_residual);
     // The merit's length L and its weight 1/L² ([`merit_length`]).
     let len = merit_length(a, b);
-    let (w2, two_over_len) = (F4::splat(1.0 / (len * len)), F4::splat(2.0 / len));
+    let (w2, two_over_len) = (F4::splat(cpu, 1.0 / (len * len)), F4::splat(cpu, 2.0 / len));
     let verifying = a.degree().max(b.degree()) >= batch.verify_min_degree;
-    let (zero, one, two) = (F4::splat(0.0), F4::splat(1.0), F4::splat(2.0));
-    let (ka4, ka2) = scale_map(a);
+    let (zero, one, two) = (F4::splat(cpu, 0.0), F4::splat(cpu, 1.0), F4::splat(cpu, 2.0));
+    let (ka4, ka2) = scale_map(cpu, a);
     let mut lanes = Lanes {
         book: LaneBook::new(),
         x: [[0.0; 4]; 3],
@@ -510,15 +521,14 @@ fn solve_on_lanes(
     };
     let empty = std::sync::Arc::new(DistanceWarmStart::default());
     let rels: Vec<Isometry3> = poses.iter().map(|(pa, pb)| pa.inv_mul(pb)).collect();
-    let starts = cold_starts(a, b, &rels);
+    let starts = cold_starts(cpu, a, b, &rels);
     // The coarse stage (eight single-precision lanes; none below `coarse_min_degree`: every pair
     // cold, in order) records where each pair stands; the fine stage's queue is the pairs it
     // drained and the cold ones (the slow ones first: they run beside the others; pairs without
     // a start are skipped by the refill), then the others.
     let (stage, queue) = if a.degree().max(b.degree()) >= batch.coarse_min_degree {
         let mut stage = vec![Stage::Cold; poses.len()];
-        // SAFETY: the lanes run only on CPUs with AVX2 and FMA (`lanes_avx2`).
-        unsafe { coarse::coarse_stage8(a, b, &rels, &starts, params, &mut stage) };
+        coarse::coarse_stage8(cpu, a, b, &rels, &starts, params, &mut stage);
         let first = |s: &Stage| matches!(s, Stage::Drained(_) | Stage::Cold);
         let mut queue: Vec<usize> = (0..poses.len()).filter(|&k| first(&stage[k])).collect();
         queue.extend((0..poses.len()).filter(|&k| matches!(stage[k], Stage::Resume(_))));
@@ -546,31 +556,32 @@ fn solve_on_lanes(
             break;
         }
         // The trial points of the four lanes, evaluated in one pass per body.
-        let (x, y) = (V3::load(&lanes.x), V3::load(&lanes.y));
-        let lam = [F4::load(&lanes.lam[0]), F4::load(&lanes.lam[1])];
-        let (dx, dy) = (V3::load(&lanes.dx), V3::load(&lanes.dy));
-        let dl = [F4::load(&lanes.dl[0]), F4::load(&lanes.dl[1])];
+        let (x, y) = (V3::load(cpu, &lanes.x), V3::load(cpu, &lanes.y));
+        let lam = [F4::load(cpu, &lanes.lam[0]), F4::load(cpu, &lanes.lam[1])];
+        let (dx, dy) = (V3::load(cpu, &lanes.dx), V3::load(cpu, &lanes.dy));
+        let dl = [F4::load(cpu, &lanes.dl[0]), F4::load(cpu, &lanes.dl[1])];
         let book = &lanes.book;
-        let (al, r0, start) = (F4::load(&book.alpha), F4::load(&book.r0), zero.lt(F4::load(&book.start)));
-        let (mb, cb) = book.map();
+        let (al, r0, start) =
+            (F4::load(cpu, &book.alpha), F4::load(cpu, &book.r0), zero.lt(F4::load(cpu, &book.start)));
+        let (mb, cb) = book.map(cpu);
         let xt = dx.mul_add(al, x);
         let yt = dy.mul_add(al, y);
         let lt = [dl[0].mul_add(al, lam[0]), dl[1].mul_add(al, lam[1])];
-        let ua = xt.mul_add(ka4, V3::load(&lanes.ca));
+        let ua = xt.mul_add(ka4, V3::load(cpu, &lanes.ca));
         let ub = mat_mul(&mb, yt).add(cb);
         let (ea, eb) = (soa_a.eval4_rows(&ua.to_arrays()), soa_b.eval4_rows(&ub.to_arrays()));
-        let ga = V3::load(&ea.gradient).scale(ka4);
-        let gb = mat_t_mul(&mb, V3::load(&eb.gradient));
-        let (va, vb) = (F4::load(&ea.value), F4::load(&eb.value));
+        let ga = V3::load(cpu, &ea.gradient).scale(ka4);
+        let gb = mat_t_mul(&mb, V3::load(cpu, &eb.gradient));
+        let (va, vb) = (F4::load(cpu, &ea.value), F4::load(cpu, &eb.value));
         let (ha, hb) = (load6(&ea.hessian, ka2), congruence(&mb, &load6(&eb.hessian, one)));
-        let tiny = F4::splat(Real::MIN_POSITIVE);
+        let tiny = F4::splat(cpu, Real::MIN_POSITIVE);
         let KktRound { lt, dist, ra, rb, cva, cvb, r1, step } =
             kkt_round(xt, yt, lt, start, tiny, w2, [ga, gb], [va, vb], [&ha, &hb]);
         let (sdx, sdy, sdl, solved) = step;
         let norm_inf = abs_max(ra).max(abs_max(rb)).max(cva.abs().max(cvb.abs()));
         // Accepted trial points: the start, or a decrease of the merit (Armijo).
-        let decrease = r1.le((F4::splat(-1e-4) * al + one) * r0).and(r1.finite());
-        let accepted = start.or(decrease).and(lanes.book.live());
+        let decrease = r1.le((F4::splat(cpu, -1e-4) * al + one) * r0).and(r1.finite());
+        let accepted = start.or(decrease).and(lanes.book.live(cpu));
         let scale = dist.mul_add(two, one);
         let stationary = norm_inf.le(tolerance * scale);
         lanes.x = V3::select(accepted, xt, x).to_arrays();
@@ -589,7 +600,7 @@ fn solve_on_lanes(
         // evaluations (no Hessians, which a last point does not need), instead of in the next
         // round's pass.
         let level = verify_level * dist.mul_add(two_over_len, one);
-        let last = if verifying { accepted.and(solved).and(r1.le(level)) } else { M4::default() };
+        let last = if verifying { accepted.and(solved).and(r1.le(level)) } else { F4::none(cpu) };
         let (done, leave, steps) = lanes.book.advance(accepted, r1, one, ends, cap, stall);
         let verify = last.and(done.not()).bits();
         if leave | verify == 0 {
@@ -597,8 +608,7 @@ fn solve_on_lanes(
         }
         let (norm_inf, steps) = (norm_inf.to_array(), steps.to_array());
         if verify != 0 {
-            // SAFETY: the lanes run only on CPUs with AVX2 and FMA (`lanes_avx2`).
-            unsafe { lanes.verify_lanes(verify, &steps, a, b, poses, params, warm_starts, &mut answers, &empty) };
+            lanes.verify_lanes(cpu, verify, &steps, a, b, poses, params, warm_starts, &mut answers, &empty);
         }
         let answer = done.and(stationary).and(r1.finite()).bits();
         for i in (0..4).filter(|i| leave & (1 << i) != 0) {
@@ -623,7 +633,7 @@ fn solve_on_lanes(
     // hand them), its growth solve on the lanes first.
     let queue: Vec<usize> = (0..poses.len()).filter(|&k| answers[k].is_none()).collect();
     if queue.len() >= batch.min_growth_lanes {
-        solve_growth_on_lanes(a, b, poses, &rels, &queue, params, warm_starts, &mut answers, &empty);
+        solve_growth_on_lanes(cpu, a, b, poses, &rels, &queue, params, warm_starts, &mut answers, &empty);
     }
     answers
         .into_iter()

@@ -21,8 +21,9 @@ fn select3(on_x: M4, on_y: M4, fx: F4, fy: F4, fz: F4) -> F4 {
 /// The cube-map cells of four directions (one per lane): [`sublevel_core::poly::radial`]'s face
 /// coordinates and bilinear interpolation, per lane.
 struct CubeCells {
-    /// Flat node index `face · (G + 1)² + j · (G + 1) + i` of each cell's first node.
-    k: __m128i,
+    /// Flat node index `face · (G + 1)² + j · (G + 1) + i` of each cell's first node (an
+    /// integer, as a real).
+    k: F4,
     /// The direction's position within its cell (interpolation weights along a and b).
     ta: F4,
     tb: F4,
@@ -35,59 +36,38 @@ impl CubeCells {
     /// (faces +x, −x, +y, −y, +z, −z, ties to the earlier axis), face coordinates the other two
     /// components in cyclic order over its modulus (the scalar look-ups' rules and arithmetic).
     #[inline(always)]
-    fn new(v: V3) -> Self {
+    fn new(v: V3<F4>) -> Self {
         let [x, y, z] = v.0;
+        let cpu = x.cpu();
         let (ax, ay, az) = (x.abs(), y.abs(), z.abs());
-        let (zero, one) = (F4::splat(0.0), F4::splat(1.0));
+        let (zero, one) = (F4::splat(cpu, 0.0), F4::splat(cpu, 1.0));
         let on_x = ay.le(ax).and(az.le(ax));
         let on_y = on_x.not().and(az.le(ay));
         let major = select3(on_x, on_y, ax, ay, az);
         let sign = select3(on_x, on_y, x, y, z).lt(zero);
-        let face = select3(on_x, on_y, zero, F4::splat(2.0), F4::splat(4.0)) + F4::select(sign, one, zero);
+        let face = select3(on_x, on_y, zero, F4::splat(cpu, 2.0), F4::splat(cpu, 4.0)) + F4::select(sign, one, zero);
         let (a, b) = (select3(on_x, on_y, y, z, x) / major, select3(on_x, on_y, z, x, y) / major);
         let ok = a.finite().and(b.finite());
-        let half = F4::splat(0.5 * GRID as Real);
+        let half = F4::splat(cpu, 0.5 * GRID as Real);
         let fa = F4::select(ok, (a + one) * half, zero);
         let fb = F4::select(ok, (b + one) * half, zero);
-        let last = F4::splat((GRID - 1) as Real);
+        let last = F4::splat(cpu, (GRID - 1) as Real);
         let (i, j) = (fa.floor().max(zero).min(last), fb.floor().max(zero).min(last));
-        let k = face.mul_add(F4::splat(FACE_NODES as Real), j.mul_add(F4::splat(NODES as Real), i));
-        // SAFETY: see [`F4`]'s docs; `k` holds small nonnegative integers (exact conversion).
-        let k = unsafe { _mm256_cvtpd_epi32(k.0) };
+        let k = face.mul_add(F4::splat(cpu, FACE_NODES as Real), j.mul_add(F4::splat(cpu, NODES as Real), i));
         Self { k, ta: fa - i, tb: fb - j, ok }
     }
 
-    /// `table[k + offset]` per lane, from the flat table `base` (`stride` reals per node).
-    ///
-    /// # Safety
-    /// `base` points at 6·(G + 1)² nodes of `stride` reals; `offset` < `stride`·(G + 2).
-    #[inline(always)]
-    unsafe fn gather(&self, base: *const Real, stride: i32, offset: usize) -> F4 {
-        // SAFETY: the node indices are below 6·(G + 1)² − (G + 2) (face ≤ 5, i, j ≤ G − 1), so
-        // with the offset every read stays in the table (the caller's contract).
-        unsafe {
-            let k = _mm_mullo_epi32(self.k, _mm_set1_epi32(stride));
-            F4(_mm256_i32gather_pd::<8>(base.add(offset), k))
-        }
-    }
-
     /// Bilinear interpolation of the four nodes around each direction, of the node quantity at
-    /// `coordinate` of `stride`-real nodes ([`sublevel_core::poly::RadialTable::radius`]'s arithmetic).
-    ///
-    /// # Safety
-    /// As [`Self::gather`], with `coordinate` < `stride`.
+    /// `coordinate` of `stride`-real nodes in the flat table `table`
+    /// ([`sublevel_core::poly::RadialTable::radius`]'s arithmetic; [`F4::gather`] keeps every
+    /// read in the table).
     #[inline(always)]
-    unsafe fn interpolate(&self, base: *const Real, stride: usize, coordinate: usize) -> F4 {
-        // SAFETY: offsets below stride·(G + 2) (the caller's contract).
-        let (s, c) = (stride as i32, coordinate);
-        let [n00, n01, n10, n11] = unsafe {
-            [
-                self.gather(base, s, c),
-                self.gather(base, s, stride + c),
-                self.gather(base, s, stride * NODES + c),
-                self.gather(base, s, stride * (NODES + 1) + c),
-            ]
-        };
+    fn interpolate(&self, table: &[Real], stride: usize, coordinate: usize) -> F4 {
+        // No closure: one compiled out of line would lose the AVX target features.
+        let (k, c) = (self.k, coordinate);
+        let (n00, n01) = (k.gather(table, stride, c), k.gather(table, stride, stride + c));
+        let (n10, n11) =
+            (k.gather(table, stride, stride * NODES + c), k.gather(table, stride, stride * (NODES + 1) + c));
         let low = n00 + (n01 - n00) * self.ta;
         let high = n10 + (n11 - n10) * self.ta;
         low + (high - low) * self.tb
@@ -96,18 +76,16 @@ impl CubeCells {
     /// The radial table's radius per lane (0 where the direction is not `ok`).
     #[inline(always)]
     fn radius(&self, table: &RadialTable) -> F4 {
-        // SAFETY: `nodes` is 6·(G + 1)² reals (one per node), coordinate 0 of stride 1.
-        let r = unsafe { self.interpolate(table.nodes().as_ptr().cast(), 1, 0) };
-        F4::select(self.ok, r, F4::splat(0.0))
+        let r = self.interpolate(table.nodes().as_flattened(), 1, 0);
+        F4::select(self.ok, r, r.constant(0.0))
     }
 
     /// The support table's interpolated support point per lane (normalized units; meaningless
     /// where the direction is not `ok`).
     #[inline(always)]
-    fn support(&self, table: &SupportTable) -> V3 {
-        let base: *const Real = table.nodes().as_ptr().cast();
-        // SAFETY: `nodes` is 6·(G + 1)² points of three reals; coordinates 0–2 of stride 3.
-        unsafe { V3([self.interpolate(base, 3, 0), self.interpolate(base, 3, 1), self.interpolate(base, 3, 2)]) }
+    fn support(&self, table: &SupportTable) -> V3<F4> {
+        let nodes = table.nodes().as_flattened().as_flattened();
+        V3([self.interpolate(nodes, 3, 0), self.interpolate(nodes, 3, 1), self.interpolate(nodes, 3, 2)])
     }
 }
 
@@ -115,15 +93,17 @@ impl CubeCells {
 /// whose direction in the body's normalized frame is `du`, for the radial table's radius `r`
 /// there (0 where ‖du‖ is 0 or not a number: [`PosedBody::boundary_towards`]'s rule, per lane).
 #[inline(always)]
-fn reach(r: F4, du: V3) -> F4 {
+fn reach(r: F4, du: V3<F4>) -> F4 {
+    let cpu = r.cpu();
     let n = du.dot(du).sqrt();
-    F4::select(F4::splat(0.0).lt(n), (r / n).min(F4::splat(1.0)), F4::splat(0.0))
+    F4::select(F4::splat(cpu, 0.0).lt(n), (r / n).min(F4::splat(cpu, 1.0)), F4::splat(cpu, 0.0))
 }
 
 /// The rotation matrix (row-major) of unit quaternions (w, x, y, z) per lane.
 #[inline(always)]
-fn rotation_matrix(w: F4, x: F4, y: F4, z: F4) -> M3 {
-    let (one, two) = (F4::splat(1.0), F4::splat(2.0));
+fn rotation_matrix(w: F4, x: F4, y: F4, z: F4) -> M3<F4> {
+    let cpu = w.cpu();
+    let (one, two) = (F4::splat(cpu, 1.0), F4::splat(cpu, 2.0));
     let (xx, yy, zz) = (x * x, y * y, z * z);
     let (xy, xz, yz, wx, wy, wz) = (x * y, x * z, y * z, w * x, w * y, w * z);
     [
@@ -146,18 +126,18 @@ fn rotation_matrix(w: F4, x: F4, y: F4, z: F4) -> M3 {
 /// 4-lane arithmetic; only the overlap tests of pairs whose spheres meet (two polynomial values,
 /// at points mapped on the lanes) stay scalar.
 #[inline(always)]
-pub(super) fn cold_starts(a: &Body, b: &Body, rels: &[Isometry3]) -> Vec<Option<(Vector3, Vector3)>> {
+pub(super) fn cold_starts(cpu: Avx2Fma, a: &Body, b: &Body, rels: &[Isometry3]) -> Vec<Option<(Vector3, Vector3)>> {
     let ba = PosedBody::unposed(a);
     let ca = ba.interior_point();
-    let ca4 = V3::splat(&ca);
+    let ca4 = V3::splat(cpu, &ca);
     let quadric = a.degree() <= 2 || b.degree() <= 2;
     let spheres = match (a.bounding_sphere(), b.bounding_sphere()) {
-        (Some((c1, r1)), Some((c2, r2))) => Some((V3::splat(&ba.to_world(&c1.coords)), c2.coords, r1 + r2)),
+        (Some((c1, r1)), Some((c2, r2))) => Some((V3::splat(cpu, &ba.to_world(&c1.coords)), c2.coords, r1 + r2)),
         _ => None,
     };
-    let (sa, sb) = (F4::splat(a.scale()), F4::splat(b.scale()));
-    let (center_a, center_b) = (V3::splat(&a.center()), V3::splat(&b.center()));
-    let (inv_sa, neg_inv_sb) = (F4::splat(1.0 / a.scale()), F4::splat(-1.0 / b.scale()));
+    let (sa, sb) = (F4::splat(cpu, a.scale()), F4::splat(cpu, b.scale()));
+    let (center_a, center_b) = (V3::splat(cpu, &a.center()), V3::splat(cpu, &b.center()));
+    let (inv_sa, neg_inv_sb) = (F4::splat(cpu, 1.0 / a.scale()), F4::splat(cpu, -1.0 / b.scale()));
     let interior_b = b.interior_point().coords;
     let mut out = Vec::with_capacity(rels.len());
     for chunk in rels.chunks(4) {
@@ -173,15 +153,16 @@ pub(super) fn cold_starts(a: &Body, b: &Body, rels: &[Isometry3]) -> Vec<Option<
         }
         // No closures here: one compiled out of line loses the AVX target features (measured: each
         // of these was a call of about 280 instructions, 5 % of a 2d = 6 batch).
-        let rot = rotation_matrix(F4::load(&q[0]), F4::load(&q[1]), F4::load(&q[2]), F4::load(&q[3]));
-        let t4 = V3::load(&t);
-        let cb = mat_mul(&rot, V3::splat(&interior_b)).add(t4);
+        let rot =
+            rotation_matrix(F4::load(cpu, &q[0]), F4::load(cpu, &q[1]), F4::load(cpu, &q[2]), F4::load(cpu, &q[3]));
+        let t4 = V3::load(cpu, &t);
+        let cb = mat_mul(&rot, V3::splat(cpu, &interior_b)).add(t4);
         let apart = match &spheres {
             Some((c1, c2, rsum)) => {
-                let d = c1.sub(mat_mul(&rot, V3::splat(c2)).add(t4));
-                F4::splat(rsum * rsum).lt(d.dot(d))
+                let d = c1.sub(mat_mul(&rot, V3::splat(cpu, c2)).add(t4));
+                F4::splat(cpu, rsum * rsum).lt(d.dot(d))
             }
-            None => M4::default(),
+            None => F4::none(cpu),
         };
         // The directions of the look-ups in each body's normalized frame: A's towards B, B's
         // towards A (A·n for the world direction n = ±(cb − ca)).
@@ -191,13 +172,13 @@ pub(super) fn cold_starts(a: &Body, b: &Body, rels: &[Isometry3]) -> Vec<Option<
         let xs = cells_a.support(a.support_table()).mul_add(sa, center_a);
         let ys = mat_mul(&rot, cells_b.support(b.support_table()).mul_add(sb, center_b)).add(t4);
         let supports = cells_a.ok.and(cells_b.ok);
-        let facing = if quadric { M4::default() } else { apart.and(supports) };
+        let facing = if quadric { F4::none(cpu) } else { apart.and(supports) };
         // Facing lanes: one bisector refinement (`distance::bisector_start`), the support
         // points for n = (y − x)/‖y − x‖ + axis/‖axis‖ where they are closer to each other.
         let (xs, ys) = if facing.bits() != 0 {
             let d = ys.sub(xs);
             let dd = d.dot(d);
-            let one = F4::splat(1.0);
+            let one = F4::splat(cpu, 1.0);
             let n = d.scale(one / dd.sqrt()).add(axis.scale(one / axis.dot(axis).sqrt()));
             let (du_a, du_b) = (n.scale(inv_sa), mat_t_mul(&rot, n).scale(neg_inv_sb));
             let (cells_a, cells_b) = (CubeCells::new(du_a), CubeCells::new(du_b));
@@ -217,13 +198,13 @@ pub(super) fn cold_starts(a: &Body, b: &Body, rels: &[Isometry3]) -> Vec<Option<
             let y0v = axis.mul_add(-reach(cells_b.radius(b.radial_table()), du_b), cb);
             let (ex, ey) = (x0v.sub(ca4), y0v.sub(ca4));
             order = apart.or(ex.dot(ex).lt(ey.dot(ey))).bits();
-            let (gs, g0) = (V3::load(&ys).sub(V3::load(&xs)), y0v.sub(x0v));
+            let (gs, g0) = (V3::load(cpu, &ys).sub(V3::load(cpu, &xs)), y0v.sub(x0v));
             use_supports = supports.and(gs.dot(gs).lt(g0.dot(g0))).bits();
             (x0, y0) = (x0v.to_arrays(), y0v.to_arrays());
         }
         // Each interior point in the other body's normalized coordinates (the overlap tests).
         let ca_in_b = mat_t_mul(&rot, ca4.sub(t4)).sub(center_b).scale(-neg_inv_sb).to_arrays();
-        let cb_in_a = V3::load(&cb_lanes).sub(center_a).scale(inv_sa).to_arrays();
+        let cb_in_a = V3::load(cpu, &cb_lanes).sub(center_a).scale(inv_sa).to_arrays();
         let (facing, apart) = (facing.bits(), apart.bits());
         for i in 0..chunk.len() {
             let bit = 1 << i;
