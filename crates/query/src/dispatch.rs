@@ -363,16 +363,18 @@ pub enum StateRoute {
 /// The route of query `ask` in one candidate state of a request: [`StateRoute::Cold`] for a lane
 /// candidate; [`StateRoute::Far`] for a distance or collide query (outside
 /// [`CertifyMode::Certify`]) between `pair = (a, b, rel)` (`rel` = a.pose⁻¹ · b.pose) whose warm
-/// start would not reach the new relative pose ([`crate::warm_start_reaches`]: from `before`, the
-/// pair's relative pose in the state before; in the first state, from the pair's cached warm
-/// start `cached()`, asked only then) — the pair moved more than half the bodies' summed scales,
-/// as between a sampling planner's random candidates; else [`StateRoute::One`] (also without
-/// `pair`: the query names no posed pair).
+/// start would not reach the new relative pose ([`crate::warm_start_reaches_with`]: from
+/// `before`, the pair's relative pose in the state before; in the first state, from the pair's
+/// cached warm start `cached()`, asked only then) — the pair moved more than
+/// [`NewtonParams::warm_reach`] of `params` (default half the bodies' summed scales), as between
+/// a sampling planner's random candidates; else [`StateRoute::One`] (also without `pair`: the
+/// query names no posed pair).
 pub fn state_route<'w>(
     ask: &PairAsk,
     pair: Option<(&PosedRef<'_>, &PosedRef<'_>, &Isometry3)>,
     before: Option<&Isometry3>,
     cached: impl FnOnce() -> Option<&'w DistanceWarmStart>,
+    params: &NewtonParams,
 ) -> StateRoute {
     if ask.lane_candidate() {
         return StateRoute::Cold;
@@ -381,8 +383,8 @@ pub fn state_route<'w>(
         return StateRoute::One;
     }
     let far = match (pair, before) {
-        (Some((a, b, rel)), Some(prev)) => !crate::warm_start_reaches(a.body, b.body, prev, rel),
-        (Some((a, b, rel)), None) => !cached().is_some_and(|w| w.reaches(a.body, b.body, rel)),
+        (Some((a, b, rel)), Some(prev)) => !crate::warm_start_reaches_with(a.body, b.body, prev, rel, params),
+        (Some((a, b, rel)), None) => !cached().is_some_and(|w| w.reaches_with(a.body, b.body, rel, params)),
         (None, _) => false,
     };
     if far {
@@ -494,14 +496,33 @@ mod tests {
         let rel = a.pose.inv_mul(&b.pose);
         let near = Isometry3::translation(1.45, 0.0, 0.0);
         let far = Isometry3::translation(3.0, 1.0, 0.0);
-        assert_eq!(state_route(&warm, Some((&a, &b, &rel)), Some(&near), || None), StateRoute::One);
-        assert_eq!(state_route(&warm, Some((&a, &b, &rel)), Some(&far), || None), StateRoute::Far);
-        assert_eq!(state_route(&warm, Some((&a, &b, &rel)), None, || None), StateRoute::Far);
+        assert_eq!(
+            state_route(&warm, Some((&a, &b, &rel)), Some(&near), || None, &NewtonParams::DEFAULT),
+            StateRoute::One
+        );
+        assert_eq!(
+            state_route(&warm, Some((&a, &b, &rel)), Some(&far), || None, &NewtonParams::DEFAULT),
+            StateRoute::Far
+        );
+        assert_eq!(state_route(&warm, Some((&a, &b, &rel)), None, || None, &NewtonParams::DEFAULT), StateRoute::Far);
         let d = crate::distance(&big, &Isometry3::identity(), &small, &near, None, &NewtonParams::default());
-        assert_eq!(state_route(&warm, Some((&a, &b, &rel)), None, || Some(&*d.warm_start)), StateRoute::One);
-        assert_eq!(state_route(&warm, None, None, || None), StateRoute::One);
-        assert_eq!(state_route(&PairAsk { cold: true, ..warm }, None, None, || None), StateRoute::Cold);
+        assert_eq!(
+            state_route(&warm, Some((&a, &b, &rel)), None, || Some(&*d.warm_start), &NewtonParams::DEFAULT),
+            StateRoute::One
+        );
+        assert_eq!(state_route(&warm, None, None, || None, &NewtonParams::DEFAULT), StateRoute::One);
+        assert_eq!(
+            state_route(&PairAsk { cold: true, ..warm }, None, None, || None, &NewtonParams::DEFAULT),
+            StateRoute::Cold
+        );
+        // The caller's warm reach decides: at 3 (instead of 0.5) summed scales (0.75 m here) the
+        // 1.8 m step from `far` is within reach.
+        let reach = NewtonParams { warm_reach: 3.0, ..NewtonParams::DEFAULT };
+        assert_eq!(state_route(&warm, Some((&a, &b, &rel)), Some(&far), || None, &reach), StateRoute::One);
         let certify = PairAsk { mode: CertifyMode::Certify, ..warm };
-        assert_eq!(state_route(&certify, Some((&a, &b, &rel)), Some(&far), || None), StateRoute::One);
+        assert_eq!(
+            state_route(&certify, Some((&a, &b, &rel)), Some(&far), || None, &NewtonParams::DEFAULT),
+            StateRoute::One
+        );
     }
 }

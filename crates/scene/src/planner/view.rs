@@ -343,6 +343,7 @@ pub(super) fn state_lane_distances(
                 posed.as_ref().zip(rel.as_ref()).map(|((a, b), rel)| (a, b, rel)),
                 before[q].as_ref(),
                 || cache.distance(pair.first, pair.second),
+                &params.newton,
             );
             let lanes = route != StateRoute::One;
             if route == StateRoute::Far {
