@@ -221,7 +221,7 @@ fn solve_growth_body<const FMA: bool>(
             }
         }
         let x0 = b2.pose * Point3::from(local);
-        let out = kkt_newton(b1, b2, x0.coords, Some(mu), &params.capped(params.warm_iterations), true);
+        let out = kkt_newton(b1, b2, x0.coords, Some(mu), params, params.warm_iterations, true);
         iterations += out.iterations;
         if out.status.converged() {
             return GrowthCore { iterations, warm_started: true, ..out.with_frame(b2) };
@@ -242,7 +242,7 @@ fn solve_growth_body<const FMA: bool>(
     let f1 = FastPosed::new(b1);
     let (v0, g1) = f1.value_gradient(&x0);
     let x0 = b2.support(&-g1).filter(|x| f1.value(x) < v0).unwrap_or(x0);
-    let out = kkt_newton(b1, b2, x0, None, params, false);
+    let out = kkt_newton(b1, b2, x0, None, params, params.max_iterations, false);
     iterations += out.iterations;
     if out.status.converged() {
         return GrowthCore { iterations, ..out.with_frame(b2) };
@@ -250,7 +250,7 @@ fn solve_growth_body<const FMA: bool>(
     // Case 3: barrier path from body 2's interior, then the polish.
     let (xb, mub, it_b) = barrier(b1, b2, &c2, params);
     iterations += it_b;
-    let out = kkt_newton(b1, b2, xb, Some(mub), params, false);
+    let out = kkt_newton(b1, b2, xb, Some(mub), params, params.max_iterations, false);
     iterations += out.iterations;
     GrowthCore { iterations, ..out.with_frame(b2) }
 }
@@ -377,14 +377,15 @@ fn newton_step_lu(w: &Sym3, pt: &KktPoint) -> Option<(Vector3, Real)> {
 
 avx2_dispatch! {
     /// Active-set Newton on `∇f + μ∇g = 0, g = 0` from x0 and the multiplier `mu0` (least squares at
-    /// the start when `None`), globalized by backtracking on the merit ‖(L·r, p₂' − 1)‖₂
+    /// the start when `None`), at most `cap` Newton steps (and [`NewtonParams::max_iterations`]),
+    /// globalized by backtracking on the merit ‖(L·r, p₂' − 1)‖₂
     /// ([`merit_length`]); a `warm` run gives up (Stalled)
     /// when μ turns nonpositive. Every point is evaluated once; near the solution (residual below
     /// [`NewtonParams::chord_residual`]) trial points skip the Hessians and a further step reuses
     /// the last ones (chord step), refreshed when it stalls.
     fn kkt_newton => kkt_newton_body(
         b1: &PosedBody<'_>, b2: &PosedBody<'_>, x0: Vector3, mu0: Option<Real>, params: &NewtonParams,
-        warm: bool,
+        cap: usize, warm: bool,
     ) -> KktOut
 }
 
@@ -396,8 +397,12 @@ fn kkt_newton_body<const FMA: bool>(
     x0: Vector3,
     mu0: Option<Real>,
     params: &NewtonParams,
+    cap: usize,
     warm: bool,
 ) -> KktOut {
+    // The cap passed apart from the settings: a capped copy of them (a few hundred bytes) would
+    // be written on every warm query.
+    let cap = cap.min(params.max_iterations);
     let (f1, f2) = (FastPosed::<FMA>::build(b1), FastPosed::<FMA>::build(b2));
     let mut x = x0;
     let mut pt = KktPoint::new(&f1, &f2, &x, mu0.unwrap_or_default(), true);
@@ -417,7 +422,7 @@ fn kkt_newton_body<const FMA: bool>(
     let len = merit_length(b1.body, b2.body);
     let l2 = len * len;
     let merit_scale = |pt: &KktPoint| 1.0 + len * abs_max(&pt.e1.gradient);
-    while it < params.max_iterations {
+    while it < cap {
         // The 2-norm carries any NaN or infinity of the residual (the ∞-norm's plain maxima do not).
         let r0 = pt.merit(l2);
         if !r0.is_finite() {

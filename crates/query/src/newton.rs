@@ -210,12 +210,6 @@ impl NewtonParams {
         frame_shift_ratio: 1e3,
         batch: BatchSettings::DEFAULT,
     };
-
-    /// These settings with the iteration cap lowered to at most `cap` (a warm or speculative run).
-    #[inline(always)]
-    pub(crate) fn capped(&self, cap: usize) -> Self {
-        Self { max_iterations: self.max_iterations.min(cap), ..*self }
-    }
 }
 
 impl Default for NewtonParams {

@@ -114,7 +114,7 @@ fn distance_body<const FMA: bool>(
     if let Some((w, step)) = &previous {
         let (a0, b0, lam0) = w.predict(step, params);
         let y0 = bb.to_world(&b0);
-        let out = kkt_newton(&ba, &bb, a0 - o, y0, Some(lam0), &params.capped(params.warm_iterations), true);
+        let out = kkt_newton(&ba, &bb, a0 - o, y0, Some(lam0), params, params.warm_iterations, true);
         iterations += out.iterations;
         if out.status.converged() {
             return finish(pose_a, &rel, out.moved(&o), iterations, true, &w.growth, previous);
@@ -129,7 +129,7 @@ fn distance_body<const FMA: bool>(
     let growth_start = warm.and_then(|w| w.growth_start(&rel, a.scale(), length, params));
     if growth_start.is_none() {
         if let Some((x0, y0)) = cold_start(&ba, &bb) {
-            let out = kkt_newton(&ba, &bb, x0, y0, None, &params.capped(params.speculative_iterations), false);
+            let out = kkt_newton(&ba, &bb, x0, y0, None, params, params.speculative_iterations, false);
             iterations += out.iterations;
             if out.status.converged() && clear_of_contact(&out.x, &out.y, a, b) {
                 return finish(pose_a, &rel, out.moved(&o), iterations, false, &GrowthWarmStart::default(), previous);
@@ -189,7 +189,7 @@ fn growth_first(
     let y0 = bb.to_world(&g.x);
     // Exact boundary point: near contact the radial table's estimate may lie past y0.
     let x0 = boundary_on_segment_within(ba, &ba.interior_point(), &y0, params.start_boundary_tolerance);
-    let out = kkt_newton(ba, bb, x0, y0, None, params, false);
+    let out = kkt_newton(ba, bb, x0, y0, None, params, params.max_iterations, false);
     iterations += out.iterations;
     if out.status.converged() {
         return finish(pose_a, rel, out.moved(o), iterations, false, &growth_warm, previous);
@@ -202,21 +202,22 @@ fn growth_first(
     }
     let (xb, yb, lamb, it_b) = barrier(ba, bb, params);
     iterations += it_b;
-    let out = kkt_newton(ba, bb, xb, yb, Some(lamb), params, false);
+    let out = kkt_newton(ba, bb, xb, yb, Some(lamb), params, params.max_iterations, false);
     iterations += out.iterations;
     finish(pose_a, rel, out.moved(o), iterations, false, &growth_warm, previous)
 }
 
 avx2_dispatch! {
     /// Active-set Newton on the 8 × 8 KKT system from (x0, y0) and the multipliers `lam0` (least
-    /// squares at the start when `None`), globalized by backtracking on the scale-free merit
+    /// squares at the start when `None`), at most `cap` Newton steps (and
+    /// [`NewtonParams::max_iterations`]), globalized by backtracking on the scale-free merit
     /// ‖(r_a/L, r_b/L, p_a' − 1, p_b' − 1)‖₂ ([`merit_length`]); a `warm` run gives up
     /// (Stalled) when a multiplier turns nonpositive. Every point is evaluated once; near the
     /// solution (residual below [`NewtonParams::chord_residual`]) trial points skip the Hessians
     /// and a further step reuses the last ones (chord step), refreshed when it stalls.
     fn kkt_newton => kkt_newton_body(
         ba: &PosedBody<'_>, bb: &PosedBody<'_>, x0: Vector3, y0: Vector3, lam0: Option<[Real; 2]>,
-        params: &NewtonParams, warm: bool,
+        params: &NewtonParams, cap: usize, warm: bool,
     ) -> KktOut
 }
 
@@ -229,8 +230,12 @@ fn kkt_newton_body<const FMA: bool>(
     y0: Vector3,
     lam0: Option<[Real; 2]>,
     params: &NewtonParams,
+    cap: usize,
     warm: bool,
 ) -> KktOut {
+    // The cap passed apart from the settings: a capped copy of them (a few hundred bytes) would
+    // be written on every warm query.
+    let cap = cap.min(params.max_iterations);
     let (fa, fb) = (FastPosed::<FMA>::build(ba), FastPosed::<FMA>::build(bb));
     let (mut x, mut y) = (x0, y0);
     let mut pt = KktPoint::new(&fa, &fb, &x, &y, lam0.unwrap_or_default(), true);
@@ -250,7 +255,7 @@ fn kkt_newton_body<const FMA: bool>(
     let merit_scale = |x: &Vector3, y: &Vector3| 1.0 + 2.0 * (x - y).norm() / len;
     let positive = |lam: [Real; 2]| lam[0] > 0.0 && lam[1] > 0.0;
     let stationary = |pt: &KktPoint, sc: Real| pt.norm_inf() <= params.kkt_tolerance * sc;
-    while it < params.max_iterations {
+    while it < cap {
         // The 2-norm carries any NaN or infinity of the residual (the ∞-norm's plain maxima do not).
         let r0 = pt.merit(w2);
         if !r0.is_finite() {

@@ -426,7 +426,7 @@ mod start_quality {
                 boundary_on_segment_within(body, &c, &(c + (w - c) * 10.0), 1e-12)
             };
             let (x0, y0) = (moved(&d.witness_a, &ba), moved(&d.witness_b, &bb));
-            let out = kkt_newton(&ba, &bb, x0, y0, None, &params, false);
+            let out = kkt_newton(&ba, &bb, x0, y0, None, &params, params.max_iterations, false);
             runs += 1;
             iterations += out.iterations;
             reached += usize::from(out.status.converged() && ((out.y - out.x).norm() - d.distance).abs() < 1e-8);
