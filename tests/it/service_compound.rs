@@ -394,3 +394,95 @@ async fn a_fit_job_with_parts_reports_progress_per_part_and_stores_a_compound_bo
     }
     server.stop().await;
 }
+
+/// A three-node tree of spheres in the compound file form: a root of radius `root_r` at the
+/// origin over spheres of radius 1 at x = ±5 (`sublevel.compound.v1`, each node p = |u|²).
+fn sphere_tree(root_r: f64) -> String {
+    let sphere = |x: f64, r: f64| {
+        serde_json::json!({
+            "degree": 2, "exponents": [[2, 0, 0], [0, 2, 0], [0, 0, 2]], "coefficients": [1.0, 1.0, 1.0],
+            "center": [x, 0.0, 0.0], "scale": r
+        })
+    };
+    serde_json::json!({
+        "format": "sublevel.compound.v1",
+        "root": 0,
+        "nodes": [
+            { "body": sphere(0.0, root_r), "children": [1, 2], "depth": 0, "excess": 0.0 },
+            { "body": sphere(-5.0, 1.0), "children": [], "depth": 1, "excess": 0.0 },
+            { "body": sphere(5.0, 1.0), "children": [], "depth": 1, "excess": 0.0 },
+        ]
+    })
+    .to_string()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_tree_whose_parent_misses_its_children_is_refused_and_a_certified_one_answers_alike_on_every_rpc() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(config(dir.path())).await;
+    let mut c = server.client().await;
+    let upload = |json: String| pb::UploadBodyRequest {
+        name: "tree".into(),
+        body: Some(pb::upload_body_request::Body::BodyJson(json)),
+    };
+    // A 0.1 m root over 1 m spheres 5 m away, and a 2.5 m root that covers them partly: the
+    // parent does not contain its children, shown by a point of the child.
+    for r in [0.1, 2.5] {
+        let status = c.upload_body(upload(sphere_tree(r))).await.unwrap_err();
+        assert_eq!(status.code(), Code::InvalidArgument, "{status:?}");
+        let m = status.message();
+        assert!(m.contains("body_json.nodes[0]") && m.contains("does not contain its child"), "{m}");
+    }
+    assert!(c.list_bodies(pb::ListBodiesRequest::default()).await.unwrap().into_inner().bodies.is_empty());
+
+    // A 6 m root holds both (certified by the S-procedure): a 0.5 m ball at x = 5.8 overlaps the
+    // child at x = 5 (centers 0.8 m apart, radii 1.5 m) on every path.
+    let tree = c.upload_body(upload(sphere_tree(6.0))).await.unwrap().into_inner().body_id;
+    let ball = crate::util::upload_sphere(&mut c, "ball", [0.0; 3], 0.5).await;
+    let scene = c.create_scene(pb::CreateSceneRequest { name: "s".into() }).await.unwrap().into_inner().scene_id;
+    let t = add(&mut c, &scene, &tree, at([0.0; 3])).await;
+    let b = add(&mut c, &scene, &ball, at([5.8, 0.0, 0.0])).await;
+    let req = pb::DistanceRequest {
+        scene_id: scene.clone(),
+        instance_a: t.clone(),
+        instance_b: b.clone(),
+        ..Default::default()
+    };
+    let d = c.distance(req).await.unwrap().into_inner().answer.unwrap();
+    assert!(d.overlapping && d.distance == 0.0, "{d:?}");
+    let q = pb::PlannerQuery {
+        kind: pb::QueryKind::Collide as i32,
+        first: t.clone(),
+        second: b.clone(),
+        ..Default::default()
+    };
+    let out = c.query(pb::QueryRequest { scene_id: scene.clone(), queries: vec![q], ..Default::default() }).await;
+    let Some(pb::query_answer::Answer::Collide(col)) = &out.unwrap().into_inner().answers[0].answer else {
+        panic!("collide")
+    };
+    assert!(col.collides, "{col:?}");
+    let check = pb::CheckSceneRequest { scene_id: scene.clone(), ..Default::default() };
+    assert_eq!(c.check_scene(check).await.unwrap().into_inner().pairs.len(), 1);
+    let columns = pb::PairColumns {
+        kind: pb::QueryKind::Collide as i32,
+        instance_ids: vec![t.clone(), b.clone()],
+        first: vec![0],
+        second: vec![1],
+        margin: 0.0,
+        cold: false,
+    };
+    let batch = pb::BatchQueryRequest { scene_id: scene.clone(), pairs: vec![], columns: Some(columns) };
+    let cols = c.batch_query(batch).await.unwrap().into_inner().columns.unwrap();
+    assert!(cols.value[0] == 0.0 && cols.overlapping[0], "{cols:?}");
+    // 1 m further out the ball is 0.8 m clear of the child, on every path.
+    crate::util::set_pose(&mut c, &scene, &b, at([7.3, 0.0, 0.0])).await;
+    let req = pb::DistanceRequest {
+        scene_id: scene.clone(),
+        instance_a: t.clone(),
+        instance_b: b.clone(),
+        ..Default::default()
+    };
+    let d = c.distance(req).await.unwrap().into_inner().answer.unwrap();
+    assert!((d.distance - 0.8).abs() < 1e-6 && !d.overlapping, "{d:?}");
+    server.stop().await;
+}

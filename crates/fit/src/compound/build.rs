@@ -16,6 +16,8 @@
 //!       children's bounding box when that is tighter or the solver fails at every degree
 //!       (box_ellipsoid); a node left out moves up alone; until one root
 //! excess of every node: sampled one-sided Hausdorff excess over the mesh          (surface.rs)
+//! certificate: every parent–child containment certified, a parent short of it rescaled
+//!       (certify.rs)
 //! ```
 //!
 //! Each leaf contains the vertices of its triangles, hence (convexity) its triangles; each parent
@@ -233,8 +235,19 @@ pub fn fit_compound(
     let leaf_fit_seconds = leaves.iter().map(|l| l.fit_seconds).sum();
     let t_tree = Instant::now();
     let nodes = build_tree(leaves, &surface, settings, leaves_end, progress)?;
-    let tree_fit_seconds = t_tree.elapsed().as_secs_f64();
     let root = nodes.len() - 1;
+    let mut nodes = nodes;
+    set_depths(&mut nodes, root);
+    // Every parent certified to contain its children (the fits check containment on samples; a
+    // parent short of a certificate is rescaled: see `certify`).
+    report(progress, FitStage::Verify, 0.97, format!("certifying the containment of {} nodes", nodes.len()));
+    let certificates = super::certify::certify_tree(&mut nodes)?;
+    let rescaled =
+        certificates.iter().filter(|c| matches!(c.proof, super::certify::ContainmentProof::Rescaled { .. })).count();
+    if rescaled > 0 {
+        notes.push(format!("{rescaled} parent–child containments certified after rescaling the parent (at most 10⁻³)"));
+    }
+    let tree_fit_seconds = t_tree.elapsed().as_secs_f64();
     let report = CompoundReport {
         mesh: mesh_name.map(str::to_owned),
         mesh_triangles: mesh.triangles.len(),
@@ -247,8 +260,6 @@ pub fn fit_compound(
         excess_samples: settings.excess_samples,
         notes,
     };
-    let mut nodes = nodes;
-    set_depths(&mut nodes, root);
     let body = CompoundBody::new(nodes, root, report)?;
     report_done(progress, &body);
     Ok(body)

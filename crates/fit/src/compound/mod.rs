@@ -6,11 +6,12 @@
 //!
 //! Files: [`decompose`] (VHACD parts of whole triangles), [`build`] (leaf fits, the tree, the
 //! part-count search: [`fit_compound`]), [`surface`] (the Hausdorff excess of a node over the
-//! mesh), [`check`] (every triangle covered).
+//! mesh), [`check`] (every triangle covered), [`certify`] (every parent contains its children).
 
 pub use sublevel_core::compound::*;
 
 pub mod build;
+pub mod certify;
 pub mod check;
 pub mod decompose;
 pub mod surface;

@@ -40,6 +40,9 @@
 //! Sizes (per body, with the same degree for every body): at 2d = 4 and deg g = 4, 2k = 0, each
 //! body adds a 10 × 10 Gram and 35 equations; 2k = 2 raises its degree to 6 (20 × 20, 84 rows).
 
+mod margin;
+pub use margin::{containment_margin, CONTAINMENT_SLACK};
+
 use super::sdp::{rescale_to_contain, usable_status, Containment, GramProgram, ProblemSpec, SolverSettings};
 use super::{report, volume, FitProgress, FitStage, KktSolver};
 use crate::{Error, Result};

@@ -215,6 +215,7 @@ avx2_dispatch! {
     /// (Stalled) when a multiplier turns nonpositive. Every point is evaluated once; near the
     /// solution (residual below [`NewtonParams::chord_residual`]) trial points skip the Hessians
     /// and a further step reuses the last ones (chord step), refreshed when it stalls.
+    #[allow(clippy::too_many_arguments)]
     fn kkt_newton => kkt_newton_body(
         ba: &PosedBody<'_>, bb: &PosedBody<'_>, x0: Vector3, y0: Vector3, lam0: Option<[Real; 2]>,
         params: &NewtonParams, cap: usize, warm: bool,
@@ -222,6 +223,7 @@ avx2_dispatch! {
 }
 
 /// The body of [`kkt_newton`], inlined into each of its builds.
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn kkt_newton_body<const FMA: bool>(
     ba: &PosedBody<'_>,

@@ -386,14 +386,18 @@ pub const MAX_COMPOUND_NODES: usize = 2 * sublevel_fit::compound::decompose::MAX
 /// ([`sublevel_core::compound::CompoundBody::from_file`]); then every node admitted as an uploaded single body is
 /// ([`sublevel_fit::sos_convexity::admit_uploaded`]: finite report, sos-convexity certificate). A node that is not sos-convex
 /// is refused: the branch and bound uses node distances as lower bounds, which only a convex
-/// node's Newton answer is. Returns the body and the smallest certified margin over its nodes.
+/// node's Newton answer is. Then every parent is certified to contain its children
+/// ([`sublevel_fit::compound::certify::certify_tree`]: a parent that provably does not is refused,
+/// one short of a certificate by less is rescaled). Returns the body and the smallest certified
+/// sos-convexity margin over its nodes.
 ///
-/// Runs one SDP per node: call it off the async workers.
+/// Runs up to three SDPs per node: call it off the async workers.
 ///
 /// # Errors
 /// [`Error::InvalidArgument`] naming `{field}.nodes` (too many), `{field}.format`,
-/// `{field}.root`, `{field}.nodes[i].<…>` (e.g. `body_json.nodes[3].body.scale`), or
-/// `{field}.nodes[i].body` for a node that is not sos-convex; [`Error::Numerical`] when Clarabel
+/// `{field}.root`, `{field}.nodes[i].<…>` (e.g. `body_json.nodes[3].body.scale`),
+/// `{field}.nodes[i].body` for a node that is not sos-convex, or `{field}.nodes[i]` for a parent
+/// that does not contain a child (with the child's point outside it); [`Error::Numerical`] when Clarabel
 /// rejects a certificate program.
 pub fn admit_compound(
     mut file: sublevel_fit::compound::CompoundFile,
@@ -422,7 +426,7 @@ pub fn admit_compound(
         if admitted.body.report.nonconvex {
             return Err(Error::invalid(
                 at,
-                "is not certified sos-convex; every node of a compound body must be (its distances bound the                  leaves below it only when it is convex)",
+                "is not certified sos-convex; every node of a compound body must be (its distances bound the leaves below it only when it is convex)",
             ));
         }
         if let Some(c) = &admitted.certificate {
@@ -437,6 +441,8 @@ pub fn admit_compound(
             fit_seconds: n.fit_seconds,
         });
     }
+    // Every parent must contain its children: the tree queries bound a parent's leaves by it.
+    sublevel_fit::compound::certify::certify_tree(&mut nodes).map_err(|e| prefix_field(e, field))?;
     let body = CompoundBody::new(nodes, file.root, file.report).map_err(|e| prefix_field(e, field))?;
     Ok((body, if margin.is_finite() { margin } else { Real::NAN }))
 }

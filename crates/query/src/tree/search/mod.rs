@@ -63,7 +63,9 @@ pub fn tree_distance<A: BodyTree + ?Sized, B: BodyTree + ?Sized>(
 /// branch and bound that descends only node pairs closer than `margin` and stops at the first leaf
 /// pair closer than it, so a pair whose roots are farther apart is answered at level 0.
 ///
-/// `margin` in meters (finite, ≥ 0; 0 asks for overlap, touching counts as not closer).
+/// `margin` in meters (finite, ≥ 0). Closer than `margin` means a model distance below it; at
+/// `margin` 0, a model distance of 0 (touching or overlapping), as a single pair's collide
+/// answers (`overlapping || distance < margin`).
 ///
 /// # Errors
 /// [`Error::InvalidArgument`] naming `margin`, `tree_a`, `tree_b` or a setting.
@@ -79,6 +81,10 @@ pub fn tree_closer_than<A: BodyTree + ?Sized, B: BodyTree + ?Sized>(
     if !(margin.is_finite() && margin >= 0.0) {
         return Err(Error::invalid("margin", format!("must be finite and ≥ 0 m, got {margin}")));
     }
+    // Closer than a margin m > 0 means a distance below m; at m = 0 it means touching or
+    // overlapping (distance 0), as for a single pair: every bound below the smallest positive
+    // distance counts.
+    let margin = effective_margin(margin);
     let mut s = Search::new(a, pose_a, b, pose_b, warm, params, Goal::Margin(margin))?;
     let stop = s.run();
     let warm_start = s.finish();
@@ -102,6 +108,12 @@ pub fn tree_closer_than<A: BodyTree + ?Sized, B: BodyTree + ?Sized>(
         pairs_pruned_by_spheres: s.sphere_pruned,
         warm_start,
     })
+}
+
+/// The margin a margin query compares distances with: `margin`, or the smallest positive number
+/// for a zero margin (so that `distance < margin` holds exactly for distance 0, touching).
+fn effective_margin(margin: Real) -> Real {
+    margin.max(Real::MIN_POSITIVE)
 }
 
 #[derive(Clone, Copy)]
