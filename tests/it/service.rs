@@ -42,6 +42,12 @@ async fn round_trip_spheres_match_closed_forms_and_warm_start() {
     assert_eq!(second.next_page_token, "");
     let long = pb::ListBodiesRequest { page_size: 1, page_token: "x".repeat(200) };
     assert_status(c.list_bodies(long).await, Code::InvalidArgument, "page_token");
+    // A forged token (not an id of this list's form: a scene id, a truncated id) is refused
+    // rather than answered with a wrong page.
+    for forged in ["s-0123456789abcdef", "b-0123", "b-0123456789ABCDEF", "zzz"] {
+        let req = pb::ListBodiesRequest { page_size: 1, page_token: forged.into() };
+        assert_status(c.list_bodies(req).await, Code::InvalidArgument, "page_token");
+    }
 
     let scene = c.create_scene(pb::CreateSceneRequest { name: "s".into() }).await.unwrap().into_inner().scene_id;
     // Instance 1: rotated 90° about z and moved; its sphere center (0.1, 0, 0) lands at (1, 2.1, 0).

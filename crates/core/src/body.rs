@@ -79,7 +79,8 @@ pub struct Body {
 impl Body {
     /// Validates and builds a body from a polynomial in normalized coordinates.
     ///
-    /// Checks: degree ∈ {2, 4, 6, 8}; center finite and within ±[`crate::math::MAX_COORDINATE`];
+    /// Checks: degree ∈ {2, 4, 6, 8}; center finite and within ±[`crate::math::MAX_COORDINATE`]; a
+    /// convex body's bounding box within ±[`crate::math::MAX_COORDINATE`] too;
     /// scale in [`crate::math::SCALE_RANGE`]; coefficients finite; p has a minimizer with
     /// p < 1 there and a positive-definite Hessian (a bounded sublevel set with interior). For a
     /// body whose report says `nonconvex`, a strict local minimizer found by modified Newton from
@@ -144,6 +145,19 @@ impl Body {
         let center = Vector3::from(center);
         let sphere = bounding_box_u
             .map(|(lo, hi)| (Point3::from(center + (lo + hi) * (0.5 * scale)), 0.5 * (hi - lo).norm() * scale));
+        // The body's real size, not only its scale: tiny coefficients make {p ≤ 1} huge.
+        if let Some((c, r)) = &sphere {
+            let reach = c.coords.abs().max() + r;
+            if reach > crate::math::MAX_COORDINATE || reach.is_nan() {
+                return Err(Error::invalid(
+                    "coefficients",
+                    format!(
+                        "the body reaches {reach:e} m from the origin, beyond ±{:e} m (p's unit sublevel set is far larger than `scale`)",
+                        crate::math::MAX_COORDINATE
+                    ),
+                ));
+            }
+        }
         Ok(Self {
             polynomial,
             center,
@@ -602,6 +616,17 @@ mod tests {
         let mut bad = e.to_file();
         bad.scale = -1.0;
         assert!(Body::from_file(bad).unwrap_err().to_string().contains("scale"));
+        // A valid scale with tiny coefficients: {p ≤ 1} reaches 1e150 m (radius 1/√1e-300 of
+        // the unit scale), so the body is refused for its real size.
+        let mut huge = e.to_file();
+        huge.coefficients.iter_mut().for_each(|c| *c *= 1e-300);
+        let err = Body::from_file(huge).unwrap_err();
+        assert!(matches!(&err, Error::InvalidArgument { field, .. } if field == "coefficients"), "{err}");
+        // 1e-6 of the coefficients: a thousand times larger (3 km), still accepted.
+        let mut large = e.to_file();
+        large.coefficients.iter_mut().for_each(|c| *c *= 1e-6);
+        let large = Body::from_file(large).unwrap();
+        assert!((large.bounding_sphere().unwrap().1 / e.bounding_sphere().unwrap().1 - 1e3).abs() < 10.0);
         let mut bad = e.to_file();
         bad.coefficients.iter_mut().for_each(|c| *c = -*c);
         assert!(Body::from_file(bad).unwrap_err().to_string().contains("coefficients"));

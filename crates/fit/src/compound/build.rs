@@ -240,7 +240,7 @@ pub fn fit_compound(
     set_depths(&mut nodes, root);
     // Every parent certified to contain its children (the fits check containment on samples; a
     // parent short of a certificate is rescaled: see `certify`).
-    report(progress, FitStage::Verify, 0.97, format!("certifying the containment of {} nodes", nodes.len()));
+    report(progress, FitStage::Verify, 1.0, format!("certifying the containment of {} nodes", nodes.len()));
     let certificates = super::certify::certify_tree(&mut nodes)?;
     let rescaled =
         certificates.iter().filter(|c| matches!(c.proof, super::certify::ContainmentProof::Rescaled { .. })).count();

@@ -36,8 +36,8 @@ pub struct FitOptions {
     pub auto: Option<(Vec<usize>, Real)>,
 }
 
-/// Validates the fit options of a request: `degree` (2, 4, 6, 8; with `auto_degree` 0 or one of
-/// them, the highest candidate), `method` (empty means logdet_p), `convexity_relaxation` (finite,
+/// Validates the fit options of a request: `degree` (2, 4, 6, 8; with `auto_degree`, or for a
+/// compound fit (`parts` / `auto_parts`), 0 or one of them, the highest candidate: 0 is automatic), `method` (empty means logdet_p), `convexity_relaxation` (finite,
 /// ≥ 0) and `volume_tolerance` (finite, in [0, 1); 0 means 0.05 with `auto_degree`).
 ///
 /// # Errors
@@ -63,7 +63,11 @@ pub fn fit_options(req: &pb::StartFitJobRequest) -> Result<FitOptions> {
     if !(tol.is_finite() && (0.0..1.0).contains(&tol)) {
         return Err(Error::invalid("volume_tolerance", format!("must be in [0, 1), got {tol}")));
     }
-    if !req.auto_degree {
+    // A compound fit (`parts` / `auto_parts`) picks each part's degree itself unless one is given:
+    // `degree` 0 there means automatic, as `sublevel fit --parts` defaults to.
+    let compound = req.parts > 0 || req.auto_parts;
+    let automatic = req.auto_degree || (compound && req.degree == 0);
+    if !automatic {
         return Ok(FitOptions { degree: fit_degree(req.degree)?, method, convexity_relaxation: c, auto: None });
     }
     let top = if req.degree == 0 { 8 } else { fit_degree(req.degree)? };
@@ -618,6 +622,14 @@ mod enum_tests {
             fit_options(&req("trace_p", pb::FitMethod::LogdetP)),
             Err(Error::InvalidArgument { field, .. }) if field == "fit_method"
         ));
+        // Degree 0: refused for a single-body fit, automatic (among 2, 4, 6 for the parts) for a
+        // compound one.
+        let single = pb::StartFitJobRequest { degree: 0, ..Default::default() };
+        assert!(matches!(fit_options(&single), Err(Error::InvalidArgument { field, .. }) if field == "degree"));
+        let parts = pb::StartFitJobRequest { degree: 0, parts: 4, ..Default::default() };
+        let options = fit_options(&parts).unwrap();
+        let compound = compound_settings(&parts, &options, sublevel_fit::FitSettings::default()).unwrap();
+        assert_eq!(compound.degrees, vec![2, 4, 6]);
         // Every core status has its own proto value, and the text form travels beside it.
         let values: std::collections::HashSet<i32> =
             SdpStatus::ALL.iter().map(|s| sdp_status_to_proto(*s) as i32).collect();

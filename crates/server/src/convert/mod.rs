@@ -82,13 +82,31 @@ pub const MAX_PAGE_SIZE: usize = 1000;
 
 /// One page of `items` (ordered by id): those after `page_token` (the last id of the previous
 /// page; empty: from the start), at most `page_size` (0: [`MAX_PAGE_SIZE`]; capped there), and
-/// the token of the next page (empty after the last).
+/// the token of the next page (empty after the last). The list's ids are `{prefix}-` and 16
+/// lowercase hex digits (`b` bodies, `s` scenes, `j` jobs), and so is every token it hands out.
 ///
 /// # Errors
-/// [`Error::InvalidArgument`] naming `page_token` when it is longer than an id can be.
-pub fn page<T>(items: Vec<T>, id: impl Fn(&T) -> &str, page_size: u32, page_token: &str) -> Result<(Vec<T>, String)> {
-    if page_token.len() > MAX_ID_BYTES {
-        return Err(Error::invalid("page_token", format!("at most {MAX_ID_BYTES} bytes (a `next_page_token`)")));
+/// [`Error::InvalidArgument`] naming `page_token` when it is not an id of this list's form (a
+/// forged or mistyped token would otherwise give a wrong page silently).
+pub fn page<T>(
+    items: Vec<T>,
+    id: impl Fn(&T) -> &str,
+    prefix: &str,
+    page_size: u32,
+    page_token: &str,
+) -> Result<(Vec<T>, String)> {
+    let well_formed = page_token
+        .strip_prefix(prefix)
+        .and_then(|t| t.strip_prefix('-'))
+        .is_some_and(|h| h.len() == 16 && h.bytes().all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b)));
+    if !(page_token.is_empty() || well_formed) {
+        return Err(Error::invalid(
+            "page_token",
+            format!(
+                "not a `next_page_token` of this list (`{prefix}-` and 16 hex digits), got `{}`",
+                sublevel_core::error::clip(page_token)
+            ),
+        ));
     }
     let size = match page_size as usize {
         0 => MAX_PAGE_SIZE,

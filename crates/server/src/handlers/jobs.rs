@@ -158,7 +158,8 @@ pub(super) async fn list_fit_jobs(
     request: Request<pb::ListFitJobsRequest>,
 ) -> Handled<pb::ListFitJobsResponse> {
     let req = request.into_inner();
-    let (jobs, next_page_token) = cv::page(svc.jobs.list(), |j| j.job_id.as_str(), req.page_size, &req.page_token)?;
+    let (jobs, next_page_token) =
+        cv::page(svc.jobs.list(), |j| j.job_id.as_str(), "j", req.page_size, &req.page_token)?;
     Ok(Response::new(pb::ListFitJobsResponse { jobs, next_page_token }))
 }
 

@@ -36,7 +36,8 @@ pub(super) async fn list_scenes(
     request: Request<pb::ListScenesRequest>,
 ) -> Handled<pb::ListScenesResponse> {
     let req = request.into_inner();
-    let (page, next_page_token) = cv::page(svc.catalog.scenes(), |s| s.id.as_str(), req.page_size, &req.page_token)?;
+    let (page, next_page_token) =
+        cv::page(svc.catalog.scenes(), |s| s.id.as_str(), "s", req.page_size, &req.page_token)?;
     let scenes = page
         .into_iter()
         .map(|s| pb::SceneSummary {
