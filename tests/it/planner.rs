@@ -142,7 +142,7 @@ async fn query_stream_keeps_a_private_view_with_warm_starts() {
     let req = pb::QueryRequest { poses: vec![pose_of("i-nope", [0.0; 3])], ..Default::default() };
     tx.send(req).await.unwrap();
     let e = answers.message().await.unwrap_err();
-    assert_eq!(e.code(), Code::InvalidArgument, "{e:?}");
+    assert_eq!(e.code(), Code::NotFound, "{e:?}");
     assert!(e.message().contains("poses[0].instance_id"), "{e:?}");
     drop(tx);
     drop(tx2);
@@ -442,7 +442,7 @@ async fn state_columns_match_the_closed_form_and_the_states_form() {
     unnormed.poses[7 * 5] = 2.0;
     assert_status(c.query(refused(unnormed)).await, Code::InvalidArgument, "state_columns.poses[35] (state 2");
     let unknown = pb::StateColumns { instance_ids: vec![s1.clone(), "nope".into()], ..packed.clone() };
-    assert_status(c.query(refused(unknown)).await, Code::InvalidArgument, "state_columns.instance_ids[1]");
+    assert_status(c.query(refused(unknown)).await, Code::NotFound, "state_columns.instance_ids[1]");
     let both = pb::QueryRequest { states: vec![pb::CandidateState::default()], ..req.clone() };
     assert_status(c.query(both).await, Code::InvalidArgument, "state_columns");
     server.stop().await;

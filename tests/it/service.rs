@@ -218,7 +218,7 @@ async fn bad_input_gets_the_right_code_naming_the_field() {
     assert_status(c.set_poses(req).await, Code::InvalidArgument, "poses[0].pose.translation");
     let unknown = vec![pb::InstancePose { instance_id: "i-nope".into(), pose: None }];
     let req = pb::SetPosesRequest { scene_id: scene.clone(), poses: unknown };
-    assert_status(c.set_poses(req).await, Code::InvalidArgument, "poses[0].instance_id");
+    assert_status(c.set_poses(req).await, Code::NotFound, "poses[0].instance_id");
     // None of the failed batches moved i2: the distance is still 2 − 0.5 − 0.5.
     assert!((distance(&mut c, &scene, &i1, &i2).await.distance - 1.0).abs() < 1e-9);
 

@@ -230,7 +230,7 @@ def test_state_columns_match_the_closed_form(client, balls):
         client.query_state_columns(scene, "distance", [a], [b], [a, b], state_poses)
     with pytest.raises(SublevelError) as e:
         client.query_state_columns(scene, "distance", [a], [b], ["no such instance"], state_poses)
-    assert e.value.code == grpc.StatusCode.INVALID_ARGUMENT and "state_columns.instance_ids[0]" in str(e.value)
+    assert e.value.code == grpc.StatusCode.NOT_FOUND and "state_columns.instance_ids[0]" in str(e.value)
 
 
 def test_cold_states_in_columns_match_the_closed_form(client, balls):

@@ -17,12 +17,15 @@ pub enum Error {
         reason: String,
     },
     /// An id does not name an existing resource.
-    #[error("{kind} `{id}` not found")]
+    #[error("{kind} `{id}` not found{}", at_field(.field))]
     NotFound {
         /// The resource kind (`body`, `scene`, `instance`, `job`).
         kind: &'static str,
         /// The id that was looked up.
         id: String,
+        /// The request field that held it (e.g. `poses[3].instance_id`); empty when the request
+        /// has one id of that kind.
+        field: String,
     },
     /// The request is valid but the state of a resource forbids it now (e.g. deleting a body
     /// that instances still use); the message says what to change first.
@@ -60,7 +63,23 @@ impl Error {
     /// 16 KB id is never echoed back whole).
     pub fn not_found(kind: &'static str, id: impl Into<String>) -> Self {
         let id: String = id.into();
-        Error::NotFound { kind, id: clip(&id) }
+        Error::NotFound { kind, id: clip(&id), field: String::new() }
+    }
+
+    /// [`Error::not_found`] for an id the request field `field` held (a batch's entry), named in
+    /// the message.
+    pub fn not_found_at(field: impl Into<String>, kind: &'static str, id: impl Into<String>) -> Self {
+        let id: String = id.into();
+        Error::NotFound { kind, id: clip(&id), field: field.into() }
+    }
+}
+
+/// ` (in `field`)` after a not-found message, or nothing without a field.
+fn at_field(field: &str) -> String {
+    if field.is_empty() {
+        String::new()
+    } else {
+        format!(" (in `{field}`)")
     }
 }
 

@@ -517,18 +517,16 @@ impl Catalog {
     /// the instance id. Returns the number of instances updated.
     ///
     /// # Errors
-    /// [`Error::NotFound`] for the scene; [`Error::InvalidArgument`] naming `poses[k].instance_id`
-    /// for an unknown or repeated instance (nothing changes then); [`Error::Storage`].
+    /// [`Error::NotFound`] for the scene, or for an unknown instance (naming `poses[k].instance_id`);
+    /// [`Error::InvalidArgument`] naming `poses[k].instance_id` for a repeated one (nothing changes
+    /// then); [`Error::Storage`].
     pub fn set_poses(&self, scene_id: &str, poses: &[(String, Isometry3)]) -> Result<usize> {
         self.with_scene(scene_id, |s| {
             let mut seen = std::collections::HashSet::new();
             let mut records = Vec::with_capacity(poses.len());
             for (k, (iid, pose)) in poses.iter().enumerate() {
                 let field = format!("poses[{k}].instance_id");
-                let inst = s
-                    .instances
-                    .get(iid)
-                    .ok_or_else(|| Error::invalid(&field, format!("no instance `{iid}` in scene `{scene_id}`")))?;
+                let inst = s.instances.get(iid).ok_or_else(|| Error::not_found_at(&field, "instance", iid.as_str()))?;
                 if !seen.insert(iid.as_str()) {
                     return Err(Error::invalid(field, format!("instance `{iid}` appears twice")));
                 }

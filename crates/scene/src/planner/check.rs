@@ -61,20 +61,15 @@ pub fn check_scene(
     let mut all = catalog.posed_instances(scene_id, &[])?;
     let index: HashMap<String, usize> = all.iter().enumerate().map(|(k, i)| (i.id.clone(), k)).collect();
     for (k, (id, pose)) in overrides.iter().enumerate() {
-        let at = *index.get(id).ok_or_else(|| {
-            Error::invalid(format!("poses[{k}].instance_id"), format!("no instance `{id}` in scene `{scene_id}`"))
-        })?;
+        let at = *index
+            .get(id)
+            .ok_or_else(|| Error::not_found_at(format!("poses[{k}].instance_id"), "instance", id.as_str()))?;
         all[at].pose = *pose;
     }
     let mut is_focus = vec![focus.is_empty(); all.len()];
     for (k, id) in focus.iter().enumerate() {
-        let at = *index.get(id).ok_or_else(|| Error::not_found("instance", id.as_str())).map_err(|e| {
-            if let Error::NotFound { .. } = e {
-                Error::invalid(format!("instance_ids[{k}]"), format!("no instance `{id}` in scene `{scene_id}`"))
-            } else {
-                e
-            }
-        })?;
+        let at =
+            *index.get(id).ok_or_else(|| Error::not_found_at(format!("instance_ids[{k}]"), "instance", id.as_str()))?;
         is_focus[at] = true;
     }
     let n = all.len();

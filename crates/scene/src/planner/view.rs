@@ -128,7 +128,7 @@ impl QueryView {
         ids.sort_unstable();
         ids.dedup();
         let stored = catalog.posed_by_ids(&self.scene_id, &ids).map_err(|e| match e {
-            Error::NotFound { kind: "instance", id } => {
+            Error::NotFound { kind: "instance", id, .. } => {
                 let field = request
                     .poses
                     .iter()
@@ -145,8 +145,8 @@ impl QueryView {
                             .map(|k| format!("state_columns.instance_ids[{k}]")),
                     });
                 match field {
-                    Some(f) => Error::invalid(f, format!("no instance `{id}` in scene `{}`", self.scene_id)),
-                    None => Error::NotFound { kind: "instance", id },
+                    Some(f) => Error::not_found_at(f, "instance", id),
+                    None => Error::not_found("instance", id),
                 }
             }
             other => other,

@@ -121,8 +121,10 @@ fn a_view_refuses_bad_state_columns_naming_the_field() {
         ..request_of(&a, &b)
     };
     let field_of = |request: &PlannerRequest| match QueryView::new(&s).run(&catalog, request) {
-        Err(sublevel_core::Error::InvalidArgument { field, .. }) => field,
-        other => panic!("expected INVALID_ARGUMENT, got {other:?}"),
+        Err(sublevel_core::Error::InvalidArgument { field, .. } | sublevel_core::Error::NotFound { field, .. }) => {
+            field
+        }
+        other => panic!("expected INVALID_ARGUMENT or NOT_FOUND, got {other:?}"),
     };
     assert_eq!(field_of(&columns(&[&a, &b], 3)), "state_columns.poses");
     assert_eq!(field_of(&columns(&[], 0)), "state_columns.poses");
