@@ -217,48 +217,145 @@ mod avx {
     use super::*;
     use std::arch::x86_64::*;
 
-    /// Implements the arithmetic operators of a lane type `$t` (register field `.0`) by
-    /// intrinsics.
-    macro_rules! lane_ops {
-        ($t:ident, $add:ident, $sub:ident, $mul:ident, $div:ident, $xor:ident, $set1:ident) => {
-            impl Add for $t {
-                type Output = $t;
-                #[inline(always)]
-                fn add(self, o: $t) -> $t {
-                    // SAFETY: a lane value proves the CPU runs AVX2 and FMA (module docs).
-                    $t(unsafe { $add(self.0, o.0) })
-                }
+    /// Implements [`Lane`] and the arithmetic operators for the lane type `$t` (register field
+    /// `.0`, elements `$e`) and [`LaneMask`] for its mask `$m`, each operation one AVX intrinsic:
+    /// the `f64` and `f32` lane types differ only in the intrinsics' suffix and their constants.
+    macro_rules! avx_lane {
+        (
+            $t:ident, $m:ident, $e:ty, singular: $singular:expr, tiny: $tiny:expr,
+            set1: $set1:ident, setzero: $setzero:ident, add: $add:ident, sub: $sub:ident,
+            mul: $mul:ident, div: $div:ident, fmadd: $fmadd:ident, andnot: $andnot:ident,
+            sqrt: $sqrt:ident, min: $min:ident, max: $max:ident, cmp: $cmp:ident,
+            blendv: $blendv:ident, and: $and:ident, or: $or:ident, xor: $xor:ident,
+            ones: $ones:expr, movemask: $movemask:ident $(,)?
+        ) => {
+            /// Implements a binary operator of `$t` by one intrinsic.
+            macro_rules! binary {
+                ($tr:ident, $f:ident, $intr:ident) => {
+                    impl $tr for $t {
+                        type Output = $t;
+                        #[inline(always)]
+                        fn $f(self, o: $t) -> $t {
+                            // SAFETY: a lane value proves the CPU runs AVX2 and FMA (module docs).
+                            $t(unsafe { $intr(self.0, o.0) })
+                        }
+                    }
+                };
             }
-            impl Sub for $t {
-                type Output = $t;
-                #[inline(always)]
-                fn sub(self, o: $t) -> $t {
-                    // SAFETY: as above.
-                    $t(unsafe { $sub(self.0, o.0) })
-                }
-            }
-            impl Mul for $t {
-                type Output = $t;
-                #[inline(always)]
-                fn mul(self, o: $t) -> $t {
-                    // SAFETY: as above.
-                    $t(unsafe { $mul(self.0, o.0) })
-                }
-            }
-            impl Div for $t {
-                type Output = $t;
-                #[inline(always)]
-                fn div(self, o: $t) -> $t {
-                    // SAFETY: as above.
-                    $t(unsafe { $div(self.0, o.0) })
-                }
-            }
+            binary!(Add, add, $add);
+            binary!(Sub, sub, $sub);
+            binary!(Mul, mul, $mul);
+            binary!(Div, div, $div);
+
             impl Neg for $t {
                 type Output = $t;
                 #[inline(always)]
                 fn neg(self) -> $t {
                     // SAFETY: as above (flips the sign bits).
                     $t(unsafe { $xor($set1(-0.0), self.0) })
+                }
+            }
+
+            impl Lane for $t {
+                type Mask = $m;
+                type Cpu = Avx2Fma;
+                const SINGULAR: Real = $singular;
+                const TINY: Real = $tiny;
+
+                #[inline(always)]
+                fn cpu(self) -> Avx2Fma {
+                    // A lane value exists only on a CPU with AVX2 and FMA (made with a proof).
+                    Avx2Fma::proven()
+                }
+
+                #[inline(always)]
+                #[allow(clippy::unnecessary_cast)]
+                fn splat(cpu: Avx2Fma, v: Real) -> Self {
+                    let _ = cpu;
+                    // SAFETY: `cpu` proves the CPU runs AVX.
+                    Self(unsafe { $set1(v as $e) })
+                }
+
+                #[inline(always)]
+                fn none(cpu: Avx2Fma) -> $m {
+                    let _ = cpu;
+                    // SAFETY: `cpu` proves the CPU runs AVX.
+                    $m(unsafe { $setzero() })
+                }
+
+                #[inline(always)]
+                fn mul_add(self, b: Self, c: Self) -> Self {
+                    // SAFETY: a lane value proves the CPU runs FMA.
+                    Self(unsafe { $fmadd(self.0, b.0, c.0) })
+                }
+
+                #[inline(always)]
+                fn abs(self) -> Self {
+                    // SAFETY: a lane value proves the CPU runs AVX (clears the sign bits).
+                    Self(unsafe { $andnot($set1(-0.0), self.0) })
+                }
+
+                #[inline(always)]
+                fn sqrt(self) -> Self {
+                    // SAFETY: a lane value proves the CPU runs AVX.
+                    Self(unsafe { $sqrt(self.0) })
+                }
+
+                #[inline(always)]
+                fn min(self, o: Self) -> Self {
+                    // SAFETY: a lane value proves the CPU runs AVX.
+                    Self(unsafe { $min(self.0, o.0) })
+                }
+
+                #[inline(always)]
+                fn max(self, o: Self) -> Self {
+                    // SAFETY: a lane value proves the CPU runs AVX.
+                    Self(unsafe { $max(self.0, o.0) })
+                }
+
+                #[inline(always)]
+                fn le(self, o: Self) -> $m {
+                    // SAFETY: a lane value proves the CPU runs AVX.
+                    $m(unsafe { $cmp::<_CMP_LE_OQ>(self.0, o.0) })
+                }
+
+                #[inline(always)]
+                fn lt(self, o: Self) -> $m {
+                    // SAFETY: a lane value proves the CPU runs AVX.
+                    $m(unsafe { $cmp::<_CMP_LT_OQ>(self.0, o.0) })
+                }
+
+                #[inline(always)]
+                fn select(m: $m, a: Self, b: Self) -> Self {
+                    // SAFETY: a lane value proves the CPU runs AVX.
+                    Self(unsafe { $blendv(b.0, a.0, m.0) })
+                }
+            }
+
+            impl LaneMask for $m {
+                #[inline(always)]
+                fn and(self, o: Self) -> Self {
+                    // SAFETY: a mask value proves the CPU runs AVX (made from lane values or a
+                    // proof).
+                    Self(unsafe { $and(self.0, o.0) })
+                }
+
+                #[inline(always)]
+                fn or(self, o: Self) -> Self {
+                    // SAFETY: as above.
+                    Self(unsafe { $or(self.0, o.0) })
+                }
+
+                #[inline(always)]
+                fn not(self) -> Self {
+                    // SAFETY: as above.
+                    Self(unsafe { $xor(self.0, $ones) })
+                }
+
+                #[inline(always)]
+                fn bits(self) -> u32 {
+                    // SAFETY: as above.
+                    unsafe { $movemask(self.0) as u32 }
                 }
             }
         };
@@ -324,82 +421,14 @@ mod avx {
         }
     }
 
-    impl Lane for F4 {
-        type Mask = M4;
-        type Cpu = Avx2Fma;
-        const SINGULAR: Real = 1e-14;
-        const TINY: Real = 1e-300;
-
-        #[inline(always)]
-        fn cpu(self) -> Avx2Fma {
-            // A lane value exists only on a CPU with AVX2 and FMA (made with a proof).
-            Avx2Fma::proven()
-        }
-
-        #[inline(always)]
-        fn splat(cpu: Avx2Fma, v: Real) -> Self {
-            let _ = cpu;
-            // SAFETY: `cpu` proves the CPU runs AVX.
-            Self(unsafe { _mm256_set1_pd(v) })
-        }
-
-        #[inline(always)]
-        fn none(cpu: Avx2Fma) -> M4 {
-            let _ = cpu;
-            // SAFETY: `cpu` proves the CPU runs AVX.
-            M4(unsafe { _mm256_setzero_pd() })
-        }
-
-        #[inline(always)]
-        fn mul_add(self, b: Self, c: Self) -> Self {
-            // SAFETY: a lane value proves the CPU runs FMA.
-            Self(unsafe { _mm256_fmadd_pd(self.0, b.0, c.0) })
-        }
-
-        #[inline(always)]
-        fn abs(self) -> Self {
-            // SAFETY: a lane value proves the CPU runs AVX (clears the sign bits).
-            Self(unsafe { _mm256_andnot_pd(_mm256_set1_pd(-0.0), self.0) })
-        }
-
-        #[inline(always)]
-        fn sqrt(self) -> Self {
-            // SAFETY: a lane value proves the CPU runs AVX.
-            Self(unsafe { _mm256_sqrt_pd(self.0) })
-        }
-
-        #[inline(always)]
-        fn min(self, o: Self) -> Self {
-            // SAFETY: a lane value proves the CPU runs AVX.
-            Self(unsafe { _mm256_min_pd(self.0, o.0) })
-        }
-
-        #[inline(always)]
-        fn max(self, o: Self) -> Self {
-            // SAFETY: a lane value proves the CPU runs AVX.
-            Self(unsafe { _mm256_max_pd(self.0, o.0) })
-        }
-
-        #[inline(always)]
-        fn le(self, o: Self) -> M4 {
-            // SAFETY: a lane value proves the CPU runs AVX.
-            M4(unsafe { _mm256_cmp_pd::<_CMP_LE_OQ>(self.0, o.0) })
-        }
-
-        #[inline(always)]
-        fn lt(self, o: Self) -> M4 {
-            // SAFETY: a lane value proves the CPU runs AVX.
-            M4(unsafe { _mm256_cmp_pd::<_CMP_LT_OQ>(self.0, o.0) })
-        }
-
-        #[inline(always)]
-        fn select(m: M4, a: Self, b: Self) -> Self {
-            // SAFETY: a lane value proves the CPU runs AVX.
-            Self(unsafe { _mm256_blendv_pd(b.0, a.0, m.0) })
-        }
+    avx_lane! {
+        F4, M4, f64, singular: 1e-14, tiny: 1e-300,
+        set1: _mm256_set1_pd, setzero: _mm256_setzero_pd, add: _mm256_add_pd, sub: _mm256_sub_pd,
+        mul: _mm256_mul_pd, div: _mm256_div_pd, fmadd: _mm256_fmadd_pd, andnot: _mm256_andnot_pd,
+        sqrt: _mm256_sqrt_pd, min: _mm256_min_pd, max: _mm256_max_pd, cmp: _mm256_cmp_pd,
+        blendv: _mm256_blendv_pd, and: _mm256_and_pd, or: _mm256_or_pd, xor: _mm256_xor_pd,
+        ones: _mm256_castsi256_pd(_mm256_set1_epi64x(-1)), movemask: _mm256_movemask_pd,
     }
-
-    lane_ops!(F4, _mm256_add_pd, _mm256_sub_pd, _mm256_mul_pd, _mm256_div_pd, _mm256_xor_pd, _mm256_set1_pd);
 
     impl M4 {
         /// Lane i set where `b[i]`.
@@ -409,32 +438,6 @@ mod avx {
             let m = |v: bool| if v { -1i64 } else { 0 };
             // SAFETY: `cpu` proves the CPU runs AVX.
             Self(unsafe { _mm256_castsi256_pd(_mm256_set_epi64x(m(b[3]), m(b[2]), m(b[1]), m(b[0]))) })
-        }
-    }
-
-    impl LaneMask for M4 {
-        #[inline(always)]
-        fn and(self, o: Self) -> Self {
-            // SAFETY: a mask value proves the CPU runs AVX (made from lane values or a proof).
-            Self(unsafe { _mm256_and_pd(self.0, o.0) })
-        }
-
-        #[inline(always)]
-        fn or(self, o: Self) -> Self {
-            // SAFETY: as above.
-            Self(unsafe { _mm256_or_pd(self.0, o.0) })
-        }
-
-        #[inline(always)]
-        fn not(self) -> Self {
-            // SAFETY: as above.
-            Self(unsafe { _mm256_xor_pd(self.0, _mm256_castsi256_pd(_mm256_set1_epi64x(-1))) })
-        }
-
-        #[inline(always)]
-        fn bits(self) -> u32 {
-            // SAFETY: as above.
-            unsafe { _mm256_movemask_pd(self.0) as u32 }
         }
     }
 
@@ -466,82 +469,14 @@ mod avx {
         }
     }
 
-    impl Lane for F8 {
-        type Mask = M8;
-        type Cpu = Avx2Fma;
-        const SINGULAR: Real = 1e-10;
-        const TINY: Real = 1e-30;
-
-        #[inline(always)]
-        fn cpu(self) -> Avx2Fma {
-            // A lane value exists only on a CPU with AVX2 and FMA (made with a proof).
-            Avx2Fma::proven()
-        }
-
-        #[inline(always)]
-        fn splat(cpu: Avx2Fma, v: Real) -> Self {
-            let _ = cpu;
-            // SAFETY: `cpu` proves the CPU runs AVX.
-            Self(unsafe { _mm256_set1_ps(v as f32) })
-        }
-
-        #[inline(always)]
-        fn none(cpu: Avx2Fma) -> M8 {
-            let _ = cpu;
-            // SAFETY: `cpu` proves the CPU runs AVX.
-            M8(unsafe { _mm256_setzero_ps() })
-        }
-
-        #[inline(always)]
-        fn mul_add(self, b: Self, c: Self) -> Self {
-            // SAFETY: a lane value proves the CPU runs FMA.
-            Self(unsafe { _mm256_fmadd_ps(self.0, b.0, c.0) })
-        }
-
-        #[inline(always)]
-        fn abs(self) -> Self {
-            // SAFETY: a lane value proves the CPU runs AVX (clears the sign bits).
-            Self(unsafe { _mm256_andnot_ps(_mm256_set1_ps(-0.0), self.0) })
-        }
-
-        #[inline(always)]
-        fn sqrt(self) -> Self {
-            // SAFETY: a lane value proves the CPU runs AVX.
-            Self(unsafe { _mm256_sqrt_ps(self.0) })
-        }
-
-        #[inline(always)]
-        fn min(self, o: Self) -> Self {
-            // SAFETY: a lane value proves the CPU runs AVX.
-            Self(unsafe { _mm256_min_ps(self.0, o.0) })
-        }
-
-        #[inline(always)]
-        fn max(self, o: Self) -> Self {
-            // SAFETY: a lane value proves the CPU runs AVX.
-            Self(unsafe { _mm256_max_ps(self.0, o.0) })
-        }
-
-        #[inline(always)]
-        fn le(self, o: Self) -> M8 {
-            // SAFETY: a lane value proves the CPU runs AVX.
-            M8(unsafe { _mm256_cmp_ps::<_CMP_LE_OQ>(self.0, o.0) })
-        }
-
-        #[inline(always)]
-        fn lt(self, o: Self) -> M8 {
-            // SAFETY: a lane value proves the CPU runs AVX.
-            M8(unsafe { _mm256_cmp_ps::<_CMP_LT_OQ>(self.0, o.0) })
-        }
-
-        #[inline(always)]
-        fn select(m: M8, a: Self, b: Self) -> Self {
-            // SAFETY: a lane value proves the CPU runs AVX.
-            Self(unsafe { _mm256_blendv_ps(b.0, a.0, m.0) })
-        }
+    avx_lane! {
+        F8, M8, f32, singular: 1e-10, tiny: 1e-30,
+        set1: _mm256_set1_ps, setzero: _mm256_setzero_ps, add: _mm256_add_ps, sub: _mm256_sub_ps,
+        mul: _mm256_mul_ps, div: _mm256_div_ps, fmadd: _mm256_fmadd_ps, andnot: _mm256_andnot_ps,
+        sqrt: _mm256_sqrt_ps, min: _mm256_min_ps, max: _mm256_max_ps, cmp: _mm256_cmp_ps,
+        blendv: _mm256_blendv_ps, and: _mm256_and_ps, or: _mm256_or_ps, xor: _mm256_xor_ps,
+        ones: _mm256_castsi256_ps(_mm256_set1_epi32(-1)), movemask: _mm256_movemask_ps,
     }
-
-    lane_ops!(F8, _mm256_add_ps, _mm256_sub_ps, _mm256_mul_ps, _mm256_div_ps, _mm256_xor_ps, _mm256_set1_ps);
 
     impl M8 {
         /// Lane i set where `b[i]`.
@@ -562,32 +497,6 @@ mod avx {
                     m(b[0]),
                 ))
             })
-        }
-    }
-
-    impl LaneMask for M8 {
-        #[inline(always)]
-        fn and(self, o: Self) -> Self {
-            // SAFETY: a mask value proves the CPU runs AVX (made from lane values or a proof).
-            Self(unsafe { _mm256_and_ps(self.0, o.0) })
-        }
-
-        #[inline(always)]
-        fn or(self, o: Self) -> Self {
-            // SAFETY: as above.
-            Self(unsafe { _mm256_or_ps(self.0, o.0) })
-        }
-
-        #[inline(always)]
-        fn not(self) -> Self {
-            // SAFETY: as above.
-            Self(unsafe { _mm256_xor_ps(self.0, _mm256_castsi256_ps(_mm256_set1_epi32(-1))) })
-        }
-
-        #[inline(always)]
-        fn bits(self) -> u32 {
-            // SAFETY: as above.
-            unsafe { _mm256_movemask_ps(self.0) as u32 }
         }
     }
 }

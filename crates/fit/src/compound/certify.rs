@@ -181,14 +181,9 @@ fn check_edge(parent: &Body, child: &Body, child_given: &Body) -> Result<Edge> {
     if corner_max <= 1.0 + BOX_TOLERANCE {
         return Ok(Edge::Certified(ContainmentProof::BoxCorners));
     }
-    let best = match containment_margin(parent, child, 0) {
-        Ok(gamma) if gamma >= -CONTAINMENT_SLACK => {
-            return Ok(Edge::Certified(ContainmentProof::SProcedure { margin: gamma, multiplier_degree: 0 }));
-        }
-        Ok(gamma) => gamma,
-        // No certificate (an infeasible or failed solve).
-        Err(Error::Numerical(_)) => Real::NEG_INFINITY,
-        Err(e) => return Err(e),
+    let best = match s_procedure(parent, child, 0)? {
+        Ok(proof) => return Ok(Edge::Certified(proof)),
+        Err(gamma) => gamma,
     };
     let points = boundary_points(child_given, &id, VIOLATION_SAMPLES)?;
     let worst = points.iter().map(|x| (*x, parent.value_at(x))).fold((Point3::origin(), Real::NEG_INFINITY), |a, b| {
@@ -204,13 +199,9 @@ fn check_edge(parent: &Body, child: &Body, child_given: &Body) -> Result<Edge> {
     // A scalar multiplier far short: a sos quadratic one may certify (bounded: at most a 35 × 35
     // Gram block).
     let best = if best < -VIOLATION_LEVEL && child.degree().max(parent.degree().saturating_sub(2)) + 2 <= 8 {
-        match containment_margin(parent, child, 2) {
-            Ok(gamma) if gamma >= -CONTAINMENT_SLACK => {
-                return Ok(Edge::Certified(ContainmentProof::SProcedure { margin: gamma, multiplier_degree: 2 }));
-            }
-            Ok(gamma) => best.max(gamma),
-            Err(Error::Numerical(_)) => best,
-            Err(e) => return Err(e),
+        match s_procedure(parent, child, 2)? {
+            Ok(proof) => return Ok(Edge::Certified(proof)),
+            Err(gamma) => best.max(gamma),
         }
     } else {
         best
@@ -222,6 +213,24 @@ fn check_edge(parent: &Body, child: &Body, child_given: &Body) -> Result<Edge> {
         return Err(Error::Numerical(format!("no certified rescale of the parent (corner value {corner_max})")));
     }
     Ok(Edge::Short { factor, margin: best })
+}
+
+/// The S-procedure step with a multiplier of degree `multiplier_degree`: the proof when the
+/// margin γ ≥ −[`CONTAINMENT_SLACK`], else γ (−∞ when the solve found no certificate: infeasible
+/// or failed).
+fn s_procedure(
+    parent: &Body,
+    child: &Body,
+    multiplier_degree: usize,
+) -> Result<std::result::Result<ContainmentProof, Real>> {
+    match containment_margin(parent, child, multiplier_degree) {
+        Ok(margin) if margin >= -CONTAINMENT_SLACK => {
+            Ok(Ok(ContainmentProof::SProcedure { margin, multiplier_degree }))
+        }
+        Ok(margin) => Ok(Err(margin)),
+        Err(Error::Numerical(_)) => Ok(Err(Real::NEG_INFINITY)),
+        Err(e) => Err(e),
+    }
 }
 
 /// `body` with its polynomial divided by `factor` (> 1: a larger body), its report noting it.

@@ -90,13 +90,7 @@ fn solve_margin(p: &Polynomial, g: &Polynomial, two_k: usize) -> Result<Real> {
     }
     rows[0].push((gamma, 1.0));
     // τ (1 − g): entry (a, b) of T times z_a z_b times each term of 1 − g.
-    let h: Vec<([u8; 3], Real)> = g
-        .exponents()
-        .iter()
-        .zip(g.coefficients())
-        .map(|(e, &c)| (*e, if *e == [0, 0, 0] { 1.0 - c } else { -c }))
-        .filter(|(_, c)| *c != 0.0)
-        .collect();
+    let h = crate::sdp::program::one_minus_terms(g);
     for b in 0..tau.size() {
         for a in 0..=b {
             let (za, zb) = (&tau.half_basis[a], &tau.half_basis[b]);

@@ -349,13 +349,7 @@ impl GramProgram {
                         rows[index3(*alpha)].push((col_c + kc, 1.0 / scale_c[kc]));
                     }
                     // h = 1 − gᵢ.
-                    let h: Vec<([u8; 3], Real)> = gi
-                        .exponents()
-                        .iter()
-                        .zip(gi.coefficients())
-                        .map(|(e, &c)| (*e, if *e == [0, 0, 0] { 1.0 - c } else { -c }))
-                        .filter(|(_, c)| *c != 0.0)
-                        .collect();
+                    let h = one_minus_terms(gi);
                     if multiplier_degree == 0 {
                         for (e, hc) in &h {
                             rows[index3(*e)].push((tau, *hc));
@@ -521,4 +515,15 @@ impl GramProgram {
     pub fn polynomial_of_gram(&self, p: &nalgebra::DMatrix<Real>) -> Result<Polynomial> {
         polynomial_of_gram(self.half_degree, p)
     }
+}
+
+/// The nonzero terms (exponent, coefficient) of 1 − g: the factor the S-procedure multiplier τ
+/// multiplies (paper §V, eq. "s.procedure"). g's basis holds the constant monomial.
+pub(crate) fn one_minus_terms(g: &Polynomial) -> Vec<([u8; 3], Real)> {
+    g.exponents()
+        .iter()
+        .zip(g.coefficients())
+        .map(|(e, &c)| (*e, if *e == [0, 0, 0] { 1.0 - c } else { -c }))
+        .filter(|(_, c)| *c != 0.0)
+        .collect()
 }
