@@ -23,6 +23,11 @@ fn defaults() -> ServerConfig {
     ServerConfig::default()
 }
 
+/// A duration in whole milliseconds (for the `*-ms` flags' defaults).
+fn millis(d: std::time::Duration) -> u64 {
+    u64::try_from(d.as_millis()).unwrap_or(u64::MAX)
+}
+
 /// Log line format on stderr.
 #[derive(clap::ValueEnum, serde::Serialize, serde::Deserialize, Clone, Copy, Debug, PartialEq, Eq)]
 #[serde(rename_all = "lowercase")]
@@ -49,9 +54,43 @@ pub struct OpsArgs {
     /// Log format on stderr: `text` or `json` (one object per line, with the RPC span's `request_id`).
     #[arg(long, env = "SUBLEVEL_LOG_FORMAT", value_enum, default_value_t = LogFormat::Text)]
     pub log_format: LogFormat,
-    /// Largest request or response message, in bytes (larger ones are OUT_OF_RANGE).
+    /// Largest response, and largest request of UploadBody / StartFitJob / StartGroupJob, in bytes
+    /// (larger ones are OUT_OF_RANGE).
     #[arg(long, env = "SUBLEVEL_MAX_MESSAGE_BYTES", default_value_t = defaults().max_message_bytes)]
     pub max_message_bytes: usize,
+    /// Largest request message of every other method, in bytes (larger ones are OUT_OF_RANGE
+    /// before any byte is buffered).
+    #[arg(long, env = "SUBLEVEL_MAX_REQUEST_BYTES", default_value_t = defaults().admission.max_request_bytes)]
+    pub max_request_bytes: usize,
+    /// Most bytes of incomplete request messages the server holds, all connections together (a
+    /// call that would pass it is RESOURCE_EXHAUSTED; its last eighth is kept for messages of at
+    /// most 64 KiB).
+    #[arg(long, env = "SUBLEVEL_REQUEST_MEMORY_BYTES", default_value_t = defaults().admission.request_memory_bytes)]
+    pub request_memory_bytes: usize,
+    /// Most bytes of incomplete request messages held for one connection (at least the largest
+    /// upload, --max-message-bytes).
+    #[arg(long, env = "SUBLEVEL_CONNECTION_MEMORY_BYTES", default_value_t = defaults().admission.connection_memory_bytes)]
+    pub connection_memory_bytes: usize,
+    /// Longest time in milliseconds one request message may take to arrive once its first byte
+    /// has (past it: DEADLINE_EXCEEDED, its bytes freed).
+    #[arg(long, env = "SUBLEVEL_MESSAGE_TIMEOUT_MS", default_value_t = millis(defaults().admission.message_timeout))]
+    pub message_timeout_ms: u64,
+    /// Most connections open at once; one more is accepted and closed at once.
+    #[arg(long, env = "SUBLEVEL_MAX_CONNECTIONS", default_value_t = defaults().admission.max_connections)]
+    pub max_connections: usize,
+    /// Most concurrent calls (HTTP/2 streams) per connection; clients queue calls beyond it.
+    #[arg(long, env = "SUBLEVEL_MAX_STREAMS_PER_CONNECTION", default_value_t = defaults().admission.max_streams_per_connection)]
+    pub max_streams_per_connection: u32,
+    /// Longest time in milliseconds from accepting a connection to its first request (TLS
+    /// handshake, HTTP/2 preface, headers); past it the connection is closed.
+    #[arg(long, env = "SUBLEVEL_HANDSHAKE_TIMEOUT_MS", default_value_t = millis(defaults().admission.handshake_timeout))]
+    pub handshake_timeout_ms: u64,
+    /// HTTP/2 flow-control window of one stream, in bytes.
+    #[arg(long, env = "SUBLEVEL_STREAM_WINDOW_BYTES", default_value_t = defaults().admission.stream_window_bytes)]
+    pub stream_window_bytes: u32,
+    /// HTTP/2 flow-control window of one connection, in bytes.
+    #[arg(long, env = "SUBLEVEL_CONNECTION_WINDOW_BYTES", default_value_t = defaults().admission.connection_window_bytes)]
+    pub connection_window_bytes: u32,
     /// Most points of one fit, after mesh parsing.
     #[arg(long, env = "SUBLEVEL_MAX_FIT_POINTS", default_value_t = defaults().max_fit_points)]
     pub max_fit_points: usize,
@@ -106,9 +145,44 @@ impl OpsArgs {
             ("--max-concurrent-fits", self.max_concurrent_fits),
             ("--max-fit-queue", self.max_fit_queue),
             ("--max-concurrent-sdp", self.max_concurrent_sdp),
+            ("--max-request-bytes", self.max_request_bytes),
+            ("--request-memory-bytes", self.request_memory_bytes),
+            ("--connection-memory-bytes", self.connection_memory_bytes),
+            ("--max-connections", self.max_connections),
+            ("--max-streams-per-connection", self.max_streams_per_connection as usize),
+            ("--message-timeout-ms", usize::try_from(self.message_timeout_ms).unwrap_or(usize::MAX)),
+            ("--handshake-timeout-ms", usize::try_from(self.handshake_timeout_ms).unwrap_or(usize::MAX)),
         ];
         if let Some((flag, _)) = limits.iter().find(|(_, v)| *v == 0) {
             return Err(Error::invalid(*flag, "must be at least 1"));
+        }
+        // An upload must fit in its connection's budget, and that in the server's.
+        let upload = self.max_message_bytes.saturating_add(5);
+        if self.connection_memory_bytes < upload {
+            return Err(Error::invalid(
+                "--connection-memory-bytes",
+                format!("must hold the largest upload: at least --max-message-bytes + 5 = {upload}"),
+            ));
+        }
+        if self.request_memory_bytes - self.request_memory_bytes / 8 < self.connection_memory_bytes {
+            return Err(Error::invalid(
+                "--request-memory-bytes",
+                format!(
+                    "its first seven eighths must hold one connection's budget (--connection-memory-bytes {}): at \
+                     least {}",
+                    self.connection_memory_bytes,
+                    self.connection_memory_bytes.div_ceil(7) * 8
+                ),
+            ));
+        }
+        for (flag, v) in [
+            ("--stream-window-bytes", self.stream_window_bytes),
+            ("--connection-window-bytes", self.connection_window_bytes),
+        ] {
+            // HTTP/2 (RFC 9113 §6.9.2): a window is at least the 65 535-byte default and below 2³¹.
+            if !(65_535..=0x7fff_ffff).contains(&v) {
+                return Err(Error::invalid(flag, format!("must be between 65535 and 2147483647 bytes, got {v}")));
+            }
         }
         config.max_message_bytes = self.max_message_bytes;
         config.max_fit_points = self.max_fit_points;
@@ -120,6 +194,17 @@ impl OpsArgs {
         config.max_concurrent_fits = self.max_concurrent_fits;
         config.max_fit_queue = self.max_fit_queue;
         config.max_concurrent_sdp = self.max_concurrent_sdp;
+        config.admission = sublevel::service::admission::AdmissionSettings {
+            max_connections: self.max_connections,
+            max_streams_per_connection: self.max_streams_per_connection,
+            handshake_timeout: std::time::Duration::from_millis(self.handshake_timeout_ms),
+            max_request_bytes: self.max_request_bytes,
+            request_memory_bytes: self.request_memory_bytes,
+            connection_memory_bytes: self.connection_memory_bytes,
+            message_timeout: std::time::Duration::from_millis(self.message_timeout_ms),
+            stream_window_bytes: self.stream_window_bytes,
+            connection_window_bytes: self.connection_window_bytes,
+        };
         config.store_url = self.store.clone();
         config.max_request_time =
             (self.max_request_ms > 0).then(|| std::time::Duration::from_millis(self.max_request_ms));

@@ -1,5 +1,6 @@
 //! The one integration-test binary (one link step instead of many): modules by area.
 
+mod admission;
 mod deadlines;
 mod fit;
 mod gradient;

@@ -26,6 +26,8 @@
 //! Transport: every accepted socket has TCP_NODELAY (a small response is never held back by
 //! Nagle's algorithm waiting for the client's delayed ACK) and TCP keepalive; HTTP/2 keepalive
 //! pings close connections whose peer vanished ([`KEEPALIVE_INTERVAL`], [`KEEPALIVE_TIMEOUT`]).
+//! [`admission`] bounds connections, streams per connection, handshake time and the memory held
+//! by incomplete request messages.
 //! [`status_layer`] turns undecodable requests into INVALID_ARGUMENT and names unknown methods.
 //!
 //! Security (both off by default): TLS, optionally mutual, from PEM files ([`tls`]); bearer
@@ -53,6 +55,7 @@
 
 pub use sublevel_core::{Error, Result};
 
+pub mod admission;
 pub mod auth;
 pub mod convert;
 pub mod deadline;
@@ -126,9 +129,13 @@ pub struct ServerConfig {
     /// `postgres://…` URL of a PostgreSQL store shared by several replicas (`--store`, feature
     /// `postgres`; see `deploy/SCALING.md`); `None` keeps the embedded redb store in `data_dir`.
     pub store_url: Option<String>,
-    /// Largest encoded request or response, in bytes (tonic rejects larger messages with
-    /// OUT_OF_RANGE before a handler runs).
+    /// Largest encoded response, and largest request of the uploads (`UploadBody`,
+    /// `StartFitJob`, `StartGroupJob`), in bytes; other requests are limited by
+    /// [`admission::AdmissionSettings::max_request_bytes`]. Larger messages are OUT_OF_RANGE
+    /// before a handler runs.
     pub max_message_bytes: usize,
+    /// Bounds on connections, handshakes and request-message memory ([`admission`]).
+    pub admission: admission::AdmissionSettings,
     /// Most points one fit may use (after mesh parsing).
     pub max_fit_points: usize,
     /// Most pairs in one `BatchQuery`.
@@ -174,6 +181,7 @@ impl Default for ServerConfig {
             data_dir: PathBuf::from("./sublevel-data"),
             store_url: None,
             max_message_bytes: 64 * 1024 * 1024,
+            admission: admission::AdmissionSettings::default(),
             max_fit_points: 2_000_000,
             max_batch_pairs: 10_000,
             max_poses_per_call: 100_000,
@@ -273,10 +281,12 @@ pub async fn serve_catalog(
     let auth_on = config.auth.is_some();
     let auth = auth::AuthLayer::new(config.auth.clone());
     let deadlines = deadline::DeadlineLayer::new(config.max_request_time);
+    let admission = config.admission.clone();
+    let messages = admission::messages::MessageLayer::new(&admission, max);
     let builder = match &config.tls {
         None => tonic::transport::Server::builder(),
         Some(tls) => tonic::transport::Server::builder()
-            .tls_config(tls.server_tls())
+            .tls_config(tls.server_tls().timeout(admission.handshake_timeout))
             .map_err(|e| Error::invalid("tls", format!("unusable certificate, key or client CA: {e}")))?,
     };
     let handlers = SublevelService::new(catalog, config);
@@ -286,9 +296,7 @@ pub async fn serve_catalog(
     let service = SublevelServer::new(handlers).max_decoding_message_size(max).max_encoding_message_size(max);
     let addr = listener.local_addr().ok();
     tracing::info!(?addr, tls = tls_mode, auth = auth_on, "serving {SERVICE_NAME}");
-    let incoming = tonic::transport::server::TcpIncoming::from(listener)
-        .with_nodelay(Some(true))
-        .with_keepalive(Some(KEEPALIVE_INTERVAL));
+    let incoming = admission::admit(listener, &admission, KEEPALIVE_INTERVAL);
     let stopping = async move {
         shutdown.await;
         tracing::info!(?grace, "shutting down: health NOT_SERVING, fit jobs cancelled, draining requests");
@@ -299,7 +307,12 @@ pub async fn serve_catalog(
     let serving = builder
         .http2_keepalive_interval(Some(KEEPALIVE_INTERVAL))
         .http2_keepalive_timeout(Some(KEEPALIVE_TIMEOUT))
+        .max_concurrent_streams(admission.max_streams_per_connection)
+        .initial_stream_window_size(admission.stream_window_bytes)
+        .initial_connection_window_size(admission.connection_window_bytes)
+        .http2_adaptive_window(Some(false))
         .layer(metrics::RpcLayer)
+        .layer(messages)
         .layer(status_layer::StatusLayer)
         .layer(auth)
         .layer(deadlines)

@@ -16,6 +16,8 @@
 //! | `sublevel_fit_queue_depth` | gauge | | fit and group jobs queued or running |
 //! | `sublevel_fit_duration_seconds` | histogram | `kind`, `outcome` | fit / group job time in its slot, by `succeeded`, `failed`, `interrupted` |
 //! | `sublevel_store_commit_seconds` | histogram | `operation` | one store transaction (`put_body`, `put_poses`, …) |
+//! | `sublevel_connections_closed_total` | counter | `reason` | connections closed by admission: `max_connections`, `handshake_timeout` |
+//! | `sublevel_requests_refused_total` | counter | `reason` | calls refused by admission: `message_size`, `request_memory`, `connection_memory`, `message_timeout` |
 //!
 //! [`RpcLayer`] wraps the whole router: every RPC runs in a `rpc` span with fields `method` and
 //! `request_id`; the id is the request's `x-request-id` metadata when it is a short printable
@@ -55,6 +57,10 @@ pub const FIT_QUEUE_DEPTH: &str = "sublevel_fit_queue_depth";
 pub const FIT_DURATION: &str = "sublevel_fit_duration_seconds";
 /// Histogram of store transaction latency in seconds (`operation`).
 pub const STORE_COMMIT: &str = "sublevel_store_commit_seconds";
+/// Counter of connections closed by admission (`reason`; see [`crate::admission`]).
+pub const CONNECTIONS_CLOSED: &str = "sublevel_connections_closed_total";
+/// Counter of calls refused by admission (`reason`; see [`crate::admission`]).
+pub const REQUESTS_REFUSED: &str = "sublevel_requests_refused_total";
 
 /// Bucket bounds of the latency histograms, in seconds (50 µs … 5 min).
 const SECONDS_BUCKETS: [f64; 16] =
