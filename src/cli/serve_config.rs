@@ -109,15 +109,21 @@ pub struct OpsArgs {
     /// Most bodies (UploadBody or StartFitJob beyond it is RESOURCE_EXHAUSTED).
     #[arg(long, env = "SUBLEVEL_MAX_BODIES", default_value_t = defaults().max_bodies)]
     pub max_bodies: usize,
-    /// Fits running at once (each is CPU-heavy; the others wait in the queue).
-    #[arg(long, env = "SUBLEVEL_MAX_CONCURRENT_FITS", default_value_t = defaults().max_concurrent_fits)]
-    pub max_concurrent_fits: usize,
+    /// Fits running at once (each is CPU-heavy; the others wait in the queue). Default: a quarter
+    /// of the CPUs, at least 1.
+    #[arg(long, env = "SUBLEVEL_MAX_CONCURRENT_FITS")]
+    pub max_concurrent_fits: Option<usize>,
     /// Most fit and group jobs queued or running (one more is RESOURCE_EXHAUSTED).
     #[arg(long, env = "SUBLEVEL_MAX_FIT_QUEUE", default_value_t = defaults().max_fit_queue)]
     pub max_fit_queue: usize,
-    /// Blocking query solves (certificates, nonconvex scenes, large batches) running at once.
-    #[arg(long, env = "SUBLEVEL_MAX_CONCURRENT_SDP", default_value_t = defaults().max_concurrent_sdp)]
-    pub max_concurrent_sdp: usize,
+    /// SDP query solves (certificates, nonconvex scenes) running at once. Default: half the CPUs,
+    /// at least 2.
+    #[arg(long, env = "SUBLEVEL_MAX_CONCURRENT_SDP")]
+    pub max_concurrent_sdp: Option<usize>,
+    /// Newton-only query work too large for an async worker (large batches, planner requests,
+    /// CheckScene) running at once, each on its own thread. Default: the CPUs.
+    #[arg(long, env = "SUBLEVEL_BATCH_WORKERS")]
+    pub batch_workers: Option<usize>,
     /// Longest time of one call in milliseconds, whatever the client's deadline (past it:
     /// DEADLINE_EXCEEDED, its query solves cancelled); 0 = only client deadlines apply.
     #[arg(long, env = "SUBLEVEL_MAX_REQUEST_MS", default_value_t = 0)]
@@ -142,9 +148,10 @@ impl OpsArgs {
             ("--max-instances-per-scene", self.max_instances_per_scene),
             ("--max-scenes", self.max_scenes),
             ("--max-bodies", self.max_bodies),
-            ("--max-concurrent-fits", self.max_concurrent_fits),
+            ("--max-concurrent-fits", self.max_concurrent_fits.unwrap_or(1)),
             ("--max-fit-queue", self.max_fit_queue),
-            ("--max-concurrent-sdp", self.max_concurrent_sdp),
+            ("--max-concurrent-sdp", self.max_concurrent_sdp.unwrap_or(1)),
+            ("--batch-workers", self.batch_workers.unwrap_or(1)),
             ("--max-request-bytes", self.max_request_bytes),
             ("--request-memory-bytes", self.request_memory_bytes),
             ("--connection-memory-bytes", self.connection_memory_bytes),
@@ -191,9 +198,10 @@ impl OpsArgs {
         config.max_instances_per_scene = self.max_instances_per_scene;
         config.max_scenes = self.max_scenes;
         config.max_bodies = self.max_bodies;
-        config.max_concurrent_fits = self.max_concurrent_fits;
+        config.max_concurrent_fits = self.max_concurrent_fits.unwrap_or(config.max_concurrent_fits);
         config.max_fit_queue = self.max_fit_queue;
-        config.max_concurrent_sdp = self.max_concurrent_sdp;
+        config.max_concurrent_sdp = self.max_concurrent_sdp.unwrap_or(config.max_concurrent_sdp);
+        config.batch_workers = self.batch_workers.unwrap_or(config.batch_workers);
         config.admission = sublevel::service::admission::AdmissionSettings {
             max_connections: self.max_connections,
             max_streams_per_connection: self.max_streams_per_connection,

@@ -5,7 +5,7 @@
 //! client    grpc-timeout: 50m  (tonic: Request::set_timeout; grpcio: timeout=…)
 //! layer     deadline = min(grpc-timeout, --max-request-ms) − DEADLINE_MARGIN after arrival
 //! expiry    the handler's future is dropped; the client gets DEADLINE_EXCEEDED naming the limit
-//! drop      the blocking query work it awaited (SdpSlots::run) sees its cancel flag set:
+//! drop      the blocking query work it awaited (Slots::run) sees its cancel flag set:
 //!           a running Clarabel solve stops at its next interior-point iteration (termination
 //!           callback, sublevel_core::cancel), a batch stops before its next pair; the SDP slot is
 //!           free again within one iteration

@@ -142,7 +142,8 @@ pub struct ServerConfig {
     pub max_batch_pairs: usize,
     /// Most poses in one `SetPoses`.
     pub max_poses_per_call: usize,
-    /// Fits running at the same time (each is CPU-heavy; the rest queue).
+    /// Fits running at the same time (each is CPU-heavy; the rest queue). Default: a quarter of
+    /// the CPUs, at least 1.
     pub max_concurrent_fits: usize,
     /// Most fit and group jobs queued or running at once; one more is RESOURCE_EXHAUSTED.
     pub max_fit_queue: usize,
@@ -153,9 +154,12 @@ pub struct ServerConfig {
     pub max_bodies: usize,
     /// Most instances in one scene; adding one more is RESOURCE_EXHAUSTED.
     pub max_instances_per_scene: usize,
-    /// Blocking SDP solves of queries (certificates, nonconvex scenes) running at once; the rest
-    /// wait for a slot.
+    /// Blocking SDP solves of queries (certificates, nonconvex scenes, answers Newton could not
+    /// settle) running at once; the rest wait for a slot. Default: half the CPUs, at least 2.
     pub max_concurrent_sdp: usize,
+    /// Blocking Newton-only query work running at once (batches and planner requests too large
+    /// for an async worker, CheckScene); the rest wait for a slot. Default: the CPUs.
+    pub batch_workers: usize,
     /// Longest time a `sublevel.v1` call may take (`--max-request-ms`); the shorter of it and the
     /// client's `grpc-timeout` applies, and a call past it answers DEADLINE_EXCEEDED with its
     /// blocking query work cancelled ([`deadline`]). `None`: only client deadlines apply.
@@ -185,12 +189,13 @@ impl Default for ServerConfig {
             max_fit_points: 2_000_000,
             max_batch_pairs: 10_000,
             max_poses_per_call: 100_000,
-            max_concurrent_fits: 1,
+            max_concurrent_fits: limits::default_fit_slots(),
             max_fit_queue: 16,
             max_scenes: 10_000,
             max_bodies: 10_000,
             max_instances_per_scene: 100_000,
-            max_concurrent_sdp: 2,
+            max_concurrent_sdp: limits::default_sdp_slots(),
+            batch_workers: limits::default_batch_workers(),
             max_request_time: None,
             newton: NewtonParams::default(),
             fit: FitSettings::default(),

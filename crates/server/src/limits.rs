@@ -8,10 +8,16 @@
 //! creations may overshoot a limit by at most the number of calls in flight — a soft limit that
 //! protects memory and disk, not an invariant.
 //!
-//! SDP work of queries (certificates, nonconvex scenes) runs in [`SdpSlots`]: at most
-//! [`super::ServerConfig::max_concurrent_sdp`] blocking solves at a time, the rest wait for a slot
-//! (asynchronously, holding no thread), so a burst of `certify` calls cannot take every thread
-//! of the blocking pool.
+//! Blocking query work runs in one of two [`Slots`] pools ([`QueryPools`]), each a semaphore in
+//! front of tokio's blocking pool; a request waits for a slot asynchronously, holding no thread:
+//!
+//! - **batch** ([`super::ServerConfig::batch_workers`], default the CPUs): Newton-only work too
+//!   large for an async worker — big batches, planner requests, compound scenes, CheckScene;
+//! - **SDP** ([`super::ServerConfig::max_concurrent_sdp`], default half the CPUs, at least 2):
+//!   certificates, nonconvex scenes, and the rare answer Newton could not settle.
+//!
+//! Separate pools so that large batches (microseconds per pair, all cores' worth of them) never
+//! wait behind seconds-long SDP solves, and a burst of `certify` calls cannot take every thread.
 
 use crate::runtime::cancellable_blocking;
 use crate::{Error, Result};
@@ -64,15 +70,49 @@ pub(crate) fn exhausted(limit: Limit, current: usize, max: usize) -> Error {
     ))
 }
 
-/// Slots for blocking SDP work: a semaphore in front of tokio's blocking pool.
+/// Slots for blocking work: a semaphore in front of tokio's blocking pool.
 #[derive(Clone, Debug)]
-pub(crate) struct SdpSlots {
-    /// Permits = the configured SDP concurrency (at least 1).
+pub(crate) struct Slots {
+    /// Permits = the configured concurrency (at least 1).
     slots: Arc<Semaphore>,
 }
 
-impl SdpSlots {
-    /// `n` slots (0 is taken as 1: no SDP at all would make certify calls wait forever).
+/// The two pools of blocking query work (see the module docs).
+#[derive(Clone, Debug)]
+pub(crate) struct QueryPools {
+    /// Newton-only work too large for an async worker.
+    pub(crate) batch: Slots,
+    /// SDP work: certificates, nonconvex scenes, SDP fallbacks.
+    pub(crate) sdp: Slots,
+}
+
+impl QueryPools {
+    /// `batch` batch slots and `sdp` SDP slots.
+    pub(crate) fn new(batch: usize, sdp: usize) -> Self {
+        Self { batch: Slots::new(batch), sdp: Slots::new(sdp) }
+    }
+}
+
+/// The default size of the batch pool: the CPUs this process may use.
+pub fn default_batch_workers() -> usize {
+    std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get)
+}
+
+/// The default number of SDP slots: half the CPUs, at least 2 (an SDP solve is single-threaded
+/// with `OPENBLAS_NUM_THREADS=1` and takes milliseconds to seconds; half the cores keeps the rest
+/// for batches and the async workers).
+pub fn default_sdp_slots() -> usize {
+    (default_batch_workers() / 2).max(2)
+}
+
+/// The default number of fit jobs running at once: a quarter of the CPUs, at least 1 (a fit is
+/// seconds to minutes of SDP solving; the rest queue).
+pub fn default_fit_slots() -> usize {
+    (default_batch_workers() / 4).max(1)
+}
+
+impl Slots {
+    /// `n` slots (0 is taken as 1: no slot at all would make calls wait forever).
     pub(crate) fn new(n: usize) -> Self {
         Self { slots: Arc::new(Semaphore::new(n.max(1))) }
     }
@@ -126,7 +166,7 @@ mod tests {
     /// Eight 20 ms jobs in two slots: never more than two at once.
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
     async fn sdp_slots_bound_the_concurrent_blocking_work() {
-        let slots = SdpSlots::new(2);
+        let slots = Slots::new(2);
         let running = Arc::new(AtomicUsize::new(0));
         let peak = Arc::new(AtomicUsize::new(0));
         let mut tasks = Vec::new();
@@ -154,7 +194,7 @@ mod tests {
     /// slot is free again.
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
     async fn dropping_the_caller_cancels_the_work_and_frees_the_slot() {
-        let slots = SdpSlots::new(1);
+        let slots = Slots::new(1);
         let (tx, rx) = std::sync::mpsc::channel();
         let work = slots.run(move || {
             let start = std::time::Instant::now();

@@ -20,7 +20,7 @@ mod scenes;
 mod tests;
 
 use crate::jobs::FitJobs;
-use crate::limits::SdpSlots;
+use crate::limits::QueryPools;
 use crate::pb::{self, sublevel_server::Sublevel};
 use crate::ServerConfig;
 use std::sync::Arc;
@@ -34,16 +34,17 @@ pub struct SublevelService {
     catalog: Arc<Catalog>,
     config: ServerConfig,
     pub(crate) jobs: Arc<FitJobs>,
-    /// Slots of blocking SDP query work (`ServerConfig::max_concurrent_sdp`).
-    sdp: SdpSlots,
+    /// Slots of blocking query work: batches (`ServerConfig::batch_workers`) and SDPs
+    /// (`ServerConfig::max_concurrent_sdp`).
+    pools: QueryPools,
 }
 
 impl SublevelService {
     /// A service over `catalog` with `config`'s limits.
     pub fn new(catalog: Arc<Catalog>, config: ServerConfig) -> Self {
         let jobs = Arc::new(FitJobs::new(catalog.clone(), config.max_concurrent_fits, config.max_fit_queue));
-        let sdp = SdpSlots::new(config.max_concurrent_sdp);
-        Self { catalog, config, jobs, sdp }
+        let pools = QueryPools::new(config.batch_workers, config.max_concurrent_sdp);
+        Self { catalog, config, jobs, pools }
     }
 }
 

@@ -1,12 +1,12 @@
 //! Queries: `Distance`, `Growth`, `BatchQuery`, `Query`, `QueryStream`, `CheckScene`, and where
 //! their work runs: inline on the async workers when it is microseconds of Newton solves, on the
-//! SDP slots of the blocking pool otherwise ([`off_workers`]).
+//! batch slots of the blocking pool when it is more Newton work than that, on the SDP slots when
+//! it needs an SDP ([`off_workers`], [`crate::limits`]).
 
 use super::{Handled, SublevelService};
 use crate::convert::{self as cv, require_id, to_status};
-use crate::limits::SdpSlots;
+use crate::limits::QueryPools;
 use crate::pb;
-use crate::runtime::cancellable_blocking;
 use crate::{Error, Result};
 use std::sync::Arc;
 use sublevel_query::CertifyMode;
@@ -19,17 +19,21 @@ use tonic::{Request, Response, Status};
 pub(super) type QueryStream = std::pin::Pin<Box<dyn Stream<Item = Result<pb::QueryResponse, Status>> + Send>>;
 
 /// Answers a planner request on a view into `sink`: inline on the async worker when it holds
-/// only Newton queries (microseconds each), on the blocking pool when one asks for a certificate
-/// (an SDP). Returns the view (moved back out of the blocking pool) with the filled sink.
+/// only a few Newton queries (microseconds each), on the batch slots when it holds more, on the
+/// SDP slots when one asks for a certificate or the scene is nonconvex. An answer that needs the
+/// SDP sends the whole request on to the SDP slots. Returns the view (moved back out of the
+/// blocking pool) with the filled sink.
 pub(super) async fn run_view<S: AnswerSink + Send + 'static>(
     catalog: Arc<Catalog>,
-    sdp: &SdpSlots,
+    pools: &QueryPools,
     mut view: QueryView,
     request: PlannerRequest,
     mut sink: S,
 ) -> (QueryView, Result<S, Status>) {
     let certify = request.queries.iter().any(|q| q.options.mode == CertifyMode::Certify);
     let answers = request.queries.len() * request.states.len().max(1);
+    let scene = view.scene_id().to_owned();
+    let mut request = request;
     if !off_workers(&catalog, view.scene_id(), certify, answers) {
         // Newton only: an answer that needs the SDP sends the whole request to the blocking pool.
         match view.run_newton_only_into(&catalog, &request, &mut sink) {
@@ -37,9 +41,24 @@ pub(super) async fn run_view<S: AnswerSink + Send + 'static>(
             Ok(false) => {}
             Err(e) => return (view, Err(to_status(e))),
         }
+    } else if !needs_sdp_slots(&catalog, &scene, certify) {
+        let c = catalog.clone();
+        let batch = pools
+            .batch
+            .run(move || {
+                let done = view.run_newton_only_into(&c, &request, &mut sink);
+                Ok((view, request, sink, done))
+            })
+            .await;
+        match batch {
+            Ok((v, _, s, Ok(true))) => return (v, Ok(s)),
+            Ok((v, r, s, Ok(false))) => (view, request, sink) = (v, r, s),
+            Ok((v, _, _, Err(e))) => return (v, Err(to_status(e))),
+            Err(e) => return (QueryView::new(&scene), Err(e)),
+        }
     }
-    let scene = view.scene_id().to_owned();
-    match sdp
+    match pools
+        .sdp
         .run(move || {
             let out = view.run_into(&catalog, &request, &mut sink).map(|()| sink);
             Ok((view, out))
@@ -56,7 +75,7 @@ pub(super) async fn run_view<S: AnswerSink + Send + 'static>(
 /// columns as they are solved; every other request collects its answers first.
 async fn answer_planner(
     catalog: Arc<Catalog>,
-    sdp: &SdpSlots,
+    pools: &QueryPools,
     view: QueryView,
     req: &pb::QueryRequest,
     planner: PlannerRequest,
@@ -67,7 +86,7 @@ async fn answer_planner(
     match columns {
         Some(kind) if state_columns => {
             let rows = planner.queries.len() * planner.states.len();
-            let (view, out) = run_view(catalog, sdp, view, planner, cv::ColumnsSink::new(kind, rows)).await;
+            let (view, out) = run_view(catalog, pools, view, planner, cv::ColumnsSink::new(kind, rows)).await;
             let reply = out.map(|c| pb::QueryResponse {
                 request_id: req.request_id,
                 server_seconds: start.elapsed().as_secs_f64(),
@@ -78,7 +97,7 @@ async fn answer_planner(
         }
         _ => {
             let answers = PlannerAnswers::for_request(&planner);
-            let (view, out) = run_view(catalog, sdp, view, planner, answers).await;
+            let (view, out) = run_view(catalog, pools, view, planner, answers).await;
             let reply = out.map(|a| {
                 let seconds = start.elapsed().as_secs_f64();
                 cv::planner_answers_to_proto(&a, req.request_id, seconds, columns)
@@ -97,6 +116,13 @@ const INLINE_ANSWERS: usize = 256;
 /// to the blocking pool from [`INLINE_ANSWERS`] / this many answers on.
 const COMPOUND_ANSWER_COST: usize = 32;
 
+/// Whether blocking query work belongs on the SDP slots from the start: it asks for certificates
+/// or its scene holds a nonconvex body (SDP lower bounds); all other blocking work starts on the
+/// batch slots.
+fn needs_sdp_slots(catalog: &Catalog, scene_id: &str, certify: bool) -> bool {
+    certify || catalog.has_nonconvex(scene_id)
+}
+
 /// Whether a query request is slow work, to run off the async workers: it asks for certificates
 /// (an SDP each), its scene holds a nonconvex body (SDP lower bounds), or it has more than
 /// [`INLINE_ANSWERS`] answers (counting [`COMPOUND_ANSWER_COST`] per answer in a scene with a
@@ -109,35 +135,43 @@ fn off_workers(catalog: &Catalog, scene_id: &str, certify: bool, answers: usize)
         || (answers.saturating_mul(COMPOUND_ANSWER_COST) > INLINE_ANSWERS && catalog.has_compound(scene_id))
 }
 
-/// Runs query work `f` inline when it is microseconds, else on the blocking pool (see
-/// [`off_workers`]). `f` gets the certification mode to use instead of the queries' own: inline
-/// [`CertifyMode::NewtonOnly`] (no SDP ever runs on an async worker); when `needs_sdp` says an
-/// answer needed the SDP fallback, `f` runs again on the blocking pool with the queries' own modes
-/// (`None`), which gives the answers a first run there would have given.
+/// Runs query work `f` inline when it is microseconds, on the batch slots when it is more Newton
+/// work, on the SDP slots when it needs SDPs (see [`off_workers`], [`needs_sdp_slots`]). `f` gets
+/// the certification mode to use instead of the queries' own: inline and on the batch slots
+/// [`CertifyMode::NewtonOnly`] (no SDP ever runs there); when `needs_sdp` says an answer needed the
+/// SDP fallback, `f` runs again on the SDP slots with the queries' own modes (`None`), which gives
+/// the answers a first run there would have given.
 async fn query_work<T: Send + 'static>(
     catalog: &Arc<Catalog>,
-    sdp: &SdpSlots,
+    pools: &QueryPools,
     scene_id: &str,
     certify: bool,
     answers: usize,
-    f: impl Fn(&Catalog, Option<CertifyMode>) -> Result<T> + Send + 'static,
+    f: impl Fn(&Catalog, Option<CertifyMode>) -> Result<T> + Send + Sync + 'static,
     needs_sdp: impl Fn(&T) -> bool,
 ) -> Result<T, Status> {
+    let f = Arc::new(f);
     if !off_workers(catalog, scene_id, certify, answers) {
         let out = f(catalog, Some(CertifyMode::NewtonOnly)).map_err(to_status)?;
         if !needs_sdp(&out) {
             return Ok(out);
         }
+    } else if !needs_sdp_slots(catalog, scene_id, certify) {
+        let (c, work) = (catalog.clone(), f.clone());
+        let out = pools.batch.run(move || work(&c, Some(CertifyMode::NewtonOnly))).await?;
+        if !needs_sdp(&out) {
+            return Ok(out);
+        }
     }
     let catalog = catalog.clone();
-    sdp.run(move || f(&catalog, None)).await
+    pools.sdp.run(move || f(&catalog, None)).await
 }
 
 /// One QueryStream: its requests, its private view of the scene (from the first request on).
 struct QueryStreamState {
     inbound: tonic::Streaming<pb::QueryRequest>,
     catalog: Arc<Catalog>,
-    sdp: SdpSlots,
+    pools: QueryPools,
     view: Option<QueryView>,
     /// (most answers, most poses) of one request.
     limits: (usize, usize),
@@ -163,7 +197,7 @@ impl QueryStreamState {
                 return Err(to_status(Error::invalid("scene_id", message)));
             }
         };
-        let (back, reply) = answer_planner(self.catalog.clone(), &self.sdp, current, &req, planner, start).await;
+        let (back, reply) = answer_planner(self.catalog.clone(), &self.pools, current, &req, planner, start).await;
         self.view = Some(back);
         reply
     }
@@ -187,7 +221,7 @@ pub(super) async fn distance(
     let scene = req.scene_id.clone();
     let r = query_work(
         &svc.catalog,
-        &svc.sdp,
+        &svc.pools,
         &scene,
         req.certify,
         1,
@@ -213,7 +247,7 @@ pub(super) async fn growth(svc: &SublevelService, request: Request<pb::GrowthReq
     let scene = req.scene_id.clone();
     let r = query_work(
         &svc.catalog,
-        &svc.sdp,
+        &svc.pools,
         &scene,
         req.certify,
         1,
@@ -244,7 +278,7 @@ pub(super) async fn batch_query(
         let (scene, n, kind) = (req.scene_id.clone(), c.first.len(), c.kind);
         let answers = query_work(
             &svc.catalog,
-            &svc.sdp,
+            &svc.pools,
             &scene,
             false,
             n,
@@ -269,7 +303,7 @@ pub(super) async fn batch_query(
     let (scene, n) = (req.scene_id.clone(), pairs.len());
     let answers = query_work(
         &svc.catalog,
-        &svc.sdp,
+        &svc.pools,
         &scene,
         certify,
         n,
@@ -289,7 +323,7 @@ pub(super) async fn query(svc: &SublevelService, request: Request<pb::QueryReque
     require_id("scene_id", &req.scene_id)?;
     let planner = cv::planner_request_from_proto(&req, svc.config.max_batch_pairs, svc.config.max_poses_per_call)?;
     let view = QueryView::new(&req.scene_id);
-    let (_, reply) = answer_planner(svc.catalog.clone(), &svc.sdp, view, &req, planner, start).await;
+    let (_, reply) = answer_planner(svc.catalog.clone(), &svc.pools, view, &req, planner, start).await;
     Ok(Response::new(reply?))
 }
 
@@ -304,7 +338,7 @@ pub(super) async fn query_stream(
     let state = QueryStreamState {
         inbound: request.into_inner(),
         catalog: svc.catalog.clone(),
-        sdp: svc.sdp.clone(),
+        pools: svc.pools.clone(),
         view: None,
         limits: (svc.config.max_batch_pairs, svc.config.max_poses_per_call),
         done: false,
@@ -338,10 +372,13 @@ pub(super) async fn check_scene(
     }
     let overrides = cv::poses_from_proto(&req.poses, svc.config.max_poses_per_call)?;
     let catalog = svc.catalog.clone();
-    // Up to n(n−1)/2 solves: off the async workers, cancelled with the request.
-    let check = cancellable_blocking(move || {
-        sublevel_scene::planner::check_scene(&catalog, &req.scene_id, req.margin, &req.instance_ids, &overrides)
-    })
-    .await?;
+    // Up to n(n−1)/2 solves: on the batch slots (the SDP slots for a nonconvex scene), cancelled
+    // with the request.
+    let slots = if svc.catalog.has_nonconvex(&req.scene_id) { &svc.pools.sdp } else { &svc.pools.batch };
+    let check = slots
+        .run(move || {
+            sublevel_scene::planner::check_scene(&catalog, &req.scene_id, req.margin, &req.instance_ids, &overrides)
+        })
+        .await?;
     Ok(Response::new(cv::scene_check_to_proto(&check, start.elapsed().as_secs_f64())))
 }

@@ -77,7 +77,7 @@ async fn an_unconverged_newton_answer_is_solved_off_the_workers_with_the_fallbac
     // The planner path: the view answers the fallback's value too.
     let request = request_of(&a, &b);
     let answers = PlannerAnswers::for_request(&request);
-    let (view, out) = run_view(catalog.clone(), &service.sdp, QueryView::new(&s), request, answers).await;
+    let (view, out) = run_view(catalog.clone(), &service.pools, QueryView::new(&s), request, answers).await;
     let PlannerAnswers::Single(answers) = out.unwrap() else { panic!("one list of answers") };
     let sublevel_scene::QueryAnswer::Distance(d) = &answers[0] else { panic!("a distance answer") };
     assert_eq!(d.answer.source, AnswerSource::SdpFallback);
@@ -96,7 +96,7 @@ async fn an_unconverged_newton_answer_is_solved_off_the_workers_with_the_fallbac
     assert!(!QueryView::new(&s).run_newton_only_into(&catalog, &request, &mut sink).unwrap());
     assert!(sink.finish().value.is_empty(), "the inline run's rows are cleared");
     let sink = cv::ColumnsSink::new(sublevel_scene::QueryKind::Distance, 3);
-    let (_, out) = run_view(catalog.clone(), &service.sdp, QueryView::new(&s), request, sink).await;
+    let (_, out) = run_view(catalog.clone(), &service.pools, QueryView::new(&s), request, sink).await;
     let rows = out.unwrap().finish();
     assert_eq!(rows.value.len(), 3);
     for (k, v) in rows.value.iter().enumerate() {
@@ -149,4 +149,55 @@ fn request_of(a: &str, b: &str) -> PlannerRequest {
         margin: 0.0,
     };
     PlannerRequest { queries: vec![pair], ..PlannerRequest::default() }
+}
+
+/// Large Newton-only batches run on the batch slots, not the SDP slots: with the only SDP slot
+/// held by a long solve, a 1 000-pair BatchQuery (off the async workers) still answers — it used
+/// to wait for that slot — with the distance the catalog computes directly, to 1e-12 m.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn large_batches_do_not_wait_for_the_sdp_slots() {
+    use pb::sublevel_server::Sublevel as _;
+    let catalog = Catalog::open(Box::new(MemoryStore::new()), NewtonParams::default()).unwrap();
+    let b1 = catalog.add_body("e1", ellipsoid([0.0; 3], [0.5, 0.2, 0.3]).unwrap()).unwrap();
+    let b2 = catalog.add_body("e2", ellipsoid([0.0; 3], [0.25, 0.4, 0.2]).unwrap()).unwrap();
+    let s = catalog.create_scene("s").unwrap();
+    let a = catalog.add_instance(&s, &b1, pose_from_parts("pose", [1.0, 0.0, 0.0, 0.0], [0.0; 3]).unwrap()).unwrap();
+    let b =
+        catalog.add_instance(&s, &b2, pose_from_parts("pose", [1.0, 0.0, 0.0, 0.0], [1.5, 0.3, 0.0]).unwrap()).unwrap();
+    let catalog = Arc::new(catalog);
+    let want = catalog.distance(&s, &a, &b).unwrap().distance;
+    let config = ServerConfig { max_concurrent_sdp: 1, batch_workers: 2, ..ServerConfig::default() };
+    let service = SublevelService::new(catalog.clone(), config);
+
+    let (release, hold) = std::sync::mpsc::channel::<()>();
+    let sdp = service.pools.sdp.clone();
+    let holder = tokio::spawn(async move {
+        sdp.run(move || {
+            let _ = hold.recv_timeout(std::time::Duration::from_secs(30));
+            Ok(())
+        })
+        .await
+    });
+    while service.pools.sdp.available() > 0 {
+        tokio::time::sleep(std::time::Duration::from_millis(1)).await;
+    }
+    let pair = pb::QueryPair {
+        kind: pb::QueryKind::Distance as i32,
+        first: a.clone(),
+        second: b.clone(),
+        ..Default::default()
+    };
+    let request = pb::BatchQueryRequest { scene_id: s.clone(), pairs: vec![pair; 1000], columns: None };
+    let reply = tokio::time::timeout(std::time::Duration::from_secs(20), service.batch_query(Request::new(request)))
+        .await
+        .expect("the batch answered while the only SDP slot was held")
+        .unwrap()
+        .into_inner();
+    assert_eq!(reply.answers.len(), 1000);
+    for answer in &reply.answers {
+        let Some(pb::query_answer::Answer::Distance(d)) = &answer.answer else { panic!("a distance answer") };
+        assert!((d.distance - want).abs() <= 1e-12, "{} vs {want}", d.distance);
+    }
+    release.send(()).unwrap();
+    holder.await.unwrap().unwrap();
 }
