@@ -29,6 +29,8 @@
 //!   queries never touch the database), scenes with their instances and caches — written through
 //!   to the store. Input is validated before anything is written, and memory changes only after
 //!   the store committed, so bad input never loses or half-writes data.
+//! - [`moveit`]: MoveIt planning scenes (`moveit_msgs/PlanningScene` in YAML or JSON) read into
+//!   typed, validated collision objects, allowed-collision matrix and robot state.
 //! - [`planner`]: what a motion planner asks of a scene — private views with pose overrides and
 //!   warm starts of their own, candidate states, scene-wide checks with a broad phase.
 //!
@@ -42,6 +44,7 @@ pub use sublevel_core::{Error, Result};
 mod answer;
 pub mod cache;
 mod catalog;
+pub mod moveit;
 pub mod planner;
 pub mod store;
 
