@@ -12,6 +12,7 @@
 //! - [`fit`] (`sublevel-fit`): fitting bodies (paper §III) and, in [`compound`], compound bodies
 //!   (paper §V);
 //! - [`query`] (`sublevel-query`): distance and growth queries and their certificates (§IV);
+//! - [`robot`] (`sublevel-robot`): URDF robot models and forward kinematics;
 //! - [`scene`] (`sublevel-scene`): scenes, warm-start caches, stores;
 //! - [`service`] (`sublevel-server`): the gRPC API `sublevel.v1`.
 //!
@@ -26,5 +27,6 @@ pub use sublevel_core::{Body, Error, PosedBody, Result};
 pub use sublevel_fit as fit;
 pub use sublevel_fit::compound;
 pub use sublevel_query as query;
+pub use sublevel_robot as robot;
 pub use sublevel_scene as scene;
 pub use sublevel_server as service;
