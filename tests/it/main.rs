@@ -11,6 +11,7 @@ mod ops;
 mod planner;
 mod query;
 mod query_compound;
+mod robot;
 mod security;
 mod service;
 mod service_compound;

@@ -7,6 +7,8 @@
 //! - [`model`]: the [`RobotModel`] read from URDF (openrr's `urdf-rs` parser): links, joints
 //!   (revolute, continuous, prismatic, fixed; mimic joints), limits, collision geometry, and the
 //!   order of the configuration's entries.
+//! - [`srdf`]: the SRDF's allowed-collision pairs, named configurations and virtual joints, and
+//!   the self-collision pairs they leave.
 //! - [`kinematics`]: forward kinematics — every link's pose in the world for a configuration and a
 //!   base pose — checked against pinocchio's `framesForwardKinematics` to 1e-12 m.
 //!
@@ -19,5 +21,7 @@ pub use sublevel_core::{Error, Result};
 
 pub mod kinematics;
 pub mod model;
+pub mod srdf;
 
-pub use model::{CollisionGeometry, Joint, JointKind, JointValue, Link, RobotModel};
+pub use model::{resolve_mesh_path, CollisionGeometry, Joint, JointKind, JointValue, Link, RobotModel};
+pub use srdf::Semantics;

@@ -471,3 +471,41 @@ impl RobotModel {
         Ok(())
     }
 }
+
+/// The file a URDF mesh name refers to, resolved as ROS and pinocchio do:
+///
+/// - `package://NAME/PATH` → the first existing `DIR/NAME/PATH` over `package_dirs`;
+/// - `file:///ABS` and absolute paths → themselves;
+/// - a relative path → relative to the URDF's directory `urdf_dir`.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `field` when no candidate file exists, listing the places
+/// searched.
+pub fn resolve_mesh_path(
+    field: &str,
+    filename: &str,
+    urdf_dir: Option<&std::path::Path>,
+    package_dirs: &[std::path::PathBuf],
+) -> Result<std::path::PathBuf> {
+    use std::path::{Path, PathBuf};
+    let candidates: Vec<PathBuf> = if let Some(rest) = filename.strip_prefix("package://") {
+        package_dirs.iter().map(|d| d.join(rest)).collect()
+    } else if let Some(abs) = filename.strip_prefix("file://") {
+        vec![PathBuf::from(abs)]
+    } else if Path::new(filename).is_absolute() {
+        vec![PathBuf::from(filename)]
+    } else {
+        vec![urdf_dir.unwrap_or(Path::new(".")).join(filename)]
+    };
+    if let Some(found) = candidates.iter().find(|p| p.is_file()) {
+        return Ok(found.clone());
+    }
+    let shown = sublevel_core::error::clip(filename);
+    let searched: Vec<String> = candidates.iter().map(|p| p.display().to_string()).collect();
+    let hint = if filename.starts_with("package://") && package_dirs.is_empty() {
+        " (give the directory holding the package with --package-dir)".to_owned()
+    } else {
+        String::new()
+    };
+    Err(Error::invalid(field, format!("mesh `{shown}` not found; searched {searched:?}{hint}")))
+}
