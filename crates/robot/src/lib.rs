@@ -9,6 +9,8 @@
 //!   order of the configuration's entries.
 //! - [`srdf`]: the SRDF's allowed-collision pairs, named configurations and virtual joints, and
 //!   the self-collision pairs they leave.
+//! - [`motion`]: how far a link can move along a joint-space segment (the bound of conservative
+//!   advancement), from the kinematic chain.
 //! - [`kinematics`]: forward kinematics — every link's pose in the world for a configuration and a
 //!   base pose — checked against pinocchio's `framesForwardKinematics` to 1e-12 m.
 //!
@@ -21,6 +23,7 @@ pub use sublevel_core::{Error, Result};
 
 pub mod kinematics;
 pub mod model;
+pub mod motion;
 pub mod srdf;
 
 pub use model::{resolve_mesh_path, CollisionGeometry, Joint, JointKind, JointValue, Link, RobotModel};
