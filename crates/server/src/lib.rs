@@ -109,7 +109,10 @@ pub mod pb {
 pub const SERVICE_NAME: &str = "sublevel.v1.Sublevel";
 
 /// Health-check name of the store: SERVING when every stored record loaded, NOT_SERVING while the
-/// quarantine holds records that could not be (the server still serves everything else).
+/// quarantine holds records that could not be (the server still serves everything else). The
+/// server listens once the store is open and its records are read; stored bodies are then built
+/// in the background ([`serve_catalog`]), and a body found invalid there turns this NOT_SERVING
+/// when the warm-up ends.
 pub const STORE_HEALTH_NAME: &str = "sublevel.v1.Store";
 
 /// Interval of HTTP/2 keepalive pings and of TCP keepalive probes on every connection.
@@ -231,6 +234,11 @@ pub async fn serve(
 
 /// Like [`serve`], with an already opened catalog (e.g. one the caller preloaded with demo data).
 ///
+/// Once it listens, the stored bodies not built yet are built in the background
+/// ([`Catalog::warm_up`] on the blocking pool, logging `bodies built` with the count and the
+/// seconds); queries meanwhile build the bodies they need first. When the warm-up ends,
+/// [`STORE_HEALTH_NAME`] turns NOT_SERVING if it quarantined bodies that no longer validate.
+///
 /// When `shutdown` completes, health turns NOT_SERVING, every queued and running fit job is
 /// cancelled (a running SDP stops at its next Clarabel iteration and the job is recorded
 /// CANCELLED, no body stored), the listener closes, and this returns once in-flight requests
@@ -279,6 +287,7 @@ pub async fn serve_catalog(
             .tls_config(tls.server_tls())
             .map_err(|e| Error::invalid("tls", format!("unusable certificate, key or client CA: {e}")))?,
     };
+    let warm_up = warm_up_in_background(catalog.clone(), reporter.clone());
     let handlers = SublevelService::new(catalog, config);
     let jobs = handlers.jobs.clone();
     let jobs_idle = handlers.jobs.clone();
@@ -292,6 +301,7 @@ pub async fn serve_catalog(
     let stopping = async move {
         shutdown.await;
         tracing::info!(?grace, "shutting down: health NOT_SERVING, fit jobs cancelled, draining requests");
+        warm_up.store(true, std::sync::atomic::Ordering::Relaxed);
         jobs.stop();
         reporter.set_not_serving::<SublevelServer<SublevelService>>().await;
         reporter.set_service_status("", ServingStatus::NotServing).await;
@@ -316,6 +326,42 @@ pub async fn serve_catalog(
     shutdown::within(serving, deadline, grace).await?;
     tracing::info!("server stopped");
     Ok(())
+}
+
+/// Starts [`Catalog::warm_up_until`] on the blocking pool, then sets [`STORE_HEALTH_NAME`] from
+/// the catalog's quarantine count; returns the flag that stops it early (set at shutdown).
+fn warm_up_in_background(
+    catalog: Arc<Catalog>,
+    reporter: tonic_health::server::HealthReporter,
+) -> Arc<std::sync::atomic::AtomicBool> {
+    use tonic_health::ServingStatus;
+    let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let (_, total) = catalog.bodies_built();
+    if catalog.bodies_pending() == 0 {
+        tracing::info!(bodies = total, "bodies built: none waited for a build");
+        return stop;
+    }
+    let flag = stop.clone();
+    tokio::spawn(async move {
+        let work = catalog.clone();
+        let done = tokio::task::spawn_blocking(move || work.warm_up_until(&flag)).await;
+        match done {
+            Ok(w) => tracing::info!(
+                built = w.built,
+                quarantined = w.quarantined,
+                bodies = total,
+                seconds = w.seconds,
+                stopped = w.stopped,
+                "bodies built"
+            ),
+            Err(e) => tracing::error!(error = %e, "the body warm-up failed; bodies build on first use"),
+        }
+        if catalog.quarantined() > 0 {
+            tracing::warn!(records = catalog.quarantined(), "the store's quarantine holds records");
+            reporter.set_service_status(STORE_HEALTH_NAME, ServingStatus::NotServing).await;
+        }
+    });
+    stop
 }
 
 #[cfg(test)]
