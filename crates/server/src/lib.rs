@@ -365,6 +365,9 @@ fn warm_up_in_background(
 }
 
 #[cfg(test)]
+mod startup_tests;
+
+#[cfg(test)]
 mod routing_tests {
     use super::*;
 
