@@ -243,7 +243,8 @@ pub async fn serve(
 /// cancelled (a running SDP stops at its next Clarabel iteration and the job is recorded
 /// CANCELLED, no body stored), the listener closes, and this returns once in-flight requests
 /// have finished and every job recorded its end, or when [`ServerConfig::shutdown_grace`] has
-/// passed, whichever comes first.
+/// passed, whichever comes first — and once the body warm-up has stopped (before its next body;
+/// at most another grace), so that the store can be reopened.
 ///
 /// # Errors
 /// [`Error::Io`] when reflection cannot be built or the transport fails.
@@ -287,7 +288,8 @@ pub async fn serve_catalog(
             .tls_config(tls.server_tls())
             .map_err(|e| Error::invalid("tls", format!("unusable certificate, key or client CA: {e}")))?,
     };
-    let warm_up = warm_up_in_background(catalog.clone(), reporter.clone());
+    let (warm_up, warm_up_task) = warm_up_in_background(catalog.clone(), reporter.clone());
+    let warm_up_stop = warm_up.clone();
     let handlers = SublevelService::new(catalog, config);
     let jobs = handlers.jobs.clone();
     let jobs_idle = handlers.jobs.clone();
@@ -323,26 +325,36 @@ pub async fn serve_catalog(
         jobs_idle.wait_idle().await;
         Ok(())
     };
-    shutdown::within(serving, deadline, grace).await?;
+    let outcome = shutdown::within(serving, deadline, grace).await;
+    // The warm-up holds the catalog (and so the store): stop it and wait for it, so a caller can
+    // reopen the store once this returns. It stops before its next body.
+    warm_up_stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    if let Some(task) = warm_up_task {
+        if tokio::time::timeout(grace, task).await.is_err() {
+            tracing::warn!(?grace, "the body warm-up did not stop within the grace");
+        }
+    }
+    outcome?;
     tracing::info!("server stopped");
     Ok(())
 }
 
 /// Starts [`Catalog::warm_up_until`] on the blocking pool, then sets [`STORE_HEALTH_NAME`] from
-/// the catalog's quarantine count; returns the flag that stops it early (set at shutdown).
+/// the catalog's quarantine count; returns the flag that stops it early (set at shutdown) and the
+/// task (`None` when no body waited for its build).
 fn warm_up_in_background(
     catalog: Arc<Catalog>,
     reporter: tonic_health::server::HealthReporter,
-) -> Arc<std::sync::atomic::AtomicBool> {
+) -> (Arc<std::sync::atomic::AtomicBool>, Option<tokio::task::JoinHandle<()>>) {
     use tonic_health::ServingStatus;
     let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
     let (_, total) = catalog.bodies_built();
     if catalog.bodies_pending() == 0 {
         tracing::info!(bodies = total, "bodies built: none waited for a build");
-        return stop;
+        return (stop, None);
     }
     let flag = stop.clone();
-    tokio::spawn(async move {
+    let task = tokio::spawn(async move {
         let work = catalog.clone();
         let done = tokio::task::spawn_blocking(move || work.warm_up_until(&flag)).await;
         match done {
@@ -361,7 +373,7 @@ fn warm_up_in_background(
             reporter.set_service_status(STORE_HEALTH_NAME, ServingStatus::NotServing).await;
         }
     });
-    stop
+    (stop, Some(task))
 }
 
 #[cfg(test)]
