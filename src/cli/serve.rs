@@ -144,7 +144,7 @@ fn seed_demo(catalog: &Arc<Catalog>) -> Result<Demo> {
     let find = |body: &str| view.instances.iter().find(|i| i.body_id == body).map(|i| i.id.clone());
     let chair_body = catalog.body(&chair)?;
     let human_body = catalog.body(&human)?;
-    let gap = 1.5 * (chair_body.body.scale() + human_body.body.scale());
+    let gap = 1.5 * (chair_body.body()?.scale() + human_body.body()?.scale());
     let at = |x: f64| -> Result<Isometry3> { pose_from_parts("demo pose", [1.0, 0.0, 0.0, 0.0], [x, 0.0, 0.0]) };
     let i_chair = match find(&chair) {
         Some(id) => id,

@@ -1,5 +1,6 @@
 //! The `sublevel-lab` command: the paper's reproduction (`table1`, `fit-time`), benchmarks against
-//! peers (`bench`), charts (`chart`) and the stability suite (`stability`).
+//! peers (`bench`), charts (`chart`), the stability suite (`stability`) and the server's start-up
+//! time on a large store (`startup`).
 //!
 //! ```text
 //! cargo run --release -p sublevel-lab -- bench --csv out/bench.csv
@@ -19,6 +20,7 @@ mod fit_time;
 mod peer_coal;
 mod peer_parry;
 mod stability;
+mod startup;
 mod table1;
 
 /// The same allocator as the `sublevel` binary, so that timings match what the service does.
@@ -47,6 +49,8 @@ enum Command {
     FitTime(fit_time::FitTimeArgs),
     /// Charts: speed against accuracy per model, Newton tolerance against time and error.
     Chart(chart::ChartArgs),
+    /// Start-up time of `sublevel serve` on a store of N bodies: open, listening, health, warm-up.
+    Startup(startup::StartupArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -58,6 +62,7 @@ fn main() -> std::process::ExitCode {
         Command::Table1(a) => table1::run(a),
         Command::FitTime(a) => fit_time::run(a),
         Command::Chart(a) => chart::run(a),
+        Command::Startup(a) => startup::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

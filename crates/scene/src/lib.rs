@@ -52,7 +52,10 @@ pub use answer::{
     precision_limited, DistanceReply, GrowthReply, PairRef, QueryAnswer, QueryKind, QueryOptions, QueryPair, TreeInfo,
     PRECISION_LIMIT,
 };
-pub use catalog::{BodyEntry, Catalog, InstanceView, PosedInstance, SceneView, MAX_JOB_RECORDS, MAX_NAME_BYTES};
+pub use catalog::{
+    BodyEntry, BodyFacts, BuiltBody, Catalog, InstanceView, PosedInstance, SceneView, WarmUp, MAX_JOB_RECORDS,
+    MAX_NAME_BYTES,
+};
 
 use serde::{Deserialize, Serialize};
 use sublevel_core::body::BodyFile;

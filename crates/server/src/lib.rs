@@ -112,7 +112,10 @@ pub mod pb {
 pub const SERVICE_NAME: &str = "sublevel.v1.Sublevel";
 
 /// Health-check name of the store: SERVING when every stored record loaded, NOT_SERVING while the
-/// quarantine holds records that could not be (the server still serves everything else).
+/// quarantine holds records that could not be (the server still serves everything else). The
+/// server listens once the store is open and its records are read; stored bodies are then built
+/// in the background ([`serve_catalog`]), and a body found invalid there turns this NOT_SERVING
+/// when the warm-up ends.
 pub const STORE_HEALTH_NAME: &str = "sublevel.v1.Store";
 
 /// Interval of HTTP/2 keepalive pings and of TCP keepalive probes on every connection.
@@ -244,11 +247,17 @@ pub async fn serve(
 
 /// Like [`serve`], with an already opened catalog (e.g. one the caller preloaded with demo data).
 ///
+/// Once it listens, the stored bodies not built yet are built in the background
+/// ([`Catalog::warm_up`] on the blocking pool, logging `bodies built` with the count and the
+/// seconds); queries meanwhile build the bodies they need first. When the warm-up ends,
+/// [`STORE_HEALTH_NAME`] turns NOT_SERVING if it quarantined bodies that no longer validate.
+///
 /// When `shutdown` completes, health turns NOT_SERVING, every queued and running fit job is
 /// cancelled (a running SDP stops at its next Clarabel iteration and the job is recorded
 /// CANCELLED, no body stored), the listener closes, and this returns once in-flight requests
 /// have finished and every job recorded its end, or when [`ServerConfig::shutdown_grace`] has
-/// passed, whichever comes first.
+/// passed, whichever comes first — and once the body warm-up has stopped (before its next body;
+/// at most another grace), so that the store can be reopened.
 ///
 /// # Errors
 /// [`Error::Io`] when reflection cannot be built or the transport fails.
@@ -294,6 +303,8 @@ pub async fn serve_catalog(
             .tls_config(tls.server_tls().timeout(admission.handshake_timeout))
             .map_err(|e| Error::invalid("tls", format!("unusable certificate, key or client CA: {e}")))?,
     };
+    let (warm_up, warm_up_task) = warm_up_in_background(catalog.clone(), reporter.clone());
+    let warm_up_stop = warm_up.clone();
     let handlers = SublevelService::new(catalog, config);
     let jobs = handlers.jobs.clone();
     let jobs_idle = handlers.jobs.clone();
@@ -305,6 +316,7 @@ pub async fn serve_catalog(
     let stopping = async move {
         shutdown.await;
         tracing::info!(?grace, "shutting down: health NOT_SERVING, fit jobs cancelled, draining requests");
+        warm_up.store(true, std::sync::atomic::Ordering::Relaxed);
         jobs.stop();
         reporter.set_not_serving::<SublevelServer<SublevelService>>().await;
         reporter.set_service_status("", ServingStatus::NotServing).await;
@@ -331,10 +343,59 @@ pub async fn serve_catalog(
         jobs_idle.wait_idle().await;
         Ok(())
     };
-    shutdown::within(serving, deadline, grace).await?;
+    let outcome = shutdown::within(serving, deadline, grace).await;
+    // The warm-up holds the catalog (and so the store): stop it and wait for it, so a caller can
+    // reopen the store once this returns. It stops before its next body.
+    warm_up_stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    if let Some(task) = warm_up_task {
+        if tokio::time::timeout(grace, task).await.is_err() {
+            tracing::warn!(?grace, "the body warm-up did not stop within the grace");
+        }
+    }
+    outcome?;
     tracing::info!("server stopped");
     Ok(())
 }
+
+/// Starts [`Catalog::warm_up_until`] on the blocking pool, then sets [`STORE_HEALTH_NAME`] from
+/// the catalog's quarantine count; returns the flag that stops it early (set at shutdown) and the
+/// task (`None` when no body waited for its build).
+fn warm_up_in_background(
+    catalog: Arc<Catalog>,
+    reporter: tonic_health::server::HealthReporter,
+) -> (Arc<std::sync::atomic::AtomicBool>, Option<tokio::task::JoinHandle<()>>) {
+    use tonic_health::ServingStatus;
+    let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let (_, total) = catalog.bodies_built();
+    if catalog.bodies_pending() == 0 {
+        tracing::info!(bodies = total, "bodies built: none waited for a build");
+        return (stop, None);
+    }
+    let flag = stop.clone();
+    let task = tokio::spawn(async move {
+        let work = catalog.clone();
+        let done = tokio::task::spawn_blocking(move || work.warm_up_until(&flag)).await;
+        match done {
+            Ok(w) => tracing::info!(
+                built = w.built,
+                quarantined = w.quarantined,
+                bodies = total,
+                seconds = w.seconds,
+                stopped = w.stopped,
+                "bodies built"
+            ),
+            Err(e) => tracing::error!(error = %e, "the body warm-up failed; bodies build on first use"),
+        }
+        if catalog.quarantined() > 0 {
+            tracing::warn!(records = catalog.quarantined(), "the store's quarantine holds records");
+            reporter.set_service_status(STORE_HEALTH_NAME, ServingStatus::NotServing).await;
+        }
+    });
+    (stop, Some(task))
+}
+
+#[cfg(test)]
+mod startup_tests;
 
 #[cfg(test)]
 mod routing_tests {

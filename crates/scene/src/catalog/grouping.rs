@@ -1,7 +1,7 @@
 //! Grouping (paper §V): reading a scene's posed bodies and replacing instances by their
 //! container, for the grouping jobs.
 
-use super::{instance, new_id, posed, read, Catalog, Instance};
+use super::{instance, new_id, posed, read, BodyEntry, Catalog, Instance};
 use crate::answer::Posed;
 use crate::{Error, Result};
 use crate::{InstanceRecord, StoredPose};
@@ -27,33 +27,44 @@ pub struct PosedInstance {
 impl Catalog {
     /// The posed bodies (body and stored pose) of instances of a scene, in the order of `ids`,
     /// read under the scene's lock so all poses are of one moment; nothing is copied but the
-    /// poses (the bodies are shared).
+    /// poses (the bodies are shared). Bodies not built yet are built after the lock is released.
     ///
     /// # Errors
-    /// [`Error::NotFound`] for the scene or an instance.
+    /// [`Error::NotFound`] for the scene or an instance; [`Error::FailedPrecondition`] naming a
+    /// body that does not validate.
     pub fn posed_by_ids(&self, scene_id: &str, ids: &[&str]) -> Result<Vec<Posed>> {
-        self.with_scene(scene_id, |s| ids.iter().map(|id| posed(s, id)).collect())
+        let read: Vec<(Arc<BodyEntry>, Isometry3)> = self.with_scene(scene_id, |s| {
+            ids.iter().map(|id| instance(s, id).map(|inst| (inst.entry.clone(), inst.pose))).collect()
+        })?;
+        read.into_iter().map(|(entry, pose)| Ok(posed(entry.built()?, pose))).collect()
     }
 
     /// The bodies and poses of instances of a scene, in the order asked (`ids` empty: every
     /// instance, ordered by id), read under the scene's lock so all poses are of one moment.
+    /// Bodies not built yet are built after the lock is released.
     ///
     /// # Errors
-    /// [`Error::NotFound`] for the scene or an instance.
+    /// [`Error::NotFound`] for the scene or an instance; [`Error::FailedPrecondition`] naming a
+    /// body that does not validate.
     pub fn posed_instances(&self, scene_id: &str, ids: &[String]) -> Result<Vec<PosedInstance>> {
-        self.with_scene(scene_id, |s| {
-            let pick = |id: &str, inst: &Instance| PosedInstance {
-                id: id.to_owned(),
-                body_id: inst.body_id.clone(),
-                body: inst.body.clone(),
-                tree: inst.tree.clone(),
-                pose: inst.pose,
-            };
+        let read: Vec<(String, Arc<BodyEntry>, Isometry3)> = self.with_scene(scene_id, |s| {
             if ids.is_empty() {
-                return Ok(s.instances.iter().map(|(id, inst)| pick(id, inst)).collect());
+                return Ok(s.instances.iter().map(|(id, inst)| (id.clone(), inst.entry.clone(), inst.pose)).collect());
             }
-            ids.iter().map(|id| instance(s, id).map(|inst| pick(id, inst))).collect()
-        })
+            ids.iter().map(|id| instance(s, id).map(|inst| (id.clone(), inst.entry.clone(), inst.pose))).collect()
+        })?;
+        read.into_iter()
+            .map(|(id, entry, pose)| {
+                let built = entry.built()?;
+                Ok(PosedInstance {
+                    id,
+                    body_id: entry.id.clone(),
+                    body: built.body.clone(),
+                    tree: built.tree.clone(),
+                    pose,
+                })
+            })
+            .collect()
     }
 
     /// Replaces instances `remove` of a scene by one new instance of body `body_id` under `pose`,

@@ -2,15 +2,18 @@
 //!
 //! ```text
 //! mod.rs        the catalog's state and locks; opening a store; jobs, bodies, scenes, instances
+//! body.rs       stored bodies built on first use, and the background warm-up that builds the rest
 //! query.rs      the query methods: single queries and batches, answered on a snapshot
 //! grouping.rs   reading a scene's posed bodies and replacing instances by their container (§V)
 //! ```
 
+mod body;
 mod grouping;
 mod query;
 #[cfg(all(test, feature = "store"))]
 mod tests;
 
+pub use body::{BodyEntry, BodyFacts, BuiltBody, WarmUp};
 pub use grouping::PosedInstance;
 
 use super::cache::WarmStartCache;
@@ -26,45 +29,6 @@ use sublevel_query::NewtonParams;
 
 /// Longest accepted body or scene name, in bytes.
 pub const MAX_NAME_BYTES: usize = 256;
-
-/// A stored body, parsed once and shared with every query that uses it.
-#[derive(Debug)]
-pub struct BodyEntry {
-    /// The body's id.
-    pub id: String,
-    /// Its name.
-    pub name: String,
-    /// The validated body; for a compound body its root node's body (which contains every other
-    /// node's body, paper §V), so bounding boxes, spheres and grouping see the whole model.
-    pub body: Arc<Body>,
-    /// The containment tree of a compound body (more than one node); `None` for a
-    /// single body, which stays on the single-body query path.
-    pub tree: Option<Arc<CompoundBody>>,
-}
-
-impl BodyEntry {
-    /// The entry of a stored record: a single body, or a compound body when the record holds a
-    /// compound file (see [`BodyRecord`]).
-    ///
-    /// # Errors
-    /// The validation errors of [`Body::from_file`] / [`CompoundBody::from_file`], naming the
-    /// field.
-    fn from_record(id: &str, rec: BodyRecord) -> Result<Self> {
-        let (body, tree) = match rec.compound {
-            None => (Arc::new(Body::from_file(rec.body)?), None),
-            Some(file) => {
-                let tree = CompoundBody::from_file(file)?;
-                (Arc::new(tree.body(tree.root()).clone()), Some(Arc::new(tree)))
-            }
-        };
-        Ok(Self { id: id.to_owned(), name: rec.name, body, tree })
-    }
-
-    /// Number of nodes of the body's containment tree (1 for a single body).
-    pub fn node_count(&self) -> usize {
-        self.tree.as_ref().map_or(1, |t| t.node_count())
-    }
-}
 
 /// An instance as seen from outside: its body and pose.
 #[derive(Clone, Debug)]
@@ -90,16 +54,19 @@ pub struct SceneView {
 
 #[derive(Debug)]
 struct Instance {
-    body_id: String,
-    body: Arc<Body>,
-    /// The body's containment tree when it is a compound body (see [`BodyEntry::tree`]).
-    tree: Option<Arc<CompoundBody>>,
+    /// The instantiated body (built on first use, see [`BodyEntry::built`]).
+    entry: Arc<BodyEntry>,
     pose: Isometry3,
 }
 
 impl Instance {
-    fn of(entry: &BodyEntry, pose: Isometry3) -> Self {
-        Self { body_id: entry.id.clone(), body: entry.body.clone(), tree: entry.tree.clone(), pose }
+    fn of(entry: &Arc<BodyEntry>, pose: Isometry3) -> Self {
+        Self { entry: entry.clone(), pose }
+    }
+
+    /// The instantiated body's id.
+    fn body_id(&self) -> &str {
+        &self.entry.id
     }
 }
 
@@ -120,11 +87,12 @@ struct SceneState {
 /// microsecond query, or one store transaction) and never awaits. Lock order, to rule out
 /// deadlocks: `bodies` → `scenes` → one scene's mutex.
 pub struct Catalog {
-    store: Box<dyn Store>,
+    store: Arc<dyn Store>,
     bodies: RwLock<BTreeMap<String, Arc<BodyEntry>>>,
     scenes: RwLock<BTreeMap<String, Arc<Mutex<SceneState>>>>,
     jobs: RwLock<BTreeMap<String, JobRecord>>,
-    quarantined: usize,
+    /// The quarantine count and the bodies waiting for their build (see [`body`]).
+    builds: Arc<body::Builds>,
     params: NewtonParams,
 }
 
@@ -163,28 +131,26 @@ fn check_name(field: &str, name: &str) -> Result<()> {
 }
 
 impl Catalog {
-    /// Loads every body, scene and job record of `store` into memory.
+    /// Loads every body, scene and job record of `store` into memory. Bodies are parsed, not
+    /// built: each builds on first use, and [`Catalog::warm_up`] builds the rest (see [`body`]),
+    /// so opening takes the time of reading the records (well under a second for 10 000 bodies).
     ///
-    /// The store always opens: a stored body that no longer validates, or an instance whose pose
-    /// does not, is moved to the store's quarantine with the reason (see
-    /// [`super::store`]) and counted in [`Catalog::quarantined`]; an instance whose body is
-    /// missing is skipped with a warning (and kept). A job record still `running` was
+    /// The store always opens: an instance whose pose no longer validates is moved to the store's
+    /// quarantine with the reason (see [`super::store`]) and counted in [`Catalog::quarantined`];
+    /// a stored body that no longer validates is moved there when it is built (its first use or
+    /// the warm-up) and then answers [`Error::FailedPrecondition`] naming it; an instance whose
+    /// body is missing is skipped with a warning (and kept). A job record still `running` was
     /// interrupted by the previous stop and is marked `interrupted`.
     ///
     /// # Errors
     /// [`Error::Storage`] when the store cannot be read.
     pub fn open(store: Box<dyn Store>, params: NewtonParams) -> Result<Self> {
+        let store: Arc<dyn Store> = Arc::from(store);
+        let builds = Arc::new(body::Builds::new(store.clone()));
         let mut bodies = BTreeMap::new();
         for (id, rec) in store.list_bodies()? {
-            match BodyEntry::from_record(&id, rec) {
-                Ok(entry) => {
-                    bodies.insert(id, Arc::new(entry));
-                }
-                Err(e) => {
-                    tracing::warn!(body_id = %id, error = %e, "quarantining stored body that does not validate");
-                    store.quarantine("bodies", &id, &format!("does not validate: {e}"))?;
-                }
-            }
+            let entry = Arc::new(BodyEntry::of_record(&id, rec, &builds));
+            bodies.insert(id, entry);
         }
         let mut scenes = BTreeMap::new();
         for (id, rec) in store.list_scenes()? {
@@ -224,6 +190,7 @@ impl Catalog {
             jobs.insert(id, rec);
         }
         let quarantined = store.quarantined()?.len();
+        builds.add_quarantined(quarantined);
         if quarantined > 0 {
             tracing::warn!(records = quarantined, "the store's quarantine holds records that could not be loaded");
         }
@@ -233,15 +200,16 @@ impl Catalog {
             bodies: RwLock::new(bodies),
             scenes: RwLock::new(scenes),
             jobs: RwLock::new(jobs),
-            quarantined,
+            builds,
             params,
         })
     }
 
-    /// Number of records in the store's quarantine when the catalog was opened (unreadable or
-    /// invalid records kept aside; see [`super::store`]). Health reports them.
+    /// Number of records in the store's quarantine (unreadable or invalid records kept aside;
+    /// see [`super::store`]): those there when the catalog was opened plus the bodies found
+    /// invalid since, when they were built. Health reports them.
     pub fn quarantined(&self) -> usize {
-        self.quarantined
+        self.builds.quarantined()
     }
 
     /// Writes a job's record (and prunes the oldest finished records beyond
@@ -299,7 +267,7 @@ impl Catalog {
         check_name("name", name)?;
         let id = new_id("b");
         self.store.put_body(&id, &BodyRecord::single(name, body.to_file()))?;
-        let entry = BodyEntry { id: id.clone(), name: name.to_owned(), body: Arc::new(body), tree: None };
+        let entry = BodyEntry::of_built(&id, name, BuiltBody { body: Arc::new(body), tree: None });
         write(&self.bodies).insert(id.clone(), Arc::new(entry));
         Ok(id)
     }
@@ -320,13 +288,12 @@ impl Catalog {
         let root = tree.body(tree.root()).clone();
         let rec = BodyRecord { name: name.to_owned(), body: root.to_file(), compound: Some(tree.to_file()) };
         self.store.put_body(&id, &rec)?;
-        let entry =
-            BodyEntry { id: id.clone(), name: name.to_owned(), body: Arc::new(root), tree: Some(Arc::new(tree)) };
+        let entry = BodyEntry::of_built(&id, name, BuiltBody { body: Arc::new(root), tree: Some(Arc::new(tree)) });
         write(&self.bodies).insert(id.clone(), Arc::new(entry));
         Ok(id)
     }
 
-    /// The body with id `id`.
+    /// The body with id `id` (not necessarily built: see [`BodyEntry::built`]).
     ///
     /// # Errors
     /// [`Error::NotFound`] (kind `body`).
@@ -338,14 +305,14 @@ impl Catalog {
     }
 
     /// A body another replica stored in a shared store ([`Store::shared`]) since this catalog
-    /// was opened, now held here too; `None` when the store has none (or is not shared).
+    /// was opened, now held here too (built on first use); `None` when the store has none (or is
+    /// not shared).
     fn load_body(&self, id: &str) -> Result<Option<Arc<BodyEntry>>> {
         if !self.store.shared() {
             return Ok(None);
         }
         let Some(rec) = self.store.get_body(id)? else { return Ok(None) };
-        let entry = BodyEntry::from_record(id, rec).map_err(|e| Error::Storage(format!("stored body `{id}`: {e}")))?;
-        let entry = Arc::new(entry);
+        let entry = Arc::new(BodyEntry::of_record(id, rec, &self.builds));
         Ok(Some(write(&self.bodies).entry(id.to_owned()).or_insert(entry).clone()))
     }
 
@@ -393,7 +360,7 @@ impl Catalog {
         }
         for scene in read(&self.scenes).values() {
             let s = lock(scene);
-            if let Some((iid, _)) = s.instances.iter().find(|(_, inst)| inst.body_id == id) {
+            if let Some((iid, _)) = s.instances.iter().find(|(_, inst)| inst.body_id() == id) {
                 return Err(Error::FailedPrecondition(format!(
                     "body `{id}` is used by instance `{iid}` of scene `{}`; remove the instance first",
                     s.id
@@ -461,19 +428,17 @@ impl Catalog {
 
     /// Whether any instance of the scene is a nonconvex body, whose queries solve an SDP lower
     /// bound (milliseconds): the service runs such queries off its async workers. False for an
-    /// unknown scene (the query itself then reports it).
+    /// unknown scene (the query itself then reports it). Builds no body ([`BodyEntry::facts`]).
     pub fn has_nonconvex(&self, scene_id: &str) -> bool {
-        let nonconvex = |i: &Instance| {
-            i.body.report.nonconvex
-                || i.tree.as_ref().is_some_and(|t| t.nodes().iter().any(|n| n.body.report.nonconvex))
-        };
+        let nonconvex = |i: &Instance| i.entry.facts().nonconvex;
         self.scene(scene_id).map(|sc| lock(&sc).instances.values().any(nonconvex)).unwrap_or(false)
     }
 
     /// Whether any instance of the scene is a compound body (its queries run the tree queries,
-    /// tens of µs each). False for an unknown scene.
+    /// tens of µs each). False for an unknown scene. Builds no body.
     pub fn has_compound(&self, scene_id: &str) -> bool {
-        self.scene(scene_id).map(|sc| lock(&sc).instances.values().any(|i| i.tree.is_some())).unwrap_or(false)
+        let compound = |i: &Instance| i.entry.facts().compound;
+        self.scene(scene_id).map(|sc| lock(&sc).instances.values().any(compound)).unwrap_or(false)
     }
 
     /// Deletes a scene with its instances and warm starts.
@@ -530,7 +495,8 @@ impl Catalog {
                 if !seen.insert(iid.as_str()) {
                     return Err(Error::invalid(field, format!("instance `{iid}` appears twice")));
                 }
-                records.push(InstanceRecord { body_id: inst.body_id.clone(), pose: StoredPose::from_isometry(pose) });
+                records
+                    .push(InstanceRecord { body_id: inst.body_id().to_owned(), pose: StoredPose::from_isometry(pose) });
             }
             let rows: Vec<(&str, &InstanceRecord)> =
                 poses.iter().zip(records.iter()).map(|((iid, _), rec)| (iid.as_str(), rec)).collect();
@@ -577,7 +543,7 @@ fn view(s: &SceneState) -> SceneView {
         instances: s
             .instances
             .iter()
-            .map(|(id, i)| InstanceView { id: id.clone(), body_id: i.body_id.clone(), pose: i.pose })
+            .map(|(id, i)| InstanceView { id: id.clone(), body_id: i.body_id().to_owned(), pose: i.pose })
             .collect(),
     }
 }
@@ -587,8 +553,7 @@ fn instance<'a>(s: &'a SceneState, id: &str) -> Result<&'a Instance> {
     s.instances.get(id).ok_or_else(|| Error::not_found("instance", id))
 }
 
-/// The instance `id` of a locked scene as a posed body (the body shared, the pose copied).
-fn posed(s: &SceneState, id: &str) -> Result<crate::answer::Posed> {
-    let inst = instance(s, id)?;
-    Ok(crate::answer::Posed { body: inst.body.clone(), tree: inst.tree.clone(), pose: inst.pose })
+/// A built body at a pose (the body shared, the pose copied).
+fn posed(built: &BuiltBody, pose: Isometry3) -> crate::answer::Posed {
+    crate::answer::Posed { body: built.body.clone(), tree: built.tree.clone(), pose }
 }

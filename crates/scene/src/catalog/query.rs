@@ -2,13 +2,15 @@
 //! copies the posed instances and warm starts under the scene's lock, solves outside it
 //! ([`crate::planner::answer_pair`]) and writes the new warm starts back.
 
-use super::{lock, posed, Catalog, SceneState};
+use super::{instance, lock, posed, BodyEntry, Catalog, SceneState};
 use crate::answer::{
     self, warm_kind, DistanceReply, GrowthReply, PairRef, Posed, QueryAnswer, QueryKind, QueryOptions, QueryPair,
 };
 use crate::cache::WarmStartCache;
 use crate::{Error, Result};
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
+use std::sync::Arc;
+use sublevel_core::math::Isometry3;
 use sublevel_query::{CertifyMode, CertifyParams, DistanceResult, GrowthResult};
 
 impl Catalog {
@@ -140,8 +142,9 @@ impl Catalog {
     ///
     /// ```text
     /// lock:    posed instances (body Arc + pose) of every id, warm starts of every pair → scratch
-    /// unlock:  solve every pair in order with the scratch warm starts (repeated pairs warm-start
-    ///          each other as before)
+    /// unlock:  build the bodies not built yet (first uses only, see `BodyEntry::built`); solve
+    ///          every pair in order with the scratch warm starts (repeated pairs warm-start each
+    ///          other as before)
     /// lock:    write the new warm starts back (those of instances still in the scene)
     /// ```
     ///
@@ -156,10 +159,13 @@ impl Catalog {
     /// request, never halfway through this one. Warm starts are copied as `Arc`s (no 1 KB copies).
     ///
     /// # Errors
-    /// [`Error::NotFound`] for the scene or an instance.
+    /// [`Error::NotFound`] for the scene or an instance; [`Error::FailedPrecondition`] naming a
+    /// body that does not validate (quarantined when it was built).
     fn answer_snapshot(&self, scene_id: &str, pairs: &[PairRef<'_>]) -> Result<Vec<QueryAnswer>> {
         let scene = self.scene(scene_id)?;
-        let (posed_by_id, mut scratch) = {
+        // Instances whose body is not built yet, built after the lock is released.
+        let mut unbuilt: BTreeMap<&str, (Arc<BodyEntry>, Isometry3)> = BTreeMap::new();
+        let (mut posed_by_id, mut scratch) = {
             let s = lock(&scene);
             if s.deleted {
                 return Err(Error::not_found("scene", scene_id));
@@ -168,8 +174,12 @@ impl Catalog {
             let mut scratch = WarmStartCache::default();
             for p in pairs {
                 for id in [p.first, p.second] {
-                    if !posed_by_id.contains_key(id) {
-                        posed_by_id.insert(id, posed(&s, id)?);
+                    if !posed_by_id.contains_key(id) && !unbuilt.contains_key(id) {
+                        let inst = instance(&s, id)?;
+                        match inst.entry.ready() {
+                            Some(built) => _ = posed_by_id.insert(id, posed(built, inst.pose)),
+                            None => _ = unbuilt.insert(id, (inst.entry.clone(), inst.pose)),
+                        }
                     }
                 }
                 if !p.options.cold {
@@ -178,6 +188,9 @@ impl Catalog {
             }
             (posed_by_id, scratch)
         };
+        for (id, (entry, pose)) in unbuilt {
+            posed_by_id.insert(id, posed(entry.built()?, pose));
+        }
         let params = self.certify_params();
         // Cold distance solves of one body pair on the batch solver's lanes, collide queries the
         // cheap tests decide (see `sublevel_query::dispatch::lane_distances`).

@@ -1,8 +1,9 @@
 //! The catalog against a real redb store: persistence across reopen, warm starts that follow
-//! their pair, all-or-nothing pose batches.
+//! their pair, all-or-nothing pose batches, bodies built on first use or by the warm-up, and
+//! stored bodies that no longer validate.
 
 use super::*;
-use crate::answer::QueryOptions;
+use crate::answer::{QueryKind, QueryOptions, QueryPair};
 use crate::store::RedbStore;
 use sublevel_core::body::ellipsoid;
 use sublevel_core::math::pose_from_parts;
@@ -105,7 +106,7 @@ fn old_single_records_load_and_compound_bodies_survive_a_reopen() {
         drop(store);
         let c = open(dir.path());
         old_id = "b-old".to_owned();
-        assert!(c.body(&old_id).unwrap().tree.is_none());
+        assert!(c.body(&old_id).unwrap().built().unwrap().tree.is_none());
         tree_id = c.add_compound_body("dumbbell", dumbbell()).unwrap();
         scene = c.create_scene("s").unwrap();
         a = c.add_instance(&scene, &tree_id, at(0.0)).unwrap();
@@ -133,4 +134,163 @@ fn old_single_records_load_and_compound_bodies_survive_a_reopen() {
     assert!(g.answer.result.value.is_infinite() && g.answer.converged);
     c.remove_instance(&scene, &b).unwrap();
     assert_eq!(c.cached_warm_starts(&scene).unwrap(), 0, "tree warm starts go with their instance");
+}
+
+/// A store with three sphere bodies, the dumbbell compound body and one instance of each in one
+/// scene (x = 0, 3, 6, 9); returns the scene id and the instance ids in that order.
+fn store_with_bodies(dir: &std::path::Path) -> (String, Vec<String>) {
+    let c = open(dir);
+    let mut bodies: Vec<String> =
+        [0.3, 0.4, 0.5].iter().map(|&r| c.add_body("s", ellipsoid([0.0; 3], [r; 3]).unwrap()).unwrap()).collect();
+    bodies.push(c.add_compound_body("dumbbell", dumbbell()).unwrap());
+    let scene = c.create_scene("s").unwrap();
+    let ids = bodies.iter().enumerate().map(|(k, b)| c.add_instance(&scene, b, at(3.0 * k as f64)).unwrap()).collect();
+    (scene, ids)
+}
+
+/// Opening builds no body; a query builds exactly the bodies it uses and answers what a warmed
+/// catalog answers, to the last bit; the warm-up builds the rest, once.
+#[test]
+fn bodies_build_on_first_use_and_the_warm_up_builds_the_rest() {
+    let dir = tempfile::tempdir().unwrap();
+    let (scene, ids) = store_with_bodies(dir.path());
+    let pairs = [(0, 1), (1, 3), (3, 2)];
+    let warmed: Vec<(f64, f64)> = {
+        let c = open(dir.path());
+        let w = c.warm_up();
+        assert_eq!((w.built, w.quarantined, w.stopped), (4, 0, false));
+        assert_eq!(c.bodies_built(), (4, 4));
+        pairs
+            .iter()
+            .map(|&(a, b)| {
+                let d = c.distance_with(&scene, &ids[a], &ids[b], &QueryOptions::default()).unwrap();
+                (d.answer.result.distance, c.growth(&scene, &ids[a], &ids[b]).unwrap().value)
+            })
+            .collect()
+    };
+    let c = open(dir.path());
+    assert_eq!(c.bodies_built(), (0, 4), "opening builds no body");
+    assert_eq!(c.bodies_pending(), 4);
+    // Facts need no build.
+    assert!(c.has_compound(&scene) && !c.has_nonconvex(&scene));
+    assert_eq!(c.bodies().iter().map(|e| e.node_count()).max(), Some(3));
+    assert_eq!(c.bodies_built(), (0, 4));
+    let d = c.distance_with(&scene, &ids[0], &ids[1], &QueryOptions::default()).unwrap();
+    assert_eq!(c.bodies_built(), (2, 4), "the query built its two bodies, no other");
+    let g = c.growth(&scene, &ids[0], &ids[1]).unwrap();
+    assert_eq!((d.answer.result.distance, g.value), warmed[0]);
+    assert_eq!(c.bodies_built(), (2, 4));
+    let w = c.warm_up();
+    assert_eq!((w.built, w.quarantined), (2, 0), "the warm-up builds only what was not built");
+    assert_eq!((c.bodies_built(), c.bodies_pending()), ((4, 4), 0));
+    for (k, &(a, b)) in pairs.iter().enumerate().skip(1) {
+        let d = c.distance_with(&scene, &ids[a], &ids[b], &QueryOptions::default()).unwrap();
+        let g = c.growth(&scene, &ids[a], &ids[b]).unwrap();
+        assert_eq!((d.answer.result.distance, g.value), warmed[k], "pair {k}");
+    }
+    assert_eq!(c.warm_up().built, 0);
+}
+
+/// Concurrent first users of a body wait for one build: every one gets the same body.
+#[test]
+fn concurrent_first_uses_build_a_body_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let (scene, ids) = store_with_bodies(dir.path());
+    let c = open(dir.path());
+    let id = c.get_scene(&scene).unwrap().instances[3].body_id.clone();
+    let entry = c.body(&id).unwrap();
+    let built: Vec<usize> = std::thread::scope(|s| {
+        let workers: Vec<_> = (0..4)
+            .map(|_| s.spawn(|| Arc::as_ptr(&entry.built().unwrap().body) as usize))
+            .chain([s.spawn(|| {
+                c.warm_up();
+                Arc::as_ptr(&entry.built().unwrap().body) as usize
+            })])
+            .collect();
+        workers.into_iter().map(|w| w.join().unwrap()).collect()
+    });
+    assert!(built.windows(2).all(|w| w[0] == w[1]), "{built:?}");
+    assert_eq!((c.bodies_built(), c.bodies_pending()), ((4, 4), 0));
+    assert!(c.distance(&scene, &ids[0], &ids[3]).is_ok());
+}
+
+/// A sphere whose polynomial is negated: −(u² + v² + w²) has no minimizer, so the body no longer
+/// validates (the record itself reads back fine).
+fn invalid_record() -> BodyRecord {
+    let mut file = ellipsoid([0.0; 3], [0.5; 3]).unwrap().to_file();
+    for c in &mut file.coefficients {
+        *c = -*c;
+    }
+    assert!(Body::from_file(file.clone()).is_err());
+    BodyRecord::single("bad", file)
+}
+
+/// A stored body that no longer validates is found when it is built — by the first query that
+/// needs it, or by the warm-up: its record moves to the quarantine (kept), every query that needs
+/// it answers FAILED_PRECONDITION naming it, and the other bodies still answer.
+#[test]
+fn a_stored_body_that_does_not_validate_is_quarantined_when_built() {
+    let dir = tempfile::tempdir().unwrap();
+    let (scene, ids) = store_with_bodies(dir.path());
+    let add_bad = |body_id: &str, instance_id: &str| {
+        let store = RedbStore::open_dir(dir.path()).unwrap();
+        store.put_body(body_id, &invalid_record()).unwrap();
+        let rec = InstanceRecord { body_id: body_id.to_owned(), pose: StoredPose::from_isometry(&at(12.0)) };
+        store.put_instances(&scene, &[(instance_id, &rec)], false).unwrap();
+    };
+    add_bad("b-bad", "i-bad");
+    {
+        let c = open(dir.path());
+        assert_eq!(c.quarantined(), 0, "nothing is validated at open");
+        assert_eq!(c.bodies_built(), (0, 5));
+        assert_eq!(c.body("b-bad").unwrap().facts().degree, 2);
+        // First use: quarantined, answered with an error naming it.
+        for _ in 0..2 {
+            let err = c.distance(&scene, &ids[0], "i-bad").unwrap_err();
+            assert!(
+                matches!(&err, Error::FailedPrecondition(m) if m.contains("b-bad") && m.contains("quarantine")),
+                "{err}"
+            );
+        }
+        assert_eq!(c.quarantined(), 1, "quarantined once");
+        let pair = |a: &str, b: &str| QueryPair {
+            kind: QueryKind::Distance,
+            first: a.to_owned(),
+            second: b.to_owned(),
+            options: QueryOptions::default(),
+            margin: 0.0,
+        };
+        let batch = [pair(&ids[1], &ids[2]), pair(&ids[2], "i-bad")];
+        assert!(matches!(c.batch(&scene, &batch), Err(Error::FailedPrecondition(m)) if m.contains("b-bad")));
+        assert!(matches!(c.posed_instances(&scene, &[]), Err(Error::FailedPrecondition(m)) if m.contains("b-bad")));
+        assert!(matches!(c.body("b-bad").unwrap().built(), Err(Error::FailedPrecondition(m)) if m.contains("b-bad")));
+        // The others still answer.
+        assert!((c.distance(&scene, &ids[0], &ids[1]).unwrap().distance - 2.3).abs() < 1e-9);
+        let w = c.warm_up();
+        assert_eq!(w.quarantined, 0, "found by the query, not again by the warm-up");
+        assert_eq!(c.bodies_built(), (4, 5));
+        assert_eq!(c.quarantined(), 1);
+    }
+    // Found by the warm-up this time.
+    add_bad("b-bad2", "i-bad2");
+    {
+        let c = open(dir.path());
+        assert_eq!(c.quarantined(), 1, "the first one is still in the quarantine");
+        let w = c.warm_up();
+        assert_eq!((w.built, w.quarantined), (4, 1));
+        assert_eq!(c.quarantined(), 2);
+        let err = c.growth(&scene, "i-bad2", &ids[0]).unwrap_err();
+        assert!(matches!(&err, Error::FailedPrecondition(m) if m.contains("b-bad2")), "{err}");
+        assert!(c.distance(&scene, &ids[3], &ids[2]).is_ok());
+    }
+    // Both records are kept in the quarantine, out of the bodies table.
+    let store = RedbStore::open_dir(dir.path()).unwrap();
+    let q = store.quarantined().unwrap();
+    let keys: Vec<&str> = q.iter().map(|r| r.key.as_str()).collect();
+    assert_eq!(keys, ["b-bad", "b-bad2"]);
+    assert!(q.iter().all(|r| r.reason.contains("does not validate") && r.text.contains("\"name\":\"bad\"")), "{q:?}");
+    assert!(store.get_body("b-bad").unwrap().is_none());
+    drop(store);
+    let c = open(dir.path());
+    assert_eq!((c.quarantined(), c.bodies().len()), (2, 4));
 }

@@ -451,14 +451,16 @@ pub fn admit_compound(
     Ok((body, if margin.is_finite() { margin } else { Real::NAN }))
 }
 
-/// A body entry as the proto summary.
+/// A body entry as the proto summary (from what is known without building the body:
+/// [`BodyEntry::facts`]).
 pub fn body_summary(e: &BodyEntry) -> pb::BodySummary {
+    let facts = e.facts();
     pb::BodySummary {
         body_id: e.id.clone(),
         name: e.name.clone(),
-        degree: e.body.degree() as u32,
-        method: e.body.report.method.clone(),
-        volume: e.body.report.volume,
+        degree: facts.degree as u32,
+        method: facts.method.clone(),
+        volume: facts.volume,
         nodes: u32::try_from(e.node_count()).unwrap_or(u32::MAX),
     }
 }

@@ -90,8 +90,9 @@ pub(super) async fn get_body(
 ) -> Handled<pb::GetBodyResponse> {
     let req = request.into_inner();
     let entry = svc.catalog.body(require_id("body_id", &req.body_id)?)?;
-    let file = entry.body.to_file();
-    let body_json = match &entry.tree {
+    let built = entry.built()?;
+    let file = built.body.to_file();
+    let body_json = match &built.tree {
         Some(tree) => serde_json::to_string(&tree.to_file()),
         None => serde_json::to_string(&file),
     }

@@ -124,13 +124,16 @@ fn needs_sdp_slots(catalog: &Catalog, scene_id: &str, certify: bool) -> bool {
 }
 
 /// Whether a query request is slow work, to run off the async workers: it asks for certificates
-/// (an SDP each), its scene holds a nonconvex body (SDP lower bounds), or it has more than
+/// (an SDP each), its scene holds a nonconvex body (SDP lower bounds), it has more than
 /// [`INLINE_ANSWERS`] answers (counting [`COMPOUND_ANSWER_COST`] per answer in a scene with a
-/// compound body). A compound query that needs an SDP (a leaf pair Newton did not resolve) is
-/// re-run on the SDP slots as any `needs_sdp` answer is.
+/// compound body), or some stored body is not built yet (after a start, until the warm-up is
+/// done: a first use builds the body, milliseconds to seconds). A compound query that needs an
+/// SDP (a leaf pair Newton did not resolve) is re-run on the SDP slots as any `needs_sdp` answer
+/// is.
 fn off_workers(catalog: &Catalog, scene_id: &str, certify: bool, answers: usize) -> bool {
     certify
         || answers > INLINE_ANSWERS
+        || catalog.bodies_pending() > 0
         || catalog.has_nonconvex(scene_id)
         || (answers.saturating_mul(COMPOUND_ANSWER_COST) > INLINE_ANSWERS && catalog.has_compound(scene_id))
 }
