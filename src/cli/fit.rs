@@ -68,8 +68,8 @@ pub struct FitArgs {
     pub seed: u64,
     /// With --parts: the leaf-excess tolerance T in meters (`--parts auto` keeps the fewest parts
     /// whose max leaf excess is ≤ T, refining up to --max-parts, and each part the lowest degree
-    /// within T). Default with `--parts auto`: 1 % of the mesh's bounding-box diagonal (1.6 mm on
-    /// a 16 cm robot link). Every leaf above T is reported and fails the command unless
+    /// within T). Default with `--parts auto`: 1 % of the mesh's bounding-box diagonal (2–3 mm on
+    /// the Panda's links, 0.19–0.33 m diagonals). Every leaf above T is reported and fails the command unless
     /// --allow-tolerance-miss. Without --parts: Clarabel's gap tolerance (same as
     /// --solver-tolerance).
     #[arg(long)]
