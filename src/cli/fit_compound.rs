@@ -97,7 +97,7 @@ pub fn run(args: FitArgs) -> sublevel::Result<()> {
 
 /// The warning for the leaves above the tolerance `t` (meters): one line per leaf (node index,
 /// triangles, excess in meters and as a multiple of `t`), then why the search stopped where the
-/// report says (the `--max-parts` cap, leaves that cannot be split).
+/// report says (the `--max-parts` cap, leaves that cannot be split, no part count within `t`).
 pub fn tolerance_warning(body: &CompoundBody, t: f64) -> String {
     let misses = &body.report.misses;
     let mut out = format!(
@@ -114,7 +114,8 @@ pub fn tolerance_warning(body: &CompoundBody, t: f64) -> String {
             m.excess / t
         );
     }
-    for note in body.report.notes.iter().filter(|n| n.contains("--max-parts") || n.contains("cannot be split")) {
+    let why = |n: &&String| n.contains("--max-parts") || n.contains("cannot be split") || n.contains("no part count");
+    for note in body.report.notes.iter().filter(why) {
         out += &format!("  {note}\n");
     }
     out
