@@ -1,21 +1,29 @@
-//! `sublevel fit MESH.off --parts auto --tolerance T --output X.json` (or `--parts N`): fit a
+//! `sublevel fit MESH --parts auto [--tolerance T] --output X.json` (or `--parts N`): fit a
 //! compound body — a convex decomposition fitted part by part under a containment tree
-//! ([`sublevel::compound`]) — and write its compound file. The report (stdout,
-//! and the file's `report`) lists every part count tried and every node: degree, triangles,
-//! excess, fit time. Then the conservativeness check: triangles not inside any leaf (must be 0).
+//! ([`sublevel::compound`]) — and write its compound file. MESH is a triangle mesh in OFF, OBJ
+//! (every object and group), STL (ASCII or binary) or PLY, welded before the decomposition
+//! (a triangle soup becomes an indexed mesh). The report (stdout, and the file's `report`) lists
+//! the weld, every part count tried and every node: degree, triangles, excess, fit time. Then the
+//! conservativeness check (triangles of MESH not inside any leaf: must be 0) and the tolerance
+//! check: with a tolerance T (for `--parts auto` by default 1 % of the mesh's bounding-box
+//! diagonal), every leaf whose excess is above T is listed on stderr, and the command exits
+//! non-zero (the file is still written) unless `--allow-tolerance-miss` is given.
 
 use super::fit::{fit_settings, progress_printer, DegreeArg, FitArgs};
 use sublevel::compound::check::uncovered_triangles;
 use sublevel::compound::{fit_compound, CompoundBody, CompoundSettings, PartCount};
 use sublevel::fit::auto::DEFAULT_AUTO_DEGREES;
-use sublevel::fit::mesh::{parse_off_mesh, MeshFormat, DEFAULT_MAX_MESH_POINTS};
+use sublevel::fit::mesh::{load_triangle_mesh_file, DEFAULT_MAX_MESH_POINTS};
 use sublevel::Error;
 
 /// Runs `sublevel fit --parts …`.
 ///
 /// # Errors
-/// [`Error::InvalidArgument`] naming `parts`, `tolerance`, `format` (not an OFF mesh) or a fit
-/// setting; whatever loading, fitting and writing return (see [`fit_compound`]).
+/// [`Error::InvalidArgument`] naming `parts`, `tolerance`, `format` or a fit setting, or `mesh`
+/// with the file's path (no faces, e.g. a point-cloud PLY; bad indices); whatever loading,
+/// fitting and writing return (see [`fit_compound`]); [`Error::Numerical`] when a triangle is
+/// outside every leaf; [`Error::FailedPrecondition`] when a leaf misses the tolerance (the file
+/// is written first) and `--allow-tolerance-miss` is not given.
 pub fn run(args: FitArgs) -> sublevel::Result<()> {
     let parts: PartCount = args.parts.as_deref().unwrap_or("auto").parse()?;
     if let PartCount::Fixed(n) = parts {
@@ -24,13 +32,13 @@ pub fn run(args: FitArgs) -> sublevel::Result<()> {
         }
     }
     let format = match &args.format {
-        Some(f) => f.parse()?,
-        None => MeshFormat::of_path(&args.mesh)?,
+        Some(f) => Some(f.parse().map_err(|e: Error| match e {
+            Error::InvalidArgument { reason, .. } => Error::invalid("format", reason),
+            other => other,
+        })?),
+        None => None,
     };
-    if format != MeshFormat::Off {
-        return Err(Error::invalid("format", "--parts needs a triangle mesh in OFF format (faces are decomposed)"));
-    }
-    let mesh = parse_off_mesh(&std::fs::read(&args.mesh)?, DEFAULT_MAX_MESH_POINTS)?;
+    let mesh = load_triangle_mesh_file(&args.mesh, format, DEFAULT_MAX_MESH_POINTS)?;
     let settings = CompoundSettings {
         fit: fit_settings(&args)?,
         degrees: match args.degree.unwrap_or(DegreeArg::Auto) {
@@ -68,12 +76,68 @@ pub fn run(args: FitArgs) -> sublevel::Result<()> {
             &uncovered[..uncovered.len().min(5)]
         )));
     }
-    Ok(())
+    let Some(t) = body.report.tolerance else { return Ok(()) };
+    if body.report.misses.is_empty() {
+        println!("tolerance met: every leaf's excess is ≤ {t:.4} m");
+        return Ok(());
+    }
+    eprint!("{}", tolerance_warning(&body, t));
+    if args.allow_tolerance_miss {
+        return Ok(());
+    }
+    Err(Error::FailedPrecondition(format!(
+        "{} of {} leaves miss the tolerance {t:.4} m (worst excess {:.4} m); the body was written to {} — pass \
+         --allow-tolerance-miss to accept it, or raise --tolerance / --max-parts",
+        body.report.misses.len(),
+        body.leaf_count(),
+        body.max_leaf_excess(),
+        output.display()
+    )))
+}
+
+/// The warning for the leaves above the tolerance `t` (meters): one line per leaf (node index,
+/// triangles, excess in meters and as a multiple of `t`), then why the search stopped where the
+/// report says (the `--max-parts` cap, leaves that cannot be split, no part count within `t`).
+pub fn tolerance_warning(body: &CompoundBody, t: f64) -> String {
+    let misses = &body.report.misses;
+    let mut out = format!(
+        "warning: {} of {} leaves miss the tolerance {t:.4} m (excess above T):\n",
+        misses.len(),
+        body.leaf_count()
+    );
+    for m in misses {
+        out += &format!(
+            "  leaf {:>4}: {:>6} triangles, excess {:.4} m = {:.2} × T\n",
+            m.node,
+            m.triangles,
+            m.excess,
+            m.excess / t
+        );
+    }
+    let why = |n: &&String| n.contains("--max-parts") || n.contains("cannot be split") || n.contains("no part count");
+    for note in body.report.notes.iter().filter(why) {
+        out += &format!("  {note}\n");
+    }
+    out
 }
 
 /// Prints the fit report: attempts, then one line per node (leaves first).
 pub fn print_report(name: &str, body: &CompoundBody) {
     let r = &body.report;
+    if let Some(w) = &r.weld {
+        println!(
+            "{name}: welded at {:.1e} m: {} → {} vertices ({} merged, {} unused), {} → {} triangles ({} collapsed, {} repeated)",
+            w.tolerance,
+            w.vertices_before,
+            w.vertices_after,
+            w.merged_vertices,
+            w.unused_vertices,
+            w.triangles_before,
+            w.triangles_after,
+            w.degenerate_triangles,
+            w.duplicate_triangles
+        );
+    }
     println!(
         "{name}: {} parts, {} nodes, height {}, max leaf excess {:.4} m, root excess {:.4} m; decomposition {:.2} s, leaves {:.2} s, tree {:.2} s, total {:.2} s",
         body.leaf_count(),

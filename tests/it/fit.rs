@@ -621,3 +621,88 @@ fn bad_relaxation_and_degenerate_moment_clouds_are_invalid() {
         other => panic!("expected InvalidArgument(method), got {other:?}"),
     }
 }
+
+/// Two unit cubes at x = ±2 (meters) as a triangle soup in ASCII STL: every triangle its own
+/// three `vertex` lines, 24 facets.
+fn two_cube_soup_stl() -> String {
+    let mut s = String::from("solid two_cubes\n");
+    for cx in [-2.0, 2.0] {
+        let v = |k: usize| {
+            [
+                cx + if k & 1 == 0 { -0.5 } else { 0.5 },
+                if k & 2 == 0 { -0.5 } else { 0.5 },
+                if k & 4 == 0 { -0.5 } else { 0.5 },
+            ]
+        };
+        for q in [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]] {
+            for t in [[q[0], q[1], q[2]], [q[0], q[2], q[3]]] {
+                s += "facet normal 0 0 0\nouter loop\n";
+                for k in t {
+                    let p = v(k);
+                    s += &format!("vertex {} {} {}\n", p[0], p[1], p[2]);
+                }
+                s += "endloop\nendfacet\n";
+            }
+        }
+    }
+    s + "endsolid two_cubes\n"
+}
+
+fn sublevel_fit(args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_sublevel")).arg("fit").args(args).output().unwrap()
+}
+
+#[test]
+fn fit_parts_reads_an_stl_soup_welds_it_and_reports_a_tolerance_miss() {
+    let dir = tempfile::tempdir().unwrap();
+    let stl = dir.path().join("two_cubes.stl");
+    std::fs::write(&stl, two_cube_soup_stl()).unwrap();
+    let out = dir.path().join("two_cubes.compound.json");
+    let (stl, out_s) = (stl.to_str().unwrap(), out.to_str().unwrap());
+    let quick = ["--degree", "2", "--excess-samples", "200", "--resolution", "32", "--quiet", "--output", out_s];
+    // Degree-2 leaves around unit cubes reach (√3 − 1)/2 ≈ 0.366 m beyond them: T = 0.3 misses
+    // at both leaves, and the command fails after writing the file.
+    let run = sublevel_fit(&[&[stl, "--parts", "2", "--tolerance", "0.3"][..], &quick[..]].concat());
+    let (stdout, stderr) = (String::from_utf8_lossy(&run.stdout), String::from_utf8_lossy(&run.stderr));
+    assert!(!run.status.success(), "{stdout}\n{stderr}");
+    // stl_io merges the soup's equal vertices: 16 of them, 24 triangles, nothing else to weld.
+    assert!(stdout.contains("16 → 16 vertices") || !stdout.contains("welded at"), "{stdout}");
+    assert!(stdout.contains("conservative: 24 of 24 triangles"), "{stdout}");
+    assert!(stderr.contains("warning: 2 of 2 leaves miss the tolerance 0.3000 m"), "{stderr}");
+    assert!(stderr.contains("12 triangles, excess 0.36") && stderr.contains("= 1.2"), "{stderr}");
+    assert!(stderr.contains("--allow-tolerance-miss"), "{stderr}");
+    let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap();
+    let report = &v["report"];
+    assert_eq!(report["tolerance"], 0.3);
+    assert_eq!(report["met"], false);
+    let misses = report["misses"].as_array().unwrap();
+    assert_eq!(misses.len(), 2);
+    for m in misses {
+        assert_eq!(m["triangles"], 12);
+        let e = m["excess"].as_f64().unwrap();
+        assert!((e - (3f64.sqrt() - 1.0) / 2.0).abs() < 0.01, "excess {e}");
+    }
+    // Accepted with --allow-tolerance-miss; met at T = 0.4.
+    let run = sublevel_fit(
+        &[&[stl, "--parts", "2", "--tolerance", "0.3", "--allow-tolerance-miss"][..], &quick[..]].concat(),
+    );
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let run = sublevel_fit(&[&[stl, "--parts", "2", "--tolerance", "0.4"][..], &quick[..]].concat());
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    assert!(String::from_utf8_lossy(&run.stdout).contains("tolerance met"));
+}
+
+#[test]
+fn fit_parts_names_a_point_cloud_file_without_faces() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = dir.path().join("cloud.ply");
+    std::fs::write(
+        &ply,
+        "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n0 0 0\n1 0 0\n0 1 0\n",
+    )
+    .unwrap();
+    let run = sublevel_fit(&[ply.to_str().unwrap(), "--parts", "auto", "--quiet"]);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success());
+    assert!(stderr.contains("cloud.ply") && stderr.contains("no `face` element"), "{stderr}");
+}

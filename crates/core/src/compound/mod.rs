@@ -92,6 +92,53 @@ pub struct CompoundReport {
     /// Free-form notes (why a part count was chosen, …).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub notes: Vec<String>,
+    /// Whether every leaf's excess is ≤ `tolerance`; `None` without a tolerance.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub met: Option<bool>,
+    /// The leaves whose excess is above `tolerance` (empty when `met`), largest excess first.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub misses: Vec<ToleranceMiss>,
+    /// What welding the mesh before its decomposition merged and dropped; `None` when the mesh
+    /// was not welded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub weld: Option<WeldReport>,
+}
+
+/// A leaf whose excess is above the build's tolerance ([`CompoundReport::misses`]).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ToleranceMiss {
+    /// Index of the leaf among the compound body's nodes.
+    pub node: usize,
+    /// Mesh triangles assigned to the leaf.
+    pub triangles: usize,
+    /// The leaf's one-sided Hausdorff excess over the mesh (sampled, meters).
+    pub excess: Real,
+}
+
+/// What welding a triangle mesh did (`sublevel_fit::mesh::weld_mesh`): vertices closer than
+/// `tolerance` merged, triangles whose corners merged (zero area) and repeated triangles dropped,
+/// vertices no triangle uses dropped. Counts before and after, and of each change.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct WeldReport {
+    /// Distance (meters) below which two vertices were merged.
+    pub tolerance: Real,
+    /// Vertices of the mesh as read.
+    pub vertices_before: usize,
+    /// Vertices after welding.
+    pub vertices_after: usize,
+    /// Vertices merged into an earlier vertex within the tolerance.
+    pub merged_vertices: usize,
+    /// Vertices dropped because no kept triangle uses them.
+    pub unused_vertices: usize,
+    /// Triangles of the mesh as read.
+    pub triangles_before: usize,
+    /// Triangles after welding.
+    pub triangles_after: usize,
+    /// Triangles dropped because two of their corners merged (zero area).
+    pub degenerate_triangles: usize,
+    /// Triangles dropped because an earlier triangle has the same three vertices (either
+    /// orientation).
+    pub duplicate_triangles: usize,
 }
 
 /// A compound body: a containment tree of bodies (see the module docs), nodes in one vector.

@@ -2,6 +2,9 @@
 //! tree, and the search over part counts.
 //!
 //! ```text
+//! weld:  vertices within τ_w × the bounding-box diagonal merged, collapsed and repeated
+//!        triangles dropped (mesh::weld_mesh; τ_w = weld_tolerance, default 1e-9)
+//! T:     the excess tolerance, or with auto and none given T = relative_tolerance × the diagonal
 //! for N in (fixed N) or (1, 2, 4, 8 until max leaf excess ≤ T):
 //!     parts  = decompose(mesh, N)                                          (decompose.rs)
 //!     leaf j = fit of the vertices of part j's triangles (paper §III-A, log det P):
@@ -18,7 +21,12 @@
 //! excess of every node: sampled one-sided Hausdorff excess over the mesh          (surface.rs)
 //! certificate: every parent–child containment certified, a parent short of it rescaled
 //!       (certify.rs)
+//! check: every leaf of excess > T is a miss (CompoundReport::misses, met = no miss)
 //! ```
+//!
+//! The tolerance is met or reported: a miss is not an error here (the body is still conservative
+//! and usable), the caller decides (`sublevel fit --parts` exits non-zero on a miss unless told
+//! otherwise).
 //!
 //! Each leaf contains the vertices of its triangles, hence (convexity) its triangles; each parent
 //! contains its children's bodies; so every triangle lies in one body at every level of the tree
@@ -28,9 +36,9 @@
 
 use super::decompose::{decompose, split_part, Part, DEFAULT_RESOLUTION, MAX_PARTS};
 use super::surface::{MeshSurface, DEFAULT_EXCESS_SAMPLES};
-use super::{CompoundBody, CompoundNode, CompoundReport};
+use super::{CompoundBody, CompoundNode, CompoundReport, ToleranceMiss};
 use crate::containment::{contain_bodies, ContainmentSettings};
-use crate::mesh::OffMesh;
+use crate::mesh::{weld_mesh, TriangleMesh, DEFAULT_WELD_TOLERANCE};
 use crate::{auto, fit_points, FitProgress, FitSettings, FitStage, PartProgress};
 use crate::{Error, Result};
 use std::time::Instant;
@@ -46,12 +54,22 @@ pub const AUTO_PART_COUNTS: [usize; 4] = [1, 2, 4, 8];
 /// Default cap on the part count reached by refinement.
 pub const DEFAULT_MAX_PARTS: usize = 32;
 
+/// Default excess tolerance of [`PartCount::Auto`] relative to the mesh's size: T = 0.01 × the
+/// diagonal of the bounding box of the (welded) mesh, 1.9–3.3 mm on the Panda's links (0.19–0.33 m
+/// diagonals): the millimeters a robot's collision model needs. It is a target, not a promise:
+/// on those links the leaves reach 5.6–23 mm beyond the mesh at the default 32 parts (docs/paper.md,
+/// compound bodies), so the fit reports every leaf above T ([`CompoundReport::misses`]) rather
+/// than a looser default calling a 2 cm body a success.
+pub const DEFAULT_RELATIVE_TOLERANCE: Real = 0.01;
+
 /// How many parts to decompose into.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum PartCount {
     /// At most this many parts (VHACD may return fewer).
     Fixed(usize),
-    /// The fewest of [`AUTO_PART_COUNTS`] whose max leaf excess is ≤ the excess tolerance.
+    /// The fewest of [`AUTO_PART_COUNTS`] whose max leaf excess is ≤ the excess tolerance T (or,
+    /// above T at 8, those parts refined up to [`CompoundSettings::max_parts`]); T defaults to
+    /// [`CompoundSettings::relative_tolerance`] × the mesh's bounding-box diagonal.
     Auto,
 }
 
@@ -79,8 +97,17 @@ pub struct CompoundSettings {
     /// `--degree auto`).
     pub volume_tolerance: Real,
     /// Leaf-excess tolerance T in meters: the lowest degree whose excess is ≤ T per part, and
-    /// the fewest parts whose max leaf excess is ≤ T with [`PartCount::Auto`] (required there).
+    /// the fewest parts whose max leaf excess is ≤ T with [`PartCount::Auto`] (there, `None`
+    /// means `relative_tolerance` × the mesh's bounding-box diagonal). With a tolerance, every
+    /// leaf's excess is checked against it ([`CompoundReport::met`], [`CompoundReport::misses`]).
     pub excess_tolerance: Option<Real>,
+    /// T relative to the bounding-box diagonal of the mesh, when [`PartCount::Auto`] has no
+    /// `excess_tolerance` (default [`DEFAULT_RELATIVE_TOLERANCE`]).
+    pub relative_tolerance: Real,
+    /// Relative weld tolerance τ_w of [`weld_mesh`], applied before the decomposition (default
+    /// [`DEFAULT_WELD_TOLERANCE`]; 0 merges equal coordinates only); `None` decomposes the
+    /// triangles as given.
+    pub weld_tolerance: Option<Real>,
     /// Degree 2d of the parent bodies (2, 4 or 6; lowered to (lowest child degree + 2) when the
     /// S-procedure multipliers would need a degree above 2).
     pub parent_degree: usize,
@@ -101,6 +128,8 @@ impl Default for CompoundSettings {
             degrees: vec![2, 4, 6],
             volume_tolerance: 0.05,
             excess_tolerance: None,
+            relative_tolerance: DEFAULT_RELATIVE_TOLERANCE,
+            weld_tolerance: Some(DEFAULT_WELD_TOLERANCE),
             parent_degree: 4,
             containment: ContainmentSettings::default().with_volume_samples(50_000),
             resolution: DEFAULT_RESOLUTION,
@@ -115,9 +144,21 @@ impl CompoundSettings {
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] naming `degrees`, `volume_tolerance`, `tolerance` (the excess
-    /// tolerance: finite, > 0), `parent_degree`, `resolution` or `excess_samples`.
+    /// tolerance: finite, > 0), `relative_tolerance` (in (0, 1)), `weld_tolerance` (in [0, 1e-3]),
+    /// `parent_degree`, `resolution` or `excess_samples`.
     pub fn validate(&self) -> Result<()> {
         auto::validate_auto(&self.degrees, self.volume_tolerance)?;
+        if !(self.relative_tolerance > 0.0 && self.relative_tolerance < 1.0) {
+            return Err(Error::invalid(
+                "relative_tolerance",
+                format!("must be in (0, 1), got {}", self.relative_tolerance),
+            ));
+        }
+        if let Some(w) = self.weld_tolerance {
+            if !(0.0..=1e-3).contains(&w) {
+                return Err(Error::invalid("weld_tolerance", format!("must be in [0, 1e-3], got {w}")));
+            }
+        }
         if let Some(t) = self.excess_tolerance {
             if !(t.is_finite() && t > 0.0) {
                 return Err(Error::invalid("tolerance", format!("must be a finite number > 0 meters, got {t}")));
@@ -142,16 +183,22 @@ impl CompoundSettings {
     }
 }
 
-/// Fits a compound body to a triangle mesh (meters; see the module docs). Progress messages say
-/// which part / parent is being fitted ("parts 8, part 3/8: degree 4: …"), stages and fractions
-/// as in [`crate::fit_points`]. `mesh_name` goes into the report.
+/// Fits a compound body to a triangle mesh (meters; see the module docs): welded first (unless
+/// `settings.weld_tolerance` is `None`), every leaf's excess checked against the tolerance at
+/// the end. The body contains every triangle of `mesh` as given (merged vertices' original
+/// positions are fitted too). Progress messages say which part / parent is being fitted
+/// ("parts 8, part 3/8: degree 4: …"), stages and fractions as in [`crate::fit_points`].
+/// `mesh_name` goes into the report, with the tolerance used, whether every leaf met it
+/// (`met`), the leaves that missed it (`misses`), the weld counts and notes (why a part count
+/// was kept, why refinement stopped).
 ///
 /// # Errors
-/// [`Error::InvalidArgument`] naming a settings field, `parts` (0, too many, or `auto` without a
-/// tolerance) or `mesh` (no triangles, bad indices); [`Error::Numerical`] when the decomposition
-/// or a fit fails (naming the part); [`Error::Cancelled`] when cancelled ([`crate::cancel`]).
+/// [`Error::InvalidArgument`] naming a settings field, `parts` (0 or too many) or `mesh` (no
+/// triangles, bad indices, nothing left after welding); [`Error::Numerical`] when the
+/// decomposition or a fit fails (naming the part); [`Error::Cancelled`] when cancelled
+/// ([`crate::cancel`]). A leaf above the tolerance is not an error: it is reported.
 pub fn fit_compound(
-    mesh: &OffMesh,
+    mesh: &TriangleMesh,
     mesh_name: Option<&str>,
     parts: PartCount,
     settings: &CompoundSettings,
@@ -159,14 +206,51 @@ pub fn fit_compound(
 ) -> Result<CompoundBody> {
     let start = Instant::now();
     settings.validate()?;
+    let mut notes = Vec::new();
+    let (welded, weld) = match settings.weld_tolerance {
+        Some(tau) => {
+            let w = weld_mesh(mesh, tau)?;
+            let r = &w.report;
+            if r.vertices_after < r.vertices_before || r.triangles_after < r.triangles_before {
+                notes.push(format!(
+                    "welded (ε = {:.1e} m): {} → {} vertices ({} merged, {} unused), {} → {} triangles ({} collapsed, {} repeated)",
+                    r.tolerance,
+                    r.vertices_before,
+                    r.vertices_after,
+                    r.merged_vertices,
+                    r.unused_vertices,
+                    r.triangles_before,
+                    r.triangles_after,
+                    r.degenerate_triangles,
+                    r.duplicate_triangles
+                ));
+            }
+            (Some(w.mesh.clone()), Some(w))
+        }
+        None => (None, None),
+    };
+    // Original positions merged into a welded vertex at another position: fitted with it, so the
+    // body contains the mesh as given, not only the welded one.
+    let extra = weld.as_ref().map(|w| merged_positions(mesh, w)).unwrap_or_default();
+    let input_triangles = mesh.triangles.len();
+    let weld = weld.map(|w| w.report);
+    let mesh = welded.as_ref().unwrap_or(mesh);
+    let mut settings = settings.clone();
+    if parts == PartCount::Auto && settings.excess_tolerance.is_none() {
+        let t = settings.relative_tolerance * bounding_diagonal(&mesh.vertices);
+        if !(t.is_finite() && t > 0.0) {
+            return Err(Error::invalid("mesh", "has no extent: its bounding box is a point"));
+        }
+        notes.push(format!(
+            "excess tolerance {t:.4} m: the default {} × the bounding-box diagonal",
+            settings.relative_tolerance
+        ));
+        settings.excess_tolerance = Some(t);
+    }
+    let settings = &settings;
     let counts: Vec<usize> = match parts {
         PartCount::Fixed(n) => vec![n],
-        PartCount::Auto => {
-            if settings.excess_tolerance.is_none() {
-                return Err(Error::invalid("parts", "`auto` needs an excess tolerance (--tolerance T meters)"));
-            }
-            AUTO_PART_COUNTS.to_vec()
-        }
+        PartCount::Auto => AUTO_PART_COUNTS.to_vec(),
     };
     let surface = MeshSurface::new(&mesh.vertices, &mesh.triangles)?;
     // Overall fraction: the attempts (decomposition and part fits) up to `attempts_end`, the
@@ -175,7 +259,6 @@ pub fn fit_compound(
     let (attempts_end, leaves_end) = if refining { (0.15, 0.4) } else { (0.4, 0.4) };
     let mut attempts = Vec::new();
     let mut best: Option<(Vec<CompoundNode>, Real, Real)> = None; // (leaves, decomposition s, max excess)
-    let mut notes = Vec::new();
     for (a, &n) in counts.iter().enumerate() {
         let t0 = Instant::now();
         let frac = |f: Real| attempts_end * (a as Real + f) / counts.len() as Real;
@@ -193,17 +276,39 @@ pub fn fit_compound(
                     part: Some(PartProgress { index: j + 1, count: got }),
                 })
             };
-            leaves.push(fit_leaf(mesh, part, j, &surface, settings, &mut inner)?);
+            leaves.push(fit_leaf(mesh, &extra, part, j, &surface, settings, &mut inner)?);
         }
         if let (PartCount::Auto, Some(t)) = (parts, settings.excess_tolerance) {
             if a + 1 == counts.len() {
                 let before = leaves.len();
-                refine(mesh, decomposition, &mut leaves, t, &surface, settings, (attempts_end, leaves_end), progress)?;
+                let source = Source { mesh, extra: &extra };
+                let stop = refine(
+                    source,
+                    decomposition,
+                    &mut leaves,
+                    t,
+                    &surface,
+                    settings,
+                    (attempts_end, leaves_end),
+                    progress,
+                )?;
                 if leaves.len() > before {
                     notes.push(format!(
-                        "{before} VHACD parts refined to {}: parts with excess above {t} m split again",
+                        "{before} VHACD parts refined to {}: parts with excess above {t:.4} m split again",
                         leaves.len()
                     ));
+                }
+                let above = leaves.iter().filter(|l| l.excess > t).count();
+                match stop {
+                    _ if above == 0 => {}
+                    RefineStop::MaxParts => notes.push(format!(
+                        "refinement stopped at --max-parts {} leaves with {above} leaves still above {t:.4} m",
+                        settings.max_parts
+                    )),
+                    RefineStop::Unsplittable => notes.push(format!(
+                        "refinement stopped with {} leaves: the {above} leaves above {t:.4} m cannot be split further (one triangle, or a piece the solver fails on)",
+                        leaves.len()
+                    )),
                 }
             }
         }
@@ -217,14 +322,15 @@ pub fn fit_compound(
             if max_excess <= t {
                 if parts == PartCount::Auto {
                     notes.push(format!(
-                        "{got} parts kept: the fewest tried whose max leaf excess {max_excess:.4} m is ≤ {t} m"
+                        "{} parts kept: the fewest tried whose max leaf excess {max_excess:.4} m is ≤ {t:.4} m",
+                        leaves_len_of(&best)
                     ));
                 }
                 break;
             }
             if a + 1 == counts.len() {
                 notes.push(format!(
-                    "no part count tried reached the excess tolerance {t} m; kept the smallest max leaf excess"
+                    "no part count tried reached the excess tolerance {t:.4} m; kept the smallest max leaf excess"
                 ));
             }
         }
@@ -248,9 +354,10 @@ pub fn fit_compound(
         notes.push(format!("{rescaled} parent–child containments certified after rescaling the parent (at most 10⁻³)"));
     }
     let tree_fit_seconds = t_tree.elapsed().as_secs_f64();
+    let misses = settings.excess_tolerance.map(|t| tolerance_misses(&nodes, t));
     let report = CompoundReport {
         mesh: mesh_name.map(str::to_owned),
-        mesh_triangles: mesh.triangles.len(),
+        mesh_triangles: input_triangles,
         tolerance: settings.excess_tolerance,
         attempts,
         decomposition_seconds,
@@ -259,10 +366,68 @@ pub fn fit_compound(
         total_seconds: start.elapsed().as_secs_f64(),
         excess_samples: settings.excess_samples,
         notes,
+        met: misses.as_ref().map(Vec::is_empty),
+        misses: misses.unwrap_or_default(),
+        weld,
     };
     let body = CompoundBody::new(nodes, root, report)?;
     report_done(progress, &body);
     Ok(body)
+}
+
+/// The leaves (nodes without children) whose excess is above `t`, largest excess first.
+fn tolerance_misses(nodes: &[CompoundNode], t: Real) -> Vec<ToleranceMiss> {
+    let mut misses: Vec<ToleranceMiss> = nodes
+        .iter()
+        .enumerate()
+        .filter(|(_, n)| n.children.is_empty() && (n.excess > t || n.excess.is_nan()))
+        .map(|(node, n)| ToleranceMiss { node, triangles: n.triangles, excess: n.excess })
+        .collect();
+    misses.sort_by(|a, b| b.excess.total_cmp(&a.excess));
+    misses
+}
+
+/// Leaves of the kept attempt (for the note of an auto search that met its tolerance).
+fn leaves_len_of(best: &Option<(Vec<CompoundNode>, Real, Real)>) -> usize {
+    best.as_ref().map_or(0, |b| b.0.len())
+}
+
+/// Diagonal (meters) of the bounding box of `points`; 0 for none.
+fn bounding_diagonal(points: &[Point3]) -> Real {
+    let Some(first) = points.first() else { return 0.0 };
+    let (lo, hi) = points.iter().fold((*first, *first), |(lo, hi), p| (lo.inf(p), hi.sup(p)));
+    (hi - lo).norm()
+}
+
+/// For every welded vertex, the positions of the input vertices merged into it that differ from
+/// its own (empty for a vertex merged only with exact copies).
+fn merged_positions(input: &TriangleMesh, weld: &crate::mesh::WeldedMesh) -> Vec<Vec<Point3>> {
+    let mut extra = vec![Vec::new(); weld.mesh.vertices.len()];
+    for (v, w) in weld.source.iter().enumerate() {
+        if let Some(w) = w {
+            let p = input.vertices[v];
+            let list: &mut Vec<Point3> = &mut extra[*w as usize];
+            if p != weld.mesh.vertices[*w as usize] && !list.contains(&p) {
+                list.push(p);
+            }
+        }
+    }
+    extra
+}
+
+/// The mesh the leaves are fitted to, with the merged positions of its welded vertices.
+#[derive(Clone, Copy)]
+struct Source<'a> {
+    mesh: &'a TriangleMesh,
+    extra: &'a [Vec<Point3>],
+}
+
+/// Why refinement stopped with leaves above the tolerance.
+enum RefineStop {
+    /// The leaf count reached [`CompoundSettings::max_parts`] (or the next split would pass it).
+    MaxParts,
+    /// No leaf above the tolerance can be split (one triangle, or the solver fails on a piece).
+    Unsplittable,
 }
 
 fn report(progress: &mut dyn FnMut(&FitProgress), stage: FitStage, fraction: Real, message: String) {
@@ -284,9 +449,12 @@ fn report_done(progress: &mut dyn FnMut(&FitProgress), body: &CompoundBody) {
     );
 }
 
-/// Fits one part (see the module docs); the node's depth is set later.
+/// Fits one part (see the module docs) to its vertices and the positions merged into them
+/// (`extra`, by vertex; may be empty); the node's depth is set later.
+#[allow(clippy::too_many_arguments)]
 fn fit_leaf(
-    mesh: &OffMesh,
+    mesh: &TriangleMesh,
+    extra: &[Vec<Point3>],
     part: &Part,
     index: usize,
     surface: &MeshSurface,
@@ -294,7 +462,12 @@ fn fit_leaf(
     progress: &mut dyn FnMut(&FitProgress),
 ) -> Result<CompoundNode> {
     let t0 = Instant::now();
-    let own: Vec<Point3> = part.vertices.iter().map(|&i| mesh.vertices[i as usize]).collect();
+    let mut own: Vec<Point3> = part.vertices.iter().map(|&i| mesh.vertices[i as usize]).collect();
+    for &i in &part.vertices {
+        if let Some(more) = extra.get(i as usize) {
+            own.extend_from_slice(more);
+        }
+    }
     let (body, excess) = match fit_leaf_points(&own, surface, settings, progress) {
         Err(Error::InvalidArgument { field, reason }) if field == "points" && !part.hull.is_empty() => {
             // A flat part: its VHACD hull gives it volume.
@@ -380,10 +553,11 @@ fn fit_leaf_points(
 /// Refinement: while a leaf's excess is above `t` and fewer than `settings.max_parts` leaves
 /// exist, the leaf of largest excess is split ([`split_part`]) and its pieces fitted anew; a
 /// leaf that cannot split (one triangle, or a piece the solver fails on) stays. `leaves[j]` is the fit of `parts[j]`.
-/// Progress fractions run over `span` as the leaf count goes to `settings.max_parts`.
+/// Progress fractions run over `span` as the leaf count goes to `settings.max_parts`. Returns
+/// why it stopped (meaningful when leaves above `t` remain).
 #[allow(clippy::too_many_arguments)]
 fn refine(
-    mesh: &OffMesh,
+    source: Source<'_>,
     parts: Vec<Part>,
     leaves: &mut Vec<CompoundNode>,
     t: Real,
@@ -391,16 +565,26 @@ fn refine(
     settings: &CompoundSettings,
     span: (Real, Real),
     progress: &mut dyn FnMut(&FitProgress),
-) -> Result<()> {
+) -> Result<RefineStop> {
+    let mesh = source.mesh;
     let first = leaves.len();
     let room = settings.max_parts.saturating_sub(first).max(1) as Real;
     let mut parts: Vec<(Part, bool)> = parts.into_iter().map(|p| (p, true)).collect();
-    while leaves.len() < settings.max_parts {
+    let mut capped = false;
+    loop {
+        if leaves.len() >= settings.max_parts {
+            return Ok(RefineStop::MaxParts);
+        }
         let worst = (0..leaves.len())
             .filter(|&j| parts[j].1 && leaves[j].excess > t)
             .max_by(|&a, &b| leaves[a].excess.total_cmp(&leaves[b].excess));
-        let Some(j) = worst else { break };
+        let Some(j) = worst else {
+            return Ok(if capped { RefineStop::MaxParts } else { RefineStop::Unsplittable });
+        };
         let pieces = split_part(&mesh.vertices, &mesh.triangles, &parts[j].0, settings.resolution);
+        if pieces.len() >= 2 && leaves.len() + pieces.len() - 1 > settings.max_parts {
+            capped = true;
+        }
         if pieces.len() < 2 || leaves.len() + pieces.len() - 1 > settings.max_parts {
             parts[j].1 = false;
             continue;
@@ -425,7 +609,7 @@ fn refine(
                     part: Some(PartProgress { index: if k == 0 { j + 1 } else { n + k }, count }),
                 })
             };
-            match fit_leaf(mesh, piece, n + k, surface, settings, &mut inner) {
+            match fit_leaf(mesh, source.extra, piece, n + k, surface, settings, &mut inner) {
                 Ok(leaf) => fitted.push(leaf),
                 // A piece the solver cannot fit: the part stays whole (its fit is valid).
                 Err(Error::Numerical(_)) => break,
@@ -445,7 +629,6 @@ fn refine(
         parts.extend(pieces.map(|p| (p, true)));
         leaves.extend(fitted);
     }
-    Ok(())
 }
 
 /// Diagonal (meters) of the box around two nodes' bounding boxes (a convex body always has one).

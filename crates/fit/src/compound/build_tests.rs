@@ -3,7 +3,7 @@
 use super::check::uncovered_triangles;
 use super::*;
 use crate::containment::boundary_points;
-use crate::mesh::{parse_off_mesh, OffMesh, DEFAULT_MAX_MESH_POINTS};
+use crate::mesh::{parse_off_mesh, TriangleMesh, DEFAULT_MAX_MESH_POINTS};
 use sublevel_core::math::{Isometry3, Point3, Real};
 
 /// A closed axis-aligned cube mesh of side `side` centered at `c` (8 vertices, 12 triangles).
@@ -21,12 +21,12 @@ fn cube(c: [Real; 3], side: Real, first: u32) -> (Vec<Point3>, Vec<[u32; 3]>) {
 }
 
 /// Two unit cubes centered at x = ±2: a nonconvex (disconnected) mesh of 24 triangles.
-fn two_cubes() -> OffMesh {
+fn two_cubes() -> TriangleMesh {
     let (mut vertices, mut triangles) = cube([-2.0, 0.0, 0.0], 1.0, 0);
     let (v2, t2) = cube([2.0, 0.0, 0.0], 1.0, 8);
     vertices.extend(v2);
     triangles.extend(t2);
-    OffMesh { vertices, triangles }
+    TriangleMesh { vertices, triangles }
 }
 
 fn quick_settings(degrees: Vec<usize>) -> CompoundSettings {
@@ -112,7 +112,7 @@ fn auto_refines_parts_above_tolerance_up_to_the_cap() {
         vertices.extend(v);
         triangles.extend(t);
     }
-    let mesh = OffMesh { vertices, triangles };
+    let mesh = TriangleMesh { vertices, triangles };
     let mut s = quick_settings(vec![2]);
     // One sphere per cube still reaches 0.366 beyond it: above 0.1, so the cap (4 parts) stops it.
     s.excess_tolerance = Some(0.1);
@@ -129,8 +129,18 @@ fn auto_refines_parts_above_tolerance_up_to_the_cap() {
     assert!(parts.iter().any(|p| p.count == 4), "{parts:?}");
     assert_eq!(c.report.attempts.last().map(|a| a.1), Some(4));
     assert!(c.max_leaf_excess() < c.report.attempts[0].2, "{:?}", c.report.attempts);
+    // Welding merged the corners the cubes share, so the two triangles of each of the 3 shared
+    // faces repeat and are dropped once: 42 triangles in the leaves, all 48 covered.
     let total: usize = c.leaves().map(|l| c.node(l).triangles).sum();
-    assert_eq!(total, 48);
+    assert_eq!(total, 42);
+    let w = c.report.weld.as_ref().unwrap();
+    assert_eq!((w.vertices_before, w.vertices_after, w.merged_vertices), (32, 20, 12));
+    assert_eq!((w.triangles_before, w.triangles_after, w.duplicate_triangles, w.degenerate_triangles), (48, 42, 6, 0));
+    assert_eq!(c.report.mesh_triangles, 48);
+    // Still above 0.1 at the cap: a miss per leaf, and a note that the cap stopped refinement.
+    assert_eq!(c.report.met, Some(false));
+    assert_eq!(c.report.misses.len(), 4);
+    assert!(c.report.notes.iter().any(|n| n.contains("--max-parts 4")), "{:?}", c.report.notes);
     assert!(uncovered_triangles(&c, &mesh).is_empty());
     let bad = CompoundSettings { max_parts: 1, ..s };
     assert!(matches!(
@@ -142,22 +152,21 @@ fn auto_refines_parts_above_tolerance_up_to_the_cap() {
 #[test]
 fn bad_settings_and_meshes_are_refused_by_field() {
     let mesh = two_cubes();
-    let fit = |parts: PartCount, s: &CompoundSettings, m: &OffMesh| fit_compound(m, None, parts, s, &mut |_| {});
+    let fit = |parts: PartCount, s: &CompoundSettings, m: &TriangleMesh| fit_compound(m, None, parts, s, &mut |_| {});
     let field_of = |r: sublevel_core::Result<CompoundBody>| match r {
         Err(sublevel_core::Error::InvalidArgument { field, .. }) => field,
         other => panic!("expected InvalidArgument, got {other:?}"),
     };
     let s = quick_settings(vec![2]);
-    assert_eq!(field_of(fit(PartCount::Auto, &s, &mesh)), "parts");
     assert_eq!(field_of(fit(PartCount::Fixed(0), &s, &mesh)), "parts");
     assert_eq!(field_of(fit(PartCount::Fixed(1000), &s, &mesh)), "parts");
     let t = CompoundSettings { excess_tolerance: Some(-1.0), ..s.clone() };
     assert_eq!(field_of(fit(PartCount::Fixed(2), &t, &mesh)), "tolerance");
     let d = CompoundSettings { degrees: vec![4, 2], ..s.clone() };
     assert_eq!(field_of(fit(PartCount::Fixed(2), &d, &mesh)), "degrees");
-    let empty = OffMesh { vertices: mesh.vertices.clone(), triangles: vec![] };
+    let empty = TriangleMesh { vertices: mesh.vertices.clone(), triangles: vec![] };
     assert_eq!(field_of(fit(PartCount::Fixed(2), &s, &empty)), "mesh");
-    let bad = OffMesh { vertices: mesh.vertices.clone(), triangles: vec![[0, 1, 99]] };
+    let bad = TriangleMesh { vertices: mesh.vertices.clone(), triangles: vec![[0, 1, 99]] };
     assert_eq!(field_of(fit(PartCount::Fixed(2), &s, &bad)), "mesh");
     assert!("auto".parse::<PartCount>().is_ok_and(|p| p == PartCount::Auto));
     assert_eq!(field_of_parse("many"), "parts");
@@ -174,7 +183,7 @@ fn data(path: &str) -> std::path::PathBuf {
     std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").join(path)
 }
 
-fn psb(name: &str) -> OffMesh {
+fn psb(name: &str) -> TriangleMesh {
     let path = data(&format!("data/psb/{name}.off"));
     parse_off_mesh(&std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display())), DEFAULT_MAX_MESH_POINTS)
         .unwrap()
@@ -239,4 +248,108 @@ fn the_box_ellipsoid_contains_both_children_and_passes_through_the_box_corners()
             assert!(e.value_at(&x) <= 1.0, "a boundary point {x} of a child is outside");
         }
     }
+}
+
+/// `mesh` as a triangle soup: every triangle its own three vertices.
+fn soup(mesh: &TriangleMesh) -> TriangleMesh {
+    let vertices = mesh.triangles.iter().flat_map(|t| t.map(|i| mesh.vertices[i as usize])).collect();
+    let triangles = (0..mesh.triangles.len() as u32).map(|k| [3 * k, 3 * k + 1, 3 * k + 2]).collect();
+    TriangleMesh { vertices, triangles }
+}
+
+#[test]
+fn a_triangle_soup_is_welded_and_decomposes_like_its_indexed_mesh() {
+    let indexed = two_cubes();
+    let soup = soup(&indexed);
+    assert_eq!(soup.vertices.len(), 72);
+    let welded = crate::mesh::weld_mesh(&soup, crate::mesh::DEFAULT_WELD_TOLERANCE).unwrap();
+    assert_eq!((welded.mesh.vertices.len(), welded.mesh.triangles.len()), (16, 24));
+    // The same parts of the same triangles (welding keeps the triangles' order).
+    let parts = |m: &TriangleMesh| -> Vec<Vec<usize>> {
+        let mut p: Vec<Vec<usize>> = super::decompose::decompose(&m.vertices, &m.triangles, 2, 32)
+            .unwrap()
+            .into_iter()
+            .map(|mut p| {
+                p.triangles.sort_unstable();
+                p.triangles
+            })
+            .collect();
+        p.sort();
+        p
+    };
+    assert_eq!(parts(&welded.mesh), parts(&indexed));
+    assert_eq!(parts(&indexed), vec![(0..12).collect::<Vec<_>>(), (12..24).collect()]);
+    // The compound fits agree: same leaves (triangles, excess), both cover the soup.
+    let s = quick_settings(vec![2]);
+    let a = fit_compound(&indexed, None, PartCount::Fixed(2), &s, &mut |_| {}).unwrap();
+    let b = fit_compound(&soup, None, PartCount::Fixed(2), &s, &mut |_| {}).unwrap();
+    let leaves = |c: &CompoundBody| -> Vec<(usize, Real)> {
+        let mut l: Vec<(usize, Real)> = c.leaves().map(|i| (c.node(i).triangles, c.node(i).excess)).collect();
+        l.sort_by(|x, y| x.1.total_cmp(&y.1));
+        l
+    };
+    let (la, lb) = (leaves(&a), leaves(&b));
+    assert_eq!(la.len(), 2);
+    for (x, y) in la.iter().zip(&lb) {
+        assert_eq!(x.0, y.0);
+        assert!((x.1 - y.1).abs() < 1e-6, "excess {} vs {}", x.1, y.1);
+    }
+    assert!(uncovered_triangles(&b, &soup).is_empty());
+    let w = b.report.weld.as_ref().unwrap();
+    assert_eq!((w.vertices_before, w.vertices_after, w.merged_vertices), (72, 16, 56));
+    assert_eq!(b.report.mesh_triangles, 24);
+}
+
+#[test]
+fn a_leaf_above_the_tolerance_is_reported_with_its_excess() {
+    // A unit cube at x = −2 and a cube of side 0.5 at x = 2: their degree-2 leaves (spheres
+    // through the corners) reach (√3 − 1)/2 ≈ 0.366 and half that, 0.183, beyond them. At
+    // T = 0.25 the big cube's leaf misses, the small one's meets it.
+    let (mut vertices, mut triangles) = cube([-2.0, 0.0, 0.0], 1.0, 0);
+    let (v2, t2) = cube([2.0, 0.0, 0.0], 0.5, 8);
+    vertices.extend(v2);
+    triangles.extend(t2);
+    let mesh = TriangleMesh { vertices, triangles };
+    let s = CompoundSettings { excess_tolerance: Some(0.25), ..quick_settings(vec![2]) };
+    let c = fit_compound(&mesh, None, PartCount::Fixed(2), &s, &mut |_| {}).unwrap();
+    assert_eq!(c.report.tolerance, Some(0.25));
+    assert_eq!(c.report.met, Some(false));
+    assert_eq!(c.report.misses.len(), 1, "{:?}", c.report.misses);
+    let miss = &c.report.misses[0];
+    let big = c.leaves().find(|&l| c.node(l).body.interior_point().x < 0.0).unwrap();
+    assert_eq!(miss.node, big);
+    assert_eq!(miss.triangles, 12);
+    assert_eq!(miss.excess, c.node(big).excess);
+    assert!((miss.excess - (3f64.sqrt() - 1.0) / 2.0).abs() < 0.01, "excess {}", miss.excess);
+    // The file keeps the check.
+    let json = serde_json::to_string(&c.to_file()).unwrap();
+    assert!(json.contains("\"met\":false") && json.contains("\"misses\":[{\"node\":"), "{json}");
+    let back = CompoundBody::from_file(serde_json::from_str(&json).unwrap()).unwrap();
+    assert_eq!(back.report, c.report);
+    // At T = 0.4 both leaves meet it.
+    let s = CompoundSettings { excess_tolerance: Some(0.4), ..s };
+    let c = fit_compound(&mesh, None, PartCount::Fixed(2), &s, &mut |_| {}).unwrap();
+    assert_eq!((c.report.met, c.report.misses.len()), (Some(true), 0));
+    // Without a tolerance a fixed part count checks nothing.
+    let s = CompoundSettings { excess_tolerance: None, ..s };
+    let c = fit_compound(&mesh, None, PartCount::Fixed(2), &s, &mut |_| {}).unwrap();
+    assert_eq!((c.report.met, c.report.misses.len()), (None, 0));
+}
+
+#[test]
+fn auto_without_a_tolerance_takes_one_percent_of_the_diagonal() {
+    let mesh = two_cubes();
+    let s = CompoundSettings { max_parts: 2, ..quick_settings(vec![2]) };
+    let c = fit_compound(&mesh, None, PartCount::Auto, &s, &mut |_| {}).unwrap();
+    // The box [−2.5, 2.5] × [−0.5, 0.5]²: diagonal √27.
+    let t = c.report.tolerance.unwrap();
+    assert!((t - 0.01 * 27f64.sqrt()).abs() < 1e-12, "tolerance {t}");
+    // The misses are exactly the leaves above it, largest first.
+    let above: Vec<usize> = c.leaves().filter(|&l| c.node(l).excess > t).collect();
+    assert_eq!(c.report.met, Some(above.is_empty()));
+    let mut missed: Vec<usize> = c.report.misses.iter().map(|m| m.node).collect();
+    missed.sort_unstable();
+    assert_eq!(missed, above);
+    assert!(c.report.misses.windows(2).all(|w| w[0].excess >= w[1].excess));
+    assert!(c.report.notes.iter().any(|n| n.contains("bounding-box diagonal")), "{:?}", c.report.notes);
 }

@@ -9,7 +9,7 @@
 //! every level of the tree.
 
 use super::CompoundBody;
-use crate::mesh::OffMesh;
+use crate::mesh::TriangleMesh;
 use sublevel_core::math::Real;
 
 /// Slack on `p(v) ≤ 1` when checking that a vertex lies in a body (dimensionless, in units of
@@ -20,7 +20,7 @@ pub const COVER_TOLERANCE: Real = 1e-9;
 /// contains (all three vertices with p ≤ 1 + [`COVER_TOLERANCE`] in one leaf). Empty means the
 /// compound body is conservative for this mesh. A triangle naming a vertex out of range counts
 /// as uncovered. Cost: one polynomial evaluation per vertex and leaf (vertex values are cached).
-pub fn uncovered_triangles(body: &CompoundBody, mesh: &OffMesh) -> Vec<usize> {
+pub fn uncovered_triangles(body: &CompoundBody, mesh: &TriangleMesh) -> Vec<usize> {
     let (vertices, triangles) = (&mesh.vertices, &mesh.triangles);
     let leaves: Vec<usize> = body.leaves().collect();
     // inside[l][v]: vertex v inside leaf l (computed lazily: None until asked).

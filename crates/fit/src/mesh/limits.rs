@@ -3,7 +3,7 @@
 //! coordinate parser of the text formats.
 
 use crate::{Error, Result};
-use sublevel_core::math::{Point3, Real};
+use sublevel_core::math::Real;
 
 /// Bytes of client text an error message repeats.
 const ECHO_BYTES: usize = 48;
@@ -48,7 +48,7 @@ pub(super) fn plural(n: impl Into<u128>, one: &'static str, many: &'static str) 
 }
 
 /// Runs a third-party parser, turning a panic into an error naming `mesh`.
-pub(super) fn guarded(fmt: &str, f: impl FnOnce() -> Result<Vec<Point3>>) -> Result<Vec<Point3>> {
+pub(super) fn guarded<T>(fmt: &str, f: impl FnOnce() -> Result<T>) -> Result<T> {
     std::panic::catch_unwind(std::panic::AssertUnwindSafe(f))
         .unwrap_or_else(|_| Err(invalid(format!("malformed {fmt} file (the parser gave up)"))))
 }

@@ -1,17 +1,20 @@
 //! Mesh and point-cloud loading: OFF, OBJ, STL (ASCII and binary), PLY (ASCII and binary), XYZ.
 //!
-//! Only vertices are returned (faces are irrelevant to a fit: the convex hull is recomputed),
-//! except by [`parse_off_mesh`], which also reads an OFF file's faces (the exact mesh–mesh
-//! distance of `sublevel-lab bench` and `chart` needs them).
+//! A single-body fit needs only the vertices ([`parse_points`]: the convex hull is recomputed);
+//! a compound fit and the exact mesh–mesh distance of `sublevel-lab bench` and `chart` need the
+//! faces too: [`load_triangle_mesh`] reads a [`TriangleMesh`] from OFF, OBJ, STL or PLY (the
+//! same parsers and limits, faces split into triangle fans), and [`weld_mesh`] merges the
+//! repeated vertices of a triangle soup before a decomposition.
 //!
 //! ```text
 //! off   "OFF" header line (also "OFF nV nF nE" on one line), then "nV nF nE", nV lines "x y z",
-//!       faces ignored; '#' comments and blank lines skipped                       (off.rs)
-//! obj   `v x y z [w]` lines of every object; faces and the rest skipped           (obj.rs)
-//! stl   ASCII or binary; shared vertices merged by stl_io           (stl.rs, via stl_io)
-//! ply   the `vertex` element's x, y, z properties (any numeric type),             (ply.rs)
-//!       ascii, binary_little_endian or binary_big_endian; other elements are checked and skipped
-//! xyz   one "x y z" per line (commas allowed, extra columns ignored)               (xyz.rs)
+//!       then nF faces "k i₁ … i_k"; '#' comments and blank lines skipped            (off.rs)
+//! obj   `v x y z [w]` lines and `f` lines of every object and group; the rest skipped (obj.rs)
+//! stl   ASCII or binary; vertices of equal coordinates merged by stl_io  (stl.rs, via stl_io)
+//! ply   the `vertex` element's x, y, z properties (any numeric type) and the `face`  (ply.rs)
+//!       element's `vertex_indices` lists; ascii, binary_little_endian or binary_big_endian;
+//!       other elements are checked and skipped
+//! xyz   one "x y z" per line (commas allowed, extra columns ignored; no faces)       (xyz.rs)
 //! ```
 //!
 //! # Untrusted input
@@ -52,14 +55,31 @@ mod ply;
 mod stl;
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod triangle_tests;
+mod weld;
 mod xyz;
 
 pub use off::{parse_off_mesh, OffMesh};
 pub use ply::MAX_PLY_HEADER_BYTES;
+pub use sublevel_core::compound::WeldReport;
+pub use weld::{weld_mesh, WeldedMesh, DEFAULT_WELD_TOLERANCE};
 
 use limits::{echo, exhausted, guarded, invalid};
 use sublevel_core::math::Point3;
 use sublevel_core::Result;
+
+/// A triangle mesh: vertices and triangles of indices into them ([`load_triangle_mesh`],
+/// [`parse_off_mesh`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct TriangleMesh {
+    /// Vertex positions, in the file's units (meters for the bundled shapes).
+    pub vertices: Vec<Point3>,
+    /// The faces as triangles of indices into `vertices`: a polygon `i₁ … i_k` is split into the
+    /// fan (i₁, i_j, i_{j+1}), j = 2 … k − 1, so it gives k − 2 triangles and a face of fewer
+    /// than 3 vertices none (consumers such as parry's `TriMesh` take triangles only).
+    pub triangles: Vec<[u32; 3]>,
+}
 
 /// The `max_points` of [`parse_points`] and [`load_points`].
 pub const DEFAULT_MAX_MESH_POINTS: usize = 10_000_000;
@@ -175,4 +195,83 @@ pub fn parse_points_limited(bytes: &[u8], format: MeshFormat, max_points: usize)
         return Err(invalid(format!("vertex {i} has a non-finite coordinate")));
     }
     Ok(points)
+}
+
+/// Parses a triangle mesh — vertices and faces, every face split into a triangle fan — from OFF,
+/// OBJ (every object and group merged), STL (ASCII or binary) or PLY (the `face` element's
+/// `vertex_indices`), with the limits of [`parse_points_limited`] (at most `max_points`
+/// vertices; counts checked against the size of `bytes` first). Coordinates are as in the file
+/// (meters for a fit); vertices are not welded ([`weld_mesh`] does that).
+///
+/// # Errors
+/// As [`parse_points_limited`], and [`sublevel_core::Error::InvalidArgument`] naming `mesh` for
+/// XYZ (a point cloud) or a file without faces (a point-cloud PLY or OBJ), a face index that
+/// names no vertex, or a face of fewer than 3 vertices in OBJ.
+pub fn load_triangle_mesh(bytes: &[u8], format: MeshFormat, max_points: usize) -> Result<TriangleMesh> {
+    let fmt = format.name();
+    let mesh = match format {
+        MeshFormat::Off => off::read_off(bytes, max_points, true)?,
+        MeshFormat::Obj => obj::parse_obj_mesh(bytes, max_points)?,
+        MeshFormat::Stl => {
+            stl::check_stl_counts(bytes, max_points)?;
+            guarded("stl", || stl::parse_stl_mesh(bytes))?
+        }
+        MeshFormat::Ply => ply::parse_ply_mesh(bytes, max_points)?,
+        MeshFormat::Xyz => {
+            return Err(invalid(
+                "an xyz file is a point cloud without faces; a triangle mesh needs off, obj, stl or ply",
+            ))
+        }
+    };
+    if mesh.vertices.is_empty() {
+        return Err(invalid(format!("the {fmt} file has no vertices")));
+    }
+    if mesh.vertices.len() > max_points {
+        return Err(exhausted(format!(
+            "the {fmt} file has {} vertices, which exceeds the limit of {max_points} points",
+            mesh.vertices.len()
+        )));
+    }
+    if let Some(i) = mesh.vertices.iter().position(|p| !p.coords.iter().all(|c| c.is_finite())) {
+        return Err(invalid(format!("vertex {i} has a non-finite coordinate")));
+    }
+    if mesh.triangles.is_empty() {
+        let what = match format {
+            MeshFormat::Ply => "no `face` element with vertex lists (a point cloud?)",
+            MeshFormat::Obj => "no `f` lines (a point cloud?)",
+            _ => "no faces",
+        };
+        return Err(invalid(format!(
+            "the {fmt} file has {} vertices but {what}: a triangle mesh is needed",
+            mesh.vertices.len()
+        )));
+    }
+    Ok(mesh)
+}
+
+/// [`load_triangle_mesh`] of a file, the format from `format` or else the path's extension.
+///
+/// # Errors
+/// [`sublevel_core::Error::Io`] when the file cannot be read; otherwise as
+/// [`load_triangle_mesh`], with the file's path in the message.
+pub fn load_triangle_mesh_file(
+    path: &std::path::Path,
+    format: Option<MeshFormat>,
+    max_points: usize,
+) -> Result<TriangleMesh> {
+    let format = match format {
+        Some(f) => f,
+        None => MeshFormat::of_path(path)?,
+    };
+    let bytes = std::fs::read(path)
+        .map_err(|e| std::io::Error::new(e.kind(), format!("cannot read {}: {e}", path.display())))?;
+    load_triangle_mesh(&bytes, format, max_points).map_err(|e| match e {
+        sublevel_core::Error::InvalidArgument { field, reason } => {
+            sublevel_core::Error::InvalidArgument { field, reason: format!("{}: {reason}", path.display()) }
+        }
+        sublevel_core::Error::ResourceExhausted(m) => {
+            sublevel_core::Error::ResourceExhausted(format!("{}: {m}", path.display()))
+        }
+        other => other,
+    })
 }

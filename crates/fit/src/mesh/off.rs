@@ -22,6 +22,7 @@
 //! two bytes).
 
 use super::limits::{echo, exhausted, invalid, parse_coord, plural, text};
+use super::TriangleMesh;
 use sublevel_core::math::Point3;
 use sublevel_core::Result;
 
@@ -31,16 +32,8 @@ const OFF_MIN_VERTEX_BYTES: usize = 6;
 /// Shortest OFF face line, `0\n` (a face without vertices).
 const OFF_MIN_FACE_BYTES: usize = 2;
 
-/// A triangle mesh read from an OFF file ([`parse_off_mesh`]).
-#[derive(Clone, Debug, PartialEq)]
-pub struct OffMesh {
-    /// Vertex positions, in the file's units (meters for the bundled shapes).
-    pub vertices: Vec<Point3>,
-    /// The faces as triangles of indices into `vertices`: a face `k i₁ … i_k` is split into the
-    /// fan (i₁, i_j, i_{j+1}), j = 2 … k − 1, so a polygon gives k − 2 triangles and a face of
-    /// fewer than 3 vertices none (consumers such as parry's `TriMesh` take triangles only).
-    pub triangles: Vec<[u32; 3]>,
-}
+/// The triangle mesh of an OFF file ([`parse_off_mesh`]): a [`TriangleMesh`], as every format gives.
+pub type OffMesh = TriangleMesh;
 
 /// Parses an ASCII OFF file with its faces (see the module documentation), at most `max_points`
 /// vertices.
@@ -51,7 +44,7 @@ pub struct OffMesh {
 /// that is not a vertex of the file, or a file without vertices;
 /// [`sublevel_core::Error::ResourceExhausted`] naming `mesh` when the header declares more than
 /// `max_points` vertices.
-pub fn parse_off_mesh(bytes: &[u8], max_points: usize) -> Result<OffMesh> {
+pub fn parse_off_mesh(bytes: &[u8], max_points: usize) -> Result<TriangleMesh> {
     let mesh = read_off(bytes, max_points, true)?;
     if mesh.vertices.is_empty() {
         return Err(invalid("the off file has no vertices"));
@@ -62,7 +55,7 @@ pub fn parse_off_mesh(bytes: &[u8], max_points: usize) -> Result<OffMesh> {
 /// Reads the header, the counts and the vertices of an OFF file and, when `with_faces`, its faces
 /// (split into triangle fans); without, the face lines are skipped unread and `triangles` is
 /// empty.
-pub(super) fn read_off(bytes: &[u8], max_points: usize, with_faces: bool) -> Result<OffMesh> {
+pub(super) fn read_off(bytes: &[u8], max_points: usize, with_faces: bool) -> Result<TriangleMesh> {
     let s = text(bytes, "off")?;
     // Meaningful lines: (1-based number, byte offset just past the line, content without comment).
     let mut lines = s
@@ -137,7 +130,7 @@ pub(super) fn read_off(bytes: &[u8], max_points: usize, with_faces: bool) -> Res
     if with_faces {
         read_faces(&mut lines, nv, nf, s.len() - vertices_end, &mut triangles)?;
     }
-    Ok(OffMesh { vertices: pts, triangles })
+    Ok(TriangleMesh { vertices: pts, triangles })
 }
 
 /// Reads `nf` face lines (after the vertices; `remaining` bytes follow them) into `triangles`,

@@ -3,10 +3,13 @@
 //! [`MAX_PLY_ELEMENTS`] elements of at most [`MAX_PLY_PROPERTIES`] properties); every element's
 //! count is checked against the bytes after the header (the sum of its property sizes per binary
 //! item, 2 bytes per property per ascii line) and the vertex count against `max_points` before
-//! anything is reserved. Only the `vertex` element's x, y, z are kept; list properties are
-//! skipped, never stored.
+//! anything is reserved. Only the `vertex` element's x, y, z are kept and, for a triangle mesh
+//! ([`parse_ply_mesh`]), the `face` element's `vertex_indices` (or `vertex_index`) lists, split
+//! into triangle fans; every other list property is skipped, never stored. The triangles are
+//! bounded by the input (every list item takes at least one byte).
 
 use super::limits::{echo, exhausted, invalid, plural};
+use super::TriangleMesh;
 use crate::{Error, Result};
 use sublevel_core::math::Point3;
 
@@ -298,6 +301,64 @@ fn ply_header(bytes: &[u8]) -> Result<PlyHeader> {
 
 /// The `vertex` element's x, y, z of a PLY file, after every count was checked (module docs).
 pub(super) fn parse_ply(bytes: &[u8], max_points: usize) -> Result<Vec<Point3>> {
+    read_ply(bytes, max_points, false).map(|m| m.vertices)
+}
+
+/// The vertices and the `face` element's vertex lists (split into triangle fans) of a PLY file;
+/// a file without a `face` element (a point cloud) gives no triangles.
+pub(super) fn parse_ply_mesh(bytes: &[u8], max_points: usize) -> Result<TriangleMesh> {
+    read_ply(bytes, max_points, true)
+}
+
+/// The element and property index of the face lists: element `face`, list property
+/// `vertex_indices` or `vertex_index` of an integer item type.
+fn face_lists(h: &PlyHeader) -> Result<Option<(usize, usize)>> {
+    let Some(fi) = h.elements.iter().position(|e| e.name == "face") else {
+        return Ok(None);
+    };
+    let face = &h.elements[fi];
+    let Some(pi) = face.props.iter().position(|p| p.name == "vertex_indices" || p.name == "vertex_index") else {
+        return Err(invalid("ply `face` element has no list property `vertex_indices` (or `vertex_index`)"));
+    };
+    match face.props[pi].kind {
+        PlyKind::List(_, item) if item.is_integer() => Ok(Some((fi, pi))),
+        PlyKind::List(_, item) => Err(invalid(format!(
+            "ply face property `{}` must list integers, not `{}`",
+            face.props[pi].name,
+            item.name()
+        ))),
+        PlyKind::Scalar(_) => Err(invalid(format!("ply face property `{}` is not a list", face.props[pi].name))),
+    }
+}
+
+/// Collects the vertex lists of one face into triangles (a fan); indices are checked against the
+/// vertex count once every element is read.
+struct FaceSink {
+    /// (element, property) of the face lists.
+    at: (usize, usize),
+    /// The current face's vertex indices.
+    face: Vec<u32>,
+    triangles: Vec<[u32; 3]>,
+}
+
+impl FaceSink {
+    fn push_index(&mut self, v: f64, item: u64) -> Result<()> {
+        if !(0.0..=f64::from(u32::MAX)).contains(&v) {
+            return Err(malformed_ply(format!("face {}: vertex index {v} is out of range", item + 1)));
+        }
+        self.face.push(v as u32);
+        Ok(())
+    }
+
+    fn end_face(&mut self) {
+        for j in 1..self.face.len().saturating_sub(1) {
+            self.triangles.push([self.face[0], self.face[j], self.face[j + 1]]);
+        }
+        self.face.clear();
+    }
+}
+
+fn read_ply(bytes: &[u8], max_points: usize, with_faces: bool) -> Result<TriangleMesh> {
     let h = ply_header(bytes)?;
     let body = &bytes[h.body_start..];
     let available = body.len() as u128;
@@ -350,11 +411,24 @@ pub(super) fn parse_ply(bytes: &[u8], max_points: usize) -> Result<Vec<Point3>> 
         }
         *slot = i;
     }
-    match h.encoding {
-        PlyEncoding::Ascii => ply_ascii_body(&h, body, vi, xyz),
-        PlyEncoding::BinaryLittleEndian => ply_binary_body(&h, body, vi, xyz, false),
-        PlyEncoding::BinaryBigEndian => ply_binary_body(&h, body, vi, xyz, true),
+    let mut faces = match with_faces {
+        true => face_lists(&h)?.map(|at| FaceSink { at, face: Vec::new(), triangles: Vec::new() }),
+        false => None,
+    };
+    let vertices = match h.encoding {
+        PlyEncoding::Ascii => ply_ascii_body(&h, body, vi, xyz, faces.as_mut())?,
+        PlyEncoding::BinaryLittleEndian => ply_binary_body(&h, body, vi, xyz, false, faces.as_mut())?,
+        PlyEncoding::BinaryBigEndian => ply_binary_body(&h, body, vi, xyz, true, faces.as_mut())?,
+    };
+    let triangles = faces.map(|f| f.triangles).unwrap_or_default();
+    if let Some((k, t)) = triangles.iter().enumerate().find(|(_, t)| t.iter().any(|&i| i as usize >= vertices.len())) {
+        return Err(malformed_ply(format!(
+            "triangle {k} names vertex {} but the file has {} vertices",
+            t.iter().max().copied().unwrap_or(0),
+            vertices.len()
+        )));
     }
+    Ok(TriangleMesh { vertices, triangles })
 }
 
 /// An error about the PLY body (after the header).
@@ -364,7 +438,13 @@ fn malformed_ply(what: String) -> Error {
 
 /// One item per line, values separated by whitespace; extra values at the end of a line are
 /// ignored (as most readers do).
-fn ply_ascii_body(h: &PlyHeader, body: &[u8], vi: usize, xyz: [usize; 3]) -> Result<Vec<Point3>> {
+fn ply_ascii_body(
+    h: &PlyHeader,
+    body: &[u8],
+    vi: usize,
+    xyz: [usize; 3],
+    mut faces: Option<&mut FaceSink>,
+) -> Result<Vec<Point3>> {
     let mut lines = body.split(|&b| b == b'\n');
     let mut line_no = h.lines;
     let mut pts = Vec::new();
@@ -420,8 +500,19 @@ fn ply_ascii_body(h: &PlyHeader, body: &[u8], vi: usize, xyz: [usize; 3]) -> Res
                                 echo(&p.name)
                             )));
                         }
-                        for _ in 0..n as u64 {
-                            value(item, p)?;
+                        let sink = faces.as_deref_mut().filter(|f| f.at == (ei, pi));
+                        match sink {
+                            Some(sink) => {
+                                for _ in 0..n as u64 {
+                                    sink.push_index(value(item, p)?, i)?;
+                                }
+                                sink.end_face();
+                            }
+                            None => {
+                                for _ in 0..n as u64 {
+                                    value(item, p)?;
+                                }
+                            }
                         }
                     }
                 }
@@ -435,7 +526,14 @@ fn ply_ascii_body(h: &PlyHeader, body: &[u8], vi: usize, xyz: [usize; 3]) -> Res
 }
 
 /// Items packed back to back; list items are skipped unread.
-fn ply_binary_body(h: &PlyHeader, body: &[u8], vi: usize, xyz: [usize; 3], big: bool) -> Result<Vec<Point3>> {
+fn ply_binary_body(
+    h: &PlyHeader,
+    body: &[u8],
+    vi: usize,
+    xyz: [usize; 3],
+    big: bool,
+    mut faces: Option<&mut FaceSink>,
+) -> Result<Vec<Point3>> {
     /// The next value of type `t` at `*pos`, or `None` past the end.
     fn take(body: &[u8], pos: &mut usize, t: PlyScalar, big: bool) -> Option<f64> {
         let b = body.get(*pos..*pos + t.size())?;
@@ -476,12 +574,22 @@ fn ply_binary_body(h: &PlyHeader, body: &[u8], vi: usize, xyz: [usize; 3], big: 
                                 echo(&p.name)
                             )));
                         }
-                        // Integer-typed, so exact; the items are skipped.
+                        // Integer-typed, so exact; the items are skipped unless they are the
+                        // face lists.
                         let skip = (n as u64).checked_mul(item.size() as u64).ok_or_else(truncated)?;
                         if skip > (body.len() - pos) as u64 {
                             return Err(truncated());
                         }
-                        pos += skip as usize;
+                        match faces.as_deref_mut().filter(|f| f.at == (ei, pi)) {
+                            Some(sink) => {
+                                for _ in 0..n as u64 {
+                                    let v = take(body, &mut pos, item, big).ok_or_else(truncated)?;
+                                    sink.push_index(v, i)?;
+                                }
+                                sink.end_face();
+                            }
+                            None => pos += skip as usize,
+                        }
                     }
                 }
             }

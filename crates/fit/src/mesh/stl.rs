@@ -4,6 +4,7 @@
 //! and its messages are rewritten as plain sentences ([`foreign_message`]).
 
 use super::limits::{exhausted, foreign_message, invalid, plural};
+use super::TriangleMesh;
 use sublevel_core::math::{Point3, Real};
 use sublevel_core::Result;
 
@@ -69,8 +70,27 @@ pub(super) fn check_stl_counts(bytes: &[u8], max_points: usize) -> Result<()> {
 
 /// The vertices stl_io reads (shared vertices merged); call [`check_stl_counts`] first.
 pub(super) fn parse_stl(bytes: &[u8]) -> Result<Vec<Point3>> {
+    Ok(parse_stl_mesh(bytes)?.vertices)
+}
+
+/// The vertices and triangles stl_io reads (vertices of exactly equal coordinates merged, so a
+/// triangle's corners index shared vertices); call [`check_stl_counts`] first.
+pub(super) fn parse_stl_mesh(bytes: &[u8]) -> Result<TriangleMesh> {
     let mut cur = std::io::Cursor::new(bytes);
     let mesh = stl_io::read_stl(&mut cur)
         .map_err(|e| invalid(format!("malformed stl file: {}", foreign_message(&e.to_string()))))?;
-    Ok(mesh.vertices.iter().map(|v| Point3::new(v[0] as Real, v[1] as Real, v[2] as Real)).collect())
+    let vertices: Vec<Point3> =
+        mesh.vertices.iter().map(|v| Point3::new(v[0] as Real, v[1] as Real, v[2] as Real)).collect();
+    let mut triangles = Vec::with_capacity(mesh.faces.len());
+    for (k, f) in mesh.faces.iter().enumerate() {
+        let mut t = [0u32; 3];
+        for (slot, &i) in t.iter_mut().zip(&f.vertices) {
+            *slot = u32::try_from(i)
+                .ok()
+                .filter(|&i| (i as usize) < vertices.len())
+                .ok_or_else(|| invalid(format!("stl triangle {k} names vertex {i} of {}", vertices.len())))?;
+        }
+        triangles.push(t);
+    }
+    Ok(TriangleMesh { vertices, triangles })
 }

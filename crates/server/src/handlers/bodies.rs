@@ -14,7 +14,8 @@ use tonic::{Request, Response};
 /// compound body file.
 enum Upload {
     Single(Box<BodyFile>, &'static str),
-    Compound(sublevel_fit::compound::CompoundFile),
+    // Boxed as `Single`'s file is: a compound file's report is several hundred bytes.
+    Compound(Box<sublevel_fit::compound::CompoundFile>),
 }
 
 /// `UploadBody`: parses a single or compound body file, admits it (its sos-convexity certificate,
@@ -42,7 +43,7 @@ pub(super) async fn upload_body(
                 }
                 let file: sublevel_fit::compound::CompoundFile =
                     serde_json::from_value(value).map_err(|e| Error::invalid("body_json", e.to_string()))?;
-                Upload::Compound(file)
+                Upload::Compound(Box::new(file))
             } else {
                 let mut file: BodyFile =
                     serde_json::from_value(value).map_err(|e| Error::invalid("body_json", e.to_string()))?;
@@ -72,7 +73,7 @@ pub(super) async fn upload_body(
             Ok((id, nonconvex, margin, 1))
         }
         Upload::Compound(file) => {
-            let (tree, margin) = cv::admit_compound(file, "body_json")?;
+            let (tree, margin) = cv::admit_compound(*file, "body_json")?;
             let nodes = tree.node_count();
             let id = catalog.add_compound_body(&req.name, tree)?;
             Ok((id, false, margin, nodes))
