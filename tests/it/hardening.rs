@@ -1,4 +1,4 @@
-//! Integration tests: one request never takes the service down (issue 11). Each numbered repro of
+//! Integration tests: one request never takes the service down. Each numbered repro of
 //! the issue is a test here; plus the store's quarantine, status codes of malformed requests, a
 //! kill -9 test on a child server process (loopback, bounded); the SIGTERM-during-fit test is in
 //! `jobs_api.rs`.

@@ -1,4 +1,4 @@
-//! Integration tests: `sublevel query distance|growth` on compound body files (issue 14 part 2)
+//! Integration tests: `sublevel query distance|growth` on compound body files
 //! against closed-form sphere distances, and single-body files answered as before.
 
 use serde_json::Value;

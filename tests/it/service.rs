@@ -260,7 +260,7 @@ async fn bad_input_gets_the_right_code_naming_the_field() {
     let r = c.upload_body(up(pb::upload_body_request::Body::BodyJson("{not json".into()))).await;
     assert_status(r, Code::InvalidArgument, "body_json");
     let compound = sublevel::compound::CompoundBody::single(ellipsoid([0.0; 3], [1.0; 3]).unwrap()).to_file();
-    // A compound file is taken (issue 14); a one-node tree is stored as the single body it is.
+    // A compound file is taken; a one-node tree is stored as the single body it is.
     let r = c.upload_body(up(pb::upload_body_request::Body::BodyJson(serde_json::to_string(&compound).unwrap()))).await;
     assert_eq!(r.unwrap().into_inner().nodes, 1);
     let mut data = sublevel::service::convert::body_file_to_proto(&ellipsoid([0.0; 3], [1.0; 3]).unwrap().to_file());

@@ -1,4 +1,4 @@
-//! Compound bodies through the service (issue 14): upload, store, scenes and every query RPC,
+//! Compound bodies through the service: upload, store, scenes and every query RPC,
 //! checked against an independent reference — brute force over all leaf pairs with the
 //! single-body `distance` query in-process (the minimum over leaf pairs is the model distance) —
 //! and single-body scenes answered exactly as before.
@@ -386,13 +386,66 @@ async fn a_fit_job_with_parts_reports_progress_per_part_and_stores_a_compound_bo
     assert_eq!(got.nodes as usize, body.node_count());
     assert!(body.leaf_count() >= 1);
     // Every box corner lies inside some leaf body (the fit's containment).
-    for x in [0.0, 1.0] {
-        for y in [0.0, 0.3] {
-            let p = sublevel::math::Point3::new(x, y, 0.3);
-            assert!(body.leaves().any(|l| body.body(l).value_at(&p) <= 1.0 + 1e-9), "{p:?} outside every leaf");
+    let corners_inside = |body: &CompoundBody| {
+        for x in [0.0, 1.0] {
+            for y in [0.0, 0.3] {
+                let p = sublevel::math::Point3::new(x, y, 0.3);
+                assert!(body.leaves().any(|l| body.body(l).value_at(&p) <= 1.0 + 1e-9), "{p:?} outside every leaf");
+            }
         }
+    };
+    corners_inside(&body);
+
+    // The same L as an ASCII STL triangle soup (each triangle with its own three vertices) is
+    // welded and fitted alike: as many nodes, every corner inside a leaf. A point cloud is refused.
+    let stl =
+        pb::Mesh { data: l_shape_stl().into_bytes(), mesh_format: pb::MeshFormat::Stl as i32, ..Default::default() };
+    let req = pb::StartFitJobRequest {
+        name: "ell-stl".into(),
+        degree: 2,
+        parts: 2,
+        source: Some(pb::start_fit_job_request::Source::Mesh(stl)),
+        ..Default::default()
+    };
+    let xyz = pb::Mesh {
+        data: b"0 0 0\n1 0 0\n0 1 0\n0 0 1\n".to_vec(),
+        mesh_format: pb::MeshFormat::Xyz as i32,
+        ..Default::default()
+    };
+    let bad = pb::StartFitJobRequest { source: Some(pb::start_fit_job_request::Source::Mesh(xyz)), ..req.clone() };
+    assert_status(c.start_fit_job(bad).await, Code::InvalidArgument, "mesh.mesh_format");
+    let job_id = c.start_fit_job(req).await.unwrap().into_inner().job_id;
+    let mut stream = c.watch_fit_job(pb::WatchFitJobRequest { job_id }).await.unwrap().into_inner();
+    let mut last = None;
+    while let Some(u) = stream.message().await.unwrap() {
+        last = Some(u);
     }
+    let last = last.unwrap();
+    assert_eq!(last.state, pb::JobState::Succeeded as i32, "{last:?}");
+    let from_stl = c.get_body(pb::GetBodyRequest { body_id: last.body_id }).await.unwrap().into_inner();
+    let from_stl = CompoundBody::from_json(&from_stl.body_json).unwrap();
+    assert_eq!(from_stl.node_count(), body.node_count());
+    corners_inside(&from_stl);
     server.stop().await;
+}
+
+/// [`l_shape_off`] as an ASCII STL: every triangle with its own three vertices.
+fn l_shape_stl() -> String {
+    let off = l_shape_off();
+    let mut lines = off.lines().skip(1);
+    let counts: Vec<usize> = lines.next().unwrap().split_whitespace().map(|v| v.parse().unwrap()).collect();
+    let vertices: Vec<&str> = lines.by_ref().take(counts[0]).collect();
+    let mut out = String::from("solid ell\n");
+    for face in lines.take(counts[1]) {
+        let idx: Vec<usize> = face.split_whitespace().skip(1).map(|v| v.parse().unwrap()).collect();
+        out.push_str("facet normal 0 0 0\nouter loop\n");
+        for i in idx {
+            out.push_str(&format!("vertex {}\n", vertices[i]));
+        }
+        out.push_str("endloop\nendfacet\n");
+    }
+    out.push_str("endsolid ell\n");
+    out
 }
 
 /// A three-node tree of spheres in the compound file form: a root of radius `root_r` at the

@@ -1,4 +1,4 @@
-"""Compound bodies (a containment tree of sos-convex bodies, issue 14) through the client: the
+"""Compound bodies (a containment tree of sos-convex bodies) through the client: the
 bundled compound chair and human are uploaded and queried; the answer carries its tree bounds.
 
 Reference: the distance does not depend on the order of the pair (the leaf pairs are the same),

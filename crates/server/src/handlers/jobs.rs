@@ -61,8 +61,9 @@ pub(super) async fn start_fit_job(
     Ok(Response::new(pb::StartFitJobResponse { job_id }))
 }
 
-/// `StartFitJob` with `parts` / `auto_parts` (a compound fit): the mesh (OFF, with
-/// triangles) is parsed off the async workers, the settings checked, the job started.
+/// `StartFitJob` with `parts` / `auto_parts` (a compound fit): the triangle mesh (OFF, OBJ, STL
+/// or PLY) is parsed off the async workers, the settings checked, the job started (the fit welds
+/// the mesh before decomposing it).
 async fn start_compound_fit(
     svc: &SublevelService,
     req: pb::StartFitJobRequest,
@@ -76,7 +77,7 @@ async fn start_compound_fit(
         _ => {
             return Err(Error::invalid(
                 "mesh",
-                "a compound fit (`parts` or `auto_parts`) needs `mesh`: a triangle mesh in OFF format",
+                "a compound fit (`parts` or `auto_parts`) needs `mesh`: a triangle mesh (OFF, OBJ, STL or PLY)",
             )
             .into())
         }
@@ -84,17 +85,23 @@ async fn start_compound_fit(
     if mesh.data.is_empty() {
         return Err(Error::invalid("mesh.data", "must not be empty").into());
     }
-    if cv::mesh_format_from_proto(&mesh)? != sublevel_fit::mesh::MeshFormat::Off {
-        return Err(
-            Error::invalid("mesh.format", "a compound fit decomposes the mesh's faces: send an OFF mesh").into()
-        );
+    let format = cv::mesh_format_from_proto(&mesh)?;
+    if format == sublevel_fit::mesh::MeshFormat::Xyz {
+        return Err(Error::invalid(
+            "mesh.mesh_format",
+            "a compound fit decomposes the mesh's faces: send OFF, OBJ, STL or PLY, not a point cloud",
+        )
+        .into());
     }
     let max = svc.config.max_fit_points;
     let mesh = blocking(move || {
-        let mesh = sublevel_fit::mesh::parse_off_mesh(&mesh.data, max)?;
+        let mesh = sublevel_fit::mesh::load_triangle_mesh(&mesh.data, format, max).map_err(|e| match e {
+            Error::InvalidArgument { reason, .. } => Error::invalid("mesh.data", reason),
+            other => other,
+        })?;
         cv::check_point_count("mesh", mesh.vertices.len(), max)?;
         if mesh.triangles.is_empty() {
-            return Err(Error::invalid("mesh.data", "the OFF mesh has no faces to decompose"));
+            return Err(Error::invalid("mesh.data", "the mesh has no faces to decompose"));
         }
         Ok(mesh)
     })
