@@ -371,11 +371,7 @@ async fn a_fit_job_with_parts_reports_progress_per_part_and_stores_a_compound_bo
     assert_status(c.start_fit_job(bad).await, Code::InvalidArgument, "mesh");
 
     let job_id = c.start_fit_job(req).await.unwrap().into_inner().job_id;
-    let mut stream = c.watch_fit_job(pb::WatchFitJobRequest { job_id }).await.unwrap().into_inner();
-    let mut updates = Vec::new();
-    while let Some(u) = stream.message().await.unwrap() {
-        updates.push(u);
-    }
+    let updates = crate::util::watch_to_end(&mut c, job_id).await;
     let last = updates.last().unwrap().clone();
     assert_eq!(last.state, pb::JobState::Succeeded as i32, "{last:?}");
     let per_part: Vec<(u32, u32)> = updates.iter().filter(|u| u.part > 0).map(|u| (u.part, u.parts)).collect();
@@ -415,12 +411,7 @@ async fn a_fit_job_with_parts_reports_progress_per_part_and_stores_a_compound_bo
     let bad = pb::StartFitJobRequest { source: Some(pb::start_fit_job_request::Source::Mesh(xyz)), ..req.clone() };
     assert_status(c.start_fit_job(bad).await, Code::InvalidArgument, "mesh.mesh_format");
     let job_id = c.start_fit_job(req).await.unwrap().into_inner().job_id;
-    let mut stream = c.watch_fit_job(pb::WatchFitJobRequest { job_id }).await.unwrap().into_inner();
-    let mut last = None;
-    while let Some(u) = stream.message().await.unwrap() {
-        last = Some(u);
-    }
-    let last = last.unwrap();
+    let last = crate::util::watch_to_end(&mut c, job_id).await.pop().unwrap();
     assert_eq!(last.state, pb::JobState::Succeeded as i32, "{last:?}");
     let from_stl = c.get_body(pb::GetBodyRequest { body_id: last.body_id }).await.unwrap().into_inner();
     let from_stl = CompoundBody::from_json(&from_stl.body_json).unwrap();

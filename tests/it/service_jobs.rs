@@ -167,12 +167,7 @@ async fn end_to_end_chair_slides_through_human() {
             ..Default::default()
         };
         let job_id = c.start_fit_job(req).await.unwrap().into_inner().job_id;
-        let mut stream = c.watch_fit_job(pb::WatchFitJobRequest { job_id }).await.unwrap().into_inner();
-        let mut last = None;
-        while let Some(u) = stream.message().await.unwrap() {
-            last = Some(u);
-        }
-        let last = last.unwrap();
+        let last = crate::util::watch_to_end(&mut c, job_id).await.pop().unwrap();
         assert_eq!(last.state, pb::JobState::Succeeded as i32, "{last:?}");
         let got = c.get_body(pb::GetBodyRequest { body_id: last.body_id.clone() }).await.unwrap().into_inner();
         let body = sublevel::Body::from_file(serde_json::from_str(&got.body_json).unwrap()).unwrap();

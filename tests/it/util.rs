@@ -137,6 +137,17 @@ pub(crate) fn v(p: &Option<pb::Vec3>) -> Vector3 {
     Vector3::new(p.x, p.y, p.z)
 }
 
+/// Every update of fit job `job_id` until its terminal one (the stream's end), in order.
+pub(crate) async fn watch_to_end(c: &mut SublevelClient<Channel>, job_id: String) -> Vec<pb::FitJobUpdate> {
+    let mut stream = c.watch_fit_job(pb::WatchFitJobRequest { job_id }).await.unwrap().into_inner();
+    let mut updates = Vec::new();
+    while let Some(u) = stream.message().await.unwrap() {
+        updates.push(u);
+    }
+    assert!(!updates.is_empty(), "a watch stream ended without an update");
+    updates
+}
+
 /// Uploads a sphere of radius `r` around `center` (a degree-2 ellipsoid body) as JSON.
 pub(crate) async fn upload_sphere(c: &mut SublevelClient<Channel>, name: &str, center: [f64; 3], r: f64) -> String {
     upload_body(c, name, &ellipsoid(center, [r; 3]).unwrap()).await

@@ -119,32 +119,15 @@ where
         if let Some(c) = &connection {
             c.requested.store(true, Ordering::Relaxed);
         }
-        let path = req.uri().path();
-        let (limit, flag) = if UPLOADS.contains(&path) {
+        let (limit, flag) = if UPLOADS.contains(&req.uri().path()) {
             (self.shared.max_upload, "--max-message-bytes / SUBLEVEL_MAX_MESSAGE_BYTES")
         } else {
             (self.shared.max_request, "--max-request-bytes / SUBLEVEL_MAX_REQUEST_BYTES")
         };
-        let method = sublevel_core::error::clip(path.rsplit('/').next().unwrap_or(path));
+        let uri = req.uri().clone();
         let shared = self.shared.clone();
         let req = req.map(move |body| {
-            tonic::body::Body::new(AdmittedBody {
-                inner: Box::pin(body),
-                pending: BytesMut::new(),
-                ready: 0,
-                need: None,
-                small: true,
-                held: 0,
-                timer: None,
-                finished: false,
-                failed: false,
-                trailers: None,
-                limit,
-                flag,
-                method,
-                shared,
-                connection,
-            })
+            tonic::body::Body::new(AdmittedBody::new(body, Limit { bytes: limit, flag }, uri, shared, connection))
         });
         self.inner.call(req)
     }
@@ -169,20 +152,61 @@ pub struct AdmittedBody<B> {
     finished: bool,
     failed: bool,
     trailers: Option<HeaderMap>,
-    limit: usize,
-    flag: &'static str,
-    method: String,
+    limit: Limit,
+    /// The call's URI (its path names the method in error messages; kept as is, so a call that
+    /// never fails allocates no name).
+    uri: tonic::codegen::http::Uri,
     shared: Arc<Shared>,
     connection: Option<Arc<ConnectionState>>,
 }
 
+/// A method's message-size limit and the flag that sets it.
+#[derive(Clone, Copy, Debug)]
+struct Limit {
+    bytes: usize,
+    flag: &'static str,
+}
+
 impl<B> std::fmt::Debug for AdmittedBody<B> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("AdmittedBody").field("method", &self.method).field("held", &self.held).finish_non_exhaustive()
+        f.debug_struct("AdmittedBody").field("uri", &self.uri).field("held", &self.held).finish_non_exhaustive()
     }
 }
 
 impl<B> AdmittedBody<B> {
+    /// A body read message by message under `limit`, charging `shared`'s budget and
+    /// `connection`'s.
+    fn new(
+        body: B,
+        limit: Limit,
+        uri: tonic::codegen::http::Uri,
+        shared: Arc<Shared>,
+        connection: Option<Arc<ConnectionState>>,
+    ) -> Self {
+        Self {
+            inner: Box::pin(body),
+            pending: BytesMut::new(),
+            ready: 0,
+            need: None,
+            small: true,
+            held: 0,
+            timer: None,
+            finished: false,
+            failed: false,
+            trailers: None,
+            limit,
+            uri,
+            shared,
+            connection,
+        }
+    }
+
+    /// The method's name, for messages (clipped).
+    fn method(&self) -> String {
+        let path = self.uri.path();
+        sublevel_core::error::clip(path.rsplit('/').next().unwrap_or(path))
+    }
+
     /// Charges `n` more bytes to both budgets, or says which one is full.
     fn charge(&mut self, n: usize) -> Result<(), Status> {
         let s = &self.shared;
@@ -194,7 +218,8 @@ impl<B> AdmittedBody<B> {
             return Err(Status::resource_exhausted(format!(
                 "request memory full: `{}` needs {n} more bytes while {before} of {} are held by incomplete request \
                  messages (set by --request-memory-bytes / SUBLEVEL_REQUEST_MEMORY_BYTES); retry later",
-                self.method, s.request_memory
+                self.method(),
+                s.request_memory
             )));
         }
         if let Some(c) = &self.connection {
@@ -207,7 +232,8 @@ impl<B> AdmittedBody<B> {
                     "connection request memory full: `{}` needs {n} more bytes while {before} of {} are held by this \
                      connection's incomplete request messages (set by --connection-memory-bytes / \
                      SUBLEVEL_CONNECTION_MEMORY_BYTES)",
-                    self.method, s.connection_memory
+                    self.method(),
+                    s.connection_memory
                 )));
             }
         }
@@ -252,11 +278,13 @@ impl<B> AdmittedBody<B> {
                         self.pending[at + 3],
                         self.pending[at + 4],
                     ]) as usize;
-                    if len > self.limit {
+                    if len > self.limit.bytes {
                         metrics::counter!(crate::metrics::REQUESTS_REFUSED, "reason" => "message_size").increment(1);
                         return Err(Status::out_of_range(format!(
                             "request message of `{}` is {len} bytes, over the limit of {} bytes (set by {})",
-                            self.method, self.limit, self.flag
+                            self.method(),
+                            self.limit.bytes,
+                            self.limit.flag
                         )));
                     }
                     self.small = len <= SMALL_MESSAGE_BYTES;
@@ -323,7 +351,7 @@ where
                     let status = Status::deadline_exceeded(format!(
                         "request message of `{}` did not arrive within {:?} of its first byte ({} bytes received; set \
                          by --message-timeout-ms / SUBLEVEL_MESSAGE_TIMEOUT_MS)",
-                        this.method,
+                        this.method(),
                         this.shared.timeout,
                         this.pending.len()
                     ));
@@ -400,23 +428,9 @@ mod tests {
     }
 
     fn admitted<B>(layer: &MessageLayer, body: B, connection: Option<Arc<ConnectionState>>) -> AdmittedBody<B> {
-        AdmittedBody {
-            inner: Box::pin(body),
-            pending: BytesMut::new(),
-            ready: 0,
-            need: None,
-            small: true,
-            held: 0,
-            timer: None,
-            finished: false,
-            failed: false,
-            trailers: None,
-            limit: layer.shared.max_request,
-            flag: "--max-request-bytes",
-            method: "Distance".into(),
-            shared: layer.shared.clone(),
-            connection,
-        }
+        let limit = Limit { bytes: layer.shared.max_request, flag: "--max-request-bytes" };
+        let uri = tonic::codegen::http::Uri::from_static("/sublevel.v1.Sublevel/Distance");
+        AdmittedBody::new(body, limit, uri, layer.shared.clone(), connection)
     }
 
     /// Two messages split across chunks at every awkward place (inside the prefix, inside the
