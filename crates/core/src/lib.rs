@@ -13,6 +13,8 @@
 //! - [`conic`]: a small builder for Clarabel cone programs (shared by fits and certificates).
 //! - [`report`]: what a fit reports about its body (paper §III).
 //! - [`body`]: a fitted body and the same body under a pose (paper §IV-C).
+//! - [`primitive`]: exact primitives (box, sphere, cylinder, capsule, halfspace), bodies given by
+//!   a few affine or quadratic constraints instead of a fitted polynomial.
 //! - [`compound`]: compound bodies, a containment tree of bodies (paper §V), and its file format.
 //!
 //! The fits live in `sublevel-fit`, the queries in `sublevel-query`.
@@ -27,7 +29,9 @@ pub mod conic;
 pub mod error;
 pub mod math;
 pub mod poly;
+pub mod primitive;
 pub mod report;
 
 pub use body::{Body, PosedBody};
 pub use error::{Error, Result};
+pub use primitive::{Primitive, PrimitiveFile};

@@ -71,6 +71,7 @@ pub(crate) mod lane_algebra;
 pub mod newton;
 pub mod penetration;
 pub mod sdp_certificate;
+pub mod shape;
 pub mod tree;
 
 pub use batch::BatchSettings;

@@ -1,0 +1,202 @@
+//! Shape distances against closed forms, their separating-plane certificates and coal.
+
+use super::*;
+use rand::{Rng, SeedableRng};
+use sublevel_core::math::UnitQuaternion;
+use sublevel_core::primitive::PrimitiveFile;
+
+fn prim(file: PrimitiveFile) -> Primitive {
+    Primitive::from_file(&file).unwrap()
+}
+
+fn shapes() -> Vec<(&'static str, Primitive)> {
+    vec![
+        ("box", prim(PrimitiveFile::Box { size: [0.4, 0.3, 0.2] })),
+        ("board", prim(PrimitiveFile::Box { size: [1.2, 1.0, 0.04] })),
+        ("cylinder", prim(PrimitiveFile::Cylinder { radius: 0.05, height: 0.3 })),
+        ("can", prim(PrimitiveFile::Cylinder { radius: 0.1, height: 0.2 })),
+        ("sphere", prim(PrimitiveFile::Sphere { radius: 0.1 })),
+        ("capsule", prim(PrimitiveFile::Capsule { radius: 0.05, height: 0.3 })),
+    ]
+}
+
+fn random_pose(rng: &mut impl Rng, spread: Real) -> Isometry3 {
+    let q = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+        rng.random_range(-1.0..1.0),
+        rng.random_range(-1.0..1.0),
+        rng.random_range(-1.0..1.0),
+        rng.random_range(-1.0..1.0),
+    ));
+    let t =
+        Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)) * spread;
+    Isometry3::from_parts(t.into(), q)
+}
+
+/// Signed distance of a world point to a posed primitive's boundary.
+fn surface_gap(p: &Primitive, pose: &Isometry3, x: &Point3) -> Real {
+    p.closest_boundary_point(&pose.inverse_transform_point(x).coords).0
+}
+
+/// Every pair of primitive types at random poses: converged, witnesses on both surfaces, and the
+/// separating-plane lower bound equal to the distance (the duality certificate of the optimum).
+#[test]
+fn random_primitive_pairs_are_certified_optimal() {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+    let list = shapes();
+    let mut worst_gap: Real = 0.0;
+    let mut worst_surface: Real = 0.0;
+    let mut iters = 0;
+    let mut count = 0;
+    for (na, a) in &list {
+        for (nb, b) in &list {
+            for _ in 0..300 {
+                let pa = random_pose(&mut rng, 0.2);
+                let pb = random_pose(&mut rng, 0.6);
+                let r = shape_distance(ShapeRef::Primitive(a), &pa, ShapeRef::Primitive(b), &pb, None).unwrap();
+                assert_eq!(r.status, SolveStatus::Converged, "{na}-{nb} {pa:?} {pb:?} {r:?}");
+                iters += r.iterations;
+                count += 1;
+                if r.overlapping {
+                    assert!(surface_gap(a, &pa, &r.witness_a) <= 1e-12, "{na}-{nb} {r:?}");
+                    assert!(surface_gap(b, &pb, &r.witness_b) <= 1e-12, "{na}-{nb} {r:?}");
+                    continue;
+                }
+                let ga = surface_gap(a, &pa, &r.witness_a).abs();
+                let gb = surface_gap(b, &pb, &r.witness_b).abs();
+                worst_surface = worst_surface.max(ga).max(gb);
+                assert!((r.distance - (r.witness_b - r.witness_a).norm()).abs() < 1e-14);
+                let lb = r.lower_bound.unwrap();
+                worst_gap = worst_gap.max(r.distance - lb);
+                assert!(
+                    r.distance - lb <= 1e-10 && lb - r.distance <= 1e-12,
+                    "{na}-{nb} gap {} {r:?}",
+                    r.distance - lb
+                );
+            }
+        }
+    }
+    eprintln!(
+        "worst certificate gap {worst_gap:e} m, worst surface gap {worst_surface:e} m, mean iterations {}",
+        iters as f64 / count as f64
+    );
+    assert!(worst_surface <= 1e-12);
+}
+
+/// A quadratic body p(u) = ‖u‖² is a ball: against every primitive the active-set answer equals the
+/// sphere's closed form.
+#[test]
+fn a_ball_body_matches_the_sphere_closed_form() {
+    use sublevel_core::body::FitReport;
+    use sublevel_core::poly::Polynomial;
+    let radius = 0.1;
+    let p = Polynomial::from_terms(2, &[([2, 0, 0], 1.0), ([0, 2, 0], 1.0), ([0, 0, 2], 1.0)]).unwrap();
+    let ball = Body::new(p, [0.0; 3], radius, FitReport::default()).unwrap();
+    let sphere = prim(PrimitiveFile::Sphere { radius });
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+    let mut worst: Real = 0.0;
+    for (name, other) in shapes().into_iter().filter(|(n, _)| *n != "sphere") {
+        for _ in 0..300 {
+            let pa = random_pose(&mut rng, 0.2);
+            let pb = random_pose(&mut rng, 0.6);
+            let exact =
+                shape_distance(ShapeRef::Primitive(&sphere), &pa, ShapeRef::Primitive(&other), &pb, None).unwrap();
+            let r = shape_distance(ShapeRef::Body(&ball), &pa, ShapeRef::Primitive(&other), &pb, None).unwrap();
+            assert_eq!(r.status, SolveStatus::Converged, "{name} {r:?}");
+            assert_eq!(r.overlapping, exact.overlapping, "{name} {r:?} {exact:?}");
+            worst = worst.max((r.distance - exact.distance).abs());
+            assert!((r.distance - exact.distance).abs() <= 1e-12, "{name} {} vs {}", r.distance, exact.distance);
+            if !r.overlapping {
+                assert!(
+                    (r.witness_a - exact.witness_a).norm() <= 1e-6 && (r.witness_b - exact.witness_b).norm() <= 1e-6
+                );
+            }
+        }
+    }
+    eprintln!("ball body against primitives: worst |Δd| {worst:e} m");
+}
+
+/// Degree-6 sos-convex bodies against every primitive: converged, the body's witness on its
+/// boundary, the primitive's on its surface, and the separating plane through the witnesses
+/// certifies the distance (the body's support value from its own support-point solve).
+#[test]
+fn bodies_against_primitives_are_certified_by_the_separating_plane() {
+    use crate::penetration::support_point;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+    let mut worst: Real = 0.0;
+    let mut iterations = 0;
+    let mut count = 0;
+    for seed in 0..4 {
+        let body = crate::test_bodies::random_body(6, seed);
+        for (name, other) in shapes() {
+            for _ in 0..60 {
+                let pa = random_pose(&mut rng, 0.2);
+                let mut pb = random_pose(&mut rng, 1.5);
+                pb.translation.vector *= 1.5;
+                let r = shape_distance(ShapeRef::Body(&body), &pa, ShapeRef::Primitive(&other), &pb, None).unwrap();
+                assert_eq!(r.status, SolveStatus::Converged, "{name} {r:?}");
+                iterations += r.iterations;
+                count += 1;
+                let on_body = body.value_at(&pa.inverse_transform_point(&r.witness_a));
+                assert!(on_body <= 1.0 + 1e-10, "{name} p = {on_body}");
+                assert!(surface_gap(&other, &pb, &r.witness_b) <= 1e-12);
+                if r.overlapping {
+                    continue;
+                }
+                assert!((on_body - 1.0).abs() <= 1e-10, "{name} p = {on_body}");
+                let n = r.normal;
+                let h_body = n.dot(&support_point(&body, &pa, &n).unwrap().coords);
+                let h_other = (-n).dot(&pb.translation.vector) + other.support_value(&(pb.rotation.inverse() * -n));
+                let lower = -h_other - h_body;
+                worst = worst.max(r.distance - lower);
+                assert!(r.distance - lower <= 1e-9 && lower <= r.distance + 1e-9, "{name}: {} vs {lower}", r.distance);
+            }
+        }
+    }
+    eprintln!(
+        "bodies against primitives: worst certificate gap {worst:e} m, mean iterations {}",
+        iterations as f64 / count as f64
+    );
+}
+
+/// A warm start from the previous answer along a motion gives the cold answer; for a body against
+/// a primitive in fewer iterations (between primitives the cold start is already exact).
+#[test]
+fn warm_starts_follow_a_motion() {
+    let list = shapes();
+    let body = crate::test_bodies::random_body(6, 1);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+    let mut pairs: Vec<(String, ShapeRef<'_>, ShapeRef<'_>)> = Vec::new();
+    for (na, a) in &list {
+        pairs.push((format!("body-{na}"), ShapeRef::Body(&body), ShapeRef::Primitive(a)));
+        for (nb, b) in &list {
+            pairs.push((format!("{na}-{nb}"), ShapeRef::Primitive(a), ShapeRef::Primitive(b)));
+        }
+    }
+    for (name, a, b) in pairs {
+        let pa = random_pose(&mut rng, 0.1);
+        let start = if matches!(a, ShapeRef::Body(_)) { 2.5 } else { 0.7 };
+        let mut pb = Isometry3::from_parts(Vector3::new(start, 0.1, 0.05).into(), random_pose(&mut rng, 0.0).rotation);
+        let mut warm = ShapeWarmStart::default();
+        let (mut warm_iterations, mut cold_iterations) = (0, 0);
+        for _ in 0..100 {
+            pb.translation.vector -= Vector3::new(0.004, 0.0, 0.0);
+            pb.rotation = UnitQuaternion::from_euler_angles(0.01, 0.0, 0.005) * pb.rotation;
+            let cold = shape_distance(a, &pa, b, &pb, None).unwrap();
+            let w = shape_distance(a, &pa, b, &pb, Some(&warm)).unwrap();
+            assert_eq!(w.status, SolveStatus::Converged);
+            assert_eq!(w.overlapping, cold.overlapping, "{name}");
+            assert!((w.distance - cold.distance).abs() <= 1e-10, "{name}: {} vs {}", w.distance, cold.distance);
+            warm = w.warm_start;
+            warm_iterations += w.iterations;
+            cold_iterations += cold.iterations;
+        }
+        if matches!(a, ShapeRef::Body(_)) {
+            assert!(
+                3 * warm_iterations <= 2 * cold_iterations,
+                "{name}: warm {warm_iterations} cold {cold_iterations}"
+            );
+        } else {
+            assert_eq!(warm_iterations, cold_iterations, "{name}");
+        }
+    }
+}
