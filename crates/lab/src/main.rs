@@ -1,6 +1,6 @@
 //! The `sublevel-lab` command: the paper's reproduction (`table1`, `fit-time`), benchmarks against
 //! peers (`bench`), charts (`chart`), the stability suite (`stability`) and the server's start-up
-//! time on a large store (`startup`).
+//! time on a large store (`startup`), the exact primitives beside coal (`primitives`).
 //!
 //! ```text
 //! cargo run --release -p sublevel-lab -- bench --csv out/bench.csv
@@ -19,6 +19,7 @@ mod csv_file;
 mod fit_time;
 mod peer_coal;
 mod peer_parry;
+mod primitives;
 mod stability;
 mod startup;
 mod table1;
@@ -51,6 +52,8 @@ enum Command {
     Chart(chart::ChartArgs),
     /// Start-up time of `sublevel serve` on a store of N bodies: open, listening, health, warm-up.
     Startup(startup::StartupArgs),
+    /// Exact primitives' distance queries beside coal on the same cases; a body against a box.
+    Primitives(primitives::PrimitivesArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -63,6 +66,7 @@ fn main() -> std::process::ExitCode {
         Command::FitTime(a) => fit_time::run(a),
         Command::Chart(a) => chart::run(a),
         Command::Startup(a) => startup::run(a),
+        Command::Primitives(a) => primitives::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

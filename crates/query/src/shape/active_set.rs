@@ -437,6 +437,26 @@ pub(crate) fn solve(a: &Side, b: &Side, mut state: ActiveSetState, tol: &Toleran
             sides[s].retract(&mut state.u[offsets[s]..offsets[s] + 3]);
         }
     }
+    // Least-squares multipliers of active smooth constraints that have none yet (a cold start):
+    // λ = −(∇c · g)/‖∇c‖² over the side's free parameters, g the gradient of ½‖x − y‖². With
+    // them the first Newton step already sees the constraint's curvature.
+    let r0 = a.point(&state.u[..na]) - b.point(&state.u[na..n]);
+    for s in 0..2 {
+        if state.smooth[s] && state.lambda[s] <= 0.0 {
+            let o = offsets[s];
+            let (_, grad, _) = sides[s].smooth(&state.u[o..o + 3]);
+            let (mut num, mut den) = (0.0, 0.0);
+            for i in 0..3 {
+                if state.fix[o + i] == Fix::Free {
+                    num += grad[i] * jac[o + i].dot(&r0);
+                    den += grad[i] * grad[i];
+                }
+            }
+            if den > 0.0 {
+                state.lambda[s] = (-num / den).max(0.0);
+            }
+        }
+    }
     let mut iterations = 0;
     let mut converged = false;
     let mut kkt_residual = Real::INFINITY;
@@ -652,6 +672,9 @@ pub(crate) fn solve(a: &Side, b: &Side, mut state: ActiveSetState, tol: &Toleran
                 if ft <= f0 + slack + 2.0 * shift * r.norm() {
                     break;
                 }
+                // A short step that f rejects is rounding: shorter ones are too.
+                halvings = 40;
+                break;
             }
             alpha *= 0.5;
             halvings += 1;

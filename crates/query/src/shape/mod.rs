@@ -215,11 +215,12 @@ fn active_set_distance(
     let mut iterations = 0;
     let mut warm_started = false;
     let mut outcome = None;
-    // Between primitives the cold start (two rounds of alternating projection onto the cores) lands
-    // on the answer's working set as often as the last answer does, and costs no more: warm starts
-    // serve pairs with a body, whose boundary point and multiplier they keep.
-    let body_pair = matches!(a, ShapeRef::Body(_)) || matches!(b, ShapeRef::Body(_));
-    if let Some(w) = warm.filter(|w| w.valid && body_pair) {
+    // Between primitives the cold start (two rounds of alternating projection onto the cores, exact
+    // closed forms) lands on the answer's working set more often than the last answer does, and
+    // costs no more: warm starts serve pairs with a body, whose boundary point and multiplier they
+    // keep (its projection is no closed form).
+    let body = matches!(a, ShapeRef::Body(_)) || matches!(b, ShapeRef::Body(_));
+    if let Some(w) = warm.filter(|w| w.valid && body) {
         let start = w.state;
         let out = solve(&sa, &sb, start, &tol);
         iterations += out.iterations;
