@@ -1,5 +1,5 @@
 //! The closed forms of the shape queries: a halfspace against a bounded shape, a sphere against a
-//! primitive. Both are exact: the first needs the shape's lowest point along the halfspace's
+//! primitive, two capsules. Both are exact: the first needs the shape's lowest point along the halfspace's
 //! normal (its support point along −n), the second the primitive's closest boundary point to the
 //! sphere's center ([`Primitive::closest_boundary_point`]).
 
@@ -84,4 +84,59 @@ pub(super) fn sphere(
     };
     let y = if overlapping { x } else { q };
     answer(x, y, distance, overlapping, swapped)
+}
+
+/// Two capsules `a` (posed by `pose_a`) and `b`: the closest points of their axis segments
+/// (Ericson, *Real-Time Collision Detection*, §5.1.9: the unconstrained minimizer of the segments'
+/// squared distance clamped to the parameter square, one edge at a time), less both radii.
+pub(super) fn capsules(a: &Primitive, pose_a: &Isometry3, b: &Primitive, pose_b: &Isometry3) -> ShapeDistance {
+    let (Primitive::Capsule { radius: ra, half_height: ha }, Primitive::Capsule { radius: rb, half_height: hb }) =
+        (*a, *b)
+    else {
+        unreachable!("called with two capsules")
+    };
+    let axis_a = pose_a.rotation * Vector3::z();
+    let axis_b = pose_b.rotation * Vector3::z();
+    let pa = pose_a.translation.vector - axis_a * ha;
+    let pb = pose_b.translation.vector - axis_b * hb;
+    let (da, db) = (axis_a * (2.0 * ha), axis_b * (2.0 * hb));
+    let r = pa - pb;
+    let (aa, ee, f) = (da.norm_squared(), db.norm_squared(), db.dot(&r));
+    let (s, t) = if aa == 0.0 && ee == 0.0 {
+        (0.0, 0.0)
+    } else if aa == 0.0 {
+        (0.0, (f / ee).clamp(0.0, 1.0))
+    } else {
+        let c = da.dot(&r);
+        if ee == 0.0 {
+            ((-c / aa).clamp(0.0, 1.0), 0.0)
+        } else {
+            let bb = da.dot(&db);
+            let denom = aa * ee - bb * bb;
+            // Parallel axes (denom = 0): any s is a minimizer's start; 0 keeps it on the segment.
+            let s = if denom > 0.0 { ((bb * f - c * ee) / denom).clamp(0.0, 1.0) } else { 0.0 };
+            let t = (bb * s + f) / ee;
+            if t < 0.0 {
+                ((-c / aa).clamp(0.0, 1.0), 0.0)
+            } else if t > 1.0 {
+                (((bb - c) / aa).clamp(0.0, 1.0), 1.0)
+            } else {
+                (s, t)
+            }
+        }
+    };
+    let x = Point3::from(pa + da * s);
+    let y = Point3::from(pb + db * t);
+    let gap = y - x;
+    let core = gap.norm();
+    let distance = core - ra - rb;
+    let overlapping = distance <= 0.0;
+    let n = if core > 0.0 { gap / core } else { Vector3::zeros() };
+    let (wa, wb) = if overlapping {
+        let common = x + n * ra.min(core);
+        (common, common)
+    } else {
+        (x + n * ra, y - n * rb)
+    };
+    answer(wa, wb, distance, overlapping, false)
 }

@@ -9,6 +9,8 @@
 //! halfspace {n·x ≤ d} – bounded shape    closed form: the shape's support point along −n
 //! sphere – primitive                     closed form: the primitive's closest boundary point to
 //!                                        the sphere's center, less the radius
+//! capsule – capsule                      closed form: the axis segments' closest points, less
+//!                                        both radii
 //! everything else                        the active-set Newton method (active_set), warm-started
 //! body – body                            distance() (the sos-convex bodies' solver)
 //! ```
@@ -132,6 +134,9 @@ pub fn shape_distance(
         (other, P(h @ Primitive::Halfspace { .. })) => closed_form::halfspace(h, pose_b, other, pose_a, true),
         (P(s @ Primitive::Sphere { .. }), P(other)) => Ok(closed_form::sphere(s, pose_a, other, pose_b, false)),
         (P(other), P(s @ Primitive::Sphere { .. })) => Ok(closed_form::sphere(s, pose_b, other, pose_a, true)),
+        (P(ca @ Primitive::Capsule { .. }), P(cb @ Primitive::Capsule { .. })) => {
+            Ok(closed_form::capsules(ca, pose_a, cb, pose_b))
+        }
         (B(ba), B(bb)) => Ok(body_pair(ba, pose_a, bb, pose_b)),
         _ => Ok(active_set_distance(a, pose_a, b, pose_b, warm)),
     }
