@@ -73,7 +73,13 @@ pub fn distance_gradient(r: &DistanceResult) -> (PoseGradient, PoseGradient) {
     if r.overlapping || r.distance <= 0.0 {
         return (PoseGradient::default(), PoseGradient::default());
     }
-    let (x, y) = (r.witness_a.coords, r.witness_b.coords);
+    witness_gradient(&r.witness_a.coords, &r.witness_b.coords)
+}
+
+/// Gradients of the distance ‖y − x‖ between separated witnesses x (on A) and y (on B) with
+/// respect to pose A and pose B, by the envelope theorem: `(−n, −x × n)` and `(n, y × n)`, n the
+/// unit normal from x to y (module docs). Every distance query's gradient, whatever the shapes.
+pub fn witness_gradient(x: &Vector3, y: &Vector3) -> (PoseGradient, PoseGradient) {
     let n = (y - x) / (y - x).norm();
     (PoseGradient { linear: -n, angular: -x.cross(&n) }, PoseGradient { linear: n, angular: y.cross(&n) })
 }

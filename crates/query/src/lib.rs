@@ -83,7 +83,7 @@ pub use distance::{
     common_point, distance, segment_common_point, warm_start_reaches, warm_start_reaches_with, DistanceResult,
     DistanceWarmStart,
 };
-pub use gradient::{distance_gradient, growth_gradient, PoseGradient};
+pub use gradient::{distance_gradient, growth_gradient, witness_gradient, PoseGradient};
 pub use growth::{growth, GrowthResult, GrowthWarmStart};
 pub use newton::{NewtonParams, SolveStatus};
 

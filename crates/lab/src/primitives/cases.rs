@@ -122,4 +122,38 @@ mod tests {
             assert!(off <= 1e-8, "{}: witness {off:e} m off the surface", c.pair);
         }
     }
+
+    /// The signed distance inside contact against coal's EPA depths on the overlapping cases
+    /// (which its script checked against a direction search within 10⁻⁹ m).
+    #[test]
+    fn penetration_depths_agree_with_coal() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../query/tests/data/coal_primitives.csv");
+        let cases = load_cases(&path).unwrap();
+        let mut worst: std::collections::BTreeMap<String, (Real, usize, Real, usize)> = Default::default();
+        for c in cases.iter().filter(|c| c.overlapping) {
+            let (a, b) = pair_shapes(&c.pair).unwrap();
+            let s = sublevel_query::shape::shape_signed_distance(
+                ShapeRef::Primitive(&a),
+                &c.pose_a,
+                ShapeRef::Primitive(&b),
+                &c.pose_b,
+                None,
+            )
+            .unwrap();
+            let e = worst.entry(c.pair.clone()).or_default();
+            // Never shallower than the true depth; exact when converged.
+            assert!(s.value <= c.distance + 1e-9, "{}: ours {} coal {}", c.pair, s.value, c.distance);
+            if s.converged {
+                assert!((s.value - c.distance).abs() <= 1e-8, "{}: ours {} coal {}", c.pair, s.value, c.distance);
+                e.0 = e.0.max((s.value - c.distance).abs());
+            } else {
+                e.1 += 1;
+                e.2 = e.2.max((s.value - c.distance).abs());
+            }
+            e.3 += 1;
+        }
+        for (p, e) in &worst {
+            eprintln!("{p:>20}: converged worst {:.1e} m; flagged {}/{} (worst {:.1e} m, deeper)", e.0, e.1, e.3, e.2);
+        }
+    }
 }

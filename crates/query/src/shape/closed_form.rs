@@ -3,7 +3,7 @@
 //! normal (its support point along −n), the second the primitive's closest boundary point to the
 //! sphere's center ([`Primitive::closest_boundary_point`]).
 
-use super::{ShapeDistance, ShapeMethod, ShapeRef, ShapeWarmStart};
+use super::{CoreGap, ShapeDistance, ShapeMethod, ShapeRef, ShapeWarmStart};
 use crate::newton::SolveStatus;
 use crate::penetration::support_point;
 use crate::Result;
@@ -28,6 +28,7 @@ fn answer(x: Point3, y: Point3, distance: Real, overlapping: bool, swapped: bool
         method: ShapeMethod::ClosedForm,
         warm_started: false,
         warm_start: ShapeWarmStart::default(),
+        core: None,
     }
 }
 
@@ -83,7 +84,18 @@ pub(super) fn sphere(
         Point3::from(c)
     };
     let y = if overlapping { x } else { q };
-    answer(x, y, distance, overlapping, swapped)
+    let mut out = answer(x, y, distance, overlapping, swapped);
+    // The outward normal of the primitive at q, towards the center (or away from it inside).
+    let outward = if signed != 0.0 { (Point3::from(c) - q) / signed } else { Vector3::zeros() };
+    if outward.norm_squared() > 0.0 {
+        let (normal, point_a, point_b, radii) = if swapped {
+            (outward, q, Point3::from(c), (0.0, radius))
+        } else {
+            (-outward, Point3::from(c), q, (radius, 0.0))
+        };
+        out.core = Some(CoreGap { gap: signed, normal, point_a, point_b, radii });
+    }
+    out
 }
 
 /// Two capsules `a` (posed by `pose_a`) and `b`: the closest points of their axis segments
@@ -138,5 +150,9 @@ pub(super) fn capsules(a: &Primitive, pose_a: &Isometry3, b: &Primitive, pose_b:
     } else {
         (x + n * ra, y - n * rb)
     };
-    answer(wa, wb, distance, overlapping, false)
+    let mut out = answer(wa, wb, distance, overlapping, false);
+    if core > 0.0 {
+        out.core = Some(CoreGap { gap: core, normal: n, point_a: x, point_b: y, radii: (ra, rb) });
+    }
+    out
 }

@@ -30,7 +30,9 @@ mod tests;
 
 pub use active_set::{ActiveSetState, Fix};
 
+use crate::gradient::{witness_gradient, PoseGradient};
 use crate::newton::{NewtonParams, SolveStatus};
+use crate::penetration::{shape_penetration, shape_support_point};
 use crate::{Error, Result};
 use active_set::{solve, Side, Tolerances};
 use sublevel_core::body::Body;
@@ -107,6 +109,141 @@ pub struct ShapeDistance {
     pub warm_started: bool,
     /// State for warm-starting the next query of the same ordered pair.
     pub warm_start: ShapeWarmStart,
+    /// For shapes swept by a ball (spheres, capsules): the signed gap between the cores (a
+    /// sphere's center, a capsule's axis segment; the other shape itself when it is not swept),
+    /// the unit normal from A to B, and the cores' points (world). The depth of an overlap whose
+    /// cores are apart (gap > 0; for a sphere against a primitive any gap) is exactly the radii
+    /// less the gap.
+    pub(crate) core: Option<CoreGap>,
+}
+
+/// The gap between the cores of swept shapes ([`ShapeDistance::core`]).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct CoreGap {
+    /// Signed gap (meters; negative only for a sphere's center inside a primitive).
+    pub gap: Real,
+    /// Unit normal from A's core towards B's: translating B along it raises the gap.
+    pub normal: Vector3,
+    /// A's core point (world).
+    pub point_a: Point3,
+    /// B's core point (world).
+    pub point_b: Point3,
+    /// The radii (A, B) sweeping the cores.
+    pub radii: (Real, Real),
+}
+
+impl ShapeDistance {
+    /// Gradients of the distance with respect to pose A and pose B (twists, the convention of
+    /// [`crate::gradient`]): the envelope theorem at the witnesses, `(−n, −x_A × n)` and
+    /// `(n, x_B × n)`. Zero for overlapping answers (see [`shape_signed_distance`] for a signal
+    /// inside contact).
+    pub fn gradient(&self) -> (PoseGradient, PoseGradient) {
+        if self.overlapping || self.distance <= 0.0 {
+            return (PoseGradient::default(), PoseGradient::default());
+        }
+        witness_gradient(&self.witness_a.coords, &self.witness_b.coords)
+    }
+}
+
+/// The signed distance of two shapes: their distance when separated, minus the penetration depth
+/// (the shortest translation of B that separates them) when overlapping.
+#[derive(Clone, Copy, Debug)]
+pub struct SignedDistance {
+    /// Meters: positive apart, negative overlapping, 0 touching.
+    pub value: Real,
+    /// Unit normal from A towards B: translating B along it raises the value at unit rate.
+    pub normal: Vector3,
+    /// A's witness (separated) or support point along the normal (overlapping), world.
+    pub point_a: Point3,
+    /// B's witness (separated) or support point along minus the normal (overlapping), world.
+    pub point_b: Point3,
+    /// Whether the value is converged: the distance solve's status, or the depth descent's.
+    pub converged: bool,
+    /// The distance answer (separated or not) it came from.
+    pub distance: ShapeDistance,
+}
+
+impl SignedDistance {
+    /// Gradients of the signed distance with respect to pose A and pose B (twists): the same form
+    /// apart and in contact, `(−n, −x_A × n)` and `(n, x_B × n)`, so an optimizer's signal is
+    /// continuous in direction through contact.
+    pub fn gradient(&self) -> (PoseGradient, PoseGradient) {
+        let n = self.normal;
+        (
+            PoseGradient { linear: -n, angular: -self.point_a.coords.cross(&n) },
+            PoseGradient { linear: n, angular: self.point_b.coords.cross(&n) },
+        )
+    }
+}
+
+/// The signed distance of shape `a` posed by `pose_a` and shape `b` posed by `pose_b`
+/// ([`SignedDistance`]): [`shape_distance`], and when the shapes overlap the penetration depth —
+/// exact for a halfspace (the shape's depth below its plane), for a sphere against a primitive
+/// and for a capsule whose axis stays outside the other shape (the radii less the cores' gap),
+/// and for two boxes (separating axes); a descent over directions on the support functions
+/// otherwise ([`crate::penetration::shape_penetration`]), whose `converged` flag says whether
+/// its gradient vanished.
+///
+/// # Errors
+/// Those of [`shape_distance`] and of the penetration's support points.
+pub fn shape_signed_distance(
+    a: ShapeRef<'_>,
+    pose_a: &Isometry3,
+    b: ShapeRef<'_>,
+    pose_b: &Isometry3,
+    warm: Option<&ShapeWarmStart>,
+) -> Result<SignedDistance> {
+    let d = shape_distance(a, pose_a, b, pose_b, warm)?;
+    if !d.overlapping {
+        return Ok(SignedDistance {
+            value: d.distance,
+            normal: d.normal,
+            point_a: d.witness_a,
+            point_b: d.witness_b,
+            converged: d.status.converged(),
+            distance: d,
+        });
+    }
+    // A halfspace: the other shape's lowest point lies `depth` below the plane.
+    let plane = |s: ShapeRef<'_>, pose: &Isometry3| match s {
+        ShapeRef::Primitive(Primitive::Halfspace { normal, offset }) => {
+            let n = pose.rotation * normal;
+            Some((n, offset + n.dot(&pose.translation.vector)))
+        }
+        _ => None,
+    };
+    if let Some((n, offset)) = plane(a, pose_a) {
+        let y = shape_support_point(b, pose_b, &-n)?;
+        let height = n.dot(&y.coords) - offset;
+        let x = y - n * height;
+        return Ok(SignedDistance { value: height, normal: n, point_a: x, point_b: y, converged: true, distance: d });
+    }
+    if let Some((n, offset)) = plane(b, pose_b) {
+        let x = shape_support_point(a, pose_a, &-n)?;
+        let height = n.dot(&x.coords) - offset;
+        let y = x - n * height;
+        return Ok(SignedDistance { value: height, normal: -n, point_a: x, point_b: y, converged: true, distance: d });
+    }
+    // Swept shapes whose cores are apart: exact.
+    if let Some(c) = d.core {
+        return Ok(SignedDistance {
+            value: c.gap - c.radii.0 - c.radii.1,
+            normal: c.normal,
+            point_a: c.point_a + c.normal * c.radii.0,
+            point_b: c.point_b - c.normal * c.radii.1,
+            converged: d.status.converged(),
+            distance: d,
+        });
+    }
+    let p = shape_penetration(a, pose_a, b, pose_b)?;
+    Ok(SignedDistance {
+        value: -p.depth.max(0.0),
+        normal: p.normal,
+        point_a: p.support_a,
+        point_b: p.support_b,
+        converged: p.converged,
+        distance: d,
+    })
 }
 
 /// Distance between shape `a` posed by `pose_a` and shape `b` posed by `pose_b` (module docs).
@@ -158,6 +295,7 @@ fn body_pair(a: &Body, pose_a: &Isometry3, b: &Body, pose_b: &Isometry3) -> Shap
         method: ShapeMethod::BodySolver,
         warm_started: false,
         warm_start: ShapeWarmStart::default(),
+        core: None,
     }
 }
 
@@ -284,5 +422,14 @@ fn active_set_distance(
         method: ShapeMethod::ActiveSet,
         warm_started,
         warm_start: ShapeWarmStart { state: out.state, valid: out.converged },
+        // Cores that meet converge to a gap at rounding level: a gap below 10⁻⁹ of the size
+        // is taken as meeting (the depth's error then stays below it).
+        core: (sa.radius + sb.radius > 0.0 && out.converged && core > 1e-9 * sa.scale.min(sb.scale)).then(|| CoreGap {
+            gap: core,
+            normal: pose_a.rotation * (gap / core),
+            point_a: pose_a * Point3::from(x),
+            point_b: pose_a * Point3::from(y),
+            radii: (sa.radius, sb.radius),
+        }),
     }
 }

@@ -311,3 +311,81 @@ fn stability_suite_degenerate_contacts() {
         }
     }
 }
+
+/// Pose gradients against central differences of the answer itself: the distance of separated
+/// pairs of every primitive type, and the signed distance of overlapping pairs where the depth is
+/// exact (box–box along translations, sphere–box, capsule–capsule, a floor under a box).
+#[test]
+fn gradients_match_finite_differences() {
+    use crate::gradient::perturb_pose;
+    let list = shapes();
+    let floor = prim(PrimitiveFile::Halfspace { normal: [0.0, 0.0, 1.0], offset: 0.0 });
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(21);
+    let eps = 1e-6;
+    let twist = |k: usize, s: Real| {
+        let mut v = Vector3::zeros();
+        let mut w = Vector3::zeros();
+        if k < 3 {
+            v[k] = s;
+        } else {
+            w[k - 3] = s;
+        }
+        (v, w)
+    };
+    // Two boxes in contact touch along a face or an edge: the depth's derivative along a rotation is
+    // then one-sided (a subgradient), so their check covers the translations only.
+    let check = |name: &str, a: &Primitive, pa: &Isometry3, b: &Primitive, pb: &Isometry3, signed: bool| {
+        let components = if signed && name == "box-box" { 3 } else { 6 };
+        let value = |pa: &Isometry3, pb: &Isometry3| {
+            let s = shape_signed_distance(ShapeRef::Primitive(a), pa, ShapeRef::Primitive(b), pb, None).unwrap();
+            if signed {
+                s.value
+            } else {
+                s.distance.distance
+            }
+        };
+        let s = shape_signed_distance(ShapeRef::Primitive(a), pa, ShapeRef::Primitive(b), pb, None).unwrap();
+        let (ga, gb) = if signed { s.gradient() } else { s.distance.gradient() };
+        for k in 0..components {
+            let (v, w) = twist(k, eps);
+            let fd_a = (value(&perturb_pose(pa, &v, &w), pb) - value(&perturb_pose(pa, &-v, &-w), pb)) / (2.0 * eps);
+            let fd_b = (value(pa, &perturb_pose(pb, &v, &w)) - value(pa, &perturb_pose(pb, &-v, &-w))) / (2.0 * eps);
+            assert!((fd_a - ga.to_array()[k]).abs() <= 1e-5, "{name} a[{k}]: fd {fd_a} vs {}", ga.to_array()[k]);
+            assert!((fd_b - gb.to_array()[k]).abs() <= 1e-5, "{name} b[{k}]: fd {fd_b} vs {}", gb.to_array()[k]);
+        }
+    };
+    for (na, a) in &list {
+        for (nb, b) in &list {
+            let mut done = 0;
+            while done < 5 {
+                let pa = random_pose(&mut rng, 0.2);
+                let pb = random_pose(&mut rng, 0.8);
+                let r = shape_distance(ShapeRef::Primitive(a), &pa, ShapeRef::Primitive(b), &pb, None).unwrap();
+                if r.distance > 1e-3 {
+                    check(&format!("{na}-{nb}"), a, &pa, b, &pb, false);
+                    done += 1;
+                }
+            }
+        }
+    }
+    let cube = prim(PrimitiveFile::Box { size: [0.4, 0.3, 0.2] });
+    let ball = prim(PrimitiveFile::Sphere { radius: 0.1 });
+    let capsule = prim(PrimitiveFile::Capsule { radius: 0.05, height: 0.3 });
+    for (name, a, b, spread) in [
+        ("box-box", &cube, &cube, 0.15),
+        ("sphere-box", &ball, &cube, 0.12),
+        ("capsule-capsule", &capsule, &capsule, 0.05),
+        ("floor-box", &floor, &cube, 0.05),
+    ] {
+        let mut done = 0;
+        while done < 10 {
+            let pa = if name == "floor-box" { Isometry3::identity() } else { random_pose(&mut rng, 0.05) };
+            let pb = random_pose(&mut rng, spread);
+            let s = shape_signed_distance(ShapeRef::Primitive(a), &pa, ShapeRef::Primitive(b), &pb, None).unwrap();
+            if s.value < -1e-3 && s.converged {
+                check(name, a, &pa, b, &pb, true);
+                done += 1;
+            }
+        }
+    }
+}
