@@ -8,10 +8,12 @@
 //! This crate is the `sublevel` binary and a facade over the workspace's crates, each re-exported
 //! under the name of its floor:
 //!
-//! - [`math`], [`error`], [`poly`], [`conic`], [`body`], [`report`], [`cancel`]: `sublevel-core`;
+//! - [`math`], [`error`], [`poly`], [`conic`], [`body`], [`primitive`], [`report`], [`cancel`]:
+//!   `sublevel-core`;
 //! - [`fit`] (`sublevel-fit`): fitting bodies (paper §III) and, in [`compound`], compound bodies
 //!   (paper §V);
-//! - [`query`] (`sublevel-query`): distance and growth queries and their certificates (§IV);
+//! - [`query`] (`sublevel-query`): distance and growth queries and their certificates (§IV), and
+//!   in [`query::shape`] distances with exact primitives;
 //! - [`robot`] (`sublevel-robot`): URDF robot models and forward kinematics;
 //! - [`scene`] (`sublevel-scene`): scenes, warm-start caches, stores;
 //! - [`service`] (`sublevel-server`): the gRPC API `sublevel.v1`.
@@ -22,8 +24,8 @@
 #![warn(missing_docs)]
 #![forbid(unsafe_code)]
 
-pub use sublevel_core::{body, cancel, conic, error, math, poly, report};
-pub use sublevel_core::{Body, Error, PosedBody, Result};
+pub use sublevel_core::{body, cancel, conic, error, math, poly, primitive, report};
+pub use sublevel_core::{Body, Error, PosedBody, Primitive, Result};
 pub use sublevel_fit as fit;
 pub use sublevel_fit::compound;
 pub use sublevel_query as query;

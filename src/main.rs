@@ -1,4 +1,5 @@
-//! The `sublevel` command: `serve`, `fit`, `group`, `query`, `health`, `loadtest`, `shard-probe`.
+//! The `sublevel` command: `serve`, `fit`, `group`, `primitive`, `query`, `health`, `loadtest`,
+//! `shard-probe`.
 //! The paper's reproduction, benchmarks and charts are the `sublevel-lab` command (crates/lab).
 
 #![forbid(unsafe_code)]
@@ -29,7 +30,9 @@ enum Command {
     Fit(cli::fit::FitArgs),
     /// Contain posed body files with one sos-convex body (paper §V) and write its body file.
     Group(cli::group::GroupArgs),
-    /// Run a distance or growth query between two body files.
+    /// Write an exact primitive's file (box, sphere, cylinder, capsule, halfspace).
+    Primitive(cli::primitive::PrimitiveArgs),
+    /// Run a distance or growth query between two body or primitive files.
     Query(cli::query::QueryArgs),
     /// Load-test a running server over gRPC: latency histograms, throughput, errors by status.
     Loadtest(cli::loadtest::LoadtestArgs),
@@ -48,6 +51,7 @@ fn main() -> std::process::ExitCode {
             .and_then(|a| a.map_or(Ok(()), cli::serve::run)),
         Command::Fit(a) => cli::fit::run(a),
         Command::Group(a) => cli::group::run(a),
+        Command::Primitive(a) => cli::primitive::run(a),
         Command::Query(a) => cli::query::run(a),
         Command::Loadtest(a) => cli::loadtest::run(a),
         Command::Health(a) => cli::health::run(a),

@@ -5,6 +5,7 @@ pub mod fit_compound;
 pub mod group;
 pub mod health;
 pub mod loadtest;
+pub mod primitive;
 pub mod query;
 pub mod serve;
 pub mod serve_config;

@@ -6,14 +6,25 @@
 //! two containment trees ([`sublevel::query::tree`]): the same fields, plus `compound`, the bounds
 //! `lower` / `upper`, the `level` reached, the active `leaves` pair and `pairs_evaluated`. A file
 //! holding one body (or a one-node compound) is answered as a single body.
+//!
+//! Either file may be an exact primitive's file (a JSON object with a `primitive` key, as
+//! `sublevel primitive` writes it; [`sublevel::primitive::PrimitiveFile`]). A distance query with
+//! a primitive against a primitive or a single body is answered by
+//! [`sublevel::query::shape::shape_distance`]: the single body's fields where they apply, plus
+//! `method` (`ClosedForm` or `ActiveSet`) and `certified_lower_bound` (the
+//! separating plane's lower bound between two separated primitives, else null). A primitive
+//! against a compound body, the growth query (defined for sos-convex bodies only), `--certify`
+//! and `--gradient` are refused with an error.
 
 use serde_json::json;
 use sublevel::compound::CompoundBody;
 use sublevel::math::{pose_from_parts, Isometry3};
+use sublevel::primitive::{Primitive, PrimitiveFile};
+use sublevel::query::shape::{shape_distance, ShapeRef};
 use sublevel::query::tree::{tree_collide, tree_distance, TreeQueryParams};
 use sublevel::query::{
     certified_distance, certified_growth, distance_gradient, growth_gradient, CertificateSummary, CertifyMode,
-    CertifyParams, NewtonParams, PoseGradient,
+    CertifyParams, NewtonParams, PoseGradient, SolveStatus,
 };
 use sublevel::{Error, Result};
 
@@ -32,9 +43,9 @@ pub struct QueryArgs {
     /// distance or growth.
     #[arg(value_enum)]
     kind: QueryKind,
-    /// Body file of A (JSON from `sublevel fit`).
+    /// Body file of A (JSON from `sublevel fit`), or a primitive file (from `sublevel primitive`).
     a: std::path::PathBuf,
-    /// Body file of B.
+    /// Body or primitive file of B.
     b: std::path::PathBuf,
     /// Pose of A: unit quaternion and translation in meters, `w,x,y,z,tx,ty,tz`.
     #[arg(long, default_value = "1,0,0,0,0,0,0", allow_hyphen_values = true)]
@@ -54,7 +65,8 @@ pub struct QueryArgs {
     /// angular about the world origin [value/rad]; pose ← exp(ξ^)·pose).
     #[arg(long)]
     gradient: bool,
-    /// KKT-residual tolerance of the Newton solver.
+    /// KKT-residual tolerance of the Newton solver (body pairs; the primitives' solvers keep their
+    /// own).
     #[arg(long, default_value_t = sublevel::math::NEWTON_KKT_TOLERANCE)]
     tolerance: f64,
     /// Compound bodies only: stop refining the distance once upper − lower ≤ this (meters, ≥ 0;
@@ -91,12 +103,40 @@ fn gradient_json(g: &PoseGradient) -> serde_json::Value {
     json!({ "linear": [g.linear.x, g.linear.y, g.linear.z], "angular": [g.angular.x, g.angular.y, g.angular.z] })
 }
 
+/// What a query's file holds: an exact primitive, or a body / compound body.
+enum Shape {
+    /// A primitive file (a JSON object with a `primitive` key).
+    Primitive(Primitive),
+    /// A body file or a compound body file (a one-node tree for a single body).
+    Bodies(Box<CompoundBody>),
+}
+
+/// Reads side `side`'s file: a primitive file when it is a JSON object with a `primitive` key,
+/// else a body or compound body file ([`CompoundBody::from_json`]). A primitive's validation error
+/// names the side too (`a.size[1]`).
+fn load_shape(side: &str, path: &std::path::Path) -> Result<Shape> {
+    let text = std::fs::read_to_string(path)?;
+    let value: serde_json::Value = serde_json::from_str(&text)?;
+    if value.as_object().is_some_and(|o| o.contains_key("primitive")) {
+        let file: PrimitiveFile = serde_json::from_value(value)?;
+        return Primitive::from_file(&file).map(Shape::Primitive).map_err(|e| match e {
+            Error::InvalidArgument { field, reason } => Error::invalid(format!("{side}.{field}"), reason),
+            e => e,
+        });
+    }
+    CompoundBody::from_json(&text).map(|t| Shape::Bodies(Box::new(t)))
+}
+
 /// Runs `sublevel query`.
 pub fn run(args: QueryArgs) -> Result<()> {
-    let ta = CompoundBody::load(&args.a)?;
-    let tb = CompoundBody::load(&args.b)?;
+    let sa = load_shape("a", &args.a)?;
+    let sb = load_shape("b", &args.b)?;
     let pose_a = parse_pose("--pose-a", &args.pose_a)?;
     let pose_b = parse_pose("--pose-b", &args.pose_b)?;
+    let (ta, tb) = match (sa, sb) {
+        (Shape::Bodies(ta), Shape::Bodies(tb)) => (*ta, *tb),
+        (sa, sb) => return print(&args, &with_primitive(&args, &sa, &pose_a, &sb, &pose_b)?),
+    };
     let params = CertifyParams {
         newton: NewtonParams { kkt_tolerance: args.tolerance, ..NewtonParams::default() },
         ..CertifyParams::default()
@@ -114,14 +154,83 @@ pub fn run(args: QueryArgs) -> Result<()> {
         };
         compound(&args, &ta, &pose_a, &tb, &pose_b, &tree)?
     };
+    print(&args, &out)
+}
+
+/// Prints an answer: pretty JSON with `--json`, else one `field: value` line per field.
+fn print(args: &QueryArgs, out: &serde_json::Value) -> Result<()> {
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&out)?);
+        println!("{}", serde_json::to_string_pretty(out)?);
     } else {
         for (k, v) in out.as_object().into_iter().flatten() {
             println!("{k:>14}: {v}");
         }
     }
     Ok(())
+}
+
+/// The distance between two shapes of which at least one is a primitive (module docs).
+///
+/// # Errors
+/// [`Error::InvalidArgument`] for the growth query (naming `kind`), `--certify` or `--gradient`
+/// with a primitive, a primitive against a compound body of several nodes (naming the compound
+/// side), or two halfspaces (naming `b`; [`shape_distance`]).
+fn with_primitive(
+    args: &QueryArgs,
+    a: &Shape,
+    pose_a: &Isometry3,
+    b: &Shape,
+    pose_b: &Isometry3,
+) -> Result<serde_json::Value> {
+    if matches!(args.kind, QueryKind::Growth) {
+        return Err(Error::invalid(
+            "kind",
+            "the growth measure is defined for sos-convex bodies only, not for primitive files; use `distance`",
+        ));
+    }
+    if args.certify {
+        return Err(Error::invalid(
+            "--certify",
+            "the sos certificate is for body pairs only; a primitive's distance carries its own bound \
+             (`certified_lower_bound`)",
+        ));
+    }
+    if args.gradient {
+        return Err(Error::invalid("--gradient", "pose gradients are not available with primitive files yet"));
+    }
+    let (ra, rb) = (shape_ref("a", a)?, shape_ref("b", b)?);
+    let start = std::time::Instant::now();
+    let r = shape_distance(ra, pose_a, rb, pose_b, None)?;
+    let micros = start.elapsed().as_secs_f64() * 1e6;
+    Ok(json!({
+        "query": "distance",
+        "distance": r.distance,
+        "witness_a": [r.witness_a.x, r.witness_a.y, r.witness_a.z],
+        "witness_b": [r.witness_b.x, r.witness_b.y, r.witness_b.z],
+        "normal": [r.normal.x, r.normal.y, r.normal.z],
+        "overlapping": r.overlapping,
+        "converged": r.status == SolveStatus::Converged,
+        "method": format!("{:?}", r.method),
+        "certified_lower_bound": r.lower_bound,
+        "status": format!("{:?}", r.status),
+        "iterations": r.iterations,
+        "kkt_residual": r.kkt_residual,
+        "microseconds": micros,
+    }))
+}
+
+/// Side `side` as a shape query's operand: its primitive, or its single body.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `side` for a compound body of several nodes.
+fn shape_ref<'s>(side: &str, s: &'s Shape) -> Result<ShapeRef<'s>> {
+    match s {
+        Shape::Primitive(p) => Ok(ShapeRef::Primitive(p)),
+        Shape::Bodies(t) if t.node_count() == 1 => Ok(ShapeRef::Body(t.body(t.root()))),
+        Shape::Bodies(_) => {
+            Err(Error::invalid(side, "a primitive against a compound body is not supported yet; use a single body"))
+        }
+    }
 }
 
 /// The query between two compound bodies (branch and bound; module docs).
