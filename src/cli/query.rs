@@ -13,14 +13,15 @@
 //! [`sublevel::query::shape::shape_distance`]: the single body's fields where they apply, plus
 //! `method` (`ClosedForm` or `ActiveSet`) and `certified_lower_bound` (the
 //! separating plane's lower bound between two separated primitives, else null). A primitive
-//! against a compound body, the growth query (defined for sos-convex bodies only), `--certify`
-//! and `--gradient` are refused with an error.
+//! against a compound body, the growth query (defined for sos-convex bodies only) and `--certify`
+//! are refused with an error; the answer adds `signed_distance` (minus the penetration depth in
+//! contact) and `--gradient` prints that signed distance's pose gradients.
 
 use serde_json::json;
 use sublevel::compound::CompoundBody;
 use sublevel::math::{pose_from_parts, Isometry3};
 use sublevel::primitive::{Primitive, PrimitiveFile};
-use sublevel::query::shape::{shape_distance, ShapeRef};
+use sublevel::query::shape::{shape_distance, shape_signed_distance, ShapeRef};
 use sublevel::query::tree::{tree_collide, tree_distance, TreeQueryParams};
 use sublevel::query::{
     certified_distance, certified_growth, distance_gradient, growth_gradient, CertificateSummary, CertifyMode,
@@ -172,8 +173,7 @@ fn print(args: &QueryArgs, out: &serde_json::Value) -> Result<()> {
 /// The distance between two shapes of which at least one is a primitive (module docs).
 ///
 /// # Errors
-/// [`Error::InvalidArgument`] for the growth query (naming `kind`), `--certify` or `--gradient`
-/// with a primitive, a primitive against a compound body of several nodes (naming the compound
+/// [`Error::InvalidArgument`] for the growth query (naming `kind`), `--certify` with a primitive, a primitive against a compound body of several nodes (naming the compound
 /// side), or two halfspaces (naming `b`; [`shape_distance`]).
 fn with_primitive(
     args: &QueryArgs,
@@ -195,14 +195,12 @@ fn with_primitive(
              (`certified_lower_bound`)",
         ));
     }
-    if args.gradient {
-        return Err(Error::invalid("--gradient", "pose gradients are not available with primitive files yet"));
-    }
     let (ra, rb) = (shape_ref("a", a)?, shape_ref("b", b)?);
     let start = std::time::Instant::now();
     let r = shape_distance(ra, pose_a, rb, pose_b, None)?;
     let micros = start.elapsed().as_secs_f64() * 1e6;
-    Ok(json!({
+    let signed = shape_signed_distance(ra, pose_a, rb, pose_b, None)?;
+    let mut v = json!({
         "query": "distance",
         "distance": r.distance,
         "witness_a": [r.witness_a.x, r.witness_a.y, r.witness_a.z],
@@ -216,7 +214,16 @@ fn with_primitive(
         "iterations": r.iterations,
         "kkt_residual": r.kkt_residual,
         "microseconds": micros,
-    }))
+        "signed_distance": signed.value,
+        "signed_distance_converged": signed.converged,
+    });
+    if args.gradient {
+        // The signed distance's gradients: the distance's apart, continuous through contact.
+        let (ga, gb) = signed.gradient();
+        v["gradient_a"] = gradient_json(&ga);
+        v["gradient_b"] = gradient_json(&gb);
+    }
+    Ok(v)
 }
 
 /// Side `side` as a shape query's operand: its primitive, or its single body.

@@ -206,8 +206,6 @@ fn what_the_primitive_path_does_not_answer_is_refused() {
     assert!(stderr.contains("sos-convex bodies only"), "{stderr}");
     let stderr = fails(&["query", "distance", &cube, body, "--certify"]);
     assert!(stderr.contains("`--certify`"), "{stderr}");
-    let stderr = fails(&["query", "distance", body, &cube, "--gradient"]);
-    assert!(stderr.contains("`--gradient`"), "{stderr}");
     let stderr = fails(&["query", "distance", &floor, &floor]);
     assert!(stderr.contains("two halfspaces"), "{stderr}");
 
@@ -216,4 +214,23 @@ fn what_the_primitive_path_does_not_answer_is_refused() {
     std::fs::write(&bad, r#"{"primitive": "box", "size": [1, -2, 3]}"#).unwrap();
     let stderr = fails(&["query", "distance", &cube, bad.to_str().unwrap()]);
     assert!(stderr.contains("`b.size[1]`"), "{stderr}");
+}
+
+/// Inside contact the answer's signed distance is minus the penetration depth (a sphere half sunk
+/// into a box: closed form), and `--gradient` prints its pose gradients: the normal along the
+/// translations.
+#[test]
+fn query_reports_the_signed_distance_and_its_gradient() {
+    let dir = tempfile::tempdir().unwrap();
+    let cube = primitive(dir.path(), "cube", &["box", "2", "2", "2"]);
+    let ball = primitive(dir.path(), "ball", &["sphere", "0.5"]);
+    // The ball's center 0.2 m inside the cube's +x face: depth 0.7 along +x.
+    let v = distance(&cube, &ball, &["--pose-b", "1,0,0,0,0.8,0.1,0", "--gradient"]);
+    assert!(v["overlapping"].as_bool().unwrap());
+    assert!((f(&v["signed_distance"]) + 0.7).abs() < 1e-12, "{v}");
+    assert!(v["signed_distance_converged"].as_bool().unwrap());
+    let lin_b = point(&v["gradient_b"]["linear"]);
+    assert!((lin_b[0] - 1.0).abs() < 1e-12 && lin_b[1].abs() < 1e-12 && lin_b[2].abs() < 1e-12, "{v}");
+    let lin_a = point(&v["gradient_a"]["linear"]);
+    assert!((lin_a[0] + 1.0).abs() < 1e-12, "{v}");
 }
