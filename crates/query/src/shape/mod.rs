@@ -22,13 +22,18 @@
 //!
 //! Two halfspaces have no finite distance in general and are refused; a halfspace against any
 //! bounded shape has one.
+//!
+//! The growth measure of a primitive (its gauge about its center in place of the body's p₁, the
+//! growth distance of Ong and Gilbert) is [`shape_growth`].
 
 mod active_set;
 mod closed_form;
+mod growth;
 #[cfg(test)]
 mod tests;
 
 pub use active_set::{ActiveSetState, Fix};
+pub use growth::{shape_growth, ShapeGrowth};
 
 use crate::gradient::{witness_gradient, PoseGradient};
 use crate::newton::{NewtonParams, SolveStatus};
