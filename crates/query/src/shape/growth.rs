@@ -21,7 +21,7 @@
 
 use super::{shape_distance, ShapeRef};
 use crate::{Error, Result};
-use sublevel_core::math::{Isometry3, Point3, Real, Vector3};
+use sublevel_core::math::{Isometry3, Point3, Real};
 use sublevel_core::primitive::Primitive;
 
 /// Answer of [`shape_growth`].
@@ -103,7 +103,7 @@ pub fn shape_growth(a: &Primitive, pose_a: &Isometry3, b: ShapeRef<'_>, pose_b: 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use sublevel_core::math::UnitQuaternion;
+    use sublevel_core::math::{UnitQuaternion, Vector3};
     use sublevel_core::primitive::PrimitiveFile;
 
     fn prim(file: PrimitiveFile) -> Primitive {
