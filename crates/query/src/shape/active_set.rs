@@ -198,18 +198,24 @@ impl<'a> Side<'a> {
                 let mut v = Vector3::new(u[0], u[1], u[2]);
                 // Newton corrections along ∇p: enough after a short step.
                 let mut done = false;
-                for _ in 0..3 {
-                    let (value, g) = p.value_gradient(&v);
+                let (mut value, mut g) = p.value_gradient(&v);
+                for _ in 0..6 {
                     let g2 = g.norm_squared();
-                    if (value - 1.0).abs() <= 1e-15 {
+                    if (value - 1.0).abs() <= 1e-14 {
                         done = true;
                         break;
                     }
-                    if g2 <= 0.0 || (value - 1.0).abs() > 1e-3 {
+                    if g2 <= 0.0 || (value - 1.0).abs() > 0.5 {
                         break;
                     }
                     v -= g * ((value - 1.0) / g2);
-                    done = (p.value(&v) - 1.0).abs() <= 1e-14;
+                    if (value - 1.0).abs() <= 1e-8 {
+                        // Newton's projection converges quadratically: from 10⁻⁸ one step
+                        // leaves p − 1 at rounding level.
+                        done = true;
+                        break;
+                    }
+                    (value, g) = p.value_gradient(&v);
                 }
                 if !done {
                     // Far off: the boundary point on the ray from the interior point through v.
@@ -266,8 +272,9 @@ impl<'a> Side<'a> {
     }
 
     /// The core's parameters nearest to the working-frame point `target` for primitives (exact
-    /// projection), or the body's boundary point towards `target` along the ray from its interior
-    /// point; with the working set they lie on.
+    /// projection), or the body's support point along the direction from its interior point to
+    /// `target` (its support table's, the closest point of a far target); with the working set
+    /// they lie on.
     pub fn start_towards(&self, target: &Vector3) -> ([Real; 3], [Fix; 3], bool) {
         let local = |m: &Matrix3| m.transpose() * (target - self.origin);
         let mut u = [0.0; 3];
@@ -314,8 +321,12 @@ impl<'a> Side<'a> {
                 if dir.norm_squared() == 0.0 || b.fast_polynomial().value(&l) <= 1.0 {
                     return ([l.x, l.y, l.z], fix, false);
                 }
-                let dir = dir.normalize();
-                let v = inside + dir * b.radial_table().radius(&dir);
+                // The support point along the direction to the target: the closest boundary
+                // point of a far target (the radial point where the table has none).
+                let v = b.support_table().support(&dir).unwrap_or_else(|| {
+                    let dir = dir.normalize();
+                    inside + dir * b.radial_table().radius(&dir)
+                });
                 ([v.x, v.y, v.z], fix, true)
             }
         }
@@ -351,6 +362,7 @@ pub(crate) struct Outcome {
 /// false when singular.
 #[inline(always)]
 fn solve_dense(n: usize, m: &mut [[Real; MAX_KKT]; MAX_KKT], rhs: &mut [Real; MAX_KKT]) -> bool {
+    let mut inverse = [0.0; MAX_KKT];
     for k in 0..n {
         let mut p = k;
         for i in k + 1..n {
@@ -364,6 +376,7 @@ fn solve_dense(n: usize, m: &mut [[Real; MAX_KKT]; MAX_KKT], rhs: &mut [Real; MA
         m.swap(k, p);
         rhs.swap(k, p);
         let inv = 1.0 / m[k][k];
+        inverse[k] = inv;
         for i in k + 1..n {
             let f = m[i][k] * inv;
             if f != 0.0 {
@@ -379,7 +392,7 @@ fn solve_dense(n: usize, m: &mut [[Real; MAX_KKT]; MAX_KKT], rhs: &mut [Real; MA
         for j in k + 1..n {
             s -= m[k][j] * rhs[j];
         }
-        rhs[k] = s / m[k][k];
+        rhs[k] = s * inverse[k];
     }
     true
 }

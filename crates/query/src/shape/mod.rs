@@ -334,10 +334,9 @@ fn cold_state(a: &Side, b: &Side) -> ActiveSetState {
 fn alternating_state(a: &Side, b: &Side, from: &Vector3) -> ActiveSetState {
     let mut state = ActiveSetState::default();
     let (na, nb) = (a.dim, b.dim);
-    let (mut ub, _, _) = b.start_towards(from);
+    let (ub, _, _) = b.start_towards(from);
     let (ua, fa, sa) = a.start_towards(&b.point(&ub[..nb]));
-    let (ub2, fb, sb) = b.start_towards(&a.point(&ua[..na]));
-    ub = ub2;
+    let (ub, fb, sb) = b.start_towards(&a.point(&ua[..na]));
     state.u[..na].copy_from_slice(&ua[..na]);
     state.fix[..na].copy_from_slice(&fa[..na]);
     state.u[na..na + nb].copy_from_slice(&ub[..nb]);
