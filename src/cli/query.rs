@@ -21,7 +21,7 @@ use serde_json::json;
 use sublevel::compound::CompoundBody;
 use sublevel::math::{pose_from_parts, Isometry3};
 use sublevel::primitive::{Primitive, PrimitiveFile};
-use sublevel::query::shape::{shape_distance, shape_signed_distance, ShapeRef};
+use sublevel::query::shape::{separating_plane_bound, shape_distance, shape_signed_distance, ShapeRef};
 use sublevel::query::tree::{tree_collide, tree_distance, TreeQueryParams};
 use sublevel::query::{
     certified_distance, certified_growth, distance_gradient, growth_gradient, CertificateSummary, CertifyMode,
@@ -200,6 +200,12 @@ fn with_primitive(
     let r = shape_distance(ra, pose_a, rb, pose_b, None)?;
     let micros = start.elapsed().as_secs_f64() * 1e6;
     let signed = shape_signed_distance(ra, pose_a, rb, pose_b, None)?;
+    // A body's side: the separating plane through its support point certifies the distance too.
+    let certified = match r.lower_bound {
+        Some(bound) => Some(bound),
+        None if !r.overlapping => separating_plane_bound(ra, pose_a, rb, pose_b, &r.normal).ok(),
+        None => None,
+    };
     let mut v = json!({
         "query": "distance",
         "distance": r.distance,
@@ -209,7 +215,7 @@ fn with_primitive(
         "overlapping": r.overlapping,
         "converged": r.status == SolveStatus::Converged,
         "method": format!("{:?}", r.method),
-        "certified_lower_bound": r.lower_bound,
+        "certified_lower_bound": certified,
         "status": format!("{:?}", r.status),
         "iterations": r.iterations,
         "kkt_residual": r.kkt_residual,

@@ -251,6 +251,29 @@ pub fn shape_signed_distance(
     })
 }
 
+/// The separating-plane lower bound of the distance between two posed shapes along the unit
+/// world direction `normal` (from A towards B): `min_{y∈B} n·y − max_{x∈A} n·x`, from the shapes'
+/// support functions (closed forms for primitives, the support-point solve for a body). A lower
+/// bound of the distance for every `normal` (negative when the plane does not separate them),
+/// equal to it along the optimum's normal (strong duality): the certificate of an answer with a
+/// body, whose [`ShapeDistance::lower_bound`] is `None` because a body's support point costs
+/// about as much as the distance itself.
+///
+/// # Errors
+/// [`Error::Numerical`] for a halfspace not facing `normal` (unbounded support) or a body whose
+/// support point fails (nonconvex).
+pub fn separating_plane_bound(
+    a: ShapeRef<'_>,
+    pose_a: &Isometry3,
+    b: ShapeRef<'_>,
+    pose_b: &Isometry3,
+    normal: &Vector3,
+) -> Result<Real> {
+    let top_a = normal.dot(&shape_support_point(a, pose_a, normal)?.coords);
+    let bottom_b = normal.dot(&shape_support_point(b, pose_b, &-normal)?.coords);
+    Ok(bottom_b - top_a)
+}
+
 /// Distance between shape `a` posed by `pose_a` and shape `b` posed by `pose_b` (module docs).
 ///
 /// `warm` is the `warm_start` of a previous answer for the same ordered pair. Never panics; the

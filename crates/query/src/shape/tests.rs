@@ -120,7 +120,6 @@ fn a_ball_body_matches_the_sphere_closed_form() {
 /// certifies the distance (the body's support value from its own support-point solve).
 #[test]
 fn bodies_against_primitives_are_certified_by_the_separating_plane() {
-    use crate::penetration::support_point;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
     let mut worst: Real = 0.0;
     let mut iterations = 0;
@@ -143,10 +142,9 @@ fn bodies_against_primitives_are_certified_by_the_separating_plane() {
                     continue;
                 }
                 assert!((on_body - 1.0).abs() <= 1e-10, "{name} p = {on_body}");
-                let n = r.normal;
-                let h_body = n.dot(&support_point(&body, &pa, &n).unwrap().coords);
-                let h_other = (-n).dot(&pb.translation.vector) + other.support_value(&(pb.rotation.inverse() * -n));
-                let lower = -h_other - h_body;
+                let lower =
+                    separating_plane_bound(ShapeRef::Body(&body), &pa, ShapeRef::Primitive(&other), &pb, &r.normal)
+                        .unwrap();
                 worst = worst.max(r.distance - lower);
                 assert!(r.distance - lower <= 1e-9 && lower <= r.distance + 1e-9, "{name}: {} vs {lower}", r.distance);
             }
