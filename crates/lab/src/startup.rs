@@ -216,7 +216,12 @@ fn write_store(args: &StartupArgs, dir: &Path) -> Result<(usize, usize, usize, u
         let rec = if k % every == every - 1 {
             let file = compounds[compound % compounds.len()].clone();
             compound += 1;
-            BodyRecord { name: format!("compound-{k}"), body: file.nodes[file.root].body.clone(), compound: Some(file) }
+            BodyRecord {
+                name: format!("compound-{k}"),
+                body: file.nodes[file.root].body.clone(),
+                compound: Some(file),
+                primitive: None,
+            }
         } else {
             BodyRecord::single(&format!("body-{k}"), singles[k % singles.len()].clone())
         };

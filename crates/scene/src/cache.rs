@@ -9,10 +9,12 @@
 //! A pair involving a compound body keeps a [`TreeWarmStart`] instead (one solver
 //! state per node pair of the two trees), under the same key: a pair is either compound or not
 //! for the lifetime of its instances, so the distance (growth) kind copies, merges and drops both
-//! tables together.
+//! tables together. A pair with an exact primitive keeps its [`ShapeWarmStart`] (the active-set
+//! method's parameters, working set and multipliers) under the distance kind the same way.
 
 use std::collections::HashMap;
 use std::sync::Arc;
+use sublevel_query::shape::ShapeWarmStart;
 use sublevel_query::tree::TreeWarmStart;
 use sublevel_query::{DistanceWarmStart, GrowthWarmStart};
 
@@ -56,6 +58,9 @@ pub struct WarmStartCache {
     tree_distance: PairMap<Arc<TreeWarmStart>>,
     /// Tree queries of pairs with a compound body: growth (overlap by d(p₁‖p₂)).
     tree_growth: PairMap<Arc<TreeWarmStart>>,
+    /// Pairs with an exact primitive: distance and collide-with-margin (a few hundred bytes,
+    /// copied rather than shared).
+    shape: PairMap<ShapeWarmStart>,
 }
 
 fn get<'a, W>(map: &'a PairMap<W>, a: &str, b: &str) -> Option<&'a W> {
@@ -128,12 +133,23 @@ impl WarmStartCache {
         put(&mut self.tree_growth, p1, p2, warm);
     }
 
+    /// The stored warm start of the ordered pair (a, b) with an exact primitive, if any.
+    pub fn shape(&self, a: &str, b: &str) -> Option<&ShapeWarmStart> {
+        get(&self.shape, a, b)
+    }
+
+    /// Stores the warm start of (a, b) with an exact primitive, replacing the previous one.
+    pub fn put_shape(&mut self, a: &str, b: &str, warm: ShapeWarmStart) {
+        put(&mut self.shape, a, b, warm);
+    }
+
     /// Whether a warm start is stored for `key`.
     pub fn contains(&self, key: &PairKey) -> bool {
         match key.kind {
             WarmKind::Distance => {
                 get(&self.distance, &key.first, &key.second).is_some()
                     || get(&self.tree_distance, &key.first, &key.second).is_some()
+                    || get(&self.shape, &key.first, &key.second).is_some()
             }
             WarmKind::Growth => {
                 get(&self.growth, &key.first, &key.second).is_some()
@@ -154,6 +170,7 @@ impl WarmStartCache {
             WarmKind::Distance => {
                 copy(&self.distance, &mut into.distance, a, b);
                 copy(&self.tree_distance, &mut into.tree_distance, a, b);
+                copy(&self.shape, &mut into.shape, a, b);
             }
             WarmKind::Growth => {
                 copy(&self.growth, &mut into.growth, a, b);
@@ -181,6 +198,7 @@ impl WarmStartCache {
         merge_map(&mut self.growth, other.growth, &keep);
         merge_map(&mut self.tree_distance, other.tree_distance, &keep);
         merge_map(&mut self.tree_growth, other.tree_growth, &keep);
+        merge_map(&mut self.shape, other.shape, &keep);
     }
 
     /// Drops every warm start involving `instance_id` (on either side, both kinds).
@@ -189,11 +207,16 @@ impl WarmStartCache {
         drop_instance(&mut self.growth, instance_id);
         drop_instance(&mut self.tree_distance, instance_id);
         drop_instance(&mut self.tree_growth, instance_id);
+        drop_instance(&mut self.shape, instance_id);
     }
 
     /// Number of stored warm starts (both kinds).
     pub fn len(&self) -> usize {
-        count(&self.distance) + count(&self.growth) + count(&self.tree_distance) + count(&self.tree_growth)
+        count(&self.distance)
+            + count(&self.growth)
+            + count(&self.tree_distance)
+            + count(&self.tree_growth)
+            + count(&self.shape)
     }
 
     /// True when nothing is stored.

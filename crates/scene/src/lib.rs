@@ -53,13 +53,14 @@ pub use answer::{
     PRECISION_LIMIT,
 };
 pub use catalog::{
-    BodyEntry, BodyFacts, BuiltBody, Catalog, InstanceView, PosedInstance, SceneView, WarmUp, MAX_JOB_RECORDS,
-    MAX_NAME_BYTES,
+    bounding_body, BodyEntry, BodyFacts, BuiltBody, Catalog, InstanceView, PosedInstance, SceneView, WarmUp,
+    MAX_JOB_RECORDS, MAX_NAME_BYTES,
 };
 
 use serde::{Deserialize, Serialize};
 use sublevel_core::body::BodyFile;
 use sublevel_core::math::{pose_from_parts, pose_to_parts, Isometry3, Real};
+use sublevel_core::primitive::{Primitive, PrimitiveFile};
 
 /// A pose as stored: unit quaternion `[w, x, y, z]` and translation `[tx, ty, tz]` in meters.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -87,28 +88,65 @@ impl StoredPose {
 }
 
 /// A body as stored: its name and its JSON body file, plus the whole containment tree for a
-/// compound body.
+/// compound body, or the exact primitive it stands for.
 ///
-/// Record forms (JSON): `{name, body}` is a single body; `{name, body, compound}` is a compound body,
-/// `body` then holding its root node's body (so a reader that ignores `compound` still sees a
-/// body containing the whole model) and `compound` the compound file
-/// ([`sublevel_core::compound::CompoundFile`], format `sublevel.compound.v1`) with every node.
+/// Record forms (JSON):
+///
+/// - `{name, body}` is a single body;
+/// - `{name, body, compound}` is a compound body, `body` then holding its root node's body (so a
+///   reader that ignores `compound` still sees a body containing the whole model) and `compound`
+///   the compound file ([`sublevel_core::compound::CompoundFile`], format `sublevel.compound.v1`)
+///   with every node;
+/// - `{name, body, primitive}` is an exact primitive ([`PrimitiveFile`]: box, sphere, cylinder,
+///   capsule, halfspace). `body` holds the primitive's bounding ellipsoid, a degree-2 body that
+///   contains it, for readers that ignore `primitive` (their distances are then lower bounds of
+///   the primitive's, their collisions a superset); for a halfspace, which no body contains, it is
+///   a body of scale 0 that such a reader refuses to build (it quarantines the record rather than
+///   answer for a wrong body). This reader builds the primitive and ignores `body`.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct BodyRecord {
     /// Human-readable name (not necessarily unique).
     pub name: String,
     /// The body file (degree, exponents, coefficients, center, scale, fit report); for a compound
-    /// body, its root node's.
+    /// body, its root node's; for a primitive, its bounding ellipsoid (see above).
     pub body: BodyFile,
     /// The compound file of a compound body (with more than one node); absent for a single body.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub compound: Option<sublevel_core::compound::CompoundFile>,
+    /// The exact primitive the record stands for; absent for a fitted body.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub primitive: Option<PrimitiveFile>,
 }
 
 impl BodyRecord {
     /// The record of a single body.
     pub fn single(name: &str, body: BodyFile) -> Self {
-        Self { name: name.to_owned(), body, compound: None }
+        Self { name: name.to_owned(), body, compound: None, primitive: None }
+    }
+
+    /// The record of an exact primitive, with its bounding ellipsoid as `body` (see
+    /// [`BodyRecord`]).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `primitive` when the bounding ellipsoid does not build (a
+    /// primitive smaller than the smallest body scale, 1 µm).
+    pub fn primitive(name: &str, primitive: &Primitive) -> Result<Self> {
+        let body = match catalog::bounding_body(primitive)? {
+            Some(b) => b.to_file(),
+            None => BodyFile {
+                degree: 2,
+                exponents: Vec::new(),
+                coefficients: Vec::new(),
+                center: [0.0; 3],
+                scale: 0.0,
+                report: sublevel_core::body::FitReport {
+                    method: "primitive".into(),
+                    notes: vec!["a halfspace: no bounded body contains it; see `primitive`".into()],
+                    ..Default::default()
+                },
+            },
+        };
+        Ok(Self { name: name.to_owned(), body, compound: None, primitive: Some(primitive.to_file()) })
     }
 }
 

@@ -4,6 +4,7 @@
 //! types.rs     what a query asks and what it answers (kinds, options, pairs, replies)
 //! mod.rs       answer_pair: the path sublevel_query::dispatch picks, run with the pair's warm start
 //! compound.rs  pairs with a compound body: the tree queries and their warm starts
+//! primitive.rs pairs with an exact primitive: shape_distance, its warm starts and certificates
 //! ```
 //!
 //! The decision of how a pair is answered (compound trees, cheap collide bounds, the batch
@@ -12,6 +13,7 @@
 //! the replies' extras (gradients, penetration, input precision).
 
 mod compound;
+mod primitive;
 mod types;
 
 pub(crate) use types::warm_kind;
@@ -25,6 +27,7 @@ use std::sync::Arc;
 use sublevel_core::body::Body;
 use sublevel_core::compound::CompoundBody;
 use sublevel_core::math::Isometry3;
+use sublevel_core::primitive::Primitive;
 use sublevel_query::dispatch::{self, Ahead, CheapCollide, CollideRoute, LaneAnswers, PosedRef};
 use sublevel_query::{
     certified_distance, certified_growth, certify_newton_distance, distance_gradient, growth_gradient, AnswerSource,
@@ -39,6 +42,10 @@ pub struct Posed {
     /// A compound body's containment tree (`None` for a single body): queries involving it run
     /// the tree queries ([`sublevel_query::tree`]).
     pub tree: Option<Arc<CompoundBody>>,
+    /// The exact primitive the instance is (`body` is then its bounding ellipsoid, or a stand-in
+    /// for a halfspace): queries involving it run [`sublevel_query::shape`]. `None` for a fitted
+    /// body.
+    pub primitive: Option<Primitive>,
     /// The pose in this view (body frame → world).
     pub pose: Isometry3,
 }
@@ -48,7 +55,33 @@ impl Posed {
     /// touched.
     #[inline]
     pub(crate) fn borrowed(&self) -> PosedRef<'_> {
-        PosedRef { body: &self.body, tree: self.tree.as_deref(), pose: self.pose }
+        PosedRef { body: &self.body, tree: self.tree.as_deref(), primitive: self.primitive.as_ref(), pose: self.pose }
+    }
+}
+
+/// Why query `pair` between `a` and `b` cannot be answered (a growth query with a primitive, a
+/// distance or collide query between two halfspaces), as [`Error::InvalidArgument`] naming
+/// `field(second)` — the request's field of the first (`false`) or second (`true`) instance;
+/// `Ok` for every other pair. Asked of every query before any is solved.
+pub(crate) fn check_pair(
+    pair: &PairRef<'_>,
+    a: &Posed,
+    b: &Posed,
+    field: impl FnOnce(bool) -> String,
+) -> crate::Result<()> {
+    if a.primitive.is_none() && b.primitive.is_none() {
+        return Ok(());
+    }
+    match dispatch::refusal(pair.kind, &a.borrowed(), &b.borrowed()) {
+        None => Ok(()),
+        Some((side, reason)) => {
+            let (second, id) = match side {
+                dispatch::PairSide::First => (false, pair.first),
+                dispatch::PairSide::Second => (true, pair.second),
+            };
+            let id = sublevel_core::error::clip(id);
+            Err(crate::Error::invalid(field(second), format!("instance `{id}` {reason}")))
+        }
     }
 }
 
@@ -90,6 +123,15 @@ pub fn answer_pair_with(
     ahead: Ahead,
 ) -> QueryAnswer {
     let (ra, rb) = (a.borrowed(), b.borrowed());
+    if dispatch::is_primitive_pair(&ra, &rb) {
+        return match pair.kind {
+            QueryKind::Distance => QueryAnswer::Distance(primitive::distance_reply(pair, &ra, &rb, cache)),
+            QueryKind::Collide => QueryAnswer::Collide(primitive::collide_reply(pair, &ra, &rb, cache)),
+            // Refused before any query is solved (`check_pair`); should one come here anyway, it is
+            // answered as the tree queries answer what they refuse: an unconverged lower bound.
+            QueryKind::Growth => QueryAnswer::Growth(unanswered_growth(a, b)),
+        };
+    }
     if dispatch::is_compound_pair(&ra, &rb) {
         return match pair.kind {
             QueryKind::Distance => QueryAnswer::Distance(compound::distance_reply(pair, &ra, &rb, cache, params)),
@@ -174,7 +216,9 @@ pub(crate) fn any_distance_reply(
     newton: Option<DistanceResult>,
 ) -> DistanceReply {
     let (ra, rb) = (a.borrowed(), b.borrowed());
-    if dispatch::is_compound_pair(&ra, &rb) {
+    if dispatch::is_primitive_pair(&ra, &rb) {
+        primitive::distance_reply(pair, &ra, &rb, cache)
+    } else if dispatch::is_compound_pair(&ra, &rb) {
         compound::distance_reply(pair, &ra, &rb, cache, params)
     } else {
         distance_reply(pair, a, b, cache, params, newton)
@@ -200,4 +244,34 @@ fn growth_reply(
         cache.put_growth(pair.first, pair.second, r.result.warm_start.clone());
     }
     GrowthReply { answer: r, gradients, precision_limited, tree: None }
+}
+
+/// The growth reply of a pair the growth measure is not defined for (a primitive side): an
+/// unconverged lower bound 0, with no minimizer.
+fn unanswered_growth(a: &Posed, b: &Posed) -> GrowthReply {
+    let result = sublevel_query::GrowthResult {
+        value: 0.0,
+        minimizer: sublevel_core::math::Point3::new(f64::NAN, f64::NAN, f64::NAN),
+        multiplier: 0.0,
+        status: sublevel_query::SolveStatus::Stalled,
+        iterations: 0,
+        kkt_residual: f64::NAN,
+        warm_started: false,
+        warm_start: Arc::default(),
+    };
+    let answer = sublevel_query::CertifiedGrowth {
+        result,
+        source: AnswerSource::Newton,
+        certificate: None,
+        lower_bound: true,
+        tight: false,
+        converged: false,
+        needs_sdp: false,
+    };
+    GrowthReply {
+        answer,
+        gradients: None,
+        precision_limited: precision_limited(&a.body, &a.pose, &b.body, &b.pose),
+        tree: None,
+    }
 }

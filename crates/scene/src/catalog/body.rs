@@ -25,16 +25,91 @@ use std::sync::{Arc, Mutex, OnceLock};
 use sublevel_core::body::{Body, BodyFile};
 use sublevel_core::compound::CompoundBody;
 use sublevel_core::math::Real;
+use sublevel_core::primitive::{Primitive, PrimitiveFile};
 
 /// A built body: what queries read.
 #[derive(Clone, Debug)]
 pub struct BuiltBody {
     /// The validated body; for a compound body its root node's body (which contains every other
-    /// node's body, paper §V), so bounding boxes, spheres and grouping see the whole model.
+    /// node's body, paper §V), so bounding boxes, spheres and grouping see the whole model. For a
+    /// primitive its bounding ellipsoid ([`bounding_body`]; grouping contains that), and for a
+    /// halfspace, which no body contains, a unit ball that no query reads (see
+    /// [`sublevel_query::dispatch::PosedRef::body`]).
     pub body: Arc<Body>,
     /// The containment tree of a compound body; `None` for a single body, which stays on the
     /// single-body query path.
     pub tree: Option<Arc<CompoundBody>>,
+    /// The exact primitive this body stands for; its queries take the primitive path
+    /// ([`sublevel_query::dispatch::primitive_pair_distance`]). `None` for a fitted body.
+    pub primitive: Option<Primitive>,
+}
+
+impl BuiltBody {
+    /// A built primitive: the primitive with its bounding ellipsoid (a unit-ball stand-in for a
+    /// halfspace).
+    ///
+    /// # Errors
+    /// As [`bounding_body`].
+    pub fn of_primitive(primitive: Primitive) -> Result<Self> {
+        let body = match bounding_body(&primitive)? {
+            Some(b) => b,
+            None => sublevel_core::body::ellipsoid([0.0; 3], [1.0; 3])?,
+        };
+        Ok(Self { body: Arc::new(body), tree: None, primitive: Some(primitive) })
+    }
+}
+
+/// The degree-2 body that contains a bounded primitive (own frame; `None` for a halfspace): the
+/// smallest axis-aligned ellipsoid about the origin holding a box (semi-axes √3·h), a cylinder
+/// (√(3/2)·r, √(3/2)·r, √3·h) or a capsule's enclosing cylinder (height + 2r), and the sphere
+/// itself. Grouping jobs contain it; broad phases use the primitive's own bounds.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `primitive` when the primitive is smaller than the smallest
+/// body scale (1 µm), or so flat that its ellipsoid does not build (it then falls back to the
+/// bounding sphere first).
+pub fn bounding_body(primitive: &Primitive) -> Result<Option<Body>> {
+    const S3: Real = 1.732_050_807_568_877_2;
+    const S32: Real = 1.224_744_871_391_589;
+    let radii = match *primitive {
+        Primitive::Box { half_extents: h } => [S3 * h.x, S3 * h.y, S3 * h.z],
+        Primitive::Sphere { radius } => [radius; 3],
+        Primitive::Cylinder { radius, half_height } => [S32 * radius, S32 * radius, S3 * half_height],
+        Primitive::Capsule { radius, half_height } => [S32 * radius, S32 * radius, S3 * (half_height + radius)],
+        Primitive::Halfspace { .. } => return Ok(None),
+    };
+    let refused = |e: Error| Error::invalid("primitive", format!("its bounding ellipsoid does not build: {e}"));
+    let body = sublevel_core::body::ellipsoid([0.0; 3], radii)
+        .or_else(|_| sublevel_core::body::ellipsoid([0.0; 3], [primitive.bounding_radius(); 3]))
+        .map_err(refused)?;
+    let mut body = body;
+    body.report.method = "primitive_bound".into();
+    body.report.notes =
+        vec![format!("the bounding ellipsoid of a {}; the record's `primitive` is exact", primitive.kind())];
+    Ok(Some(body))
+}
+
+/// A primitive's volume in cubic meters (+∞ for a halfspace).
+pub(crate) fn primitive_volume(p: &PrimitiveFile) -> Real {
+    use std::f64::consts::PI;
+    match *p {
+        PrimitiveFile::Box { size } => size.iter().product(),
+        PrimitiveFile::Sphere { radius } => 4.0 / 3.0 * PI * radius.powi(3),
+        PrimitiveFile::Cylinder { radius, height } => PI * radius * radius * height,
+        PrimitiveFile::Capsule { radius, height } => PI * radius * radius * height + 4.0 / 3.0 * PI * radius.powi(3),
+        PrimitiveFile::Halfspace { .. } => Real::INFINITY,
+    }
+}
+
+/// A primitive file's kind (`box`, `sphere`, `cylinder`, `capsule`, `halfspace`).
+pub(crate) fn primitive_kind(p: &PrimitiveFile) -> &'static str {
+    match p {
+        PrimitiveFile::Box { .. } => "box",
+        PrimitiveFile::Sphere { .. } => "sphere",
+        PrimitiveFile::Cylinder { .. } => "cylinder",
+        PrimitiveFile::Capsule { .. } => "capsule",
+        PrimitiveFile::Halfspace { .. } => "halfspace",
+    }
 }
 
 /// What is known of a body without building it: read from its record (or from the body itself
@@ -54,6 +129,10 @@ pub struct BodyFacts {
     pub nodes: usize,
     /// Whether it is a compound body (its queries run the tree queries).
     pub compound: bool,
+    /// The kind of an exact primitive (`box`, `sphere`, `cylinder`, `capsule`, `halfspace`);
+    /// `None` for a fitted body. A primitive has degree 0 (no polynomial), method `primitive` and
+    /// its exact volume (+∞ for a halfspace).
+    pub primitive: Option<&'static str>,
 }
 
 impl BodyFacts {
@@ -65,10 +144,26 @@ impl BodyFacts {
             nonconvex,
             nodes,
             compound,
+            primitive: None,
+        }
+    }
+
+    fn of_primitive(p: &PrimitiveFile) -> Self {
+        Self {
+            degree: 0,
+            method: "primitive".into(),
+            volume: primitive_volume(p),
+            nonconvex: false,
+            nodes: 1,
+            compound: false,
+            primitive: Some(primitive_kind(p)),
         }
     }
 
     fn of_record(rec: &BodyRecord) -> Self {
+        if let Some(p) = &rec.primitive {
+            return Self::of_primitive(p);
+        }
         match &rec.compound {
             None => Self::of_file(&rec.body, rec.body.report.nonconvex, 1, false),
             Some(file) => {
@@ -80,6 +175,9 @@ impl BodyFacts {
     }
 
     fn of_built(b: &BuiltBody) -> Self {
+        if let Some(p) = &b.primitive {
+            return Self::of_primitive(&p.to_file());
+        }
         let nonconvex = b.body.report.nonconvex
             || b.tree.as_ref().is_some_and(|t| t.nodes().iter().any(|n| n.body.report.nonconvex));
         Self {
@@ -89,6 +187,7 @@ impl BodyFacts {
             nonconvex,
             nodes: b.tree.as_ref().map_or(1, |t| t.node_count()),
             compound: b.tree.is_some(),
+            primitive: None,
         }
     }
 }
@@ -272,17 +371,21 @@ impl Drop for BodyEntry {
     }
 }
 
-/// Validates and builds a stored record: a single body, or a compound body when the record holds
-/// a compound file (see [`BodyRecord`]).
+/// Validates and builds a stored record: a single body, a compound body when the record holds a
+/// compound file, a primitive when it holds one (see [`BodyRecord`]).
 ///
 /// # Errors
 /// The validation errors of [`Body::from_file`] / [`CompoundBody::from_file`], naming the field.
 fn build_record(rec: BodyRecord) -> Result<BuiltBody> {
+    if let Some(file) = &rec.primitive {
+        // The record's `body` is for readers that ignore `primitive`: the bounds are rebuilt.
+        return BuiltBody::of_primitive(Primitive::from_file(file)?);
+    }
     Ok(match rec.compound {
-        None => BuiltBody { body: Arc::new(Body::from_file(rec.body)?), tree: None },
+        None => BuiltBody { body: Arc::new(Body::from_file(rec.body)?), tree: None, primitive: None },
         Some(file) => {
             let tree = CompoundBody::from_file(file)?;
-            BuiltBody { body: Arc::new(tree.body(tree.root()).clone()), tree: Some(Arc::new(tree)) }
+            BuiltBody { body: Arc::new(tree.body(tree.root()).clone()), tree: Some(Arc::new(tree)), primitive: None }
         }
     })
 }

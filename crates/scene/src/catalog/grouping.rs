@@ -20,6 +20,9 @@ pub struct PosedInstance {
     pub body: Arc<Body>,
     /// A compound body's containment tree (`None` for a single body).
     pub tree: Option<Arc<sublevel_core::compound::CompoundBody>>,
+    /// The exact primitive the body stands for (`body` is then its bounding ellipsoid, a stand-in
+    /// for a halfspace); `None` for a fitted body.
+    pub primitive: Option<sublevel_core::primitive::Primitive>,
     /// Its pose (body frame → world).
     pub pose: Isometry3,
 }
@@ -61,6 +64,7 @@ impl Catalog {
                     body_id: entry.id.clone(),
                     body: built.body.clone(),
                     tree: built.tree.clone(),
+                    primitive: built.primitive,
                     pose,
                 })
             })

@@ -9,11 +9,13 @@
 
 mod body;
 mod grouping;
+#[cfg(all(test, feature = "store"))]
+mod primitive_tests;
 mod query;
 #[cfg(all(test, feature = "store"))]
 mod tests;
 
-pub use body::{BodyEntry, BodyFacts, BuiltBody, WarmUp};
+pub use body::{bounding_body, BodyEntry, BodyFacts, BuiltBody, WarmUp};
 pub use grouping::PosedInstance;
 
 use super::cache::WarmStartCache;
@@ -267,7 +269,7 @@ impl Catalog {
         check_name("name", name)?;
         let id = new_id("b");
         self.store.put_body(&id, &BodyRecord::single(name, body.to_file()))?;
-        let entry = BodyEntry::of_built(&id, name, BuiltBody { body: Arc::new(body), tree: None });
+        let entry = BodyEntry::of_built(&id, name, BuiltBody { body: Arc::new(body), tree: None, primitive: None });
         write(&self.bodies).insert(id.clone(), Arc::new(entry));
         Ok(id)
     }
@@ -286,9 +288,31 @@ impl Catalog {
         check_name("name", name)?;
         let id = new_id("b");
         let root = tree.body(tree.root()).clone();
-        let rec = BodyRecord { name: name.to_owned(), body: root.to_file(), compound: Some(tree.to_file()) };
+        let rec =
+            BodyRecord { name: name.to_owned(), body: root.to_file(), compound: Some(tree.to_file()), primitive: None };
         self.store.put_body(&id, &rec)?;
-        let entry = BodyEntry::of_built(&id, name, BuiltBody { body: Arc::new(root), tree: Some(Arc::new(tree)) });
+        let entry = BodyEntry::of_built(
+            &id,
+            name,
+            BuiltBody { body: Arc::new(root), tree: Some(Arc::new(tree)), primitive: None },
+        );
+        write(&self.bodies).insert(id.clone(), Arc::new(entry));
+        Ok(id)
+    }
+
+    /// Stores an exact primitive (box, sphere, cylinder, capsule, halfspace) under a fresh id and
+    /// returns the id. It is used as a body is (instances, queries, scene checks); its record
+    /// holds the primitive beside its bounding ellipsoid ([`BodyRecord`]). No fit, no SDP.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `name` for an over-long name, or `primitive` for one
+    /// smaller than 1 µm ([`bounding_body`]); [`Error::Storage`].
+    pub fn add_primitive(&self, name: &str, primitive: sublevel_core::primitive::Primitive) -> Result<String> {
+        check_name("name", name)?;
+        let built = BuiltBody::of_primitive(primitive)?;
+        let id = new_id("b");
+        self.store.put_body(&id, &BodyRecord::primitive(name, &primitive)?)?;
+        let entry = BodyEntry::of_built(&id, name, built);
         write(&self.bodies).insert(id.clone(), Arc::new(entry));
         Ok(id)
     }
@@ -555,5 +579,5 @@ fn instance<'a>(s: &'a SceneState, id: &str) -> Result<&'a Instance> {
 
 /// A built body at a pose (the body shared, the pose copied).
 fn posed(built: &BuiltBody, pose: Isometry3) -> crate::answer::Posed {
-    crate::answer::Posed { body: built.body.clone(), tree: built.tree.clone(), pose }
+    crate::answer::Posed { body: built.body.clone(), tree: built.tree.clone(), primitive: built.primitive, pose }
 }

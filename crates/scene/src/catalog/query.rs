@@ -40,10 +40,12 @@ impl Catalog {
     /// request of the scene.
     ///
     /// # Errors
-    /// [`Error::NotFound`] for the scene or an instance.
+    /// [`Error::NotFound`] for the scene or an instance; [`Error::InvalidArgument`] naming
+    /// `instance_b` for two halfspaces (no finite distance).
     pub fn distance_with(&self, scene_id: &str, a: &str, b: &str, options: &QueryOptions) -> Result<DistanceReply> {
         let pair = PairRef { kind: QueryKind::Distance, first: a, second: b, options: *options, margin: 0.0 };
-        match self.answer_snapshot(scene_id, &[pair])?.pop() {
+        let field = |_: usize, second: bool| if second { "instance_b" } else { "instance_a" }.to_owned();
+        match self.answer_snapshot(scene_id, &[pair], &field)?.pop() {
             Some(QueryAnswer::Distance(d)) => Ok(d),
             _ => Err(Error::Numerical("a distance query answered with another kind".into())),
         }
@@ -52,10 +54,13 @@ impl Catalog {
     /// [`Catalog::growth`] with options, like [`Catalog::distance_with`].
     ///
     /// # Errors
-    /// [`Error::NotFound`] for the scene or an instance.
+    /// [`Error::NotFound`] for the scene or an instance; [`Error::InvalidArgument`] naming
+    /// `instance_1` or `instance_2` when it is a primitive (growth is defined for sos-convex
+    /// bodies).
     pub fn growth_with(&self, scene_id: &str, p1: &str, p2: &str, options: &QueryOptions) -> Result<GrowthReply> {
         let pair = PairRef { kind: QueryKind::Growth, first: p1, second: p2, options: *options, margin: 0.0 };
-        match self.answer_snapshot(scene_id, &[pair])?.pop() {
+        let field = |_: usize, second: bool| if second { "instance_2" } else { "instance_1" }.to_owned();
+        match self.answer_snapshot(scene_id, &[pair], &field)?.pop() {
             Some(QueryAnswer::Growth(g)) => Ok(g),
             _ => Err(Error::Numerical("a growth query answered with another kind".into())),
         }
@@ -97,7 +102,8 @@ impl Catalog {
                 v
             })
             .collect();
-        self.answer_snapshot(scene_id, &views)
+        let field = |k: usize, second: bool| format!("pairs[{k}].{}", if second { "second" } else { "first" });
+        self.answer_snapshot(scene_id, &views, &field)
     }
 
     /// Queries of one kind given in columns: pair k asks about `ids[first[k]]` and
@@ -135,7 +141,8 @@ impl Catalog {
             .zip(second)
             .map(|(&i, &j)| PairRef { kind, first: &ids[i as usize], second: &ids[j as usize], options, margin })
             .collect();
-        self.answer_snapshot(scene_id, &views)
+        let field = |k: usize, second: bool| format!("columns.{}[{k}]", if second { "second" } else { "first" });
+        self.answer_snapshot(scene_id, &views, &field)
     }
 
     /// Answers `pairs` on a snapshot of the scene, solving outside its lock:
@@ -160,8 +167,15 @@ impl Catalog {
     ///
     /// # Errors
     /// [`Error::NotFound`] for the scene or an instance; [`Error::FailedPrecondition`] naming a
-    /// body that does not validate (quarantined when it was built).
-    fn answer_snapshot(&self, scene_id: &str, pairs: &[PairRef<'_>]) -> Result<Vec<QueryAnswer>> {
+    /// body that does not validate (quarantined when it was built); [`Error::InvalidArgument`]
+    /// naming `field(k, second)` (query k's first or second instance) for a query that cannot be
+    /// answered (growth with a primitive, the distance of two halfspaces), before any is solved.
+    fn answer_snapshot(
+        &self,
+        scene_id: &str,
+        pairs: &[PairRef<'_>],
+        field: &dyn Fn(usize, bool) -> String,
+    ) -> Result<Vec<QueryAnswer>> {
         let scene = self.scene(scene_id)?;
         // Instances whose body is not built yet, built after the lock is released.
         let mut unbuilt: BTreeMap<&str, (Arc<BodyEntry>, Isometry3)> = BTreeMap::new();
@@ -190,6 +204,9 @@ impl Catalog {
         };
         for (id, (entry, pose)) in unbuilt {
             posed_by_id.insert(id, posed(entry.built()?, pose));
+        }
+        for (k, p) in pairs.iter().enumerate() {
+            answer::check_pair(p, &posed_by_id[p.first], &posed_by_id[p.second], |second| field(k, second))?;
         }
         let params = self.certify_params();
         // Cold distance solves of one body pair on the batch solver's lanes, collide queries the

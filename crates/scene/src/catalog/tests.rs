@@ -69,7 +69,7 @@ fn catalog_persists_and_warm_starts_follow_the_pair() {
 
 /// A dumbbell containment tree: root sphere r = 1 at the origin containing spheres r = 0.4 at
 /// x = ±0.5.
-fn dumbbell() -> CompoundBody {
+pub(super) fn dumbbell() -> CompoundBody {
     use sublevel_core::compound::{CompoundNode, CompoundReport};
     let node = |c: [f64; 3], r: f64, children: Vec<usize>, depth: usize| CompoundNode {
         body: ellipsoid(c, [r; 3]).unwrap(),

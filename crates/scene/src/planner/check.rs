@@ -6,7 +6,7 @@ use crate::cache::WarmStartCache;
 use crate::catalog::Catalog;
 use crate::{Error, Result};
 use std::collections::HashMap;
-use sublevel_core::math::{Isometry3, Real};
+use sublevel_core::math::{Isometry3, Real, Vector3};
 use sublevel_query::dispatch::{self, PosedRef};
 
 /// A pair found by [`check_scene`].
@@ -39,8 +39,10 @@ pub struct SceneCheck {
 /// `margin` meters, with `overrides` applied to the stored poses (not stored). Broad phase: a BVH
 /// (parry's) over the posed bounding boxes grown by `margin / 2`; then the bounding spheres, and
 /// for two single bodies the separating axis ([`sublevel_query::dispatch::pair_lower_bound`]);
-/// then cold distance solves on what remains. A nonconvex body (no proven bound) is a candidate
-/// for every pair.
+/// then cold distance solves on what remains. A nonconvex body or a halfspace (no bounded box) is
+/// a candidate for every pair; a pair of two halfspaces (no finite distance) is never reported.
+/// Pairs with a primitive are solved by [`sublevel_query::shape`], converged or not as each
+/// answer says.
 ///
 /// # Errors
 /// [`Error::NotFound`] for the scene or a `focus` / override instance; [`Error::InvalidArgument`]
@@ -83,7 +85,7 @@ pub fn check_scene(
     let far = sublevel_core::math::MAX_COORDINATE * 4.0;
     let boxes: Vec<Aabb> = all
         .iter()
-        .map(|i| match i.body.world_aabb(&i.pose) {
+        .map(|i| match world_aabb(i) {
             Some((lo, hi)) => {
                 let (lo, hi) = (lo.add_scalar(-half), hi.add_scalar(half));
                 Aabb::new([lo.x, lo.y, lo.z].into(), [hi.x, hi.y, hi.z].into())
@@ -99,7 +101,7 @@ pub fn check_scene(
     let mut candidates: Vec<(usize, usize)> = bvh
         .leaf_pairs(&bvh, |x, y| x.aabb().intersects(&y.aabb()))
         .map(|(i, j)| (i as usize, j as usize))
-        .filter(|&(i, j)| i < j && (is_focus[i] || is_focus[j]))
+        .filter(|&(i, j)| i < j && (is_focus[i] || is_focus[j]) && !(halfspace(&all[i]) && halfspace(&all[j])))
         .collect();
     candidates.sort_unstable();
     candidates.dedup();
@@ -113,7 +115,12 @@ pub fn check_scene(
     let solves: Vec<(usize, usize)> = candidates
         .into_iter()
         .filter(|&(i, j)| {
-            let at = |k: usize| PosedRef { body: &all[k].body, tree: all[k].tree.as_deref(), pose: all[k].pose };
+            let at = |k: usize| PosedRef {
+                body: &all[k].body,
+                tree: all[k].tree.as_deref(),
+                primitive: all[k].primitive.as_ref(),
+                pose: all[k].pose,
+            };
             dispatch::pair_lower_bound(&at(i), &at(j), margin).is_none_or(|lower| lower <= margin)
         })
         .collect();
@@ -130,7 +137,12 @@ pub fn check_scene(
     let posed_pairs: Vec<(Posed, Posed)> = solves
         .iter()
         .map(|&(i, j)| {
-            let posed = |k: usize| Posed { body: all[k].body.clone(), tree: all[k].tree.clone(), pose: all[k].pose };
+            let posed = |k: usize| Posed {
+                body: all[k].body.clone(),
+                tree: all[k].tree.clone(),
+                primitive: all[k].primitive,
+                pose: all[k].pose,
+            };
             (posed(i), posed(j))
         })
         .collect();
@@ -153,4 +165,25 @@ pub fn check_scene(
     }
     out.pairs.sort_by(|x, y| x.distance.answer.result.distance.total_cmp(&y.distance.answer.result.distance));
     Ok(out)
+}
+
+/// The world box of a posed instance: a primitive's own (its frame's half extents under the
+/// rotation, `|R|·h` about the translation), a body's from its bounding box; `None` without a
+/// bounded one (a halfspace, a nonconvex body).
+fn world_aabb(i: &crate::PosedInstance) -> Option<(Vector3, Vector3)> {
+    match &i.primitive {
+        Some(p) => {
+            let h = p.local_half_extents()?;
+            let r = i.pose.rotation.to_rotation_matrix().into_inner().abs();
+            let reach = r * h;
+            let t = i.pose.translation.vector;
+            Some((t - reach, t + reach))
+        }
+        None => i.body.world_aabb(&i.pose),
+    }
+}
+
+/// Whether an instance is a halfspace.
+fn halfspace(i: &crate::PosedInstance) -> bool {
+    i.primitive.is_some_and(|p| !p.is_bounded())
 }

@@ -16,8 +16,8 @@ fn routed(xs: &[[Real; 3]], cache: &WarmStartCache) -> Vec<Ahead> {
     let big = Arc::new(ellipsoid([0.0; 3], [0.5; 3]).unwrap());
     let small = Arc::new(ellipsoid([0.0; 3], [0.25; 3]).unwrap());
     let slots = vec![
-        Posed { body: big, tree: None, pose: Isometry3::identity() },
-        Posed { body: small, tree: None, pose: Isometry3::identity() },
+        Posed { body: big, tree: None, primitive: None, pose: Isometry3::identity() },
+        Posed { body: small, tree: None, primitive: None, pose: Isometry3::identity() },
     ];
     let at = |x: &[Real; 3]| Isometry3::translation(x[0], x[1], x[2]);
     let request = PlannerRequest {

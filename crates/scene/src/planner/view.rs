@@ -43,7 +43,8 @@ impl QueryView {
     /// # Errors
     /// [`Error::NotFound`] for the scene or an instance a query names; [`Error::InvalidArgument`]
     /// naming `poses[k].instance_id` / `states[s].poses[k].instance_id` for an unknown or repeated
-    /// instance (the view is then unchanged).
+    /// instance (the view is then unchanged), or `queries[k].first` / `queries[k].second` for a
+    /// query that cannot be answered (growth with a primitive, two halfspaces).
     pub fn run(&mut self, catalog: &Catalog, request: &PlannerRequest) -> Result<PlannerAnswers> {
         let mut answers = PlannerAnswers::for_request(request);
         self.run_into(catalog, request, &mut answers)?;
@@ -151,6 +152,15 @@ impl QueryView {
             }
             other => other,
         })?;
+        // Queries that cannot be answered are refused before the view changes (`ids` is sorted).
+        let at = |id: &str| ids.binary_search(&id).ok().map(|i| &stored[i]);
+        for (k, q) in request.queries.iter().enumerate() {
+            if let (Some(a), Some(b)) = (at(&q.first), at(&q.second)) {
+                answer::check_pair(&q.view(), a, b, |second| {
+                    format!("queries[{k}].{}", if second { "second" } else { "first" })
+                })?;
+            }
+        }
         for (id, pose) in &request.poses {
             match self.overrides.get_mut(id) {
                 Some(p) => *p = *pose,
@@ -166,6 +176,7 @@ impl QueryView {
             }
             posed.insert(id, p);
         }
+
         let params = catalog.certify_params();
         if !newton_only {
             return Ok(self.answer_states(request, &mut posed, &params, None, sink));

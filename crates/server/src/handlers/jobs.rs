@@ -222,6 +222,15 @@ pub(super) async fn start_group_job(
         return Err(too_many(req.instance_ids.len()).into());
     }
     let instances = svc.catalog.posed_instances(&req.scene_id, &req.instance_ids)?;
+    // A primitive is grouped by its bounding ellipsoid (it contains the primitive); a halfspace
+    // has none.
+    if let Some(k) = instances.iter().position(|i| i.primitive.is_some_and(|p| !p.is_bounded())) {
+        let field = if req.instance_ids.is_empty() { "instance_ids".to_owned() } else { format!("instance_ids[{k}]") };
+        let id = &instances[k].id;
+        return Err(
+            Error::invalid(field, format!("instance `{id}` is a halfspace: no bounded body contains it")).into()
+        );
+    }
     if instances.is_empty() {
         return Err(Error::invalid("instance_ids", "fewer than 1 instance to group (the scene is empty)").into());
     }

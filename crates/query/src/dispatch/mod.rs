@@ -6,6 +6,10 @@
 //! answers the pair:
 //!
 //! ```text
+//! 0. primitive pair     either side is an exact primitive (box, sphere, cylinder, capsule,
+//!                       halfspace) → shapes::primitive_pair_distance: shape_distance, a compound
+//!                       side searched leaf by leaf (shapes module docs); a collide query first
+//!                       asks the bounding spheres (shapes::primitive_lower_bound)
 //! 1. compound pair      either side is a compound body (a containment tree, paper §V)
 //!                       → the branch and bound over the trees (tree::tree_distance, tree_collide,
 //!                         tree_closer_than) with tree_params(mode); a single body on the other
@@ -35,12 +39,19 @@
 //! answers ([`crate::batch`]), and a cheap decision only says what a solve would say (a certified
 //! lower bound above the margin, or a proven common point).
 
+mod shapes;
+
+pub use shapes::{
+    is_primitive_pair, primitive_lower_bound, primitive_pair_distance, refusal, PairSide, ShapePairAnswer,
+};
+
 use crate::batch::cold_distances;
 use crate::tree::{BodyTree, TreeQueryParams};
 use crate::{CertifyMode, CertifyParams, DistanceResult, DistanceWarmStart, NewtonParams};
 use sublevel_core::body::Body;
 use sublevel_core::compound::CompoundBody;
 use sublevel_core::math::{Isometry3, Point3, Real};
+use sublevel_core::primitive::Primitive;
 
 /// Which query to run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -86,10 +97,14 @@ impl PairAsk {
 /// A body at a pose, borrowed: what the dispatch reads of one side of a pair.
 #[derive(Clone, Copy, Debug)]
 pub struct PosedRef<'p> {
-    /// The body; a compound body's root body (which contains every node's body).
+    /// The body; a compound body's root body (which contains every node's body). For a primitive,
+    /// a body that contains it (its bounding ellipsoid) — a stand-in for a halfspace, which no
+    /// body contains — read by no step: a primitive pair takes step 0.
     pub body: &'p Body,
     /// A compound body's containment tree; `None` for a single body.
     pub tree: Option<&'p CompoundBody>,
+    /// An exact primitive: the side is this set, not `body` (step 0); `None` for a fitted body.
+    pub primitive: Option<&'p Primitive>,
     /// The pose (body frame → world).
     pub pose: Isometry3,
 }
@@ -109,15 +124,15 @@ impl<'p> PosedRef<'p> {
     /// collide tests and the lanes take.
     #[inline]
     fn single_convex(&self) -> bool {
-        self.tree.is_none() && !self.body.report.nonconvex
+        self.tree.is_none() && self.primitive.is_none() && !self.body.report.nonconvex
     }
 }
 
 /// Whether a query between `a` and `b` goes to the tree queries (step 1: either side is
-/// compound).
+/// compound, and neither is a primitive, which takes step 0).
 #[inline]
 pub fn is_compound_pair(a: &PosedRef<'_>, b: &PosedRef<'_>) -> bool {
-    a.tree.is_some() || b.tree.is_some()
+    (a.tree.is_some() || b.tree.is_some()) && !is_primitive_pair(a, b)
 }
 
 /// The tree-query settings of a compound pair's query in `mode` with distance tolerance
@@ -163,10 +178,13 @@ pub fn collide_lower_bound(a: &Body, pose_a: &Isometry3, b: &Body, pose_b: &Isom
 
 /// A scene check's cheap lower bound of a candidate pair's distance (meters), before any solve:
 /// [`collide_lower_bound`] for two single bodies, the root bodies' bounding spheres
-/// ([`sphere_lower_bound`]) when either is compound; `None` when a body has no proven bound
-/// (nonconvex: the pair is always solved).
+/// ([`sphere_lower_bound`]) when either is compound, the bounding spheres of
+/// [`primitive_lower_bound`] when either is a primitive; `None` when a side has no proven bound
+/// (nonconvex, a halfspace: the pair is always solved).
 pub fn pair_lower_bound(a: &PosedRef<'_>, b: &PosedRef<'_>, margin: Real) -> Option<Real> {
-    if is_compound_pair(a, b) {
+    if is_primitive_pair(a, b) {
+        primitive_lower_bound(a, b)
+    } else if is_compound_pair(a, b) {
         sphere_lower_bound(a.body, &a.pose, b.body, &b.pose)
     } else {
         collide_lower_bound(a.body, &a.pose, b.body, &b.pose, margin)
@@ -379,7 +397,7 @@ pub fn state_route<'w>(
     if ask.lane_candidate() {
         return StateRoute::Cold;
     }
-    if !ask.lane_kind() {
+    if !ask.lane_kind() || pair.is_some_and(|(a, b, _)| is_primitive_pair(a, b)) {
         return StateRoute::One;
     }
     let far = match (pair, before) {
@@ -406,7 +424,7 @@ mod tests {
     }
 
     fn at(body: &Body, x: Real) -> PosedRef<'_> {
-        PosedRef { body, tree: None, pose: Isometry3::translation(x, 0.0, 0.0) }
+        PosedRef { body, tree: None, primitive: None, pose: Isometry3::translation(x, 0.0, 0.0) }
     }
 
     /// Only cold distance and collide queries outside `Certify` are lane candidates.
