@@ -157,3 +157,62 @@ mod tests {
         }
     }
 }
+
+#[cfg(test)]
+mod compound_tests {
+    use std::path::Path;
+    use sublevel_core::compound::CompoundBody;
+    use sublevel_core::math::{Isometry3, Real, UnitQuaternion, Vector3};
+    use sublevel_core::primitive::{Primitive, PrimitiveFile};
+    use sublevel_query::dispatch::{primitive_pair_distance, PosedRef};
+    use sublevel_scene::bounding_body;
+
+    /// The bundled compound chair (64 leaves fitted to `data/psb/chair_101.off`) against 200 boxes
+    /// around it, beside coal 3.0.3's exact mesh–box distances (`scripts/peers/coal_mesh_boxes.py`):
+    /// never farther than the mesh (the leaves contain it: the conservative side), and within the
+    /// compound's largest leaf excess (38.7 mm) of it on at least 195 of the 200 (measured: 197; the
+    /// median gap is 2.3 mm). The stated excess is sampled against each leaf's convex part, which
+    /// fills the mesh's concavities, so it is not a bound against the mesh itself: the worst box is
+    /// 76.6 mm nearer to the compound than to the mesh.
+    #[test]
+    fn a_compound_body_against_boxes_is_conservative_and_near_the_mesh() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+        let tree = CompoundBody::load(&root.join("data/compound/chair_101.json")).unwrap();
+        let excess = tree.max_leaf_excess();
+        let text = std::fs::read_to_string(root.join("crates/lab/tests/data/coal_chair_boxes.csv")).unwrap();
+        let mut worst_gap: Real = 0.0;
+        let mut gaps = Vec::new();
+        let mut cases = 0;
+        for line in text.lines().skip(1) {
+            let v: Vec<Real> = line.split(',').map(|s| s.parse().unwrap()).collect();
+            let cube = Primitive::from_file(&PrimitiveFile::Box { size: [v[0], v[1], v[2]] }).unwrap();
+            let stand_in = bounding_body(&cube).unwrap().unwrap();
+            let q = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(v[3], v[4], v[5], v[6]));
+            let pose = Isometry3::from_parts(Vector3::new(v[7], v[8], v[9]).into(), q);
+            let mesh = v[10].max(0.0);
+            let a = PosedRef {
+                body: tree.body(tree.root()),
+                tree: Some(&tree),
+                primitive: None,
+                pose: Isometry3::identity(),
+            };
+            let b = PosedRef { body: &stand_in, tree: None, primitive: Some(&cube), pose };
+            let r = primitive_pair_distance(&a, &b, None).unwrap();
+            assert!(r.converged(), "{r:?}");
+            let d = r.distance.distance;
+            assert!(d <= mesh + 1e-9, "compound {d} farther than the mesh {mesh}");
+            gaps.push(mesh - d);
+            worst_gap = worst_gap.max(mesh - d);
+            cases += 1;
+        }
+        assert_eq!(cases, 200);
+        gaps.sort_by(Real::total_cmp);
+        let within = gaps.iter().filter(|g| **g <= excess).count();
+        eprintln!(
+            "compound chair against boxes: mesh − compound median {:.4} m, worst {worst_gap:.4} m; {within} of 200 within the excess {excess:.4} m",
+            gaps[gaps.len() / 2]
+        );
+        assert!(within >= 195, "{within} of 200 within the stated excess");
+        assert!(gaps[gaps.len() / 2] <= 0.1 * excess);
+    }
+}
