@@ -9,6 +9,7 @@ mod hardening;
 mod jobs_api;
 mod ops;
 mod planner;
+mod primitives;
 mod query;
 mod query_compound;
 mod robot;

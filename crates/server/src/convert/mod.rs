@@ -16,13 +16,14 @@
 
 //! The conversions live in one file per area, all re-exported here:
 //!
-//! | file          | area                                                              |
-//! |---------------|-------------------------------------------------------------------|
-//! | `errors.rs`   | `Error → Status` (google.rpc BadRequest details), field labels    |
-//! | `bodies.rs`   | fit options, point clouds and their checks, reports, body files   |
-//! | `scenes.rs`   | points, vectors, poses, instances, scenes, `SetPoses` entries     |
-//! | `queries.rs`  | answers, certificates, gradients, query options, batch pairs      |
-//! | `planner.rs`  | pair / answer columns, planner requests and answers, scene checks |
+//! | file            | area                                                              |
+//! |-----------------|-------------------------------------------------------------------|
+//! | `errors.rs`     | `Error → Status` (google.rpc BadRequest details), field labels    |
+//! | `bodies.rs`     | fit options, point clouds and their checks, reports, body files   |
+//! | `primitives.rs` | exact primitives (box, sphere, cylinder, capsule, halfspace)      |
+//! | `scenes.rs`     | points, vectors, poses, instances, scenes, `SetPoses` entries     |
+//! | `queries.rs`    | answers, certificates, gradients, query options, batch pairs      |
+//! | `planner.rs`    | pair / answer columns, planner requests and answers, scene checks |
 //!
 //! Ids and pages, shared by every area, are here.
 
@@ -31,6 +32,7 @@ use crate::{Error, Result};
 mod bodies;
 mod errors;
 mod planner;
+mod primitives;
 #[cfg(test)]
 mod properties;
 mod queries;
@@ -47,6 +49,7 @@ pub use planner::{
     answers_to_columns, columns_kind, pair_columns_from_proto, planner_answers_to_proto, planner_request_from_proto,
     scene_check_to_proto, ColumnsSink, PairColumns,
 };
+pub use primitives::{primitive_from_proto, primitive_to_proto};
 pub use queries::{
     answer_to_proto, certificate_to_proto, distance_reply_to_proto, distance_to_proto, gradient_to_proto,
     growth_reply_to_proto, growth_to_proto, pairs_from_proto, query_options, source_to_proto, status_to_proto,
