@@ -6,6 +6,7 @@ pub mod group;
 pub mod health;
 pub mod loadtest;
 pub mod query;
+pub mod scene;
 pub mod serve;
 pub mod serve_config;
 pub mod serve_ops;

@@ -13,6 +13,7 @@ mod primitives;
 mod query;
 mod query_compound;
 mod robot;
+mod scene_import;
 mod security;
 mod service;
 mod service_compound;

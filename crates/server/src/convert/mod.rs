@@ -16,14 +16,14 @@
 
 //! The conversions live in one file per area, all re-exported here:
 //!
-//! | file            | area                                                              |
-//! |-----------------|-------------------------------------------------------------------|
-//! | `errors.rs`     | `Error → Status` (google.rpc BadRequest details), field labels    |
-//! | `bodies.rs`     | fit options, point clouds and their checks, reports, body files   |
-//! | `primitives.rs` | exact primitives (box, sphere, cylinder, capsule, halfspace)      |
-//! | `scenes.rs`     | points, vectors, poses, instances, scenes, `SetPoses` entries     |
-//! | `queries.rs`    | answers, certificates, gradients, query options, batch pairs      |
-//! | `planner.rs`    | pair / answer columns, planner requests and answers, scene checks |
+//! | file            | area                                                                          |
+//! |-----------------|-------------------------------------------------------------------------------|
+//! | `errors.rs`     | `Error → Status` (google.rpc BadRequest details), field labels                |
+//! | `bodies.rs`     | fit options, point clouds and their checks, reports, body files               |
+//! | `primitives.rs` | exact primitives (box, sphere, cylinder, capsule, halfspace)                  |
+//! | `scenes.rs`     | points, vectors, poses, instances, scenes, `SetPoses` entries, MoveIt imports |
+//! | `queries.rs`    | answers, certificates, gradients, query options, batch pairs                  |
+//! | `planner.rs`    | pair / answer columns, planner requests and answers, scene checks             |
 //!
 //! Ids and pages, shared by every area, are here.
 
@@ -56,8 +56,8 @@ pub use queries::{
     tree_to_proto, tree_tolerance,
 };
 pub use scenes::{
-    instance_to_proto, point_to_proto, pose_from_proto, pose_to_proto, poses_from_proto, scene_to_proto,
-    vector_to_proto,
+    imported_scene_to_proto, instance_to_proto, planning_scene_from_proto, point_to_proto, pose_from_proto,
+    pose_to_proto, poses_from_proto, scene_to_proto, vector_to_proto,
 };
 
 /// Longest accepted id, in bytes (ids the server makes are 18 bytes, e.g. `b-3f29c0d1a4e5b6c7`).
