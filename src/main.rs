@@ -40,6 +40,8 @@ enum Command {
     Health(cli::health::HealthArgs),
     /// Scale-out test client: set up, route, move, check and load scenes through a sharding proxy.
     ShardProbe(cli::shard_probe::ShardProbeArgs),
+    /// Scenes on a running server: `scene import` reads a MoveIt planning scene into a new scene.
+    Scene(cli::scene::SceneArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -56,6 +58,7 @@ fn main() -> std::process::ExitCode {
         Command::Loadtest(a) => cli::loadtest::run(a),
         Command::Health(a) => cli::health::run(a),
         Command::ShardProbe(a) => cli::shard_probe::run(a),
+        Command::Scene(a) => cli::scene::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

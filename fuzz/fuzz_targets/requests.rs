@@ -33,6 +33,10 @@ fn upload_body(req: pb::UploadBodyRequest) {
             serde_json::from_str::<sublevel::body::BodyFile>(json).map_err(sublevel::Error::from)
         }
         Some(pb::upload_body_request::Body::Data(data)) => cv::body_file_from_proto(data),
+        Some(pb::upload_body_request::Body::Primitive(p)) => {
+            let _ = cv::primitive_from_proto(p, "primitive");
+            return;
+        }
         None => return,
     };
     if let Ok(file) = file {

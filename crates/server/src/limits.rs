@@ -62,6 +62,21 @@ pub(crate) fn check_room(limit: Limit, current: usize, max: usize) -> Result<()>
     Err(exhausted(limit, current, max))
 }
 
+/// Checks that `adding` more items fit under `limit`: `Ok` while `current + adding <= max`.
+///
+/// # Errors
+/// [`Error::ResourceExhausted`] naming the limit, what is held and what would be added, its flag
+/// and its environment variable.
+pub(crate) fn check_room_for(limit: Limit, current: usize, adding: usize, max: usize) -> Result<()> {
+    if current.saturating_add(adding) <= max {
+        return Ok(());
+    }
+    Err(Error::ResourceExhausted(format!(
+        "limit reached: {current} {} and {adding} more exceed at most {max} (set by {} / {})",
+        limit.what, limit.flag, limit.env
+    )))
+}
+
 /// The RESOURCE_EXHAUSTED error of a full `limit` holding `current` of at most `max` items.
 pub(crate) fn exhausted(limit: Limit, current: usize, max: usize) -> Error {
     Error::ResourceExhausted(format!(

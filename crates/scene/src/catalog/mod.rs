@@ -500,6 +500,44 @@ impl Catalog {
         })
     }
 
+    /// Adds many instances to scene `scene_id` in one store transaction, instance k of body
+    /// `instances[k].0` under pose `instances[k].1`; returns their ids in order. All or nothing.
+    ///
+    /// # Errors
+    /// [`Error::NotFound`] for the scene or a body (naming `instances[k].body_id`; nothing is
+    /// added then); [`Error::Storage`].
+    pub fn add_instances(&self, scene_id: &str, instances: &[(&str, Isometry3)]) -> Result<Vec<String>> {
+        for (body_id, _) in instances {
+            self.body(body_id)?;
+        }
+        self.scene(scene_id)?;
+        let bodies = read(&self.bodies);
+        let entries = instances
+            .iter()
+            .enumerate()
+            .map(|(k, (body_id, _))| {
+                let field = format!("instances[{k}].body_id");
+                bodies.get(*body_id).cloned().ok_or_else(|| Error::not_found_at(field, "body", *body_id))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        self.with_scene(scene_id, |s| {
+            let ids: Vec<String> = instances.iter().map(|_| new_id("i")).collect();
+            let records: Vec<InstanceRecord> = instances
+                .iter()
+                .map(|(body_id, pose)| InstanceRecord {
+                    body_id: (*body_id).to_owned(),
+                    pose: StoredPose::from_isometry(pose),
+                })
+                .collect();
+            let rows: Vec<(&str, &InstanceRecord)> = ids.iter().map(String::as_str).zip(records.iter()).collect();
+            self.store.put_instances(scene_id, &rows, false)?;
+            for ((id, entry), (_, pose)) in ids.iter().zip(&entries).zip(instances) {
+                s.instances.insert(id.clone(), Instance::of(entry, *pose));
+            }
+            Ok(ids)
+        })
+    }
+
     /// Sets the poses of many instances of one scene: all or nothing.
     ///
     /// Poses must already be validated (see [`sublevel_core::math::pose_from_parts`]); `poses[k].0` is

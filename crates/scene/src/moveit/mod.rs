@@ -155,6 +155,16 @@ impl PlanningScene {
         raw.validate()
     }
 
+    /// Reads a `moveit_msgs/PlanningScene` from JSON bytes with a JSON parser (exact JSON error
+    /// positions); the same message and checks as [`PlanningScene::from_yaml`].
+    ///
+    /// # Errors
+    /// As [`PlanningScene::from_yaml`].
+    pub fn from_json(bytes: &[u8]) -> Result<Self> {
+        let raw: RawScene = serde_json::from_slice(bytes).map_err(|e| Error::invalid("scene", e.to_string()))?;
+        raw.validate()
+    }
+
     /// Number of shapes of all objects.
     pub fn shape_count(&self) -> usize {
         self.objects.iter().map(|o| o.shapes.len()).sum()
@@ -632,5 +642,8 @@ impl RawScene {
     }
 }
 
+mod import;
 #[cfg(test)]
 mod tests;
+
+pub use import::{ImportPlan, ImportedInstance, ImportedScene, PlannedInstance, SkippedShape};

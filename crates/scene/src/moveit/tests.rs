@@ -6,7 +6,7 @@ use super::*;
 use sublevel_core::math::Point3;
 
 /// A scene in the spelling of `rostopic echo` (maps, integer primitive codes, ACM entries).
-const ROS_SCENE: &str = r#"
+pub(super) const ROS_SCENE: &str = r#"
 name: kitchen
 robot_state:
   joint_state:

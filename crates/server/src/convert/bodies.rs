@@ -460,8 +460,10 @@ pub fn body_summary(e: &BodyEntry) -> pb::BodySummary {
         name: e.name.clone(),
         degree: facts.degree as u32,
         method: facts.method.clone(),
-        volume: facts.volume,
+        // A halfspace's volume is infinite: 0, as an unknown volume.
+        volume: if facts.volume.is_finite() { facts.volume } else { 0.0 },
         nodes: u32::try_from(e.node_count()).unwrap_or(u32::MAX),
+        primitive: facts.primitive.unwrap_or_default().to_owned(),
     }
 }
 

@@ -16,13 +16,14 @@
 
 //! The conversions live in one file per area, all re-exported here:
 //!
-//! | file          | area                                                              |
-//! |---------------|-------------------------------------------------------------------|
-//! | `errors.rs`   | `Error → Status` (google.rpc BadRequest details), field labels    |
-//! | `bodies.rs`   | fit options, point clouds and their checks, reports, body files   |
-//! | `scenes.rs`   | points, vectors, poses, instances, scenes, `SetPoses` entries     |
-//! | `queries.rs`  | answers, certificates, gradients, query options, batch pairs      |
-//! | `planner.rs`  | pair / answer columns, planner requests and answers, scene checks |
+//! | file            | area                                                                          |
+//! |-----------------|-------------------------------------------------------------------------------|
+//! | `errors.rs`     | `Error → Status` (google.rpc BadRequest details), field labels                |
+//! | `bodies.rs`     | fit options, point clouds and their checks, reports, body files               |
+//! | `primitives.rs` | exact primitives (box, sphere, cylinder, capsule, halfspace)                  |
+//! | `scenes.rs`     | points, vectors, poses, instances, scenes, `SetPoses` entries, MoveIt imports |
+//! | `queries.rs`    | answers, certificates, gradients, query options, batch pairs                  |
+//! | `planner.rs`    | pair / answer columns, planner requests and answers, scene checks             |
 //!
 //! Ids and pages, shared by every area, are here.
 
@@ -31,6 +32,7 @@ use crate::{Error, Result};
 mod bodies;
 mod errors;
 mod planner;
+mod primitives;
 #[cfg(test)]
 mod properties;
 mod queries;
@@ -47,14 +49,15 @@ pub use planner::{
     answers_to_columns, columns_kind, pair_columns_from_proto, planner_answers_to_proto, planner_request_from_proto,
     scene_check_to_proto, ColumnsSink, PairColumns,
 };
+pub use primitives::{primitive_from_proto, primitive_to_proto};
 pub use queries::{
     answer_to_proto, certificate_to_proto, distance_reply_to_proto, distance_to_proto, gradient_to_proto,
     growth_reply_to_proto, growth_to_proto, pairs_from_proto, query_options, source_to_proto, status_to_proto,
     tree_to_proto, tree_tolerance,
 };
 pub use scenes::{
-    instance_to_proto, point_to_proto, pose_from_proto, pose_to_proto, poses_from_proto, scene_to_proto,
-    vector_to_proto,
+    imported_scene_to_proto, instance_to_proto, planning_scene_from_proto, point_to_proto, pose_from_proto,
+    pose_to_proto, poses_from_proto, scene_to_proto, vector_to_proto,
 };
 
 /// Longest accepted id, in bytes (ids the server makes are 18 bytes, e.g. `b-3f29c0d1a4e5b6c7`).

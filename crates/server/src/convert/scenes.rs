@@ -81,6 +81,89 @@ pub fn poses_from_proto(poses: &[pb::InstancePose], max_poses: usize) -> Result<
         .collect()
 }
 
+/// Reads `ImportSceneRequest.scene` (YAML or JSON bytes) into a planning scene and its import
+/// plan ([`sublevel_scene::moveit::ImportPlan`]).
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `scene` when neither form is set, `yaml` / `json` for bytes
+/// that do not parse, or `yaml.<path>` / `json.<path>` for the scene's first field that does not
+/// validate (e.g. `yaml.world.collision_objects[3].primitive_poses[0]`).
+pub fn planning_scene_from_proto(
+    scene: Option<&pb::import_scene_request::Scene>,
+) -> Result<(sublevel_scene::moveit::PlanningScene, sublevel_scene::moveit::ImportPlan)> {
+    use sublevel_scene::moveit::{ImportPlan, PlanningScene};
+    let (parsed, field) = match scene {
+        None => return Err(Error::invalid("scene", "set `yaml` or `json`")),
+        Some(pb::import_scene_request::Scene::Yaml(bytes)) => (PlanningScene::from_yaml(bytes), "yaml"),
+        Some(pb::import_scene_request::Scene::Json(bytes)) => (PlanningScene::from_json(bytes), "json"),
+    };
+    // The parser names the whole document `scene`; the request's field is `yaml` or `json`.
+    let located = |e: Error| match e {
+        Error::InvalidArgument { field: f, reason } if f == "scene" => Error::invalid(field, reason),
+        other => super::prefix_field(other, field),
+    };
+    let scene = parsed.map_err(located)?;
+    let plan = ImportPlan::new(&scene).map_err(located)?;
+    Ok((scene, plan))
+}
+
+/// An imported planning scene as the `ImportScene` response: the instances and skipped shapes of
+/// `plan` as written (`imported`), with `scene`'s allowed-collision matrix and robot state.
+pub fn imported_scene_to_proto(
+    imported: &sublevel_scene::moveit::ImportedScene,
+    plan: &sublevel_scene::moveit::ImportPlan,
+    scene: &sublevel_scene::moveit::PlanningScene,
+) -> pb::ImportSceneResponse {
+    let count = |n: usize| u32::try_from(n).unwrap_or(u32::MAX);
+    let instances = imported
+        .instances
+        .iter()
+        .map(|i| pb::ImportedInstance {
+            name: i.planned.name.clone(),
+            object_id: i.planned.object_id.clone(),
+            shape_index: count(i.planned.shape_index),
+            instance_id: i.instance_id.clone(),
+            body_id: i.body_id.clone(),
+            kind: i.planned.kind.to_owned(),
+            pose: Some(pose_to_proto(&i.planned.pose)),
+            frame_id: i.planned.frame_id.clone(),
+            note: i.planned.note.clone(),
+        })
+        .collect();
+    let skipped = plan
+        .skipped
+        .iter()
+        .map(|s| pb::SkippedShape {
+            object_id: s.object_id.clone(),
+            shape_index: count(s.shape_index),
+            kind: s.kind.to_owned(),
+            pose: Some(pose_to_proto(&s.pose)),
+            reason: s.reason.clone(),
+        })
+        .collect();
+    let allowed_collision = scene.allowed_collision.as_ref().map(|acm| pb::AllowedCollisionMatrix {
+        names: acm.names.clone(),
+        rows: acm.allowed.iter().map(|r| pb::AllowedCollisionRow { allowed: r.clone() }).collect(),
+        default_names: acm.defaults.iter().map(|(n, _)| n.clone()).collect(),
+        default_allowed: acm.defaults.iter().map(|(_, a)| *a).collect(),
+    });
+    let joint_positions = scene
+        .joint_positions
+        .iter()
+        .map(|(name, position)| pb::JointPosition { name: name.clone(), position: *position })
+        .collect();
+    pb::ImportSceneResponse {
+        scene_id: imported.scene_id.clone(),
+        name: imported.name.clone(),
+        instances,
+        skipped,
+        objects: count(scene.objects.len()),
+        bodies: count(imported.body_ids.len()),
+        allowed_collision,
+        joint_positions,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

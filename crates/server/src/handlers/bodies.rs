@@ -16,17 +16,23 @@ enum Upload {
     Single(Box<BodyFile>, &'static str),
     // Boxed as `Single`'s file is: a compound file's report is several hundred bytes.
     Compound(Box<sublevel_fit::compound::CompoundFile>),
+    /// An exact primitive, validated: stored as it is (no certificate to solve).
+    Primitive(sublevel_core::primitive::Primitive),
 }
 
 /// `UploadBody`: parses a single or compound body file, admits it (its sos-convexity certificate,
-/// an SDP per node, off the async workers) and stores it.
+/// an SDP per node, off the async workers) and stores it; or validates and stores an exact
+/// primitive (no certificate).
 pub(super) async fn upload_body(
     svc: &SublevelService,
     request: Request<pb::UploadBodyRequest>,
 ) -> Handled<pb::UploadBodyResponse> {
     let req = request.into_inner();
     let upload = match req.body {
-        None => return Err(Error::invalid("body", "set `body_json` or `data`").into()),
+        None => return Err(Error::invalid("body", "set `body_json`, `data` or `primitive`").into()),
+        Some(pb::upload_body_request::Body::Primitive(p)) => {
+            Upload::Primitive(cv::primitive_from_proto(&p, "primitive")?)
+        }
         Some(pb::upload_body_request::Body::BodyJson(text)) => {
             let value: serde_json::Value =
                 serde_json::from_str(&text).map_err(|e| Error::invalid("body_json", e.to_string()))?;
@@ -78,13 +84,15 @@ pub(super) async fn upload_body(
             let id = catalog.add_compound_body(&req.name, tree)?;
             Ok((id, false, margin, nodes))
         }
+        Upload::Primitive(p) => Ok((catalog.add_primitive(&req.name, p)?, false, f64::NAN, 1)),
     })
     .await?;
     let nodes = u32::try_from(nodes).unwrap_or(u32::MAX);
     Ok(Response::new(pb::UploadBodyResponse { body_id, nonconvex, convexity_margin: margin, nodes }))
 }
 
-/// `GetBody`: a stored body with its body file (and compound file).
+/// `GetBody`: a stored body with its body file (and compound file), or a primitive with its
+/// primitive file.
 pub(super) async fn get_body(
     svc: &SublevelService,
     request: Request<pb::GetBodyRequest>,
@@ -92,6 +100,16 @@ pub(super) async fn get_body(
     let req = request.into_inner();
     let entry = svc.catalog.body(require_id("body_id", &req.body_id)?)?;
     let built = entry.built()?;
+    if let Some(p) = &built.primitive {
+        return Ok(Response::new(pb::GetBodyResponse {
+            body_id: entry.id.clone(),
+            name: entry.name.clone(),
+            data: None,
+            body_json: serde_json::to_string(&p.to_file()).map_err(Error::from)?,
+            nodes: 1,
+            primitive: Some(cv::primitive_to_proto(p)),
+        }));
+    }
     let file = built.body.to_file();
     let body_json = match &built.tree {
         Some(tree) => serde_json::to_string(&tree.to_file()),
@@ -104,6 +122,7 @@ pub(super) async fn get_body(
         data: Some(cv::body_file_to_proto(&file)),
         body_json,
         nodes: u32::try_from(entry.node_count()).unwrap_or(u32::MAX),
+        primitive: None,
     }))
 }
 

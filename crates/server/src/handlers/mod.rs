@@ -4,7 +4,8 @@
 //! mod.rs      the service state; the trait impl, one delegating call per RPC
 //! jobs.rs     StartFitJob, WatchFitJob, GetFitJob, ListFitJobs, CancelFitJob, StartGroupJob
 //! bodies.rs   UploadBody, GetBody, ListBodies, DeleteBody
-//! scenes.rs   CreateScene, GetScene, ListScenes, DeleteScene, AddInstance, SetPoses, RemoveInstance
+//! scenes.rs   CreateScene, GetScene, ListScenes, DeleteScene, AddInstance, SetPoses, RemoveInstance,
+//!             ImportScene
 //! queries.rs  Distance, Growth, BatchQuery, Query, QueryStream, CheckScene, and where query work
 //!             runs (inline on the async workers, or on the SDP slots)
 //! ```
@@ -152,6 +153,10 @@ impl Sublevel for SublevelService {
 
     async fn remove_instance(&self, request: Request<pb::RemoveInstanceRequest>) -> Reply<pb::RemoveInstanceResponse> {
         scenes::remove_instance(self, request).await.map_err(Status::from)
+    }
+
+    async fn import_scene(&self, request: Request<pb::ImportSceneRequest>) -> Reply<pb::ImportSceneResponse> {
+        scenes::import_scene(self, request).await.map_err(Status::from)
     }
 
     async fn distance(&self, request: Request<pb::DistanceRequest>) -> Reply<pb::DistanceResponse> {

@@ -1,9 +1,9 @@
 //! Scenes and their instances: `CreateScene`, `GetScene`, `ListScenes`, `DeleteScene`,
-//! `AddInstance`, `SetPoses`, `RemoveInstance`.
+//! `AddInstance`, `SetPoses`, `RemoveInstance`, `ImportScene`.
 
 use super::{Handled, SublevelService};
 use crate::convert::{self as cv, require_id};
-use crate::limits::{self, check_room};
+use crate::limits::{self, check_room, check_room_for};
 use crate::pb;
 use crate::runtime::blocking;
 use tonic::{Request, Response};
@@ -103,4 +103,22 @@ pub(super) async fn remove_instance(
     let catalog = svc.catalog.clone();
     blocking(move || catalog.remove_instance(&req.scene_id, &req.instance_id)).await?;
     Ok(Response::new(pb::RemoveInstanceResponse {}))
+}
+
+/// `ImportScene`: reads a MoveIt planning scene, checks its counts against the limits, and writes
+/// it as a new scene of primitive instances ([`sublevel_scene::moveit::ImportPlan`]).
+pub(super) async fn import_scene(
+    svc: &SublevelService,
+    request: Request<pb::ImportSceneRequest>,
+) -> Handled<pb::ImportSceneResponse> {
+    let req = request.into_inner();
+    // Parsing a large scene takes milliseconds: off the async workers.
+    let source = req.scene;
+    let (scene, plan) = blocking(move || cv::planning_scene_from_proto(source.as_ref())).await?;
+    check_room(limits::SCENES, svc.catalog.scenes().len(), svc.config.max_scenes)?;
+    check_room_for(limits::BODIES, svc.catalog.bodies().len(), plan.bodies.len(), svc.config.max_bodies)?;
+    check_room_for(limits::INSTANCES, 0, plan.instances.len(), svc.config.max_instances_per_scene)?;
+    let catalog = svc.catalog.clone();
+    let (imported, plan) = blocking(move || catalog.import_plan(&req.name, &plan).map(|i| (i, plan))).await?;
+    Ok(Response::new(cv::imported_scene_to_proto(&imported, &plan, &scene)))
 }
