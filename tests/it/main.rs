@@ -9,7 +9,7 @@ mod hardening;
 mod jobs_api;
 mod ops;
 mod planner;
-mod primitive;
+mod primitive_cli;
 mod primitives;
 mod query;
 mod query_compound;
