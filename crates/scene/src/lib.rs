@@ -2,9 +2,10 @@
 //!
 //! Scenes: instances of bodies under rigid poses, warm-start caches, and the persistent store.
 //!
-//! A *scene* is a set of *instances*; each instance is a stored [`Body`](sublevel_core::Body) placed in the
-//! world by a pose `x ↦ R x + t` (unit quaternion `(w, x, y, z)`, translation in meters; paper
-//! §IV-C). Queries always run between two instances of one scene:
+//! A *scene* is a set of *instances*; each instance is a stored [`Body`](sublevel_core::Body) (or an
+//! exact [`Primitive`], answered by [`sublevel_query::shape`]) placed in the world by a pose
+//! `x ↦ R x + t` (unit quaternion `(w, x, y, z)`, translation in meters; paper §IV-C). Queries
+//! always run between two instances of one scene:
 //!
 //! ```text
 //! distance(a, b)  = min ‖x − y‖   s.t. p_a'(x) ≤ 1, p_b'(y) ≤ 1      (eq. "distance")
@@ -30,7 +31,8 @@
 //!   to the store. Input is validated before anything is written, and memory changes only after
 //!   the store committed, so bad input never loses or half-writes data.
 //! - [`moveit`]: MoveIt planning scenes (`moveit_msgs/PlanningScene` in YAML or JSON) read into
-//!   typed, validated collision objects, allowed-collision matrix and robot state.
+//!   typed, validated collision objects, allowed-collision matrix and robot state, and imported
+//!   into the catalog as scenes of exact primitives ([`moveit::ImportPlan`]).
 //! - [`planner`]: what a motion planner asks of a scene — private views with pose overrides and
 //!   warm starts of their own, candidate states, scene-wide checks with a broad phase.
 //!

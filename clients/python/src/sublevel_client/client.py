@@ -26,6 +26,7 @@ from .types import (
     BodySummary,
     DistanceAnswer,
     GrowthAnswer,
+    ImportedScene,
     Instance,
     QueryResult,
     Scene,
@@ -318,12 +319,66 @@ class Client:
         """
         return self.upload(name, body).body_id
 
+    def upload_primitive(
+        self,
+        kind: str,
+        *,
+        size: Optional[Sequence[float]] = None,
+        radius: Optional[float] = None,
+        height: Optional[float] = None,
+        normal: Optional[Sequence[float]] = None,
+        offset: Optional[float] = None,
+        name: Optional[str] = None,
+    ) -> str:
+        """Stores an exact primitive (no fit) and returns its body id; it is used as any body is
+        (instances, queries, scene checks), and answered exactly (docs/primitives.md).
+
+        Args:
+            kind: ``"box"`` (``size``: full side lengths x, y, z), ``"sphere"`` (``radius``),
+                ``"cylinder"`` (``radius``, ``height``: full length along z), ``"capsule"``
+                (``radius``, ``height``: the axis segment's length, 0 allowed) or ``"halfspace"``
+                (``normal``, ``offset``: the set ``normal · u <= offset``). Meters, centered at the
+                body frame's origin.
+            name: a human-readable name (default: the kind).
+
+        Only the dimensions of ``kind`` may be given; the server refuses a bad one naming it
+        (``SublevelError.field == "primitive.size[1]"``), and ``kind`` unknown raises ValueError.
+
+        >>> table = c.upload_primitive("box", size=(1.2, 0.8, 0.04))   # doctest: +SKIP
+        >>> floor = c.upload_primitive("halfspace", normal=(0, 0, 1), offset=0.0)  # doctest: +SKIP
+        """
+        kinds = {
+            "box": pb.PRIMITIVE_KIND_BOX,
+            "sphere": pb.PRIMITIVE_KIND_SPHERE,
+            "cylinder": pb.PRIMITIVE_KIND_CYLINDER,
+            "capsule": pb.PRIMITIVE_KIND_CAPSULE,
+            "halfspace": pb.PRIMITIVE_KIND_HALFSPACE,
+        }
+        if kind not in kinds:
+            raise ValueError(f"`kind`: one of {', '.join(kinds)}, got {kind!r}")
+        p = pb.Primitive(kind=kinds[kind])
+        if size is not None:
+            p.size.extend(float(x) for x in size)
+        if radius is not None:
+            p.radius = float(radius)
+        if height is not None:
+            p.height = float(height)
+        if normal is not None:
+            n = [float(x) for x in normal]
+            if len(n) != 3:
+                raise ValueError(f"`normal`: expected 3 numbers, got {len(n)}")
+            p.normal.CopyFrom(pb.Vec3(x=n[0], y=n[1], z=n[2]))
+        if offset is not None:
+            p.offset = float(offset)
+        req = pb.UploadBodyRequest(name=kind if name is None else name, primitive=p)
+        return self._call("UploadBody", req).body_id
+
     def list_bodies(self) -> List[BodySummary]:
         """All stored bodies (summaries), ordered by id (every page of ListBodies)."""
         out, token = [], ""
         while True:
             r = self._call("ListBodies", pb.ListBodiesRequest(page_token=token))
-            out += [BodySummary(b.body_id, b.name, b.degree, b.method, b.volume) for b in r.bodies]
+            out += [BodySummary(b.body_id, b.name, b.degree, b.method, b.volume, b.primitive) for b in r.bodies]
             token = r.next_page_token
             if not token:
                 return out
@@ -362,6 +417,43 @@ class Client:
             if s.name == name:
                 return s.scene_id
         raise KeyError(f"no scene named {name!r}")
+
+    def import_scene(self, scene: Any, name: Optional[str] = None) -> ImportedScene:
+        """Imports a MoveIt planning scene (``moveit_msgs/PlanningScene``) as a new scene: each
+        collision object's primitives (box, sphere, cylinder; a cone as its cylinder) and planes
+        (the halfspace opposite the normal) become instances of exact primitive bodies at their
+        composed poses; meshes are skipped (``ImportedScene.skipped``, with their poses).
+
+        Args:
+            scene: the scene as YAML or JSON — a path (``str`` or ``os.PathLike``; JSON when it
+                ends in ``.json``), ``bytes``, or the text itself (JSON when it starts with ``{``).
+            name: the new scene's name (default: the planning scene's ``name``, else
+                ``"imported"``).
+
+        Returns the :class:`ImportedScene` (instance ids by name in ``.ids``, the allowed-collision
+        matrix and joint positions). A bad scene raises SublevelError naming its field
+        (``yaml.world.collision_objects[3].primitive_poses[0]``).
+        """
+        json_form = False
+        if isinstance(scene, os.PathLike) or (isinstance(scene, str) and os.path.isfile(scene)):
+            path = os.fspath(scene)
+            with open(path, "rb") as f:
+                data = f.read()
+            json_form = path.lower().endswith(".json")
+        elif isinstance(scene, (bytes, bytearray)):
+            data = bytes(scene)
+            json_form = data.lstrip().startswith(b"{")
+        elif isinstance(scene, str):
+            data = scene.encode("utf-8")
+            json_form = scene.lstrip().startswith("{")
+        else:
+            raise ValueError(f"`scene`: expected a path, bytes or text, got {type(scene).__name__}")
+        req = pb.ImportSceneRequest(name=name or "")
+        if json_form:
+            req.json = data
+        else:
+            req.yaml = data
+        return ImportedScene.from_proto(self._call("ImportScene", req))
 
     def delete_scene(self, scene_id: str) -> None:
         """Deletes a scene with its instances (the bodies stay)."""

@@ -33,6 +33,10 @@ __all__ = [
     "Instance",
     "Scene",
     "UploadedBody",
+    "AllowedCollisionMatrix",
+    "ImportedInstance",
+    "SkippedShape",
+    "ImportedScene",
 ]
 
 
@@ -526,13 +530,16 @@ class UploadedBody:
 
 @dataclass
 class BodySummary:
-    """A stored body without its coefficients (volume in m³; 0 when unknown)."""
+    """A stored body without its coefficients (volume in m³; 0 when unknown). For an exact
+    primitive, ``primitive`` is its kind (``"box"``, ``"sphere"``, ``"cylinder"``, ``"capsule"``,
+    ``"halfspace"``), ``degree`` 0 and ``method`` ``"primitive"``; empty for a fitted body."""
 
     body_id: str
     name: str
     degree: int
     method: str
     volume: float
+    primitive: str = ""
 
 
 @dataclass
@@ -578,3 +585,137 @@ class Scene:
         for i in self.instances:
             out.setdefault(i.body_id, []).append(i.instance_id)
         return out
+
+
+@dataclass
+class AllowedCollisionMatrix:
+    """A MoveIt allowed-collision matrix: which pairs of names (robot links, object ids) may touch.
+
+    Attributes:
+        names: the names of the rows and columns.
+        matrix: ``(n, n)`` bool array; ``matrix[i, j]``: contacts of ``names[i]`` and ``names[j]``
+            are allowed.
+        defaults: names with a default entry, and whether their contacts are all allowed.
+    """
+
+    names: List[str]
+    matrix: np.ndarray
+    defaults: Dict[str, bool] = field(default_factory=dict)
+
+    def allowed(self, a: str, b: str) -> bool:
+        """Whether contacts between ``a`` and ``b`` are allowed: the matrix entry when both are
+        named, else a default entry of either that allows them (MoveIt's rule)."""
+        if a in self.names and b in self.names:
+            return bool(self.matrix[self.names.index(a), self.names.index(b)])
+        return bool(self.defaults.get(a, False) or self.defaults.get(b, False))
+
+    @classmethod
+    def from_proto(cls, m) -> "AllowedCollisionMatrix":
+        n = len(m.names)
+        matrix = np.array([list(r.allowed) for r in m.rows], dtype=bool).reshape(n, n)
+        return cls(names=list(m.names), matrix=matrix, defaults=dict(zip(m.default_names, m.default_allowed)))
+
+
+@dataclass
+class ImportedInstance:
+    """One imported shape of a planning scene: an instance of a primitive body.
+
+    Attributes:
+        name: the collision object's id, with ``#k`` when the object has several shapes.
+        object_id, shape_index: the object and the shape's index in it (primitives, then meshes,
+            then planes).
+        instance_id, body_id: the new instance and its (shared) primitive body.
+        kind: ``"box"``, ``"sphere"``, ``"cylinder"`` or ``"halfspace"`` (a plane).
+        pose: its pose in the scene; frame_id: the object's header frame.
+        note: how the shape was approximated (a cone by its cylinder), else empty.
+    """
+
+    name: str
+    object_id: str
+    shape_index: int
+    instance_id: str
+    body_id: str
+    kind: str
+    pose: Pose
+    frame_id: str
+    note: str
+
+    @classmethod
+    def from_proto(cls, m) -> "ImportedInstance":
+        return cls(
+            name=m.name,
+            object_id=m.object_id,
+            shape_index=m.shape_index,
+            instance_id=m.instance_id,
+            body_id=m.body_id,
+            kind=m.kind,
+            pose=_pose(m.pose, m.HasField("pose")),
+            frame_id=m.frame_id,
+            note=m.note,
+        )
+
+
+@dataclass
+class SkippedShape:
+    """A shape of the planning scene that was not imported (a mesh), with its pose and why."""
+
+    object_id: str
+    shape_index: int
+    kind: str
+    pose: Pose
+    reason: str
+
+    @classmethod
+    def from_proto(cls, m) -> "SkippedShape":
+        return cls(
+            object_id=m.object_id,
+            shape_index=m.shape_index,
+            kind=m.kind,
+            pose=_pose(m.pose, m.HasField("pose")),
+            reason=m.reason,
+        )
+
+
+@dataclass
+class ImportedScene:
+    """The answer of ``Client.import_scene``: the new scene, its instances by name, the skipped
+    shapes, and the planning scene's allowed-collision matrix and robot state (not stored by the
+    server: keep them here).
+
+    Attributes:
+        scene_id, name: the new scene.
+        instances: the imported shapes, object by object.
+        skipped: the shapes not imported (meshes).
+        objects: collision objects in the planning scene; bodies: primitive bodies stored.
+        allowed_collision: the matrix, or None.
+        joint_positions: the robot state's joint positions by name (radians or meters).
+    """
+
+    scene_id: str
+    name: str
+    instances: List[ImportedInstance]
+    skipped: List[SkippedShape]
+    objects: int
+    bodies: int
+    allowed_collision: Optional[AllowedCollisionMatrix]
+    joint_positions: Dict[str, float]
+
+    @property
+    def ids(self) -> Dict[str, str]:
+        """Instance ids by instance name."""
+        return {i.name: i.instance_id for i in self.instances}
+
+    @classmethod
+    def from_proto(cls, m) -> "ImportedScene":
+        return cls(
+            scene_id=m.scene_id,
+            name=m.name,
+            instances=[ImportedInstance.from_proto(i) for i in m.instances],
+            skipped=[SkippedShape.from_proto(s) for s in m.skipped],
+            objects=m.objects,
+            bodies=m.bodies,
+            allowed_collision=AllowedCollisionMatrix.from_proto(m.allowed_collision)
+            if m.HasField("allowed_collision")
+            else None,
+            joint_positions={j.name: j.position for j in m.joint_positions},
+        )
