@@ -183,7 +183,7 @@ pub struct Certified<R> {
 
 impl<R> Certified<R> {
     /// Newton's answer as it is (`source = Newton`, not a lower bound).
-    fn newton(result: R, certificate: Option<CertificateSummary>, converged: bool) -> Self {
+    pub fn newton(result: R, certificate: Option<CertificateSummary>, converged: bool) -> Self {
         Self {
             result,
             source: AnswerSource::Newton,
@@ -193,6 +193,12 @@ impl<R> Certified<R> {
             converged,
             needs_sdp: false,
         }
+    }
+
+    /// An answer that could not be solved (a refused or failed query): `result` as a lower bound,
+    /// not converged, no certificate.
+    pub fn unresolved(result: R) -> Self {
+        Self { lower_bound: true, ..Self::newton(result, None, false) }
     }
 
     /// Newton's unconverged answer of [`CertifyMode::NewtonOnly`], marked as needing the SDP.

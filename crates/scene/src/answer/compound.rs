@@ -76,15 +76,7 @@ pub(crate) fn distance_reply(
         Ok(t) => t,
         Err(e) => {
             tracing::warn!(error = %e, "tree distance query refused");
-            let answer = CertifiedDistance {
-                result: unresolved_distance(0.0),
-                source: AnswerSource::Newton,
-                certificate: None,
-                lower_bound: true,
-                tight: false,
-                converged: false,
-                needs_sdp: false,
-            };
+            let answer = CertifiedDistance::unresolved(unresolved_distance(0.0));
             return DistanceReply {
                 answer,
                 gradients: None,
@@ -147,15 +139,7 @@ pub(crate) fn growth_reply(
     let limited = precision_limited(a.body, &a.pose, b.body, &b.pose);
     let refused = |e: sublevel_core::Error| {
         tracing::warn!(error = %e, "tree growth query refused");
-        let answer = CertifiedGrowth {
-            result: empty_growth(0.0, SolveStatus::Stalled),
-            source: AnswerSource::Newton,
-            certificate: None,
-            lower_bound: true,
-            tight: false,
-            converged: false,
-            needs_sdp: false,
-        };
+        let answer = CertifiedGrowth::unresolved(empty_growth(0.0, SolveStatus::Stalled));
         GrowthReply { answer, gradients: None, precision_limited: limited, tree: None }
     };
     let t = match tree_collide(a.as_tree(), &a.pose, b.as_tree(), &b.pose, true, warm, &tp) {

@@ -259,15 +259,7 @@ fn unanswered_growth(a: &Posed, b: &Posed) -> GrowthReply {
         warm_started: false,
         warm_start: Arc::default(),
     };
-    let answer = sublevel_query::CertifiedGrowth {
-        result,
-        source: AnswerSource::Newton,
-        certificate: None,
-        lower_bound: true,
-        tight: false,
-        converged: false,
-        needs_sdp: false,
-    };
+    let answer = sublevel_query::CertifiedGrowth::unresolved(result);
     GrowthReply {
         answer,
         gradients: None,

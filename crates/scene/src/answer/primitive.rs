@@ -25,8 +25,7 @@ use sublevel_core::conic::SdpStatus;
 use sublevel_core::math::{Point3, Real, Vector3};
 use sublevel_query::dispatch::{self, PosedRef};
 use sublevel_query::{
-    distance_gradient, AnswerSource, CertificateKind, CertificateSummary, CertifiedDistance, CertifyMode,
-    DistanceResult, SolveStatus,
+    distance_gradient, CertificateKind, CertificateSummary, CertifiedDistance, CertifyMode, DistanceResult, SolveStatus,
 };
 
 /// The distance reply of a pair with a primitive (module docs). A pair the shape query refuses
@@ -46,15 +45,7 @@ pub(crate) fn distance_reply(
         Err(e) => {
             tracing::warn!(error = %e, "primitive distance query refused");
             return DistanceReply {
-                answer: CertifiedDistance {
-                    result: unresolved(),
-                    source: AnswerSource::Newton,
-                    certificate: None,
-                    lower_bound: true,
-                    tight: false,
-                    converged: false,
-                    needs_sdp: false,
-                },
+                answer: CertifiedDistance::unresolved(unresolved()),
                 gradients: None,
                 precision_limited: limited,
                 signed: o.signed,
@@ -95,15 +86,7 @@ pub(crate) fn distance_reply(
     if !o.cold && !found.compound && converged {
         cache.put_shape(pair.first, pair.second, d.warm_start);
     }
-    let answer = CertifiedDistance {
-        result,
-        source: AnswerSource::Newton,
-        certificate,
-        lower_bound: false,
-        tight: false,
-        converged,
-        needs_sdp: false,
-    };
+    let answer = CertifiedDistance::newton(result, certificate, converged);
     DistanceReply { answer, gradients, precision_limited: limited, signed: o.signed, penetration: None, tree }
 }
 
