@@ -42,6 +42,9 @@ enum Command {
     ShardProbe(cli::shard_probe::ShardProbeArgs),
     /// Scenes on a running server: `scene import` reads a MoveIt planning scene into a new scene.
     Scene(cli::scene::SceneArgs),
+    /// Robots: `robot fit` fits a URDF robot's links, `robot check` checks joint configurations
+    /// against a planning scene (collides, world / self, minimum distance), offline.
+    Robot(cli::robot::RobotArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -59,6 +62,7 @@ fn main() -> std::process::ExitCode {
         Command::Health(a) => cli::health::run(a),
         Command::ShardProbe(a) => cli::shard_probe::run(a),
         Command::Scene(a) => cli::scene::run(a),
+        Command::Robot(a) => cli::robot::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -7,6 +7,7 @@ pub mod health;
 pub mod loadtest;
 pub mod primitive;
 pub mod query;
+pub mod robot;
 pub mod scene;
 pub mod serve;
 pub mod serve_config;

@@ -14,6 +14,7 @@ mod primitives;
 mod query;
 mod query_compound;
 mod robot;
+mod robot_cli;
 mod scene_import;
 mod security;
 mod service;

@@ -1,24 +1,21 @@
 //! Integration tests: the Panda of the MotionBenchMaker problems read from its URDF and SRDF agrees
 //! with the problems' own scenes — the self-collision pairs the SRDF leaves are exactly the robot
 //! pairs a scene's allowed-collision matrix does not allow (21, as the peer labels say), and every
-//! collision mesh resolves under the package directory. Skipped where `../shared` is not there.
+//! collision mesh resolves under the package directory (`data/robots/panda`, the VAMP copy of the
+//! MotionBenchMaker Panda).
 
 use std::path::PathBuf;
 use sublevel::robot::srdf::Semantics;
 use sublevel::robot::{resolve_mesh_path, CollisionGeometry, RobotModel};
 use sublevel::scene::moveit::PlanningScene;
 
-fn panda_dir() -> Option<PathBuf> {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/peers/robots/panda");
-    dir.join("panda.urdf").is_file().then_some(dir)
+fn panda_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data/robots/panda")
 }
 
 #[test]
 fn the_panda_srdf_leaves_the_pairs_the_scenes_check() {
-    let Some(dir) = panda_dir() else {
-        eprintln!("skipped: ../shared/peers/robots/panda is not there");
-        return;
-    };
+    let dir = panda_dir();
     let robot = RobotModel::from_urdf_file(&dir.join("panda.urdf")).unwrap();
     let srdf = Semantics::from_srdf_file(&dir.join("panda.srdf")).unwrap();
     let pairs = robot.self_collision_pairs(&srdf.disabled_pairs).unwrap();
@@ -36,17 +33,9 @@ fn the_panda_srdf_leaves_the_pairs_the_scenes_check() {
         .collect();
     from_srdf.sort();
 
-    let tmp = tempfile::tempdir().unwrap();
-    let status = std::process::Command::new("tar")
-        .arg("xjf")
-        .arg(dir.join("problems.tar.bz2"))
-        .arg("-C")
-        .arg(tmp.path())
-        .arg("problems/table_pick_panda/scene0001.yaml")
-        .status()
-        .unwrap();
-    assert!(status.success());
-    let text = std::fs::read(tmp.path().join("problems/table_pick_panda/scene0001.yaml")).unwrap();
+    let scene =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data/robots/mbm_panda/scenes/table_pick/scene0001.yaml");
+    let text = std::fs::read(scene).unwrap();
     let acm = PlanningScene::from_yaml(&text).unwrap().allowed_collision.unwrap();
     let mut from_scene = Vec::new();
     for (i, a) in acm.names.iter().enumerate() {

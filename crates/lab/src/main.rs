@@ -20,6 +20,7 @@ mod fit_time;
 mod peer_coal;
 mod peer_parry;
 mod primitives;
+mod robot_labels;
 mod stability;
 mod startup;
 mod table1;
@@ -54,6 +55,9 @@ enum Command {
     Startup(startup::StartupArgs),
     /// Exact primitives' distance queries beside coal on the same cases; a body against a box.
     Primitives(primitives::PrimitivesArgs),
+    /// A fitted robot's configuration checks against mesh-exact labels (misses, false
+    /// collisions, distance error, time per configuration), per scenario.
+    RobotLabels(robot_labels::RobotLabelsArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -67,6 +71,7 @@ fn main() -> std::process::ExitCode {
         Command::Chart(a) => chart::run(a),
         Command::Startup(a) => startup::run(a),
         Command::Primitives(a) => primitives::run(a),
+        Command::RobotLabels(a) => robot_labels::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

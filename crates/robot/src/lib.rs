@@ -14,6 +14,13 @@
 //! - [`kinematics`]: forward kinematics — every link's pose in the world for a configuration and a
 //!   base pose — checked against pinocchio's `framesForwardKinematics` to 1e-12 m.
 //!
+//! - [`fit`]: a robot fitted once — every link mesh a compound sos-convex body containing it
+//!   (paper §V), URDF primitives exact, the SRDF's allowed pairs — saved as a robot file
+//!   ([`fitted`]).
+//! - [`check`]: configurations checked against a world of exact primitives and for
+//!   self-collision: the sos model decides what is far, the meshes what is near; no missed
+//!   collision, and the minimum distance never above the meshes'.
+//!
 //! This crate knows nothing of scenes or gRPC.
 
 #![warn(missing_docs)]
@@ -21,10 +28,16 @@
 
 pub use sublevel_core::{Error, Result};
 
+pub mod check;
+pub mod fit;
+pub mod fitted;
 pub mod kinematics;
 pub mod model;
 pub mod motion;
 pub mod srdf;
 
+pub use check::{CheckOptions, ConfigurationAnswer, RobotChecker, WorldObject};
+pub use fit::{fit_robot, RobotFitProgress, RobotFitSettings};
+pub use fitted::{FittedRobot, LinkShape, RobotFile, RobotGeometry};
 pub use model::{resolve_mesh_path, CollisionGeometry, Joint, JointKind, JointValue, Link, RobotModel};
 pub use srdf::Semantics;

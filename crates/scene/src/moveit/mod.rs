@@ -645,5 +645,7 @@ impl RawScene {
 mod import;
 #[cfg(test)]
 mod tests;
+mod world;
 
 pub use import::{ImportPlan, ImportedInstance, ImportedScene, PlannedInstance, SkippedShape};
+pub use world::{allowed_override, world_objects};

@@ -1,0 +1,303 @@
+//! `sublevel-lab robot-labels`: a fitted robot's configuration checks against mesh-exact labels
+//! (the MotionBenchMaker Panda labels of the robots peer: pinocchio + coal on the collision meshes,
+//! 14 000 configurations over 7 scenarios × 10 scenes), per scenario:
+//!
+//! - misses: configurations the meshes call colliding that the check calls free (world, self);
+//! - false collisions: mesh-free configurations called colliding, as % of the mesh-free ones,
+//!   with the mesh clearance of those that remain;
+//! - the minimum robot–world distance against the mesh-exact one (never above it; the mean and
+//!   worst error where both call the robot free of the world);
+//! - time per configuration, one thread: the full answer (distance, world, self) and the verdict
+//!   alone (world pairs stop at the first collision, no distance), medians.
+
+use csv::StringRecord;
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::time::Instant;
+use sublevel_core::math::{Isometry3, Real};
+use sublevel_core::{Error, Result};
+use sublevel_robot::{CheckOptions, FittedRobot, RobotChecker};
+use sublevel_scene::moveit::{allowed_override, world_objects, PlanningScene};
+
+/// Arguments of `sublevel-lab robot-labels`.
+#[derive(clap::Args, Debug)]
+pub struct RobotLabelsArgs {
+    /// The fitted robot (`sublevel robot fit`).
+    #[arg(long, default_value = "data/robots/panda/panda.robot.json")]
+    robot: PathBuf,
+    /// The labels CSV (`scenario, scene, idx, kind, q1..q7, collides, collides_world,
+    /// collides_self, min_world_dist_m, colliding_pairs`).
+    /// The default holds the labels of the collision meshes as their OBJ files define them
+    /// (`scripts/peers/relabel_panda.py`); the peer's own labels are
+    /// `../shared/peers/robots/labels/mbm_panda_labels.csv`.
+    #[arg(long, default_value = "data/robots/mbm_panda/labels_obj.csv")]
+    labels: PathBuf,
+    /// The planning scenes: `DIR/SCENARIO{suffix}/sceneNNNN.yaml`.
+    #[arg(long, default_value = "data/robots/mbm_panda/scenes")]
+    problems: PathBuf,
+    /// Suffix of the scenario folders (`_panda` for MotionBenchMaker's extracted problems).
+    #[arg(long, default_value = "")]
+    suffix: String,
+    /// Check only every k-th labelled configuration.
+    #[arg(long, default_value_t = 1)]
+    every: usize,
+    /// Print every miss and the worst distance errors.
+    #[arg(long)]
+    verbose: bool,
+}
+
+#[derive(Default)]
+struct Tally {
+    n: usize,
+    mesh_colliding: usize,
+    mesh_free: usize,
+    ours_colliding: usize,
+    miss_world: usize,
+    miss_self: usize,
+    false_world: usize,
+    false_self: usize,
+    false_any: usize,
+    false_clearance: Vec<Real>,
+    dist_err: Vec<Real>,
+    above: usize,
+    unconverged: usize,
+    exact_pairs: usize,
+    full_ns: Vec<Real>,
+    verdict_ns: Vec<Real>,
+}
+
+fn median(v: &mut [Real]) -> Real {
+    if v.is_empty() {
+        return Real::NAN;
+    }
+    v.sort_by(Real::total_cmp);
+    v[v.len() / 2]
+}
+
+fn field<'a>(r: &'a StringRecord, h: &StringRecord, name: &str) -> Result<&'a str> {
+    let i = h.iter().position(|x| x == name).ok_or_else(|| Error::invalid("labels", format!("no column {name}")))?;
+    r.get(i).ok_or_else(|| Error::invalid("labels", format!("a row lacks {name}")))
+}
+
+fn num(r: &StringRecord, h: &StringRecord, name: &str) -> Result<Real> {
+    field(r, h, name)?.parse::<Real>().map_err(|e| Error::invalid("labels", format!("{name}: {e}")))
+}
+
+/// Runs `sublevel-lab robot-labels`.
+///
+/// # Errors
+/// Files that cannot be read; a label row or a scene that does not parse; a check that fails.
+pub fn run(args: RobotLabelsArgs) -> Result<()> {
+    let mut tallies = evaluate(&args)?;
+    print_table(&mut tallies);
+    Ok(())
+}
+
+/// Checks the labelled configurations, per scenario.
+fn evaluate(args: &RobotLabelsArgs) -> Result<BTreeMap<String, Tally>> {
+    let robot = FittedRobot::load(&args.robot)?;
+    let mut reader = csv::Reader::from_path(&args.labels).map_err(|e| Error::invalid("labels", e.to_string()))?;
+    let header = reader.headers().map_err(|e| Error::invalid("labels", e.to_string()))?.clone();
+    let rows: Vec<StringRecord> =
+        reader.records().collect::<std::result::Result<_, _>>().map_err(|e| Error::invalid("labels", e.to_string()))?;
+    let dof = robot.model.dof();
+    // Group rows by scene, keeping their order.
+    let mut by_scene: BTreeMap<(String, u32), Vec<&StringRecord>> = BTreeMap::new();
+    for (k, r) in rows.iter().enumerate() {
+        if k % args.every.max(1) != 0 {
+            continue;
+        }
+        let scene: u32 = field(r, &header, "scene")?.parse().map_err(|_| Error::invalid("labels", "scene"))?;
+        by_scene.entry((field(r, &header, "scenario")?.to_owned(), scene)).or_default().push(r);
+    }
+    let mut tallies: BTreeMap<String, Tally> = BTreeMap::new();
+    let base = Isometry3::identity();
+    let full = CheckOptions::default();
+    let verdict = CheckOptions { distance: false, ..CheckOptions::default() };
+    for ((scenario, scene_no), rows) in &by_scene {
+        let path = args.problems.join(format!("{scenario}{}", args.suffix)).join(format!("scene{scene_no:04}.yaml"));
+        let bytes = std::fs::read(&path)
+            .map_err(|e| std::io::Error::new(e.kind(), format!("cannot read {}: {e}", path.display())))?;
+        let scene = PlanningScene::from_yaml(&bytes)?;
+        let (world, _) = world_objects(&scene)?;
+        let allowed = allowed_override(&scene);
+        let mut checker = RobotChecker::new(&robot, world, &allowed)?;
+        let t = tallies.entry(scenario.clone()).or_default();
+        for r in rows {
+            let q: Vec<Real> = (1..=dof).map(|j| num(r, &header, &format!("q{j}"))).collect::<Result<_>>()?;
+            let mesh = num(r, &header, "collides")? > 0.5;
+            let mesh_world = num(r, &header, "collides_world")? > 0.5;
+            let mesh_self = num(r, &header, "collides_self")? > 0.5;
+            let mesh_dist = num(r, &header, "min_world_dist_m")?;
+            let s = Instant::now();
+            let a = checker.check(&q, &base, &full)?;
+            t.full_ns.push(s.elapsed().as_nanos() as Real);
+            let s = Instant::now();
+            let v = checker.check(&q, &base, &verdict)?;
+            t.verdict_ns.push(s.elapsed().as_nanos() as Real);
+            if v.world != a.world || v.self_collision != a.self_collision {
+                return Err(Error::Numerical(format!(
+                    "{scenario} scene {scene_no} idx {}: the verdict-only check disagrees with the full one",
+                    field(r, &header, "idx")?
+                )));
+            }
+            t.n += 1;
+            t.exact_pairs += a.pairs_exact;
+            t.unconverged += usize::from(!a.converged);
+            t.ours_colliding += usize::from(a.collides);
+            if mesh {
+                t.mesh_colliding += 1;
+            } else {
+                t.mesh_free += 1;
+            }
+            let idx = field(r, &header, "idx")?;
+            if mesh_world && !a.world {
+                t.miss_world += 1;
+                if args.verbose {
+                    eprintln!(
+                        "miss (world): {scenario} {scene_no} idx {idx} pairs {}",
+                        field(r, &header, "colliding_pairs")?
+                    );
+                }
+            }
+            if mesh_self && !a.self_collision {
+                t.miss_self += 1;
+                if args.verbose {
+                    eprintln!(
+                        "miss (self): {scenario} {scene_no} idx {idx} pairs {}",
+                        field(r, &header, "colliding_pairs")?
+                    );
+                }
+            }
+            t.false_world += usize::from(!mesh_world && a.world);
+            t.false_self += usize::from(!mesh_self && a.self_collision);
+            if !mesh && a.collides {
+                if args.verbose {
+                    let pair =
+                        a.pair.map(|(g, o)| format!("{} – {}", robot.geometries[g].name, checker.world()[o].name));
+                    let self_pair = a
+                        .self_pair
+                        .map(|(x, y)| format!("{} – {}", robot.geometries[x].name, robot.geometries[y].name));
+                    eprintln!("false collision: {scenario} {scene_no} idx {idx} world {} {pair:?} self {} {self_pair:?}, mesh clearance {mesh_dist}", a.world, a.self_collision);
+                }
+                t.false_any += 1;
+                t.false_clearance.push(mesh_dist);
+            }
+            if !mesh_world && !a.world {
+                let err = mesh_dist - a.distance;
+                if a.distance > mesh_dist + 1e-5 {
+                    t.above += 1;
+                    if args.verbose {
+                        eprintln!(
+                            "distance above the mesh's: {scenario} {scene_no} idx {idx}: {} > {mesh_dist}",
+                            a.distance
+                        );
+                    }
+                }
+                t.dist_err.push(err);
+            }
+        }
+    }
+    Ok(tallies)
+}
+
+fn print_table(tallies: &mut BTreeMap<String, Tally>) {
+    println!(
+        "| scenario | configs | mesh colliding | misses (world / self) | false collisions (world / self) | false % of mesh-free | distance above mesh | mean / max distance error (mm) | pairs on meshes per config | not converged | full check median (µs) | verdict median (µs) |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+    let mut all = Tally::default();
+    for (name, t) in tallies.iter_mut() {
+        row(name, t);
+        all.n += t.n;
+        all.mesh_colliding += t.mesh_colliding;
+        all.mesh_free += t.mesh_free;
+        all.miss_world += t.miss_world;
+        all.miss_self += t.miss_self;
+        all.false_world += t.false_world;
+        all.false_self += t.false_self;
+        all.false_any += t.false_any;
+        all.false_clearance.extend(&t.false_clearance);
+        all.dist_err.extend(&t.dist_err);
+        all.above += t.above;
+        all.unconverged += t.unconverged;
+        all.exact_pairs += t.exact_pairs;
+        all.full_ns.extend(&t.full_ns);
+        all.verdict_ns.extend(&t.verdict_ns);
+    }
+    row("all", &mut all);
+    let mut c = all.false_clearance.clone();
+    c.sort_by(Real::total_cmp);
+    let bins = [0.001, 0.002, 0.005, 0.01, 0.02, 0.05, Real::INFINITY];
+    let mut lo = 0.0;
+    let mut hist = Vec::new();
+    for hi in bins {
+        let n = c.iter().filter(|&&x| x >= lo && x < hi).count();
+        hist.push(format!(
+            "[{:.0}, {}) mm: {n}",
+            lo * 1e3,
+            if hi.is_finite() { format!("{:.0}", hi * 1e3) } else { "∞".into() }
+        ));
+        lo = hi;
+    }
+    println!("\nmesh clearance of the false collisions (meters of min world distance): {}", hist.join(", "));
+}
+
+fn row(name: &str, t: &mut Tally) {
+    let mean =
+        if t.dist_err.is_empty() { Real::NAN } else { t.dist_err.iter().sum::<Real>() / t.dist_err.len() as Real };
+    let max = t.dist_err.iter().copied().fold(0.0, Real::max);
+    println!(
+        "| {name} | {} | {} | {} / {} | {} / {} | {:.2} % | {} | {:.2} / {:.1} | {:.2} | {} | {:.1} | {:.1} |",
+        t.n,
+        t.mesh_colliding,
+        t.miss_world,
+        t.miss_self,
+        t.false_world,
+        t.false_self,
+        100.0 * t.false_any as Real / t.mesh_free.max(1) as Real,
+        t.above,
+        mean * 1e3,
+        max * 1e3,
+        t.exact_pairs as Real / t.n.max(1) as Real,
+        t.unconverged,
+        median(&mut t.full_ns) / 1e3,
+        median(&mut t.verdict_ns) / 1e3,
+    );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every tenth of the 14 000 MotionBenchMaker Panda configurations, against the labels of
+    /// pinocchio + coal on the OBJ meshes as written (`scripts/peers/relabel_panda.py`): no miss,
+    /// no false collision, the minimum world distance equal to coal's to 10 µm (both GJK; the
+    /// labels are rounded to 1 µm), every answer converged.
+    #[test]
+    fn the_panda_checks_agree_with_the_mesh_labels() {
+        let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
+        let args = RobotLabelsArgs {
+            robot: root.join("data/robots/panda/panda.robot.json"),
+            labels: root.join("data/robots/mbm_panda/labels_obj.csv"),
+            problems: root.join("data/robots/mbm_panda/scenes"),
+            suffix: String::new(),
+            every: 10,
+            verbose: true,
+        };
+        let tallies = evaluate(&args).unwrap();
+        assert_eq!(tallies.len(), 7, "seven scenarios");
+        let n: usize = tallies.values().map(|t| t.n).sum();
+        let colliding: usize = tallies.values().map(|t| t.mesh_colliding).sum();
+        assert_eq!(n, 1400);
+        assert!(colliding > 300 && colliding < n - 300, "both verdicts present: {colliding} colliding");
+        for (name, t) in &tallies {
+            assert_eq!((t.miss_world, t.miss_self), (0, 0), "{name}: misses");
+            assert_eq!((t.false_world, t.false_self), (0, 0), "{name}: false collisions");
+            assert_eq!(t.above, 0, "{name}: a distance above the mesh's");
+            assert_eq!(t.unconverged, 0, "{name}: not converged");
+            let worst = t.dist_err.iter().fold(0.0, |m: Real, e| m.max(e.abs()));
+            assert!(worst < 1e-5, "{name}: distance differs from coal's by {worst} m");
+        }
+    }
+}

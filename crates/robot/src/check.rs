@@ -1,0 +1,570 @@
+//! Configuration checks: does the robot at joint configuration `q` collide with the world or with
+//! itself, and how far is it from the world.
+//!
+//! ```text
+//! q ──FK──► link poses ──► geometry poses (link pose · URDF collision origin)
+//! world pairs (every geometry × every object, minus the allowed ones), by increasing ball gap:
+//!   ball gap > padding (verdict) or ≥ best distance so far (distance)       → decided, no solve
+//!   sos bound: the link's compound root body (contains every leaf, hence every triangle) against
+//!              the object's exact primitive, one Newton / active-set solve: d_sos ≤ d_mesh
+//!   d_sos > padding (verdict) or ≥ best (distance)                           → decided
+//!   mesh:  the link's triangles against the primitive (parry's BVH): intersecting or within the
+//!          padding → collides; else the exact mesh distance, the new best
+//! self pairs (the SRDF's allowed pairs left out): ball gap, root–root sos bound, then the two
+//!   meshes' triangles
+//! ```
+//!
+//! **No missed collision.** The root body contains the mesh, so `d_sos` never exceeds the mesh's
+//! distance: a pair it calls free is free. A pair it cannot call free (overlap, within the
+//! padding, or a solve that did not converge) is decided on the mesh itself, exactly as a mesh
+//! checker (coal, FCL) decides it: triangles against the primitive or the other mesh's triangles
+//! (a shape wholly inside a closed mesh, touching no triangle, is not a contact for either). So
+//! the verdict is the mesh's, and the sos bodies decide, cheaply, what is far.
+//!
+//! **Distance.** The minimum robot–world distance is the exact mesh distance of the closest pair:
+//! pairs are taken by their ball gap, the sos bound prunes those that cannot beat the best, and
+//! the rest get the mesh distance.
+//!
+//! **Why the root and not the leaves.** On the Panda's links the branch-and-bound descent of a
+//! 32-leaf tree against a box costs tens of µs, the mesh's own BVH distance 1–8 µs and the root's
+//! sos solve 0.4–2 µs: near pairs are cheaper on the mesh than down the tree
+//! (`crates/robot/examples/check_profile.rs` measures it).
+
+use crate::fitted::{FittedRobot, LinkShape};
+use crate::{Error, Result};
+use parry3d_f64::query::ClosestPoints;
+use parry3d_f64::shape::SharedShape;
+use std::f64::consts::FRAC_PI_2;
+use sublevel_core::math::{Isometry3, Point3, Real, UnitQuaternion, Vector3};
+use sublevel_core::primitive::Primitive;
+use sublevel_query::shape::{shape_distance, ShapeRef};
+
+/// An object of the world: an exact primitive placed in the world frame.
+#[derive(Clone, Debug)]
+pub struct WorldObject {
+    /// Its name (a MoveIt collision object's id, with `#k` for its k-th shape, k ≥ 1).
+    pub name: String,
+    /// The shape.
+    pub primitive: Primitive,
+    /// Shape frame → world.
+    pub pose: Isometry3,
+}
+
+/// What a check computes.
+#[derive(Clone, Copy, Debug)]
+pub struct CheckOptions {
+    /// Padding added around every robot geometry (meters, ≥ 0): a pair closer than it collides.
+    pub padding: Real,
+    /// Whether the minimum robot–world distance is computed (else the world pairs stop at the
+    /// first collision and far pairs are not solved).
+    pub distance: bool,
+    /// Whether self-collision pairs are checked.
+    pub self_collision: bool,
+}
+
+impl Default for CheckOptions {
+    fn default() -> Self {
+        Self { padding: 0.0, distance: true, self_collision: true }
+    }
+}
+
+/// The answer for one configuration.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ConfigurationAnswer {
+    /// Whether the robot collides with the world or itself.
+    pub collides: bool,
+    /// Whether a robot geometry collides with a world object.
+    pub world: bool,
+    /// Whether two robot geometries of a checked self pair collide.
+    pub self_collision: bool,
+    /// Minimum robot–world distance (meters): the closest pair's mesh distance (module docs); 0
+    /// when the robot collides with the world; +∞ with no world pair; NaN when not asked for.
+    pub distance: Real,
+    /// The world pair of `distance` (or the colliding one), as (geometry index, object index).
+    pub pair: Option<(usize, usize)>,
+    /// Witness points of `distance` on the robot and on the object (world frame, meters), when
+    /// the robot is free of the world.
+    pub witnesses: Option<(Point3, Point3)>,
+    /// A colliding self pair, as geometry indices.
+    pub self_pair: Option<(usize, usize)>,
+    /// Whether every solve the answer rests on converged (pairs resolved on the mesh count as
+    /// converged: the mesh test is exact).
+    pub converged: bool,
+    /// Pairs decided by their bounding balls.
+    pub pairs_pruned: usize,
+    /// Pairs bounded by the sos bodies (one solve each).
+    pub pairs_model: usize,
+    /// Pairs resolved on the meshes.
+    pub pairs_exact: usize,
+}
+
+/// One geometry's exact shape for the mesh stage, and the pose offset parry's shape needs.
+struct ExactShape {
+    shape: SharedShape,
+    /// parry shape frame → geometry frame (a cylinder's axis is y in parry, z here).
+    offset: Isometry3,
+}
+
+fn exact_primitive(p: &Primitive) -> ExactShape {
+    let v = |x: Real, y: Real, z: Real| parry3d_f64::math::Vector::new(x, y, z);
+    let id = Isometry3::identity();
+    match *p {
+        Primitive::Box { half_extents: h } => ExactShape { shape: SharedShape::cuboid(h.x, h.y, h.z), offset: id },
+        Primitive::Sphere { radius } => ExactShape { shape: SharedShape::ball(radius), offset: id },
+        Primitive::Cylinder { radius, half_height } => ExactShape {
+            shape: SharedShape::cylinder(half_height, radius),
+            offset: Isometry3::from_parts(
+                Vector3::zeros().into(),
+                UnitQuaternion::from_axis_angle(&Vector3::x_axis(), FRAC_PI_2),
+            ),
+        },
+        Primitive::Capsule { radius, half_height } => ExactShape {
+            shape: SharedShape::capsule(v(0.0, 0.0, -half_height), v(0.0, 0.0, half_height), radius),
+            offset: id,
+        },
+        Primitive::Halfspace { normal, offset } => ExactShape {
+            shape: SharedShape::halfspace(v(normal.x, normal.y, normal.z).normalize()),
+            offset: Isometry3::translation(normal.x * offset, normal.y * offset, normal.z * offset),
+        },
+    }
+}
+
+fn parry_pose(iso: &Isometry3) -> parry3d_f64::math::Pose {
+    let q = iso.rotation.quaternion();
+    let t = iso.translation.vector;
+    parry3d_f64::math::Pose::from_parts(
+        parry3d_f64::math::Vector::new(t.x, t.y, t.z),
+        parry3d_f64::math::Rot3::from_xyzw(q.i, q.j, q.k, q.w),
+    )
+}
+
+/// A box placed in the world: center, rotation columns and half extents (meters).
+#[derive(Clone, Copy, Debug)]
+struct PlacedBox {
+    center: Vector3,
+    axes: sublevel_core::math::Matrix3,
+    half: Vector3,
+}
+
+impl PlacedBox {
+    fn new(pose: &Isometry3, local: &(Vector3, Vector3)) -> Self {
+        Self {
+            center: pose.transform_point(&local.0.into()).coords,
+            axes: *pose.rotation.to_rotation_matrix().matrix(),
+            half: local.1,
+        }
+    }
+
+    /// Half the box's extent along the unit axis `n`.
+    fn radius(&self, n: &Vector3) -> Real {
+        (0..3).map(|i| self.half[i] * self.axes.column(i).dot(n).abs()).sum()
+    }
+}
+
+/// A lower bound of the distance between two boxes (meters; ≤ 0 when they overlap): the largest
+/// gap between their projections over the 15 separating axes of two boxes (Gottschalk, Lin and
+/// Manocha, OBBTree, 1996): `dist ≥ |n·(c_b − c_a)| − r_a(n) − r_b(n)` for any unit `n`.
+fn box_gap(a: &PlacedBox, b: &PlacedBox) -> Real {
+    let d = b.center - a.center;
+    let mut gap = Real::NEG_INFINITY;
+    let mut axis = |n: Vector3| {
+        let len = n.norm();
+        if len > 1e-9 {
+            let n = n / len;
+            gap = gap.max(n.dot(&d).abs() - a.radius(&n) - b.radius(&n));
+        }
+    };
+    for i in 0..3 {
+        axis(a.axes.column(i).into_owned());
+        axis(b.axes.column(i).into_owned());
+    }
+    for i in 0..3 {
+        for j in 0..3 {
+            axis(a.axes.column(i).cross(&b.axes.column(j)));
+        }
+    }
+    // Rounding of the projections: a hair below the exact gap.
+    gap - 1e-12 * (d.norm() + a.half.norm() + b.half.norm())
+}
+
+/// The outcome of one pair.
+enum PairOutcome {
+    /// Free, at least this far apart (meters), with witnesses (robot side first) and whether the
+    /// value is the mesh-exact one.
+    Free { distance: Real, witnesses: Option<(Point3, Point3)> },
+    /// Colliding (within the padding).
+    Collides,
+}
+
+/// Checks configurations of one robot in one world (module docs). Holds the world's exact shapes
+/// and scratch space; one checker per thread.
+pub struct RobotChecker<'r> {
+    robot: &'r FittedRobot,
+    world: Vec<WorldObject>,
+    world_exact: Vec<ExactShape>,
+    /// Each world object's placed box (`None` for a halfspace).
+    world_boxes: Vec<Option<PlacedBox>>,
+    robot_exact: Vec<ExactShape>,
+    /// Checked world pairs per geometry (objects not allowed to touch it).
+    world_pairs: Vec<Vec<usize>>,
+    /// Checked self pairs, as geometry indices.
+    self_pairs: Vec<(usize, usize)>,
+    link_poses: Vec<Isometry3>,
+    poses: Vec<Isometry3>,
+    centers: Vec<Vector3>,
+    boxes: Vec<Option<PlacedBox>>,
+    order: Vec<(Real, usize, usize)>,
+}
+
+impl<'r> RobotChecker<'r> {
+    /// A checker of `robot` among `world`. `allowed(a, b)` overrides which pairs may touch, by
+    /// link and object names (a scene's allowed-collision matrix): `Some(true)` allowed (never
+    /// checked), `Some(false)` checked, `None` the default — self pairs as the robot's SRDF says,
+    /// world pairs checked.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `world[k].pose` when a pose is not finite.
+    pub fn new(
+        robot: &'r FittedRobot,
+        world: Vec<WorldObject>,
+        allowed: &dyn Fn(&str, &str) -> Option<bool>,
+    ) -> Result<Self> {
+        for (k, o) in world.iter().enumerate() {
+            let m = o.pose.to_homogeneous();
+            if m.iter().any(|v| !v.is_finite()) {
+                return Err(Error::invalid(format!("world[{k}].pose"), "must be finite"));
+            }
+        }
+        let links = robot.model.links();
+        let world_pairs = robot
+            .geometries
+            .iter()
+            .map(|g| {
+                let link = &links[g.link].name;
+                (0..world.len()).filter(|&o| allowed(link, &world[o].name) != Some(true)).collect()
+            })
+            .collect();
+        let mut self_pairs = Vec::new();
+        let n = robot.geometries.len();
+        for a in 0..n {
+            for b in a + 1..n {
+                let (la, lb) = (robot.geometries[a].link, robot.geometries[b].link);
+                if la == lb {
+                    continue;
+                }
+                let default = robot.self_pairs.contains(&(la.min(lb), la.max(lb)));
+                let check = match allowed(&links[la].name, &links[lb].name) {
+                    Some(allow) => !allow,
+                    None => default,
+                };
+                if check {
+                    self_pairs.push((a, b));
+                }
+            }
+        }
+        let robot_exact = robot
+            .geometries
+            .iter()
+            .map(|g| match &g.shape {
+                LinkShape::Primitive(p) => Ok(exact_primitive(p)),
+                LinkShape::Mesh { vertices, triangles, .. } => {
+                    let v = vertices.iter().map(|p| parry3d_f64::math::Vector::new(p.x, p.y, p.z)).collect();
+                    let mesh = SharedShape::trimesh(v, triangles.clone())
+                        .map_err(|e| Error::invalid(format!("geometries[{}].mesh", g.name), format!("{e:?}")))?;
+                    Ok(ExactShape { shape: mesh, offset: Isometry3::identity() })
+                }
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let world_exact = world.iter().map(|o| exact_primitive(&o.primitive)).collect();
+        let world_boxes = world
+            .iter()
+            .map(|o| o.primitive.local_half_extents().map(|h| PlacedBox::new(&o.pose, &(Vector3::zeros(), h))))
+            .collect();
+        Ok(Self {
+            robot,
+            world,
+            world_exact,
+            world_boxes,
+            robot_exact,
+            world_pairs,
+            self_pairs,
+            link_poses: Vec::new(),
+            poses: Vec::new(),
+            centers: Vec::new(),
+            boxes: Vec::new(),
+            order: Vec::new(),
+        })
+    }
+
+    /// The world objects.
+    pub fn world(&self) -> &[WorldObject] {
+        &self.world
+    }
+
+    /// The checked self pairs, as geometry indices.
+    pub fn self_pairs(&self) -> &[(usize, usize)] {
+        &self.self_pairs
+    }
+
+    /// Checks configuration `q` (one entry per [`crate::RobotModel::variable_names`], radians /
+    /// meters) with the robot's root at `base`.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `q` or `q[k]` (wrong length, not finite) or `padding`
+    /// (negative or not finite); [`Error::Numerical`] when a query fails outright.
+    pub fn check(&mut self, q: &[Real], base: &Isometry3, options: &CheckOptions) -> Result<ConfigurationAnswer> {
+        if !(options.padding.is_finite() && options.padding >= 0.0) {
+            return Err(Error::invalid("padding", format!("must be finite and ≥ 0 m, got {}", options.padding)));
+        }
+        let robot = self.robot;
+        robot.model.forward_kinematics(q, base, &mut self.link_poses)?;
+        self.poses.clear();
+        self.centers.clear();
+        self.boxes.clear();
+        for g in &robot.geometries {
+            let pose = self.link_poses[g.link] * g.origin;
+            self.centers.push(pose.transform_point(&g.sphere.0.into()).coords);
+            self.boxes.push(g.local_box.as_ref().map(|b| PlacedBox::new(&pose, b)));
+            self.poses.push(pose);
+        }
+        let mut answer = ConfigurationAnswer {
+            collides: false,
+            world: false,
+            self_collision: false,
+            distance: if options.distance { Real::INFINITY } else { Real::NAN },
+            pair: None,
+            witnesses: None,
+            self_pair: None,
+            converged: true,
+            pairs_pruned: 0,
+            pairs_model: 0,
+            pairs_exact: 0,
+        };
+        self.world_check(options, &mut answer)?;
+        if options.self_collision {
+            self.self_check(options, &mut answer)?;
+        }
+        answer.collides = answer.world || answer.self_collision;
+        Ok(answer)
+    }
+
+    /// Ball gap of robot geometry `g` and world object `o` (a lower bound of their distance).
+    fn world_gap(&self, g: usize, o: usize) -> Real {
+        let r = self.robot.geometries[g].sphere.1;
+        let obj = &self.world[o];
+        match obj.primitive {
+            Primitive::Halfspace { normal, offset } => {
+                let n = obj.pose.rotation * normal;
+                let d = offset + n.dot(&obj.pose.translation.vector);
+                n.dot(&self.centers[g]) - d - r
+            }
+            p => (self.centers[g] - obj.pose.translation.vector).norm() - r - p.bounding_radius(),
+        }
+    }
+
+    /// The box gap of robot geometry `g` and world object `o` (a lower bound of their distance;
+    /// −∞ without boxes).
+    fn world_box_gap(&self, g: usize, o: usize) -> Real {
+        match (&self.boxes[g], &self.world_boxes[o]) {
+            (Some(a), Some(b)) => box_gap(a, b),
+            _ => Real::NEG_INFINITY,
+        }
+    }
+
+    fn world_check(&mut self, options: &CheckOptions, answer: &mut ConfigurationAnswer) -> Result<()> {
+        let mut order = std::mem::take(&mut self.order);
+        order.clear();
+        for g in 0..self.robot.geometries.len() {
+            for &o in &self.world_pairs[g] {
+                order.push((self.world_gap(g, o), g, o));
+            }
+        }
+        order.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+        let mut best = Real::INFINITY;
+        let mut result = Ok(());
+        for (k, &(gap, g, o)) in order.iter().enumerate() {
+            if (options.distance && gap >= best) || (!options.distance && gap > options.padding) {
+                answer.pairs_pruned += order.len() - k;
+                break;
+            }
+            let bound = if options.distance { best.max(options.padding) } else { options.padding };
+            let box_gap = self.world_box_gap(g, o);
+            if box_gap > options.padding && box_gap >= bound {
+                answer.pairs_pruned += 1;
+                continue;
+            }
+            match self.world_pair(g, o, bound, options.padding, answer) {
+                Ok(None) => {}
+                Ok(Some(PairOutcome::Collides)) => {
+                    answer.world = true;
+                    answer.pair = Some((g, o));
+                    answer.witnesses = None;
+                    if options.distance {
+                        answer.distance = 0.0;
+                    }
+                    break;
+                }
+                Ok(Some(PairOutcome::Free { distance, witnesses })) => {
+                    if distance < best {
+                        best = distance;
+                        answer.pair = Some((g, o));
+                        answer.witnesses = witnesses;
+                    }
+                }
+                Err(e) => {
+                    result = Err(e);
+                    break;
+                }
+            }
+        }
+        if options.distance && !answer.world {
+            answer.distance = best;
+        }
+        self.order = order;
+        result
+    }
+
+    /// One world pair: `None` when the sos bound shows the pair is at least `bound` apart (and
+    /// farther than the padding), else the mesh's answer.
+    fn world_pair(
+        &self,
+        g: usize,
+        o: usize,
+        bound: Real,
+        padding: Real,
+        answer: &mut ConfigurationAnswer,
+    ) -> Result<Option<PairOutcome>> {
+        let geometry = &self.robot.geometries[g];
+        let obj = &self.world[o];
+        let pose = &self.poses[g];
+        answer.pairs_model += 1;
+        let shape = match &geometry.shape {
+            LinkShape::Primitive(p) => ShapeRef::Primitive(p),
+            LinkShape::Mesh { body, .. } => ShapeRef::Body(body.body(body.root())),
+        };
+        let d = shape_distance(shape, pose, ShapeRef::Primitive(&obj.primitive), &obj.pose, None)?;
+        let converged = d.status.converged();
+        if let (LinkShape::Primitive(_), true) = (&geometry.shape, converged) {
+            // Both exact: the primitive answer is the verdict and the distance.
+            return Ok(Some(if d.overlapping || d.distance <= padding {
+                PairOutcome::Collides
+            } else {
+                PairOutcome::Free { distance: d.distance, witnesses: Some((d.witness_a, d.witness_b)) }
+            }));
+        }
+        if converged && !d.overlapping && d.distance > padding && d.distance >= bound {
+            return Ok(None);
+        }
+        if bound <= padding {
+            // A verdict only: no distance needed.
+            answer.pairs_exact += 1;
+            let (a, b) = (&self.robot_exact[g], &self.world_exact[o]);
+            let collides = exact_collides(
+                &parry_pose(&(self.poses[g] * a.offset)),
+                a,
+                &parry_pose(&(obj.pose * b.offset)),
+                b,
+                padding,
+            )?;
+            return Ok(collides.then_some(PairOutcome::Collides));
+        }
+        self.exact_world_pair(g, o, padding, answer).map(Some)
+    }
+
+    /// A world pair on the mesh (exact; parry's triangle BVH).
+    fn exact_world_pair(
+        &self,
+        g: usize,
+        o: usize,
+        padding: Real,
+        answer: &mut ConfigurationAnswer,
+    ) -> Result<PairOutcome> {
+        answer.pairs_exact += 1;
+        let (a, b) = (&self.robot_exact[g], &self.world_exact[o]);
+        let pa = parry_pose(&(self.poses[g] * a.offset));
+        let pb = parry_pose(&(self.world[o].pose * b.offset));
+        exact_pair(&pa, a, &pb, b, padding)
+    }
+
+    fn self_check(&mut self, options: &CheckOptions, answer: &mut ConfigurationAnswer) -> Result<()> {
+        for k in 0..self.self_pairs.len() {
+            let (a, b) = self.self_pairs[k];
+            let (ga, gb) = (&self.robot.geometries[a], &self.robot.geometries[b]);
+            let gap = (self.centers[a] - self.centers[b]).norm() - ga.sphere.1 - gb.sphere.1;
+            let box_gap = match (&self.boxes[a], &self.boxes[b]) {
+                (Some(x), Some(y)) => box_gap(x, y),
+                _ => Real::NEG_INFINITY,
+            };
+            if gap > options.padding || box_gap > options.padding {
+                answer.pairs_pruned += 1;
+                continue;
+            }
+            answer.pairs_model += 1;
+            let (pa, pb) = (&self.poses[a], &self.poses[b]);
+            let shape = |s: &'r LinkShape| match s {
+                LinkShape::Primitive(p) => ShapeRef::Primitive(p),
+                LinkShape::Mesh { body, .. } => ShapeRef::Body(body.body(body.root())),
+            };
+            let d = shape_distance(shape(&ga.shape), pa, shape(&gb.shape), pb, None)?;
+            let free = d.status.converged() && !d.overlapping && d.distance > options.padding;
+            if free {
+                continue;
+            }
+            answer.pairs_exact += 1;
+            let (ea, eb) = (&self.robot_exact[a], &self.robot_exact[b]);
+            if exact_collides(&parry_pose(&(pa * ea.offset)), ea, &parry_pose(&(pb * eb.offset)), eb, options.padding)?
+            {
+                answer.self_collision = true;
+                answer.self_pair = Some((a, b));
+                break;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Whether two exact shapes (parry) intersect or come within `padding`.
+fn exact_collides(
+    pa: &parry3d_f64::math::Pose,
+    a: &ExactShape,
+    pb: &parry3d_f64::math::Pose,
+    b: &ExactShape,
+    padding: Real,
+) -> Result<bool> {
+    let unsupported = |_| Error::Numerical("the exact mesh stage does not support this shape pair".into());
+    if padding == 0.0 {
+        return parry3d_f64::query::intersection_test(pa, a.shape.as_ref(), pb, b.shape.as_ref())
+            .map(|r| r.intersecting)
+            .map_err(unsupported);
+    }
+    Ok(!matches!(
+        parry3d_f64::query::closest_points(pa, a.shape.as_ref(), pb, b.shape.as_ref(), padding).map_err(unsupported)?,
+        ClosestPoints::Disjoint
+    ))
+}
+
+/// Two exact shapes (parry): collides within `padding`, else their distance and closest points.
+fn exact_pair(
+    pa: &parry3d_f64::math::Pose,
+    a: &ExactShape,
+    pb: &parry3d_f64::math::Pose,
+    b: &ExactShape,
+    padding: Real,
+) -> Result<PairOutcome> {
+    let unsupported = |_| Error::Numerical("the exact mesh stage does not support this shape pair".into());
+    match parry3d_f64::query::closest_points(pa, a.shape.as_ref(), pb, b.shape.as_ref(), Real::MAX)
+        .map_err(unsupported)?
+    {
+        ClosestPoints::Intersecting => Ok(PairOutcome::Collides),
+        ClosestPoints::WithinMargin(p1, p2) => {
+            let (x, y) = (Point3::new(p1.x, p1.y, p1.z), Point3::new(p2.x, p2.y, p2.z));
+            let d = (x - y).norm();
+            if d <= padding {
+                Ok(PairOutcome::Collides)
+            } else {
+                Ok(PairOutcome::Free { distance: d, witnesses: Some((x, y)) })
+            }
+        }
+        ClosestPoints::Disjoint => Ok(PairOutcome::Free { distance: Real::INFINITY, witnesses: None }),
+    }
+}

@@ -1,0 +1,341 @@
+//! Fitting a robot: every link mesh of a URDF becomes a compound sos-convex body (paper §V) that
+//! contains it, every URDF primitive stays exact.
+//!
+//! ```text
+//! URDF ──► links' <collision> ──► box / cylinder / sphere / capsule  →  Primitive (exact)
+//!                              └► mesh (package://…, relative)      →  read (OBJ, STL, PLY, OFF), scaled,
+//!                                                                      fitted once per distinct content:
+//!                                                                      fit_compound(--parts auto), cached
+//! SRDF ──► disable_collisions ──► allowed pairs (the robot's allowed-collision matrix)
+//! ```
+//!
+//! Distinct meshes (by SHA-256 of the file, scale and fit settings) are fitted once, in parallel
+//! (one per core), and cached in `cache_dir` as `KEY.json` compound files, so a re-fit of the same
+//! robot reads them back at once. Every leaf contains its triangles (the fit checks it); a leaf
+//! above the tolerance is reported in the robot's notes, not refused: the checks resolve the
+//! configurations the model cannot decide against the mesh itself ([`crate::check`]).
+
+use crate::fitted::{FittedRobot, GeometryFile, MeshFile, PoseFile, RobotFile, RobotFitReport, ROBOT_FORMAT};
+use crate::model::{resolve_mesh_path, CollisionGeometry, RobotModel};
+use crate::srdf::Semantics;
+use crate::{Error, Result};
+use sha2::{Digest, Sha256};
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::time::Instant;
+use sublevel_core::compound::CompoundBody;
+use sublevel_core::math::{Point3, Real};
+use sublevel_core::primitive::PrimitiveFile;
+use sublevel_fit::compound::{fit_compound, CompoundSettings, PartCount};
+use sublevel_fit::mesh::{load_triangle_mesh, MeshFormat, TriangleMesh, DEFAULT_MAX_MESH_POINTS};
+
+/// Settings of [`fit_robot`]; the default fits every mesh with `CompoundSettings::default()`, no
+/// cache, one mesh per core.
+#[derive(Clone, Debug, Default)]
+pub struct RobotFitSettings {
+    /// Directories that hold ROS packages: `package://NAME/PATH` is `DIR/NAME/PATH`.
+    pub package_dirs: Vec<PathBuf>,
+    /// Settings of each mesh's compound fit (`--parts auto`; its `excess_tolerance` is the leaf
+    /// tolerance T in meters, `None` for 1 % of each mesh's bounding-box diagonal).
+    pub compound: CompoundSettings,
+    /// Where fitted meshes are cached (`None`: no cache).
+    pub cache_dir: Option<PathBuf>,
+    /// Fit every mesh again instead of reading the cache (the entries are rewritten).
+    pub refresh_cache: bool,
+    /// Meshes fitted at once (0: one per available core).
+    pub threads: usize,
+}
+
+/// Progress of [`fit_robot`]: one message per mesh started or finished.
+#[derive(Clone, Debug)]
+pub struct RobotFitProgress {
+    /// Distinct meshes done (fitted or cached).
+    pub done: usize,
+    /// Distinct meshes in all.
+    pub total: usize,
+    /// What happened (`link1.obj: fitted, 32 leaves, worst leaf excess 0.0231 m, 44.1 s`).
+    pub message: String,
+}
+
+/// A mesh to fit: its key, name and triangles (geometry frame, scaled).
+struct MeshJob {
+    key: String,
+    name: String,
+    mesh: TriangleMesh,
+}
+
+/// Fits the robot of `urdf_path` (module docs); `srdf_path` gives the allowed pairs.
+///
+/// # Errors
+/// As [`RobotModel::from_urdf_str`] and [`Semantics::from_srdf_str`] (naming the element);
+/// [`Error::InvalidArgument`] naming `urdf.link[NAME].collision[k].mesh` when a mesh file is not
+/// found (the places searched listed) or cannot be read as a triangle mesh; [`Error::Io`] for an
+/// unreadable file; the fit's errors naming the mesh.
+pub fn fit_robot(
+    urdf_path: &Path,
+    srdf_path: Option<&Path>,
+    settings: &RobotFitSettings,
+    progress: &(dyn Fn(&RobotFitProgress) + Sync),
+) -> Result<FittedRobot> {
+    let start = Instant::now();
+    let urdf = std::fs::read_to_string(urdf_path)
+        .map_err(|e| std::io::Error::new(e.kind(), format!("cannot read {}: {e}", urdf_path.display())))?;
+    let model = RobotModel::from_urdf_str(&urdf)?;
+    let allowed_pairs: Vec<[String; 2]> = match srdf_path {
+        Some(p) => {
+            let srdf = Semantics::from_srdf_file(p)?;
+            model.self_collision_pairs(&srdf.disabled_pairs)?;
+            srdf.disabled_pairs.iter().map(|d| [d.link1.clone(), d.link2.clone()]).collect()
+        }
+        None => Vec::new(),
+    };
+    let urdf_dir = urdf_path.parent();
+    let tag = settings_tag(&settings.compound);
+    let mut geometries = Vec::new();
+    let mut jobs: Vec<MeshJob> = Vec::new();
+    for link in model.links() {
+        for (k, c) in link.collision.iter().enumerate() {
+            let field = format!("urdf.link[{}].collision[{k}]", link.name);
+            let (origin, primitive, mesh) = match c {
+                CollisionGeometry::Box { origin, size } => (origin, Some(PrimitiveFile::Box { size: *size }), None),
+                CollisionGeometry::Sphere { origin, radius } => {
+                    (origin, Some(PrimitiveFile::Sphere { radius: *radius }), None)
+                }
+                CollisionGeometry::Cylinder { origin, radius, length } => {
+                    (origin, Some(PrimitiveFile::Cylinder { radius: *radius, height: *length }), None)
+                }
+                CollisionGeometry::Capsule { origin, radius, length } => {
+                    (origin, Some(PrimitiveFile::Capsule { radius: *radius, height: *length }), None)
+                }
+                CollisionGeometry::Mesh { origin, filename, scale } => {
+                    let path = resolve_mesh_path(&format!("{field}.mesh"), filename, urdf_dir, &settings.package_dirs)?;
+                    let (file, job) = read_mesh(&format!("{field}.mesh"), &path, filename, *scale, &tag)?;
+                    if !jobs.iter().any(|j| j.key == job.key) {
+                        jobs.push(job);
+                    }
+                    (origin, None, Some(file))
+                }
+            };
+            geometries.push(GeometryFile {
+                link: link.name.clone(),
+                index: k,
+                origin: PoseFile::of(origin),
+                primitive,
+                mesh,
+                compound: None,
+            });
+        }
+    }
+    let (bodies, report) = fit_meshes(jobs, settings, progress)?;
+    for g in &mut geometries {
+        if let Some(m) = &g.mesh {
+            let key = mesh_key(&m.sha256, m.scale, &tag);
+            let body = bodies.iter().find(|(k, _)| *k == key).map(|(_, b)| b.to_file());
+            g.compound = body;
+        }
+    }
+    let report = RobotFitReport { seconds: start.elapsed().as_secs_f64(), ..report };
+    let file = RobotFile {
+        format: ROBOT_FORMAT.to_owned(),
+        name: model.name.clone(),
+        urdf,
+        allowed_pairs,
+        geometries,
+        report,
+    };
+    FittedRobot::from_file(file)
+}
+
+/// The fit settings that change a mesh's compound body, as text for the cache key.
+fn settings_tag(s: &CompoundSettings) -> String {
+    format!(
+        "parts=auto tol={:?} rel={} weld={:?} degrees={:?} parent={} res={} samples={} max_parts={} vtol={}",
+        s.excess_tolerance,
+        s.relative_tolerance,
+        s.weld_tolerance,
+        s.degrees,
+        s.parent_degree,
+        s.resolution,
+        s.excess_samples,
+        s.max_parts,
+        s.volume_tolerance
+    )
+}
+
+/// The cache key of a mesh: SHA-256 of its file's hash, its scale and the settings tag.
+fn mesh_key(sha256: &str, scale: [Real; 3], tag: &str) -> String {
+    let mut h = Sha256::new();
+    h.update(sha256.as_bytes());
+    h.update(format!("{scale:?}").as_bytes());
+    h.update(tag.as_bytes());
+    hex(&h.finalize())
+}
+
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// Reads a link mesh: its stored form and its fit job.
+fn read_mesh(field: &str, path: &Path, source: &str, scale: [Real; 3], tag: &str) -> Result<(MeshFile, MeshJob)> {
+    let bytes = std::fs::read(path)
+        .map_err(|e| std::io::Error::new(e.kind(), format!("cannot read {}: {e}", path.display())))?;
+    let format = MeshFormat::of_path(path).map_err(|e| Error::invalid(field, e.to_string()))?;
+    let mut mesh = load_triangle_mesh(&bytes, format, DEFAULT_MAX_MESH_POINTS)
+        .map_err(|e| Error::invalid(field, format!("{}: {e}", path.display())))?;
+    if mesh.triangles.is_empty() {
+        return Err(Error::invalid(field, format!("{} holds no triangles", path.display())));
+    }
+    if scale.iter().any(|s| !(s.is_finite() && *s != 0.0)) {
+        return Err(Error::invalid(format!("{field}.scale"), format!("must be finite and nonzero, got {scale:?}")));
+    }
+    for v in &mut mesh.vertices {
+        *v = Point3::new(v.x * scale[0], v.y * scale[1], v.z * scale[2]);
+    }
+    let sha256 = hex(&Sha256::digest(&bytes));
+    let key = mesh_key(&sha256, scale, tag);
+    let name = path.file_name().map_or_else(|| source.to_owned(), |n| n.to_string_lossy().into_owned());
+    let file = MeshFile {
+        source: source.to_owned(),
+        sha256,
+        scale,
+        vertices: mesh.vertices.iter().map(|p| [p.x, p.y, p.z]).collect(),
+        triangles: mesh.triangles.clone(),
+    };
+    Ok((file, MeshJob { key, name, mesh }))
+}
+
+/// One mesh's outcome: its job index, cache key, and body, whether it came from the cache, and its
+/// name with any note of the fit.
+type MeshOutcome = (usize, String, Result<(CompoundBody, bool, String)>);
+
+/// Fits (or reads from the cache) every distinct mesh, `threads` at once.
+fn fit_meshes(
+    jobs: Vec<MeshJob>,
+    settings: &RobotFitSettings,
+    progress: &(dyn Fn(&RobotFitProgress) + Sync),
+) -> Result<(Vec<(String, CompoundBody)>, RobotFitReport)> {
+    let total = jobs.len();
+    let threads = match settings.threads {
+        0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
+        n => n,
+    }
+    .clamp(1, total.max(1));
+    let queue = Mutex::new(jobs.into_iter().enumerate().collect::<Vec<_>>());
+    let results: Mutex<Vec<MeshOutcome>> = Mutex::new(Vec::new());
+    let done = Mutex::new(0usize);
+    std::thread::scope(|s| {
+        for _ in 0..threads {
+            s.spawn(|| {
+                while let Some((i, job)) = queue.lock().ok().and_then(|mut q| q.pop()) {
+                    let t = Instant::now();
+                    let outcome = fit_one(&job, settings);
+                    let message = match &outcome {
+                        Ok((body, cached, note)) => format!(
+                            "{}: {}, {} leaves, worst leaf excess {:.4} m{}, {:.1} s",
+                            job.name,
+                            if *cached { "cached" } else { "fitted" },
+                            body.leaf_count(),
+                            body.max_leaf_excess(),
+                            note,
+                            t.elapsed().as_secs_f64()
+                        ),
+                        Err(e) => format!("{}: failed: {e}", job.name),
+                    };
+                    let n = done.lock().map(|mut d| {
+                        *d += 1;
+                        *d
+                    });
+                    progress(&RobotFitProgress { done: n.unwrap_or(0), total, message });
+                    if let Ok(mut r) = results.lock() {
+                        r.push((i, job.key.clone(), outcome.map(|(b, c, note)| (b, c, format!("{}{note}", job.name)))));
+                    }
+                }
+            });
+        }
+    });
+    let mut results = results.into_inner().map_err(|_| Error::Numerical("a mesh fit panicked".into()))?;
+    results.sort_by_key(|r| r.0);
+    let mut report = RobotFitReport::default();
+    let mut bodies = Vec::new();
+    for (_, key, outcome) in results {
+        let (body, cached, name) = outcome?;
+        if cached {
+            report.cached += 1;
+        } else {
+            report.fitted += 1;
+        }
+        let tol = body.report.tolerance.map_or_else(|| "none".to_owned(), |t| format!("{t:.4} m"));
+        report.notes.push(format!(
+            "{name}: {} leaves, worst leaf excess {:.4} m (tolerance {tol}){}",
+            body.leaf_count(),
+            body.max_leaf_excess(),
+            if body.report.met == Some(false) { ", some leaves above it" } else { "" }
+        ));
+        bodies.push((key, body));
+    }
+    if bodies.len() != total {
+        return Err(Error::Numerical("a mesh fit did not finish".into()));
+    }
+    Ok((bodies, report))
+}
+
+/// One mesh: from the cache when there, else fitted (and cached).
+fn fit_one(job: &MeshJob, settings: &RobotFitSettings) -> Result<(CompoundBody, bool, String)> {
+    let cached = settings.cache_dir.as_ref().map(|d| d.join(format!("{}.json", job.key)));
+    if let (Some(path), false) = (&cached, settings.refresh_cache) {
+        if let Ok(body) = CompoundBody::load(path) {
+            return Ok((body, true, String::new()));
+        }
+    }
+    let mut no_progress = |_: &sublevel_fit::FitProgress| {};
+    // A tree whose containment cannot be certified is fitted again with fewer leaves, and at the
+    // last as one body (always certified: no tree).
+    let mut fallbacks = vec![(PartCount::Auto, settings.compound.max_parts)];
+    for m in [16, 8] {
+        if m < settings.compound.max_parts {
+            fallbacks.push((PartCount::Auto, m));
+        }
+    }
+    fallbacks.push((PartCount::Fixed(1), settings.compound.max_parts));
+    let mut note = String::new();
+    let mut body = None;
+    let mut last_error = None;
+    for (parts, max_parts) in fallbacks {
+        let s = CompoundSettings { max_parts, ..settings.compound.clone() };
+        match fit_compound(&job.mesh, Some(&job.name), parts, &s, &mut no_progress) {
+            Ok(b) => {
+                body = Some(b);
+                break;
+            }
+            Err(e) => {
+                note.push_str(&format!(
+                    " (at {parts:?}, --max-parts {max_parts}: {e}; fitted again with fewer leaves)"
+                ));
+                last_error = Some(e);
+            }
+        }
+    }
+    let body = match (body, last_error) {
+        (Some(b), _) => b,
+        (None, Some(e)) => {
+            return Err(match e {
+                Error::InvalidArgument { field, reason } => {
+                    Error::InvalidArgument { field, reason: format!("{}: {reason}", job.name) }
+                }
+                other => other,
+            })
+        }
+        (None, None) => return Err(Error::Numerical(format!("{}: no fit was tried", job.name))),
+    };
+    if let Some(path) = &cached {
+        let saved = std::fs::create_dir_all(path.parent().unwrap_or(Path::new("."))).and_then(|()| {
+            let tmp = path.with_extension("json.tmp");
+            std::fs::write(&tmp, serde_json::to_string(&body.to_file()).unwrap_or_default())?;
+            std::fs::rename(&tmp, path)
+        });
+        if let Err(e) = saved {
+            note = format!(" (not cached: {e})");
+        }
+    }
+    Ok((body, false, note))
+}

@@ -1,0 +1,206 @@
+//! Robot fits and configuration checks on a small robot whose answers have closed forms: a fixed
+//! base cube (a mesh), a prismatic arm (a URDF box) and a revolute tip (a smaller cube mesh).
+//!
+//! ```text
+//! base  cube mesh, half side 0.1, at the origin
+//! arm   box 0.2³, at (0.5 + slide, 0, 0)                 prismatic along x
+//! tip   cube mesh, half side 0.05, at the arm + (0, 0, 0.5), turned by `turn` about z
+//! ```
+
+use sublevel_core::math::{Isometry3, Point3, Real, Vector3};
+use sublevel_core::primitive::Primitive;
+use sublevel_robot::fitted::LinkShape;
+use sublevel_robot::{fit_robot, CheckOptions, FittedRobot, RobotChecker, RobotFitSettings, WorldObject};
+
+const URDF: &str = r#"<robot name="slider">
+  <link name="base"><collision><geometry><mesh filename="cube.obj" scale="0.2 0.2 0.2"/></geometry></collision></link>
+  <link name="arm"><collision><geometry><box size="0.2 0.2 0.2"/></geometry></collision></link>
+  <link name="tip"><collision><geometry><mesh filename="cube.obj" scale="0.1 0.1 0.1"/></geometry></collision></link>
+  <joint name="slide" type="prismatic"><parent link="base"/><child link="arm"/><origin xyz="0.5 0 0"/>
+    <axis xyz="1 0 0"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+  <joint name="turn" type="revolute"><parent link="arm"/><child link="tip"/><origin xyz="0 0 0.5"/>
+    <axis xyz="0 0 1"/><limit lower="-3.2" upper="3.2" effort="1" velocity="1"/></joint>
+</robot>"#;
+
+/// The unit cube [−0.5, 0.5]³ as 12 triangles (OBJ, quads split by the reader).
+const CUBE: &str = "v -0.5 -0.5 -0.5\nv 0.5 -0.5 -0.5\nv 0.5 0.5 -0.5\nv -0.5 0.5 -0.5\n\
+v -0.5 -0.5 0.5\nv 0.5 -0.5 0.5\nv 0.5 0.5 0.5\nv -0.5 0.5 0.5\n\
+f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n";
+
+fn robot() -> (FittedRobot, tempfile::TempDir) {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("cube.obj"), CUBE).unwrap();
+    std::fs::write(dir.path().join("slider.urdf"), URDF).unwrap();
+    let mut settings = RobotFitSettings { cache_dir: Some(dir.path().join("cache")), ..Default::default() };
+    settings.compound.excess_tolerance = Some(0.2);
+    settings.compound.max_parts = 2;
+    let robot = fit_robot(&dir.path().join("slider.urdf"), None, &settings, &|_| {}).unwrap();
+    (robot, dir)
+}
+
+/// Distance between two axis-aligned boxes (centers, half extents): the closed form.
+fn box_distance(c1: Vector3, h1: Vector3, c2: Vector3, h2: Vector3) -> Real {
+    let gap = (c1 - c2).abs() - h1 - h2;
+    gap.sup(&Vector3::zeros()).norm()
+}
+
+fn boxed(name: &str, half: Real, at: [Real; 3]) -> WorldObject {
+    WorldObject {
+        name: name.into(),
+        primitive: Primitive::Box { half_extents: Vector3::repeat(half) },
+        pose: Isometry3::translation(at[0], at[1], at[2]),
+    }
+}
+
+#[test]
+fn the_fit_keeps_primitives_exact_and_every_mesh_vertex_inside_its_body() {
+    let (robot, dir) = robot();
+    assert_eq!(robot.geometries.len(), 3);
+    assert_eq!(robot.file.report.fitted, 2, "two scales of one mesh: two fits");
+    assert!(matches!(robot.geometries[1].shape, LinkShape::Primitive(Primitive::Box { .. })));
+    for g in &robot.geometries {
+        if let LinkShape::Mesh { body, vertices, .. } = &g.shape {
+            let root = body.body(body.root());
+            for v in vertices {
+                assert!(root.value_at(v) <= 1.0 + 1e-9, "{}: vertex {v} outside the root body", g.name);
+            }
+        }
+    }
+    // A second fit reads both meshes from the cache, and the saved file reads back the same.
+    let mut settings = RobotFitSettings { cache_dir: Some(dir.path().join("cache")), ..Default::default() };
+    settings.compound.excess_tolerance = Some(0.2);
+    settings.compound.max_parts = 2;
+    let again = fit_robot(&dir.path().join("slider.urdf"), None, &settings, &|_| {}).unwrap();
+    assert_eq!((again.file.report.fitted, again.file.report.cached), (0, 2));
+    let path = dir.path().join("slider.robot.json");
+    robot.save(&path).unwrap();
+    let read = FittedRobot::load(&path).unwrap();
+    assert_eq!(read.geometries.len(), 3);
+    assert_eq!(read.self_pairs, vec![(0, 1), (0, 2), (1, 2)]);
+}
+
+#[test]
+fn world_distances_and_verdicts_match_the_closed_form() {
+    let (robot, _dir) = robot();
+    // Below the arm's track and beside the base.
+    let world = vec![boxed("low", 0.05, [0.8, 0.0, -0.4]), boxed("side", 0.1, [0.0, 0.45, 0.0])];
+    let mut checker = RobotChecker::new(&robot, world.clone(), &|_, _| None).unwrap();
+    let half = |h: Real| Vector3::repeat(h);
+    for k in 0..=40 {
+        let slide = -0.29 + 0.03 * k as Real;
+        let arm = Vector3::new(0.5 + slide, 0.0, 0.0);
+        let tip = arm + Vector3::new(0.0, 0.0, 0.5);
+        let expected = world
+            .iter()
+            .flat_map(|o| {
+                let c = o.pose.translation.vector;
+                let h = match o.primitive {
+                    Primitive::Box { half_extents } => half_extents,
+                    _ => unreachable!(),
+                };
+                [
+                    box_distance(Vector3::zeros(), half(0.1), c, h),
+                    box_distance(arm, half(0.1), c, h),
+                    box_distance(tip, half(0.05), c, h),
+                ]
+            })
+            .fold(Real::INFINITY, Real::min);
+        let a = checker.check(&[slide, 0.0], &Isometry3::identity(), &CheckOptions::default()).unwrap();
+        assert!(a.converged);
+        if expected > 1e-9 {
+            assert!(!a.world, "slide {slide}: free at {expected} m");
+            assert!((a.distance - expected).abs() < 1e-9, "slide {slide}: {} vs {expected}", a.distance);
+            let (x, y) = a.witnesses.unwrap();
+            assert!(((x - y).norm() - expected).abs() < 1e-9);
+        } else {
+            assert!(a.world && a.distance == 0.0, "slide {slide}: overlapping");
+        }
+        let verdict = checker
+            .check(&[slide, 0.0], &Isometry3::identity(), &CheckOptions { distance: false, ..Default::default() })
+            .unwrap();
+        assert_eq!(verdict.world, a.world, "slide {slide}: the verdict alone agrees");
+    }
+    // Padding: the arm 0.05 m above `low` (slide 0.3: the arm's bottom at −0.1, low's top at −0.35).
+    let a = checker.check(&[0.3, 0.0], &Isometry3::identity(), &CheckOptions::default()).unwrap();
+    assert!((a.distance - 0.25).abs() < 1e-9, "{}", a.distance);
+    for (padding, collides) in [(0.2, false), (0.3, true)] {
+        let options = CheckOptions { padding, ..Default::default() };
+        assert_eq!(checker.check(&[0.3, 0.0], &Isometry3::identity(), &options).unwrap().world, collides);
+    }
+}
+
+#[test]
+fn a_turned_mesh_link_against_a_sphere_matches_the_closed_form() {
+    let (robot, _dir) = robot();
+    let center = Vector3::new(0.7, 0.12, 0.5);
+    let world = vec![WorldObject {
+        name: "ball".into(),
+        primitive: Primitive::Sphere { radius: 0.03 },
+        pose: Isometry3::translation(center.x, center.y, center.z),
+    }];
+    let mut checker = RobotChecker::new(&robot, world, &|_, _| None).unwrap();
+    for k in 0..12 {
+        let turn = -3.0 + 0.5 * k as Real;
+        let slide = 0.05;
+        // The ball's center in the tip's frame; its distance to the cube [−0.05, 0.05]³, less r.
+        let tip = Isometry3::from_parts(
+            Vector3::new(0.5 + slide, 0.0, 0.5).into(),
+            sublevel_core::math::UnitQuaternion::from_axis_angle(&Vector3::z_axis(), turn),
+        );
+        let local = tip.inverse_transform_point(&Point3::from(center)).coords;
+        let tip_d = ((local.abs() - Vector3::repeat(0.05)).sup(&Vector3::zeros())).norm() - 0.03;
+        let arm_d =
+            box_distance(Vector3::new(0.5 + slide, 0.0, 0.0), Vector3::repeat(0.1), center, Vector3::zeros()) - 0.03;
+        let expected = tip_d.min(arm_d);
+        let a = checker.check(&[slide, turn], &Isometry3::identity(), &CheckOptions::default()).unwrap();
+        if expected > 1e-9 {
+            assert!((a.distance - expected).abs() < 1e-8, "turn {turn}: {} vs {expected}", a.distance);
+        } else {
+            assert!(a.world, "turn {turn}: the ball touches the tip");
+        }
+    }
+}
+
+#[test]
+fn self_collision_follows_the_geometry_and_the_allowed_pairs() {
+    let (robot, _dir) = robot();
+    let mut checker = RobotChecker::new(&robot, Vec::new(), &|_, _| None).unwrap();
+    // The arm (half 0.1 at 0.5 + slide) meets the base (half 0.1 at 0) at slide −0.3.
+    for (slide, collides) in [(-0.35, true), (-0.31, true), (-0.29, false), (0.2, false)] {
+        let a = checker.check(&[slide, 0.0], &Isometry3::identity(), &CheckOptions::default()).unwrap();
+        assert_eq!(a.self_collision, collides, "slide {slide}");
+        assert_eq!(a.collides, collides);
+        if collides {
+            assert_eq!(a.self_pair, Some((0, 1)));
+        }
+        assert!(a.distance.is_infinite(), "no world: no distance");
+    }
+    let allowed = |a: &str, b: &str| ((a, b) == ("base", "arm") || (a, b) == ("arm", "base")).then_some(true);
+    let mut allowing = RobotChecker::new(&robot, Vec::new(), &allowed).unwrap();
+    assert_eq!(allowing.self_pairs(), &[(0, 2), (1, 2)]);
+    assert!(!allowing.check(&[-0.35, 0.0], &Isometry3::identity(), &CheckOptions::default()).unwrap().collides);
+}
+
+#[test]
+fn bad_input_is_refused_naming_the_field() {
+    let (robot, _dir) = robot();
+    let mut checker = RobotChecker::new(&robot, Vec::new(), &|_, _| None).unwrap();
+    let field = |e: sublevel_robot::Error| match e {
+        sublevel_robot::Error::InvalidArgument { field, .. } => field,
+        other => panic!("{other}"),
+    };
+    let id = Isometry3::identity();
+    assert_eq!(field(checker.check(&[0.0], &id, &CheckOptions::default()).unwrap_err()), "q");
+    assert_eq!(field(checker.check(&[0.0, Real::NAN], &id, &CheckOptions::default()).unwrap_err()), "q[1]");
+    let options = CheckOptions { padding: -1.0, ..Default::default() };
+    assert_eq!(field(checker.check(&[0.0, 0.0], &id, &options).unwrap_err()), "padding");
+    let mut file = robot.file.clone();
+    file.geometries[0].link = "nowhere".into();
+    assert_eq!(field(FittedRobot::from_file(file).unwrap_err()), "geometries[0].link");
+    let mut file = robot.file.clone();
+    file.geometries[0].mesh.as_mut().unwrap().triangles[0][1] = 99;
+    assert_eq!(field(FittedRobot::from_file(file).unwrap_err()), "geometries[0].mesh.triangles[0]");
+    let mut file = robot.file.clone();
+    file.format = "other".into();
+    assert_eq!(field(FittedRobot::from_file(file).unwrap_err()), "format");
+}

@@ -1,0 +1,280 @@
+//! `sublevel robot fit` and `sublevel robot check`: robots fitted from URDF (and SRDF), and joint
+//! configurations checked against a MoveIt planning scene, offline (no server).
+//!
+//! ```text
+//! sublevel robot fit ROBOT.urdf [--srdf ROBOT.srdf] [--package-dir DIR]... [--tolerance T] --output robot.json
+//! sublevel robot check robot.json --scene SCENE.yaml --configs Q.csv [--json] [--padding P]
+//! ```
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::time::Instant;
+use sublevel::math::{Isometry3, Real};
+use sublevel::robot::{fit_robot, CheckOptions, FittedRobot, RobotChecker, RobotFitSettings};
+use sublevel::scene::moveit::{allowed_override, world_objects, PlanningScene};
+use sublevel::{Error, Result};
+
+/// Arguments of `sublevel robot`.
+#[derive(clap::Args, Debug)]
+pub struct RobotArgs {
+    #[command(subcommand)]
+    command: RobotCommand,
+}
+
+/// What `sublevel robot` does.
+#[derive(clap::Subcommand, Debug)]
+enum RobotCommand {
+    /// Fit a robot from its URDF: every link mesh becomes a compound sos-convex body containing
+    /// it, URDF primitives stay exact, the SRDF's disabled pairs become the allowed pairs.
+    Fit(FitArgs),
+    /// Check joint configurations of a fitted robot against a MoveIt planning scene: collides
+    /// (world, self), minimum robot–world distance and its pair.
+    Check(CheckArgs),
+}
+
+/// Arguments of `sublevel robot fit`.
+#[derive(clap::Args, Debug)]
+struct FitArgs {
+    /// The robot's URDF.
+    urdf: PathBuf,
+    /// The robot's SRDF: its `disable_collisions` pairs are never checked for self-collision.
+    #[arg(long)]
+    srdf: Option<PathBuf>,
+    /// A directory holding ROS packages: `package://NAME/PATH` is read as `DIR/NAME/PATH`
+    /// (repeatable; relative mesh paths are read from the URDF's directory).
+    #[arg(long = "package-dir")]
+    package_dirs: Vec<PathBuf>,
+    /// Leaf-excess tolerance T of every link mesh's compound fit, meters (default: 1 % of each
+    /// mesh's bounding-box diagonal). Leaves above it are reported; the checks stay exact.
+    #[arg(long)]
+    tolerance: Option<Real>,
+    /// Most leaves of one link's compound body (2..=64).
+    #[arg(long, default_value_t = 32)]
+    max_parts: usize,
+    /// Where fitted link meshes are cached (by content): default `$XDG_CACHE_HOME/sublevel/links`
+    /// or `~/.cache/sublevel/links`.
+    #[arg(long)]
+    cache: Option<PathBuf>,
+    /// Fit every mesh again, not reading the cache (its entries are rewritten).
+    #[arg(long)]
+    no_cache: bool,
+    /// Meshes fitted at once (0: one per core).
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
+    /// Where to write the robot file.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// No progress on stderr.
+    #[arg(short, long)]
+    quiet: bool,
+}
+
+/// Arguments of `sublevel robot check`.
+#[derive(clap::Args, Debug)]
+struct CheckArgs {
+    /// The robot file (`sublevel robot fit`).
+    robot: PathBuf,
+    /// The world: a MoveIt planning scene (YAML, or JSON for `.json`); its allowed-collision
+    /// matrix overrides the robot's, its robot state gives the joints the configurations omit.
+    #[arg(long)]
+    scene: Option<PathBuf>,
+    /// Configurations: a header of joint names, then one configuration per row (radians,
+    /// meters). Joints not listed keep the scene's robot state, else 0.
+    #[arg(long)]
+    configs: PathBuf,
+    /// One JSON line per configuration instead of the table.
+    #[arg(long)]
+    json: bool,
+    /// Padding around every robot geometry, meters.
+    #[arg(long, default_value_t = 0.0)]
+    padding: Real,
+    /// Do not check self-collision.
+    #[arg(long)]
+    no_self: bool,
+}
+
+/// Runs `sublevel robot`.
+///
+/// # Errors
+/// As the subcommand: files that cannot be read, a URDF / SRDF / scene / CSV field that does not
+/// validate (named), a fit that fails.
+pub fn run(args: RobotArgs) -> Result<()> {
+    match args.command {
+        RobotCommand::Fit(a) => fit(a),
+        RobotCommand::Check(a) => check(a),
+    }
+}
+
+fn default_cache() -> Option<PathBuf> {
+    let base = std::env::var_os("XDG_CACHE_HOME")
+        .map(PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))?;
+    Some(base.join("sublevel").join("links"))
+}
+
+fn fit(args: FitArgs) -> Result<()> {
+    let mut settings =
+        RobotFitSettings { package_dirs: args.package_dirs.clone(), threads: args.threads, ..Default::default() };
+    settings.compound.excess_tolerance = args.tolerance;
+    settings.compound.max_parts = args.max_parts;
+    settings.compound.validate()?;
+    settings.cache_dir = args.cache.clone().or_else(default_cache);
+    settings.refresh_cache = args.no_cache;
+    let start = Instant::now();
+    let quiet = args.quiet;
+    let progress = move |p: &sublevel::robot::RobotFitProgress| {
+        if !quiet {
+            eprintln!("[{}/{}] {}", p.done, p.total, p.message);
+        }
+    };
+    let robot = fit_robot(&args.urdf, args.srdf.as_deref(), &settings, &progress)?;
+    robot.save(&args.output)?;
+    let r = &robot.file.report;
+    let links = robot.model.links().iter().filter(|l| !l.collision.is_empty()).count();
+    eprintln!(
+        "{}: {} links with geometry, {} geometries, {} meshes fitted, {} from the cache, {} self pairs checked, {:.1} s -> {}",
+        robot.model.name,
+        links,
+        robot.geometries.len(),
+        r.fitted,
+        r.cached,
+        robot.self_pairs.len(),
+        start.elapsed().as_secs_f64(),
+        args.output.display()
+    );
+    for n in &r.notes {
+        eprintln!("  {n}");
+    }
+    Ok(())
+}
+
+/// Reads `Q.csv`: the joint names of the header and the rows, as full configurations of `robot`
+/// (joints not listed from `defaults`, else 0).
+fn read_configs(path: &std::path::Path, robot: &FittedRobot, defaults: &[(String, Real)]) -> Result<Vec<Vec<Real>>> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| std::io::Error::new(e.kind(), format!("cannot read {}: {e}", path.display())))?;
+    let mut lines = text.lines().filter(|l| !l.trim().is_empty());
+    let header: Vec<String> = lines
+        .next()
+        .ok_or_else(|| Error::invalid("configs", "empty file: expected a header of joint names"))?
+        .split(',')
+        .map(|s| s.trim().to_owned())
+        .collect();
+    let names = robot.model.variable_names();
+    let columns: Vec<usize> = header
+        .iter()
+        .enumerate()
+        .map(|(c, h)| {
+            names.iter().position(|n| n == h).ok_or_else(|| {
+                Error::invalid(
+                    format!("configs.header[{c}]"),
+                    format!("`{}` is not a joint of the robot; its joints: {names:?}", sublevel::error::clip(h)),
+                )
+            })
+        })
+        .collect::<Result<_>>()?;
+    let mut base = vec![0.0; names.len()];
+    for (name, v) in defaults {
+        if let Some(k) = names.iter().position(|n| n == name) {
+            base[k] = *v;
+        }
+    }
+    let mut out = Vec::new();
+    for (row, line) in lines.enumerate() {
+        let cells: Vec<&str> = line.split(',').map(str::trim).collect();
+        if cells.len() != columns.len() {
+            return Err(Error::invalid(
+                format!("configs.row[{row}]"),
+                format!("{} values for the {} columns of the header", cells.len(), columns.len()),
+            ));
+        }
+        let mut q = base.clone();
+        for (c, cell) in cells.iter().enumerate() {
+            q[columns[c]] = cell.parse::<Real>().ok().filter(|v| v.is_finite()).ok_or_else(|| {
+                Error::invalid(format!("configs.row[{row}].{}", header[c]), format!("`{cell}` is not a finite number"))
+            })?;
+        }
+        out.push(q);
+    }
+    Ok(out)
+}
+
+fn check(args: CheckArgs) -> Result<()> {
+    let robot = FittedRobot::load(&args.robot)?;
+    let scene = match &args.scene {
+        Some(path) => {
+            let bytes = std::fs::read(path)
+                .map_err(|e| std::io::Error::new(e.kind(), format!("cannot read {}: {e}", path.display())))?;
+            if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("json")) {
+                PlanningScene::from_json(&bytes)?
+            } else {
+                PlanningScene::from_yaml(&bytes)?
+            }
+        }
+        None => PlanningScene::default(),
+    };
+    let (world, skipped) = world_objects(&scene)?;
+    for s in &skipped {
+        eprintln!("warning: {}[{}] ({}) left out: {}", s.object_id, s.shape_index, s.kind, s.reason);
+    }
+    let configs = read_configs(&args.configs, &robot, &scene.joint_positions)?;
+    let allowed = allowed_override(&scene);
+    let mut checker = RobotChecker::new(&robot, world, &allowed)?;
+    let options = CheckOptions { padding: args.padding, distance: true, self_collision: !args.no_self };
+    let base = Isometry3::identity();
+    let stdout = std::io::stdout();
+    let mut out = std::io::BufWriter::new(stdout.lock());
+    if !args.json {
+        writeln!(out, "{:>6} {:>8} {:>6} {:>5} {:>12}  pair", "config", "collides", "world", "self", "distance_m")?;
+    }
+    let start = Instant::now();
+    let (mut colliding, mut unconverged) = (0usize, 0usize);
+    for (i, q) in configs.iter().enumerate() {
+        let a = checker.check(q, &base, &options).map_err(|e| match e {
+            Error::InvalidArgument { field, reason } => {
+                Error::InvalidArgument { field: format!("configs.row[{i}].{field}"), reason }
+            }
+            other => other,
+        })?;
+        colliding += usize::from(a.collides);
+        unconverged += usize::from(!a.converged);
+        let name = |g: usize| robot.geometries[g].name.clone();
+        let pair = match (a.world, a.self_pair) {
+            (false, Some((x, y))) if a.self_collision && a.pair.is_none() => Some((name(x), name(y))),
+            _ => a.pair.map(|(g, o)| (name(g), checker.world()[o].name.clone())),
+        };
+        let self_pair = a.self_pair.map(|(x, y)| (name(x), name(y)));
+        if args.json {
+            let line = serde_json::json!({
+                "config": i,
+                "collides": a.collides,
+                "world": a.world,
+                "self": a.self_collision,
+                "distance": if a.distance.is_finite() { serde_json::json!(a.distance) } else { serde_json::Value::Null },
+                "pair": pair.as_ref().map(|(x, y)| [x, y]),
+                "self_pair": self_pair.as_ref().map(|(x, y)| [x, y]),
+                "converged": a.converged,
+            });
+            writeln!(out, "{line}")?;
+        } else {
+            let shown = match (&pair, &self_pair) {
+                (_, Some((x, y))) if a.self_collision && !a.world => format!("{x} – {y} (self)"),
+                (Some((x, y)), _) => format!("{x} – {y}"),
+                _ => String::new(),
+            };
+            writeln!(
+                out,
+                "{i:>6} {:>8} {:>6} {:>5} {:>12.6}  {shown}",
+                a.collides, a.world, a.self_collision, a.distance
+            )?;
+        }
+    }
+    out.flush()?;
+    let seconds = start.elapsed().as_secs_f64();
+    eprintln!(
+        "{} configurations, {colliding} colliding, {unconverged} not converged; {:.1} µs per configuration (one thread)",
+        configs.len(),
+        1e6 * seconds / configs.len().max(1) as Real
+    );
+    Ok(())
+}
