@@ -3,7 +3,7 @@
 //!
 //! ```text
 //! sublevel robot fit ROBOT.urdf [--srdf ROBOT.srdf] [--package-dir DIR]... [--tolerance T] --output robot.json
-//! sublevel robot check robot.json --scene SCENE.yaml --configs Q.csv [--json] [--padding P]
+//! sublevel robot check robot.json --scene SCENE.yaml --configs Q.csv [--json] [--gradient] [--padding P]
 //! ```
 
 use std::io::Write;
@@ -91,6 +91,10 @@ struct CheckArgs {
     /// Do not check self-collision.
     #[arg(long)]
     no_self: bool,
+    /// With --json: also `gradient`, ∂distance/∂q per configuration entry (meters per radian or
+    /// meter), when the robot is free of the world.
+    #[arg(long)]
+    gradient: bool,
 }
 
 /// Runs `sublevel robot`.
@@ -220,7 +224,8 @@ fn check(args: CheckArgs) -> Result<()> {
     let configs = read_configs(&args.configs, &robot, &scene.joint_positions)?;
     let allowed = allowed_override(&scene);
     let mut checker = RobotChecker::new(&robot, world, &allowed)?;
-    let options = CheckOptions { padding: args.padding, distance: true, self_collision: !args.no_self };
+    let options =
+        CheckOptions { padding: args.padding, distance: true, self_collision: !args.no_self, gradient: args.gradient };
     let base = Isometry3::identity();
     let stdout = std::io::stdout();
     let mut out = std::io::BufWriter::new(stdout.lock());
@@ -254,6 +259,7 @@ fn check(args: CheckArgs) -> Result<()> {
                 "pair": pair.as_ref().map(|(x, y)| [x, y]),
                 "self_pair": self_pair.as_ref().map(|(x, y)| [x, y]),
                 "converged": a.converged,
+                "gradient": a.gradient,
             });
             writeln!(out, "{line}")?;
         } else {

@@ -3,7 +3,8 @@
 //! minimum distance (medians per configuration, one thread), with the pairs each stage took.
 //!
 //! ```text
-//! cargo run --release -p sublevel-lab --example check_profile -- ROBOT.json PROBLEMS_DIR LABELS.csv [EVERY]
+//! cargo run --release -p sublevel-lab --example check_profile -- \
+//!     data/robots/panda/panda.robot.json data/robots/mbm_panda/scenes data/robots/mbm_panda/labels_obj.csv [EVERY]
 //! ```
 
 use std::time::Instant;
@@ -14,7 +15,7 @@ use sublevel_scene::moveit::{allowed_override, world_objects, PlanningScene};
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
     if args.len() < 4 {
-        eprintln!("usage: check_profile ROBOT.json PROBLEMS_DIR LABELS.csv [EVERY]");
+        eprintln!("usage: check_profile ROBOT.json SCENES_DIR LABELS.csv [EVERY] (scenes as SCENES_DIR/SCENARIO/sceneNNNN.yaml)");
         std::process::exit(2);
     }
     let robot = FittedRobot::load(args[1].as_ref())?;
@@ -43,7 +44,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let mut scene_keep;
         for (scenario, scene, q) in &rows {
             if current != Some((scenario.clone(), *scene)) {
-                let path = format!("{}/{scenario}_panda/scene{scene:04}.yaml", args[2]);
+                let path = format!("{}/{scenario}/scene{scene:04}.yaml", args[2]);
                 scene_keep = PlanningScene::from_yaml(&std::fs::read(path)?)?;
                 let (mut world, _) = world_objects(&scene_keep)?;
                 if name == "verdict, self only" {

@@ -300,4 +300,45 @@ mod tests {
             assert!(worst < 1e-5, "{name}: distance differs from coal's by {worst} m");
         }
     }
+
+    /// The minimum world distance's joint-space gradient on the Panda against central
+    /// differences of the distance (h = 1e-6 rad), at the uniform labelled configurations of a
+    /// table_pick scene that are free of the world.
+    #[test]
+    fn the_panda_distance_gradient_matches_central_differences() {
+        let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
+        let robot = FittedRobot::load(&root.join("data/robots/panda/panda.robot.json")).unwrap();
+        let scene = PlanningScene::from_yaml(
+            &std::fs::read(root.join("data/robots/mbm_panda/scenes/table_pick/scene0001.yaml")).unwrap(),
+        )
+        .unwrap();
+        let (world, _) = world_objects(&scene).unwrap();
+        let allowed = allowed_override(&scene);
+        let mut checker = RobotChecker::new(&robot, world, &allowed).unwrap();
+        let labels = std::fs::read_to_string(root.join("data/robots/mbm_panda/labels_obj.csv")).unwrap();
+        let id = Isometry3::identity();
+        let options = CheckOptions { gradient: true, ..CheckOptions::default() };
+        let (h, mut checked, mut worst) = (1e-6, 0, 0.0 as Real);
+        for line in labels.lines().filter(|l| l.starts_with("table_pick,1,") && l.contains(",uniform,")) {
+            let c: Vec<&str> = line.split(',').collect();
+            if c[12] == "1" {
+                continue;
+            }
+            let q: Vec<Real> = c[4..11].iter().map(|x| x.parse().unwrap()).collect();
+            let g = checker.check(&q, &id, &options).unwrap().gradient.unwrap();
+            for k in 0..7 {
+                let mut d = |s: Real| {
+                    let mut p = q.clone();
+                    p[k] += s;
+                    checker.check(&p, &id, &CheckOptions::default()).unwrap().distance
+                };
+                let fd = (d(h) - d(-h)) / (2.0 * h);
+                worst = worst.max((g[k] - fd).abs());
+            }
+            checked += 1;
+        }
+        eprintln!("gradient: {checked} configurations, worst difference {worst:e} m/rad");
+        assert!(checked >= 50, "{checked} configurations");
+        assert!(worst < 1e-4, "worst |∂d/∂q − central difference| {worst} m/rad");
+    }
 }

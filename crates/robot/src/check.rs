@@ -60,11 +60,13 @@ pub struct CheckOptions {
     pub distance: bool,
     /// Whether self-collision pairs are checked.
     pub self_collision: bool,
+    /// Whether the minimum distance's joint-space gradient is computed (with `distance`).
+    pub gradient: bool,
 }
 
 impl Default for CheckOptions {
     fn default() -> Self {
-        Self { padding: 0.0, distance: true, self_collision: true }
+        Self { padding: 0.0, distance: true, self_collision: true, gradient: false }
     }
 }
 
@@ -87,6 +89,12 @@ pub struct ConfigurationAnswer {
     pub witnesses: Option<(Point3, Point3)>,
     /// A colliding self pair, as geometry indices.
     pub self_pair: Option<(usize, usize)>,
+    /// With [`CheckOptions::gradient`], when the robot is free of the world at a finite distance:
+    /// ∂distance/∂q, one entry per configuration entry (meters per radian or per meter). The
+    /// closest points' normal `n` (from the object's witness to the robot's) times the point
+    /// Jacobian of the robot's witness ([`crate::RobotModel::point_jacobian`]): `∂d/∂q_k = n·∂x/∂q_k`,
+    /// the derivative wherever the closest pair and its closest features do not switch.
+    pub gradient: Option<Vec<Real>>,
     /// Whether every solve the answer rests on converged (pairs resolved on the mesh count as
     /// converged: the mesh test is exact).
     pub converged: bool,
@@ -335,12 +343,24 @@ impl<'r> RobotChecker<'r> {
             pair: None,
             witnesses: None,
             self_pair: None,
+            gradient: None,
             converged: true,
             pairs_pruned: 0,
             pairs_model: 0,
             pairs_exact: 0,
         };
         self.world_check(options, &mut answer)?;
+        if options.gradient && options.distance && !answer.world && answer.distance.is_finite() {
+            if let (Some((x, y)), Some((g, _))) = (answer.witnesses, answer.pair) {
+                let d = x - y;
+                if d.norm() > 0.0 {
+                    let n = d / d.norm();
+                    let mut jacobian = Vec::new();
+                    robot.model.point_jacobian(&self.link_poses, robot.geometries[g].link, &x, &mut jacobian);
+                    answer.gradient = Some(jacobian.iter().map(|c| n.dot(c)).collect());
+                }
+            }
+        }
         if options.self_collision {
             self.self_check(options, &mut answer)?;
         }
@@ -376,7 +396,13 @@ impl<'r> RobotChecker<'r> {
         order.clear();
         for g in 0..self.robot.geometries.len() {
             for &o in &self.world_pairs[g] {
-                order.push((self.world_gap(g, o), g, o));
+                let gap = self.world_gap(g, o);
+                if !options.distance && gap > options.padding {
+                    // A verdict only: a pair apart by its balls is decided here, unsorted.
+                    answer.pairs_pruned += 1;
+                    continue;
+                }
+                order.push((gap, g, o));
             }
         }
         order.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));

@@ -12,9 +12,9 @@
 //! on the Panda and on a test robot with every joint kind to 1e-12 m and 1e-12 in every rotation
 //! entry (`tests/fk.rs`).
 
-use crate::model::{JointValue, RobotModel};
+use crate::model::{JointKind, JointValue, RobotModel};
 use crate::Result;
-use sublevel_core::math::{Isometry3, Real};
+use sublevel_core::math::{Isometry3, Point3, Real, Vector3};
 
 impl RobotModel {
     /// The value of every joint (radians or meters; 0 for fixed joints) at configuration `q`, in
@@ -61,5 +61,41 @@ impl RobotModel {
         let mut out = Vec::new();
         self.forward_kinematics(q, base, &mut out)?;
         Ok(out)
+    }
+
+    /// The point Jacobian of a point fixed on link `link`: `out[k]` = ∂x/∂q_k, the velocity of the
+    /// point `x` (world frame, meters) per unit of configuration entry k, at the configuration
+    /// whose link poses are `link_poses` ([`RobotModel::forward_kinematics`]). For each joint on
+    /// the chain from the root to the link, with world axis `a` through the joint frame's origin
+    /// `p` (Siciliano et al., *Robotics*, §3.1):
+    ///
+    /// ```text
+    /// revolute, continuous   ∂x/∂v = a × (x − p)
+    /// prismatic              ∂x/∂v = a
+    /// ```
+    ///
+    /// and `v = q_k` (a configuration entry) or `v = m · q_k + c` (a mimic joint: m times that).
+    /// `out` is resized to [`RobotModel::dof`] entries.
+    pub fn point_jacobian(&self, link_poses: &[Isometry3], link: usize, x: &Point3, out: &mut Vec<Vector3>) {
+        out.clear();
+        out.resize(self.dof(), Vector3::zeros());
+        let mut at = link;
+        while let Some(j) = self.links().get(at).and_then(|l| l.parent_joint) {
+            let joint = &self.joints()[j];
+            at = joint.parent;
+            let (k, m) = match joint.value {
+                JointValue::Fixed => continue,
+                JointValue::Variable(k) => (k, 1.0),
+                JointValue::Mimic { variable, multiplier, .. } => (variable, multiplier),
+            };
+            let frame = link_poses[joint.parent] * joint.origin;
+            let a = frame.rotation * joint.axis;
+            let dx = match joint.kind {
+                JointKind::Revolute | JointKind::Continuous => a.cross(&(x.coords - frame.translation.vector)),
+                JointKind::Prismatic => a,
+                JointKind::Fixed => continue,
+            };
+            out[k] += m * dx;
+        }
     }
 }

@@ -204,3 +204,36 @@ fn bad_input_is_refused_naming_the_field() {
     file.format = "other".into();
     assert_eq!(field(FittedRobot::from_file(file).unwrap_err()), "format");
 }
+
+#[test]
+fn the_distance_gradient_matches_central_differences() {
+    let (robot, _dir) = robot();
+    let world = vec![
+        WorldObject {
+            name: "ball".into(),
+            primitive: Primitive::Sphere { radius: 0.03 },
+            pose: Isometry3::translation(0.62, 0.2, 0.55),
+        },
+        boxed("low", 0.05, [0.8, 0.0, -0.4]),
+    ];
+    let mut checker = RobotChecker::new(&robot, world, &|_, _| None).unwrap();
+    let options = CheckOptions { gradient: true, ..Default::default() };
+    let id = Isometry3::identity();
+    let h = 1e-6;
+    let mut checked = 0;
+    for (slide, turn) in [(0.0, 0.3), (0.1, -0.7), (-0.1, 1.1), (0.05, 2.0), (0.2, 0.0)] {
+        let a = checker.check(&[slide, turn], &id, &options).unwrap();
+        assert!(!a.world);
+        let g = a.gradient.clone().unwrap();
+        let mut d = |q: [Real; 2]| checker.check(&q, &id, &CheckOptions::default()).unwrap().distance;
+        let fd = [
+            (d([slide + h, turn]) - d([slide - h, turn])) / (2.0 * h),
+            (d([slide, turn + h]) - d([slide, turn - h])) / (2.0 * h),
+        ];
+        for k in 0..2 {
+            assert!((g[k] - fd[k]).abs() < 1e-5, "q = ({slide}, {turn}): ∂d/∂q{k} {} vs {}", g[k], fd[k]);
+        }
+        checked += 1;
+    }
+    assert_eq!(checked, 5);
+}
