@@ -16,7 +16,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 use sublevel_core::math::{Isometry3, Real};
 use sublevel_core::{Error, Result};
-use sublevel_robot::{CheckOptions, FittedRobot, RobotChecker};
+use sublevel_robot::{CheckOptions, FittedRobot, MotionChecker, MotionOptions, RobotChecker};
 use sublevel_scene::moveit::{allowed_override, world_objects, PlanningScene};
 
 /// Arguments of `sublevel-lab robot-labels`.
@@ -90,7 +90,97 @@ fn num(r: &StringRecord, h: &StringRecord, name: &str) -> Result<Real> {
 pub fn run(args: RobotLabelsArgs) -> Result<()> {
     let mut tallies = evaluate(&args)?;
     print_table(&mut tallies);
+    let motions = evaluate_motions(&args, None)?;
+    println!("\nstart–goal motions of the scenes (conservative advancement, tolerance 1 mm), against their 100 labelled samples:");
+    println!("| scenario | motions | valid | invalid, a sample collides | invalid, every sample free | inconsistent | median steps | median time (µs) |");
+    println!("|---|---|---|---|---|---|---|---|");
+    for (name, m) in motions {
+        let mut steps = m.steps.clone();
+        let mut times = m.micros.clone();
+        println!(
+            "| {name} | {} | {} | {} | {} | {} | {:.0} | {:.0} |",
+            m.n,
+            m.valid,
+            m.invalid_sampled,
+            m.invalid_unsampled,
+            m.inconsistent,
+            median(&mut steps),
+            median(&mut times)
+        );
+    }
     Ok(())
+}
+
+/// Start–goal motions of one scenario.
+#[derive(Default)]
+struct MotionTally {
+    n: usize,
+    valid: usize,
+    /// Invalid, and a labelled sample of the segment collides.
+    invalid_sampled: usize,
+    /// Invalid, though all 100 labelled samples are free (a contact between samples, or within
+    /// the tolerance).
+    invalid_unsampled: usize,
+    /// Valid with a colliding sample, or a contact after the first colliding sample.
+    inconsistent: usize,
+    steps: Vec<Real>,
+    micros: Vec<Real>,
+}
+
+/// A labelled sample of a start–goal segment: its index, configuration and whether it collides.
+type Sample = (usize, Vec<Real>, bool);
+
+/// Each labelled scene's start–goal motion (the `line` configurations are its samples at
+/// t = (idx − 100) / 99) checked by conservative advancement, against the samples' labels.
+fn evaluate_motions(args: &RobotLabelsArgs, only: Option<&[&str]>) -> Result<BTreeMap<String, MotionTally>> {
+    let robot = FittedRobot::load(&args.robot)?;
+    let mut reader = csv::Reader::from_path(&args.labels).map_err(|e| Error::invalid("labels", e.to_string()))?;
+    let header = reader.headers().map_err(|e| Error::invalid("labels", e.to_string()))?.clone();
+    let mut lines: BTreeMap<(String, u32), Vec<Sample>> = BTreeMap::new();
+    for r in reader.records() {
+        let r = r.map_err(|e| Error::invalid("labels", e.to_string()))?;
+        if field(&r, &header, "kind")? != "line"
+            || only.is_some_and(|o| !o.contains(&field(&r, &header, "scenario").unwrap_or("")))
+        {
+            continue;
+        }
+        let scene: u32 = field(&r, &header, "scene")?.parse().map_err(|_| Error::invalid("labels", "scene"))?;
+        let idx: usize = field(&r, &header, "idx")?.parse().map_err(|_| Error::invalid("labels", "idx"))?;
+        let q = (1..=robot.model.dof()).map(|j| num(&r, &header, &format!("q{j}"))).collect::<Result<_>>()?;
+        let collides = num(&r, &header, "collides")? > 0.5;
+        lines.entry((field(&r, &header, "scenario")?.to_owned(), scene)).or_default().push((idx, q, collides));
+    }
+    let mut out: BTreeMap<String, MotionTally> = BTreeMap::new();
+    let options = MotionOptions::default();
+    for ((scenario, scene_no), mut samples) in lines {
+        samples.sort_by_key(|s| s.0);
+        let path = args.problems.join(format!("{scenario}{}", args.suffix)).join(format!("scene{scene_no:04}.yaml"));
+        let bytes = std::fs::read(&path)
+            .map_err(|e| std::io::Error::new(e.kind(), format!("cannot read {}: {e}", path.display())))?;
+        let scene = PlanningScene::from_yaml(&bytes)?;
+        let (world, _) = world_objects(&scene)?;
+        let allowed = allowed_override(&scene);
+        let mut checker = RobotChecker::new(&robot, world, &allowed)?;
+        let mut motions = MotionChecker::new(&mut checker)?;
+        let (Some(first), Some(last)) = (samples.first(), samples.last()) else { continue };
+        let start = Instant::now();
+        let a = motions.check_motion(&first.1, &last.1, &Isometry3::identity(), &options)?;
+        let micros = start.elapsed().as_secs_f64() * 1e6;
+        let n = samples.len().max(2) as Real - 1.0;
+        let first_colliding = samples.iter().position(|s| s.2).map(|k| k as Real / n);
+        let t = out.entry(scenario).or_default();
+        t.n += 1;
+        t.steps.push(a.steps as Real);
+        t.micros.push(micros);
+        match (a.valid, first_colliding, a.contact) {
+            (true, None, _) => t.valid += 1,
+            (true, Some(_), _) => t.inconsistent += 1,
+            (false, Some(f), Some(c)) if c <= f + 1e-9 => t.invalid_sampled += 1,
+            (false, None, Some(_)) => t.invalid_unsampled += 1,
+            _ => t.inconsistent += 1,
+        }
+    }
+    Ok(out)
 }
 
 /// Checks the labelled configurations, per scenario.
@@ -340,5 +430,30 @@ mod tests {
         eprintln!("gradient: {checked} configurations, worst difference {worst:e} m/rad");
         assert!(checked >= 50, "{checked} configurations");
         assert!(worst < 1e-4, "worst |∂d/∂q − central difference| {worst} m/rad");
+    }
+
+    /// The start–goal motions of the box, cage and table_under_pick scenes: a motion proven valid
+    /// has no colliding sample, and an invalid one reports its first contact no later than the
+    /// first colliding sample.
+    #[test]
+    fn panda_motions_agree_with_their_labelled_samples() {
+        let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
+        let args = RobotLabelsArgs {
+            robot: root.join("data/robots/panda/panda.robot.json"),
+            labels: root.join("data/robots/mbm_panda/labels_obj.csv"),
+            problems: root.join("data/robots/mbm_panda/scenes"),
+            suffix: String::new(),
+            every: 1,
+            verbose: false,
+        };
+        let motions = evaluate_motions(&args, Some(&["box", "cage", "table_under_pick"])).unwrap();
+        let n: usize = motions.values().map(|m| m.n).sum();
+        let valid: usize = motions.values().map(|m| m.valid).sum();
+        let sampled: usize = motions.values().map(|m| m.invalid_sampled).sum();
+        assert_eq!(n, 30);
+        assert!(sampled > 20, "{valid} valid, {sampled} invalid at a sample");
+        for (name, m) in &motions {
+            assert_eq!(m.inconsistent, 0, "{name}");
+        }
     }
 }

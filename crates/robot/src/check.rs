@@ -368,6 +368,119 @@ impl<'r> RobotChecker<'r> {
         Ok(answer)
     }
 
+    /// Places every geometry at configuration `q` (forward kinematics) for the pair bounds of
+    /// [`RobotChecker::world_bound`] and [`RobotChecker::self_bound`].
+    ///
+    /// # Errors
+    /// As [`crate::RobotModel::forward_kinematics`].
+    pub(crate) fn place(&mut self, q: &[Real], base: &Isometry3) -> Result<()> {
+        let robot = self.robot;
+        robot.model.forward_kinematics(q, base, &mut self.link_poses)?;
+        self.poses.clear();
+        self.centers.clear();
+        self.boxes.clear();
+        for g in &robot.geometries {
+            let pose = self.link_poses[g.link] * g.origin;
+            self.centers.push(pose.transform_point(&g.sphere.0.into()).coords);
+            self.boxes.push(g.local_box.as_ref().map(|b| PlacedBox::new(&pose, b)));
+            self.poses.push(pose);
+        }
+        Ok(())
+    }
+
+    /// The checked world pairs of geometry `g` (object indices).
+    pub(crate) fn world_pairs_of(&self, g: usize) -> &[usize] {
+        &self.world_pairs[g]
+    }
+
+    /// A lower bound of the distance of robot geometry `g` and world object `o` as placed by
+    /// [`RobotChecker::place`] (meters; 0 when they touch), and whether it is exact, at `level`:
+    /// 0 the ball and box gaps, 1 the sos root bound (exact for a primitive link), 2 the meshes'
+    /// distance.
+    ///
+    /// # Errors
+    /// A query that fails outright.
+    pub(crate) fn world_bound(&self, g: usize, o: usize, level: u8) -> Result<(Real, bool)> {
+        let primitive = matches!(self.robot.geometries[g].shape, LinkShape::Primitive(_));
+        match level {
+            0 => Ok((self.world_gap(g, o).max(self.world_box_gap(g, o)), false)),
+            1 => Ok((self.sos_world_bound(g, o)?, primitive)),
+            _ => {
+                if primitive {
+                    return Ok((self.sos_world_bound(g, o)?, true));
+                }
+                let (a, b) = (&self.robot_exact[g], &self.world_exact[o]);
+                let pa = parry_pose(&(self.poses[g] * a.offset));
+                let pb = parry_pose(&(self.world[o].pose * b.offset));
+                Ok((
+                    match exact_pair(&pa, a, &pb, b, 0.0)? {
+                        PairOutcome::Collides => 0.0,
+                        PairOutcome::Free { distance, .. } => distance,
+                    },
+                    true,
+                ))
+            }
+        }
+    }
+
+    /// As [`RobotChecker::world_bound`] for checked self pair `k` ([`RobotChecker::self_pairs`]).
+    ///
+    /// # Errors
+    /// A query that fails outright.
+    pub(crate) fn self_bound(&self, k: usize, level: u8) -> Result<(Real, bool)> {
+        let (a, b) = self.self_pairs[k];
+        let (ga, gb) = (&self.robot.geometries[a], &self.robot.geometries[b]);
+        let both_primitive = matches!((&ga.shape, &gb.shape), (LinkShape::Primitive(_), LinkShape::Primitive(_)));
+        let (pa, pb) = (self.poses[a], self.poses[b]);
+        match level {
+            0 => {
+                let gap = (self.centers[a] - self.centers[b]).norm() - ga.sphere.1 - gb.sphere.1;
+                let box_gap = match (&self.boxes[a], &self.boxes[b]) {
+                    (Some(x), Some(y)) => box_gap(x, y),
+                    _ => Real::NEG_INFINITY,
+                };
+                Ok((gap.max(box_gap), false))
+            }
+            1 => {
+                let shape = |s: &'r LinkShape| match s {
+                    LinkShape::Primitive(p) => ShapeRef::Primitive(p),
+                    LinkShape::Mesh { body, .. } => ShapeRef::Body(body.body(body.root())),
+                };
+                let d = shape_distance(shape(&ga.shape), &pa, shape(&gb.shape), &pb, None)?;
+                let ok = d.status.converged() && !d.overlapping;
+                Ok((if ok { d.distance.max(0.0) } else { 0.0 }, both_primitive && ok))
+            }
+            _ => {
+                let (ea, eb) = (&self.robot_exact[a], &self.robot_exact[b]);
+                let outcome = exact_pair(&parry_pose(&(pa * ea.offset)), ea, &parry_pose(&(pb * eb.offset)), eb, 0.0)?;
+                Ok((
+                    match outcome {
+                        PairOutcome::Collides => 0.0,
+                        PairOutcome::Free { distance, .. } => distance,
+                    },
+                    true,
+                ))
+            }
+        }
+    }
+
+    /// The sos root bound of a world pair (its distance; 0 when overlapping or not converged).
+    fn sos_world_bound(&self, g: usize, o: usize) -> Result<Real> {
+        let geometry = &self.robot.geometries[g];
+        let obj = &self.world[o];
+        let shape = match &geometry.shape {
+            LinkShape::Primitive(p) => ShapeRef::Primitive(p),
+            LinkShape::Mesh { body, .. } => ShapeRef::Body(body.body(body.root())),
+        };
+        let d = shape_distance(shape, &self.poses[g], ShapeRef::Primitive(&obj.primitive), &obj.pose, None)?;
+        Ok(if d.status.converged() && !d.overlapping { d.distance.max(0.0) } else { 0.0 })
+    }
+
+    /// The robot being checked.
+    pub fn robot(&self) -> &FittedRobot {
+        self.robot
+    }
+
     /// Ball gap of robot geometry `g` and world object `o` (a lower bound of their distance).
     fn world_gap(&self, g: usize, o: usize) -> Real {
         let r = self.robot.geometries[g].sphere.1;

@@ -21,6 +21,9 @@
 //!   self-collision: the sos model decides what is far, the meshes what is near; no missed
 //!   collision, and the minimum distance never above the meshes'.
 //!
+//! - [`advance`]: joint-space motions proven free by conservative advancement, or their first
+//!   contact, with no sampling resolution.
+//!
 //! This crate knows nothing of scenes or gRPC.
 
 #![warn(missing_docs)]
@@ -28,6 +31,7 @@
 
 pub use sublevel_core::{Error, Result};
 
+pub mod advance;
 pub mod check;
 pub mod fit;
 pub mod fitted;
@@ -36,6 +40,7 @@ pub mod model;
 pub mod motion;
 pub mod srdf;
 
+pub use advance::{MotionAnswer, MotionChecker, MotionOptions};
 pub use check::{CheckOptions, ConfigurationAnswer, RobotChecker, WorldObject};
 pub use fit::{fit_robot, RobotFitProgress, RobotFitSettings};
 pub use fitted::{FittedRobot, LinkShape, RobotFile, RobotGeometry};
