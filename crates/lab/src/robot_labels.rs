@@ -83,6 +83,23 @@ fn num(r: &StringRecord, h: &StringRecord, name: &str) -> Result<Real> {
     field(r, h, name)?.parse::<Real>().map_err(|e| Error::invalid("labels", format!("{name}: {e}")))
 }
 
+/// A checker of `robot` in the planning scene `scene_no` of `scenario` (its primitives and its
+/// allowed-collision matrix).
+fn scene_checker<'r>(
+    args: &RobotLabelsArgs,
+    robot: &'r FittedRobot,
+    scenario: &str,
+    scene_no: u32,
+) -> Result<RobotChecker<'r>> {
+    let path = args.problems.join(format!("{scenario}{}", args.suffix)).join(format!("scene{scene_no:04}.yaml"));
+    let bytes = std::fs::read(&path)
+        .map_err(|e| std::io::Error::new(e.kind(), format!("cannot read {}: {e}", path.display())))?;
+    let scene = PlanningScene::from_yaml(&bytes)?;
+    let (world, _) = world_objects(&scene)?;
+    let allowed = allowed_override(&scene);
+    RobotChecker::new(robot, world, &allowed)
+}
+
 /// Runs `sublevel-lab robot-labels`.
 ///
 /// # Errors
@@ -154,13 +171,7 @@ fn evaluate_motions(args: &RobotLabelsArgs, only: Option<&[&str]>) -> Result<BTr
     let options = MotionOptions::default();
     for ((scenario, scene_no), mut samples) in lines {
         samples.sort_by_key(|s| s.0);
-        let path = args.problems.join(format!("{scenario}{}", args.suffix)).join(format!("scene{scene_no:04}.yaml"));
-        let bytes = std::fs::read(&path)
-            .map_err(|e| std::io::Error::new(e.kind(), format!("cannot read {}: {e}", path.display())))?;
-        let scene = PlanningScene::from_yaml(&bytes)?;
-        let (world, _) = world_objects(&scene)?;
-        let allowed = allowed_override(&scene);
-        let mut checker = RobotChecker::new(&robot, world, &allowed)?;
+        let mut checker = scene_checker(args, &robot, &scenario, scene_no)?;
         let mut motions = MotionChecker::new(&mut checker)?;
         let (Some(first), Some(last)) = (samples.first(), samples.last()) else { continue };
         let start = Instant::now();
@@ -205,13 +216,7 @@ fn evaluate(args: &RobotLabelsArgs) -> Result<BTreeMap<String, Tally>> {
     let full = CheckOptions::default();
     let verdict = CheckOptions { distance: false, ..CheckOptions::default() };
     for ((scenario, scene_no), rows) in &by_scene {
-        let path = args.problems.join(format!("{scenario}{}", args.suffix)).join(format!("scene{scene_no:04}.yaml"));
-        let bytes = std::fs::read(&path)
-            .map_err(|e| std::io::Error::new(e.kind(), format!("cannot read {}: {e}", path.display())))?;
-        let scene = PlanningScene::from_yaml(&bytes)?;
-        let (world, _) = world_objects(&scene)?;
-        let allowed = allowed_override(&scene);
-        let mut checker = RobotChecker::new(&robot, world, &allowed)?;
+        let mut checker = scene_checker(args, &robot, scenario, *scene_no)?;
         let t = tallies.entry(scenario.clone()).or_default();
         for r in rows {
             let q: Vec<Real> = (1..=dof).map(|j| num(r, &header, &format!("q{j}"))).collect::<Result<_>>()?;
@@ -360,21 +365,26 @@ fn row(name: &str, t: &mut Tally) {
 mod tests {
     use super::*;
 
+    /// The repository's Panda, labels and scenes, every `every`-th configuration.
+    fn repository_args(every: usize, verbose: bool) -> RobotLabelsArgs {
+        let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
+        RobotLabelsArgs {
+            robot: root.join("data/robots/panda/panda.robot.json"),
+            labels: root.join("data/robots/mbm_panda/labels_obj.csv"),
+            problems: root.join("data/robots/mbm_panda/scenes"),
+            suffix: String::new(),
+            every,
+            verbose,
+        }
+    }
+
     /// Every tenth of the 14 000 MotionBenchMaker Panda configurations, against the labels of
     /// pinocchio + coal on the OBJ meshes as written (`scripts/peers/relabel_panda.py`): no miss,
     /// no false collision, the minimum world distance equal to coal's to 10 µm (both GJK; the
     /// labels are rounded to 1 µm), every answer converged.
     #[test]
     fn the_panda_checks_agree_with_the_mesh_labels() {
-        let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
-        let args = RobotLabelsArgs {
-            robot: root.join("data/robots/panda/panda.robot.json"),
-            labels: root.join("data/robots/mbm_panda/labels_obj.csv"),
-            problems: root.join("data/robots/mbm_panda/scenes"),
-            suffix: String::new(),
-            every: 10,
-            verbose: true,
-        };
+        let args = repository_args(10, true);
         let tallies = evaluate(&args).unwrap();
         assert_eq!(tallies.len(), 7, "seven scenarios");
         let n: usize = tallies.values().map(|t| t.n).sum();
@@ -437,15 +447,7 @@ mod tests {
     /// first colliding sample.
     #[test]
     fn panda_motions_agree_with_their_labelled_samples() {
-        let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
-        let args = RobotLabelsArgs {
-            robot: root.join("data/robots/panda/panda.robot.json"),
-            labels: root.join("data/robots/mbm_panda/labels_obj.csv"),
-            problems: root.join("data/robots/mbm_panda/scenes"),
-            suffix: String::new(),
-            every: 1,
-            verbose: false,
-        };
+        let args = repository_args(1, false);
         let motions = evaluate_motions(&args, Some(&["box", "cage", "table_under_pick"])).unwrap();
         let n: usize = motions.values().map(|m| m.n).sum();
         let valid: usize = motions.values().map(|m| m.valid).sum();

@@ -180,6 +180,9 @@ impl<'c, 'r> MotionChecker<'c, 'r> {
             steps: 0,
         };
         let threshold = options.padding + options.tolerance;
+        // Bounds this close are taken on the meshes: a contact is never reported from a loose
+        // bound.
+        let refine_below = options.padding + 10.0 * options.tolerance;
         // The pairs that move, with their closing speeds; the others keep q₀'s verdict.
         let mut moving: Vec<((usize, Option<usize>), Real)> = Vec::new();
         for (g, &link) in geometries.iter().enumerate() {
@@ -229,13 +232,15 @@ impl<'c, 'r> MotionChecker<'c, 'r> {
             }
             let limiting = loop {
                 let Some(mut top) = heap.pop() else { break None };
-                if top.exact || top.level >= 2 {
+                // A bound is good enough for a step once it is the sos root's and not close: only
+                // pairs within `refine_below` need the meshes.
+                if top.exact || top.level >= 2 || (top.level == 1 && top.bound > refine_below) {
                     break Some(top);
                 }
                 // Refine: the sos bound, then the meshes (at once where the sos bound is close).
                 top.level += 1;
                 let (bound, exact) = self.bound(top.pair, top.level)?;
-                let (bound, exact) = if !exact && top.level == 1 && bound <= threshold + 10.0 * options.tolerance {
+                let (bound, exact) = if !exact && top.level == 1 && bound <= refine_below {
                     top.level = 2;
                     self.bound(top.pair, 2)?
                 } else {

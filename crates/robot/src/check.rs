@@ -195,6 +195,15 @@ fn box_gap(a: &PlacedBox, b: &PlacedBox) -> Real {
     gap - 1e-12 * (d.norm() + a.half.norm() + b.half.norm())
 }
 
+/// A link shape as the sos bound sees it: the primitive, or the compound body's root (which
+/// contains every leaf, hence every triangle).
+fn root_shape(s: &LinkShape) -> ShapeRef<'_> {
+    match s {
+        LinkShape::Primitive(p) => ShapeRef::Primitive(p),
+        LinkShape::Mesh { body, .. } => ShapeRef::Body(body.body(body.root())),
+    }
+}
+
 /// The outcome of one pair.
 enum PairOutcome {
     /// Free, at least this far apart (meters), with witnesses (robot side first) and whether the
@@ -325,16 +334,7 @@ impl<'r> RobotChecker<'r> {
             return Err(Error::invalid("padding", format!("must be finite and ≥ 0 m, got {}", options.padding)));
         }
         let robot = self.robot;
-        robot.model.forward_kinematics(q, base, &mut self.link_poses)?;
-        self.poses.clear();
-        self.centers.clear();
-        self.boxes.clear();
-        for g in &robot.geometries {
-            let pose = self.link_poses[g.link] * g.origin;
-            self.centers.push(pose.transform_point(&g.sphere.0.into()).coords);
-            self.boxes.push(g.local_box.as_ref().map(|b| PlacedBox::new(&pose, b)));
-            self.poses.push(pose);
-        }
+        self.place(q, base)?;
         let mut answer = ConfigurationAnswer {
             collides: false,
             world: false,
@@ -442,11 +442,7 @@ impl<'r> RobotChecker<'r> {
                 Ok((gap.max(box_gap), false))
             }
             1 => {
-                let shape = |s: &'r LinkShape| match s {
-                    LinkShape::Primitive(p) => ShapeRef::Primitive(p),
-                    LinkShape::Mesh { body, .. } => ShapeRef::Body(body.body(body.root())),
-                };
-                let d = shape_distance(shape(&ga.shape), &pa, shape(&gb.shape), &pb, None)?;
+                let d = shape_distance(root_shape(&ga.shape), &pa, root_shape(&gb.shape), &pb, None)?;
                 let ok = d.status.converged() && !d.overlapping;
                 Ok((if ok { d.distance.max(0.0) } else { 0.0 }, both_primitive && ok))
             }
@@ -468,11 +464,13 @@ impl<'r> RobotChecker<'r> {
     fn sos_world_bound(&self, g: usize, o: usize) -> Result<Real> {
         let geometry = &self.robot.geometries[g];
         let obj = &self.world[o];
-        let shape = match &geometry.shape {
-            LinkShape::Primitive(p) => ShapeRef::Primitive(p),
-            LinkShape::Mesh { body, .. } => ShapeRef::Body(body.body(body.root())),
-        };
-        let d = shape_distance(shape, &self.poses[g], ShapeRef::Primitive(&obj.primitive), &obj.pose, None)?;
+        let d = shape_distance(
+            root_shape(&geometry.shape),
+            &self.poses[g],
+            ShapeRef::Primitive(&obj.primitive),
+            &obj.pose,
+            None,
+        )?;
         Ok(if d.status.converged() && !d.overlapping { d.distance.max(0.0) } else { 0.0 })
     }
 
@@ -577,11 +575,8 @@ impl<'r> RobotChecker<'r> {
         let obj = &self.world[o];
         let pose = &self.poses[g];
         answer.pairs_model += 1;
-        let shape = match &geometry.shape {
-            LinkShape::Primitive(p) => ShapeRef::Primitive(p),
-            LinkShape::Mesh { body, .. } => ShapeRef::Body(body.body(body.root())),
-        };
-        let d = shape_distance(shape, pose, ShapeRef::Primitive(&obj.primitive), &obj.pose, None)?;
+        let d =
+            shape_distance(root_shape(&geometry.shape), pose, ShapeRef::Primitive(&obj.primitive), &obj.pose, None)?;
         let converged = d.status.converged();
         if let (LinkShape::Primitive(_), true) = (&geometry.shape, converged) {
             // Both exact: the primitive answer is the verdict and the distance.
@@ -640,11 +635,7 @@ impl<'r> RobotChecker<'r> {
             }
             answer.pairs_model += 1;
             let (pa, pb) = (&self.poses[a], &self.poses[b]);
-            let shape = |s: &'r LinkShape| match s {
-                LinkShape::Primitive(p) => ShapeRef::Primitive(p),
-                LinkShape::Mesh { body, .. } => ShapeRef::Body(body.body(body.root())),
-            };
-            let d = shape_distance(shape(&ga.shape), pa, shape(&gb.shape), pb, None)?;
+            let d = shape_distance(root_shape(&ga.shape), pa, root_shape(&gb.shape), pb, None)?;
             let free = d.status.converged() && !d.overlapping && d.distance > options.padding;
             if free {
                 continue;

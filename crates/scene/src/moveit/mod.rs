@@ -643,9 +643,11 @@ impl RawScene {
 }
 
 mod import;
+mod request;
 #[cfg(test)]
 mod tests;
 mod world;
 
 pub use import::{ImportPlan, ImportedInstance, ImportedScene, PlannedInstance, SkippedShape};
+pub use request::MotionPlanRequest;
 pub use world::{allowed_override, world_objects};

@@ -1,0 +1,122 @@
+//! A MoveIt motion plan request (`moveit_msgs/MotionPlanRequest`, YAML or JSON) as the
+//! MotionBenchMaker problems write it: the start state's joint positions, the goal's joint
+//! constraints and the planning group. Other constraints, tolerances and planner settings are
+//! not read.
+
+use crate::{Error, Result};
+use serde::Deserialize;
+use sublevel_core::math::Real;
+
+/// A motion plan request: start and goal joint positions by name (radians, meters).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MotionPlanRequest {
+    /// The planning group (`group_name`; empty when absent).
+    pub group_name: String,
+    /// The start state's joint positions, in message order.
+    pub start: Vec<(String, Real)>,
+    /// The first goal constraint's joint positions, in message order.
+    pub goal: Vec<(String, Real)>,
+}
+
+#[derive(Deserialize)]
+struct RawRequest {
+    #[serde(default)]
+    group_name: String,
+    #[serde(default)]
+    start_state: RawStart,
+    #[serde(default)]
+    goal_constraints: Vec<RawGoal>,
+}
+
+#[derive(Deserialize, Default)]
+struct RawStart {
+    #[serde(default)]
+    joint_state: RawJoints,
+}
+
+#[derive(Deserialize, Default)]
+struct RawJoints {
+    #[serde(default)]
+    name: Vec<String>,
+    #[serde(default)]
+    position: Vec<Real>,
+}
+
+#[derive(Deserialize)]
+struct RawGoal {
+    #[serde(default)]
+    joint_constraints: Vec<RawConstraint>,
+}
+
+#[derive(Deserialize)]
+struct RawConstraint {
+    joint_name: String,
+    position: Real,
+}
+
+impl MotionPlanRequest {
+    /// Reads a request from YAML (or JSON) bytes.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `request` for bytes that are not the message,
+    /// `start_state.joint_state` when names and positions differ in number,
+    /// `goal_constraints` when there is no joint goal, or the first non-finite position.
+    pub fn from_yaml(bytes: &[u8]) -> Result<Self> {
+        let raw: RawRequest = serde_saphyr::from_slice(bytes).map_err(|e| Error::invalid("request", e.to_string()))?;
+        let js = raw.start_state.joint_state;
+        if js.name.len() != js.position.len() {
+            return Err(Error::invalid(
+                "start_state.joint_state",
+                format!("{} names for {} positions", js.name.len(), js.position.len()),
+            ));
+        }
+        if let Some(k) = js.position.iter().position(|v| !v.is_finite()) {
+            return Err(Error::invalid(format!("start_state.joint_state.position[{k}]"), "must be finite"));
+        }
+        let goal: Vec<(String, Real)> = raw
+            .goal_constraints
+            .first()
+            .map(|g| g.joint_constraints.iter().map(|c| (c.joint_name.clone(), c.position)).collect())
+            .unwrap_or_default();
+        if goal.is_empty() {
+            return Err(Error::invalid("goal_constraints", "no joint constraints: a joint-space goal is needed"));
+        }
+        if let Some(k) = goal.iter().position(|(_, v)| !v.is_finite()) {
+            return Err(Error::invalid(
+                format!("goal_constraints[0].joint_constraints[{k}].position"),
+                "must be finite",
+            ));
+        }
+        Ok(Self { group_name: raw.group_name, start: js.name.into_iter().zip(js.position).collect(), goal })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_motionbenchmaker_request_reads_its_start_and_goal() {
+        let path =
+            concat!(env!("CARGO_MANIFEST_DIR"), "/../../data/robots/mbm_panda/requests/table_pick/request0001.yaml");
+        let r = MotionPlanRequest::from_yaml(&std::fs::read(path).unwrap()).unwrap();
+        assert_eq!(r.group_name, "panda_arm");
+        assert_eq!(r.start.len(), 9);
+        assert_eq!(r.start[3], ("panda_joint4".to_owned(), -2.356));
+        assert_eq!(r.start[8], ("panda_finger_joint2".to_owned(), 0.065));
+        assert_eq!(r.goal.len(), 7);
+        assert_eq!(r.goal[0], ("panda_joint1".to_owned(), -1.451140183264752));
+        assert_eq!(r.goal[6], ("panda_joint7".to_owned(), 0.8869533207576928));
+    }
+
+    #[test]
+    fn a_bad_request_is_refused_naming_the_field() {
+        let field = |text: &str| match MotionPlanRequest::from_yaml(text.as_bytes()).unwrap_err() {
+            Error::InvalidArgument { field, .. } => field,
+            other => panic!("{other}"),
+        };
+        assert_eq!(field("start_state: {joint_state: {name: [a, b], position: [1]}}"), "start_state.joint_state");
+        assert_eq!(field("start_state: {joint_state: {name: [a], position: [1]}}"), "goal_constraints");
+        assert_eq!(field("- 1\n- 2\n"), "request");
+    }
+}
