@@ -413,7 +413,7 @@ impl<'r> RobotChecker<'r> {
                 let pa = parry_pose(&(self.poses[g] * a.offset));
                 let pb = parry_pose(&(self.world[o].pose * b.offset));
                 Ok((
-                    match exact_pair(&pa, a, &pb, b, 0.0)? {
+                    match exact_pair(&pa, a, &pb, b, 0.0, Real::INFINITY)? {
                         PairOutcome::Collides => 0.0,
                         PairOutcome::Free { distance, .. } => distance,
                     },
@@ -448,7 +448,14 @@ impl<'r> RobotChecker<'r> {
             }
             _ => {
                 let (ea, eb) = (&self.robot_exact[a], &self.robot_exact[b]);
-                let outcome = exact_pair(&parry_pose(&(pa * ea.offset)), ea, &parry_pose(&(pb * eb.offset)), eb, 0.0)?;
+                let outcome = exact_pair(
+                    &parry_pose(&(pa * ea.offset)),
+                    ea,
+                    &parry_pose(&(pb * eb.offset)),
+                    eb,
+                    0.0,
+                    Real::INFINITY,
+                )?;
                 Ok((
                     match outcome {
                         PairOutcome::Collides => 0.0,
@@ -602,7 +609,16 @@ impl<'r> RobotChecker<'r> {
             )?;
             return Ok(collides.then_some(PairOutcome::Collides));
         }
-        self.exact_world_pair(g, o, padding, answer).map(Some)
+        // An upper bound of the mesh's distance: from the object's witness (a point of the
+        // object) to the mesh's surface. The search for the closest triangles stops beyond it.
+        let mut max_dist = bound;
+        if let (true, Some(mesh)) = (converged, self.robot_exact[g].shape.as_trimesh()) {
+            use parry3d_f64::query::PointQuery;
+            let y = pose.inverse_transform_point(&d.witness_b);
+            let upper = mesh.distance_to_local_point(parry3d_f64::math::Vector::new(y.x, y.y, y.z), false);
+            max_dist = max_dist.min(upper * (1.0 + 1e-9) + 1e-12);
+        }
+        self.exact_world_pair(g, o, padding, max_dist, answer).map(Some)
     }
 
     /// A world pair on the mesh (exact; parry's triangle BVH).
@@ -611,13 +627,14 @@ impl<'r> RobotChecker<'r> {
         g: usize,
         o: usize,
         padding: Real,
+        max_dist: Real,
         answer: &mut ConfigurationAnswer,
     ) -> Result<PairOutcome> {
         answer.pairs_exact += 1;
         let (a, b) = (&self.robot_exact[g], &self.world_exact[o]);
         let pa = parry_pose(&(self.poses[g] * a.offset));
         let pb = parry_pose(&(self.world[o].pose * b.offset));
-        exact_pair(&pa, a, &pb, b, padding)
+        exact_pair(&pa, a, &pb, b, padding, max_dist)
     }
 
     fn self_check(&mut self, options: &CheckOptions, answer: &mut ConfigurationAnswer) -> Result<()> {
@@ -673,16 +690,20 @@ fn exact_collides(
     ))
 }
 
-/// Two exact shapes (parry): collides within `padding`, else their distance and closest points.
+/// Two exact shapes (parry): collides within `padding`, else their distance and closest points;
+/// a pair farther apart than `max_dist` is answered free at +∞ without its points (the search
+/// stops at that distance, much sooner than a full one).
 fn exact_pair(
     pa: &parry3d_f64::math::Pose,
     a: &ExactShape,
     pb: &parry3d_f64::math::Pose,
     b: &ExactShape,
     padding: Real,
+    max_dist: Real,
 ) -> Result<PairOutcome> {
     let unsupported = |_| Error::Numerical("the exact mesh stage does not support this shape pair".into());
-    match parry3d_f64::query::closest_points(pa, a.shape.as_ref(), pb, b.shape.as_ref(), Real::MAX)
+    let max_dist = if max_dist.is_finite() { max_dist.max(padding) } else { Real::MAX };
+    match parry3d_f64::query::closest_points(pa, a.shape.as_ref(), pb, b.shape.as_ref(), max_dist)
         .map_err(unsupported)?
     {
         ClosestPoints::Intersecting => Ok(PairOutcome::Collides),
