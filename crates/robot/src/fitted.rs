@@ -298,6 +298,35 @@ impl FittedRobot {
         Ok(())
     }
 
+    /// Attaches an object to link `link` (a grasped object): an exact primitive at `origin` in the
+    /// link's frame, moving with the link and checked like it — against the world, and against
+    /// the links the link itself is checked against (its allowed pairs are the object's too). Its
+    /// name is `name`; it is kept in memory only (not written by [`FittedRobot::save`]).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `link` when the robot has no such link, `origin` when the
+    /// pose is not finite, or `primitive` for a halfspace (an attached object is bounded).
+    pub fn attach(&mut self, link: &str, name: &str, primitive: Primitive, origin: Isometry3) -> Result<usize> {
+        let index = self.model.link_index(link).ok_or_else(|| {
+            Error::invalid("link", format!("`{}` is not a link of the robot", sublevel_core::error::clip(link)))
+        })?;
+        if origin.to_homogeneous().iter().any(|v| !v.is_finite()) {
+            return Err(Error::invalid("origin", "must be finite"));
+        }
+        let Some(half) = primitive.local_half_extents() else {
+            return Err(Error::invalid("primitive", "a halfspace cannot be attached: attached objects are bounded"));
+        };
+        self.geometries.push(RobotGeometry {
+            link: index,
+            name: name.to_owned(),
+            origin,
+            shape: LinkShape::Primitive(primitive),
+            sphere: (Vector3::zeros(), primitive.bounding_radius()),
+            local_box: Some((Vector3::zeros(), half)),
+        });
+        Ok(self.geometries.len() - 1)
+    }
+
     /// The geometries of link `link`.
     pub fn link_geometries(&self, link: usize) -> impl Iterator<Item = (usize, &RobotGeometry)> + '_ {
         self.geometries.iter().enumerate().filter(move |(_, g)| g.link == link)

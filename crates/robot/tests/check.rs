@@ -237,3 +237,39 @@ fn the_distance_gradient_matches_central_differences() {
     }
     assert_eq!(checked, 5);
 }
+
+#[test]
+fn an_attached_object_moves_with_its_link_and_collides_like_it() {
+    let (mut robot, _dir) = robot();
+    // A 0.1 m cube held 0.2 m beyond the tip (the tip at the arm + (0, 0, 0.5)), turning with it.
+    let held = robot
+        .attach(
+            "tip",
+            "tool",
+            Primitive::Box { half_extents: Vector3::repeat(0.05) },
+            Isometry3::translation(0.2, 0.0, 0.0),
+        )
+        .unwrap();
+    assert_eq!(robot.geometries[held].name, "tool");
+    // An obstacle the tool reaches at turn 0 and the tip alone does not.
+    let world = vec![boxed("post", 0.05, [0.79, 0.0, 0.5])];
+    let mut checker = RobotChecker::new(&robot, world, &|_, _| None).unwrap();
+    let id = Isometry3::identity();
+    let a = checker.check(&[0.0, 0.0], &id, &CheckOptions::default()).unwrap();
+    assert!(a.world && a.pair == Some((held, 0)), "{a:?}");
+    // Turned by π/2 about z the tool points along y; the tip is then the closest, 0.19 m away.
+    let a = checker.check(&[0.0, std::f64::consts::FRAC_PI_2], &id, &CheckOptions::default()).unwrap();
+    assert!(!a.world);
+    let post = Vector3::new(0.79, 0.0, 0.5);
+    let tool = box_distance(Vector3::new(0.5, 0.2, 0.5), Vector3::repeat(0.05), post, Vector3::repeat(0.05));
+    let tip = box_distance(Vector3::new(0.5, 0.0, 0.5), Vector3::repeat(0.05), post, Vector3::repeat(0.05));
+    assert!((tip - 0.19).abs() < 1e-12 && tool > tip);
+    assert!((a.distance - tool.min(tip)).abs() < 1e-9, "{} vs {}", a.distance, tool.min(tip));
+    let field = |e: sublevel_robot::Error| match e {
+        sublevel_robot::Error::InvalidArgument { field, .. } => field,
+        other => panic!("{other}"),
+    };
+    let half = Primitive::Halfspace { normal: Vector3::z(), offset: 0.0 };
+    assert_eq!(field(robot.attach("nowhere", "x", Primitive::Sphere { radius: 0.1 }, id).unwrap_err()), "link");
+    assert_eq!(field(robot.attach("tip", "x", half, id).unwrap_err()), "primitive");
+}
