@@ -19,8 +19,10 @@
 //!       children's bounding box when that is tighter or the solver fails at every degree
 //!       (box_ellipsoid); a node left out moves up alone; until one root
 //! excess of every node: sampled one-sided Hausdorff excess over the mesh          (surface.rs)
-//! certificate: every parent–child containment certified, a parent short of it rescaled
-//!       (certify.rs)
+//! certificate: every parent–child containment certified, a parent short of it rescaled; a
+//!       parent shown not to contain a child (its fit checks samples only) replaced by the
+//!       tighter of itself rescaled to a certified factor and the box ellipsoid, and certified
+//!       (certify.rs, certify_tree_repairing)
 //! check: every leaf of excess > T is a miss (CompoundReport::misses, met = no miss)
 //! ```
 //!
@@ -345,14 +347,22 @@ pub fn fit_compound(
     let mut nodes = nodes;
     set_depths(&mut nodes, root);
     // Every parent certified to contain its children (the fits check containment on samples; a
-    // parent short of a certificate is rescaled: see `certify`).
+    // parent short of a certificate is rescaled, one shown to miss a child replaced: see
+    // `certify`).
     report(progress, FitStage::Verify, 1.0, format!("certifying the containment of {} nodes", nodes.len()));
-    let certificates = super::certify::certify_tree(&mut nodes)?;
-    let rescaled =
-        certificates.iter().filter(|c| matches!(c.proof, super::certify::ContainmentProof::Rescaled { .. })).count();
+    let mut excess = |b: &Body| surface.excess(b, settings.excess_samples);
+    let certified = super::certify::certify_tree_repairing(&mut nodes, &mut excess)?;
+    // (A replaced parent's rescale, by more, has its own note.)
+    let rescaled = certified
+        .certificates
+        .iter()
+        .filter(|c| matches!(c.proof, super::certify::ContainmentProof::Rescaled { .. }))
+        .filter(|c| certified.repairs.iter().all(|r| r.parent != c.parent))
+        .count();
     if rescaled > 0 {
         notes.push(format!("{rescaled} parent–child containments certified after rescaling the parent (at most 10⁻³)"));
     }
+    notes.extend(certified.repairs.iter().map(repair_note));
     let tree_fit_seconds = t_tree.elapsed().as_secs_f64();
     let misses = settings.excess_tolerance.map(|t| tolerance_misses(&nodes, t));
     let report = CompoundReport {
@@ -373,6 +383,20 @@ pub fn fit_compound(
     let body = CompoundBody::new(nodes, root, report)?;
     report_done(progress, &body);
     Ok(body)
+}
+
+/// The report's note on a parent that [`super::certify::certify_tree_repairing`] replaced.
+fn repair_note(r: &super::certify::Repair) -> String {
+    let by = match r.replacement {
+        super::certify::Replacement::Rescaled { factor } => format!("itself rescaled by {factor:.6}"),
+        super::certify::Replacement::BoxEllipsoid => {
+            "the ellipsoid through the corners of its children's bounding box".into()
+        }
+    };
+    format!(
+        "node {} did not contain its child node {} (p = {:.6} at ({:.6}, {:.6}, {:.6}) m): replaced by {by}, the tighter candidate (excess {:.4} m, was {:.4} m), and certified",
+        r.parent, r.child, r.value, r.point.x, r.point.y, r.point.z, r.excess, r.excess_before
+    )
 }
 
 /// The leaves (nodes without children) whose excess is above `t`, largest excess first.
@@ -767,7 +791,8 @@ fn fit_parent(
 /// The ellipsoid through the corners of the box around the children's bounding boxes
 /// (semi-axes √3 × the box's half extents, widened by 1e-9 relative): it contains the box, hence
 /// the children's bodies, exactly (convexity). The parent when the containment SDP fails at every
-/// degree, and whenever it is tighter than the §V fit (by sampled excess).
+/// degree, whenever it is tighter than the §V fit (by sampled excess), and a candidate
+/// replacement of a parent shown not to contain a child (`certify::certify_tree_repairing`).
 ///
 /// # Errors
 /// [`Error::Numerical`] when a child has no bounding box (not convex).
