@@ -610,15 +610,27 @@ impl<'r> RobotChecker<'r> {
             return Ok(collides.then_some(PairOutcome::Collides));
         }
         // An upper bound of the mesh's distance: from the object's witness (a point of the
-        // object) to the mesh's surface. The search for the closest triangles stops beyond it.
-        let mut max_dist = bound;
+        // object) to the mesh's surface. The search for the closest triangles stops a little
+        // beyond it (parry's GJK distances can exceed the true one by a few µm), and where its
+        // answer is not below the bound, the bound and its points are the answer.
+        let mut upper = None;
         if let (true, Some(mesh)) = (converged, self.robot_exact[g].shape.as_trimesh()) {
             use parry3d_f64::query::PointQuery;
             let y = pose.inverse_transform_point(&d.witness_b);
-            let upper = mesh.distance_to_local_point(parry3d_f64::math::Vector::new(y.x, y.y, y.z), false);
-            max_dist = max_dist.min(upper * (1.0 + 1e-9) + 1e-12);
+            let p = mesh.project_local_point(parry3d_f64::math::Vector::new(y.x, y.y, y.z), false).point;
+            let x = pose.transform_point(&Point3::new(p.x, p.y, p.z));
+            upper = Some(((x - d.witness_b).norm(), x, d.witness_b));
         }
-        self.exact_world_pair(g, o, padding, max_dist, answer).map(Some)
+        let max_dist = upper.map_or(bound, |(u, _, _)| bound.min(u * (1.0 + 1e-6) + 1e-6));
+        let outcome = self.exact_world_pair(g, o, padding, max_dist, answer)?;
+        Ok(Some(match (outcome, upper) {
+            // The mesh is within `u` of the object: within the padding, a contact.
+            (PairOutcome::Free { .. }, Some((u, _, _))) if u <= padding => PairOutcome::Collides,
+            (PairOutcome::Free { distance, .. }, Some((u, x, y))) if u < distance && u < bound => {
+                PairOutcome::Free { distance: u, witnesses: Some((x, y)) }
+            }
+            (outcome, _) => outcome,
+        }))
     }
 
     /// A world pair on the mesh (exact; parry's triangle BVH).
