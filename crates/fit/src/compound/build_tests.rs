@@ -237,7 +237,7 @@ fn the_box_ellipsoid_contains_both_children_and_passes_through_the_box_corners()
     let a = sublevel_core::body::ellipsoid([-2.0, 0.0, 0.0], [1.0; 3]).unwrap();
     let b = sublevel_core::body::ellipsoid([2.0, 0.0, 0.0], [1.0; 3]).unwrap();
     let id = Isometry3::identity();
-    let e = super::build::box_ellipsoid(&[(&a, id), (&b, id)]).unwrap();
+    let e = super::tree::box_ellipsoid(&[(&a, id), (&b, id)]).unwrap();
     let s3 = 3.0_f64.sqrt();
     for (x, want) in [([3.0, 1.0, 1.0], 1.0), ([3.0 * s3, 0.0, 0.0], 1.0), ([0.0, s3, 0.0], 1.0), ([0.0; 3], 0.0)] {
         let v = e.value_at(&Point3::from(x));

@@ -39,7 +39,7 @@
 //! rescaled:      p divided by the largest certified factor of its edges (steps 2 and 4: the
 //!                S-procedure's 1 − γ, or the largest p at the child's box corners)
 //! box ellipsoid: the ellipsoid through the corners of the children's union bounding box
-//!                (build::box_ellipsoid; contains every child's box, hence the child)
+//!                (tree::box_ellipsoid; contains every child's box, hence the child)
 //! ```
 //!
 //! The rescale is certified as in step 4 (a certificate of margin γ is one of margin 0 for
@@ -310,7 +310,7 @@ fn replace_parent(
     );
     let id = Isometry3::identity();
     let bodies: Vec<(&Body, Isometry3)> = nodes[i].children.iter().map(|&c| (&nodes[c].body, id)).collect();
-    let mut boxed = super::build::box_ellipsoid(&bodies)?;
+    let mut boxed = super::tree::box_ellipsoid(&bodies)?;
     boxed
         .report
         .notes

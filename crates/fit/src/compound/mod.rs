@@ -6,7 +6,7 @@
 //!
 //! Files: [`decompose`] (VHACD parts of whole triangles), [`build`] (leaf fits, the tree, the
 //! part-count search: [`fit_compound`]), [`surface`] (the Hausdorff excess of a node over the
-//! mesh), [`check`] (every triangle covered), [`certify`] (every parent contains its children).
+//! mesh), `tree` (the containment tree over the leaves), [`check`] (every triangle covered), [`certify`] (every parent contains its children).
 
 pub use sublevel_core::compound::*;
 
@@ -15,6 +15,7 @@ pub mod certify;
 pub mod check;
 pub mod decompose;
 pub mod surface;
+mod tree;
 
 #[cfg(test)]
 mod build_tests;
