@@ -15,6 +15,7 @@ mod query;
 mod query_compound;
 mod robot;
 mod robot_cli;
+mod robot_service;
 mod scene_import;
 mod security;
 mod service;

@@ -232,7 +232,7 @@ fn write_store(args: &StartupArgs, dir: &Path) -> Result<(usize, usize, usize, u
     let mut instances = 0;
     for s in 0..scenes {
         let scene = format!("s-{s:016x}");
-        store.put_scene(&scene, &SceneMeta { name: format!("scene-{s}") })?;
+        store.put_scene(&scene, &SceneMeta::named(&format!("scene-{s}")))?;
         let mut rows = Vec::new();
         for j in 0..args.instances_per_scene {
             let body = &ids[(s * args.instances_per_scene + j) % ids.len().max(1)];

@@ -283,15 +283,10 @@ impl<'r> RobotChecker<'r> {
             .geometries
             .iter()
             .map(|g| match &g.shape {
-                LinkShape::Primitive(p) => Ok(exact_primitive(p)),
-                LinkShape::Mesh { vertices, triangles, .. } => {
-                    let v = vertices.iter().map(|p| parry3d_f64::math::Vector::new(p.x, p.y, p.z)).collect();
-                    let mesh = SharedShape::trimesh(v, triangles.clone())
-                        .map_err(|e| Error::invalid(format!("geometries[{}].mesh", g.name), format!("{e:?}")))?;
-                    Ok(ExactShape { shape: mesh, offset: Isometry3::identity() })
-                }
+                LinkShape::Primitive(p) => exact_primitive(p),
+                LinkShape::Mesh { exact, .. } => ExactShape { shape: exact.clone(), offset: Isometry3::identity() },
             })
-            .collect::<Result<Vec<_>>>()?;
+            .collect();
         let world_exact = world.iter().map(|o| exact_primitive(&o.primitive)).collect();
         let world_boxes = world
             .iter()

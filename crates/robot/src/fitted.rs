@@ -149,6 +149,9 @@ pub enum LinkShape {
         vertices: Vec<Point3>,
         /// Triangles.
         triangles: Vec<[u32; 3]>,
+        /// parry's triangle mesh of `vertices` and `triangles` with its BVH, built once when the
+        /// robot is read (the exact stage of [`crate::check`]).
+        exact: parry3d_f64::shape::SharedShape,
     },
 }
 
@@ -257,7 +260,10 @@ impl FittedRobot {
                         CompoundBody::from_file(c.clone()).map_err(|e| prefix(e, &format!("{field}.compound")))?;
                     let sphere = bounding_ball(&vertices);
                     let local_box = Some(bounding_box(&vertices));
-                    (LinkShape::Mesh { body: Box::new(body), vertices, triangles }, sphere, local_box)
+                    let points = vertices.iter().map(|p| parry3d_f64::math::Vector::new(p.x, p.y, p.z)).collect();
+                    let exact = parry3d_f64::shape::SharedShape::trimesh(points, triangles.clone())
+                        .map_err(|e| Error::invalid(format!("{field}.mesh"), format!("not a valid triangle mesh: {e:?}")))?;
+                    (LinkShape::Mesh { body: Box::new(body), vertices, triangles, exact }, sphere, local_box)
                 }
                 _ => {
                     return Err(Error::invalid(

@@ -454,6 +454,76 @@ impl RobotModel {
         Ok(())
     }
 
+    /// Full configurations from columns of named joints, as planners send them: `names` the
+    /// joints given (each once; empty: every configuration entry, in
+    /// [`RobotModel::variable_names`] order), `values` `len(names)` values per configuration
+    /// (radians, meters), configuration-major. Entries not named take `defaults` (by joint name;
+    /// names the robot lacks are ignored), else 0.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `field.joint_names[c]` (a joint the robot lacks, a fixed
+    /// or mimic joint, or a repeat), `field.values` (a length that is not a positive multiple of
+    /// the columns) or `field.values[i]` (not finite).
+    pub fn configurations(
+        &self,
+        field: &str,
+        names: &[String],
+        values: &[Real],
+        defaults: &[(String, Real)],
+    ) -> Result<Vec<Vec<Real>>> {
+        let all = self.variable_names();
+        let columns: Vec<usize> = if names.is_empty() {
+            (0..all.len()).collect()
+        } else {
+            let mut seen = vec![false; all.len()];
+            names
+                .iter()
+                .enumerate()
+                .map(|(c, n)| {
+                    let k = all.iter().position(|v| v == n).ok_or_else(|| {
+                        Error::invalid(
+                            format!("{field}.joint_names[{c}]"),
+                            format!(
+                                "`{}` is not a moving joint of the robot; its joints: {all:?}",
+                                sublevel_core::error::clip(n)
+                            ),
+                        )
+                    })?;
+                    if std::mem::replace(&mut seen[k], true) {
+                        return Err(Error::invalid(format!("{field}.joint_names[{c}]"), format!("`{n}` is repeated")));
+                    }
+                    Ok(k)
+                })
+                .collect::<Result<_>>()?
+        };
+        let n = columns.len();
+        if n == 0 || values.is_empty() || values.len() % n != 0 {
+            return Err(Error::invalid(
+                format!("{field}.values"),
+                format!("expected a positive multiple of the {n} columns, got {} values", values.len()),
+            ));
+        }
+        if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+            return Err(Error::invalid(format!("{field}.values[{i}]"), "joint values must be finite numbers"));
+        }
+        let mut base = vec![0.0; all.len()];
+        for (name, v) in defaults {
+            if let Some(k) = all.iter().position(|n| n == name) {
+                base[k] = *v;
+            }
+        }
+        Ok(values
+            .chunks_exact(n)
+            .map(|row| {
+                let mut q = base.clone();
+                for (c, &v) in row.iter().enumerate() {
+                    q[columns[c]] = v;
+                }
+                q
+            })
+            .collect())
+    }
+
     /// Checks a configuration's length and that its entries are finite.
     ///
     /// # Errors

@@ -55,8 +55,8 @@ pub use answer::{
     PRECISION_LIMIT,
 };
 pub use catalog::{
-    bounding_body, BodyEntry, BodyFacts, BuiltBody, Catalog, InstanceView, PosedInstance, SceneView, WarmUp,
-    MAX_JOB_RECORDS, MAX_NAME_BYTES,
+    bounding_body, BodyEntry, BodyFacts, BuiltBody, Catalog, InstanceView, PosedInstance, RobotEntry, RobotWorld,
+    SceneView, WarmUp, MAX_JOB_RECORDS, MAX_NAME_BYTES,
 };
 
 use serde::{Deserialize, Serialize};
@@ -158,6 +158,57 @@ impl BodyRecord {
 pub struct SceneMeta {
     /// Human-readable name (not necessarily unique).
     pub name: String,
+    /// What an imported planning scene says beyond its shapes (empty for other scenes).
+    #[serde(default, skip_serializing_if = "PlanningContext::is_empty")]
+    pub planning: PlanningContext,
+}
+
+impl SceneMeta {
+    /// The fields of a scene named `name`, with no planning context.
+    pub fn named(name: &str) -> Self {
+        Self { name: name.to_owned(), planning: PlanningContext::default() }
+    }
+}
+
+/// What a MoveIt planning scene says beyond its shapes, kept with a scene imported from it for
+/// the robot checks ([`sublevel_robot::RobotChecker`]): the objects' names, its
+/// allowed-collision matrix, and its robot state.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PlanningContext {
+    /// Instance id → the name the planning scene gives it (the collision object's id, with `#k`
+    /// for its k-th shape): the names the allowed-collision matrix uses.
+    #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    pub names: std::collections::BTreeMap<String, String>,
+    /// The planning scene's allowed-collision matrix, when it has one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub allowed_collision: Option<moveit::AllowedCollisionMatrix>,
+    /// The robot state's joint positions by name (radians, meters): joints a configuration does
+    /// not give take these.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub joint_positions: Vec<(String, sublevel_core::math::Real)>,
+}
+
+impl PlanningContext {
+    /// Whether it holds nothing.
+    pub fn is_empty(&self) -> bool {
+        self.names.is_empty() && self.allowed_collision.is_none() && self.joint_positions.is_empty()
+    }
+
+    /// The allowed-collision override of [`sublevel_robot::RobotChecker::new`]: the matrix's
+    /// entry when the matrix names both (or has a default entry of either), else `None` (the
+    /// robot's own defaults).
+    pub fn allowed_override(&self) -> impl Fn(&str, &str) -> Option<bool> + '_ {
+        move |a, b| moveit::acm_override(self.allowed_collision.as_ref()?, a, b)
+    }
+}
+
+/// A fitted robot as stored: its name and its robot file ([`sublevel_robot::RobotFile`]).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct RobotRecord {
+    /// Human-readable name (not necessarily unique).
+    pub name: String,
+    /// The robot file (URDF, allowed pairs, link meshes and bodies).
+    pub file: sublevel_robot::RobotFile,
 }
 
 /// An instance as stored.

@@ -32,7 +32,7 @@ use std::pin::Pin;
 use std::task::{Context, Poll};
 use std::time::{Duration, Instant};
 use sublevel_scene::store::{QuarantinedRecord, Store};
-use sublevel_scene::{BodyRecord, InstanceRecord, JobRecord, JobRecordState, SceneMeta, SceneRecord};
+use sublevel_scene::{BodyRecord, InstanceRecord, JobRecord, JobRecordState, RobotRecord, SceneMeta, SceneRecord};
 use tonic::codegen::http::{HeaderMap, HeaderValue, Request, Response};
 use tonic::codegen::{Bytes, Service};
 use tracing::Instrument;
@@ -406,6 +406,15 @@ impl Store for TimedStore {
     }
     fn delete_body(&self, id: &str) -> Result<bool> {
         self.timed("delete_body", |s| s.delete_body(id))
+    }
+    fn put_robot(&self, id: &str, record: &RobotRecord) -> Result<()> {
+        self.timed("put_robot", |s| s.put_robot(id, record))
+    }
+    fn list_robots(&self) -> Result<Vec<(String, RobotRecord)>> {
+        self.inner.list_robots()
+    }
+    fn delete_robot(&self, id: &str) -> Result<bool> {
+        self.timed("delete_robot", |s| s.delete_robot(id))
     }
     fn put_scene(&self, id: &str, meta: &SceneMeta) -> Result<()> {
         self.timed("put_scene", |s| s.put_scene(id, meta))

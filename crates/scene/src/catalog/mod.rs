@@ -5,6 +5,7 @@
 //! body.rs       stored bodies built on first use, and the background warm-up that builds the rest
 //! query.rs      the query methods: single queries and batches, answered on a snapshot
 //! grouping.rs   reading a scene's posed bodies and replacing instances by their container (§V)
+//! robots.rs     stored robots, and a scene as the world of the robot checks
 //! ```
 
 mod body;
@@ -12,15 +13,17 @@ mod grouping;
 #[cfg(all(test, feature = "store"))]
 mod primitive_tests;
 mod query;
+mod robots;
 #[cfg(all(test, feature = "store"))]
 mod tests;
 
 pub use body::{bounding_body, BodyEntry, BodyFacts, BuiltBody, WarmUp};
 pub use grouping::PosedInstance;
+pub use robots::{RobotEntry, RobotWorld};
 
 use super::cache::WarmStartCache;
 use super::store::Store;
-use super::{BodyRecord, InstanceRecord, JobRecord, JobRecordState, SceneMeta, StoredPose};
+use super::{BodyRecord, InstanceRecord, JobRecord, JobRecordState, PlanningContext, SceneMeta, StoredPose};
 use crate::{Error, Result};
 use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex, MutexGuard, RwLock, RwLockReadGuard, RwLockWriteGuard};
@@ -52,6 +55,8 @@ pub struct SceneView {
     pub name: String,
     /// Its instances, ordered by id.
     pub instances: Vec<InstanceView>,
+    /// What the planning scene it was imported from says beyond its shapes (empty otherwise).
+    pub planning: Arc<PlanningContext>,
 }
 
 #[derive(Debug)]
@@ -78,6 +83,8 @@ struct SceneState {
     name: String,
     instances: BTreeMap<String, Instance>,
     cache: WarmStartCache,
+    /// Instance names, allowed-collision matrix and robot state of an imported planning scene.
+    planning: Arc<PlanningContext>,
     /// Set (under this scene's lock) when the scene is deleted, so a request that fetched the
     /// scene just before cannot write it back to the store.
     deleted: bool,
@@ -93,6 +100,7 @@ pub struct Catalog {
     bodies: RwLock<BTreeMap<String, Arc<BodyEntry>>>,
     scenes: RwLock<BTreeMap<String, Arc<Mutex<SceneState>>>>,
     jobs: RwLock<BTreeMap<String, JobRecord>>,
+    robots: RwLock<BTreeMap<String, Arc<RobotEntry>>>,
     /// The quarantine count and the bodies waiting for their build (see [`body`]).
     builds: Arc<body::Builds>,
     params: NewtonParams,
@@ -177,6 +185,7 @@ impl Catalog {
                 name: rec.meta.name,
                 instances,
                 cache: WarmStartCache::default(),
+                planning: Arc::new(rec.meta.planning),
                 deleted: false,
             };
             scenes.insert(id, Arc::new(Mutex::new(state)));
@@ -191,17 +200,26 @@ impl Catalog {
             }
             jobs.insert(id, rec);
         }
+        let robots = robots::load(store.as_ref())?;
         let quarantined = store.quarantined()?.len();
         builds.add_quarantined(quarantined);
         if quarantined > 0 {
             tracing::warn!(records = quarantined, "the store's quarantine holds records that could not be loaded");
         }
-        tracing::info!(bodies = bodies.len(), scenes = scenes.len(), jobs = jobs.len(), quarantined, "catalog loaded");
+        tracing::info!(
+            bodies = bodies.len(),
+            scenes = scenes.len(),
+            jobs = jobs.len(),
+            robots = robots.len(),
+            quarantined,
+            "catalog loaded"
+        );
         Ok(Self {
             store,
             bodies: RwLock::new(bodies),
             scenes: RwLock::new(scenes),
             jobs: RwLock::new(jobs),
+            robots: RwLock::new(robots),
             builds,
             params,
         })
@@ -361,6 +379,7 @@ impl Catalog {
             name: rec.meta.name,
             instances,
             cache: WarmStartCache::default(),
+            planning: Arc::new(rec.meta.planning),
             deleted: false,
         };
         tracing::info!(scene_id = %id, "scene loaded from the shared store");
@@ -407,12 +426,13 @@ impl Catalog {
     pub fn create_scene(&self, name: &str) -> Result<String> {
         check_name("name", name)?;
         let id = new_id("s");
-        self.store.put_scene(&id, &SceneMeta { name: name.to_owned() })?;
+        self.store.put_scene(&id, &SceneMeta::named(name))?;
         let state = SceneState {
             id: id.clone(),
             name: name.to_owned(),
             instances: BTreeMap::new(),
             cache: WarmStartCache::default(),
+            planning: Arc::default(),
             deleted: false,
         };
         write(&self.scenes).insert(id.clone(), Arc::new(Mutex::new(state)));
@@ -607,6 +627,7 @@ fn view(s: &SceneState) -> SceneView {
             .iter()
             .map(|(id, i)| InstanceView { id: id.clone(), body_id: i.body_id().to_owned(), pose: i.pose })
             .collect(),
+        planning: s.planning.clone(),
     }
 }
 

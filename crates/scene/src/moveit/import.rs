@@ -74,6 +74,10 @@ pub struct ImportPlan {
     pub instances: Vec<PlannedInstance>,
     /// The shapes not imported.
     pub skipped: Vec<SkippedShape>,
+    /// The planning scene's allowed-collision matrix, kept with the imported scene.
+    pub allowed_collision: Option<super::AllowedCollisionMatrix>,
+    /// The planning scene's robot state (joint positions by name), kept with the imported scene.
+    pub joint_positions: Vec<(String, Real)>,
 }
 
 impl ImportPlan {
@@ -89,6 +93,8 @@ impl ImportPlan {
             bodies: Vec::new(),
             instances: Vec::new(),
             skipped: Vec::new(),
+            allowed_collision: scene.allowed_collision.clone(),
+            joint_positions: scene.joint_positions.clone(),
         };
         // Dedupe by the primitive file's exact JSON (kind and dimensions, bit for bit).
         let mut seen: std::collections::HashMap<String, usize> = std::collections::HashMap::new();
@@ -218,7 +224,14 @@ impl Catalog {
             }
             let rows: Vec<(&str, Isometry3)> =
                 plan.instances.iter().map(|p| (body_ids[p.body].as_str(), p.pose)).collect();
-            self.add_instances(&scene_id, &rows)
+            let ids = self.add_instances(&scene_id, &rows)?;
+            let planning = crate::PlanningContext {
+                names: ids.iter().zip(&plan.instances).map(|(id, p)| (id.clone(), p.name.clone())).collect(),
+                allowed_collision: plan.allowed_collision.clone(),
+                joint_positions: plan.joint_positions.clone(),
+            };
+            self.set_planning(&scene_id, planning)?;
+            Ok(ids)
         })();
         let instance_ids = match written {
             Ok(ids) => ids,

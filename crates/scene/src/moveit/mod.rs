@@ -108,7 +108,7 @@ pub struct CollisionObject {
 }
 
 /// The allowed-collision matrix: which pairs of names (robot links, object ids) may touch.
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct AllowedCollisionMatrix {
     /// The names of the rows and columns.
     pub names: Vec<String>,
@@ -650,4 +650,4 @@ mod world;
 
 pub use import::{ImportPlan, ImportedInstance, ImportedScene, PlannedInstance, SkippedShape};
 pub use request::MotionPlanRequest;
-pub use world::{allowed_override, world_objects};
+pub use world::{acm_override, allowed_override, world_objects};

@@ -4,7 +4,7 @@
 //! [`ImportPlan`] imports them (cones as the cylinders that contain them, meshes skipped with
 //! the reason).
 
-use super::{ImportPlan, PlanningScene, SkippedShape};
+use super::{AllowedCollisionMatrix, ImportPlan, PlanningScene, SkippedShape};
 use crate::Result;
 use sublevel_robot::WorldObject;
 
@@ -26,14 +26,17 @@ pub fn world_objects(scene: &PlanningScene) -> Result<(Vec<WorldObject>, Vec<Ski
 /// matrix's entry when the scene has a matrix naming both (or a default entry of either), else
 /// `None` (the robot's own defaults).
 pub fn allowed_override(scene: &PlanningScene) -> impl Fn(&str, &str) -> Option<bool> + '_ {
-    move |a, b| {
-        let acm = scene.allowed_collision.as_ref()?;
-        let named = |n: &str| acm.names.iter().any(|m| m == n) || acm.defaults.iter().any(|(m, _)| m == n);
-        let either_default = acm.defaults.iter().any(|(m, _)| m == a || m == b);
-        if (named(a) && named(b)) || either_default {
-            Some(acm.allowed(a, b))
-        } else {
-            None
-        }
+    move |a, b| acm_override(scene.allowed_collision.as_ref()?, a, b)
+}
+
+/// The entry of `acm` for the pair `a`, `b` when the matrix names both (or has a default entry of
+/// either), else `None`.
+pub fn acm_override(acm: &AllowedCollisionMatrix, a: &str, b: &str) -> Option<bool> {
+    let named = |n: &str| acm.names.iter().any(|m| m == n) || acm.defaults.iter().any(|(m, _)| m == n);
+    let either_default = acm.defaults.iter().any(|(m, _)| m == a || m == b);
+    if (named(a) && named(b)) || either_default {
+        Some(acm.allowed(a, b))
+    } else {
+        None
     }
 }

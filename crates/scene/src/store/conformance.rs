@@ -2,7 +2,7 @@
 //! (redb, PostgreSQL), and a throwaway PostgreSQL cluster for the PostgreSQL store's test.
 
 use super::Store;
-use crate::{BodyRecord, InstanceRecord, JobRecord, JobRecordState, SceneMeta, StoredPose};
+use crate::{BodyRecord, InstanceRecord, JobRecord, JobRecordState, PlanningContext, RobotRecord, SceneMeta, StoredPose};
 use sublevel_core::body::ellipsoid;
 
 fn inst(body: &str, tx: f64) -> InstanceRecord {
@@ -25,6 +25,21 @@ fn job(state: JobRecordState, created: u64) -> JobRecord {
     }
 }
 
+/// A robot record: one link holding a sphere.
+fn robot() -> RobotRecord {
+    let file = serde_json::json!({
+        "format": "sublevel.robot.v1",
+        "name": "ball",
+        "urdf": "<robot name=\"ball\"><link name=\"base\"/></robot>",
+        "geometries": [{
+            "link": "base", "index": 0,
+            "origin": {"translation": [0.0, 0.0, 0.5], "rotation": [1.0, 0.0, 0.0, 0.0]},
+            "primitive": {"primitive": "sphere", "radius": 0.25}
+        }]
+    });
+    RobotRecord { name: "ball".into(), file: serde_json::from_value(file).unwrap() }
+}
+
 /// Put / get / list / delete of bodies, scenes, instances (scoped by scene, also for ids that
 /// share a prefix) and job records; a record that would not read back is refused; `open()` a
 /// second time (a restart) finds everything written before. `open` must return a store over the
@@ -36,9 +51,18 @@ pub(crate) fn check_store(open: &dyn Fn() -> Box<dyn Store>) {
         assert!(s.list_bodies().unwrap().is_empty() && s.list_scenes().unwrap().is_empty());
         s.put_body("b-1", &BodyRecord::single("egg", body.to_file())).unwrap();
         s.put_body("b-2", &BodyRecord::single("two", body.to_file())).unwrap();
-        s.put_scene("s-1", &SceneMeta { name: "one".into() }).unwrap();
+        s.put_scene("s-1", &SceneMeta::named("one")).unwrap();
         // "s-10" shares the prefix "s-1": its instances must not leak into s-1.
-        s.put_scene("s-10", &SceneMeta { name: "ten".into() }).unwrap();
+        let mut ten = SceneMeta::named("ten");
+        ten.planning = PlanningContext {
+            names: [("i-c".to_owned(), "shelf#1".to_owned())].into(),
+            allowed_collision: None,
+            joint_positions: vec![("panda_joint1".into(), 0.25)],
+        };
+        s.put_scene("s-10", &ten).unwrap();
+        s.put_robot("r-1", &robot()).unwrap();
+        s.put_robot("r-2", &robot()).unwrap();
+        assert!(s.delete_robot("r-2").unwrap());
         s.put_instances("s-1", &[("i-a", &inst("b-1", 1.0)), ("i-b", &inst("b-1", 2.0))], false).unwrap();
         s.put_instances("s-10", &[("i-c", &inst("b-1", 3.0))], false).unwrap();
         s.put_instances("s-1", &[("i-b", &inst("b-1", 5.0))], true).unwrap();
@@ -64,6 +88,14 @@ pub(crate) fn check_store(open: &dyn Fn() -> Box<dyn Store>) {
     assert_eq!(one.instances.keys().collect::<Vec<_>>(), ["i-a", "i-b"]);
     assert_eq!(one.instances["i-b"].pose.translation[0], 5.0);
     assert_eq!(s.list_scenes().unwrap().len(), 2);
+    let ten = s.get_scene("s-10").unwrap().unwrap();
+    assert_eq!(ten.meta.planning.names["i-c"], "shelf#1");
+    assert_eq!(ten.meta.planning.joint_positions, [("panda_joint1".to_owned(), 0.25)]);
+    let robots = s.list_robots().unwrap();
+    assert_eq!(robots.iter().map(|(k, _)| k.as_str()).collect::<Vec<_>>(), ["r-1"]);
+    assert_eq!(robots[0].1.file.urdf, robot().file.urdf);
+    assert!(s.delete_robot("r-1").unwrap());
+    assert!(!s.delete_robot("r-1").unwrap());
     let jobs = s.list_jobs().unwrap();
     assert_eq!(jobs.iter().map(|(k, _)| k.as_str()).collect::<Vec<_>>(), ["j-1", "j-2"]);
     assert_eq!(jobs[0].1, job(JobRecordState::Running, 1));

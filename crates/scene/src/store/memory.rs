@@ -2,7 +2,7 @@
 //! database (the `store` feature off) and for tests.
 
 use super::{encode, Store};
-use crate::{BodyRecord, InstanceRecord, JobRecord, SceneMeta, SceneRecord};
+use crate::{BodyRecord, InstanceRecord, JobRecord, RobotRecord, SceneMeta, SceneRecord};
 use std::collections::BTreeMap;
 use std::sync::{Mutex, MutexGuard};
 use sublevel_core::Result;
@@ -22,6 +22,7 @@ struct Tables {
     /// (scene id, instance id) → instance.
     instances: BTreeMap<(String, String), InstanceRecord>,
     jobs: BTreeMap<String, JobRecord>,
+    robots: BTreeMap<String, RobotRecord>,
 }
 
 impl MemoryStore {
@@ -63,6 +64,20 @@ impl Store for MemoryStore {
 
     fn delete_body(&self, id: &str) -> Result<bool> {
         Ok(self.tables().bodies.remove(id).is_some())
+    }
+
+    fn put_robot(&self, id: &str, record: &RobotRecord) -> Result<()> {
+        encode("robot", record)?;
+        self.tables().robots.insert(id.to_owned(), record.clone());
+        Ok(())
+    }
+
+    fn list_robots(&self) -> Result<Vec<(String, RobotRecord)>> {
+        Ok(self.tables().robots.iter().map(|(k, v)| (k.clone(), v.clone())).collect())
+    }
+
+    fn delete_robot(&self, id: &str) -> Result<bool> {
+        Ok(self.tables().robots.remove(id).is_some())
     }
 
     fn put_scene(&self, id: &str, meta: &SceneMeta) -> Result<()> {
@@ -154,7 +169,7 @@ mod tests {
     #[test]
     fn a_catalog_on_the_memory_store_answers_and_deletes() {
         let store = MemoryStore::new();
-        let meta = SceneMeta { name: "x".into() };
+        let meta = SceneMeta::named("x");
         store.put_scene("s-1", &meta).unwrap();
         let record = InstanceRecord { body_id: "b".into(), pose: StoredPose::from_isometry(&at(1.0)) };
         store.put_instances("s-1", &[("i-1", &record), ("i-2", &record)], true).unwrap();

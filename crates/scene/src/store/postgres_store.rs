@@ -11,6 +11,7 @@
 //! sublevel_scenes      scene_id               → SceneMeta
 //! sublevel_instances   (scene_id, inst_id)    → InstanceRecord
 //! sublevel_jobs        job_id                 → JobRecord
+//! sublevel_robots      robot_id               → RobotRecord
 //! sublevel_quarantine  (tbl, key)             → reason, text
 //! ```
 //!
@@ -26,7 +27,7 @@
 //! the catalog writes through one transaction at a time per call.
 
 use super::{encode, QuarantinedRecord, Store};
-use crate::{BodyRecord, InstanceRecord, JobRecord, SceneMeta, SceneRecord};
+use crate::{BodyRecord, InstanceRecord, JobRecord, RobotRecord, SceneMeta, SceneRecord};
 use crate::{Error, Result};
 use postgres::{Client, NoTls};
 use std::sync::Mutex;
@@ -39,6 +40,7 @@ CREATE TABLE IF NOT EXISTS sublevel_instances (
     scene_id text NOT NULL, instance_id text NOT NULL, value text NOT NULL,
     PRIMARY KEY (scene_id, instance_id));
 CREATE TABLE IF NOT EXISTS sublevel_jobs (key text PRIMARY KEY, value text NOT NULL);
+CREATE TABLE IF NOT EXISTS sublevel_robots (key text PRIMARY KEY, value text NOT NULL);
 CREATE TABLE IF NOT EXISTS sublevel_quarantine (
     tbl text NOT NULL, key text NOT NULL, reason text NOT NULL, text text NOT NULL,
     PRIMARY KEY (tbl, key));
@@ -100,6 +102,21 @@ fn off_runtime<T: Send>(f: impl FnOnce() -> Result<T> + Send) -> Result<T> {
     })
 }
 
+impl PostgresStore {
+    /// Every record of the key-value table `sublevel_{table}`, ordered by key.
+    fn list<T: serde::de::DeserializeOwned>(&self, table: &str) -> Result<Vec<(String, T)>> {
+        let sql = format!("SELECT key, value FROM sublevel_{table} ORDER BY key");
+        let rows = self.with(|c| c.query(&sql, &[]).map_err(storage))?;
+        rows.iter()
+            .map(|r| {
+                let key: String = r.get(0);
+                let value = parse(table, &key, r.get(1))?;
+                Ok((key, value))
+            })
+            .collect()
+    }
+}
+
 /// `INSERT … ON CONFLICT DO UPDATE` of a key-value table.
 fn upsert(table: &str) -> String {
     format!("INSERT INTO {table} (key, value) VALUES ($1, $2) ON CONFLICT (key) DO UPDATE SET value = EXCLUDED.value")
@@ -118,19 +135,24 @@ impl Store for PostgresStore {
     }
 
     fn list_bodies(&self) -> Result<Vec<(String, BodyRecord)>> {
-        let rows =
-            self.with(|c| c.query("SELECT key, value FROM sublevel_bodies ORDER BY key", &[]).map_err(storage))?;
-        rows.iter()
-            .map(|r| {
-                let key: String = r.get(0);
-                let value = parse("bodies", &key, r.get(1))?;
-                Ok((key, value))
-            })
-            .collect()
+        self.list("bodies")
     }
 
     fn delete_body(&self, id: &str) -> Result<bool> {
         self.with(|c| c.execute("DELETE FROM sublevel_bodies WHERE key = $1", &[&id]).map(|n| n > 0).map_err(storage))
+    }
+
+    fn put_robot(&self, id: &str, record: &RobotRecord) -> Result<()> {
+        let json = encode("robot", record)?;
+        self.with(|c| c.execute(&upsert("sublevel_robots"), &[&id, &json]).map(drop).map_err(storage))
+    }
+
+    fn list_robots(&self) -> Result<Vec<(String, RobotRecord)>> {
+        self.list("robots")
+    }
+
+    fn delete_robot(&self, id: &str) -> Result<bool> {
+        self.with(|c| c.execute("DELETE FROM sublevel_robots WHERE key = $1", &[&id]).map(|n| n > 0).map_err(storage))
     }
 
     fn put_scene(&self, id: &str, meta: &SceneMeta) -> Result<()> {
@@ -241,14 +263,7 @@ impl Store for PostgresStore {
     }
 
     fn list_jobs(&self) -> Result<Vec<(String, JobRecord)>> {
-        let rows = self.with(|c| c.query("SELECT key, value FROM sublevel_jobs ORDER BY key", &[]).map_err(storage))?;
-        rows.iter()
-            .map(|r| {
-                let key: String = r.get(0);
-                let value = parse("jobs", &key, r.get(1))?;
-                Ok((key, value))
-            })
-            .collect()
+        self.list("jobs")
     }
 
     fn delete_jobs(&self, ids: &[&str]) -> Result<()> {
@@ -260,7 +275,7 @@ impl Store for PostgresStore {
         self.with(|c| {
             let mut tx = c.transaction().map_err(storage)?;
             let text: Option<String> = match table {
-                "bodies" | "scenes" | "jobs" => {
+                "bodies" | "scenes" | "jobs" | "robots" => {
                     let sql = format!("DELETE FROM sublevel_{table} WHERE key = $1 RETURNING value");
                     tx.query_opt(&sql, &[&key]).map_err(storage)?.map(|r| r.get(0))
                 }

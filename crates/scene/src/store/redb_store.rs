@@ -1,7 +1,7 @@
 //! [`RedbStore`]: the [`Store`] on a redb database file (see the parent module for its tables).
 
 use super::{encode, QuarantinedRecord, Store};
-use crate::{BodyRecord, InstanceRecord, JobRecord, SceneMeta, SceneRecord};
+use crate::{BodyRecord, InstanceRecord, JobRecord, RobotRecord, SceneMeta, SceneRecord};
 use crate::{Error, Result};
 use redb::{Durability, ReadableTable, TableDefinition};
 use std::collections::BTreeMap;
@@ -12,6 +12,7 @@ const SCENES: TableDefinition<&str, &str> = TableDefinition::new("scenes");
 const INSTANCES: TableDefinition<&str, &str> = TableDefinition::new("instances");
 const JOBS: TableDefinition<&str, &str> = TableDefinition::new("jobs");
 const QUARANTINE: TableDefinition<&str, &str> = TableDefinition::new("quarantine");
+const ROBOTS: TableDefinition<&str, &str> = TableDefinition::new("robots");
 
 /// A table's name, definition and the parse check of its records.
 type TableCheck =
@@ -23,6 +24,7 @@ fn table_def(name: &str) -> Option<TableDefinition<'static, &'static str, &'stat
         "scenes" => Some(SCENES),
         "instances" => Some(INSTANCES),
         "jobs" => Some(JOBS),
+        "robots" => Some(ROBOTS),
         _ => None,
     }
 }
@@ -86,7 +88,7 @@ impl RedbStore {
     pub fn open(path: &Path) -> Result<Self> {
         let db = redb::Database::create(path).map_err(storage)?;
         let txn = db.begin_write().map_err(storage)?;
-        for table in [BODIES, SCENES, INSTANCES, JOBS, QUARANTINE] {
+        for table in [BODIES, SCENES, INSTANCES, JOBS, QUARANTINE, ROBOTS] {
             txn.open_table(table).map_err(storage)?;
         }
         txn.commit().map_err(storage)?;
@@ -101,17 +103,60 @@ impl RedbStore {
         Ok(store)
     }
 
+    /// Inserts or replaces a record of a key-value table (immediate durability); `kind` names it
+    /// in errors.
+    fn put<T: serde::Serialize + serde::de::DeserializeOwned>(
+        &self,
+        def: TableDefinition<'static, &'static str, &'static str>,
+        kind: &str,
+        id: &str,
+        record: &T,
+    ) -> Result<()> {
+        let json = encode(kind, record)?;
+        self.write(Durability::Immediate, |txn| {
+            txn.open_table(def).map_err(storage)?.insert(id, json.as_str()).map_err(storage)?;
+            Ok(true)
+        })
+        .map(|_| ())
+    }
+
+    /// Deletes a record of a key-value table; false if it did not exist.
+    fn delete(&self, def: TableDefinition<'static, &'static str, &'static str>, id: &str) -> Result<bool> {
+        self.write(Durability::Immediate, |txn| {
+            let mut t = txn.open_table(def).map_err(storage)?;
+            let removed = t.remove(id).map_err(storage)?.is_some();
+            Ok(removed)
+        })
+    }
+
+    /// Every record of a key-value table, ordered by key; `kind` names them in errors.
+    fn list<T: serde::de::DeserializeOwned>(
+        &self,
+        def: TableDefinition<'static, &'static str, &'static str>,
+        kind: &str,
+    ) -> Result<Vec<(String, T)>> {
+        let txn = self.db.begin_read().map_err(storage)?;
+        let table = txn.open_table(def).map_err(storage)?;
+        let mut out = Vec::new();
+        for row in table.iter().map_err(storage)? {
+            let (k, v) = row.map_err(storage)?;
+            out.push((k.value().to_owned(), decode(kind, k.value(), v.value())?));
+        }
+        Ok(out)
+    }
+
     /// Moves every record that does not parse as its table's type to the quarantine, in one
     /// transaction; returns how many moved.
     fn quarantine_unreadable(&self) -> Result<usize> {
         let mut bad: Vec<(&'static str, String, String, String)> = Vec::new();
         {
             let txn = self.db.begin_read().map_err(storage)?;
-            let checks: [TableCheck; 4] = [
+            let checks: [TableCheck; 5] = [
                 ("bodies", BODIES, readable::<BodyRecord>),
                 ("scenes", SCENES, readable::<SceneMeta>),
                 ("instances", INSTANCES, readable::<InstanceRecord>),
                 ("jobs", JOBS, readable::<JobRecord>),
+                ("robots", ROBOTS, readable::<RobotRecord>),
             ];
             for (name, def, check) in checks {
                 let table = txn.open_table(def).map_err(storage)?;
@@ -192,12 +237,7 @@ impl RedbStore {
 
 impl Store for RedbStore {
     fn put_body(&self, id: &str, record: &BodyRecord) -> Result<()> {
-        let json = encode("body", record)?;
-        self.write(Durability::Immediate, |txn| {
-            txn.open_table(BODIES).map_err(storage)?.insert(id, json.as_str()).map_err(storage)?;
-            Ok(true)
-        })
-        .map(|_| ())
+        self.put(BODIES, "body", id, record)
     }
 
     fn get_body(&self, id: &str) -> Result<Option<BodyRecord>> {
@@ -208,31 +248,27 @@ impl Store for RedbStore {
     }
 
     fn list_bodies(&self) -> Result<Vec<(String, BodyRecord)>> {
-        let txn = self.db.begin_read().map_err(storage)?;
-        let table = txn.open_table(BODIES).map_err(storage)?;
-        let mut out = Vec::new();
-        for row in table.iter().map_err(storage)? {
-            let (k, v) = row.map_err(storage)?;
-            out.push((k.value().to_owned(), decode("body", k.value(), v.value())?));
-        }
-        Ok(out)
+        self.list(BODIES, "body")
     }
 
     fn delete_body(&self, id: &str) -> Result<bool> {
-        self.write(Durability::Immediate, |txn| {
-            let mut t = txn.open_table(BODIES).map_err(storage)?;
-            let removed = t.remove(id).map_err(storage)?.is_some();
-            Ok(removed)
-        })
+        self.delete(BODIES, id)
+    }
+
+    fn put_robot(&self, id: &str, record: &RobotRecord) -> Result<()> {
+        self.put(ROBOTS, "robot", id, record)
+    }
+
+    fn list_robots(&self) -> Result<Vec<(String, RobotRecord)>> {
+        self.list(ROBOTS, "robot")
+    }
+
+    fn delete_robot(&self, id: &str) -> Result<bool> {
+        self.delete(ROBOTS, id)
     }
 
     fn put_scene(&self, id: &str, meta: &SceneMeta) -> Result<()> {
-        let json = encode("scene", meta)?;
-        self.write(Durability::Immediate, |txn| {
-            txn.open_table(SCENES).map_err(storage)?.insert(id, json.as_str()).map_err(storage)?;
-            Ok(true)
-        })
-        .map(|_| ())
+        self.put(SCENES, "scene", id, meta)
     }
 
     fn get_scene(&self, id: &str) -> Result<Option<SceneRecord>> {
@@ -294,23 +330,11 @@ impl Store for RedbStore {
     }
 
     fn put_job(&self, id: &str, record: &JobRecord) -> Result<()> {
-        let json = encode("job", record)?;
-        self.write(Durability::Immediate, |txn| {
-            txn.open_table(JOBS).map_err(storage)?.insert(id, json.as_str()).map_err(storage)?;
-            Ok(true)
-        })
-        .map(|_| ())
+        self.put(JOBS, "job", id, record)
     }
 
     fn list_jobs(&self) -> Result<Vec<(String, JobRecord)>> {
-        let txn = self.db.begin_read().map_err(storage)?;
-        let table = txn.open_table(JOBS).map_err(storage)?;
-        let mut out = Vec::new();
-        for row in table.iter().map_err(storage)? {
-            let (k, v) = row.map_err(storage)?;
-            out.push((k.value().to_owned(), decode("job", k.value(), v.value())?));
-        }
-        Ok(out)
+        self.list(JOBS, "job")
     }
 
     fn delete_jobs(&self, ids: &[&str]) -> Result<()> {
@@ -393,9 +417,9 @@ mod tests {
         {
             let s = RedbStore::open_dir(dir.path()).unwrap();
             s.put_body("b-1", &BodyRecord::single("egg", body.to_file())).unwrap();
-            s.put_scene("s-1", &SceneMeta { name: "one".into() }).unwrap();
+            s.put_scene("s-1", &SceneMeta::named("one")).unwrap();
             // "s-10" shares the prefix "s-1": its instances must not leak into s-1.
-            s.put_scene("s-10", &SceneMeta { name: "ten".into() }).unwrap();
+            s.put_scene("s-10", &SceneMeta::named("ten")).unwrap();
             s.put_instances("s-1", &[("i-a", &inst("b-1", 1.0)), ("i-b", &inst("b-1", 2.0))], false).unwrap();
             s.put_instances("s-10", &[("i-c", &inst("b-1", 3.0))], false).unwrap();
             s.put_instances("s-1", &[("i-b", &inst("b-1", 5.0))], true).unwrap();

@@ -24,6 +24,7 @@
 //! | `scenes.rs`     | points, vectors, poses, instances, scenes, `SetPoses` entries, MoveIt imports |
 //! | `queries.rs`    | answers, certificates, gradients, query options, batch pairs                  |
 //! | `planner.rs`    | pair / answer columns, planner requests and answers, scene checks             |
+//! | `robots.rs`     | robot summaries, configuration columns, configuration and motion answers      |
 //!
 //! Ids and pages, shared by every area, are here.
 
@@ -36,6 +37,7 @@ mod primitives;
 #[cfg(test)]
 mod properties;
 mod queries;
+mod robots;
 mod scenes;
 
 pub use bodies::{
@@ -54,6 +56,10 @@ pub use queries::{
     answer_to_proto, certificate_to_proto, distance_reply_to_proto, distance_to_proto, gradient_to_proto,
     growth_reply_to_proto, growth_to_proto, pairs_from_proto, query_options, source_to_proto, status_to_proto,
     tree_to_proto, tree_tolerance,
+};
+pub use robots::{
+    configurations_from_proto, motion_options, padding, push_configuration_answers, push_motion_answers,
+    robot_summary, MAX_CONFIGURATIONS_PER_CALL,
 };
 pub use scenes::{
     imported_scene_to_proto, instance_to_proto, planning_scene_from_proto, point_to_proto, pose_from_proto,

@@ -6,6 +6,7 @@
 //! bodies.rs   UploadBody, GetBody, ListBodies, DeleteBody
 //! scenes.rs   CreateScene, GetScene, ListScenes, DeleteScene, AddInstance, SetPoses, RemoveInstance,
 //!             ImportScene
+//! robots.rs   UploadRobot, GetRobot, ListRobots, DeleteRobot, CheckConfigurations, CheckMotions
 //! queries.rs  Distance, Growth, BatchQuery, Query, QueryStream, CheckScene, and where query work
 //!             runs (inline on the async workers, or on the SDP slots)
 //! ```
@@ -16,6 +17,7 @@
 mod bodies;
 mod jobs;
 mod queries;
+mod robots;
 mod scenes;
 #[cfg(test)]
 mod tests;
@@ -190,5 +192,32 @@ impl Sublevel for SublevelService {
 
     async fn check_scene(&self, request: Request<pb::CheckSceneRequest>) -> Reply<pb::CheckSceneResponse> {
         queries::check_scene(self, request).await.map_err(Status::from)
+    }
+
+    async fn upload_robot(&self, request: Request<pb::UploadRobotRequest>) -> Reply<pb::UploadRobotResponse> {
+        robots::upload_robot(self, request).await.map_err(Status::from)
+    }
+
+    async fn get_robot(&self, request: Request<pb::GetRobotRequest>) -> Reply<pb::GetRobotResponse> {
+        robots::get_robot(self, request).await.map_err(Status::from)
+    }
+
+    async fn list_robots(&self, request: Request<pb::ListRobotsRequest>) -> Reply<pb::ListRobotsResponse> {
+        robots::list_robots(self, request).await.map_err(Status::from)
+    }
+
+    async fn delete_robot(&self, request: Request<pb::DeleteRobotRequest>) -> Reply<pb::DeleteRobotResponse> {
+        robots::delete_robot(self, request).await.map_err(Status::from)
+    }
+
+    async fn check_configurations(
+        &self,
+        request: Request<pb::CheckConfigurationsRequest>,
+    ) -> Reply<pb::CheckConfigurationsResponse> {
+        robots::check_configurations(self, request).await.map_err(Status::from)
+    }
+
+    async fn check_motions(&self, request: Request<pb::CheckMotionsRequest>) -> Reply<pb::CheckMotionsResponse> {
+        robots::check_motions(self, request).await.map_err(Status::from)
     }
 }

@@ -1,0 +1,156 @@
+//! Stored robots, and a scene as the world of the robot checks.
+//!
+//! A robot is stored as its robot file ([`RobotRecord`]) and held in memory as the validated
+//! [`FittedRobot`] (kinematic model, link bodies, meshes with their BVHs), built once when it is
+//! uploaded or the catalog opens, and shared by every check through an `Arc`. A scene becomes the
+//! world of [`sublevel_robot::RobotChecker`] through [`Catalog::robot_world`]: its instances of
+//! exact primitives, named as the planning scene it was imported from names them, with that
+//! scene's allowed-collision matrix and robot state.
+
+use super::{check_name, new_id, read, write, Catalog};
+use crate::store::Store;
+use crate::{Error, PlanningContext, Result, RobotRecord};
+use std::collections::BTreeMap;
+use std::sync::Arc;
+use sublevel_robot::{FittedRobot, RobotFile, WorldObject};
+
+/// A stored robot, validated and ready for checks.
+#[derive(Debug)]
+pub struct RobotEntry {
+    /// The robot's id (`r-…`).
+    pub id: String,
+    /// Its name.
+    pub name: String,
+    /// The robot: model, geometries, allowed pairs, and the file it was read from.
+    pub robot: Arc<FittedRobot>,
+}
+
+/// A scene as the world of the robot checks.
+#[derive(Clone, Debug)]
+pub struct RobotWorld {
+    /// The scene's instances as world objects, ordered by instance id.
+    pub objects: Vec<WorldObject>,
+    /// The planning scene's names, allowed-collision matrix and robot state (empty for a scene
+    /// not imported from one).
+    pub planning: Arc<PlanningContext>,
+}
+
+/// Every stored robot, validated; one that no longer validates is moved to the store's quarantine
+/// with the reason, and the rest load.
+pub(super) fn load(store: &dyn Store) -> Result<BTreeMap<String, Arc<RobotEntry>>> {
+    let mut robots = BTreeMap::new();
+    for (id, rec) in store.list_robots()? {
+        match FittedRobot::from_file(rec.file) {
+            Ok(robot) => {
+                robots.insert(id.clone(), Arc::new(RobotEntry { id, name: rec.name, robot: Arc::new(robot) }));
+            }
+            Err(e) => {
+                tracing::warn!(robot_id = %id, error = %e, "quarantining robot");
+                store.quarantine("robots", &id, &format!("does not validate: {e}"))?;
+            }
+        }
+    }
+    Ok(robots)
+}
+
+impl Catalog {
+    /// Validates a robot file and stores it under a new id. `name` empty: the URDF's robot name.
+    /// Building the robot (its bodies, its meshes' BVHs) takes milliseconds to a second: call it
+    /// off the async workers.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `name` (too long) or the file's field (as
+    /// [`FittedRobot::from_file`]); [`Error::Storage`].
+    pub fn add_robot(&self, name: &str, file: RobotFile) -> Result<Arc<RobotEntry>> {
+        check_name("name", name)?;
+        let robot = FittedRobot::from_file(file)?;
+        let name = if name.is_empty() { robot.file.name.clone() } else { name.to_owned() };
+        let id = new_id("r");
+        self.store.put_robot(&id, &RobotRecord { name: name.clone(), file: robot.file.clone() })?;
+        let entry = Arc::new(RobotEntry { id: id.clone(), name, robot: Arc::new(robot) });
+        write(&self.robots).insert(id, entry.clone());
+        Ok(entry)
+    }
+
+    /// The robot `id`. With a shared store, a robot another replica stored since this catalog
+    /// opened is loaded here on first use.
+    ///
+    /// # Errors
+    /// [`Error::NotFound`] (kind `robot`); [`Error::Storage`].
+    pub fn robot(&self, id: &str) -> Result<Arc<RobotEntry>> {
+        if let Some(entry) = read(&self.robots).get(id).cloned() {
+            return Ok(entry);
+        }
+        if self.store.shared() {
+            let loaded = load(self.store.as_ref())?;
+            let mut robots = write(&self.robots);
+            for (k, entry) in loaded {
+                robots.entry(k).or_insert(entry);
+            }
+            if let Some(entry) = robots.get(id) {
+                return Ok(entry.clone());
+            }
+        }
+        Err(Error::not_found("robot", id))
+    }
+
+    /// Every robot, ordered by id.
+    pub fn robots(&self) -> Vec<Arc<RobotEntry>> {
+        read(&self.robots).values().cloned().collect()
+    }
+
+    /// Deletes a robot.
+    ///
+    /// # Errors
+    /// [`Error::NotFound`]; [`Error::Storage`].
+    pub fn delete_robot(&self, id: &str) -> Result<()> {
+        let mut robots = write(&self.robots);
+        if !robots.contains_key(id) && !self.store.shared() {
+            return Err(Error::not_found("robot", id));
+        }
+        let removed = self.store.delete_robot(id)?;
+        if robots.remove(id).is_none() && !removed {
+            return Err(Error::not_found("robot", id));
+        }
+        Ok(())
+    }
+
+    /// Scene `scene_id` as the world of the robot checks: every instance as a [`WorldObject`]
+    /// named by the planning scene's name for it (else its instance id), at its stored pose.
+    ///
+    /// # Errors
+    /// [`Error::NotFound`] (kind `scene`); [`Error::FailedPrecondition`] naming an instance of a
+    /// fitted body (robot checks take exact primitives as obstacles) or of a body that no longer
+    /// validates.
+    pub fn robot_world(&self, scene_id: &str) -> Result<RobotWorld> {
+        let view = self.get_scene(scene_id)?;
+        let mut objects = Vec::with_capacity(view.instances.len());
+        for inst in &view.instances {
+            let built = self.body(&inst.body_id)?;
+            let Some(primitive) = built.built()?.primitive else {
+                return Err(Error::FailedPrecondition(format!(
+                    "instance `{}` of scene `{scene_id}` is the fitted body `{}`: robot checks take exact \
+                     primitives (box, sphere, cylinder, capsule, halfspace) as obstacles; use a scene of primitives",
+                    inst.id, inst.body_id
+                )));
+            };
+            let name = view.planning.names.get(&inst.id).cloned().unwrap_or_else(|| inst.id.clone());
+            objects.push(WorldObject { name, primitive, pose: inst.pose });
+        }
+        Ok(RobotWorld { objects, planning: view.planning })
+    }
+
+    /// Replaces the planning context of scene `scene_id` (written through to the store).
+    ///
+    /// # Errors
+    /// [`Error::NotFound`] (kind `scene`); [`Error::InvalidArgument`] when it would not read back
+    /// from the store (a non-finite joint position); [`Error::Storage`].
+    pub fn set_planning(&self, scene_id: &str, planning: PlanningContext) -> Result<()> {
+        self.with_scene(scene_id, |s| {
+            let meta = crate::SceneMeta { name: s.name.clone(), planning };
+            self.store.put_scene(scene_id, &meta)?;
+            s.planning = Arc::new(meta.planning);
+            Ok(())
+        })
+    }
+}

@@ -1,0 +1,172 @@
+//! Robots: summaries, configuration columns, and the answers of configuration and motion checks
+//! in columns.
+
+use crate::pb;
+use crate::{Error, Result};
+use sublevel_core::math::Real;
+use sublevel_robot::{ConfigurationAnswer, FittedRobot, MotionAnswer, MotionOptions, WorldObject};
+use sublevel_scene::RobotEntry;
+
+/// Most configurations (or motions) one call may carry.
+pub const MAX_CONFIGURATIONS_PER_CALL: usize = 100_000;
+
+/// A stored robot's summary.
+pub fn robot_summary(entry: &RobotEntry) -> pb::RobotSummary {
+    let model = &entry.robot.model;
+    let joints = || (0..model.dof()).map(|k| model.variable_joint(k));
+    let mut link_names: Vec<String> = Vec::new();
+    for g in &entry.robot.geometries {
+        let name = &model.links()[g.link].name;
+        if !link_names.contains(name) {
+            link_names.push(name.clone());
+        }
+    }
+    pb::RobotSummary {
+        robot_id: entry.id.clone(),
+        name: entry.name.clone(),
+        joint_names: joints().map(|j| j.name.clone()).collect(),
+        lower: joints().map(|j| j.limits.map_or(Real::NEG_INFINITY, |l| l.0)).collect(),
+        upper: joints().map(|j| j.limits.map_or(Real::INFINITY, |l| l.1)).collect(),
+        link_names,
+        geometries: entry.robot.geometries.len() as u32,
+        self_pairs: entry.robot.self_pairs.len() as u32,
+    }
+}
+
+/// Full configurations of `robot` from columns (see [`sublevel_robot::RobotModel::configurations`]);
+/// `field` names the columns in errors (`configurations`, `start`, `end`).
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `field` when absent, `field.values` beyond
+/// [`MAX_CONFIGURATIONS_PER_CALL`] configurations, or as `configurations`.
+pub fn configurations_from_proto(
+    field: &str,
+    columns: Option<&pb::ConfigurationColumns>,
+    robot: &FittedRobot,
+    defaults: &[(String, Real)],
+) -> Result<Vec<Vec<Real>>> {
+    let columns = columns.ok_or_else(|| Error::invalid(field, "required: joint names and values"))?;
+    let width = if columns.joint_names.is_empty() { robot.model.dof() } else { columns.joint_names.len() };
+    if columns.values.len() > MAX_CONFIGURATIONS_PER_CALL * width.max(1) {
+        return Err(Error::invalid(
+            format!("{field}.values"),
+            format!("{} values: at most {MAX_CONFIGURATIONS_PER_CALL} configurations per call", columns.values.len()),
+        ));
+    }
+    robot.model.configurations(field, &columns.joint_names, &columns.values, defaults)
+}
+
+/// Checks padding (meters, finite, ≥ 0).
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `padding`.
+pub fn padding(value: Real) -> Result<Real> {
+    if value.is_finite() && value >= 0.0 {
+        Ok(value)
+    } else {
+        Err(Error::invalid("padding", format!("must be finite and >= 0 m, got {value}")))
+    }
+}
+
+/// The motion options of a request: `tolerance` 0 → 1 mm, `max_steps` 0 → the default.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `padding` or `tolerance`.
+pub fn motion_options(pad: Real, tolerance: Real, max_steps: u32) -> Result<MotionOptions> {
+    let defaults = MotionOptions::default();
+    let tolerance = if tolerance == 0.0 { defaults.tolerance } else { tolerance };
+    if !(tolerance.is_finite() && tolerance > 0.0) {
+        return Err(Error::invalid("tolerance", format!("must be finite and > 0 m, got {tolerance}")));
+    }
+    let max_steps = if max_steps == 0 { defaults.max_steps } else { max_steps as usize };
+    Ok(MotionOptions { padding: padding(pad)?, tolerance, max_steps })
+}
+
+/// The link name of geometry `g`.
+fn link_of(robot: &FittedRobot, g: usize) -> String {
+    robot.model.links()[robot.geometries[g].link].name.clone()
+}
+
+/// Appends the answers of configurations to the response columns.
+pub fn push_configuration_answers(
+    out: &mut pb::CheckConfigurationsResponse,
+    answers: &[ConfigurationAnswer],
+    robot: &FittedRobot,
+    world: &[WorldObject],
+    gradient: bool,
+) {
+    let dof = robot.model.dof();
+    for a in answers {
+        out.collides.push(a.collides);
+        out.world.push(a.world);
+        out.self_collision.push(a.self_collision);
+        out.distance.push(a.distance);
+        match a.pair {
+            Some((g, o)) => {
+                out.robot_link.push(link_of(robot, g));
+                out.robot_geometry.push(robot.geometries[g].name.clone());
+                out.world_object.push(world[o].name.clone());
+            }
+            None => {
+                out.robot_link.push(String::new());
+                out.robot_geometry.push(String::new());
+                out.world_object.push(String::new());
+            }
+        }
+        match a.witnesses {
+            Some((x, y)) => out.witnesses.extend([x.x, x.y, x.z, y.x, y.y, y.z]),
+            None => out.witnesses.extend([Real::NAN; 6]),
+        }
+        match a.self_pair.filter(|_| a.self_collision) {
+            Some((x, y)) => {
+                out.self_link_a.push(link_of(robot, x));
+                out.self_link_b.push(link_of(robot, y));
+            }
+            None => {
+                out.self_link_a.push(String::new());
+                out.self_link_b.push(String::new());
+            }
+        }
+        if gradient {
+            match &a.gradient {
+                Some(g) => out.gradient.extend_from_slice(g),
+                None => out.gradient.extend(std::iter::repeat_n(Real::NAN, dof)),
+            }
+        }
+        out.converged.push(a.converged);
+        out.pairs_pruned += a.pairs_pruned as u64;
+        out.pairs_model += a.pairs_model as u64;
+        out.pairs_exact += a.pairs_exact as u64;
+    }
+    out.count = out.collides.len() as u32;
+}
+
+/// Appends the answers of motions to the response columns.
+pub fn push_motion_answers(
+    out: &mut pb::CheckMotionsResponse,
+    answers: &[MotionAnswer],
+    robot: &FittedRobot,
+    world: &[WorldObject],
+) {
+    let dof = robot.model.dof();
+    for a in answers {
+        out.valid.push(a.valid);
+        out.decided.push(a.decided);
+        out.contact_t.push(a.contact.unwrap_or(Real::NAN));
+        match &a.contact_q {
+            Some(q) => out.contact_configuration.extend_from_slice(q),
+            None => out.contact_configuration.extend(std::iter::repeat_n(Real::NAN, dof)),
+        }
+        let (link, other, self_contact) = match (a.pair, a.self_pair) {
+            (Some((g, Some(o))), _) => (link_of(robot, g), world[o].name.clone(), false),
+            (_, Some((x, y))) => (link_of(robot, x), link_of(robot, y), true),
+            (Some((g, None)), None) => (link_of(robot, g), String::new(), true),
+            (None, None) => (String::new(), String::new(), false),
+        };
+        out.robot_link.push(link);
+        out.other.push(other);
+        out.self_contact.push(self_contact);
+        out.steps.push(u32::try_from(a.steps).unwrap_or(u32::MAX));
+    }
+    out.count = out.valid.len() as u32;
+}

@@ -1,0 +1,208 @@
+//! Robots: `UploadRobot`, `GetRobot`, `ListRobots`, `DeleteRobot`, `CheckConfigurations`,
+//! `CheckMotions`.
+//!
+//! Checks run on the batch slots, split in chunks of configurations (or motions) over as many
+//! slots as the batch pool has and the work fills ([`chunks`]); each chunk makes its own
+//! [`RobotChecker`] (the robot's meshes and bodies are shared, only the world's pair lists are
+//! built, in microseconds).
+
+use super::{Handled, SublevelService};
+use crate::convert::{self as cv, require_id};
+use crate::pb;
+use crate::runtime::blocking;
+use crate::{Error, Result};
+use futures_util::future::try_join_all;
+use std::sync::Arc;
+use sublevel_core::math::Isometry3;
+use sublevel_robot::{CheckOptions, MotionChecker, RobotChecker};
+use sublevel_scene::{RobotEntry, RobotWorld};
+use tonic::{Request, Response};
+
+/// Fewest configurations worth a chunk of their own (a configuration takes 5–200 µs).
+const MIN_CHUNK: usize = 32;
+
+/// `UploadRobot`: validates the robot file (building its bodies and mesh BVHs, off the async
+/// workers) and stores it.
+pub(super) async fn upload_robot(
+    svc: &SublevelService,
+    request: Request<pb::UploadRobotRequest>,
+) -> Handled<pb::UploadRobotResponse> {
+    let req = request.into_inner();
+    let catalog = svc.catalog.clone();
+    let entry = blocking(move || {
+        let file = serde_json::from_slice(&req.robot_file)
+            .map_err(|e| Error::invalid("robot_file", format!("not a robot file (sublevel.robot.v1 JSON): {e}")))?;
+        catalog.add_robot(&req.name, file).map_err(|e| cv::prefix_field(e, "robot_file"))
+    })
+    .await?;
+    Ok(Response::new(pb::UploadRobotResponse { robot: Some(cv::robot_summary(&entry)) }))
+}
+
+/// `GetRobot`: a stored robot's summary.
+pub(super) async fn get_robot(svc: &SublevelService, request: Request<pb::GetRobotRequest>) -> Handled<pb::GetRobotResponse> {
+    let id = request.into_inner().robot_id;
+    let catalog = svc.catalog.clone();
+    let entry = blocking(move || catalog.robot(require_id("robot_id", &id)?)).await?;
+    Ok(Response::new(pb::GetRobotResponse { robot: Some(cv::robot_summary(&entry)) }))
+}
+
+/// `ListRobots`: every stored robot's summary.
+pub(super) async fn list_robots(
+    svc: &SublevelService,
+    _request: Request<pb::ListRobotsRequest>,
+) -> Handled<pb::ListRobotsResponse> {
+    let robots = svc.catalog.robots().iter().map(|e| cv::robot_summary(e)).collect();
+    Ok(Response::new(pb::ListRobotsResponse { robots }))
+}
+
+/// `DeleteRobot`: deletes a stored robot.
+pub(super) async fn delete_robot(
+    svc: &SublevelService,
+    request: Request<pb::DeleteRobotRequest>,
+) -> Handled<pb::DeleteRobotResponse> {
+    let id = request.into_inner().robot_id;
+    require_id("robot_id", &id)?;
+    let catalog = svc.catalog.clone();
+    blocking(move || catalog.delete_robot(&id)).await?;
+    Ok(Response::new(pb::DeleteRobotResponse {}))
+}
+
+/// The robot, the world and the base pose of a check request.
+struct Setting {
+    entry: Arc<RobotEntry>,
+    world: Arc<RobotWorld>,
+    base: Isometry3,
+}
+
+/// Reads a check's robot, scene (empty: no world) and base (off the async workers: the robot or
+/// the scene may load from a shared store).
+async fn setting(svc: &SublevelService, robot_id: String, scene_id: String, base: Option<pb::Pose>) -> Result<Setting, tonic::Status> {
+    let base = cv::pose_from_proto("base", base.as_ref()).map_err(cv::to_status)?;
+    let catalog = svc.catalog.clone();
+    blocking(move || {
+        let entry = catalog.robot(require_id("robot_id", &robot_id)?)?;
+        let world = if scene_id.is_empty() {
+            RobotWorld { objects: Vec::new(), planning: Arc::default() }
+        } else {
+            catalog.robot_world(require_id("scene_id", &scene_id)?)?
+        };
+        Ok(Setting { entry, world: Arc::new(world), base })
+    })
+    .await
+}
+
+/// Splits `0..n` into chunks for the batch slots: at most one per slot, none under [`MIN_CHUNK`].
+fn chunks(n: usize, slots: usize) -> Vec<std::ops::Range<usize>> {
+    let count = n.div_ceil(MIN_CHUNK).clamp(1, slots.max(1));
+    let size = n.div_ceil(count).max(1);
+    (0..n).step_by(size).map(|s| s..(s + size).min(n)).collect()
+}
+
+/// `CheckConfigurations`: configurations checked in chunks on the batch slots, answered in columns.
+pub(super) async fn check_configurations(
+    svc: &SublevelService,
+    request: Request<pb::CheckConfigurationsRequest>,
+) -> Handled<pb::CheckConfigurationsResponse> {
+    let req = request.into_inner();
+    let padding = cv::padding(req.padding)?;
+    let Setting { entry, world, base } = setting(svc, req.robot_id, req.scene_id, req.base).await?;
+    let configs = Arc::new(cv::configurations_from_proto(
+        "configurations",
+        req.configurations.as_ref(),
+        &entry.robot,
+        &world.planning.joint_positions,
+    )?);
+    let options = CheckOptions {
+        padding,
+        distance: req.distance || req.gradient,
+        self_collision: !req.skip_self,
+        gradient: req.gradient,
+    };
+    let work = chunks(configs.len(), svc.config.batch_workers).into_iter().map(|range| {
+        let (entry, world, configs) = (entry.clone(), world.clone(), configs.clone());
+        svc.pools.batch.run(move || {
+            let allowed = world.planning.allowed_override();
+            let mut checker = RobotChecker::new(&entry.robot, world.objects.clone(), &allowed)?;
+            range
+                .map(|c| {
+                    checker.check(&configs[c], &base, &options).map_err(|e| cv::prefix_field(e, &format!("configurations[{c}]")))
+                })
+                .collect::<Result<Vec<_>>>()
+        })
+    });
+    let answers = try_join_all(work).await?;
+    let mut out = pb::CheckConfigurationsResponse {
+        joint_names: entry.robot.model.variable_names().iter().map(|s| (*s).to_owned()).collect(),
+        ..Default::default()
+    };
+    for chunk in &answers {
+        cv::push_configuration_answers(&mut out, chunk, &entry.robot, &world.objects, req.gradient);
+    }
+    Ok(Response::new(out))
+}
+
+/// `CheckMotions`: motions checked by conservative advancement in chunks on the batch slots,
+/// answered in columns.
+pub(super) async fn check_motions(
+    svc: &SublevelService,
+    request: Request<pb::CheckMotionsRequest>,
+) -> Handled<pb::CheckMotionsResponse> {
+    let req = request.into_inner();
+    let options = cv::motion_options(req.padding, req.tolerance, req.max_steps)?;
+    let Setting { entry, world, base } = setting(svc, req.robot_id, req.scene_id, req.base).await?;
+    let defaults = &world.planning.joint_positions;
+    let start = cv::configurations_from_proto("start", req.start.as_ref(), &entry.robot, defaults)?;
+    let end = cv::configurations_from_proto("end", req.end.as_ref(), &entry.robot, defaults)?;
+    if start.len() != end.len() {
+        return Err(Error::invalid(
+            "end.values",
+            format!("{} end configurations for {} start configurations", end.len(), start.len()),
+        )
+        .into());
+    }
+    let motions = Arc::new((start, end));
+    let work = chunks(motions.0.len(), svc.config.batch_workers).into_iter().map(|range| {
+        let (entry, world, motions) = (entry.clone(), world.clone(), motions.clone());
+        svc.pools.batch.run(move || {
+            let allowed = world.planning.allowed_override();
+            let mut checker = RobotChecker::new(&entry.robot, world.objects.clone(), &allowed)?;
+            let mut motion = MotionChecker::new(&mut checker)?;
+            range
+                .map(|m| {
+                    motion
+                        .check_motion(&motions.0[m], &motions.1[m], &base, &options)
+                        .map_err(|e| cv::prefix_field(e, &format!("motions[{m}]")))
+                })
+                .collect::<Result<Vec<_>>>()
+        })
+    });
+    let answers = try_join_all(work).await?;
+    let mut out = pb::CheckMotionsResponse {
+        joint_names: entry.robot.model.variable_names().iter().map(|s| (*s).to_owned()).collect(),
+        ..Default::default()
+    };
+    for chunk in &answers {
+        cv::push_motion_answers(&mut out, chunk, &entry.robot, &world.objects);
+    }
+    Ok(Response::new(out))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::chunks;
+
+    #[test]
+    fn chunks_cover_every_index_once_and_respect_the_slots() {
+        for (n, slots) in [(0, 4), (1, 4), (31, 4), (33, 4), (1000, 3), (1000, 64), (64, 1)] {
+            let c = chunks(n, slots);
+            assert!(c.len() <= slots.max(1), "{n} {slots}: {c:?}");
+            let flat: Vec<usize> = c.iter().flat_map(|r| r.clone()).collect();
+            assert_eq!(flat, (0..n).collect::<Vec<_>>(), "{n} {slots}");
+            if c.len() > 1 {
+                assert!(c.iter().all(|r| r.len() >= MIN_CHUNK_FLOOR), "{n} {slots}: {c:?}");
+            }
+        }
+    }
+
+    const MIN_CHUNK_FLOOR: usize = super::MIN_CHUNK / 2;
+}

@@ -1,0 +1,239 @@
+//! Integration tests: robots over gRPC. The fitted Panda (`data/robots/panda/panda.robot.json`)
+//! uploaded, a MotionBenchMaker scene imported (its allowed-collision matrix and robot state kept
+//! with it), and the scene's labelled configurations checked by `CheckConfigurations` against the
+//! mesh-exact labels (`data/robots/mbm_panda/labels_obj.csv`, pinocchio + coal on the collision
+//! meshes): the same verdicts, distances within 10 µm of coal's and never above them; the answers
+//! equal the in-process checker's bit for bit. `CheckMotions` on the scene's start–goal request
+//! agrees with the labels along that line and with the in-process motion checker. Errors name
+//! their fields; robots and planning contexts survive a restart.
+
+use crate::util::{assert_status, config, Server};
+use std::path::PathBuf;
+use sublevel::robot::{CheckOptions, FittedRobot, MotionChecker, MotionOptions, RobotChecker};
+use sublevel::scene::moveit::{allowed_override, world_objects, MotionPlanRequest, PlanningScene};
+use sublevel::service::pb::{self, sublevel_client::SublevelClient};
+use tonic::transport::Channel;
+use tonic::Code;
+
+fn data(path: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data/robots").join(path)
+}
+
+/// The labelled configurations of one scene: (kind, q, collides, min world distance).
+fn labels(scenario: &str, scene: u32) -> Vec<(String, Vec<f64>, bool, f64)> {
+    let text = std::fs::read_to_string(data("mbm_panda/labels_obj.csv")).unwrap();
+    text.lines()
+        .skip(1)
+        .filter_map(|line| {
+            let c: Vec<&str> = line.split(',').collect();
+            (c[0] == scenario && c[1].parse::<u32>().unwrap() == scene).then(|| {
+                let q = c[4..11].iter().map(|v| v.parse().unwrap()).collect();
+                (c[3].to_owned(), q, c[11] == "1", c[14].parse().unwrap_or(f64::INFINITY))
+            })
+        })
+        .collect()
+}
+
+async fn upload_panda(c: &mut SublevelClient<Channel>) -> pb::RobotSummary {
+    let bytes = std::fs::read(data("panda/panda.robot.json")).unwrap();
+    let req = pb::UploadRobotRequest { name: "panda".into(), robot_file: bytes };
+    c.upload_robot(req).await.unwrap().into_inner().robot.unwrap()
+}
+
+async fn import(c: &mut SublevelClient<Channel>, yaml: &[u8]) -> String {
+    let req = pb::ImportSceneRequest {
+        name: String::new(),
+        scene: Some(pb::import_scene_request::Scene::Yaml(yaml.to_vec())),
+    };
+    c.import_scene(req).await.unwrap().into_inner().scene_id
+}
+
+fn columns(names: &[&str], rows: &[Vec<f64>]) -> Option<pb::ConfigurationColumns> {
+    Some(pb::ConfigurationColumns {
+        joint_names: names.iter().map(|s| (*s).to_owned()).collect(),
+        values: rows.iter().flatten().copied().collect(),
+    })
+}
+
+const JOINTS: [&str; 7] =
+    ["panda_joint1", "panda_joint2", "panda_joint3", "panda_joint4", "panda_joint5", "panda_joint6", "panda_joint7"];
+
+#[tokio::test]
+async fn configurations_and_motions_over_grpc_agree_with_the_mesh_labels_and_the_library() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(config(dir.path())).await;
+    let mut c = server.client().await;
+    let summary = upload_panda(&mut c).await;
+    let robot = FittedRobot::load(&data("panda/panda.robot.json")).unwrap();
+    assert_eq!(summary.joint_names, robot.model.variable_names());
+    for k in 0..robot.model.dof() {
+        let (lo, hi) = robot.model.variable_joint(k).limits.unwrap();
+        assert_eq!((summary.lower[k], summary.upper[k]), (lo, hi));
+    }
+    assert_eq!(summary.geometries as usize, robot.geometries.len());
+    assert_eq!(summary.self_pairs, 21);
+
+    let yaml = std::fs::read(data("mbm_panda/scenes/bookshelf_small/scene0001.yaml")).unwrap();
+    let scene_id = import(&mut c, &yaml).await;
+    let rows = labels("bookshelf_small", 1);
+    assert_eq!(rows.len(), 200);
+    let q: Vec<Vec<f64>> = rows.iter().map(|r| r.1.clone()).collect();
+    let req = pb::CheckConfigurationsRequest {
+        robot_id: summary.robot_id.clone(),
+        scene_id: scene_id.clone(),
+        configurations: columns(&JOINTS, &q),
+        distance: true,
+        ..Default::default()
+    };
+    let got = c.check_configurations(req).await.unwrap().into_inner();
+    assert_eq!(got.count, 200);
+    assert_eq!(got.witnesses.len(), 6 * 200);
+
+    // The in-process checker on the parsed scene, as `sublevel robot check` runs it.
+    let scene = PlanningScene::from_yaml(&yaml).unwrap();
+    let (world, _) = world_objects(&scene).unwrap();
+    let allowed = allowed_override(&scene);
+    let mut checker = RobotChecker::new(&robot, world, &allowed).unwrap();
+    let base = sublevel::math::Isometry3::identity();
+    let (mut colliding, mut free) = (0, 0);
+    for (i, (_, q, collides, label_distance)) in rows.iter().enumerate() {
+        let a = checker.check(q, &base, &CheckOptions::default()).unwrap();
+        assert_eq!(got.collides[i], a.collides, "configuration {i}");
+        assert_eq!(got.distance[i].to_bits(), a.distance.to_bits(), "configuration {i}");
+        // Against coal on the meshes: the same verdict; free distances within 10 µm, never above.
+        assert_eq!(got.collides[i], *collides, "configuration {i} against the label");
+        assert!(got.converged[i]);
+        if *collides {
+            colliding += 1;
+            assert!(!got.robot_link[i].is_empty() || !got.self_link_a[i].is_empty(), "configuration {i}");
+        } else if got.distance[i].is_finite() && label_distance.is_finite() {
+            free += 1;
+            assert!((got.distance[i] - label_distance).abs() <= 1e-5, "{i}: {} vs {label_distance}", got.distance[i]);
+            // The witness points are that far apart.
+            let w = &got.witnesses[6 * i..6 * i + 6];
+            let gap = ((w[0] - w[3]).powi(2) + (w[1] - w[4]).powi(2) + (w[2] - w[5]).powi(2)).sqrt();
+            assert!((gap - got.distance[i]).abs() <= 1e-9, "{i}: witnesses {gap} vs {}", got.distance[i]);
+            assert!(!got.world_object[i].is_empty() && got.robot_link[i].starts_with("panda_"));
+        }
+    }
+    assert!(colliding > 10 && free > 100, "{colliding} colliding, {free} free");
+
+    // The start–goal motion of the scene's request: invalid exactly when a labelled configuration
+    // on its line collides, as the in-process motion checker answers.
+    let request =
+        MotionPlanRequest::from_yaml(&std::fs::read(data("mbm_panda/requests/bookshelf_small/request0001.yaml")).unwrap())
+            .unwrap();
+    let pick = |joints: &[(String, f64)]| -> Vec<f64> {
+        JOINTS.iter().map(|j| joints.iter().find(|(n, _)| n == j).unwrap().1).collect()
+    };
+    let (q0, q1) = (pick(&request.start), pick(&request.goal));
+    let req = pb::CheckMotionsRequest {
+        robot_id: summary.robot_id.clone(),
+        scene_id: scene_id.clone(),
+        start: columns(&JOINTS, std::slice::from_ref(&q0)),
+        end: columns(&JOINTS, std::slice::from_ref(&q1)),
+        ..Default::default()
+    };
+    let m = c.check_motions(req).await.unwrap().into_inner();
+    let mut motion = MotionChecker::new(&mut checker).unwrap();
+    let local = motion.check_motion(&q0, &q1, &base, &MotionOptions::default()).unwrap();
+    assert_eq!((m.valid[0], m.decided[0], m.steps[0] as usize), (local.valid, local.decided, local.steps));
+    let line_collides = rows.iter().any(|r| r.0 == "line" && r.2);
+    assert!(m.decided[0]);
+    assert_eq!(m.valid[0], !line_collides);
+    if !m.valid[0] {
+        assert_eq!(m.contact_t[0].to_bits(), local.contact.unwrap().to_bits());
+        assert!(m.contact_t[0] > 0.0 && m.contact_t[0] <= 1.0);
+        assert_eq!(m.contact_configuration.len(), 7);
+    }
+    server.stop().await;
+}
+
+#[tokio::test]
+async fn robot_requests_name_their_fields_and_robots_survive_a_restart() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(config(dir.path())).await;
+    let mut c = server.client().await;
+    let robot_id = upload_panda(&mut c).await.robot_id;
+    let yaml = std::fs::read(data("mbm_panda/scenes/table_pick/scene0001.yaml")).unwrap();
+    let scene_id = import(&mut c, &yaml).await;
+    let zero = vec![vec![0.0; 7]];
+    let check = |names: &[&str], rows: &[Vec<f64>]| pb::CheckConfigurationsRequest {
+        robot_id: robot_id.clone(),
+        scene_id: scene_id.clone(),
+        configurations: columns(names, rows),
+        ..Default::default()
+    };
+
+    assert_status(
+        c.upload_robot(pb::UploadRobotRequest { name: String::new(), robot_file: b"{}".to_vec() }).await,
+        Code::InvalidArgument,
+        "robot_file",
+    );
+    let mut broken: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(data("panda/panda.robot.json")).unwrap()).unwrap();
+    broken["geometries"][0]["link"] = "no_such_link".into();
+    assert_status(
+        c.upload_robot(pb::UploadRobotRequest { name: String::new(), robot_file: broken.to_string().into_bytes() })
+            .await,
+        Code::InvalidArgument,
+        "robot_file.geometries[0].link",
+    );
+    let mut req = check(&JOINTS, &zero);
+    req.robot_id = "r-0000000000000000".into();
+    assert_status(c.check_configurations(req).await, Code::NotFound, "robot");
+    assert_status(c.check_configurations(check(&["elbow"], &[vec![0.0]])).await, Code::InvalidArgument, "configurations.joint_names[0]");
+    assert_status(c.check_configurations(check(&JOINTS, &[vec![0.0; 6]])).await, Code::InvalidArgument, "configurations.values");
+    assert_status(
+        c.check_configurations(check(&JOINTS, &[vec![0.0, 0.0, f64::NAN, 0.0, 0.0, 0.0, 0.0]])).await,
+        Code::InvalidArgument,
+        "configurations.values[2]",
+    );
+    let mut req = check(&JOINTS, &zero);
+    req.padding = -1.0;
+    assert_status(c.check_configurations(req).await, Code::InvalidArgument, "padding");
+    let req = pb::CheckMotionsRequest {
+        robot_id: robot_id.clone(),
+        scene_id: scene_id.clone(),
+        start: columns(&JOINTS, &zero),
+        end: columns(&JOINTS, &[vec![0.0; 7], vec![0.0; 7]]),
+        ..Default::default()
+    };
+    assert_status(c.check_motions(req).await, Code::InvalidArgument, "end.values");
+    // A scene holding a fitted body is not a robot's world.
+    let fitted = c.create_scene(pb::CreateSceneRequest { name: "fitted".into() }).await.unwrap().into_inner().scene_id;
+    let sphere = crate::util::upload_sphere(&mut c, "ball", [0.0; 3], 0.1).await;
+    crate::util::add(&mut c, &fitted, &sphere, crate::util::at([2.0, 0.0, 0.0])).await;
+    let mut req = check(&JOINTS, &zero);
+    req.scene_id = fitted;
+    assert_status(c.check_configurations(req).await, Code::FailedPrecondition, "fitted body");
+
+    // Joints left out take the scene's robot state: joint 7 alone given, the rest from the YAML.
+    let scene = PlanningScene::from_yaml(&yaml).unwrap();
+    let state: Vec<f64> =
+        JOINTS.iter().map(|j| scene.joint_positions.iter().find(|(n, _)| n == j).map_or(0.0, |p| p.1)).collect();
+    let partial = c.check_configurations(check(&["panda_joint7"], &[vec![state[6]]])).await.unwrap().into_inner();
+    let full = c
+        .check_configurations(pb::CheckConfigurationsRequest { distance: true, ..check(&JOINTS, &[state.clone()]) })
+        .await
+        .unwrap()
+        .into_inner();
+    assert_eq!(partial.collides, full.collides);
+    server.stop().await;
+
+    // A restart finds the robot and the scene's planning context (names, matrix, state).
+    let server = Server::start(config(dir.path())).await;
+    let mut c = server.client().await;
+    let listed = c.list_robots(pb::ListRobotsRequest {}).await.unwrap().into_inner().robots;
+    assert_eq!(listed.iter().map(|r| r.robot_id.as_str()).collect::<Vec<_>>(), [robot_id.as_str()]);
+    let again = c
+        .check_configurations(pb::CheckConfigurationsRequest { distance: true, ..check(&JOINTS, &[state]) })
+        .await
+        .unwrap()
+        .into_inner();
+    assert_eq!(again.distance[0].to_bits(), full.distance[0].to_bits());
+    assert_eq!(again.world_object, full.world_object);
+    c.delete_robot(pb::DeleteRobotRequest { robot_id: robot_id.clone() }).await.unwrap();
+    assert_status(c.get_robot(pb::GetRobotRequest { robot_id }).await, Code::NotFound, "robot");
+    server.stop().await;
+}
