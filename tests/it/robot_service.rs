@@ -120,9 +120,10 @@ async fn configurations_and_motions_over_grpc_agree_with_the_mesh_labels_and_the
 
     // The start–goal motion of the scene's request: invalid exactly when a labelled configuration
     // on its line collides, as the in-process motion checker answers.
-    let request =
-        MotionPlanRequest::from_yaml(&std::fs::read(data("mbm_panda/requests/bookshelf_small/request0001.yaml")).unwrap())
-            .unwrap();
+    let request = MotionPlanRequest::from_yaml(
+        &std::fs::read(data("mbm_panda/requests/bookshelf_small/request0001.yaml")).unwrap(),
+    )
+    .unwrap();
     let pick = |joints: &[(String, f64)]| -> Vec<f64> {
         JOINTS.iter().map(|j| joints.iter().find(|(n, _)| n == j).unwrap().1).collect()
     };
@@ -182,8 +183,16 @@ async fn robot_requests_name_their_fields_and_robots_survive_a_restart() {
     let mut req = check(&JOINTS, &zero);
     req.robot_id = "r-0000000000000000".into();
     assert_status(c.check_configurations(req).await, Code::NotFound, "robot");
-    assert_status(c.check_configurations(check(&["elbow"], &[vec![0.0]])).await, Code::InvalidArgument, "configurations.joint_names[0]");
-    assert_status(c.check_configurations(check(&JOINTS, &[vec![0.0; 6]])).await, Code::InvalidArgument, "configurations.values");
+    assert_status(
+        c.check_configurations(check(&["elbow"], &[vec![0.0]])).await,
+        Code::InvalidArgument,
+        "configurations.joint_names[0]",
+    );
+    assert_status(
+        c.check_configurations(check(&JOINTS, &[vec![0.0; 6]])).await,
+        Code::InvalidArgument,
+        "configurations.values",
+    );
     assert_status(
         c.check_configurations(check(&JOINTS, &[vec![0.0, 0.0, f64::NAN, 0.0, 0.0, 0.0, 0.0]])).await,
         Code::InvalidArgument,
@@ -214,7 +223,10 @@ async fn robot_requests_name_their_fields_and_robots_survive_a_restart() {
         JOINTS.iter().map(|j| scene.joint_positions.iter().find(|(n, _)| n == j).map_or(0.0, |p| p.1)).collect();
     let partial = c.check_configurations(check(&["panda_joint7"], &[vec![state[6]]])).await.unwrap().into_inner();
     let full = c
-        .check_configurations(pb::CheckConfigurationsRequest { distance: true, ..check(&JOINTS, &[state.clone()]) })
+        .check_configurations(pb::CheckConfigurationsRequest {
+            distance: true,
+            ..check(&JOINTS, std::slice::from_ref(&state))
+        })
         .await
         .unwrap()
         .into_inner();

@@ -261,8 +261,9 @@ impl FittedRobot {
                     let sphere = bounding_ball(&vertices);
                     let local_box = Some(bounding_box(&vertices));
                     let points = vertices.iter().map(|p| parry3d_f64::math::Vector::new(p.x, p.y, p.z)).collect();
-                    let exact = parry3d_f64::shape::SharedShape::trimesh(points, triangles.clone())
-                        .map_err(|e| Error::invalid(format!("{field}.mesh"), format!("not a valid triangle mesh: {e:?}")))?;
+                    let exact = parry3d_f64::shape::SharedShape::trimesh(points, triangles.clone()).map_err(|e| {
+                        Error::invalid(format!("{field}.mesh"), format!("not a valid triangle mesh: {e:?}"))
+                    })?;
                     (LinkShape::Mesh { body: Box::new(body), vertices, triangles, exact }, sphere, local_box)
                 }
                 _ => {

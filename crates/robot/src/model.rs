@@ -497,7 +497,7 @@ impl RobotModel {
                 .collect::<Result<_>>()?
         };
         let n = columns.len();
-        if n == 0 || values.is_empty() || values.len() % n != 0 {
+        if n == 0 || values.is_empty() || !values.len().is_multiple_of(n) {
             return Err(Error::invalid(
                 format!("{field}.values"),
                 format!("expected a positive multiple of the {n} columns, got {} values", values.len()),

@@ -2,7 +2,9 @@
 //! (redb, PostgreSQL), and a throwaway PostgreSQL cluster for the PostgreSQL store's test.
 
 use super::Store;
-use crate::{BodyRecord, InstanceRecord, JobRecord, JobRecordState, PlanningContext, RobotRecord, SceneMeta, StoredPose};
+use crate::{
+    BodyRecord, InstanceRecord, JobRecord, JobRecordState, PlanningContext, RobotRecord, SceneMeta, StoredPose,
+};
 use sublevel_core::body::ellipsoid;
 
 fn inst(body: &str, tx: f64) -> InstanceRecord {

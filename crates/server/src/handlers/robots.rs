@@ -39,7 +39,10 @@ pub(super) async fn upload_robot(
 }
 
 /// `GetRobot`: a stored robot's summary.
-pub(super) async fn get_robot(svc: &SublevelService, request: Request<pb::GetRobotRequest>) -> Handled<pb::GetRobotResponse> {
+pub(super) async fn get_robot(
+    svc: &SublevelService,
+    request: Request<pb::GetRobotRequest>,
+) -> Handled<pb::GetRobotResponse> {
     let id = request.into_inner().robot_id;
     let catalog = svc.catalog.clone();
     let entry = blocking(move || catalog.robot(require_id("robot_id", &id)?)).await?;
@@ -76,7 +79,12 @@ struct Setting {
 
 /// Reads a check's robot, scene (empty: no world) and base (off the async workers: the robot or
 /// the scene may load from a shared store).
-async fn setting(svc: &SublevelService, robot_id: String, scene_id: String, base: Option<pb::Pose>) -> Result<Setting, tonic::Status> {
+async fn setting(
+    svc: &SublevelService,
+    robot_id: String,
+    scene_id: String,
+    base: Option<pb::Pose>,
+) -> Result<Setting, tonic::Status> {
     let base = cv::pose_from_proto("base", base.as_ref()).map_err(cv::to_status)?;
     let catalog = svc.catalog.clone();
     blocking(move || {
@@ -91,11 +99,12 @@ async fn setting(svc: &SublevelService, robot_id: String, scene_id: String, base
     .await
 }
 
-/// Splits `0..n` into chunks for the batch slots: at most one per slot, none under [`MIN_CHUNK`].
+/// Splits `0..n` into balanced chunks for the batch slots: at most one per slot, and none under
+/// half of [`MIN_CHUNK`].
 fn chunks(n: usize, slots: usize) -> Vec<std::ops::Range<usize>> {
     let count = n.div_ceil(MIN_CHUNK).clamp(1, slots.max(1));
-    let size = n.div_ceil(count).max(1);
-    (0..n).step_by(size).map(|s| s..(s + size).min(n)).collect()
+    // Balanced: sizes differ by at most one.
+    (0..count).map(|i| i * n / count..(i + 1) * n / count).filter(|r| !r.is_empty()).collect()
 }
 
 /// `CheckConfigurations`: configurations checked in chunks on the batch slots, answered in columns.
@@ -125,7 +134,9 @@ pub(super) async fn check_configurations(
             let mut checker = RobotChecker::new(&entry.robot, world.objects.clone(), &allowed)?;
             range
                 .map(|c| {
-                    checker.check(&configs[c], &base, &options).map_err(|e| cv::prefix_field(e, &format!("configurations[{c}]")))
+                    checker
+                        .check(&configs[c], &base, &options)
+                        .map_err(|e| cv::prefix_field(e, &format!("configurations[{c}]")))
                 })
                 .collect::<Result<Vec<_>>>()
         })
