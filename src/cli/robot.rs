@@ -164,43 +164,27 @@ fn read_configs(path: &std::path::Path, robot: &FittedRobot, defaults: &[(String
         .split(',')
         .map(|s| s.trim().to_owned())
         .collect();
-    let names = robot.model.variable_names();
-    let columns: Vec<usize> = header
-        .iter()
-        .enumerate()
-        .map(|(c, h)| {
-            names.iter().position(|n| n == h).ok_or_else(|| {
-                Error::invalid(
-                    format!("configs.header[{c}]"),
-                    format!("`{}` is not a joint of the robot; its joints: {names:?}", sublevel::error::clip(h)),
-                )
-            })
-        })
-        .collect::<Result<_>>()?;
-    let mut base = vec![0.0; names.len()];
-    for (name, v) in defaults {
-        if let Some(k) = names.iter().position(|n| n == name) {
-            base[k] = *v;
-        }
-    }
-    let mut out = Vec::new();
+    let mut values = Vec::new();
     for (row, line) in lines.enumerate() {
         let cells: Vec<&str> = line.split(',').map(str::trim).collect();
-        if cells.len() != columns.len() {
+        if cells.len() != header.len() {
             return Err(Error::invalid(
                 format!("configs.row[{row}]"),
-                format!("{} values for the {} columns of the header", cells.len(), columns.len()),
+                format!("{} values for the {} columns of the header", cells.len(), header.len()),
             ));
         }
-        let mut q = base.clone();
         for (c, cell) in cells.iter().enumerate() {
-            q[columns[c]] = cell.parse::<Real>().ok().filter(|v| v.is_finite()).ok_or_else(|| {
+            values.push(cell.parse::<Real>().ok().filter(|v| v.is_finite()).ok_or_else(|| {
                 Error::invalid(format!("configs.row[{row}].{}", header[c]), format!("`{cell}` is not a finite number"))
-            })?;
+            })?);
         }
-        out.push(q);
     }
-    Ok(out)
+    robot.model.configurations("configs", &header, &values, defaults).map_err(|e| match e {
+        Error::InvalidArgument { field, reason } => {
+            Error::InvalidArgument { field: field.replacen("configs.joint_names", "configs.header", 1), reason }
+        }
+        other => other,
+    })
 }
 
 fn check(args: CheckArgs) -> Result<()> {

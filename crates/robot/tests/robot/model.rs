@@ -102,3 +102,30 @@ fn malformed_descriptions_name_their_element() {
     let bad_box = r#"<robot name="r"><link name="a"><collision><geometry><box size="1 -2 1"/></geometry></collision></link></robot>"#;
     assert_eq!(field_of(RobotModel::from_urdf_str(bad_box)), "urdf.link[a].collision[0].box.size");
 }
+
+#[test]
+fn configurations_from_named_columns_fill_the_rest_from_defaults() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/gantry.urdf");
+    let gantry = RobotModel::from_urdf_file(&path).unwrap();
+    // rail, spin, shoulder, elbow are the configuration's entries; `follow` is a mimic joint.
+    assert_eq!(gantry.variable_names(), ["rail", "spin", "shoulder", "elbow"]);
+    let defaults = [("shoulder".to_owned(), 0.5), ("not_a_joint".to_owned(), 9.0)];
+    let names = ["elbow".to_owned(), "rail".to_owned()];
+    let q = gantry.configurations("c", &names, &[1.0, 2.0, 3.0, 4.0], &defaults).unwrap();
+    assert_eq!(q, [vec![2.0, 0.0, 0.5, 1.0], vec![4.0, 0.0, 0.5, 3.0]]);
+    // No names: every entry, in order.
+    assert_eq!(gantry.configurations("c", &[], &[1.0, 2.0, 3.0, 4.0], &[]).unwrap(), [vec![1.0, 2.0, 3.0, 4.0]]);
+    let err = |names: &[&str], values: &[f64]| {
+        let names: Vec<String> = names.iter().map(|s| (*s).to_owned()).collect();
+        match gantry.configurations("c", &names, values, &[]) {
+            Err(Error::InvalidArgument { field, .. }) => field,
+            other => panic!("expected InvalidArgument, got {other:?}"),
+        }
+    };
+    assert_eq!(err(&["follow"], &[0.0]), "c.joint_names[0]");
+    assert_eq!(err(&["tool_mount"], &[0.0]), "c.joint_names[0]");
+    assert_eq!(err(&["rail", "rail"], &[0.0, 0.0]), "c.joint_names[1]");
+    assert_eq!(err(&["rail", "spin"], &[0.0, 0.0, 0.0]), "c.values");
+    assert_eq!(err(&["rail"], &[]), "c.values");
+    assert_eq!(err(&["rail", "spin"], &[0.0, f64::NAN]), "c.values[1]");
+}
