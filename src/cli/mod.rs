@@ -8,6 +8,7 @@ pub mod loadtest;
 pub mod primitive;
 pub mod query;
 pub mod robot;
+pub mod robot_bench;
 pub mod scene;
 pub mod serve;
 pub mod serve_config;

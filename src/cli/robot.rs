@@ -4,6 +4,7 @@
 //! ```text
 //! sublevel robot fit ROBOT.urdf [--srdf ROBOT.srdf] [--package-dir DIR]... [--tolerance T] --output robot.json
 //! sublevel robot check robot.json --scene SCENE.yaml --configs Q.csv [--json] [--gradient] [--padding P]
+//! sublevel robot bench robot.json --scene SCENE.yaml [--columns 1000] [--addr HOST:PORT]   (robot_bench.rs)
 //! ```
 
 use std::io::Write;
@@ -30,6 +31,9 @@ enum RobotCommand {
     /// Check joint configurations of a fitted robot against a MoveIt planning scene: collides
     /// (world, self), minimum robot–world distance and its pair.
     Check(CheckArgs),
+    /// Measure configuration checks: in process on one thread (single, in blocks, with
+    /// distance) and over gRPC in columns.
+    Bench(super::robot_bench::BenchArgs),
 }
 
 /// Arguments of `sublevel robot fit`.
@@ -106,6 +110,7 @@ pub fn run(args: RobotArgs) -> Result<()> {
     match args.command {
         RobotCommand::Fit(a) => fit(a),
         RobotCommand::Check(a) => check(a),
+        RobotCommand::Bench(a) => super::robot_bench::run(a),
     }
 }
 

@@ -31,7 +31,7 @@ fn uri(addr: &str) -> String {
 }
 
 /// The endpoint of `--addr` (TCP_NODELAY, 5 s connect timeout).
-pub(super) fn endpoint(addr: &str) -> Result<Endpoint> {
+pub(crate) fn endpoint(addr: &str) -> Result<Endpoint> {
     let e = Endpoint::from_shared(uri(addr)).map_err(|e| Error::invalid("--addr", e.to_string()))?;
     Ok(e.tcp_nodelay(true).connect_timeout(Duration::from_secs(5)))
 }
@@ -42,7 +42,7 @@ fn io_error(what: &str, e: impl std::fmt::Display) -> Error {
 }
 
 /// Connects to `endpoint`; the error names every cause.
-pub(super) async fn connect(endpoint: &Endpoint) -> Result<Channel> {
+pub(crate) async fn connect(endpoint: &Endpoint) -> Result<Channel> {
     endpoint.connect().await.map_err(|e| {
         // tonic's transport error says only "transport error": append its causes.
         let mut text = e.to_string();

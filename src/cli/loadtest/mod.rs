@@ -76,7 +76,8 @@
 //! report (text, JSON); `in_process.rs` the in-process comparison; `tests.rs` the tests against a
 //! real server; this file the arguments and the run.
 
-use client::{connect, endpoint, setup, teardown, worker, Plan, Remote};
+pub(crate) use client::{connect, endpoint};
+use client::{setup, teardown, worker, Plan, Remote};
 use in_process::in_process;
 use report::{Figures, Outcome, Report, Tally};
 use scene::{Layout, OPS};
