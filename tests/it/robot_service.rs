@@ -249,3 +249,107 @@ async fn robot_requests_name_their_fields_and_robots_survive_a_restart() {
     assert_status(c.get_robot(pb::GetRobotRequest { robot_id }).await, Code::NotFound, "robot");
     server.stop().await;
 }
+
+/// A robot of two cube meshes (one as `package://`, one relative to the URDF) and a URDF box on a
+/// prismatic joint; the SRDF allows base–tip.
+const SLIDER_URDF: &str = r#"<robot name="slider">
+  <link name="base"><collision><geometry><mesh filename="package://parts/meshes/cube.obj" scale="0.2 0.2 0.2"/></geometry></collision></link>
+  <link name="arm"><collision><geometry><box size="0.2 0.2 0.2"/></geometry></collision></link>
+  <link name="tip"><collision><geometry><mesh filename="meshes/tip.obj" scale="0.1 0.1 0.1"/></geometry></collision></link>
+  <joint name="slide" type="prismatic"><parent link="base"/><child link="arm"/><origin xyz="0.5 0 0"/>
+    <axis xyz="1 0 0"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+  <joint name="turn" type="revolute"><parent link="arm"/><child link="tip"/><origin xyz="0 0 0.5"/>
+    <axis xyz="0 0 1"/><limit lower="-3.2" upper="3.2" effort="1" velocity="1"/></joint>
+</robot>"#;
+
+const SLIDER_SRDF: &str =
+    r#"<robot name="slider"><disable_collisions link1="base" link2="tip" reason="Never"/></robot>"#;
+
+/// The unit cube [−0.5, 0.5]³ (OBJ quads).
+const CUBE: &str = "v -0.5 -0.5 -0.5\nv 0.5 -0.5 -0.5\nv 0.5 0.5 -0.5\nv -0.5 0.5 -0.5\n\
+v -0.5 -0.5 0.5\nv 0.5 -0.5 0.5\nv 0.5 0.5 0.5\nv -0.5 0.5 0.5\n\
+f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n";
+
+#[tokio::test]
+async fn a_robot_fit_job_stores_a_robot_whose_checks_meet_the_closed_forms() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(config(dir.path())).await;
+    let mut c = server.client().await;
+    let meshes: std::collections::HashMap<String, Vec<u8>> = [
+        ("package://parts/meshes/cube.obj".to_owned(), CUBE.as_bytes().to_vec()),
+        ("meshes/tip.obj".to_owned(), CUBE.as_bytes().to_vec()),
+    ]
+    .into();
+    let request = |meshes: std::collections::HashMap<String, Vec<u8>>| pb::StartRobotFitJobRequest {
+        name: String::new(),
+        urdf: SLIDER_URDF.into(),
+        srdf: SLIDER_SRDF.into(),
+        meshes,
+        tolerance: 0.2,
+        max_parts: 2,
+    };
+    // Validated before a job exists: a missing mesh, an unsafe name, a broken SRDF.
+    let mut missing = meshes.clone();
+    missing.remove("meshes/tip.obj");
+    assert_status(c.start_robot_fit_job(request(missing)).await, Code::InvalidArgument, "meshes[meshes/tip.obj]");
+    let mut unsafe_name = meshes.clone();
+    unsafe_name.insert("../escape.obj".into(), CUBE.as_bytes().to_vec());
+    assert_status(c.start_robot_fit_job(request(unsafe_name)).await, Code::InvalidArgument, "meshes[../escape.obj]");
+    let mut bad = request(meshes.clone());
+    bad.srdf = r#"<robot name="slider"><disable_collisions link1="base" link2="nope"/></robot>"#.into();
+    assert_status(c.start_robot_fit_job(bad).await, Code::InvalidArgument, "srdf");
+
+    let job_id = c.start_robot_fit_job(request(meshes)).await.unwrap().into_inner().job_id;
+    let updates = crate::util::watch_to_end(&mut c, job_id.clone()).await;
+    let last = updates.last().unwrap();
+    assert_eq!(last.state, pb::JobState::Succeeded as i32, "{last:?}");
+    assert!(last.body_id.is_empty() && last.robot_id.starts_with("r-"), "{last:?}");
+    assert!(updates.iter().any(|u| u.message.contains("[2/2]")), "progress per mesh: {updates:?}");
+    let job = c.get_fit_job(pb::GetFitJobRequest { job_id }).await.unwrap().into_inner().job.unwrap();
+    assert_eq!((job.kind.as_str(), job.robot_id.as_str()), ("robot", last.robot_id.as_str()));
+    let robot = c.get_robot(pb::GetRobotRequest { robot_id: last.robot_id.clone() }).await.unwrap().into_inner();
+    let robot = robot.robot.unwrap();
+    assert_eq!((robot.name.as_str(), robot.joint_names.clone()), ("slider", vec!["slide".to_owned(), "turn".into()]));
+    assert_eq!((robot.lower.clone(), robot.upper.clone()), (vec![-1.0, -3.2], vec![1.0, 3.2]));
+    // base–arm and arm–tip are checked; base–tip is allowed by the SRDF.
+    assert_eq!((robot.geometries, robot.self_pairs), (3, 2));
+
+    // A box of half side 0.1 at (1.2, 0, 0): the arm (half side 0.1 at x = 0.5 + slide) is
+    // 0.5 − slide away, the base cube (half side 0.1) 0.9 away, the tip above the arm.
+    let scene = c.create_scene(pb::CreateSceneRequest { name: "wall".into() }).await.unwrap().into_inner().scene_id;
+    let wall = c
+        .upload_body(pb::UploadBodyRequest {
+            name: "wall".into(),
+            body: Some(pb::upload_body_request::Body::Primitive(pb::Primitive {
+                kind: pb::PrimitiveKind::Box as i32,
+                size: vec![0.2, 0.2, 0.2],
+                ..Default::default()
+            })),
+        })
+        .await
+        .unwrap()
+        .into_inner()
+        .body_id;
+    crate::util::add(&mut c, &scene, &wall, crate::util::at([1.2, 0.0, 0.0])).await;
+    let slides = [-0.2, 0.0, 0.3, 0.45, 0.55];
+    let answer = c
+        .check_configurations(pb::CheckConfigurationsRequest {
+            robot_id: robot.robot_id.clone(),
+            scene_id: scene.clone(),
+            configurations: columns(&["slide"], &slides.iter().map(|&s| vec![s]).collect::<Vec<_>>()),
+            distance: true,
+            ..Default::default()
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    for (i, &s) in slides.iter().enumerate() {
+        let exact = (0.5 - s).max(0.0);
+        assert_eq!(answer.collides[i], s >= 0.5, "slide {s}");
+        assert!((answer.distance[i] - exact).abs() <= 1e-9, "slide {s}: {} vs {exact}", answer.distance[i]);
+        if s < 0.5 {
+            assert_eq!(answer.robot_link[i], "arm");
+        }
+    }
+    server.stop().await;
+}

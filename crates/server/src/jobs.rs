@@ -77,6 +77,68 @@ pub(crate) struct FitJobs {
     active: Arc<watch::Sender<usize>>,
 }
 
+/// A robot fit's validated inputs (see [`FitJobs::start_robot`]).
+#[derive(Debug)]
+pub(crate) struct RobotFitInput {
+    /// The URDF text.
+    pub(crate) urdf: String,
+    /// The SRDF text, when given.
+    pub(crate) srdf: Option<String>,
+    /// Mesh files by the name the URDF gives them: (`package://NAME/PATH` or a relative path,
+    /// bytes).
+    pub(crate) meshes: Vec<(String, Vec<u8>)>,
+    /// The fit's settings (package directory set by [`RobotFitInput::write`]).
+    pub(crate) settings: sublevel_robot::RobotFitSettings,
+    /// Where jobs write their inputs.
+    pub(crate) work_dir: std::path::PathBuf,
+}
+
+impl RobotFitInput {
+    /// Writes the inputs under `dir` as a ROS workspace: `dir/urdf/robot.urdf`, relative meshes
+    /// beside it, `package://NAME/PATH` as `dir/packages/NAME/PATH`; returns the URDF's and the
+    /// SRDF's paths and the settings with `dir/packages` as package directory.
+    fn write(
+        &self,
+        dir: &std::path::Path,
+    ) -> Result<(std::path::PathBuf, Option<std::path::PathBuf>, sublevel_robot::RobotFitSettings)> {
+        let urdf_dir = dir.join("urdf");
+        let packages = dir.join("packages");
+        std::fs::create_dir_all(&urdf_dir)?;
+        for (name, bytes) in &self.meshes {
+            let path = match name.strip_prefix("package://") {
+                Some(rest) => packages.join(rest),
+                None => urdf_dir.join(name),
+            };
+            if let Some(parent) = path.parent() {
+                std::fs::create_dir_all(parent)?;
+            }
+            std::fs::write(&path, bytes)?;
+        }
+        let urdf = urdf_dir.join("robot.urdf");
+        std::fs::write(&urdf, &self.urdf)?;
+        let srdf = match &self.srdf {
+            Some(text) => {
+                let path = dir.join("robot.srdf");
+                std::fs::write(&path, text)?;
+                Some(path)
+            }
+            None => None,
+        };
+        let mut settings = self.settings.clone();
+        settings.package_dirs = vec![packages];
+        Ok((urdf, srdf, settings))
+    }
+}
+
+/// A directory removed (with everything in it) when dropped.
+struct RemoveOnDrop(std::path::PathBuf);
+
+impl Drop for RemoveOnDrop {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
 /// One `FitJobUpdate`; `part` is the compound fit's part being fitted (`part` / `parts` 0 without).
 fn update(
     job_id: &str,
@@ -97,6 +159,7 @@ fn update(
         error: String::new(),
         part,
         parts,
+        robot_id: String::new(),
     }
 }
 
@@ -138,7 +201,7 @@ fn error_of_record(r: &JobRecord) -> String {
 /// The terminal update a stored record stands for.
 fn update_of_record(job_id: &str, r: &JobRecord) -> pb::FitJobUpdate {
     let mut u = update(job_id, pb::FitStage::Done, 1.0, &r.message, state_of_record(r.state), None);
-    u.body_id = r.body_id.clone();
+    set_stored_id(&mut u, &r.kind, r.body_id.clone());
     u.error = error_of_record(r);
     u
 }
@@ -154,10 +217,23 @@ fn job_of_record(job_id: &str, r: &JobRecord) -> pb::FitJob {
         stage: pb::FitStage::Done as i32,
         fraction: 1.0,
         message: r.message.clone(),
-        body_id: r.body_id.clone(),
+        body_id: if r.kind == ROBOT_KIND { String::new() } else { r.body_id.clone() },
         error: error_of_record(r),
         created_unix_ms: r.created_unix_ms,
         finished_unix_ms: r.finished_unix_ms,
+        robot_id: if r.kind == ROBOT_KIND { r.body_id.clone() } else { String::new() },
+    }
+}
+
+/// The kind of a robot fit job. Its record keeps the stored robot's id in `body_id`.
+pub(crate) const ROBOT_KIND: &str = "robot";
+
+/// Puts the id a job stored into the update: `robot_id` for a robot fit, else `body_id`.
+fn set_stored_id(u: &mut pb::FitJobUpdate, kind: &str, id: String) {
+    if kind == ROBOT_KIND {
+        u.robot_id = id;
+    } else {
+        u.body_id = id;
     }
 }
 
@@ -175,6 +251,7 @@ fn job_of_live(job: &LiveJob, u: &pb::FitJobUpdate) -> pb::FitJob {
         error: u.error.clone(),
         created_unix_ms: job.created_unix_ms,
         finished_unix_ms: 0,
+        robot_id: u.robot_id.clone(),
     }
 }
 
@@ -365,7 +442,7 @@ impl FitJobs {
                 Ok(Ok((body_id, message))) => {
                     tracing::info!(job_id = %job_id, %body_id, "job succeeded");
                     let mut u = update(&job_id, pb::FitStage::Done, 1.0, &message, pb::JobState::Succeeded, None);
-                    u.body_id = body_id;
+                    set_stored_id(&mut u, kind, body_id);
                     (u, JobRecordState::Succeeded)
                 }
                 Ok(Err(e)) if cancel.load(Ordering::SeqCst) || matches!(e, Error::Cancelled(_)) => {
@@ -387,7 +464,7 @@ impl FitJobs {
                 kind: kind.to_owned(),
                 name,
                 state,
-                body_id: last.body_id.clone(),
+                body_id: if kind == ROBOT_KIND { last.robot_id.clone() } else { last.body_id.clone() },
                 error: last.error.clone(),
                 message: last.message.clone(),
                 created_unix_ms,
@@ -482,6 +559,58 @@ impl FitJobs {
                 body.max_leaf_excess()
             );
             Ok((catalog.add_compound_body(&name, body)?, message))
+        });
+        Ok(job_id)
+    }
+
+    /// Starts a robot fit ([`sublevel_robot::fit_robot`]) of validated inputs and returns the job
+    /// id. The URDF, SRDF and meshes are written under `input.work_dir/JOB_ID` (removed at the
+    /// end), the meshes fitted one per thread of `input.settings.threads` (cached in
+    /// `input.settings.cache_dir`); progress reports each mesh fitted or read from the cache. On
+    /// success the robot is stored under `name`. A cancellation stops the job once its meshes are
+    /// fitted (the fits run on their own threads), and nothing is stored.
+    ///
+    /// # Errors
+    /// UNAVAILABLE when the job's record cannot be written.
+    pub(crate) async fn start_robot(&self, name: String, input: RobotFitInput) -> Result<String, Status> {
+        let job = self.register(ROBOT_KIND, name).await?;
+        let (job_id, name) = (job.job_id.clone(), job.name.clone());
+        tracing::info!(job_id = %job_id, meshes = input.meshes.len(), "robot fit queued");
+        let catalog = self.catalog.clone();
+        let dir = input.work_dir.join(&job_id);
+        self.spawn(job, ROBOT_KIND, move |progress| {
+            let _cleanup = RemoveOnDrop(dir.clone());
+            let (urdf, srdf, settings) = input.write(&dir)?;
+            let (tx, rx) = std::sync::mpsc::channel::<sublevel_robot::RobotFitProgress>();
+            // The fit reports from its own threads; this thread relays to the job's progress.
+            let robot = std::thread::scope(|scope| {
+                let fit = scope.spawn(move || {
+                    let report = move |p: &sublevel_robot::RobotFitProgress| {
+                        let _ = tx.send(p.clone());
+                    };
+                    sublevel_robot::fit_robot(&urdf, srdf.as_deref(), &settings, &report)
+                });
+                for p in rx {
+                    progress(&FitProgress {
+                        stage: sublevel_fit::FitStage::Solve,
+                        fraction: p.done as Real / p.total.max(1) as Real,
+                        message: format!("[{}/{}] {}", p.done, p.total, p.message),
+                        part: None,
+                    });
+                }
+                fit.join().unwrap_or_else(|_| Err(Error::Numerical("the robot fit panicked".into())))
+            })?;
+            sublevel_core::cancel::check()?;
+            let r = &robot.file.report;
+            let message = format!(
+                "robot fit stored: {} geometries, {} meshes fitted, {} from the cache, {} self pairs",
+                robot.geometries.len(),
+                r.fitted,
+                r.cached,
+                robot.self_pairs.len()
+            );
+            let entry = catalog.add_robot(&name, robot.file)?;
+            Ok((entry.id.clone(), message))
         });
         Ok(job_id)
     }

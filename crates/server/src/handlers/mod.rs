@@ -6,7 +6,7 @@
 //! bodies.rs   UploadBody, GetBody, ListBodies, DeleteBody
 //! scenes.rs   CreateScene, GetScene, ListScenes, DeleteScene, AddInstance, SetPoses, RemoveInstance,
 //!             ImportScene
-//! robots.rs   UploadRobot, GetRobot, ListRobots, DeleteRobot, CheckConfigurations, CheckMotions
+//! robots.rs   StartRobotFitJob, UploadRobot, GetRobot, ListRobots, DeleteRobot, CheckConfigurations, CheckMotions
 //! queries.rs  Distance, Growth, BatchQuery, Query, QueryStream, CheckScene, and where query work
 //!             runs (inline on the async workers, or on the SDP slots)
 //! ```
@@ -192,6 +192,13 @@ impl Sublevel for SublevelService {
 
     async fn check_scene(&self, request: Request<pb::CheckSceneRequest>) -> Reply<pb::CheckSceneResponse> {
         queries::check_scene(self, request).await.map_err(Status::from)
+    }
+
+    async fn start_robot_fit_job(
+        &self,
+        request: Request<pb::StartRobotFitJobRequest>,
+    ) -> Reply<pb::StartRobotFitJobResponse> {
+        robots::start_robot_fit_job(self, request).await.map_err(Status::from)
     }
 
     async fn upload_robot(&self, request: Request<pb::UploadRobotRequest>) -> Reply<pb::UploadRobotResponse> {

@@ -1,4 +1,4 @@
-//! Robots: `UploadRobot`, `GetRobot`, `ListRobots`, `DeleteRobot`, `CheckConfigurations`,
+//! Robots: `StartRobotFitJob`, `UploadRobot`, `GetRobot`, `ListRobots`, `DeleteRobot`, `CheckConfigurations`,
 //! `CheckMotions`.
 //!
 //! Checks run on the batch slots, split in chunks of configurations (or motions) over as many
@@ -8,18 +8,96 @@
 
 use super::{Handled, SublevelService};
 use crate::convert::{self as cv, require_id};
+use crate::jobs::RobotFitInput;
 use crate::pb;
 use crate::runtime::blocking;
 use crate::{Error, Result};
 use futures_util::future::try_join_all;
 use std::sync::Arc;
 use sublevel_core::math::Isometry3;
-use sublevel_robot::{CheckOptions, MotionChecker, RobotChecker};
+use sublevel_robot::srdf::Semantics;
+use sublevel_robot::{CheckOptions, CollisionGeometry, MotionChecker, RobotChecker, RobotFitSettings, RobotModel};
 use sublevel_scene::{RobotEntry, RobotWorld};
 use tonic::{Request, Response};
 
 /// Fewest configurations worth a chunk of their own (a configuration takes 5–200 µs).
 const MIN_CHUNK: usize = 32;
+
+/// `StartRobotFitJob`: validates the URDF, the SRDF and the meshes (every mesh the URDF names is
+/// sent, under a safe name), then starts the fit as a job.
+pub(super) async fn start_robot_fit_job(
+    svc: &SublevelService,
+    request: Request<pb::StartRobotFitJobRequest>,
+) -> Handled<pb::StartRobotFitJobResponse> {
+    let req = request.into_inner();
+    if req.name.len() > sublevel_scene::MAX_NAME_BYTES {
+        return Err(Error::invalid("name", format!("at most {} bytes", sublevel_scene::MAX_NAME_BYTES)).into());
+    }
+    let model = RobotModel::from_urdf_str(&req.urdf).map_err(|e| cv::prefix_field(e, "urdf"))?;
+    let srdf = if req.srdf.trim().is_empty() {
+        None
+    } else {
+        let semantics = Semantics::from_srdf_str(&req.srdf).map_err(|e| cv::prefix_field(e, "srdf"))?;
+        model.self_collision_pairs(&semantics.disabled_pairs)?;
+        Some(req.srdf)
+    };
+    for (name, bytes) in &req.meshes {
+        let field = format!("meshes[{}]", sublevel_core::error::clip(name));
+        let rest = name.strip_prefix("package://").unwrap_or(name);
+        let path = std::path::Path::new(rest);
+        // Only plain components (no `..`, no root), and a package name with its path.
+        let safe = !rest.is_empty()
+            && path.components().all(|c| matches!(c, std::path::Component::Normal(_)))
+            && (!name.starts_with("package://") || rest.contains('/'));
+        if !safe {
+            return Err(Error::invalid(
+                field,
+                "a mesh name must be `package://NAME/PATH` or a relative path without `..`",
+            )
+            .into());
+        }
+        if bytes.is_empty() {
+            return Err(Error::invalid(field, "empty file").into());
+        }
+    }
+    for link in model.links() {
+        for (k, c) in link.collision.iter().enumerate() {
+            if let CollisionGeometry::Mesh { filename, .. } = c {
+                if !req.meshes.contains_key(filename) {
+                    return Err(Error::invalid(
+                        format!("meshes[{}]", sublevel_core::error::clip(filename)),
+                        format!("link `{}` collision {k} names this mesh: send its bytes under this name", link.name),
+                    )
+                    .into());
+                }
+            }
+        }
+    }
+    let mut settings = RobotFitSettings {
+        cache_dir: Some(svc.config.data_dir.join("robot-fit-cache")),
+        // Half the cores: a robot fit must not take every core from the queries.
+        threads: (std::thread::available_parallelism().map_or(2, |n| n.get()) / 2).max(1),
+        ..RobotFitSettings::default()
+    };
+    settings.compound.excess_tolerance = (req.tolerance != 0.0).then_some(req.tolerance);
+    if req.max_parts != 0 {
+        settings.compound.max_parts = req.max_parts as usize;
+    }
+    settings.compound.validate().map_err(|e| match e {
+        Error::InvalidArgument { reason, .. } => Error::invalid("tolerance / max_parts", reason),
+        other => other,
+    })?;
+    let name = if req.name.is_empty() { model.name.clone() } else { req.name };
+    let input = RobotFitInput {
+        urdf: req.urdf,
+        srdf,
+        meshes: req.meshes.into_iter().collect(),
+        settings,
+        work_dir: svc.config.data_dir.join("robot-fit-jobs"),
+    };
+    let job_id = svc.jobs.start_robot(name, input).await?;
+    Ok(Response::new(pb::StartRobotFitJobResponse { job_id }))
+}
 
 /// `UploadRobot`: validates the robot file (building its bodies and mesh BVHs, off the async
 /// workers) and stores it.
