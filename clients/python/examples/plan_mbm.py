@@ -7,7 +7,7 @@
 
 Needs ``pip install ./clients/python ompl==2.0.1 pyyaml``; ``--checker coal`` and ``--verify`` also
 ``pin==4.1.0`` (pinocchio with coal). ``--checker sublevel`` needs a running server (``sublevel serve``;
-``--serve`` starts one from the binary, in memory, for the run).
+``--serve`` starts one from the binary for the run, its store in a temporary folder).
 
 Problems: MotionBenchMaker's layout, a tar (read in place) or a folder holding
 ``<scenario>_<robot>/sceneNNNN.yaml`` with ``requestNNNN.yaml`` beside it, or ``scenes/<scenario>/`` with
@@ -633,8 +633,9 @@ def served(args):
         yield args.addr
         return
     binary = find_binary(args.sublevel_bin)
+    data = tempfile.mkdtemp(prefix="plan_mbm-store-")
     proc = subprocess.Popen(
-        [str(binary), "serve", "--addr", "127.0.0.1:0", "--memory"],
+        [str(binary), "serve", "--addr", "127.0.0.1:0", "--data-dir", data],
         stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL, text=True,
     )
     try:
@@ -657,6 +658,7 @@ def served(args):
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
+        shutil.rmtree(data, ignore_errors=True)
 
 
 def median(v):
@@ -681,7 +683,7 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=1, help="OMPL's random seed (default 1)")
     ap.add_argument("--checker", choices=("sublevel", "coal"), default="sublevel", help="collision checker (default sublevel)")
     ap.add_argument("--addr", default="127.0.0.1:50051", help="the Sublevel server (default 127.0.0.1:50051)")
-    ap.add_argument("--serve", action="store_true", help="start a server (sublevel serve --memory) for the run")
+    ap.add_argument("--serve", action="store_true", help="start a server (sublevel serve, a temporary store) for the run")
     ap.add_argument("--sublevel-bin", help="the sublevel binary (default: PATH, else target/release or target/debug)")
     ap.add_argument("--sublevel-motions", choices=("certified", "sampled"), default="certified",
                     help="sublevel: motions by conservative advancement (default) or sampled at --resolution in one call")
