@@ -578,6 +578,8 @@ def plan_one(args, checker, joints: List[Joint], plan_idx: List[int], start: np.
         planner.setRange(args.range)
     ss.setPlanner(planner)
     ss.setup()
+    if hasattr(planner, "getRange"):
+        args.used_range = planner.getRange()
     ss.solve(args.timeout)
     planning = ss.getLastPlanComputationTime()
     if not ss.haveExactSolutionPath():
@@ -791,8 +793,10 @@ def main(argv=None) -> int:
             )
 
     print()
+    used_range = getattr(args, "used_range", None)
     print(f"checker {args.checker}" + (f" (motions {args.sublevel_motions})" if args.checker == "sublevel" else "")
-          + f", {args.planner}, timeout {args.timeout:g} s, seed {args.seed}:")
+          + f", {args.planner}" + (f" (range {used_range:.3g})" if used_range else "")
+          + f", timeout {args.timeout:g} s, seed {args.seed}:")
     cols = "| scenario | problems | valid | solved | solved % | median planning time (ms) | median states | median motions |"
     sep = "|---|---|---|---|---|---|---|---|"
     if verifier:
@@ -817,7 +821,7 @@ def main(argv=None) -> int:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         with open(args.json, "w") as f:
             json.dump({"joint_names": names, "checker": args.checker, "planner": args.planner,
-                       "timeout_s": args.timeout, "problems": results}, f, indent=1)
+                       "range": used_range, "timeout_s": args.timeout, "problems": results}, f, indent=1)
         print(f"wrote {args.json}")
     return 0
 
