@@ -7,10 +7,12 @@ body-frame points to world points, ``x_world = R x_body + t``.
 from __future__ import annotations
 
 import json
+import math
 import os
 import queue
 import threading
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Iterable, Iterator, List, Mapping, Optional, Sequence, Tuple, Union
 
 import grpc
@@ -24,11 +26,14 @@ from .types import (
     Answer,
     AnswerColumns,
     BodySummary,
+    ConfigurationColumns,
     DistanceAnswer,
     GrowthAnswer,
     ImportedScene,
     Instance,
+    MotionColumns,
     QueryResult,
+    RobotInfo,
     Scene,
     SceneCheck,
     SceneSummary,
@@ -234,6 +239,57 @@ def _body_json(body: Any) -> str:
     raise ValueError(f"`body`: expected JSON text, a path or a dict, got {type(body).__name__}")
 
 
+def _robot_file(robot_file: Any) -> bytes:
+    """The bytes of a robot file given as a path (``str`` or ``os.PathLike``), bytes, or JSON text."""
+    if isinstance(robot_file, (bytes, bytearray, memoryview)):
+        return bytes(robot_file)
+    if isinstance(robot_file, os.PathLike) or (isinstance(robot_file, str) and os.path.isfile(robot_file)):
+        return Path(robot_file).read_bytes()
+    if isinstance(robot_file, str):
+        if robot_file.lstrip().startswith("{"):
+            return robot_file.encode("utf-8")
+        raise ValueError(f"`robot_file`: neither an existing file nor JSON text: {robot_file[:80]!r}")
+    raise ValueError(f"`robot_file`: expected a path or bytes, got {type(robot_file).__name__}")
+
+
+def _joint_names(joint_names: Optional[Sequence[str]]) -> List[str]:
+    if joint_names is None:
+        return []
+    if isinstance(joint_names, str):
+        raise ValueError(f"`joint_names`: expected a list of joint names, got the string {joint_names!r}")
+    names = list(joint_names)
+    if not all(isinstance(j, str) for j in names):
+        raise ValueError(f"`joint_names`: expected strings, got {names!r}")
+    if len(set(names)) != len(names):
+        raise ValueError(f"`joint_names`: each joint at most once, got {names!r}")
+    return names
+
+
+def _configurations(q: Any, n: int, name: str, what: str) -> np.ndarray:
+    """``q`` as a (count, n) float array: a 2-D array-like of shape (count, n), or one
+    configuration of shape (n,). ValueError naming ``name`` on another shape, no rows, or a
+    non-finite entry; ``what`` says where n comes from."""
+    try:
+        a = np.asarray(q, dtype=float)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"`{name}`: expected an array of joint values, got {q!r} ({e})") from None
+    if a.ndim == 1:
+        a = a[None, :]
+    if a.ndim != 2 or a.shape[1] != n:
+        raise ValueError(f"`{name}`: expected shape (configurations, {n}) or ({n},) ({what}), got shape {np.shape(q)}")
+    if a.shape[0] == 0:
+        raise ValueError(f"`{name}`: no configuration")
+    bad = np.argwhere(~np.isfinite(a))
+    if len(bad):
+        c, k = bad[0]
+        raise ValueError(f"`{name}`: entry [{c}, {k}] is not finite ({a[c, k]})")
+    return a
+
+
+def _configuration_columns(values: np.ndarray, joint_names: List[str]) -> pb.ConfigurationColumns:
+    return pb.ConfigurationColumns(joint_names=joint_names, values=np.ascontiguousarray(values).ravel().tolist())
+
+
 class Client:
     """A connection to a Sublevel server.
 
@@ -266,6 +322,7 @@ class Client:
         self._own_channel = channel is None
         self.channel = channel if channel is not None else grpc.insecure_channel(addr, options=opts)
         self.stub = pb_grpc.SublevelStub(self.channel)
+        self._robots: dict = {}  # robot summaries by id (joint counts for the shape checks)
 
     # -- plumbing -----------------------------------------------------------------------------
     def __enter__(self) -> "Client":
@@ -480,6 +537,162 @@ class Client:
         """
         req = pb.SetPosesRequest(scene_id=scene, poses=_instance_poses(poses, "poses"))
         return self._call("SetPoses", req).updated
+
+    # -- robots -------------------------------------------------------------------------------
+    def upload_robot(self, robot_file: Union[str, "os.PathLike[str]", bytes], name: str = "") -> RobotInfo:
+        """Stores a fitted robot: the ``sublevel.robot.v1`` file that ``sublevel robot fit ...
+        --output robot.json`` writes (its URDF, allowed pairs and link bodies; nothing is fitted
+        here).
+
+        Args:
+            robot_file: a path to the file (read as bytes), its bytes, or its JSON text.
+            name: a human-readable name; empty: the URDF's robot name.
+
+        Returns the stored robot's :class:`RobotInfo`. A malformed file raises SublevelError
+        (INVALID_ARGUMENT) naming the file's field.
+        """
+        req = pb.UploadRobotRequest(name=name, robot_file=_robot_file(robot_file))
+        info = RobotInfo.from_proto(self._call("UploadRobot", req).robot)
+        self._robots[info.robot_id] = info
+        return info
+
+    def get_robot(self, robot_id: str) -> RobotInfo:
+        """A stored robot's summary: joint names and limits, links, geometry and pair counts
+        (SublevelError NOT_FOUND when there is none)."""
+        info = RobotInfo.from_proto(self._call("GetRobot", pb.GetRobotRequest(robot_id=robot_id)).robot)
+        self._robots[info.robot_id] = info
+        return info
+
+    def list_robots(self) -> List[RobotInfo]:
+        """Every stored robot's summary, ordered by id."""
+        return [RobotInfo.from_proto(r) for r in self._call("ListRobots", pb.ListRobotsRequest()).robots]
+
+    def delete_robot(self, robot_id: str) -> None:
+        """Deletes a stored robot (SublevelError NOT_FOUND when there is none)."""
+        self._robots.pop(robot_id, None)
+        self._call("DeleteRobot", pb.DeleteRobotRequest(robot_id=robot_id))
+
+    def _joint_count(self, robot: str, joint_names: List[str]) -> Tuple[int, str]:
+        """The number of values per configuration and where it comes from: the joints named, else
+        every joint of the robot (its summary, fetched once per robot)."""
+        if joint_names:
+            return len(joint_names), f"{len(joint_names)} joint_names"
+        info = self._robots.get(robot)
+        if info is None:
+            info = self.get_robot(robot)
+        return info.dof, f"robot {robot} has {info.dof} joints"
+
+    def check_configurations(
+        self,
+        robot: str,
+        q: Any,
+        *,
+        scene: str = "",
+        joint_names: Optional[Sequence[str]] = None,
+        base: Any = None,
+        padding: float = 0.0,
+        distance: bool = False,
+        self_collision: bool = True,
+        gradient: bool = False,
+    ) -> ConfigurationColumns:
+        """Checks joint configurations of a stored robot among a scene's primitives, in columns.
+
+        No configuration the collision meshes call colliding is answered free, and none they call
+        free is answered colliding; the distance is the meshes' (docs/robots.md).
+
+        Args:
+            robot: the robot's id (:meth:`upload_robot`).
+            q: the configurations, array-like of shape (N, n), or (n,) for one: radians for
+                revolute and continuous joints, meters for prismatic ones.
+            scene: the world: a scene of primitive instances (e.g. :meth:`import_scene`'s, whose
+                allowed-collision matrix then applies); empty: no world (self-collision only).
+            joint_names: the n joints of ``q``'s columns, each once; None: every joint of the
+                robot in :attr:`RobotInfo.joint_names` order. Joints not named take the scene's
+                robot state, else 0.
+            base: the pose of the robot's root link in the scene (a :class:`Pose`, a 7-vector
+                ``[w, x, y, z, tx, ty, tz]`` or a 4x4 matrix; meters); None: the identity.
+            padding: meters (>= 0) around every robot geometry: a pair closer than it collides.
+            distance: also compute the minimum robot–world distance, its pair and witnesses
+                (else the world pairs stop at the first collision).
+            self_collision: check the robot's self pairs (False skips them).
+            gradient: also compute the distance's joint-space gradient (implies ``distance``).
+
+        Returns :class:`ConfigurationColumns` (numpy columns of N rows). Raises ValueError naming
+        the argument when ``q``, ``joint_names`` or ``base`` is malformed (nothing is sent), and
+        SublevelError for the server's refusals: NOT_FOUND for an unknown robot or scene,
+        INVALID_ARGUMENT naming the field (``configurations.joint_names[2]`` for an unknown
+        joint), FAILED_PRECONDITION for a scene holding a fitted body.
+        """
+        names = _joint_names(joint_names)
+        n, what = self._joint_count(robot, names)
+        values = _configurations(q, n, "q", what)
+        req = pb.CheckConfigurationsRequest(
+            robot_id=robot,
+            scene_id=scene,
+            configurations=_configuration_columns(values, names),
+            padding=float(padding),
+            distance=bool(distance or gradient),
+            skip_self=not self_collision,
+            gradient=bool(gradient),
+        )
+        if base is not None:
+            req.base.CopyFrom(_pose_pb(base, "base"))
+        return ConfigurationColumns.from_proto(self._call("CheckConfigurations", req), gradient=bool(gradient))
+
+    def check_motions(
+        self,
+        robot: str,
+        q0: Any,
+        q1: Any,
+        *,
+        scene: str = "",
+        joint_names: Optional[Sequence[str]] = None,
+        base: Any = None,
+        padding: float = 0.0,
+        tolerance: float = 1e-3,
+        max_steps: int = 0,
+    ) -> MotionColumns:
+        """Checks straight joint-space motions ``q0[m] -> q1[m]`` (continuous joints the shorter
+        way) by conservative advancement: each is proven free, or answered with its first contact
+        parameter t* (within ``tolerance``), the configuration and the pair there. No sampling
+        resolution to choose.
+
+        Args:
+            robot, scene, joint_names, base, padding: as in :meth:`check_configurations`.
+            q0, q1: start and end configurations, array-like of the same shape, (M, n) or (n,)
+                for one motion (radians, meters).
+            tolerance: meters (> 0): a distance bound at or below ``padding + tolerance`` is a
+                contact.
+            max_steps: most advancement steps per motion before it is answered undecided
+                (``decided`` false); 0: the server's default (100 000).
+
+        Returns :class:`MotionColumns` (numpy columns of M rows). Raises ValueError naming the
+        argument when ``q0``, ``q1``, ``joint_names``, ``base`` or ``tolerance`` is malformed
+        (nothing is sent), and SublevelError for the server's refusals, as
+        :meth:`check_configurations`.
+        """
+        names = _joint_names(joint_names)
+        n, what = self._joint_count(robot, names)
+        start = _configurations(q0, n, "q0", what)
+        end = _configurations(q1, n, "q1", what)
+        if start.shape != end.shape:
+            raise ValueError(f"`q1`: {end.shape[0]} configurations, `q0` has {start.shape[0]}")
+        if not (float(tolerance) > 0.0) or not math.isfinite(float(tolerance)):
+            raise ValueError(f"`tolerance`: expected a positive number of meters, got {tolerance!r}")
+        if int(max_steps) < 0:
+            raise ValueError(f"`max_steps`: expected >= 0, got {max_steps!r}")
+        req = pb.CheckMotionsRequest(
+            robot_id=robot,
+            scene_id=scene,
+            start=_configuration_columns(start, names),
+            end=_configuration_columns(end, names),
+            padding=float(padding),
+            tolerance=float(tolerance),
+            max_steps=int(max_steps),
+        )
+        if base is not None:
+            req.base.CopyFrom(_pose_pb(base, "base"))
+        return MotionColumns.from_proto(self._call("CheckMotions", req))
 
     # -- queries ------------------------------------------------------------------------------
     def distance(

@@ -1,0 +1,834 @@
+#!/usr/bin/env python3
+"""Plan the MotionBenchMaker problems with OMPL, checked by the Sublevel service or by pinocchio + coal.
+
+    python clients/python/examples/plan_mbm.py --urdf data/robots/panda/panda.urdf \\
+        --srdf data/robots/panda/panda.srdf --problems ../shared/peers/robots/panda/problems.tar.bz2 \\
+        --limit 10 --timeout 1 [--checker sublevel|coal] [--verify] [--json out/plan_mbm.json]
+
+Needs ``pip install ./clients/python ompl==2.0.1 pyyaml``; ``--checker coal`` and ``--verify`` also
+``pin==4.1.0`` (pinocchio with coal). ``--checker sublevel`` needs a running server (``sublevel serve``;
+``--serve`` starts one from the binary for the run, its store in a temporary folder).
+
+Problems: MotionBenchMaker's layout, a tar (read in place) or a folder holding
+``<scenario>_<robot>/sceneNNNN.yaml`` with ``requestNNNN.yaml`` beside it, or ``scenes/<scenario>/`` with
+``requests/<scenario>/`` (``data/robots/mbm_panda``). A scene is a MoveIt ``PlanningScene``; a request a
+``MotionPlanRequest``: its start state's joint positions and its first goal's joint constraints. The
+planning joints are the goal's joints; the robot's other joints stay at the start state's values.
+
+Per problem: OMPL (``RealVectorStateSpace`` in the URDF's joint limits, ``SimpleSetup``, the planner,
+path simplification) with
+
+* ``--checker sublevel``: the fitted robot uploaded (``--robot``; for the Panda's URDF
+  ``data/robots/panda/panda.robot.json``, else fitted by ``sublevel robot fit``), the scene imported
+  (``Client.import_scene``, deleted afterwards); states by ``Client.check_configurations``, motions by
+  ``Client.check_motions`` (conservative advancement: each edge proven free, within ``--tolerance``
+  of contact), or with ``--sublevel-motions sampled`` the edge's states at ``--resolution`` in one
+  ``check_configurations`` call;
+* ``--checker coal``: the robots peer's pinocchio + coal checker (``coal_peer.py`` from ``--peer-dir``,
+  else a minimal one here) on the collision meshes; motions sampled at ``--resolution``
+  configurations per unit of joint-space distance (VAMP's 32), as coal has no certified motion check.
+
+``--verify`` re-checks every returned path on pinocchio + coal meshes, each edge densified until the end
+effector (``--ee``: panda_hand, else the last link with collision geometry: its frame origin and its
+collision geometry's box corners) moves at most ``--verify-step`` (1 mm) between checks, and reports
+every path with a colliding state.
+
+Meshes: coal reads the OBJ files through assimp, which joins ``link6.obj``'s faces differently from
+the file (data/robots/SOURCE.md); by default the meshes are built from the OBJ files' own vertices
+and faces, the surface the fitted robot contains (``--mesh-reader assimp`` keeps coal's reading).
+
+Prints per problem: scenario, scene, solved, planning time, states and motions checked; then per
+scenario: solved %, median planning time. ``--json OUT`` writes ``{"joint_names": [...], "problems":
+[{"scenario", "scene", "request", "solved", "planning_time_s", "states_checked", "motions_checked",
+"path": [[...], ...]}, ...]}`` (radians, meters; the path after simplification).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import math
+import os
+import re
+import shutil
+import statistics
+import subprocess
+import sys
+import tarfile
+import tempfile
+import time
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Dict, List, Optional, Sequence
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[3]
+PANDA_ROBOT = REPO / "data" / "robots" / "panda" / "panda.robot.json"
+DEFAULT_PEER_DIR = REPO.parent / "shared" / "peers" / "robots"
+
+
+# -- the robot ------------------------------------------------------------------------------------
+@dataclass
+class Joint:
+    """A moving joint of the URDF: its limits (radians or meters; continuous: ±π for sampling)."""
+
+    name: str
+    kind: str
+    lower: float
+    upper: float
+
+
+def urdf_joints(urdf: Path):
+    """The robot's name and its moving, non-mimic joints in URDF order."""
+    root = ET.parse(urdf).getroot()
+    joints = []
+    for j in root.iter("joint"):
+        kind = j.get("type")
+        if kind not in ("revolute", "continuous", "prismatic") or j.find("mimic") is not None:
+            continue
+        lim = j.find("limit")
+        if kind == "continuous":
+            lo, hi = -math.pi, math.pi
+        else:
+            if lim is None:
+                raise ValueError(f"{urdf}: joint {j.get('name')} has no <limit>")
+            lo, hi = float(lim.get("lower", 0.0)), float(lim.get("upper", 0.0))
+        joints.append(Joint(j.get("name"), kind, lo, hi))
+    return root.get("name", ""), joints
+
+
+def srdf_disabled(srdf: Optional[Path]):
+    """The SRDF's ``disable_collisions`` link pairs (as frozensets)."""
+    if srdf is None:
+        return set()
+    return {frozenset((d.get("link1"), d.get("link2"))) for d in ET.parse(srdf).getroot().iter("disable_collisions")}
+
+
+# -- the problems ---------------------------------------------------------------------------------
+@dataclass
+class Problem:
+    """One planning problem: the scene and request files' names and texts."""
+
+    scenario: str
+    index: int
+    scene_name: str
+    scene: bytes
+    request_name: str
+    request: bytes
+
+
+_SCENE = re.compile(r"^scene(\d+)\.ya?ml$")
+
+
+def _scenario(folder: str, robot: str) -> str:
+    return folder[: -len(robot) - 1] if robot and folder.endswith("_" + robot) else folder
+
+
+def load_problems(source: Path, robot: str, scenarios: Optional[Sequence[str]], limit: int) -> List[Problem]:
+    """The problems of ``source`` (a tar, or a folder in either layout), the first ``limit`` of each
+    scenario by number (0: all), the scenarios in ``scenarios`` (names with or without the
+    ``_<robot>`` suffix) or all of them."""
+    files: Dict[str, bytes] = {}
+    if source.is_file():
+        with tarfile.open(source, "r:*") as tar:
+            for m in tar.getmembers():
+                if m.isfile() and m.name.endswith((".yaml", ".yml")):
+                    files[m.name] = tar.extractfile(m).read()
+    elif source.is_dir():
+        for p in source.rglob("*.y*ml"):
+            files[p.relative_to(source).as_posix()] = p.read_bytes()
+    else:
+        raise FileNotFoundError(f"--problems {source}: no such file or folder")
+    found: Dict[str, List[Problem]] = {}
+    for name, data in files.items():
+        parts = name.split("/")
+        m = _SCENE.match(parts[-1])
+        if not m or len(parts) < 2:
+            continue
+        index, folder = int(m.group(1)), parts[-2]
+        candidates = ["/".join(parts[:-1] + [f"request{m.group(1)}.yaml"])]
+        if len(parts) >= 3 and parts[-3] == "scenes":  # scenes/<scenario>/ beside requests/<scenario>/
+            candidates.append("/".join(parts[:-3] + ["requests", folder, f"request{m.group(1)}.yaml"]))
+        request = next((c for c in candidates if c in files), None)
+        if request is None:
+            print(f"warning: {name} has no request ({' or '.join(candidates)}); skipped", file=sys.stderr)
+            continue
+        scenario = _scenario(folder, robot)
+        found.setdefault(scenario, []).append(
+            Problem(scenario, index, parts[-1], data, request.split("/")[-1], files[request])
+        )
+    if scenarios:
+        wanted = {_scenario(s, robot) for s in scenarios}
+        missing = wanted - set(found)
+        if missing:
+            raise ValueError(f"--scenarios: {sorted(missing)} not in {source} (found {sorted(found)})")
+        found = {s: p for s, p in found.items() if s in wanted}
+    out = []
+    for s in sorted(found):
+        probs = sorted(found[s], key=lambda p: p.index)
+        out += probs[:limit] if limit > 0 else probs
+    return out
+
+
+def read_request(text: bytes, joints: List[Joint]):
+    """(planning joint indices, start, goal): the start state's positions of every joint (radians,
+    meters) and the goal, whose joint constraints name the planning joints."""
+    import yaml
+
+    req = yaml.safe_load(text)
+    js = (req.get("start_state") or {}).get("joint_state") or {}
+    start_by_name = dict(zip(js.get("name", []), js.get("position", [])))
+    goals = req.get("goal_constraints") or []
+    if not goals or not goals[0].get("joint_constraints"):
+        raise ValueError("the request has no joint-space goal (goal_constraints[0].joint_constraints)")
+    goal_by_name = {c["joint_name"]: float(c["position"]) for c in goals[0]["joint_constraints"]}
+    names = [j.name for j in joints]
+    unknown = sorted(set(goal_by_name) - set(names))
+    if unknown:
+        raise ValueError(f"goal joints {unknown} are not moving joints of the URDF")
+    missing = [n for n in names if n not in start_by_name]
+    if missing:
+        raise ValueError(f"the start state lacks joints {missing}")
+    start = np.array([float(start_by_name[n]) for n in names])
+    goal = start.copy()
+    for k, n in enumerate(names):
+        if n in goal_by_name:
+            goal[k] = goal_by_name[n]
+    plan = [k for k, n in enumerate(names) if n in goal_by_name]
+    return plan, start, goal
+
+
+# -- checkers -------------------------------------------------------------------------------------
+def van_der_corput(n: int) -> List[int]:
+    """1..n ordered so that each next index halves the largest gap left (the end first)."""
+    order, seen = [n], {n}
+    step = n
+    while step > 1:
+        step = (step + 1) // 2
+        for k in range(step, n, step):
+            if k not in seen:
+                seen.add(k)
+                order.append(k)
+    order += [k for k in range(1, n) if k not in seen]
+    return order
+
+
+class Counts:
+    """States and motions checked, and the seconds spent in the checker."""
+
+    def __init__(self):
+        self.states = 0
+        self.motions = 0
+        self.seconds = 0.0
+
+
+class SublevelChecker:
+    """States and motions checked by the service, in an imported planning scene."""
+
+    def __init__(self, client, robot_id: str, joint_names: List[str], motions: str, resolution: float, tolerance: float):
+        self.client = client
+        self.robot = robot_id
+        self.names = joint_names
+        self.motions = motions
+        self.resolution = resolution
+        self.tolerance = tolerance
+        self.scene = ""
+        self.count = Counts()
+
+    def set_scene(self, problem: Problem) -> None:
+        self.scene = self.client.import_scene(problem.scene, name=f"plan_mbm {problem.scenario} {problem.scene_name}").scene_id
+
+    def clear_scene(self) -> None:
+        if self.scene:
+            self.client.delete_scene(self.scene)
+            self.scene = ""
+
+    def valid(self, q: np.ndarray) -> bool:
+        t0 = time.perf_counter()
+        r = self.client.check_configurations(self.robot, q, scene=self.scene, joint_names=self.names)
+        self.count.seconds += time.perf_counter() - t0
+        self.count.states += 1
+        return not bool(r.collides[0])
+
+    def motion(self, q0: np.ndarray, q1: np.ndarray) -> bool:
+        t0 = time.perf_counter()
+        if self.motions == "certified":
+            r = self.client.check_motions(
+                self.robot, q0, q1, scene=self.scene, joint_names=self.names, tolerance=self.tolerance
+            )
+            ok = bool(r.valid[0])
+        else:
+            n = max(1, math.ceil(float(np.linalg.norm(q1 - q0)) * self.resolution))
+            ts = np.arange(1, n + 1) / n
+            r = self.client.check_configurations(
+                self.robot, q0 + ts[:, None] * (q1 - q0), scene=self.scene, joint_names=self.names
+            )
+            ok = not r.collides.any()
+        self.count.seconds += time.perf_counter() - t0
+        self.count.motions += 1
+        return ok
+
+
+@contextlib.contextmanager
+def obj_meshes_as_written(enabled: bool):
+    """While active, pinocchio's URDF geometry loader builds each OBJ mesh from the file's own
+    vertices and faces (scaled as the URDF says) instead of assimp's reading."""
+    import coal
+    import pinocchio as pin
+
+    if not enabled:
+        yield
+        return
+    sys.path.insert(0, str(REPO / "scripts" / "peers"))
+    try:
+        from relabel_panda import read_obj  # an OBJ's own vertices and faces (polygons as fans)
+    finally:
+        sys.path.pop(0)
+    build = pin.buildGeomFromUrdf
+
+    def literal(*a, **k):
+        geom = build(*a, **k)
+        for g in geom.geometryObjects:
+            if g.meshPath and g.meshPath.lower().endswith(".obj"):
+                v, t = read_obj(g.meshPath)
+                v = v * np.asarray(g.meshScale, dtype=float)
+                m = coal.BVHModelOBBRSS()
+                m.beginModel(len(t), len(v))
+                m.addVertices(v)
+                m.addTriangles(t)
+                m.endModel()
+                g.geometry = m
+        return geom
+
+    pin.buildGeomFromUrdf = literal
+    try:
+        yield
+    finally:
+        pin.buildGeomFromUrdf = build
+
+
+def _peer(peer_dir: Optional[Path]):
+    """The robots peer's coal_peer module, or None."""
+    if not peer_dir or not (Path(peer_dir) / "coal_peer.py").is_file():
+        return None
+    sys.path.insert(0, str(peer_dir))
+    try:
+        import coal_peer  # noqa: F401 (the peer's loader)
+
+        return coal_peer
+    except ImportError as e:
+        print(f"note: {peer_dir}/coal_peer.py does not import ({e}); using the minimal loader", file=sys.stderr)
+        return None
+    finally:
+        sys.path.remove(str(peer_dir))
+
+
+def _se3(position, quat_xyzw):
+    import pinocchio as pin
+
+    x, y, z, w = quat_xyzw if quat_xyzw is not None else (0.0, 0.0, 0.0, 1.0)
+    q = pin.Quaternion(w, x, y, z) if (x, y, z, w) != (0, 0, 0, 0) else pin.Quaternion(1, 0, 0, 0)
+    q.normalize()
+    return pin.SE3(q.matrix(), np.asarray(position, dtype=float))
+
+
+def _xyz(v):
+    return [v["x"], v["y"], v["z"]] if isinstance(v, dict) else list(v)
+
+
+def _xyzw(v):
+    return [v["x"], v["y"], v["z"], v["w"]] if isinstance(v, dict) else list(v)
+
+
+def minimal_scene(path: str):
+    """(objects, allowed pairs) of a MoveIt planning scene's primitives, as the peer's loader reads
+    them: boxes (full sides), cylinders ([height, radius]) and spheres at pose · primitive pose."""
+    import coal
+    import yaml
+
+    data = yaml.safe_load(Path(path).read_text())
+    objects = []
+    for co in (data.get("world") or {}).get("collision_objects") or []:
+        base = _se3(_xyz(co["pose"]["position"]), _xyzw(co["pose"]["orientation"])) if "pose" in co else None
+        for k, (prim, pp) in enumerate(zip(co.get("primitives", []), co.get("primitive_poses", []))):
+            pose = _se3(_xyz(pp.get("position", [0, 0, 0])), _xyzw(pp.get("orientation", [0, 0, 0, 1])))
+            if base is not None:
+                pose = base * pose
+            d, kind = prim["dimensions"], prim["type"]
+            if kind in ("box", 1):
+                g = coal.Box(d[0], d[1], d[2])
+            elif kind in ("cylinder", 3):
+                g = coal.Cylinder(d[1], d[0])
+            elif kind in ("sphere", 2):
+                g = coal.Sphere(d[0])
+            else:
+                raise ValueError(f"{path}: unsupported primitive {kind!r}")
+            objects.append((f"{co['id']}#{k}", g, pose))
+    acm = set()
+    m = data.get("allowed_collision_matrix")
+    if m:
+        names = m["entry_names"]
+        for i, row in enumerate(m["entry_values"]):
+            row = row["enabled"] if isinstance(row, dict) else row
+            acm |= {frozenset((names[i], names[j])) for j, v in enumerate(row) if v and i != j}
+    return objects, acm
+
+
+class MinimalSceneChecker:
+    """Every robot geometry against every world object and the robot pairs not allowed, as the
+    peer's SceneChecker builds them (used when coal_peer.py cannot be imported)."""
+
+    def __init__(self, model, urdf, package_dir, objects, acm):
+        import pinocchio as pin
+
+        self.model, self.data = model, model.createData()
+        geom = pin.buildGeomFromUrdf(model, str(urdf), pin.COLLISION, package_dirs=[str(package_dir)])
+        n = len(geom.geometryObjects)
+        link = [model.frames[g.parentFrame].name for g in geom.geometryObjects]
+        for name, g, pose in objects:
+            geom.addGeometryObject(pin.GeometryObject(name, 0, 0, pose, g))
+        for i in range(n):
+            for j in range(n, len(geom.geometryObjects)):
+                if frozenset((link[i], geom.geometryObjects[j].name.split("#")[0])) not in acm:
+                    geom.addCollisionPair(pin.CollisionPair(i, j))
+            for j in range(i + 1, n):
+                if link[i] != link[j] and frozenset((link[i], link[j])) not in acm:
+                    geom.addCollisionPair(pin.CollisionPair(i, j))
+        self.geom, self.gdata = geom, pin.GeometryData(geom)
+
+    def collide(self, q, stop_at_first):
+        import pinocchio as pin
+
+        return pin.computeCollisions(self.model, self.data, self.geom, self.gdata, q, stop_at_first)
+
+
+class MeshChecker:
+    """pinocchio + coal on the collision meshes: states by ``computeCollisions`` (stop at the first
+    collision), motions sampled at ``resolution`` configurations per unit of joint distance."""
+
+    def __init__(self, urdf: Path, package_dir: Path, joint_names: List[str], disabled: set, peer, obj_as_written: bool, resolution: float):
+        import pinocchio as pin
+
+        self.urdf, self.package_dir = urdf, package_dir
+        self.model = pin.buildModelFromUrdf(str(urdf))
+        self.peer = peer
+        self.obj_as_written = obj_as_written
+        self.disabled = disabled
+        self.resolution = resolution
+        self.nq = self.model.nq
+        # Where each planning joint sits in pinocchio's q (a continuous joint is cos, sin).
+        self.slots = []
+        for name in joint_names:
+            jid = self.model.getJointId(name)
+            if jid >= self.model.njoints:
+                raise ValueError(f"pinocchio's model of {urdf} has no joint {name}")
+            self.slots.append((self.model.joints[jid].idx_q, self.model.joints[jid].nq))
+        self.checker = None
+        self.count = Counts()
+
+    def pin_q(self, q: np.ndarray) -> np.ndarray:
+        out = np.zeros(self.nq)
+        for v, (i, n) in zip(q, self.slots):
+            if n == 2:
+                out[i], out[i + 1] = math.cos(v), math.sin(v)
+            else:
+                out[i] = v
+        return out
+
+    def set_scene(self, problem: Problem) -> None:
+        with tempfile.NamedTemporaryFile(suffix=".yaml") as f:
+            f.write(problem.scene)
+            f.flush()
+            load = self.peer.load_scene if self.peer else minimal_scene
+            objects, acm = load(f.name)
+        make = self.peer.SceneChecker if self.peer else MinimalSceneChecker
+        with obj_meshes_as_written(self.obj_as_written):
+            self.checker = make(self.model, self.urdf, self.package_dir, objects, acm | self.disabled)
+
+    def clear_scene(self) -> None:
+        self.checker = None
+
+    def collides(self, q: np.ndarray) -> bool:
+        return bool(self.checker.collide(self.pin_q(q), True))
+
+    def valid(self, q: np.ndarray) -> bool:
+        t0 = time.perf_counter()
+        ok = not self.collides(q)
+        self.count.seconds += time.perf_counter() - t0
+        self.count.states += 1
+        return ok
+
+    def motion(self, q0: np.ndarray, q1: np.ndarray) -> bool:
+        t0 = time.perf_counter()
+        n = max(1, math.ceil(float(np.linalg.norm(q1 - q0)) * self.resolution))
+        ok = all(not self.collides(q0 + (k / n) * (q1 - q0)) for k in van_der_corput(n))
+        self.count.seconds += time.perf_counter() - t0
+        self.count.motions += 1
+        return ok
+
+
+class Verifier:
+    """Re-checks paths on the meshes, each edge densified until the end effector moves at most
+    ``step`` meters between checked states."""
+
+    def __init__(self, mesh: MeshChecker, ee: Optional[str], step: float):
+        import pinocchio as pin
+
+        self.mesh = mesh
+        self.step = step
+        model = mesh.model
+        if ee is None:
+            ee = "panda_hand" if model.existFrame("panda_hand") else None
+        if ee is None:
+            with obj_meshes_as_written(False):
+                geom = pin.buildGeomFromUrdf(model, str(mesh.urdf), pin.COLLISION, package_dirs=[str(mesh.package_dir)])
+            ee = model.frames[max(g.parentFrame for g in geom.geometryObjects)].name
+        if not model.existFrame(ee):
+            raise ValueError(f"--ee {ee}: no such link in {mesh.urdf}")
+        self.ee = ee
+        self.frame = model.getFrameId(ee)
+        self.data = model.createData()
+        self.corners = None  # the EE's collision geometry's box corners in its frame, set per scene
+
+    def _points(self, q: np.ndarray) -> np.ndarray:
+        import pinocchio as pin
+
+        pin.framesForwardKinematics(self.mesh.model, self.data, self.mesh.pin_q(q))
+        m = self.data.oMf[self.frame]
+        return self.corners @ m.rotation.T + m.translation
+
+    def _set_corners(self) -> None:
+        geom = self.mesh.checker.geom
+        pts = [np.zeros(3)]
+        for g in geom.geometryObjects:
+            if g.parentFrame == self.frame:
+                g.geometry.computeLocalAABB()
+                lo, hi = np.asarray(g.geometry.aabb_local.min_), np.asarray(g.geometry.aabb_local.max_)
+                box = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+                pts.append(box @ np.asarray(g.placement.rotation).T + np.asarray(g.placement.translation))
+        self.corners = np.vstack([np.atleast_2d(p) for p in pts])
+
+    def edge_ts(self, q0: np.ndarray, q1: np.ndarray) -> List[float]:
+        """Parameters t in [0, 1] of the states checked on q0 -> q1: consecutive ones move every
+        tracked point of the end effector at most ``step`` (chord) apart."""
+        ts = list(np.linspace(0.0, 1.0, 9))
+        pts = [self._points(q0 + t * (q1 - q0)) for t in ts]
+        k = 0
+        while k < len(ts) - 1:
+            if np.max(np.linalg.norm(pts[k + 1] - pts[k], axis=1)) > self.step and ts[k + 1] - ts[k] > 1e-12:
+                t = 0.5 * (ts[k] + ts[k + 1])
+                ts.insert(k + 1, t)
+                pts.insert(k + 1, self._points(q0 + t * (q1 - q0)))
+            else:
+                k += 1
+        return ts
+
+    def check_path(self, path: List[np.ndarray]):
+        """(states checked, the first colliding (edge, t) or None)."""
+        self._set_corners()
+        checked = 0
+        for e in range(len(path) - 1):
+            for t in self.edge_ts(path[e], path[e + 1]):
+                if e > 0 and t == 0.0:
+                    continue
+                checked += 1
+                if self.mesh.collides(path[e] + t * (path[e + 1] - path[e])):
+                    return checked, (e, t)
+        return checked, None
+
+
+# -- planning -------------------------------------------------------------------------------------
+def plan_one(args, checker, joints: List[Joint], plan_idx: List[int], start: np.ndarray, goal: np.ndarray):
+    """One OMPL run: (solved, planning seconds, simplification seconds, path (states, all joints))."""
+    from ompl import base as ob
+    from ompl import geometric as og
+
+    dof = len(plan_idx)
+    space = ob.RealVectorStateSpace(dof)
+    bounds = ob.RealVectorBounds(dof)
+    for k, j in enumerate(plan_idx):
+        bounds.setLow(k, joints[j].lower)
+        bounds.setHigh(k, joints[j].upper)
+    space.setBounds(bounds)
+    ss = og.SimpleSetup(space)
+    si = ss.getSpaceInformation()
+
+    def full(state) -> np.ndarray:
+        q = start.copy()
+        q[plan_idx] = [state[k] for k in range(dof)]
+        return q
+
+    ss.setStateValidityChecker(lambda s: bool(checker.valid(full(s))))
+
+    class Motions(ob.MotionValidator):
+        def checkMotion(self, s1, s2):  # noqa: N802 (OMPL's name)
+            return bool(checker.motion(full(s1), full(s2)))
+
+    motions = Motions(si)  # kept alive while OMPL holds it
+    si.setMotionValidator(motions)
+    s0, s1 = space.allocState(), space.allocState()
+    for k, j in enumerate(plan_idx):
+        s0[k], s1[k] = float(start[j]), float(goal[j])
+    ss.setStartAndGoalStates(s0, s1)
+    planner = getattr(og, args.planner)(si)
+    if args.range is not None:
+        planner.setRange(args.range)
+    ss.setPlanner(planner)
+    ss.setup()
+    if hasattr(planner, "getRange"):
+        args.used_range = planner.getRange()
+    ss.solve(args.timeout)
+    planning = ss.getLastPlanComputationTime()
+    if not ss.haveExactSolutionPath():
+        return False, planning, 0.0, []
+    t0 = time.perf_counter()
+    ss.simplifySolution(args.simplify_timeout if args.simplify_timeout is not None else args.timeout)
+    simplify = time.perf_counter() - t0
+    path = ss.getSolutionPath()
+    states = [full(path.getState(k)) for k in range(path.getStateCount())]
+    del motions
+    return True, planning, simplify, states
+
+
+def find_binary(explicit: Optional[str]) -> Path:
+    """The sublevel binary: ``explicit``, else on PATH, else the newer of target/{release,debug}."""
+    if explicit:
+        if not Path(explicit).is_file():
+            raise FileNotFoundError(f"--sublevel-bin {explicit}: no such file")
+        return Path(explicit)
+    on_path = shutil.which("sublevel")
+    if on_path:
+        return Path(on_path)
+    built = [p for p in (REPO / "target" / "release" / "sublevel", REPO / "target" / "debug" / "sublevel") if p.is_file()]
+    if not built:
+        raise FileNotFoundError("no sublevel binary: pass --sublevel-bin, put it on PATH, or `cargo build --release`")
+    return max(built, key=lambda p: p.stat().st_mtime)
+
+
+def fitted_robot(args, urdf_text: str) -> Path:
+    """The fitted robot file: --robot if it exists, the Panda's when the URDF is its, else
+    ``sublevel robot fit`` into --robot (or a temporary folder)."""
+    if args.robot and Path(args.robot).is_file():
+        return Path(args.robot)
+    if not args.robot and PANDA_ROBOT.is_file():
+        with open(PANDA_ROBOT, encoding="utf-8") as f:
+            if json.load(f).get("urdf") == urdf_text:
+                return PANDA_ROBOT
+    out = Path(args.robot) if args.robot else Path(tempfile.mkdtemp(prefix="plan_mbm-")) / "robot.json"
+    cmd = [str(find_binary(args.sublevel_bin)), "robot", "fit", str(args.urdf), "--output", str(out)]
+    if args.srdf:
+        cmd += ["--srdf", str(args.srdf)]
+    for d in args.package_dir or [args.urdf.parent]:
+        cmd += ["--package-dir", str(d)]
+    print("fitting the robot (once; link meshes are cached): " + " ".join(cmd), flush=True)
+    subprocess.run(cmd, check=True)  # its progress goes to our stderr
+    return out
+
+
+@contextlib.contextmanager
+def served(args):
+    """The server's address: --addr, or with --serve a server started for the run."""
+    if not args.serve:
+        yield args.addr
+        return
+    binary = find_binary(args.sublevel_bin)
+    data = tempfile.mkdtemp(prefix="plan_mbm-store-")
+    proc = subprocess.Popen(
+        [str(binary), "serve", "--addr", "127.0.0.1:0", "--data-dir", data],
+        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL, text=True,
+    )
+    try:
+        addr = None
+        deadline = time.monotonic() + 60
+        while addr is None and time.monotonic() < deadline:
+            line = proc.stdout.readline()
+            if not line:
+                break
+            m = re.match(r"listening on (\S+)", line)
+            addr = m.group(1) if m else None
+        if addr is None:
+            raise RuntimeError(f"{binary} serve printed no `listening on` line")
+        print(f"server {binary} on {addr}", flush=True)
+        yield addr
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(timeout=15)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+        shutil.rmtree(data, ignore_errors=True)
+
+
+def median(v):
+    return statistics.median(v) if v else float("nan")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], epilog=__doc__.split("\n\n", 1)[1],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--urdf", type=Path, required=True, help="the robot's URDF")
+    ap.add_argument("--srdf", type=Path, help="its SRDF (disabled collision pairs)")
+    ap.add_argument("--package-dir", type=Path, action="append",
+                    help="where package://NAME/PATH meshes resolve as DIR/NAME/PATH (repeatable; default: the URDF's folder)")
+    ap.add_argument("--robot", help="the fitted robot file (sublevel robot fit); fitted into this path when it does not exist")
+    ap.add_argument("--problems", type=Path, required=True, help="MotionBenchMaker problems: a tar or a folder")
+    ap.add_argument("--scenarios", nargs="+", help="scenarios to plan (default: all)")
+    ap.add_argument("--limit", type=int, default=0, help="the first N problems of each scenario (default: all)")
+    ap.add_argument("--timeout", type=float, default=1.0, help="planning time limit per problem, seconds (default 1)")
+    ap.add_argument("--simplify-timeout", type=float, help="path simplification time limit, seconds (default: --timeout)")
+    ap.add_argument("--planner", default="RRTConnect", help="an OMPL geometric planner (default RRTConnect)")
+    ap.add_argument("--range", type=float, help="the planner's range (joint-space distance; default: OMPL's)")
+    ap.add_argument("--seed", type=int, default=1, help="OMPL's random seed (default 1)")
+    ap.add_argument("--checker", choices=("sublevel", "coal"), default="sublevel", help="collision checker (default sublevel)")
+    ap.add_argument("--addr", default="127.0.0.1:50051", help="the Sublevel server (default 127.0.0.1:50051)")
+    ap.add_argument("--serve", action="store_true", help="start a server (sublevel serve, a temporary store) for the run")
+    ap.add_argument("--sublevel-bin", help="the sublevel binary (default: PATH, else target/release or target/debug)")
+    ap.add_argument("--sublevel-motions", choices=("certified", "sampled"), default="certified",
+                    help="sublevel: motions by conservative advancement (default) or sampled at --resolution in one call")
+    ap.add_argument("--tolerance", type=float, default=1e-3, help="sublevel certified motions: contact tolerance, meters (default 0.001)")
+    ap.add_argument("--resolution", type=float, default=32.0,
+                    help="sampled motions: configurations per unit of joint-space distance (default 32, VAMP's)")
+    ap.add_argument("--peer-dir", type=Path, default=DEFAULT_PEER_DIR,
+                    help="the robots peer (coal_peer.py) for the coal checker (default ../shared/peers/robots)")
+    ap.add_argument("--mesh-reader", choices=("obj", "assimp"), default="obj",
+                    help="coal meshes from the OBJ files' own faces (default) or coal's assimp reading")
+    ap.add_argument("--verify", action="store_true", help="re-check every path on the meshes at --verify-step of end-effector travel")
+    ap.add_argument("--verify-step", type=float, default=1e-3, help="end-effector travel between verified states, meters (default 0.001)")
+    ap.add_argument("--ee", help="the end-effector link for --verify (default panda_hand, else the last link with geometry)")
+    ap.add_argument("--json", type=Path, help="write the problems, paths and figures here")
+    args = ap.parse_args(argv)
+
+    from ompl import util as ou
+
+    ou.setLogLevel(ou.LOG_ERROR)
+    ou.RNG.setSeed(args.seed)
+
+    urdf_text = args.urdf.read_text()
+    robot_name, joints = urdf_joints(args.urdf)
+    names = [j.name for j in joints]
+    problems = load_problems(args.problems, robot_name, args.scenarios, args.limit)
+    if not problems:
+        print(f"no problems in {args.problems}", file=sys.stderr)
+        return 2
+    package_dir = (args.package_dir or [args.urdf.parent])[0]
+    disabled = srdf_disabled(args.srdf)
+    peer = _peer(args.peer_dir) if (args.checker == "coal" or args.verify) else None
+    mesh = None
+    if args.checker == "coal" or args.verify:
+        mesh = MeshChecker(args.urdf, package_dir, names, disabled, peer, args.mesh_reader == "obj", args.resolution)
+    verifier = Verifier(mesh, args.ee, args.verify_step) if args.verify else None
+    print(
+        f"{len(problems)} problems, checker {args.checker}"
+        + (f" (motions {args.sublevel_motions})" if args.checker == "sublevel" else f" (motions sampled at {args.resolution:g}/rad)")
+        + f", {args.planner}, timeout {args.timeout:g} s"
+        + (f"; coal from {'the peer' if peer else 'the minimal loader'}, meshes read by {args.mesh_reader}" if mesh else "")
+        + (f"; verify at {args.verify_step * 1e3:g} mm of {verifier.ee}" if verifier else ""),
+        flush=True,
+    )
+
+    with contextlib.ExitStack() as stack:
+        if args.checker == "sublevel":
+            from sublevel_client import Client
+
+            addr = stack.enter_context(served(args))
+            client = stack.enter_context(Client(addr, timeout=600.0))
+            client.wait_ready(10.0)
+            robot_file = fitted_robot(args, urdf_text)
+            info = client.upload_robot(robot_file)
+            stack.callback(client.delete_robot, info.robot_id)
+            if set(info.joint_names) != set(names):
+                raise SystemExit(f"the fitted robot's joints {info.joint_names} are not the URDF's {names}")
+            print(f"robot {info.name} ({info.robot_id}) from {robot_file}: {info.dof} joints, {info.geometries} geometries, "
+                  f"{info.self_pairs} self pairs", flush=True)
+            checker = SublevelChecker(client, info.robot_id, names, args.sublevel_motions, args.resolution, args.tolerance)
+        else:
+            checker = mesh
+
+        results = []
+        header = f"{'scenario':<18} {'scene':<14} {'solved':<7} {'plan ms':>9} {'simplify ms':>11} {'states':>8} {'motions':>8}"
+        print(header + ("  verify" if verifier else ""), flush=True)
+        for p in problems:
+            plan_idx, start, goal = read_request(p.request, joints)
+            checker.set_scene(p)
+            if mesh is not None and mesh is not checker:
+                mesh.set_scene(p)
+            try:
+                before_s, before_m = checker.count.states, checker.count.motions
+                start_ok, goal_ok = checker.valid(start), checker.valid(goal)
+                if start_ok and goal_ok:
+                    solved, planning, simplify, path = plan_one(args, checker, joints, plan_idx, start, goal)
+                else:
+                    solved, planning, simplify, path = False, 0.0, 0.0, []
+                row = {
+                    "scenario": p.scenario,
+                    "scene": p.scene_name,
+                    "request": p.request_name,
+                    "valid_problem": bool(start_ok and goal_ok),
+                    "solved": solved,
+                    "planning_time_s": planning,
+                    "simplify_time_s": simplify,
+                    "states_checked": checker.count.states - before_s,
+                    "motions_checked": checker.count.motions - before_m,
+                    "path": [[float(v) for v in q] for q in path],
+                }
+                note = "" if row["valid_problem"] else "  (start or goal in collision)"
+                if verifier is not None and solved:
+                    n, hit = verifier.check_path(path)
+                    row["verify_states"] = n
+                    row["verify_collision"] = None if hit is None else {"edge": hit[0], "t": hit[1]}
+                    note = f"  {n} states, " + ("free" if hit is None else f"COLLIDES at edge {hit[0]} t={hit[1]:.6f}")
+            finally:
+                checker.clear_scene()
+                if mesh is not None and mesh is not checker:
+                    mesh.clear_scene()
+            results.append(row)
+            print(
+                f"{p.scenario:<18} {p.scene_name:<14} {str(solved):<7} {planning * 1e3:9.1f} {simplify * 1e3:11.1f} "
+                f"{row['states_checked']:8d} {row['motions_checked']:8d}{note}",
+                flush=True,
+            )
+
+    print()
+    used_range = getattr(args, "used_range", None)
+    print(f"checker {args.checker}" + (f" (motions {args.sublevel_motions})" if args.checker == "sublevel" else "")
+          + f", {args.planner}" + (f" (range {used_range:.3g})" if used_range else "")
+          + f", timeout {args.timeout:g} s, seed {args.seed}:")
+    cols = "| scenario | problems | valid | solved | solved % | median planning time (ms) | median states | median motions |"
+    sep = "|---|---|---|---|---|---|---|---|"
+    if verifier:
+        cols += " paths colliding at 1 mm |" if args.verify_step == 1e-3 else f" paths colliding at {args.verify_step * 1e3:g} mm |"
+        sep += "---|"
+    print(cols)
+    print(sep)
+    for s in sorted({r["scenario"] for r in results}) + ["all"]:
+        rs = [r for r in results if s in ("all", r["scenario"])]
+        valid = [r for r in rs if r["valid_problem"]]
+        solved = [r for r in valid if r["solved"]]
+        line = (
+            f"| {s} | {len(rs)} | {len(valid)} | {len(solved)} | {100.0 * len(solved) / max(len(valid), 1):.0f} | "
+            f"{median([r['planning_time_s'] * 1e3 for r in solved]):.1f} | "
+            f"{median([r['states_checked'] for r in solved]):.0f} | {median([r['motions_checked'] for r in solved]):.0f} |"
+        )
+        if verifier:
+            line += f" {sum(r.get('verify_collision') is not None for r in solved)} of {len(solved)} |"
+        print(line)
+
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        with open(args.json, "w") as f:
+            json.dump({"joint_names": names, "checker": args.checker, "planner": args.planner,
+                       "range": used_range, "timeout_s": args.timeout, "problems": results}, f, indent=1)
+        print(f"wrote {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    code = main()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    # OMPL's nanobind module reports leaked bindings at interpreter exit; skip that noise.
+    os._exit(code)
