@@ -180,6 +180,17 @@ async fn robot_requests_name_their_fields_and_robots_survive_a_restart() {
         Code::InvalidArgument,
         "robot_file.geometries[0].link",
     );
+    // A mesh vertex outside its root body would make the sos bound unsound: refused.
+    let mut outside: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(data("panda/panda.robot.json")).unwrap()).unwrap();
+    let k = outside["geometries"].as_array().unwrap().iter().position(|g| g.get("mesh").is_some()).unwrap();
+    outside["geometries"][k]["mesh"]["vertices"][0] = serde_json::json!([3.0, 3.0, 3.0]);
+    assert_status(
+        c.upload_robot(pb::UploadRobotRequest { name: String::new(), robot_file: outside.to_string().into_bytes() })
+            .await,
+        Code::InvalidArgument,
+        &format!("robot_file.geometries[{k}].compound.nodes["),
+    );
     let mut req = check(&JOINTS, &zero);
     req.robot_id = "r-0000000000000000".into();
     assert_status(c.check_configurations(req).await, Code::NotFound, "robot");

@@ -200,7 +200,7 @@ fn box_gap(a: &PlacedBox, b: &PlacedBox) -> Real {
 fn root_shape(s: &LinkShape) -> ShapeRef<'_> {
     match s {
         LinkShape::Primitive(p) => ShapeRef::Primitive(p),
-        LinkShape::Mesh { body, .. } => ShapeRef::Body(body.body(body.root())),
+        LinkShape::Mesh { body, .. } => ShapeRef::Body(body),
     }
 }
 

@@ -59,8 +59,7 @@ fn the_fit_keeps_primitives_exact_and_every_mesh_vertex_inside_its_body() {
     assert_eq!(robot.file.report.fitted, 2, "two scales of one mesh: two fits");
     assert!(matches!(robot.geometries[1].shape, LinkShape::Primitive(Primitive::Box { .. })));
     for g in &robot.geometries {
-        if let LinkShape::Mesh { body, vertices, .. } = &g.shape {
-            let root = body.body(body.root());
+        if let LinkShape::Mesh { body: root, vertices, .. } = &g.shape {
             for v in vertices {
                 assert!(root.value_at(v) <= 1.0 + 1e-9, "{}: vertex {v} outside the root body", g.name);
             }
