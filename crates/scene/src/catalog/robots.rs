@@ -94,6 +94,12 @@ impl Catalog {
         Err(Error::not_found("robot", id))
     }
 
+    /// Whether the catalog's store is shared by several replicas (PostgreSQL): then a robot,
+    /// scene or body may have to be loaded from the database on first use.
+    pub fn shared_store(&self) -> bool {
+        self.store.shared()
+    }
+
     /// Every robot, ordered by id.
     pub fn robots(&self) -> Vec<Arc<RobotEntry>> {
         read(&self.robots).values().cloned().collect()

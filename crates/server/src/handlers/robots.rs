@@ -13,8 +13,9 @@ use crate::pb;
 use crate::runtime::blocking;
 use crate::{Error, Result};
 use futures_util::future::try_join_all;
+use std::ops::Range;
 use std::sync::Arc;
-use sublevel_core::math::Isometry3;
+use sublevel_core::math::{Isometry3, Real};
 use sublevel_robot::srdf::Semantics;
 use sublevel_robot::{CheckOptions, CollisionGeometry, MotionChecker, RobotChecker, RobotFitSettings, RobotModel};
 use sublevel_scene::{RobotEntry, RobotWorld};
@@ -22,6 +23,11 @@ use tonic::{Request, Response};
 
 /// Fewest configurations worth a chunk of their own (a configuration takes 5–200 µs).
 const MIN_CHUNK: usize = 32;
+
+/// Most configurations whose verdicts (no distance) are answered inline on the async worker
+/// (tens of µs each, as small query requests are), saving the two hand-offs to the blocking pool
+/// that would cost more than the check.
+const INLINE_CONFIGURATIONS: usize = 4;
 
 /// `StartRobotFitJob`: validates the URDF, the SRDF and the meshes (every mesh the URDF names is
 /// sent, under a safe name), then starts the fit as a job.
@@ -155,8 +161,14 @@ struct Setting {
     base: Isometry3,
 }
 
-/// Reads a check's robot, scene (empty: no world) and base (off the async workers: the robot or
-/// the scene may load from a shared store).
+/// Whether the robot and the scene of a check read from memory alone: no shared store (which may
+/// load them from the database) and every stored body built (a first use builds it).
+fn in_memory(svc: &SublevelService) -> bool {
+    !svc.catalog.shared_store() && svc.catalog.bodies_pending() == 0
+}
+
+/// Reads a check's robot, scene (empty: no world) and base: inline when they are in memory
+/// ([`in_memory`]), else off the async workers.
 async fn setting(
     svc: &SublevelService,
     robot_id: String,
@@ -165,7 +177,7 @@ async fn setting(
 ) -> Result<Setting, tonic::Status> {
     let base = cv::pose_from_proto("base", base.as_ref()).map_err(cv::to_status)?;
     let catalog = svc.catalog.clone();
-    blocking(move || {
+    let read = move || {
         let entry = catalog.robot(require_id("robot_id", &robot_id)?)?;
         let world = if scene_id.is_empty() {
             RobotWorld { objects: Vec::new(), planning: Arc::default() }
@@ -173,8 +185,12 @@ async fn setting(
             catalog.robot_world(require_id("scene_id", &scene_id)?)?
         };
         Ok(Setting { entry, world: Arc::new(world), base })
-    })
-    .await
+    };
+    if in_memory(svc) {
+        read().map_err(cv::to_status)
+    } else {
+        blocking(read).await
+    }
 }
 
 /// Splits `0..n` into balanced chunks for the batch slots: at most one per slot, and none under
@@ -205,21 +221,28 @@ pub(super) async fn check_configurations(
         self_collision: !req.skip_self,
         gradient: req.gradient,
     };
-    let work = chunks(configs.len(), svc.config.batch_workers).into_iter().map(|range| {
-        let (entry, world, configs) = (entry.clone(), world.clone(), configs.clone());
-        svc.pools.batch.run(move || {
-            let allowed = world.planning.allowed_override();
-            let mut checker = RobotChecker::new(&entry.robot, world.objects.clone(), &allowed)?;
-            range
-                .map(|c| {
-                    checker
-                        .check(&configs[c], &base, &options)
-                        .map_err(|e| cv::prefix_field(e, &format!("configurations[{c}]")))
-                })
-                .collect::<Result<Vec<_>>>()
-        })
-    });
-    let answers = try_join_all(work).await?;
+    let check = move |entry: &RobotEntry, world: &RobotWorld, configs: &[Vec<Real>], range: Range<usize>| {
+        let allowed = world.planning.allowed_override();
+        let mut checker = RobotChecker::new(&entry.robot, world.objects.clone(), &allowed)?;
+        range
+            .map(|c| {
+                checker
+                    .check(&configs[c], &base, &options)
+                    .map_err(|e| cv::prefix_field(e, &format!("configurations[{c}]")))
+            })
+            .collect::<Result<Vec<_>>>()
+    };
+    // A few verdicts are microseconds: answered inline, as small query requests are; the rest
+    // (distances reach the meshes' distance searches) in chunks on the batch slots.
+    let answers = if configs.len() <= INLINE_CONFIGURATIONS && !options.distance && in_memory(svc) {
+        vec![check(&entry, &world, &configs, 0..configs.len())?]
+    } else {
+        let work = chunks(configs.len(), svc.config.batch_workers).into_iter().map(|range| {
+            let (entry, world, configs) = (entry.clone(), world.clone(), configs.clone());
+            svc.pools.batch.run(move || check(&entry, &world, &configs, range))
+        });
+        try_join_all(work).await?
+    };
     let mut out = pb::CheckConfigurationsResponse {
         joint_names: entry.robot.model.variable_names().iter().map(|s| (*s).to_owned()).collect(),
         ..Default::default()
