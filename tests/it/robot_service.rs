@@ -118,6 +118,42 @@ async fn configurations_and_motions_over_grpc_agree_with_the_mesh_labels_and_the
     }
     assert!(colliding > 10 && free > 100, "{colliding} colliding, {free} free");
 
+    // A grasped ball on the hand: the answers of the library's `attach`, bit for bit.
+    let ball = pb::AttachedObject {
+        link: "panda_hand".into(),
+        name: "ball".into(),
+        primitive: Some(pb::Primitive { kind: pb::PrimitiveKind::Sphere as i32, radius: 0.05, ..Default::default() }),
+        origin: Some(crate::util::at([0.0, 0.0, 0.15])),
+    };
+    let req = pb::CheckConfigurationsRequest {
+        robot_id: summary.robot_id.clone(),
+        scene_id: scene_id.clone(),
+        configurations: columns(&JOINTS, &q),
+        distance: true,
+        attached: vec![ball],
+        ..Default::default()
+    };
+    let held = c.check_configurations(req).await.unwrap().into_inner();
+    let mut holding = robot.clone();
+    holding
+        .attach(
+            "panda_hand",
+            "ball",
+            sublevel::Primitive::Sphere { radius: 0.05 },
+            sublevel::math::Isometry3::translation(0.0, 0.0, 0.15),
+        )
+        .unwrap();
+    let (world_objects_again, _) = world_objects(&scene).unwrap();
+    let mut with_ball = RobotChecker::new(&holding, world_objects_again, &allowed).unwrap();
+    let mut touched = 0;
+    for (i, q) in q.iter().enumerate() {
+        let a = with_ball.check(q, &base, &CheckOptions::default()).unwrap();
+        assert_eq!((held.collides[i], held.distance[i].to_bits()), (a.collides, a.distance.to_bits()), "{i}");
+        assert!(held.distance[i] <= got.distance[i], "{i}: holding more cannot be farther");
+        touched += usize::from(held.robot_geometry[i] == "ball");
+    }
+    assert!(touched > 0, "the ball is the closest geometry somewhere");
+
     // The start–goal motion of the scene's request: invalid exactly when a labelled configuration
     // on its line collides, as the in-process motion checker answers.
     let request = MotionPlanRequest::from_yaml(
@@ -209,6 +245,14 @@ async fn robot_requests_name_their_fields_and_robots_survive_a_restart() {
         Code::InvalidArgument,
         "configurations.values[2]",
     );
+    let mut req = check(&JOINTS, &zero);
+    req.attached = vec![pb::AttachedObject {
+        link: "panda_tail".into(),
+        name: "x".into(),
+        primitive: Some(pb::Primitive { kind: pb::PrimitiveKind::Sphere as i32, radius: 0.1, ..Default::default() }),
+        origin: None,
+    }];
+    assert_status(c.check_configurations(req).await, Code::InvalidArgument, "attached[0].link");
     let mut req = check(&JOINTS, &zero);
     req.padding = -1.0;
     assert_status(c.check_configurations(req).await, Code::InvalidArgument, "padding");

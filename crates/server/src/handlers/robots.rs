@@ -17,7 +17,9 @@ use std::ops::Range;
 use std::sync::Arc;
 use sublevel_core::math::{Isometry3, Real};
 use sublevel_robot::srdf::Semantics;
-use sublevel_robot::{CheckOptions, CollisionGeometry, MotionChecker, RobotChecker, RobotFitSettings, RobotModel};
+use sublevel_robot::{
+    CheckOptions, CollisionGeometry, FittedRobot, MotionChecker, RobotChecker, RobotFitSettings, RobotModel,
+};
 use sublevel_scene::{RobotEntry, RobotWorld};
 use tonic::{Request, Response};
 
@@ -156,9 +158,31 @@ pub(super) async fn delete_robot(
 
 /// The robot, the world and the base pose of a check request.
 struct Setting {
-    entry: Arc<RobotEntry>,
+    /// The robot, with the request's attached objects (a copy of the stored robot when there
+    /// are any: its meshes' BVHs shared, its vertices copied).
+    robot: Arc<FittedRobot>,
     world: Arc<RobotWorld>,
     base: Isometry3,
+}
+
+/// The stored robot with `attached` objects added (the stored one itself when there are none).
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `attached[k]` and its field.
+fn with_attached(entry: &RobotEntry, attached: &[pb::AttachedObject]) -> Result<Arc<FittedRobot>> {
+    if attached.is_empty() {
+        return Ok(entry.robot.clone());
+    }
+    let mut robot = (*entry.robot).clone();
+    for (k, a) in attached.iter().enumerate() {
+        let field = format!("attached[{k}]");
+        let primitive = a.primitive.as_ref().ok_or_else(|| Error::invalid(format!("{field}.primitive"), "required"))?;
+        let primitive = cv::primitive_from_proto(primitive, &format!("{field}.primitive"))?;
+        let origin = cv::pose_from_proto(&format!("{field}.origin"), a.origin.as_ref())?;
+        let name = if a.name.is_empty() { format!("attached#{k}") } else { a.name.clone() };
+        robot.attach(&a.link, &name, primitive, origin).map_err(|e| cv::prefix_field(e, &field))?;
+    }
+    Ok(Arc::new(robot))
 }
 
 /// Whether the robot and the scene of a check read from memory alone: no shared store (which may
@@ -174,6 +198,7 @@ async fn setting(
     robot_id: String,
     scene_id: String,
     base: Option<pb::Pose>,
+    attached: Vec<pb::AttachedObject>,
 ) -> Result<Setting, tonic::Status> {
     let base = cv::pose_from_proto("base", base.as_ref()).map_err(cv::to_status)?;
     let catalog = svc.catalog.clone();
@@ -184,7 +209,7 @@ async fn setting(
         } else {
             catalog.robot_world(require_id("scene_id", &scene_id)?)?
         };
-        Ok(Setting { entry, world: Arc::new(world), base })
+        Ok(Setting { robot: with_attached(&entry, &attached)?, world: Arc::new(world), base })
     };
     if in_memory(svc) {
         read().map_err(cv::to_status)
@@ -208,11 +233,11 @@ pub(super) async fn check_configurations(
 ) -> Handled<pb::CheckConfigurationsResponse> {
     let req = request.into_inner();
     let padding = cv::padding(req.padding)?;
-    let Setting { entry, world, base } = setting(svc, req.robot_id, req.scene_id, req.base).await?;
+    let Setting { robot, world, base } = setting(svc, req.robot_id, req.scene_id, req.base, req.attached).await?;
     let configs = Arc::new(cv::configurations_from_proto(
         "configurations",
         req.configurations.as_ref(),
-        &entry.robot,
+        &robot,
         &world.planning.joint_positions,
     )?);
     let options = CheckOptions {
@@ -221,9 +246,9 @@ pub(super) async fn check_configurations(
         self_collision: !req.skip_self,
         gradient: req.gradient,
     };
-    let check = move |entry: &RobotEntry, world: &RobotWorld, configs: &[Vec<Real>], range: Range<usize>| {
+    let check = move |robot: &FittedRobot, world: &RobotWorld, configs: &[Vec<Real>], range: Range<usize>| {
         let allowed = world.planning.allowed_override();
-        let mut checker = RobotChecker::new(&entry.robot, world.objects.clone(), &allowed)?;
+        let mut checker = RobotChecker::new(robot, world.objects.clone(), &allowed)?;
         range
             .map(|c| {
                 checker
@@ -235,20 +260,20 @@ pub(super) async fn check_configurations(
     // A few verdicts are microseconds: answered inline, as small query requests are; the rest
     // (distances reach the meshes' distance searches) in chunks on the batch slots.
     let answers = if configs.len() <= INLINE_CONFIGURATIONS && !options.distance && in_memory(svc) {
-        vec![check(&entry, &world, &configs, 0..configs.len())?]
+        vec![check(&robot, &world, &configs, 0..configs.len())?]
     } else {
         let work = chunks(configs.len(), svc.config.batch_workers).into_iter().map(|range| {
-            let (entry, world, configs) = (entry.clone(), world.clone(), configs.clone());
-            svc.pools.batch.run(move || check(&entry, &world, &configs, range))
+            let (robot, world, configs) = (robot.clone(), world.clone(), configs.clone());
+            svc.pools.batch.run(move || check(&robot, &world, &configs, range))
         });
         try_join_all(work).await?
     };
     let mut out = pb::CheckConfigurationsResponse {
-        joint_names: entry.robot.model.variable_names().iter().map(|s| (*s).to_owned()).collect(),
+        joint_names: robot.model.variable_names().iter().map(|s| (*s).to_owned()).collect(),
         ..Default::default()
     };
     for chunk in &answers {
-        cv::push_configuration_answers(&mut out, chunk, &entry.robot, &world.objects, req.gradient);
+        cv::push_configuration_answers(&mut out, chunk, &robot, &world.objects, req.gradient);
     }
     Ok(Response::new(out))
 }
@@ -261,10 +286,10 @@ pub(super) async fn check_motions(
 ) -> Handled<pb::CheckMotionsResponse> {
     let req = request.into_inner();
     let options = cv::motion_options(req.padding, req.tolerance, req.max_steps)?;
-    let Setting { entry, world, base } = setting(svc, req.robot_id, req.scene_id, req.base).await?;
+    let Setting { robot, world, base } = setting(svc, req.robot_id, req.scene_id, req.base, req.attached).await?;
     let defaults = &world.planning.joint_positions;
-    let start = cv::configurations_from_proto("start", req.start.as_ref(), &entry.robot, defaults)?;
-    let end = cv::configurations_from_proto("end", req.end.as_ref(), &entry.robot, defaults)?;
+    let start = cv::configurations_from_proto("start", req.start.as_ref(), &robot, defaults)?;
+    let end = cv::configurations_from_proto("end", req.end.as_ref(), &robot, defaults)?;
     if start.len() != end.len() {
         return Err(Error::invalid(
             "end.values",
@@ -274,10 +299,10 @@ pub(super) async fn check_motions(
     }
     let motions = Arc::new((start, end));
     let work = chunks(motions.0.len(), svc.config.batch_workers).into_iter().map(|range| {
-        let (entry, world, motions) = (entry.clone(), world.clone(), motions.clone());
+        let (robot, world, motions) = (robot.clone(), world.clone(), motions.clone());
         svc.pools.batch.run(move || {
             let allowed = world.planning.allowed_override();
-            let mut checker = RobotChecker::new(&entry.robot, world.objects.clone(), &allowed)?;
+            let mut checker = RobotChecker::new(&robot, world.objects.clone(), &allowed)?;
             let mut motion = MotionChecker::new(&mut checker)?;
             range
                 .map(|m| {
@@ -290,11 +315,11 @@ pub(super) async fn check_motions(
     });
     let answers = try_join_all(work).await?;
     let mut out = pb::CheckMotionsResponse {
-        joint_names: entry.robot.model.variable_names().iter().map(|s| (*s).to_owned()).collect(),
+        joint_names: robot.model.variable_names().iter().map(|s| (*s).to_owned()).collect(),
         ..Default::default()
     };
     for chunk in &answers {
-        cv::push_motion_answers(&mut out, chunk, &entry.robot, &world.objects);
+        cv::push_motion_answers(&mut out, chunk, &robot, &world.objects);
     }
     Ok(Response::new(out))
 }
