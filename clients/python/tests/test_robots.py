@@ -217,6 +217,24 @@ def test_a_robot_of_spheres_answers_closed_forms(client, slider):
     assert not client.check_configurations(info.robot_id, [0.0, 0.0], padding=gap + 1e-6, self_collision=False).collides[0]
 
 
+def test_an_attached_ball_moves_with_its_link(client, slider):
+    info, scene, objects = slider
+    # A tool ball of radius 0.03 held 0.2 m beyond the arm's ball, along the arm: at slide 0.9 and
+    # swing 0 its center is at x = 1.6, 0.4 − 0.03 − RO = 0.17 m from the obstacle ball, closer
+    # than the carriage to the floor (0.4) or the arm's ball to the obstacle (0.35).
+    tool = {"link": "arm", "name": "tool", "kind": "sphere", "radius": 0.03, "origin": Pose(t=[ARM + 0.2, 0, 0])}
+    r = client.check_configurations(info.robot_id, [0.9, 0.0], scene=scene, distance=True, attached=[tool])
+    assert abs(r.distance[0] - 0.17) <= 1e-9
+    assert (r.robot_link[0], r.robot_geometry[0], objects[r.world_object[0]]) == ("arm", "tool", "ball")
+    np.testing.assert_allclose(r.witnesses[0, 0], [1.63, 0.0, 0.0], atol=1e-9)
+    # Without it, the closed form of the bare robot.
+    bare = client.check_configurations(info.robot_id, [0.9, 0.0], scene=scene, distance=True)
+    assert abs(bare.distance[0] - slider_closest([0.9, 0.0])[0]) <= 1e-9
+    with pytest.raises(SublevelError) as e:
+        client.check_configurations(info.robot_id, [0.9, 0.0], scene=scene, attached=[{**tool, "link": "nope"}])
+    assert e.value.code == grpc.StatusCode.INVALID_ARGUMENT and "attached[0].link" in e.value.field
+
+
 def test_motions_of_the_sphere_robot_stop_at_the_closed_form_contact(client, slider):
     info, scene, objects = slider
     tol = 1e-3

@@ -404,29 +404,7 @@ class Client:
         >>> table = c.upload_primitive("box", size=(1.2, 0.8, 0.04))   # doctest: +SKIP
         >>> floor = c.upload_primitive("halfspace", normal=(0, 0, 1), offset=0.0)  # doctest: +SKIP
         """
-        kinds = {
-            "box": pb.PRIMITIVE_KIND_BOX,
-            "sphere": pb.PRIMITIVE_KIND_SPHERE,
-            "cylinder": pb.PRIMITIVE_KIND_CYLINDER,
-            "capsule": pb.PRIMITIVE_KIND_CAPSULE,
-            "halfspace": pb.PRIMITIVE_KIND_HALFSPACE,
-        }
-        if kind not in kinds:
-            raise ValueError(f"`kind`: one of {', '.join(kinds)}, got {kind!r}")
-        p = pb.Primitive(kind=kinds[kind])
-        if size is not None:
-            p.size.extend(float(x) for x in size)
-        if radius is not None:
-            p.radius = float(radius)
-        if height is not None:
-            p.height = float(height)
-        if normal is not None:
-            n = [float(x) for x in normal]
-            if len(n) != 3:
-                raise ValueError(f"`normal`: expected 3 numbers, got {len(n)}")
-            p.normal.CopyFrom(pb.Vec3(x=n[0], y=n[1], z=n[2]))
-        if offset is not None:
-            p.offset = float(offset)
+        p = _primitive_pb(kind, size=size, radius=radius, height=height, normal=normal, offset=offset)
         req = pb.UploadBodyRequest(name=kind if name is None else name, primitive=p)
         return self._call("UploadBody", req).body_id
 
@@ -594,6 +572,7 @@ class Client:
         distance: bool = False,
         self_collision: bool = True,
         gradient: bool = False,
+        attached: Optional[Sequence[dict]] = None,
     ) -> ConfigurationColumns:
         """Checks joint configurations of a stored robot among a scene's primitives, in columns.
 
@@ -616,6 +595,9 @@ class Client:
                 (else the world pairs stop at the first collision).
             self_collision: check the robot's self pairs (False skips them).
             gradient: also compute the distance's joint-space gradient (implies ``distance``).
+            attached: objects grasped for this call, each a dict ``{"link", "name", "kind",
+                "size" / "radius" / "height", "origin"}`` (an exact primitive at ``origin`` in the
+                link's frame, meters): it moves with the link and is checked like it.
 
         Returns :class:`ConfigurationColumns` (numpy columns of N rows). Raises ValueError naming
         the argument when ``q``, ``joint_names`` or ``base`` is malformed (nothing is sent), and
@@ -634,6 +616,7 @@ class Client:
             distance=bool(distance or gradient),
             skip_self=not self_collision,
             gradient=bool(gradient),
+            attached=_attached_pb(attached),
         )
         if base is not None:
             req.base.CopyFrom(_pose_pb(base, "base"))
@@ -969,3 +952,49 @@ class PlannerStream:
         if not states:
             return []
         return self.request(poses=poses, queries=queries, states=states).states
+
+
+def _primitive_pb(kind: str, *, size=None, radius=None, height=None, normal=None, offset=None) -> "pb.Primitive":
+    """A ``Primitive`` message (see :meth:`Client.upload_primitive` for the kinds and dimensions).
+    Raises ValueError for an unknown kind or a normal that is not 3 numbers."""
+    kinds = {
+        "box": pb.PRIMITIVE_KIND_BOX,
+        "sphere": pb.PRIMITIVE_KIND_SPHERE,
+        "cylinder": pb.PRIMITIVE_KIND_CYLINDER,
+        "capsule": pb.PRIMITIVE_KIND_CAPSULE,
+        "halfspace": pb.PRIMITIVE_KIND_HALFSPACE,
+    }
+    if kind not in kinds:
+        raise ValueError(f"`kind`: one of {', '.join(kinds)}, got {kind!r}")
+    p = pb.Primitive(kind=kinds[kind])
+    if size is not None:
+        p.size.extend(float(x) for x in size)
+    if radius is not None:
+        p.radius = float(radius)
+    if height is not None:
+        p.height = float(height)
+    if normal is not None:
+        n = [float(x) for x in normal]
+        if len(n) != 3:
+            raise ValueError(f"`normal`: expected 3 numbers, got {len(n)}")
+        p.normal.CopyFrom(pb.Vec3(x=n[0], y=n[1], z=n[2]))
+    if offset is not None:
+        p.offset = float(offset)
+    return p
+
+
+def _attached_pb(attached) -> List["pb.AttachedObject"]:
+    """``AttachedObject`` messages from dicts ``{"link", "name", "kind", size / radius / height,
+    "origin"}`` (origin: a pose as ``base`` takes it, default identity). Raises ValueError naming
+    ``attached[k]``."""
+    out = []
+    for k, a in enumerate(attached or ()):
+        if not isinstance(a, dict) or "link" not in a or "kind" not in a:
+            raise ValueError(f"`attached[{k}]`: a dict with `link`, `kind` and its dimensions")
+        dims = {d: a[d] for d in ("size", "radius", "height") if d in a}
+        msg = pb.AttachedObject(link=str(a["link"]), name=str(a.get("name", "")),
+                                primitive=_primitive_pb(a["kind"], **dims))
+        if a.get("origin") is not None:
+            msg.origin.CopyFrom(_pose_pb(a["origin"], f"attached[{k}].origin"))
+        out.append(msg)
+    return out
