@@ -54,8 +54,8 @@ pub struct OpsArgs {
     /// Log format on stderr: `text` or `json` (one object per line, with the RPC span's `request_id`).
     #[arg(long, env = "SUBLEVEL_LOG_FORMAT", value_enum, default_value_t = LogFormat::Text)]
     pub log_format: LogFormat,
-    /// Largest response, and largest request of UploadBody / StartFitJob / StartGroupJob, in bytes
-    /// (larger ones are OUT_OF_RANGE).
+    /// Largest response, and largest request of the uploads (UploadBody, StartFitJob, StartGroupJob,
+    /// ImportScene, UploadRobot, StartRobotFitJob), in bytes (larger ones are OUT_OF_RANGE).
     #[arg(long, env = "SUBLEVEL_MAX_MESSAGE_BYTES", default_value_t = defaults().max_message_bytes)]
     pub max_message_bytes: usize,
     /// Largest request message of every other method, in bytes (larger ones are OUT_OF_RANGE

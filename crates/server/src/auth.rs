@@ -145,6 +145,10 @@ const READ_METHODS: &[&str] = &[
     "Query",
     "QueryStream",
     "CheckScene",
+    "GetRobot",
+    "ListRobots",
+    "CheckConfigurations",
+    "CheckMotions",
 ];
 
 /// The role a request path needs: None for health and reflection (always open), Read for the
@@ -271,7 +275,18 @@ mod tests {
     fn methods_map_to_roles() {
         assert_eq!(method_role("/grpc.health.v1.Health/Check"), None);
         assert_eq!(method_role("/grpc.reflection.v1.ServerReflection/ServerReflectionInfo"), None);
-        for read in ["Distance", "QueryStream", "ListBodies", "GetFitJob", "WatchFitJob", "CheckScene"] {
+        for read in [
+            "Distance",
+            "QueryStream",
+            "ListBodies",
+            "GetFitJob",
+            "WatchFitJob",
+            "CheckScene",
+            "GetRobot",
+            "ListRobots",
+            "CheckConfigurations",
+            "CheckMotions",
+        ] {
             assert_eq!(method_role(&format!("/sublevel.v1.Sublevel/{read}")), Some(Role::Read), "{read}");
         }
         for write in [
@@ -285,6 +300,9 @@ mod tests {
             "StartFitJob",
             "StartGroupJob",
             "CancelFitJob",
+            "StartRobotFitJob",
+            "UploadRobot",
+            "DeleteRobot",
             "SomethingNew",
         ] {
             assert_eq!(method_role(&format!("/sublevel.v1.Sublevel/{write}")), Some(Role::Admin), "{write}");

@@ -133,7 +133,7 @@ pub struct ServerConfig {
     /// `postgres`; see `deploy/SCALING.md`); `None` keeps the embedded redb store in `data_dir`.
     pub store_url: Option<String>,
     /// Largest encoded response, and largest request of the uploads (`UploadBody`,
-    /// `StartFitJob`, `StartGroupJob`), in bytes; other requests are limited by
+    /// `StartFitJob`, `StartGroupJob`, `ImportScene`, `UploadRobot`, `StartRobotFitJob`), in bytes; other requests are limited by
     /// [`admission::AdmissionSettings::max_request_bytes`]. Larger messages are OUT_OF_RANGE
     /// before a handler runs.
     pub max_message_bytes: usize,

@@ -3,7 +3,8 @@
 //! bytes) until it is complete and only then hands it to tonic.
 //!
 //! - A length over the method's limit is OUT_OF_RANGE before any byte is buffered: uploads
-//!   (`UploadBody`, `StartFitJob`, `StartGroupJob`, `ImportScene`) may send [`crate::ServerConfig::max_message_bytes`],
+//!   (`UploadBody`, `StartFitJob`, `StartGroupJob`, `ImportScene`, `UploadRobot`,
+//!   `StartRobotFitJob`) may send [`crate::ServerConfig::max_message_bytes`],
 //!   every other method [`super::AdmissionSettings::max_request_bytes`].
 //! - Bytes held (received, message not yet complete) are charged as they arrive to the
 //!   connection's budget and to the server's, and released when the message is handed on or the
@@ -38,11 +39,13 @@ pub const SMALL_MESSAGE_BYTES: usize = 64 << 10;
 const PREFIX: usize = 5;
 
 /// The methods whose requests may be as large as [`crate::ServerConfig::max_message_bytes`].
-const UPLOADS: [&str; 4] = [
+const UPLOADS: [&str; 6] = [
     "/sublevel.v1.Sublevel/UploadBody",
     "/sublevel.v1.Sublevel/StartFitJob",
     "/sublevel.v1.Sublevel/StartGroupJob",
     "/sublevel.v1.Sublevel/ImportScene",
+    "/sublevel.v1.Sublevel/UploadRobot",
+    "/sublevel.v1.Sublevel/StartRobotFitJob",
 ];
 
 type BoxError = Box<dyn std::error::Error + Send + Sync>;
