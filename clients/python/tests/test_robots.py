@@ -235,6 +235,29 @@ def test_an_attached_ball_moves_with_its_link(client, slider):
     assert e.value.code == grpc.StatusCode.INVALID_ARGUMENT and "attached[0].link" in e.value.field
 
 
+def test_link_padding_inflates_one_link(client, slider):
+    info, scene, objects = slider
+    # At slide 1.5, swing π the carriage is 0.2 m from the ball (the arm farther): its padding
+    # decides, the arm's does not; a motion stops where the padded carriage reaches the ball.
+    q = [1.5, math.pi]
+    d0 = slider_closest(q)[0]
+    for pad, collides in ((d0 - 1e-6, False), (d0 + 1e-6, True)):
+        r = client.check_configurations(info.robot_id, q, scene=scene, self_collision=False,
+                                        link_padding={"carriage": pad})
+        assert bool(r.collides[0]) == collides
+    r = client.check_configurations(info.robot_id, q, scene=scene, self_collision=False, distance=True,
+                                    link_padding={"arm": d0 + 1e-6})
+    assert not r.collides[0] and abs(r.distance[0] - d0) <= 1e-9
+    # Sliding the carriage (swing π, arm behind) towards the ball from 0: with 0.1 m of padding the
+    # contact is where the carriage is 0.1 m away, slide = 2 − RO − RC − 0.1 = 1.6.
+    m = client.check_motions(info.robot_id, [0.0, math.pi], [2.0, math.pi], scene=scene, tolerance=1e-6,
+                             link_padding={"carriage": 0.1})
+    assert not m.valid[0] and abs(m.contact_t[0] * 2.0 - 1.6) <= 1e-5
+    with pytest.raises(SublevelError) as e:
+        client.check_configurations(info.robot_id, q, scene=scene, link_padding={"nope": 0.1})
+    assert e.value.code == grpc.StatusCode.INVALID_ARGUMENT and "link_padding[nope]" in e.value.field
+
+
 def test_motions_of_the_sphere_robot_stop_at_the_closed_form_contact(client, slider):
     info, scene, objects = slider
     tol = 1e-3

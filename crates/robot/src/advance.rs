@@ -280,10 +280,13 @@ impl<'c, 'r> MotionChecker<'c, 'r> {
     }
 
     /// A pair's bound at `level` ([`RobotChecker::world_bound`], [`RobotChecker::self_bound`]).
+    /// Less the pair's link padding ([`RobotChecker::set_link_padding`]): a lower bound of the
+    /// distance of the padded shapes, compared with the options' padding like any bound.
     fn bound(&self, pair: (usize, Option<usize>), level: u8) -> Result<(Real, bool)> {
-        match pair {
-            (g, Some(o)) => self.checker.world_bound(g, o, level),
-            (k, None) => self.checker.self_bound(k, level),
-        }
+        let ((bound, exact), extra) = match pair {
+            (g, Some(o)) => (self.checker.world_bound(g, o, level)?, self.checker.world_extra(g)),
+            (k, None) => (self.checker.self_bound(k, level)?, self.checker.self_extra(k)),
+        };
+        Ok((bound - extra, exact))
     }
 }

@@ -231,6 +231,10 @@ pub struct RobotChecker<'r> {
     centers: Vec<Vector3>,
     boxes: Vec<Option<PlacedBox>>,
     order: Vec<(Real, usize, usize)>,
+    /// Extra padding per geometry (meters, ≥ 0): its link's ([`RobotChecker::set_link_padding`]).
+    pad: Vec<Real>,
+    /// The largest entry of `pad` (0 with none).
+    pad_max: Real,
 }
 
 impl<'r> RobotChecker<'r> {
@@ -305,7 +309,50 @@ impl<'r> RobotChecker<'r> {
             centers: Vec::new(),
             boxes: Vec::new(),
             order: Vec::new(),
+            pad: vec![0.0; robot.geometries.len()],
+            pad_max: 0.0,
         })
+    }
+
+    /// Sets per-link padding, as MoveIt's link padding: `padding[k] = (link, meters ≥ 0)` inflates
+    /// every geometry of that link (attached objects included) for the checks that follow, on top of
+    /// [`CheckOptions::padding`]. A world pair then collides within `padding + p(link)`, a self pair
+    /// within `padding + p(a) + p(b)`; distances stay the unpadded ones. Links not listed get 0;
+    /// each call replaces the previous padding.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `link_padding[LINK]` for a link the robot lacks or a
+    /// padding that is negative or not finite (nothing changes then).
+    pub fn set_link_padding(&mut self, padding: &[(String, Real)]) -> Result<()> {
+        let robot = self.robot;
+        let mut pad = vec![0.0; robot.geometries.len()];
+        for (link, p) in padding {
+            let field = || format!("link_padding[{}]", sublevel_core::error::clip(link));
+            let index =
+                robot.model.link_index(link).ok_or_else(|| Error::invalid(field(), "is not a link of the robot"))?;
+            if !(p.is_finite() && *p >= 0.0) {
+                return Err(Error::invalid(field(), format!("must be finite and ≥ 0 m, got {p}")));
+            }
+            for (g, geometry) in robot.geometries.iter().enumerate() {
+                if geometry.link == index {
+                    pad[g] = *p;
+                }
+            }
+        }
+        self.pad_max = pad.iter().copied().fold(0.0, Real::max);
+        self.pad = pad;
+        Ok(())
+    }
+
+    /// The link padding of robot geometry `g` (meters).
+    pub(crate) fn world_extra(&self, g: usize) -> Real {
+        self.pad[g]
+    }
+
+    /// The link padding of checked self pair `k`: both geometries' (meters).
+    pub(crate) fn self_extra(&self, k: usize) -> Real {
+        let (a, b) = self.self_pairs[k];
+        self.pad[a] + self.pad[b]
     }
 
     /// The world objects.
@@ -507,10 +554,12 @@ impl<'r> RobotChecker<'r> {
     fn world_check(&mut self, options: &CheckOptions, answer: &mut ConfigurationAnswer) -> Result<()> {
         let mut order = std::mem::take(&mut self.order);
         order.clear();
+        let most = options.padding + self.pad_max;
         for g in 0..self.robot.geometries.len() {
+            let padding = options.padding + self.pad[g];
             for &o in &self.world_pairs[g] {
                 let gap = self.world_gap(g, o);
-                if !options.distance && gap > options.padding {
+                if !options.distance && gap > padding {
                     // A verdict only: a pair apart by its balls is decided here, unsorted.
                     answer.pairs_pruned += 1;
                     continue;
@@ -522,17 +571,23 @@ impl<'r> RobotChecker<'r> {
         let mut best = Real::INFINITY;
         let mut result = Ok(());
         for (k, &(gap, g, o)) in order.iter().enumerate() {
-            if (options.distance && gap >= best) || (!options.distance && gap > options.padding) {
+            // Sorted by gap: past `best` (distance) and every pair's padding, nothing is left.
+            if (!options.distance || gap >= best) && gap > most {
                 answer.pairs_pruned += order.len() - k;
                 break;
             }
-            let bound = if options.distance { best.max(options.padding) } else { options.padding };
-            let box_gap = self.world_box_gap(g, o);
-            if box_gap > options.padding && box_gap >= bound {
+            let padding = options.padding + self.pad[g];
+            if gap > padding && (!options.distance || gap >= best) {
                 answer.pairs_pruned += 1;
                 continue;
             }
-            match self.world_pair(g, o, bound, options.padding, answer) {
+            let bound = if options.distance { best.max(padding) } else { padding };
+            let box_gap = self.world_box_gap(g, o);
+            if box_gap > padding && box_gap >= bound {
+                answer.pairs_pruned += 1;
+                continue;
+            }
+            match self.world_pair(g, o, bound, padding, answer) {
                 Ok(None) => {}
                 Ok(Some(PairOutcome::Collides)) => {
                     answer.world = true;
@@ -647,27 +702,27 @@ impl<'r> RobotChecker<'r> {
     fn self_check(&mut self, options: &CheckOptions, answer: &mut ConfigurationAnswer) -> Result<()> {
         for k in 0..self.self_pairs.len() {
             let (a, b) = self.self_pairs[k];
+            let padding = options.padding + self.pad[a] + self.pad[b];
             let (ga, gb) = (&self.robot.geometries[a], &self.robot.geometries[b]);
             let gap = (self.centers[a] - self.centers[b]).norm() - ga.sphere.1 - gb.sphere.1;
             let box_gap = match (&self.boxes[a], &self.boxes[b]) {
                 (Some(x), Some(y)) => box_gap(x, y),
                 _ => Real::NEG_INFINITY,
             };
-            if gap > options.padding || box_gap > options.padding {
+            if gap > padding || box_gap > padding {
                 answer.pairs_pruned += 1;
                 continue;
             }
             answer.pairs_model += 1;
             let (pa, pb) = (&self.poses[a], &self.poses[b]);
             let d = shape_distance(root_shape(&ga.shape), pa, root_shape(&gb.shape), pb, None)?;
-            let free = d.status.converged() && !d.overlapping && d.distance > options.padding;
+            let free = d.status.converged() && !d.overlapping && d.distance > padding;
             if free {
                 continue;
             }
             answer.pairs_exact += 1;
             let (ea, eb) = (&self.robot_exact[a], &self.robot_exact[b]);
-            if exact_collides(&parry_pose(&(pa * ea.offset)), ea, &parry_pose(&(pb * eb.offset)), eb, options.padding)?
-            {
+            if exact_collides(&parry_pose(&(pa * ea.offset)), ea, &parry_pose(&(pb * eb.offset)), eb, padding)? {
                 answer.self_collision = true;
                 answer.self_pair = Some((a, b));
                 break;

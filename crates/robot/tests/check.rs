@@ -126,6 +126,36 @@ fn world_distances_and_verdicts_match_the_closed_form() {
         let options = CheckOptions { padding, ..Default::default() };
         assert_eq!(checker.check(&[0.3, 0.0], &Isometry3::identity(), &options).unwrap().world, collides);
     }
+    // Link padding: the arm's alone, on top of the options' padding; the distance stays 0.25 and
+    // the verdict turns where padding + the arm's padding passes 0.25.
+    for (global, arm, collides) in [(0.0, 0.2, false), (0.0, 0.3, true), (0.1, 0.14, false), (0.1, 0.16, true)] {
+        checker.set_link_padding(&[("arm".to_owned(), arm), ("tip".to_owned(), 0.0)]).unwrap();
+        for distance in [false, true] {
+            let options = CheckOptions { padding: global, distance, ..Default::default() };
+            let a = checker.check(&[0.3, 0.0], &Isometry3::identity(), &options).unwrap();
+            assert_eq!(a.world, collides, "padding {global} + arm {arm}, distance {distance}");
+            if distance && !collides {
+                assert!((a.distance - 0.25).abs() < 1e-9, "{}", a.distance);
+            }
+        }
+    }
+    // A self pair takes both links' padding: base and arm 0.6 m apart at slide 0.3 (checked as
+    // base–arm: the base cube's face at x = 0.1, the arm's at 0.7).
+    for (base, arm, collides) in [(0.3, 0.29, false), (0.3, 0.31, true)] {
+        checker.set_link_padding(&[("base".to_owned(), base), ("arm".to_owned(), arm)]).unwrap();
+        let a = checker.check(&[0.3, 0.0], &Isometry3::identity(), &CheckOptions::default()).unwrap();
+        assert_eq!(a.self_collision, collides, "base {base} + arm {arm}");
+    }
+    // Another link's padding does not touch the arm's pair.
+    checker.set_link_padding(&[("tip".to_owned(), 0.3)]).unwrap();
+    assert!(!checker.check(&[0.3, 0.0], &Isometry3::identity(), &CheckOptions::default()).unwrap().world);
+    let field = |e| match e {
+        sublevel_core::Error::InvalidArgument { field, .. } => field,
+        other => panic!("{other:?}"),
+    };
+    assert_eq!(field(checker.set_link_padding(&[("nope".to_owned(), 0.1)]).unwrap_err()), "link_padding[nope]");
+    assert_eq!(field(checker.set_link_padding(&[("arm".to_owned(), -0.1)]).unwrap_err()), "link_padding[arm]");
+    checker.set_link_padding(&[]).unwrap();
 }
 
 #[test]

@@ -70,6 +70,13 @@ fn a_ball_passing_an_obstacle_is_valid_and_padding_closes_the_gap() {
     let a = motions.check_motion(&[0.0], &[2.0], &id, &options).unwrap();
     let x = 1.0 - (0.21f64.powi(2) - 0.04).sqrt();
     assert!((a.contact.unwrap() * 2.0 - x).abs() < 1e-5, "{:?} vs {}", a.contact, x / 2.0);
+    // The same 6 cm as the ball's link padding (3 of them global, 3 the link's): the same contact.
+    drop(motions);
+    checker.set_link_padding(&[("ball".to_owned(), 0.03)]).unwrap();
+    let mut motions = MotionChecker::new(&mut checker).unwrap();
+    let options = MotionOptions { padding: 0.03, tolerance: 1e-6, ..Default::default() };
+    let a = motions.check_motion(&[0.0], &[2.0], &id, &options).unwrap();
+    assert!((a.contact.unwrap() * 2.0 - x).abs() < 1e-5, "{:?} vs {}", a.contact, x / 2.0);
 }
 
 #[test]

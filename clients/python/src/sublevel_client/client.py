@@ -573,6 +573,7 @@ class Client:
         self_collision: bool = True,
         gradient: bool = False,
         attached: Optional[Sequence[dict]] = None,
+        link_padding: Optional[Mapping[str, float]] = None,
     ) -> ConfigurationColumns:
         """Checks joint configurations of a stored robot among a scene's primitives, in columns.
 
@@ -598,6 +599,9 @@ class Client:
             attached: objects grasped for this call, each a dict ``{"link", "name", "kind",
                 "size" / "radius" / "height", "origin"}`` (an exact primitive at ``origin`` in the
                 link's frame, meters): it moves with the link and is checked like it.
+            link_padding: meters (>= 0) per link name, on top of ``padding``, as MoveIt's link
+                padding: a world pair collides within ``padding + p(link)``, a self pair within
+                ``padding + p(a) + p(b)``; distances stay unpadded.
 
         Returns :class:`ConfigurationColumns` (numpy columns of N rows). Raises ValueError naming
         the argument when ``q``, ``joint_names`` or ``base`` is malformed (nothing is sent), and
@@ -617,6 +621,7 @@ class Client:
             skip_self=not self_collision,
             gradient=bool(gradient),
             attached=_attached_pb(attached),
+            link_padding={str(k): float(v) for k, v in (link_padding or {}).items()},
         )
         if base is not None:
             req.base.CopyFrom(_pose_pb(base, "base"))
@@ -634,6 +639,8 @@ class Client:
         padding: float = 0.0,
         tolerance: float = 1e-3,
         max_steps: int = 0,
+        attached: Optional[Sequence[dict]] = None,
+        link_padding: Optional[Mapping[str, float]] = None,
     ) -> MotionColumns:
         """Checks straight joint-space motions ``q0[m] -> q1[m]`` (continuous joints the shorter
         way) by conservative advancement: each is proven free, or answered with its first contact
@@ -641,7 +648,8 @@ class Client:
         resolution to choose.
 
         Args:
-            robot, scene, joint_names, base, padding: as in :meth:`check_configurations`.
+            robot, scene, joint_names, base, padding, attached, link_padding: as in
+                :meth:`check_configurations`.
             q0, q1: start and end configurations, array-like of the same shape, (M, n) or (n,)
                 for one motion (radians, meters).
             tolerance: meters (> 0): a distance bound at or below ``padding + tolerance`` is a
@@ -672,6 +680,8 @@ class Client:
             padding=float(padding),
             tolerance=float(tolerance),
             max_steps=int(max_steps),
+            attached=_attached_pb(attached),
+            link_padding={str(k): float(v) for k, v in (link_padding or {}).items()},
         )
         if base is not None:
             req.base.CopyFrom(_pose_pb(base, "base"))

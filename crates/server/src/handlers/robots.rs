@@ -246,9 +246,11 @@ pub(super) async fn check_configurations(
         self_collision: !req.skip_self,
         gradient: req.gradient,
     };
+    let link_padding: Arc<[(String, Real)]> = req.link_padding.into_iter().collect();
     let check = move |robot: &FittedRobot, world: &RobotWorld, configs: &[Vec<Real>], range: Range<usize>| {
         let allowed = world.planning.allowed_override();
         let mut checker = RobotChecker::new(robot, world.objects.clone(), &allowed)?;
+        checker.set_link_padding(&link_padding)?;
         range
             .map(|c| {
                 checker
@@ -263,7 +265,7 @@ pub(super) async fn check_configurations(
         vec![check(&robot, &world, &configs, 0..configs.len())?]
     } else {
         let work = chunks(configs.len(), svc.config.batch_workers).into_iter().map(|range| {
-            let (robot, world, configs) = (robot.clone(), world.clone(), configs.clone());
+            let (robot, world, configs, check) = (robot.clone(), world.clone(), configs.clone(), check.clone());
             svc.pools.batch.run(move || check(&robot, &world, &configs, range))
         });
         try_join_all(work).await?
@@ -298,11 +300,14 @@ pub(super) async fn check_motions(
         .into());
     }
     let motions = Arc::new((start, end));
+    let link_padding: Arc<[(String, Real)]> = req.link_padding.into_iter().collect();
     let work = chunks(motions.0.len(), svc.config.batch_workers).into_iter().map(|range| {
-        let (robot, world, motions) = (robot.clone(), world.clone(), motions.clone());
+        let (robot, world, motions, link_padding) =
+            (robot.clone(), world.clone(), motions.clone(), link_padding.clone());
         svc.pools.batch.run(move || {
             let allowed = world.planning.allowed_override();
             let mut checker = RobotChecker::new(&robot, world.objects.clone(), &allowed)?;
+            checker.set_link_padding(&link_padding)?;
             let mut motion = MotionChecker::new(&mut checker)?;
             range
                 .map(|m| {
