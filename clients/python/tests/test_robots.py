@@ -235,6 +235,42 @@ def test_an_attached_ball_moves_with_its_link(client, slider):
     assert e.value.code == grpc.StatusCode.INVALID_ARGUMENT and "attached[0].link" in e.value.field
 
 
+CUBE_OBJ = """v -0.5 -0.5 -0.5\nv 0.5 -0.5 -0.5\nv 0.5 0.5 -0.5\nv -0.5 0.5 -0.5
+v -0.5 -0.5 0.5\nv 0.5 -0.5 0.5\nv 0.5 0.5 0.5\nv -0.5 0.5 0.5
+f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8
+"""
+
+
+def test_a_robot_fitted_on_the_server_from_its_urdf_meets_the_closed_form(client, tmp_path):
+    # A cube mesh of side 0.2 (as a ROS package) on a prismatic joint along x; a wall box of half
+    # side 0.1 at x = 1.1: the cube, centered at x = slide, is 1.1 − 0.1 − 0.1 − slide away.
+    pkg = tmp_path / "pkgs" / "parts" / "meshes"
+    pkg.mkdir(parents=True)
+    (pkg / "cube.obj").write_text(CUBE_OBJ)
+    urdf = tmp_path / "robot" / "cube.urdf"
+    urdf.parent.mkdir()
+    urdf.write_text("""<robot name="cube"><link name="base"/>
+      <link name="block"><collision><geometry><mesh filename="package://parts/meshes/cube.obj" scale="0.2 0.2 0.2"/>
+      </geometry></collision></link>
+      <joint name="slide" type="prismatic"><parent link="base"/><child link="block"/><axis xyz="1 0 0"/>
+        <limit lower="-1" upper="1" effort="1" velocity="1"/></joint></robot>""")
+    updates = []
+    info = client.fit_robot(urdf, package_dirs=[tmp_path / "elsewhere", tmp_path / "pkgs"], tolerance=0.2,
+                            max_parts=2, progress=updates.append, timeout=120)
+    assert (info.name, info.joint_names, info.geometries) == ("cube", ["slide"], 1)
+    assert updates and updates[-1].robot_id == info.robot_id
+    scene = client.create_scene("wall")
+    client.add_instance(scene, client.upload_primitive("box", size=(0.2, 0.2, 0.2)), Pose(t=[1.1, 0, 0]))
+    slides = np.array([[-0.5], [0.0], [0.5], [0.95]])
+    r = client.check_configurations(info.robot_id, slides, scene=scene, distance=True)
+    np.testing.assert_allclose(r.distance[:3], 0.9 - slides[:3, 0], atol=1e-9)
+    np.testing.assert_array_equal(r.collides, [False, False, False, True])
+    client.delete_scene(scene)
+    client.delete_robot(info.robot_id)
+    with pytest.raises(FileNotFoundError):
+        client.fit_robot(urdf, package_dirs=[tmp_path / "elsewhere"])
+
+
 def test_link_padding_inflates_one_link(client, slider):
     info, scene, objects = slider
     # At slide 1.5, swing π the carriage is 0.2 m from the ball (the arm farther): its padding

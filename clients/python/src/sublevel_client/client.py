@@ -517,6 +517,80 @@ class Client:
         return self._call("SetPoses", req).updated
 
     # -- robots -------------------------------------------------------------------------------
+    def fit_robot(
+        self,
+        urdf: Union[str, "os.PathLike[str]"],
+        *,
+        srdf: Union[str, "os.PathLike[str]", None] = None,
+        package_dirs: Sequence[Union[str, "os.PathLike[str]"]] = (),
+        name: str = "",
+        tolerance: float = 0.0,
+        max_parts: int = 0,
+        progress: Any = None,
+        timeout: Optional[float] = None,
+    ) -> RobotInfo:
+        """Fits a robot on the server from its URDF (``StartRobotFitJob``) and waits for it, as
+        ``sublevel robot fit`` does: URDF primitives stay exact, each link mesh becomes a compound
+        sos-convex body containing it (cached by content on the server, so a re-fit is quick), the
+        SRDF's disabled pairs become the allowed pairs.
+
+        Args:
+            urdf: the URDF file. Every mesh its collision elements name is read and sent:
+                ``package://NAME/PATH`` from ``DIR/NAME/PATH`` for the first of ``package_dirs``
+                that has it (as ROS and pinocchio resolve it), a relative path from the URDF's
+                directory.
+            srdf: the SRDF file, if any.
+            name: the stored robot's name; empty: the URDF's robot name.
+            tolerance: leaf-excess tolerance of each mesh's fit, meters; 0: 1 % of each mesh's
+                bounding-box diagonal.
+            max_parts: most leaves per link (2..64); 0: 32.
+            progress: called with each ``FitJobUpdate`` (``fraction``, ``message``: one per mesh).
+            timeout: seconds to wait for the job (None: no limit; the Panda takes minutes).
+
+        Returns the stored robot's :class:`RobotInfo`. Raises FileNotFoundError naming a mesh the
+        URDF names that no place holds, SublevelError for the server's refusals (INVALID_ARGUMENT
+        naming the field) and for a job that fails or is cancelled (its error as the message).
+        """
+        import xml.etree.ElementTree as ET
+
+        urdf_path = Path(urdf)
+        text = urdf_path.read_text()
+        meshes = {}
+        for mesh in ET.fromstring(text).iter("mesh"):
+            filename = mesh.get("filename", "")
+            if not filename or filename in meshes:
+                continue
+            if filename.startswith("package://"):
+                rest = filename[len("package://"):]
+                places = [Path(d) / rest for d in package_dirs]
+            else:
+                places = [urdf_path.parent / filename]
+            found = next((p for p in places if p.is_file()), None)
+            if found is None:
+                raise FileNotFoundError(f"mesh {filename!r} of the URDF: not found in {[str(p) for p in places]}")
+            meshes[filename] = found.read_bytes()
+        req = pb.StartRobotFitJobRequest(
+            name=name,
+            urdf=text,
+            srdf=Path(srdf).read_text() if srdf is not None else "",
+            meshes=meshes,
+            tolerance=float(tolerance),
+            max_parts=int(max_parts),
+        )
+        job_id = self._call("StartRobotFitJob", req).job_id
+        last = None
+        try:
+            for update in self.stub.WatchFitJob(pb.WatchFitJobRequest(job_id=job_id), timeout=timeout):
+                last = update
+                if progress is not None:
+                    progress(update)
+        except grpc.RpcError as e:
+            raise SublevelError.from_rpc_error(e) from None
+        if last is None or last.state != pb.JOB_STATE_SUCCEEDED or not last.robot_id:
+            error = last.error if last is not None else "no update"
+            raise SublevelError(grpc.StatusCode.ABORTED, f"robot fit job {job_id} did not succeed: {error}")
+        return self.get_robot(last.robot_id)
+
     def upload_robot(self, robot_file: Union[str, "os.PathLike[str]", bytes], name: str = "") -> RobotInfo:
         """Stores a fitted robot: the ``sublevel.robot.v1`` file that ``sublevel robot fit ...
         --output robot.json`` writes (its URDF, allowed pairs and link bodies; nothing is fitted
