@@ -17,6 +17,7 @@ mod robot;
 mod robot_cli;
 mod robot_service;
 mod scene_import;
+mod scene_robot;
 mod security;
 mod service;
 mod service_compound;

@@ -55,8 +55,8 @@ pub use answer::{
     PRECISION_LIMIT,
 };
 pub use catalog::{
-    bounding_body, BodyEntry, BodyFacts, BuiltBody, Catalog, InstanceView, PosedInstance, RobotEntry, RobotWorld,
-    SceneView, WarmUp, MAX_JOB_RECORDS, MAX_NAME_BYTES,
+    bounding_body, BodyEntry, BodyFacts, BuiltBody, Catalog, InstanceView, PlacedRobot, PosedInstance, RobotEntry,
+    RobotWorld, SceneRobotCheck, SceneView, WarmUp, MAX_JOB_RECORDS, MAX_NAME_BYTES,
 };
 
 use serde::{Deserialize, Serialize};
@@ -186,12 +186,52 @@ pub struct PlanningContext {
     /// not give take these.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub joint_positions: Vec<(String, sublevel_core::math::Real)>,
+    /// The robot placed in the scene, when there is one ([`Catalog::set_scene_robot`]): its
+    /// joint positions are `joint_positions`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub robot: Option<SceneRobot>,
+}
+
+/// The robot of a scene: a stored robot at a base pose, with its grasped objects and link
+/// padding, at the scene's joint positions ([`PlanningContext::joint_positions`]). A scene holds
+/// at most one robot, as a MoveIt planning scene does; the robot checks of the scene use it when
+/// they name no robot of their own.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SceneRobot {
+    /// The stored robot's id (`r-…`).
+    pub robot_id: String,
+    /// The pose of the robot's root link in the scene.
+    pub base: StoredPose,
+    /// Objects attached to its links (grasped objects), in attachment order.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub attached: Vec<AttachedRecord>,
+    /// Padding per link (link name, meters ≥ 0), as MoveIt's link padding
+    /// ([`sublevel_robot::RobotChecker::set_link_padding`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub link_padding: Vec<(String, sublevel_core::math::Real)>,
+}
+
+/// An object attached to a robot link, as stored: an exact bounded primitive at `origin` in the
+/// link's frame, moving with the link ([`sublevel_robot::FittedRobot::attach`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct AttachedRecord {
+    /// The link it is attached to.
+    pub link: String,
+    /// Its name (unique among the robot's attached objects).
+    pub name: String,
+    /// Its shape.
+    pub primitive: PrimitiveFile,
+    /// Its pose in the link's frame.
+    pub origin: StoredPose,
 }
 
 impl PlanningContext {
     /// Whether it holds nothing.
     pub fn is_empty(&self) -> bool {
-        self.names.is_empty() && self.allowed_collision.is_none() && self.joint_positions.is_empty()
+        self.names.is_empty()
+            && self.allowed_collision.is_none()
+            && self.joint_positions.is_empty()
+            && self.robot.is_none()
     }
 
     /// The allowed-collision override of [`sublevel_robot::RobotChecker::new`]: the matrix's

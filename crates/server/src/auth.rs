@@ -303,6 +303,11 @@ mod tests {
             "StartRobotFitJob",
             "UploadRobot",
             "DeleteRobot",
+            "SetSceneRobot",
+            "SetJointPositions",
+            "AttachObject",
+            "DetachObject",
+            "ClearSceneRobot",
             "SomethingNew",
         ] {
             assert_eq!(method_role(&format!("/sublevel.v1.Sublevel/{write}")), Some(Role::Admin), "{write}");

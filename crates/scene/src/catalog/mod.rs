@@ -6,6 +6,7 @@
 //! query.rs      the query methods: single queries and batches, answered on a snapshot
 //! grouping.rs   reading a scene's posed bodies and replacing instances by their container (§V)
 //! robots.rs     stored robots, and a scene as the world of the robot checks
+//! scene_robot.rs the robot placed in a scene: base, joint positions, attached objects
 //! ```
 
 mod body;
@@ -14,12 +15,16 @@ mod grouping;
 mod primitive_tests;
 mod query;
 mod robots;
+mod scene_robot;
+#[cfg(all(test, feature = "store"))]
+mod scene_robot_tests;
 #[cfg(all(test, feature = "store"))]
 mod tests;
 
 pub use body::{bounding_body, BodyEntry, BodyFacts, BuiltBody, WarmUp};
 pub use grouping::PosedInstance;
 pub use robots::{RobotEntry, RobotWorld};
+pub use scene_robot::{PlacedRobot, SceneRobotCheck};
 
 use super::cache::WarmStartCache;
 use super::store::Store;
@@ -85,9 +90,20 @@ struct SceneState {
     cache: WarmStartCache,
     /// Instance names, allowed-collision matrix and robot state of an imported planning scene.
     planning: Arc<PlanningContext>,
+    /// The scene's robot as last built, with the stored robot it was built from
+    /// ([`Catalog::placed_robot`]).
+    placed: Option<PlacedCache>,
     /// Set (under this scene's lock) when the scene is deleted, so a request that fetched the
     /// scene just before cannot write it back to the store.
     deleted: bool,
+}
+
+/// A scene's built robot and the stored robot it was built from: valid while the scene's record
+/// of its robot is the one it was built from and that stored robot is still the catalog's.
+#[derive(Clone, Debug)]
+struct PlacedCache {
+    placed: Arc<PlacedRobot>,
+    robot_source: Arc<sublevel_robot::FittedRobot>,
 }
 
 /// Bodies and scenes in memory, written through to a [`Store`].
@@ -186,6 +202,7 @@ impl Catalog {
                 instances,
                 cache: WarmStartCache::default(),
                 planning: Arc::new(rec.meta.planning),
+                placed: None,
                 deleted: false,
             };
             scenes.insert(id, Arc::new(Mutex::new(state)));
@@ -380,6 +397,7 @@ impl Catalog {
             instances,
             cache: WarmStartCache::default(),
             planning: Arc::new(rec.meta.planning),
+            placed: None,
             deleted: false,
         };
         tracing::info!(scene_id = %id, "scene loaded from the shared store");
@@ -433,6 +451,7 @@ impl Catalog {
             instances: BTreeMap::new(),
             cache: WarmStartCache::default(),
             planning: Arc::default(),
+            placed: None,
             deleted: false,
         };
         write(&self.scenes).insert(id.clone(), Arc::new(Mutex::new(state)));

@@ -30,9 +30,13 @@ pub struct RobotEntry {
 pub struct RobotWorld {
     /// The scene's instances as world objects, ordered by instance id.
     pub objects: Vec<WorldObject>,
+    /// The instance id of each object.
+    pub instance_ids: Vec<String>,
     /// The planning scene's names, allowed-collision matrix and robot state (empty for a scene
     /// not imported from one).
     pub planning: Arc<PlanningContext>,
+    /// The robot placed in the scene, when there is one ([`Catalog::set_scene_robot`]).
+    pub robot: Option<Arc<super::PlacedRobot>>,
 }
 
 /// Every stored robot, validated; one that no longer validates is moved to the store's quarantine
@@ -51,6 +55,23 @@ pub(super) fn load(store: &dyn Store) -> Result<BTreeMap<String, Arc<RobotEntry>
         }
     }
     Ok(robots)
+}
+
+impl RobotWorld {
+    /// A world with no object, no planning context and no robot (self-collision checks only).
+    pub fn empty() -> Self {
+        Self { objects: Vec::new(), instance_ids: Vec::new(), planning: Arc::default(), robot: None }
+    }
+
+    /// Moves the objects of the instances `poses` names (instance id, pose) to those poses;
+    /// instances the world lacks are ignored.
+    pub fn with_poses<'a>(&mut self, poses: impl IntoIterator<Item = (&'a str, &'a sublevel_core::math::Isometry3)>) {
+        for (id, pose) in poses {
+            if let Some(k) = self.instance_ids.iter().position(|i| i == id) {
+                self.objects[k].pose = *pose;
+            }
+        }
+    }
 }
 
 impl Catalog {
@@ -122,15 +143,17 @@ impl Catalog {
     }
 
     /// Scene `scene_id` as the world of the robot checks: every instance as a [`WorldObject`]
-    /// named by the planning scene's name for it (else its instance id), at its stored pose.
+    /// named by the planning scene's name for it (else its instance id), at its stored pose, and
+    /// the scene's robot ([`Catalog::placed_robot`]).
     ///
     /// # Errors
     /// [`Error::NotFound`] (kind `scene`); [`Error::FailedPrecondition`] naming an instance of a
     /// fitted body (robot checks take exact primitives as obstacles) or of a body that no longer
-    /// validates.
+    /// validates, or a scene robot that was deleted.
     pub fn robot_world(&self, scene_id: &str) -> Result<RobotWorld> {
         let view = self.get_scene(scene_id)?;
         let mut objects = Vec::with_capacity(view.instances.len());
+        let mut instance_ids = Vec::with_capacity(view.instances.len());
         for inst in &view.instances {
             let built = self.body(&inst.body_id)?;
             let Some(primitive) = built.built()?.primitive else {
@@ -142,8 +165,10 @@ impl Catalog {
             };
             let name = view.planning.names.get(&inst.id).cloned().unwrap_or_else(|| inst.id.clone());
             objects.push(WorldObject { name, primitive, pose: inst.pose });
+            instance_ids.push(inst.id.clone());
         }
-        Ok(RobotWorld { objects, planning: view.planning })
+        let robot = self.placed_robot(scene_id)?;
+        Ok(RobotWorld { objects, instance_ids, planning: view.planning, robot })
     }
 
     /// Replaces the planning context of scene `scene_id` (written through to the store).
@@ -152,11 +177,6 @@ impl Catalog {
     /// [`Error::NotFound`] (kind `scene`); [`Error::InvalidArgument`] when it would not read back
     /// from the store (a non-finite joint position); [`Error::Storage`].
     pub fn set_planning(&self, scene_id: &str, planning: PlanningContext) -> Result<()> {
-        self.with_scene(scene_id, |s| {
-            let meta = crate::SceneMeta { name: s.name.clone(), planning };
-            self.store.put_scene(scene_id, &meta)?;
-            s.planning = Arc::new(meta.planning);
-            Ok(())
-        })
+        self.update_planning(scene_id, |_| Ok(planning))
     }
 }

@@ -229,6 +229,7 @@ impl Catalog {
                 names: ids.iter().zip(&plan.instances).map(|(id, p)| (id.clone(), p.name.clone())).collect(),
                 allowed_collision: plan.allowed_collision.clone(),
                 joint_positions: plan.joint_positions.clone(),
+                robot: None,
             };
             self.set_planning(&scene_id, planning)?;
             Ok(ids)

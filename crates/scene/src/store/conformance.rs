@@ -60,6 +60,17 @@ pub(crate) fn check_store(open: &dyn Fn() -> Box<dyn Store>) {
             names: [("i-c".to_owned(), "shelf#1".to_owned())].into(),
             allowed_collision: None,
             joint_positions: vec![("panda_joint1".into(), 0.25)],
+            robot: Some(crate::SceneRobot {
+                robot_id: "r-1".into(),
+                base: crate::StoredPose { rotation: [1.0, 0.0, 0.0, 0.0], translation: [0.5, 0.0, 0.1] },
+                attached: vec![crate::AttachedRecord {
+                    link: "hand".into(),
+                    name: "can".into(),
+                    primitive: sublevel_core::primitive::Primitive::Sphere { radius: 0.03 }.to_file(),
+                    origin: crate::StoredPose { rotation: [1.0, 0.0, 0.0, 0.0], translation: [0.0, 0.0, 0.1] },
+                }],
+                link_padding: vec![("hand".into(), 0.01)],
+            }),
         };
         s.put_scene("s-10", &ten).unwrap();
         s.put_robot("r-1", &robot()).unwrap();
@@ -93,6 +104,10 @@ pub(crate) fn check_store(open: &dyn Fn() -> Box<dyn Store>) {
     let ten = s.get_scene("s-10").unwrap().unwrap();
     assert_eq!(ten.meta.planning.names["i-c"], "shelf#1");
     assert_eq!(ten.meta.planning.joint_positions, [("panda_joint1".to_owned(), 0.25)]);
+    let placed = ten.meta.planning.robot.as_ref().expect("the scene's robot is stored");
+    assert_eq!((placed.robot_id.as_str(), placed.base.translation), ("r-1", [0.5, 0.0, 0.1]));
+    assert_eq!(placed.attached[0].name, "can");
+    assert_eq!(placed.link_padding, [("hand".to_owned(), 0.01)]);
     let robots = s.list_robots().unwrap();
     assert_eq!(robots.iter().map(|(k, _)| k.as_str()).collect::<Vec<_>>(), ["r-1"]);
     assert_eq!(robots[0].1.file.urdf, robot().file.urdf);

@@ -58,8 +58,8 @@ pub use queries::{
     tree_to_proto, tree_tolerance,
 };
 pub use robots::{
-    configurations_from_proto, motion_options, padding, push_configuration_answers, push_motion_answers, robot_summary,
-    MAX_CONFIGURATIONS_PER_CALL,
+    attached_record_from_proto, configurations_from_proto, motion_options, padding, push_configuration_answers,
+    push_motion_answers, robot_summary, scene_robot_to_proto, MAX_CONFIGURATIONS_PER_CALL,
 };
 pub use scenes::{
     imported_scene_to_proto, instance_to_proto, planning_scene_from_proto, point_to_proto, pose_from_proto,

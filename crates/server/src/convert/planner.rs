@@ -407,7 +407,7 @@ pub fn columns_kind(req: &pb::QueryRequest) -> Option<QueryKind> {
     }
 }
 
-/// A scene check as the proto response.
+/// A scene check as the proto response (without the scene's robot, which the handler adds).
 pub fn scene_check_to_proto(c: &sublevel_scene::planner::SceneCheck, server_seconds: f64) -> pb::CheckSceneResponse {
     pb::CheckSceneResponse {
         pairs: c
@@ -424,6 +424,7 @@ pub fn scene_check_to_proto(c: &sublevel_scene::planner::SceneCheck, server_seco
         narrow_phase_solves: c.narrow_phase_solves,
         all_pairs: c.all_pairs,
         server_seconds,
+        robot: None,
     }
 }
 

@@ -5,7 +5,7 @@ use crate::pb;
 use crate::{Error, Result};
 use sublevel_core::math::Real;
 use sublevel_robot::{ConfigurationAnswer, FittedRobot, MotionAnswer, MotionOptions, WorldObject};
-use sublevel_scene::RobotEntry;
+use sublevel_scene::{AttachedRecord, PlacedRobot, RobotEntry, StoredPose};
 
 /// Most configurations (or motions) one call may carry.
 pub const MAX_CONFIGURATIONS_PER_CALL: usize = 100_000;
@@ -169,4 +169,50 @@ pub fn push_motion_answers(
         out.steps.push(u32::try_from(a.steps).unwrap_or(u32::MAX));
     }
     out.count = out.valid.len() as u32;
+}
+
+/// An attached object of a request as stored with a scene's robot (`field` names it in errors).
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `field.primitive` (absent or invalid) or `field.origin`.
+pub fn attached_record_from_proto(a: &pb::AttachedObject, field: &str, k: usize) -> Result<AttachedRecord> {
+    let primitive = a.primitive.as_ref().ok_or_else(|| Error::invalid(format!("{field}.primitive"), "required"))?;
+    let primitive = super::primitive_from_proto(primitive, &format!("{field}.primitive"))?;
+    let origin = super::pose_from_proto(&format!("{field}.origin"), a.origin.as_ref())?;
+    Ok(AttachedRecord {
+        link: a.link.clone(),
+        name: if a.name.is_empty() { format!("attached#{k}") } else { a.name.clone() },
+        primitive: primitive.to_file(),
+        origin: StoredPose::from_isometry(&origin),
+    })
+}
+
+/// A scene's robot as the API shows it, with its joint positions from `joint_positions` (the
+/// scene's, by name).
+pub fn scene_robot_to_proto(placed: &PlacedRobot, joint_positions: &[(String, Real)]) -> pb::SceneRobot {
+    let names = placed.robot.model.variable_names();
+    let q = placed.configuration(joint_positions);
+    pb::SceneRobot {
+        robot_id: placed.robot_id.clone(),
+        base: Some(super::pose_to_proto(&placed.base)),
+        attached: placed
+            .record
+            .attached
+            .iter()
+            .map(|a| pb::AttachedObject {
+                link: a.link.clone(),
+                name: a.name.clone(),
+                primitive: sublevel_core::primitive::Primitive::from_file(&a.primitive)
+                    .ok()
+                    .map(|p| super::primitive_to_proto(&p)),
+                origin: a.origin.to_isometry("origin").ok().map(|o| super::pose_to_proto(&o)),
+            })
+            .collect(),
+        link_padding: placed.link_padding.iter().cloned().collect(),
+        joint_positions: names
+            .iter()
+            .zip(q)
+            .map(|(name, position)| pb::JointPosition { name: (*name).to_owned(), position })
+            .collect(),
+    }
 }

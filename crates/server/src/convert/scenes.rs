@@ -49,12 +49,18 @@ pub fn instance_to_proto(i: &InstanceView) -> pb::Instance {
     pb::Instance { instance_id: i.id.clone(), body_id: i.body_id.clone(), pose: Some(pose_to_proto(&i.pose)) }
 }
 
-/// A scene as the proto response.
-pub fn scene_to_proto(s: &SceneView) -> pb::GetSceneResponse {
+/// A scene as the proto response, with its robot (`robot`) when it has one.
+pub fn scene_to_proto(s: &SceneView, robot: Option<&sublevel_scene::PlacedRobot>) -> pb::GetSceneResponse {
+    let positions = &s.planning.joint_positions;
     pb::GetSceneResponse {
         scene_id: s.id.clone(),
         name: s.name.clone(),
         instances: s.instances.iter().map(instance_to_proto).collect(),
+        robot: robot.map(|r| super::scene_robot_to_proto(r, positions)),
+        joint_positions: positions
+            .iter()
+            .map(|(name, position)| pb::JointPosition { name: name.clone(), position: *position })
+            .collect(),
     }
 }
 

@@ -7,6 +7,7 @@
 //! scenes.rs   CreateScene, GetScene, ListScenes, DeleteScene, AddInstance, SetPoses, RemoveInstance,
 //!             ImportScene
 //! robots.rs   StartRobotFitJob, UploadRobot, GetRobot, ListRobots, DeleteRobot, CheckConfigurations, CheckMotions
+//! scene_robots.rs  SetSceneRobot, ClearSceneRobot, SetJointPositions, AttachObject, DetachObject
 //! queries.rs  Distance, Growth, BatchQuery, Query, QueryStream, CheckScene, and where query work
 //!             runs (inline on the async workers, or on the SDP slots)
 //! ```
@@ -18,6 +19,7 @@ mod bodies;
 mod jobs;
 mod queries;
 mod robots;
+mod scene_robots;
 mod scenes;
 #[cfg(test)]
 mod tests;
@@ -226,5 +228,31 @@ impl Sublevel for SublevelService {
 
     async fn check_motions(&self, request: Request<pb::CheckMotionsRequest>) -> Reply<pb::CheckMotionsResponse> {
         robots::check_motions(self, request).await.map_err(Status::from)
+    }
+
+    async fn set_scene_robot(&self, request: Request<pb::SetSceneRobotRequest>) -> Reply<pb::SetSceneRobotResponse> {
+        scene_robots::set_scene_robot(self, request).await.map_err(Status::from)
+    }
+
+    async fn clear_scene_robot(
+        &self,
+        request: Request<pb::ClearSceneRobotRequest>,
+    ) -> Reply<pb::ClearSceneRobotResponse> {
+        scene_robots::clear_scene_robot(self, request).await.map_err(Status::from)
+    }
+
+    async fn set_joint_positions(
+        &self,
+        request: Request<pb::SetJointPositionsRequest>,
+    ) -> Reply<pb::SetJointPositionsResponse> {
+        scene_robots::set_joint_positions(self, request).await.map_err(Status::from)
+    }
+
+    async fn attach_object(&self, request: Request<pb::AttachObjectRequest>) -> Reply<pb::AttachObjectResponse> {
+        scene_robots::attach_object(self, request).await.map_err(Status::from)
+    }
+
+    async fn detach_object(&self, request: Request<pb::DetachObjectRequest>) -> Reply<pb::DetachObjectResponse> {
+        scene_robots::detach_object(self, request).await.map_err(Status::from)
     }
 }

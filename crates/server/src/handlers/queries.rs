@@ -378,10 +378,29 @@ pub(super) async fn check_scene(
     // Up to n(n−1)/2 solves: on the batch slots (the SDP slots for a nonconvex scene), cancelled
     // with the request.
     let slots = if svc.catalog.has_nonconvex(&req.scene_id) { &svc.pools.sdp } else { &svc.pools.batch };
-    let check = slots
+    let (check, robot) = slots
         .run(move || {
-            sublevel_scene::planner::check_scene(&catalog, &req.scene_id, req.margin, &req.instance_ids, &overrides)
+            let check = sublevel_scene::planner::check_scene(
+                &catalog,
+                &req.scene_id,
+                req.margin,
+                &req.instance_ids,
+                &overrides,
+            )?;
+            // The scene's robot, at its joint positions, within the margin as padding.
+            let options = sublevel_robot::CheckOptions { padding: req.margin, distance: true, ..Default::default() };
+            let robot = catalog.check_scene_robot(&req.scene_id, &options, &overrides)?.map(|r| {
+                let mut out = pb::CheckConfigurationsResponse {
+                    joint_names: r.placed.robot.model.variable_names().iter().map(|s| (*s).to_owned()).collect(),
+                    ..Default::default()
+                };
+                cv::push_configuration_answers(&mut out, &[r.answer], &r.placed.robot, &r.world.objects, false);
+                out
+            });
+            Ok((check, robot))
         })
         .await?;
-    Ok(Response::new(cv::scene_check_to_proto(&check, start.elapsed().as_secs_f64())))
+    let mut out = cv::scene_check_to_proto(&check, start.elapsed().as_secs_f64());
+    out.robot = robot;
+    Ok(Response::new(out))
 }

@@ -20,7 +20,7 @@ use sublevel_robot::srdf::Semantics;
 use sublevel_robot::{
     CheckOptions, CollisionGeometry, FittedRobot, MotionChecker, RobotChecker, RobotFitSettings, RobotModel,
 };
-use sublevel_scene::{RobotEntry, RobotWorld};
+use sublevel_scene::RobotWorld;
 use tonic::{Request, Response};
 
 /// Fewest configurations worth a chunk of their own (a configuration takes 5–200 µs).
@@ -156,24 +156,25 @@ pub(super) async fn delete_robot(
     Ok(Response::new(pb::DeleteRobotResponse {}))
 }
 
-/// The robot, the world and the base pose of a check request.
+/// The robot, the world, the base pose and the link padding of a check request.
 struct Setting {
     /// The robot, with the request's attached objects (a copy of the stored robot when there
     /// are any: its meshes' BVHs shared, its vertices copied).
     robot: Arc<FittedRobot>,
     world: Arc<RobotWorld>,
     base: Isometry3,
+    link_padding: Arc<[(String, Real)]>,
 }
 
-/// The stored robot with `attached` objects added (the stored one itself when there are none).
+/// `robot` with `attached` objects added (`robot` itself when there are none).
 ///
 /// # Errors
 /// [`Error::InvalidArgument`] naming `attached[k]` and its field.
-fn with_attached(entry: &RobotEntry, attached: &[pb::AttachedObject]) -> Result<Arc<FittedRobot>> {
+fn with_attached(robot: &Arc<FittedRobot>, attached: &[pb::AttachedObject]) -> Result<Arc<FittedRobot>> {
     if attached.is_empty() {
-        return Ok(entry.robot.clone());
+        return Ok(robot.clone());
     }
-    let mut robot = (*entry.robot).clone();
+    let mut robot = (**robot).clone();
     for (k, a) in attached.iter().enumerate() {
         let field = format!("attached[{k}]");
         let primitive = a.primitive.as_ref().ok_or_else(|| Error::invalid(format!("{field}.primitive"), "required"))?;
@@ -191,25 +192,50 @@ fn in_memory(svc: &SublevelService) -> bool {
     !svc.catalog.shared_store() && svc.catalog.bodies_pending() == 0
 }
 
-/// Reads a check's robot, scene (empty: no world) and base: inline when they are in memory
-/// ([`in_memory`]), else off the async workers.
-async fn setting(
-    svc: &SublevelService,
+/// What a check request says of its robot and world (see [`setting`]).
+struct Asked {
     robot_id: String,
     scene_id: String,
     base: Option<pb::Pose>,
     attached: Vec<pb::AttachedObject>,
-) -> Result<Setting, tonic::Status> {
-    let base = cv::pose_from_proto("base", base.as_ref()).map_err(cv::to_status)?;
+    link_padding: std::collections::HashMap<String, Real>,
+}
+
+/// Reads a check's robot, scene (empty: no world), base and link padding: inline when they are
+/// in memory ([`in_memory`]), else off the async workers. With no `robot_id`, the scene's robot
+/// with its base (unless the request gives one), attached objects (the request's added) and link
+/// padding (the request's replacing it link by link).
+async fn setting(svc: &SublevelService, asked: Asked) -> Result<Setting, tonic::Status> {
+    let Asked { robot_id, scene_id, base, attached, link_padding } = asked;
+    let base = base.map(|b| cv::pose_from_proto("base", Some(&b))).transpose().map_err(cv::to_status)?;
     let catalog = svc.catalog.clone();
     let read = move || {
-        let entry = catalog.robot(require_id("robot_id", &robot_id)?)?;
         let world = if scene_id.is_empty() {
-            RobotWorld { objects: Vec::new(), planning: Arc::default() }
+            RobotWorld::empty()
         } else {
             catalog.robot_world(require_id("scene_id", &scene_id)?)?
         };
-        Ok(Setting { robot: with_attached(&entry, &attached)?, world: Arc::new(world), base })
+        let (robot, base, mut padding) = if robot_id.is_empty() {
+            let placed = world.robot.clone().ok_or_else(|| {
+                Error::invalid("robot_id", "required: name a robot, or a scene holding one (SetSceneRobot)")
+            })?;
+            (placed.robot.clone(), base.unwrap_or(placed.base), placed.link_padding.clone())
+        } else {
+            let entry = catalog.robot(require_id("robot_id", &robot_id)?)?;
+            (entry.robot.clone(), base.unwrap_or_else(Isometry3::identity), Vec::new())
+        };
+        for (link, p) in link_padding {
+            match padding.iter_mut().find(|(l, _)| *l == link) {
+                Some(entry) => entry.1 = p,
+                None => padding.push((link, p)),
+            }
+        }
+        Ok(Setting {
+            robot: with_attached(&robot, &attached)?,
+            world: Arc::new(world),
+            base,
+            link_padding: padding.into(),
+        })
     };
     if in_memory(svc) {
         read().map_err(cv::to_status)
@@ -233,7 +259,14 @@ pub(super) async fn check_configurations(
 ) -> Handled<pb::CheckConfigurationsResponse> {
     let req = request.into_inner();
     let padding = cv::padding(req.padding)?;
-    let Setting { robot, world, base } = setting(svc, req.robot_id, req.scene_id, req.base, req.attached).await?;
+    let asked = Asked {
+        robot_id: req.robot_id,
+        scene_id: req.scene_id,
+        base: req.base,
+        attached: req.attached,
+        link_padding: req.link_padding,
+    };
+    let Setting { robot, world, base, link_padding } = setting(svc, asked).await?;
     let configs = Arc::new(cv::configurations_from_proto(
         "configurations",
         req.configurations.as_ref(),
@@ -246,7 +279,6 @@ pub(super) async fn check_configurations(
         self_collision: !req.skip_self,
         gradient: req.gradient,
     };
-    let link_padding: Arc<[(String, Real)]> = req.link_padding.into_iter().collect();
     let check = move |robot: &FittedRobot, world: &RobotWorld, configs: &[Vec<Real>], range: Range<usize>| {
         let allowed = world.planning.allowed_override();
         let mut checker = RobotChecker::new(robot, world.objects.clone(), &allowed)?;
@@ -288,7 +320,14 @@ pub(super) async fn check_motions(
 ) -> Handled<pb::CheckMotionsResponse> {
     let req = request.into_inner();
     let options = cv::motion_options(req.padding, req.tolerance, req.max_steps)?;
-    let Setting { robot, world, base } = setting(svc, req.robot_id, req.scene_id, req.base, req.attached).await?;
+    let asked = Asked {
+        robot_id: req.robot_id,
+        scene_id: req.scene_id,
+        base: req.base,
+        attached: req.attached,
+        link_padding: req.link_padding,
+    };
+    let Setting { robot, world, base, link_padding } = setting(svc, asked).await?;
     let defaults = &world.planning.joint_positions;
     let start = cv::configurations_from_proto("start", req.start.as_ref(), &robot, defaults)?;
     let end = cv::configurations_from_proto("end", req.end.as_ref(), &robot, defaults)?;
@@ -300,7 +339,6 @@ pub(super) async fn check_motions(
         .into());
     }
     let motions = Arc::new((start, end));
-    let link_padding: Arc<[(String, Real)]> = req.link_padding.into_iter().collect();
     let work = chunks(motions.0.len(), svc.config.batch_workers).into_iter().map(|range| {
         let (robot, world, motions, link_padding) =
             (robot.clone(), world.clone(), motions.clone(), link_padding.clone());

@@ -26,8 +26,17 @@ pub(super) async fn get_scene(
     request: Request<pb::GetSceneRequest>,
 ) -> Handled<pb::GetSceneResponse> {
     let id = request.into_inner().scene_id;
-    let scene = svc.catalog.get_scene(require_id("scene_id", &id)?)?;
-    Ok(Response::new(cv::scene_to_proto(&scene)))
+    require_id("scene_id", &id)?;
+    let catalog = svc.catalog.clone();
+    // The scene's robot is built (its attached objects added) on first use: off the workers.
+    let (scene, robot) = blocking(move || {
+        let scene = catalog.get_scene(&id)?;
+        // A robot deleted since it was placed is left out here; the checks name it.
+        let robot = catalog.placed_robot(&id).ok().flatten();
+        Ok((scene, robot))
+    })
+    .await?;
+    Ok(Response::new(cv::scene_to_proto(&scene, robot.as_deref())))
 }
 
 /// `ListScenes`: a page of the scenes, by id.

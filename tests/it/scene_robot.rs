@@ -1,0 +1,189 @@
+//! Integration tests: the robot of a scene over gRPC. The fitted Panda placed in an imported
+//! MotionBenchMaker scene, moved by `SetJointPositions` to labelled configurations, checked by
+//! `CheckScene` against the mesh-exact labels (pinocchio + coal on the collision meshes); checks
+//! naming no robot answer exactly as the same checks naming the robot, its attached objects and
+//! padding; changes are all or nothing, name their fields, and survive a restart.
+
+use crate::util::{assert_status, config, Server};
+use std::path::PathBuf;
+use sublevel::service::pb::{self, sublevel_client::SublevelClient};
+use tonic::transport::Channel;
+use tonic::Code;
+
+fn data(path: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data/robots").join(path)
+}
+
+const JOINTS: [&str; 7] =
+    ["panda_joint1", "panda_joint2", "panda_joint3", "panda_joint4", "panda_joint5", "panda_joint6", "panda_joint7"];
+
+/// The labelled configurations of bookshelf_small scene 1: (q, collides, min world distance).
+fn labels() -> Vec<(Vec<f64>, bool, f64)> {
+    let text = std::fs::read_to_string(data("mbm_panda/labels_obj.csv")).unwrap();
+    text.lines()
+        .skip(1)
+        .filter_map(|line| {
+            let c: Vec<&str> = line.split(',').collect();
+            (c[0] == "bookshelf_small" && c[1] == "1").then(|| {
+                let q = c[4..11].iter().map(|v| v.parse().unwrap()).collect();
+                (q, c[11] == "1", c[14].parse().unwrap_or(f64::INFINITY))
+            })
+        })
+        .collect()
+}
+
+fn joints(q: &[f64]) -> Option<pb::ConfigurationColumns> {
+    Some(pb::ConfigurationColumns { joint_names: JOINTS.iter().map(|s| (*s).to_owned()).collect(), values: q.to_vec() })
+}
+
+fn ball(radius: f64) -> pb::Primitive {
+    pb::Primitive { kind: pb::PrimitiveKind::Sphere as i32, radius, ..Default::default() }
+}
+
+async fn setup(c: &mut SublevelClient<Channel>) -> (String, String) {
+    let bytes = std::fs::read(data("panda/panda.robot.json")).unwrap();
+    let robot = c.upload_robot(pb::UploadRobotRequest { name: "panda".into(), robot_file: bytes }).await.unwrap();
+    let yaml = std::fs::read(data("mbm_panda/scenes/bookshelf_small/scene0001.yaml")).unwrap();
+    let req = pb::ImportSceneRequest { name: String::new(), scene: Some(pb::import_scene_request::Scene::Yaml(yaml)) };
+    let scene_id = c.import_scene(req).await.unwrap().into_inner().scene_id;
+    (robot.into_inner().robot.unwrap().robot_id, scene_id)
+}
+
+async fn check_scene_robot(c: &mut SublevelClient<Channel>, scene_id: &str) -> pb::CheckConfigurationsResponse {
+    let req = pb::CheckSceneRequest { scene_id: scene_id.into(), ..Default::default() };
+    c.check_scene(req).await.unwrap().into_inner().robot.expect("the scene has a robot")
+}
+
+#[tokio::test]
+async fn a_scene_robot_is_checked_at_its_joint_positions_against_the_mesh_labels() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(config(dir.path())).await;
+    let mut c = server.client().await;
+    let (robot_id, scene_id) = setup(&mut c).await;
+    let rows = labels();
+    let colliding = rows.iter().find(|r| r.1).unwrap();
+    let free: Vec<_> = rows.iter().filter(|r| !r.1 && r.2.is_finite()).take(3).collect();
+
+    // Without a robot, CheckScene has no robot answer and SetJointPositions has nothing to move.
+    let req = pb::CheckSceneRequest { scene_id: scene_id.clone(), ..Default::default() };
+    assert!(c.check_scene(req).await.unwrap().into_inner().robot.is_none());
+    let req = pb::SetJointPositionsRequest { scene_id: scene_id.clone(), joint_positions: joints(&colliding.0) };
+    assert_status(c.set_joint_positions(req).await, Code::FailedPrecondition, "no robot");
+
+    let req = pb::SetSceneRobotRequest {
+        scene_id: scene_id.clone(),
+        robot_id: robot_id.clone(),
+        joint_positions: joints(&colliding.0),
+        ..Default::default()
+    };
+    let placed = c.set_scene_robot(req).await.unwrap().into_inner().robot.unwrap();
+    assert_eq!(placed.robot_id, robot_id);
+    let shown: Vec<f64> = placed.joint_positions.iter().take(7).map(|j| j.position).collect();
+    assert_eq!(shown, colliding.0);
+    let got = check_scene_robot(&mut c, &scene_id).await;
+    assert_eq!((got.count, got.collides[0]), (1, true), "a configuration the meshes call colliding");
+
+    // Moved to free configurations: free, at the meshes' distance within 10 µm and never above.
+    for (q, _, label) in &free {
+        let req = pb::SetJointPositionsRequest { scene_id: scene_id.clone(), joint_positions: joints(q) };
+        c.set_joint_positions(req).await.unwrap();
+        let got = check_scene_robot(&mut c, &scene_id).await;
+        assert!(!got.collides[0]);
+        assert!(got.distance[0] <= label + 1e-9 && got.distance[0] >= label - 1e-5, "{} vs {label}", got.distance[0]);
+    }
+
+    // All or nothing: an unknown joint is named and moves nothing.
+    let before = c.get_scene(pb::GetSceneRequest { scene_id: scene_id.clone() }).await.unwrap().into_inner();
+    let mut bad = joints(&free[0].0).unwrap();
+    bad.joint_names[3] = "elbow".into();
+    let req = pb::SetJointPositionsRequest { scene_id: scene_id.clone(), joint_positions: Some(bad) };
+    assert_status(c.set_joint_positions(req).await, Code::InvalidArgument, "joint_positions.joint_names[3]");
+    let after = c.get_scene(pb::GetSceneRequest { scene_id: scene_id.clone() }).await.unwrap().into_inner();
+    assert_eq!(before.joint_positions, after.joint_positions);
+    assert_eq!(after.robot.unwrap().joint_positions, before.robot.unwrap().joint_positions);
+
+    // A grasped ball and link padding: checks naming no robot answer as the same checks naming
+    // the robot, the ball and the padding, bit for bit.
+    let can = pb::AttachedObject {
+        link: "panda_hand".into(),
+        name: "can".into(),
+        primitive: Some(ball(0.04)),
+        origin: Some(pb::Pose {
+            rotation: Some(pb::Quaternion { w: 1.0, ..Default::default() }),
+            translation: Some(pb::Vec3 { x: 0.0, y: 0.0, z: 0.1 }),
+        }),
+    };
+    let req = pb::AttachObjectRequest { scene_id: scene_id.clone(), attached: Some(can.clone()) };
+    let placed = c.attach_object(req).await.unwrap().into_inner().robot.unwrap();
+    assert_eq!(placed.attached.len(), 1);
+    let mut bad = can.clone();
+    bad.link = "gripper".into();
+    let req = pb::AttachObjectRequest { scene_id: scene_id.clone(), attached: Some(bad) };
+    assert_status(c.attach_object(req).await, Code::InvalidArgument, "attached.link");
+    let padding: std::collections::HashMap<String, f64> = [("panda_link7".to_owned(), 0.01)].into();
+    let req = pb::SetSceneRobotRequest {
+        scene_id: scene_id.clone(),
+        robot_id: robot_id.clone(),
+        attached: vec![can.clone()],
+        link_padding: padding.clone(),
+        ..Default::default()
+    };
+    c.set_scene_robot(req).await.unwrap();
+    let q: Vec<f64> = rows.iter().take(40).flat_map(|r| r.0.clone()).collect();
+    let req = pb::CheckConfigurationsRequest {
+        scene_id: scene_id.clone(),
+        configurations: joints(&q),
+        distance: true,
+        ..Default::default()
+    };
+    let by_scene = c.check_configurations(req.clone()).await.unwrap().into_inner();
+    let named = pb::CheckConfigurationsRequest {
+        robot_id: robot_id.clone(),
+        attached: vec![can],
+        link_padding: padding,
+        ..req
+    };
+    let by_name = c.check_configurations(named).await.unwrap().into_inner();
+    assert_eq!(by_scene.count, 40);
+    assert_eq!(by_scene.collides, by_name.collides);
+    assert_eq!(by_scene.robot_geometry, by_name.robot_geometry);
+    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&by_scene.distance), bits(&by_name.distance));
+    let motion = pb::CheckMotionsRequest {
+        scene_id: scene_id.clone(),
+        start: joints(&free[0].0),
+        end: joints(&free[1].0),
+        ..Default::default()
+    };
+    let by_scene = c.check_motions(motion.clone()).await.unwrap().into_inner();
+    let by_name = c
+        .check_motions(pb::CheckMotionsRequest {
+            robot_id: robot_id.clone(),
+            attached: vec![placed.attached[0].clone()],
+            link_padding: [("panda_link7".to_owned(), 0.01)].into(),
+            ..motion
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    assert_eq!((by_scene.valid, by_scene.steps), (by_name.valid, by_name.steps));
+    server.stop().await;
+
+    // A restart finds the scene's robot, its ball, padding and joint positions.
+    let server = Server::start(config(dir.path())).await;
+    let mut c = server.client().await;
+    let scene = c.get_scene(pb::GetSceneRequest { scene_id: scene_id.clone() }).await.unwrap().into_inner();
+    let robot = scene.robot.unwrap();
+    assert_eq!((robot.attached.len(), robot.link_padding["panda_link7"]), (1, 0.01));
+    let shown: Vec<f64> = robot.joint_positions.iter().take(7).map(|j| j.position).collect();
+    assert_eq!(shown, free[2].0);
+    let req = pb::DetachObjectRequest { scene_id: scene_id.clone(), name: "cup".into() };
+    assert_status(c.detach_object(req).await, Code::NotFound, "cup");
+    let req = pb::DetachObjectRequest { scene_id: scene_id.clone(), name: "can".into() };
+    assert!(c.detach_object(req).await.unwrap().into_inner().robot.unwrap().attached.is_empty());
+    let removed = c.clear_scene_robot(pb::ClearSceneRobotRequest { scene_id: scene_id.clone() }).await.unwrap();
+    assert!(removed.into_inner().removed);
+    let req = pb::CheckConfigurationsRequest { scene_id, configurations: joints(&free[0].0), ..Default::default() };
+    assert_status(c.check_configurations(req).await, Code::InvalidArgument, "robot_id");
+    server.stop().await;
+}
