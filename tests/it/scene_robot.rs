@@ -187,3 +187,123 @@ async fn a_scene_robot_is_checked_at_its_joint_positions_against_the_mesh_labels
     assert_status(c.check_configurations(req).await, Code::InvalidArgument, "robot_id");
     server.stop().await;
 }
+
+/// A revolute joint `j` about z at the base; link `arm` holds a ball of radius 0.1 m at
+/// (0.5, 0, 0) in its frame, so at j = θ the ball's center is (0.5 cos θ, 0.5 sin θ, 0).
+fn arm_file() -> Vec<u8> {
+    serde_json::to_vec(&serde_json::json!({
+        "format": "sublevel.robot.v1",
+        "name": "arm",
+        "urdf": "<robot name=\"arm\"><link name=\"base\"/><link name=\"arm\"/>\
+                 <joint name=\"j\" type=\"revolute\"><parent link=\"base\"/><child link=\"arm\"/>\
+                 <axis xyz=\"0 0 1\"/><limit lower=\"-3\" upper=\"3\" effort=\"1\" velocity=\"1\"/></joint></robot>",
+        "geometries": [{
+            "link": "arm", "index": 0,
+            "origin": {"translation": [0.5, 0.0, 0.0], "rotation": [1.0, 0.0, 0.0, 0.0]},
+            "primitive": {"primitive": "sphere", "radius": 0.1}
+        }]
+    }))
+    .unwrap()
+}
+
+fn at(x: f64, y: f64) -> pb::Pose {
+    pb::Pose {
+        rotation: Some(pb::Quaternion { w: 1.0, ..Default::default() }),
+        translation: Some(pb::Vec3 { x, y, z: 0.0 }),
+    }
+}
+
+fn arm_states(q: &[f64]) -> pb::CheckConfigurationsRequest {
+    pb::CheckConfigurationsRequest {
+        configurations: Some(pb::ConfigurationColumns { joint_names: vec!["j".into()], values: q.to_vec() }),
+        distance: true,
+        ..Default::default()
+    }
+}
+
+/// Joint configurations as the states of a planner stream: checked against the stream's private
+/// view (its poses), with motions certified there, against closed forms; the stored scene and a
+/// unary Query never see the view's poses.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn query_streams_check_joint_configurations_and_motions_on_their_view() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(config(dir.path())).await;
+    let mut c = server.client().await;
+    let robot = c.upload_robot(pb::UploadRobotRequest { name: "arm".into(), robot_file: arm_file() }).await.unwrap();
+    let robot_id = robot.into_inner().robot.unwrap().robot_id;
+    let scene_id = c.create_scene(pb::CreateSceneRequest { name: "cell".into() }).await.unwrap().into_inner().scene_id;
+    let req =
+        pb::UploadBodyRequest { name: "ball".into(), body: Some(pb::upload_body_request::Body::Primitive(ball(0.2))) };
+    let body_id = c.upload_body(req).await.unwrap().into_inner().body_id;
+    // The obstacle: a ball of radius 0.2 m at (0.5, 1, 0).
+    let req = pb::AddInstanceRequest { scene_id: scene_id.clone(), body_id, pose: Some(at(0.5, 1.0)) };
+    let obstacle = c.add_instance(req).await.unwrap().into_inner().instance_id;
+    let req = pb::SetSceneRobotRequest { scene_id: scene_id.clone(), robot_id, ..Default::default() };
+    c.set_scene_robot(req).await.unwrap();
+
+    let (tx, rx) = tokio::sync::mpsc::channel(4);
+    let mut answers = c.query_stream(tokio_stream::wrappers::ReceiverStream::new(rx)).await.unwrap().into_inner();
+    // j = 0: centers 1 m apart, 0.7 m between the balls; j = π/2: √0.5 − 0.3.
+    let half_pi = std::f64::consts::FRAC_PI_2;
+    tx.send(pb::QueryRequest {
+        scene_id: scene_id.clone(),
+        robot_states: Some(arm_states(&[0.0, half_pi])),
+        ..Default::default()
+    })
+    .await
+    .unwrap();
+    let r = answers.message().await.unwrap().unwrap().robot_states.unwrap();
+    assert!(
+        (r.distance[0] - 0.7).abs() < 1e-9 && (r.distance[1] - (0.5f64.sqrt() - 0.3)).abs() < 1e-9,
+        "{:?}",
+        r.distance
+    );
+
+    // The stream moves the obstacle onto the ball's circle at 45°: j = 0 is then
+    // 2 · 0.5 · sin(π/8) − 0.3 from it, and the motion j: 0 → π/2 touches it where the chord
+    // sin(|θ − π/4| / 2) falls to 0.3, at θ* = π/4 − 2 asin(0.3), t* = θ* / (π/2).
+    let c45 = 0.5 * std::f64::consts::FRAC_1_SQRT_2;
+    let motion = pb::CheckMotionsRequest {
+        start: Some(pb::ConfigurationColumns { joint_names: vec!["j".into()], values: vec![0.0] }),
+        end: Some(pb::ConfigurationColumns { joint_names: vec!["j".into()], values: vec![half_pi] }),
+        ..Default::default()
+    };
+    tx.send(pb::QueryRequest {
+        poses: vec![pb::InstancePose { instance_id: obstacle.clone(), pose: Some(at(c45, c45)) }],
+        robot_states: Some(arm_states(&[0.0])),
+        robot_motions: Some(motion.clone()),
+        ..Default::default()
+    })
+    .await
+    .unwrap();
+    let r = answers.message().await.unwrap().unwrap();
+    let states = r.robot_states.unwrap();
+    let expected = (std::f64::consts::PI / 8.0).sin() - 0.3;
+    assert!((states.distance[0] - expected).abs() < 1e-9, "{} vs {expected}", states.distance[0]);
+    let motions = r.robot_motions.unwrap();
+    let t_star = (std::f64::consts::FRAC_PI_4 - 2.0 * 0.3f64.asin()) / half_pi;
+    assert!(!motions.valid[0] && motions.decided[0]);
+    // Reported no later than t*, and within the 1 mm tolerance of it (the ball moves at most
+    // 0.6 · π/2 m per unit of t).
+    let t = motions.contact_t[0];
+    assert!(t <= t_star + 1e-12 && t >= t_star - 1e-3 / (0.6 * half_pi) - 1e-9, "{t} vs {t_star}");
+
+    // Errors name their fields, prefixed: another scene, an unknown joint.
+    let mut other = arm_states(&[0.0]);
+    other.scene_id = "s-0000000000000000".into();
+    tx.send(pb::QueryRequest { robot_states: Some(other), ..Default::default() }).await.unwrap();
+    assert_status(answers.message().await, Code::InvalidArgument, "robot_states.scene_id");
+
+    // The stored scene never saw the stream's pose: a unary Query and CheckScene answer 0.7 m.
+    let req =
+        pb::QueryRequest { scene_id: scene_id.clone(), robot_states: Some(arm_states(&[0.0])), ..Default::default() };
+    let r = c.query(req).await.unwrap().into_inner().robot_states.unwrap();
+    assert!((r.distance[0] - 0.7).abs() < 1e-9);
+    let mut bad = arm_states(&[0.0]);
+    bad.configurations.as_mut().unwrap().joint_names[0] = "k".into();
+    let req = pb::QueryRequest { scene_id: scene_id.clone(), robot_states: Some(bad), ..Default::default() };
+    assert_status(c.query(req).await, Code::InvalidArgument, "robot_states.configurations.joint_names[0]");
+    let robot = check_scene_robot(&mut c, &scene_id).await;
+    assert!((robot.distance[0] - 0.7).abs() < 1e-9);
+    server.stop().await;
+}

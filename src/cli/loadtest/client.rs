@@ -317,7 +317,7 @@ impl<'a> Task<'a> {
                     states: Vec::new(),
                     request_id: step,
                     columns: plan.columns.then(|| self.stream_columns.clone()),
-                    state_columns: None,
+                    ..Default::default()
                 };
                 let resp = self.stream_step(req).await?;
                 if resp.request_id != step || !resp.states.is_empty() {

@@ -33,6 +33,12 @@ impl QueryView {
         &self.scene_id
     }
 
+    /// The view's pose overrides (instance id, pose), in no particular order: the poses its
+    /// requests set, which the stored scene does not see.
+    pub fn pose_overrides(&self) -> Vec<(String, Isometry3)> {
+        self.overrides.iter().map(|(id, pose)| (id.clone(), *pose)).collect()
+    }
+
     /// Number of warm starts this view holds.
     pub fn warm_starts(&self) -> usize {
         self.cache.len()

@@ -3,6 +3,7 @@
 //! batch slots of the blocking pool when it is more Newton work than that, on the SDP slots when
 //! it needs an SDP ([`off_workers`], [`crate::limits`]).
 
+use super::robots::RobotChecks;
 use super::{Handled, SublevelService};
 use crate::convert::{self as cv, require_id, to_status};
 use crate::limits::QueryPools;
@@ -170,11 +171,53 @@ async fn query_work<T: Send + 'static>(
     pools.sdp.run(move || f(&catalog, None)).await
 }
 
+/// Answers the robot checks a planner request carries (`robot_states`, `robot_motions`) on the
+/// view the request left (its poses applied), into `reply`.
+///
+/// # Errors
+/// INVALID_ARGUMENT naming `robot_states.scene_id` / `robot_motions.scene_id` when it names
+/// another scene than the view's; the checks' own errors, their fields prefixed by
+/// `robot_states.` / `robot_motions.`.
+async fn robot_checks(
+    robots: &RobotChecks,
+    view: &QueryView,
+    states: Option<pb::CheckConfigurationsRequest>,
+    motions: Option<pb::CheckMotionsRequest>,
+    reply: &mut pb::QueryResponse,
+) -> Result<(), Status> {
+    let scene = |field: &str, id: &mut String| {
+        if id.is_empty() || id == view.scene_id() {
+            *id = view.scene_id().to_owned();
+            Ok(())
+        } else {
+            Err(to_status(Error::invalid(format!("{field}.scene_id"), "must be empty or the request's scene")))
+        }
+    };
+    let prefixed = |field: &'static str| {
+        move |e: super::HandlerError| match e {
+            super::HandlerError::Core(e) => to_status(cv::prefix_field(e, field)),
+            other => Status::from(other),
+        }
+    };
+    if let Some(mut req) = states {
+        scene("robot_states", &mut req.scene_id)?;
+        let out = robots.configurations(req, view.pose_overrides()).await.map_err(prefixed("robot_states"))?;
+        reply.robot_states = Some(out);
+    }
+    if let Some(mut req) = motions {
+        scene("robot_motions", &mut req.scene_id)?;
+        let out = robots.motions(req, view.pose_overrides()).await.map_err(prefixed("robot_motions"))?;
+        reply.robot_motions = Some(out);
+    }
+    Ok(())
+}
+
 /// One QueryStream: its requests, its private view of the scene (from the first request on).
 struct QueryStreamState {
     inbound: tonic::Streaming<pb::QueryRequest>,
     catalog: Arc<Catalog>,
     pools: QueryPools,
+    robots: RobotChecks,
     view: Option<QueryView>,
     /// (most answers, most poses) of one request.
     limits: (usize, usize),
@@ -184,8 +227,9 @@ struct QueryStreamState {
 impl QueryStreamState {
     /// Answers one request of the stream on its view (created by the first request; later ones
     /// may repeat its scene id or leave it empty).
-    async fn answer(&mut self, req: pb::QueryRequest) -> Result<pb::QueryResponse, Status> {
+    async fn answer(&mut self, mut req: pb::QueryRequest) -> Result<pb::QueryResponse, Status> {
         let start = std::time::Instant::now();
+        let (robot_states, robot_motions) = (req.robot_states.take(), req.robot_motions.take());
         let planner = cv::planner_request_from_proto(&req, self.limits.0, self.limits.1).map_err(to_status)?;
         let current = match self.view.take() {
             None => QueryView::new(require_id("scene_id", &req.scene_id).map_err(to_status)?),
@@ -201,6 +245,14 @@ impl QueryStreamState {
             }
         };
         let (back, reply) = answer_planner(self.catalog.clone(), &self.pools, current, &req, planner, start).await;
+        let mut reply = reply;
+        if let Ok(out) = &mut reply {
+            if let Err(e) = robot_checks(&self.robots, &back, robot_states, robot_motions, out).await {
+                reply = Err(e);
+            } else {
+                out.server_seconds = start.elapsed().as_secs_f64();
+            }
+        }
         self.view = Some(back);
         reply
     }
@@ -322,12 +374,16 @@ pub(super) async fn batch_query(
 /// `Query`: a planner request on a fresh view of the scene ([`answer_planner`]).
 pub(super) async fn query(svc: &SublevelService, request: Request<pb::QueryRequest>) -> Handled<pb::QueryResponse> {
     let start = std::time::Instant::now();
-    let req = request.into_inner();
+    let mut req = request.into_inner();
     require_id("scene_id", &req.scene_id)?;
+    let (robot_states, robot_motions) = (req.robot_states.take(), req.robot_motions.take());
     let planner = cv::planner_request_from_proto(&req, svc.config.max_batch_pairs, svc.config.max_poses_per_call)?;
     let view = QueryView::new(&req.scene_id);
-    let (_, reply) = answer_planner(svc.catalog.clone(), &svc.pools, view, &req, planner, start).await;
-    Ok(Response::new(reply?))
+    let (view, reply) = answer_planner(svc.catalog.clone(), &svc.pools, view, &req, planner, start).await;
+    let mut reply = reply?;
+    robot_checks(&RobotChecks::of(svc), &view, robot_states, robot_motions, &mut reply).await?;
+    reply.server_seconds = start.elapsed().as_secs_f64();
+    Ok(Response::new(reply))
 }
 
 /// `QueryStream`: planner requests on one view of a scene for the stream's lifetime.
@@ -342,6 +398,7 @@ pub(super) async fn query_stream(
         inbound: request.into_inner(),
         catalog: svc.catalog.clone(),
         pools: svc.pools.clone(),
+        robots: RobotChecks::of(svc),
         view: None,
         limits: (svc.config.max_batch_pairs, svc.config.max_poses_per_call),
         done: false,

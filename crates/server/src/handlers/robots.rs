@@ -6,7 +6,7 @@
 //! [`RobotChecker`] (the robot's meshes and bodies are shared, only the world's pair lists are
 //! built, in microseconds).
 
-use super::{Handled, SublevelService};
+use super::{Handled, HandlerError, SublevelService};
 use crate::convert::{self as cv, require_id};
 use crate::jobs::RobotFitInput;
 use crate::pb;
@@ -186,61 +186,202 @@ fn with_attached(robot: &Arc<FittedRobot>, attached: &[pb::AttachedObject]) -> R
     Ok(Arc::new(robot))
 }
 
-/// Whether the robot and the scene of a check read from memory alone: no shared store (which may
-/// load them from the database) and every stored body built (a first use builds it).
-fn in_memory(svc: &SublevelService) -> bool {
-    !svc.catalog.shared_store() && svc.catalog.bodies_pending() == 0
+/// What the robot checks need of the service: the catalog, the batch slots and their number.
+/// The unary checks and the query streams (whose requests may carry robot checks) share it.
+#[derive(Clone, Debug)]
+pub(super) struct RobotChecks {
+    catalog: Arc<sublevel_scene::Catalog>,
+    pools: crate::limits::QueryPools,
+    slots: usize,
 }
 
-/// What a check request says of its robot and world (see [`setting`]).
+/// What a check request says of its robot and world (see [`RobotChecks::setting`]).
 struct Asked {
     robot_id: String,
     scene_id: String,
     base: Option<pb::Pose>,
     attached: Vec<pb::AttachedObject>,
     link_padding: std::collections::HashMap<String, Real>,
+    /// Pose overrides of scene instances (instance id → pose): a query stream's view.
+    poses: Vec<(String, Isometry3)>,
 }
 
-/// Reads a check's robot, scene (empty: no world), base and link padding: inline when they are
-/// in memory ([`in_memory`]), else off the async workers. With no `robot_id`, the scene's robot
-/// with its base (unless the request gives one), attached objects (the request's added) and link
-/// padding (the request's replacing it link by link).
-async fn setting(svc: &SublevelService, asked: Asked) -> Result<Setting, tonic::Status> {
-    let Asked { robot_id, scene_id, base, attached, link_padding } = asked;
-    let base = base.map(|b| cv::pose_from_proto("base", Some(&b))).transpose().map_err(cv::to_status)?;
-    let catalog = svc.catalog.clone();
-    let read = move || {
-        let world = if scene_id.is_empty() {
-            RobotWorld::empty()
-        } else {
-            catalog.robot_world(require_id("scene_id", &scene_id)?)?
-        };
-        let (robot, base, mut padding) = if robot_id.is_empty() {
-            let placed = world.robot.clone().ok_or_else(|| {
-                Error::invalid("robot_id", "required: name a robot, or a scene holding one (SetSceneRobot)")
-            })?;
-            (placed.robot.clone(), base.unwrap_or(placed.base), placed.link_padding.clone())
-        } else {
-            let entry = catalog.robot(require_id("robot_id", &robot_id)?)?;
-            (entry.robot.clone(), base.unwrap_or_else(Isometry3::identity), Vec::new())
-        };
-        for (link, p) in link_padding {
-            match padding.iter_mut().find(|(l, _)| *l == link) {
-                Some(entry) => entry.1 = p,
-                None => padding.push((link, p)),
+impl RobotChecks {
+    /// The robot checks of `svc`.
+    pub(super) fn of(svc: &SublevelService) -> Self {
+        Self { catalog: svc.catalog.clone(), pools: svc.pools.clone(), slots: svc.config.batch_workers }
+    }
+
+    /// Whether the robot and the scene of a check read from memory alone: no shared store
+    /// (which may load them from the database) and every stored body built (a first use builds
+    /// it).
+    fn in_memory(&self) -> bool {
+        !self.catalog.shared_store() && self.catalog.bodies_pending() == 0
+    }
+
+    /// Reads a check's robot, scene (empty: no world), base and link padding: inline when they
+    /// are in memory ([`RobotChecks::in_memory`]), else off the async workers. With no
+    /// `robot_id`, the scene's robot with its base (unless the request gives one), attached
+    /// objects (the request's added) and link padding (the request's replacing it link by link).
+    async fn setting(&self, asked: Asked) -> Result<Setting, HandlerError> {
+        let Asked { robot_id, scene_id, base, attached, link_padding, poses } = asked;
+        let base = base.map(|b| cv::pose_from_proto("base", Some(&b))).transpose().map_err(cv::to_status)?;
+        let catalog = self.catalog.clone();
+        let read = move || -> Result<Setting> {
+            let mut world = if scene_id.is_empty() {
+                RobotWorld::empty()
+            } else {
+                catalog.robot_world(require_id("scene_id", &scene_id)?)?
+            };
+            world.with_poses(poses.iter().map(|(id, p)| (id.as_str(), p)));
+            let (robot, base, mut padding) = if robot_id.is_empty() {
+                let placed = world.robot.clone().ok_or_else(|| {
+                    Error::invalid("robot_id", "required: name a robot, or a scene holding one (SetSceneRobot)")
+                })?;
+                (placed.robot.clone(), base.unwrap_or(placed.base), placed.link_padding.clone())
+            } else {
+                let entry = catalog.robot(require_id("robot_id", &robot_id)?)?;
+                (entry.robot.clone(), base.unwrap_or_else(Isometry3::identity), Vec::new())
+            };
+            for (link, p) in link_padding {
+                match padding.iter_mut().find(|(l, _)| *l == link) {
+                    Some(entry) => entry.1 = p,
+                    None => padding.push((link, p)),
+                }
             }
+            Ok(Setting {
+                robot: with_attached(&robot, &attached)?,
+                world: Arc::new(world),
+                base,
+                link_padding: padding.into(),
+            })
+        };
+        if self.in_memory() {
+            Ok(read()?)
+        } else {
+            // The check's own error stays a core error (its field can still be prefixed).
+            Ok(blocking(move || Ok(read())).await??)
         }
-        Ok(Setting {
-            robot: with_attached(&robot, &attached)?,
-            world: Arc::new(world),
-            base,
-            link_padding: padding.into(),
-        })
-    };
-    if in_memory(svc) {
-        read().map_err(cv::to_status)
-    } else {
-        blocking(read).await
+    }
+
+    /// Answers a `CheckConfigurations` request, the scene's instances in `poses` moved there:
+    /// configurations checked in chunks on the batch slots, answered in columns.
+    pub(super) async fn configurations(
+        &self,
+        req: pb::CheckConfigurationsRequest,
+        poses: Vec<(String, Isometry3)>,
+    ) -> Result<pb::CheckConfigurationsResponse, HandlerError> {
+        let padding = cv::padding(req.padding)?;
+        let asked = Asked {
+            robot_id: req.robot_id,
+            scene_id: req.scene_id,
+            base: req.base,
+            attached: req.attached,
+            link_padding: req.link_padding,
+            poses,
+        };
+        let Setting { robot, world, base, link_padding } = self.setting(asked).await?;
+        let configs = Arc::new(cv::configurations_from_proto(
+            "configurations",
+            req.configurations.as_ref(),
+            &robot,
+            &world.planning.joint_positions,
+        )?);
+        let options = CheckOptions {
+            padding,
+            distance: req.distance || req.gradient,
+            self_collision: !req.skip_self,
+            gradient: req.gradient,
+        };
+        let check = move |robot: &FittedRobot, world: &RobotWorld, configs: &[Vec<Real>], range: Range<usize>| {
+            let allowed = world.planning.allowed_override();
+            let mut checker = RobotChecker::new(robot, world.objects.clone(), &allowed)?;
+            checker.set_link_padding(&link_padding)?;
+            range
+                .map(|c| {
+                    checker
+                        .check(&configs[c], &base, &options)
+                        .map_err(|e| cv::prefix_field(e, &format!("configurations[{c}]")))
+                })
+                .collect::<Result<Vec<_>>>()
+        };
+        // A few verdicts are microseconds: answered inline, as small query requests are; the
+        // rest (distances reach the meshes' distance searches) in chunks on the batch slots.
+        let answers = if configs.len() <= INLINE_CONFIGURATIONS && !options.distance && self.in_memory() {
+            vec![check(&robot, &world, &configs, 0..configs.len())?]
+        } else {
+            let work = chunks(configs.len(), self.slots).into_iter().map(|range| {
+                let (robot, world, configs, check) = (robot.clone(), world.clone(), configs.clone(), check.clone());
+                self.pools.batch.run(move || Ok(check(&robot, &world, &configs, range)))
+            });
+            try_join_all(work).await?.into_iter().collect::<Result<Vec<_>>>()?
+        };
+        let mut out = pb::CheckConfigurationsResponse {
+            joint_names: robot.model.variable_names().iter().map(|s| (*s).to_owned()).collect(),
+            ..Default::default()
+        };
+        for chunk in &answers {
+            cv::push_configuration_answers(&mut out, chunk, &robot, &world.objects, req.gradient);
+        }
+        Ok(out)
+    }
+
+    /// Answers a `CheckMotions` request, the scene's instances in `poses` moved there: motions
+    /// checked by conservative advancement in chunks on the batch slots, answered in columns.
+    pub(super) async fn motions(
+        &self,
+        req: pb::CheckMotionsRequest,
+        poses: Vec<(String, Isometry3)>,
+    ) -> Result<pb::CheckMotionsResponse, HandlerError> {
+        let options = cv::motion_options(req.padding, req.tolerance, req.max_steps)?;
+        let asked = Asked {
+            robot_id: req.robot_id,
+            scene_id: req.scene_id,
+            base: req.base,
+            attached: req.attached,
+            link_padding: req.link_padding,
+            poses,
+        };
+        let Setting { robot, world, base, link_padding } = self.setting(asked).await?;
+        let defaults = &world.planning.joint_positions;
+        let start = cv::configurations_from_proto("start", req.start.as_ref(), &robot, defaults)?;
+        let end = cv::configurations_from_proto("end", req.end.as_ref(), &robot, defaults)?;
+        if start.len() != end.len() {
+            return Err(Error::invalid(
+                "end.values",
+                format!("{} end configurations for {} start configurations", end.len(), start.len()),
+            )
+            .into());
+        }
+        let motions = Arc::new((start, end));
+        let work = chunks(motions.0.len(), self.slots).into_iter().map(|range| {
+            let (robot, world, motions, link_padding) =
+                (robot.clone(), world.clone(), motions.clone(), link_padding.clone());
+            self.pools.batch.run(move || {
+                Ok((|| {
+                    let allowed = world.planning.allowed_override();
+                    let mut checker = RobotChecker::new(&robot, world.objects.clone(), &allowed)?;
+                    checker.set_link_padding(&link_padding)?;
+                    let mut motion = MotionChecker::new(&mut checker)?;
+                    range
+                        .map(|m| {
+                            motion
+                                .check_motion(&motions.0[m], &motions.1[m], &base, &options)
+                                .map_err(|e| cv::prefix_field(e, &format!("motions[{m}]")))
+                        })
+                        .collect::<Result<Vec<_>>>()
+                })())
+            })
+        });
+        let answers = try_join_all(work).await?.into_iter().collect::<Result<Vec<_>>>()?;
+        let mut out = pb::CheckMotionsResponse {
+            joint_names: robot.model.variable_names().iter().map(|s| (*s).to_owned()).collect(),
+            ..Default::default()
+        };
+        for chunk in &answers {
+            cv::push_motion_answers(&mut out, chunk, &robot, &world.objects);
+        }
+        Ok(out)
     }
 }
 
@@ -257,58 +398,7 @@ pub(super) async fn check_configurations(
     svc: &SublevelService,
     request: Request<pb::CheckConfigurationsRequest>,
 ) -> Handled<pb::CheckConfigurationsResponse> {
-    let req = request.into_inner();
-    let padding = cv::padding(req.padding)?;
-    let asked = Asked {
-        robot_id: req.robot_id,
-        scene_id: req.scene_id,
-        base: req.base,
-        attached: req.attached,
-        link_padding: req.link_padding,
-    };
-    let Setting { robot, world, base, link_padding } = setting(svc, asked).await?;
-    let configs = Arc::new(cv::configurations_from_proto(
-        "configurations",
-        req.configurations.as_ref(),
-        &robot,
-        &world.planning.joint_positions,
-    )?);
-    let options = CheckOptions {
-        padding,
-        distance: req.distance || req.gradient,
-        self_collision: !req.skip_self,
-        gradient: req.gradient,
-    };
-    let check = move |robot: &FittedRobot, world: &RobotWorld, configs: &[Vec<Real>], range: Range<usize>| {
-        let allowed = world.planning.allowed_override();
-        let mut checker = RobotChecker::new(robot, world.objects.clone(), &allowed)?;
-        checker.set_link_padding(&link_padding)?;
-        range
-            .map(|c| {
-                checker
-                    .check(&configs[c], &base, &options)
-                    .map_err(|e| cv::prefix_field(e, &format!("configurations[{c}]")))
-            })
-            .collect::<Result<Vec<_>>>()
-    };
-    // A few verdicts are microseconds: answered inline, as small query requests are; the rest
-    // (distances reach the meshes' distance searches) in chunks on the batch slots.
-    let answers = if configs.len() <= INLINE_CONFIGURATIONS && !options.distance && in_memory(svc) {
-        vec![check(&robot, &world, &configs, 0..configs.len())?]
-    } else {
-        let work = chunks(configs.len(), svc.config.batch_workers).into_iter().map(|range| {
-            let (robot, world, configs, check) = (robot.clone(), world.clone(), configs.clone(), check.clone());
-            svc.pools.batch.run(move || check(&robot, &world, &configs, range))
-        });
-        try_join_all(work).await?
-    };
-    let mut out = pb::CheckConfigurationsResponse {
-        joint_names: robot.model.variable_names().iter().map(|s| (*s).to_owned()).collect(),
-        ..Default::default()
-    };
-    for chunk in &answers {
-        cv::push_configuration_answers(&mut out, chunk, &robot, &world.objects, req.gradient);
-    }
+    let out = RobotChecks::of(svc).configurations(request.into_inner(), Vec::new()).await?;
     Ok(Response::new(out))
 }
 
@@ -318,52 +408,7 @@ pub(super) async fn check_motions(
     svc: &SublevelService,
     request: Request<pb::CheckMotionsRequest>,
 ) -> Handled<pb::CheckMotionsResponse> {
-    let req = request.into_inner();
-    let options = cv::motion_options(req.padding, req.tolerance, req.max_steps)?;
-    let asked = Asked {
-        robot_id: req.robot_id,
-        scene_id: req.scene_id,
-        base: req.base,
-        attached: req.attached,
-        link_padding: req.link_padding,
-    };
-    let Setting { robot, world, base, link_padding } = setting(svc, asked).await?;
-    let defaults = &world.planning.joint_positions;
-    let start = cv::configurations_from_proto("start", req.start.as_ref(), &robot, defaults)?;
-    let end = cv::configurations_from_proto("end", req.end.as_ref(), &robot, defaults)?;
-    if start.len() != end.len() {
-        return Err(Error::invalid(
-            "end.values",
-            format!("{} end configurations for {} start configurations", end.len(), start.len()),
-        )
-        .into());
-    }
-    let motions = Arc::new((start, end));
-    let work = chunks(motions.0.len(), svc.config.batch_workers).into_iter().map(|range| {
-        let (robot, world, motions, link_padding) =
-            (robot.clone(), world.clone(), motions.clone(), link_padding.clone());
-        svc.pools.batch.run(move || {
-            let allowed = world.planning.allowed_override();
-            let mut checker = RobotChecker::new(&robot, world.objects.clone(), &allowed)?;
-            checker.set_link_padding(&link_padding)?;
-            let mut motion = MotionChecker::new(&mut checker)?;
-            range
-                .map(|m| {
-                    motion
-                        .check_motion(&motions.0[m], &motions.1[m], &base, &options)
-                        .map_err(|e| cv::prefix_field(e, &format!("motions[{m}]")))
-                })
-                .collect::<Result<Vec<_>>>()
-        })
-    });
-    let answers = try_join_all(work).await?;
-    let mut out = pb::CheckMotionsResponse {
-        joint_names: robot.model.variable_names().iter().map(|s| (*s).to_owned()).collect(),
-        ..Default::default()
-    };
-    for chunk in &answers {
-        cv::push_motion_answers(&mut out, chunk, &robot, &world.objects);
-    }
+    let out = RobotChecks::of(svc).motions(request.into_inner(), Vec::new()).await?;
     Ok(Response::new(out))
 }
 
