@@ -288,6 +288,17 @@ async fn query_streams_check_joint_configurations_and_motions_on_their_view() {
     let t = motions.contact_t[0];
     assert!(t <= t_star + 1e-12 && t >= t_star - 1e-3 / (0.6 * half_pi) - 1e-9, "{t} vs {t_star}");
 
+    // Stopping at the first collision: j = π/4 touches the obstacle, so j = π/2 is not checked.
+    let quarter = std::f64::consts::FRAC_PI_4;
+    for stop in [true, false] {
+        let states =
+            pb::CheckConfigurationsRequest { stop_at_first_collision: stop, ..arm_states(&[0.0, quarter, half_pi]) };
+        tx.send(pb::QueryRequest { robot_states: Some(states), ..Default::default() }).await.unwrap();
+        let r = answers.message().await.unwrap().unwrap().robot_states.unwrap();
+        let expected: &[bool] = if stop { &[false, true] } else { &[false, true, false] };
+        assert_eq!((r.count as usize, r.collides.as_slice()), (expected.len(), expected));
+    }
+
     // Errors name their fields, prefixed: another scene, an unknown joint.
     let mut other = arm_states(&[0.0]);
     other.scene_id = "s-0000000000000000".into();

@@ -293,24 +293,32 @@ impl RobotChecks {
             self_collision: !req.skip_self,
             gradient: req.gradient,
         };
+        let stop = req.stop_at_first_collision;
         let check = move |robot: &FittedRobot, world: &RobotWorld, configs: &[Vec<Real>], range: Range<usize>| {
             let allowed = world.planning.allowed_override();
             let mut checker = RobotChecker::new(robot, world.objects.clone(), &allowed)?;
             checker.set_link_padding(&link_padding)?;
-            range
-                .map(|c| {
-                    checker
-                        .check(&configs[c], &base, &options)
-                        .map_err(|e| cv::prefix_field(e, &format!("configurations[{c}]")))
-                })
-                .collect::<Result<Vec<_>>>()
+            let mut out = Vec::with_capacity(range.len());
+            for c in range {
+                let answer = checker
+                    .check(&configs[c], &base, &options)
+                    .map_err(|e| cv::prefix_field(e, &format!("configurations[{c}]")))?;
+                let collides = answer.collides;
+                out.push(answer);
+                if stop && collides {
+                    break;
+                }
+            }
+            Ok(out)
         };
         // A few verdicts are microseconds: answered inline, as small query requests are; the
-        // rest (distances reach the meshes' distance searches) in chunks on the batch slots.
+        // rest (distances reach the meshes' distance searches) in chunks on the batch slots, or
+        // in one chunk, in order, when the check stops at the first collision.
         let answers = if configs.len() <= INLINE_CONFIGURATIONS && !options.distance && self.in_memory() {
             vec![check(&robot, &world, &configs, 0..configs.len())?]
         } else {
-            let work = chunks(configs.len(), self.slots).into_iter().map(|range| {
+            let slots = if stop { 1 } else { self.slots };
+            let work = chunks(configs.len(), slots).into_iter().map(|range| {
                 let (robot, world, configs, check) = (robot.clone(), world.clone(), configs.clone(), check.clone());
                 self.pools.batch.run(move || Ok(check(&robot, &world, &configs, range)))
             });
