@@ -278,10 +278,16 @@ class SublevelChecker:
             )
             ok = bool(r.valid[0])
         else:
+            # The samples in van der Corput order, the check stopping at the first collision (as
+            # OMPL's discrete motion validator and the coal checker here do).
             n = max(1, math.ceil(float(np.linalg.norm(q1 - q0)) * self.resolution))
-            ts = np.arange(1, n + 1) / n
+            ts = np.asarray(van_der_corput(n), dtype=float) / n
             r = self.client.check_configurations(
-                self.robot, q0 + ts[:, None] * (q1 - q0), scene=self.scene, joint_names=self.names
+                self.robot,
+                q0 + ts[:, None] * (q1 - q0),
+                scene=self.scene,
+                joint_names=self.names,
+                stop_at_first_collision=True,
             )
             ok = not r.collides.any()
         self.count.seconds += time.perf_counter() - t0
