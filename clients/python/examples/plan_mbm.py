@@ -25,7 +25,8 @@ path simplification) with
   of contact). ``--sublevel-motions lazy`` (the default) samples the edges at ``--resolution`` in one
   ``check_configurations`` call during the search, then certifies the simplified path's edges in one
   ``check_motions`` call and searches again (within the time left) when one fails, so every returned
-  path is certified; ``certified`` certifies every edge the planner tries; ``sampled`` only samples;
+  path is certified (the search pads the states by ``--search-padding``, 5 mm, so that the simplified
+  path keeps clear of the obstacles and certifies at padding 0); ``certified`` certifies every edge the planner tries; ``sampled`` only samples;
 * ``--checker coal``: the robots peer's pinocchio + coal checker (``coal_peer.py`` from ``--peer-dir``,
   else a minimal one here) on the collision meshes; motions sampled at ``--resolution``
   configurations per unit of joint-space distance (VAMP's 32), as coal has no certified motion check.
@@ -232,8 +233,18 @@ class Counts:
 class SublevelChecker:
     """States and motions checked by the service, in an imported planning scene."""
 
-    def __init__(self, client, robot_id: str, joint_names: List[str], motions: str, resolution: float, tolerance: float):
+    def __init__(
+        self,
+        client,
+        robot_id: str,
+        joint_names: List[str],
+        motions: str,
+        resolution: float,
+        tolerance: float,
+        search_padding: float = 0.0,
+    ):
         self.client = client
+        self.padding = search_padding
         self.robot = robot_id
         self.names = joint_names
         self.motions = motions
@@ -252,7 +263,9 @@ class SublevelChecker:
 
     def valid(self, q: np.ndarray) -> bool:
         t0 = time.perf_counter()
-        r = self.client.check_configurations(self.robot, q, scene=self.scene, joint_names=self.names)
+        r = self.client.check_configurations(
+            self.robot, q, scene=self.scene, joint_names=self.names, padding=self.padding
+        )
         self.count.seconds += time.perf_counter() - t0
         self.count.states += 1
         return not bool(r.collides[0])
@@ -287,6 +300,7 @@ class SublevelChecker:
                 q0 + ts[:, None] * (q1 - q0),
                 scene=self.scene,
                 joint_names=self.names,
+                padding=self.padding,
                 stop_at_first_collision=True,
             )
             ok = not r.collides.any()
@@ -734,6 +748,11 @@ def main(argv=None) -> int:
     ap.add_argument("--tolerance", type=float, default=1e-3, help="sublevel certified motions: contact tolerance, meters (default 0.001)")
     ap.add_argument("--resolution", type=float, default=32.0,
                     help="sampled motions: configurations per unit of joint-space distance (default 32, VAMP's)")
+    ap.add_argument("--search-padding", type=float, default=0.005,
+                    help="sublevel lazy motions: padding of the sampled states during the search, meters "
+                         "(default 0.005): a path kept clear of the obstacles is certified at padding 0 in "
+                         "fewer advancement steps, where a path simplified against them is often refused "
+                         "within the contact tolerance and searched again")
     ap.add_argument("--peer-dir", type=Path, default=DEFAULT_PEER_DIR,
                     help="the robots peer (coal_peer.py) for the coal checker (default ../shared/peers/robots)")
     ap.add_argument("--mesh-reader", choices=("obj", "assimp"), default="obj",
@@ -786,7 +805,15 @@ def main(argv=None) -> int:
                 raise SystemExit(f"the fitted robot's joints {info.joint_names} are not the URDF's {names}")
             print(f"robot {info.name} ({info.robot_id}) from {robot_file}: {info.dof} joints, {info.geometries} geometries, "
                   f"{info.self_pairs} self pairs", flush=True)
-            checker = SublevelChecker(client, info.robot_id, names, args.sublevel_motions, args.resolution, args.tolerance)
+            checker = SublevelChecker(
+                client,
+                info.robot_id,
+                names,
+                args.sublevel_motions,
+                args.resolution,
+                args.tolerance,
+                args.search_padding if args.sublevel_motions == "lazy" else 0.0,
+            )
         else:
             checker = mesh
 
