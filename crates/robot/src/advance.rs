@@ -5,10 +5,12 @@
 //! first: the configuration q₀ checked (pairs whose links do not move keep their verdict throughout)
 //! t ← 0
 //! loop:  place the geometries at q(t); every moving pair p gets a cheap lower bound b_p of its
-//!        distance (ball and box gaps) and its closing speed v_p per unit of t:
-//!            v = D_L for a link–world pair,  D_a + D_b for a self pair,
-//!            D_L = Σ_j c_Lj |Δq_j|: how far any point of link L moves per unit of t (motion)
-//!        take pairs by (b_p − padding) / v_p, smallest first; refine the one taken
+//!        distance (ball and box gaps) and the bound of how far it can close in a step of s:
+//!            m_L(s) = min(s·D_L, s·A_L + s²·B_L / 2) for a link–world pair, m_a + m_b for a self pair
+//!            D_L = Σ_j c_Lj |Δq_j| over the whole segment, A_L and B_L from the joint axes' distances
+//!            to the link at q(t) ([`crate::motion`])
+//!        take pairs by their step s_p (the largest s with m(s) ≤ b_p − padding), smallest first;
+//!        refine the one taken
 //!            ball / box gap → sos root bound → the meshes' exact distance
 //!        until the smallest is exact: its ratio is the step Δt (every other pair's ratio is at
 //!        least its lower bound's, hence at least Δt)
@@ -16,9 +18,9 @@
 //!        t ← t + Δt;  t ≥ 1                                 → the motion is free
 //! ```
 //!
-//! No point of link L moves farther than `Δt · D_L` during a step (the motion bound,
-//! [`crate::motion`], holds at every configuration), and a geometry at distance `d_g` from the
-//! world cannot touch it before moving `d_g`; two links close by at most `D_a + D_b` per unit of t.
+//! No point of link L moves farther than `m_L(Δt)` during a step (the motion bound,
+//! [`crate::motion`]), and a geometry at distance `d_g` from the world cannot touch it before moving
+//! `d_g`; two links close by at most `m_a + m_b`.
 //! So each step is free, and the steps cover `[0, 1]` with no gap: there is no sampling
 //! resolution to choose (Schwarzer, Saha and Latombe, IEEE T-RO 2005). A contact is reported at
 //! the first `t` where a bound falls to `padding + tolerance`; the motion is free before it, so the
@@ -30,7 +32,7 @@
 use crate::check::CheckOptions;
 use crate::check::RobotChecker;
 use crate::model::JointKind;
-use crate::motion::MotionBounds;
+use crate::motion::{step, LinkMotion, MotionBounds};
 use crate::{Error, Result};
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
@@ -86,8 +88,8 @@ struct Queued {
     bound: Real,
     level: u8,
     exact: bool,
-    /// Closing speed per unit of t (meters).
-    speed: Real,
+    /// How fast the pair can close (the bound of its links' relative motion).
+    motion: LinkMotion,
     /// A world pair `(g, Some(o))` or self pair `(k, None)`.
     pair: (usize, Option<usize>),
 }
@@ -168,6 +170,7 @@ impl<'c, 'r> MotionChecker<'c, 'r> {
             })
             .collect();
         let speed: Vec<Real> = (0..model.links().len()).map(|l| self.bounds.displacement(l, &dq)).collect();
+        let links = model.links().len();
         let geometries: Vec<usize> = self.checker.robot().geometries.iter().map(|g| g.link).collect();
         let self_pairs = self.checker.self_pairs().to_vec();
         let mut answer = MotionAnswer {
@@ -183,19 +186,20 @@ impl<'c, 'r> MotionChecker<'c, 'r> {
         // Bounds this close are taken on the meshes: a contact is never reported from a loose
         // bound.
         let refine_below = options.padding + 10.0 * options.tolerance;
-        // The pairs that move, with their closing speeds; the others keep q₀'s verdict.
-        let mut moving: Vec<((usize, Option<usize>), Real)> = Vec::new();
+        // The pairs that move, with their links (one for a world pair); the others keep q₀'s
+        // verdict.
+        let mut moving: Vec<((usize, Option<usize>), (usize, Option<usize>))> = Vec::new();
         for (g, &link) in geometries.iter().enumerate() {
             if speed[link] > 0.0 {
-                moving.extend(self.checker.world_pairs_of(g).iter().map(|&o| ((g, Some(o)), speed[link])));
+                moving.extend(self.checker.world_pairs_of(g).iter().map(|&o| ((g, Some(o)), (link, None))));
             }
         }
         for (k, &(a, b)) in self_pairs.iter().enumerate() {
-            let v = speed[geometries[a]] + speed[geometries[b]];
-            if v > 0.0 {
-                moving.push(((k, None), v));
+            if speed[geometries[a]] + speed[geometries[b]] > 0.0 {
+                moving.push(((k, None), (geometries[a], Some(geometries[b]))));
             }
         }
+        let mut motion = vec![LinkMotion::default(); links];
         let first = self.checker.check(
             q0,
             base,
@@ -225,10 +229,22 @@ impl<'c, 'r> MotionChecker<'c, 'r> {
                 q[k] = q0[k] + t * dq[k];
             }
             self.checker.place(&q, base)?;
+            let model = &self.checker.robot().model;
+            for (l, m) in motion.iter_mut().enumerate() {
+                *m = if speed[l] > 0.0 {
+                    self.bounds.at(model, l, self.checker.link_poses(), &dq)
+                } else {
+                    LinkMotion::default()
+                };
+            }
             heap.clear();
-            for &(pair, v) in &moving {
+            for &(pair, (la, lb)) in &moving {
+                let m = match lb {
+                    Some(lb) => motion[la].plus(&motion[lb]),
+                    None => motion[la],
+                };
                 let (bound, exact) = self.bound(pair, 0)?;
-                heap.push(Queued { ratio: (bound - options.padding) / v, bound, level: 0, exact, speed: v, pair });
+                heap.push(Queued { ratio: step(bound - options.padding, &m), bound, level: 0, exact, motion: m, pair });
             }
             let limiting = loop {
                 let Some(mut top) = heap.pop() else { break None };
@@ -248,7 +264,7 @@ impl<'c, 'r> MotionChecker<'c, 'r> {
                 };
                 top.bound = bound;
                 top.exact = exact;
-                top.ratio = (bound - options.padding) / top.speed;
+                top.ratio = step(bound - options.padding, &top.motion);
                 heap.push(top);
             };
             let Some(limit) = limiting else {

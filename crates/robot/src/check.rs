@@ -430,6 +430,11 @@ impl<'r> RobotChecker<'r> {
         Ok(())
     }
 
+    /// The link poses of the configuration last placed ([`RobotChecker::place`]).
+    pub(crate) fn link_poses(&self) -> &[Isometry3] {
+        &self.link_poses
+    }
+
     /// The checked world pairs of geometry `g` (object indices).
     pub(crate) fn world_pairs_of(&self, g: usize) -> &[usize] {
         &self.world_pairs[g]

@@ -24,10 +24,26 @@
 //! A mimic joint following entry v with multiplier μ moves by `μ · Δq_v`, so it adds `|μ| · c` to
 //! entry v's coefficient. The bound holds for every configuration, so it holds on every sub-segment
 //! too: a step of length `Δt` moves no point of L farther than `Δt · Σ_j c_Lj |Δq_j|`.
+//!
+//! **At a configuration** the lever arms are usually much shorter than the chain's full reach `R_jL`
+//! (an arm folded, or a link close to a joint's axis). Write a point of L in joint j's child frame
+//! as `y`: `x − o_j = R_j · y`, and only the joints after j on the chain move `y`, at most
+//! `E_jL = Σ_{k after j} c'_kL |Δq_k|` per unit of t (`c'_kL = R_kL`, or 1 for a prismatic k). The
+//! distance of x from j's axis (the part of `y` across the axis) starts at most
+//! `ρ_jL = min(dist(p_L, axis_j) + r_L, R_jL)` (p_L the link's origin at the step's start) and grows
+//! at most at rate `E_jL`, so during a step of length s
+//!
+//! ```text
+//! |dx/dt| ≤ A_L + s·B_L,   A_L = Σ_j |Δq_j| · (ρ_jL, or 1 prismatic),   B_L = Σ_{j revolute} |Δq_j| · E_jL
+//! |x(t+s) − x(t)| ≤ s·A_L + s²·B_L / 2            and also ≤ s · Σ_j c_Lj |Δq_j|
+//! ```
+//!
+//! ([`MotionBounds::at`]; mimic joints with their `|μ|`). A clearance d allows the step
+//! `s = max(d / D_L, 2d / (A_L + √(A_L² + 2 B_L d)))`, the larger of the two bounds' ([`step`]).
 
 use crate::model::{JointKind, JointValue, RobotModel};
 use crate::{Error, Result};
-use sublevel_core::math::Real;
+use sublevel_core::math::{Isometry3, Real};
 
 /// Per-link coefficients of the motion bound (see the module docs): `coefficients[link][k]`
 /// meters per radian (revolute, continuous) or meters per meter (prismatic) of configuration
@@ -35,6 +51,74 @@ use sublevel_core::math::Real;
 #[derive(Clone, Debug, PartialEq)]
 pub struct MotionBounds {
     coefficients: Vec<Vec<Real>>,
+    /// Per link, the moving joints from it up to the root, nearest first.
+    chains: Vec<Vec<ChainJoint>>,
+    /// Per link, the radius about its origin that holds its geometry (meters).
+    radius: Vec<Real>,
+}
+
+/// A moving joint on a link's chain (see the module docs).
+#[derive(Clone, Debug, PartialEq)]
+struct ChainJoint {
+    /// The joint's index in [`RobotModel::joints`].
+    joint: usize,
+    /// The configuration entry it follows.
+    variable: usize,
+    /// `|μ|` for a mimic joint, else 1.
+    gain: Real,
+    /// Whether it is prismatic (a speed of `|Δq|`, no lever arm).
+    prismatic: bool,
+    /// `R_jL`: the chain's full reach from the joint to any point of the link (meters).
+    reach: Real,
+}
+
+/// The bound of one link's motion from a configuration along a segment (see the module docs), per
+/// unit of the segment's parameter t: a point moves at most `min(s·full, s·linear + s²·quadratic / 2)`
+/// in a step of length s.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct LinkMotion {
+    /// `D_L = Σ_j c_Lj |Δq_j|`, the configuration-free bound (meters).
+    pub full: Real,
+    /// `A_L`, the speed at the step's start (meters).
+    pub linear: Real,
+    /// `B_L`, how fast that speed can grow (meters).
+    pub quadratic: Real,
+}
+
+impl LinkMotion {
+    /// The sum of two links' bounds: of their relative motion (a self pair).
+    pub fn plus(&self, other: &LinkMotion) -> LinkMotion {
+        LinkMotion {
+            full: self.full + other.full,
+            linear: self.linear + other.linear,
+            quadratic: self.quadratic + other.quadratic,
+        }
+    }
+
+    /// Whether the link does not move.
+    pub fn is_still(&self) -> bool {
+        self.full <= 0.0
+    }
+}
+
+/// The longest step (in units of t) over which no point bounded by `motion` moves `clearance`
+/// meters or more: `max(d / D, 2d / (A + √(A² + 2Bd)))` (+∞ for a link that does not move, 0 for
+/// `clearance ≤ 0`).
+pub fn step(clearance: Real, motion: &LinkMotion) -> Real {
+    if clearance <= 0.0 {
+        return 0.0;
+    }
+    if motion.is_still() {
+        return Real::INFINITY;
+    }
+    let coarse = clearance / motion.full;
+    let root = (motion.linear * motion.linear + 2.0 * motion.quadratic * clearance).sqrt();
+    let fine = 2.0 * clearance / (motion.linear + root);
+    if fine.is_finite() {
+        coarse.max(fine)
+    } else {
+        coarse
+    }
 }
 
 impl MotionBounds {
@@ -51,6 +135,33 @@ impl MotionBounds {
     /// The coefficients of link `link`, one per configuration entry.
     pub fn coefficients(&self, link: usize) -> &[Real] {
         &self.coefficients[link]
+    }
+
+    /// The bound of link `link`'s motion from the configuration whose link poses are `poses`
+    /// ([`RobotModel::forward_kinematics`]) along `dq` (see the module docs).
+    ///
+    /// # Panics
+    /// Never for `poses` and `dq` of the robot's lengths.
+    pub fn at(&self, model: &RobotModel, link: usize, poses: &[Isometry3], dq: &[Real]) -> LinkMotion {
+        let joints = model.joints();
+        let origin = poses[link].translation.vector;
+        let (mut linear, mut quadratic, mut after) = (0.0, 0.0, 0.0);
+        for c in &self.chains[link] {
+            let rate = c.gain * dq[c.variable].abs();
+            if c.prismatic {
+                linear += rate;
+                after += rate;
+                continue;
+            }
+            let frame = &poses[joints[c.joint].child];
+            let axis = frame.rotation * joints[c.joint].axis;
+            let offset = origin - frame.translation.vector;
+            let across = (offset - axis * offset.dot(&axis)).norm();
+            linear += rate * (across + self.radius[link]).min(c.reach);
+            quadratic += rate * after;
+            after += rate * c.reach;
+        }
+        LinkMotion { full: self.displacement(link, dq), linear, quadratic }
     }
 }
 
@@ -75,7 +186,8 @@ impl RobotModel {
         }
         let joints = self.joints();
         let mut coefficients = vec![vec![0.0; self.dof()]; links.len()];
-        for (l, row) in coefficients.iter_mut().enumerate() {
+        let mut chains = vec![Vec::new(); links.len()];
+        for ((l, row), chain) in coefficients.iter_mut().enumerate().zip(&mut chains) {
             // Walk from the link up to the root; `reach` is R_jL for the joint reached so far
             // (the terms of the joints below it plus the link's radius).
             let mut reach = link_radius[l];
@@ -88,7 +200,11 @@ impl RobotModel {
                     JointValue::Mimic { variable, multiplier, .. } => (Some(variable), multiplier.abs()),
                 };
                 if let Some(k) = source {
-                    row[k] += gain * if joint.kind == JointKind::Prismatic { 1.0 } else { reach };
+                    let prismatic = joint.kind == JointKind::Prismatic;
+                    row[k] += gain * if prismatic { 1.0 } else { reach };
+                    if gain > 0.0 {
+                        chain.push(ChainJoint { joint: j, variable: k, gain, prismatic, reach });
+                    }
                 }
                 // Joint j itself lies below the next joint up the chain.
                 let travel = match (joint.kind, joint.limits) {
@@ -99,6 +215,6 @@ impl RobotModel {
                 at = links[joint.parent].parent_joint;
             }
         }
-        Ok(MotionBounds { coefficients })
+        Ok(MotionBounds { coefficients, chains, radius: link_radius.to_vec() })
     }
 }

@@ -69,6 +69,71 @@ fn no_point_moves_farther_than_the_bound() {
     assert!((follower[3] - 0.5 * radius).abs() < 1e-15, "{follower:?}");
 }
 
+/// The bound at a configuration ([`sublevel_robot::MotionBounds::at`]) against brute force: from a
+/// random point q(t) of 200 random segments, no point within a link's radius moves farther in a
+/// step of s (at 20 steps up to the segment's end) than `min(s·D, s·A + s²·B/2)`; returns the
+/// median ratio of that bound to the configuration-free `s·D` at s = 0.05.
+fn local_bound_holds(robot: &RobotModel, radius: Real, seed: u64) -> Real {
+    let bounds = robot.motion_bounds(&vec![radius; robot.links().len()]).unwrap();
+    let mut points = vec![Vector3::zeros()];
+    for d in [Vector3::x(), Vector3::y(), Vector3::z(), -Vector3::x(), -Vector3::y(), -Vector3::z()] {
+        points.push(d * radius);
+    }
+    let limits: Vec<(Real, Real)> = (0..robot.dof())
+        .map(|k| robot.variable_joint(k).limits.unwrap_or((-2.0 * std::f64::consts::PI, 2.0 * std::f64::consts::PI)))
+        .collect();
+    let mut state = seed;
+    let mut gains = Vec::new();
+    for _ in 0..200 {
+        let q0: Vec<Real> = limits.iter().map(|&(lo, hi)| uniform(&mut state, lo, hi)).collect();
+        let q1: Vec<Real> = limits.iter().map(|&(lo, hi)| uniform(&mut state, lo, hi)).collect();
+        let dq: Vec<Real> = q0.iter().zip(&q1).map(|(a, b)| b - a).collect();
+        let t = uniform(&mut state, 0.0, 0.9);
+        let at = |t: Real| -> Vec<Real> { q0.iter().zip(&dq).map(|(a, d)| a + t * d).collect() };
+        let start = robot.link_poses(&at(t), &Isometry3::identity()).unwrap();
+        let motion: Vec<_> = (0..robot.links().len()).map(|l| bounds.at(robot, l, &start, &dq)).collect();
+        for l in 0..robot.links().len() {
+            let m = &motion[l];
+            if m.full > 0.0 {
+                let s = 0.05;
+                gains.push((s * m.linear + s * s * m.quadratic / 2.0).min(s * m.full) / (s * m.full));
+            }
+        }
+        for k in 1..=20 {
+            let s = (1.0 - t) * k as Real / 20.0;
+            let now = robot.link_poses(&at(t + s), &Isometry3::identity()).unwrap();
+            for (l, m) in motion.iter().enumerate() {
+                let bound = (s * m.full).min(s * m.linear + s * s * m.quadratic / 2.0);
+                for p in &points {
+                    let moved = (now[l] * Point3::from(*p) - start[l] * Point3::from(*p)).norm();
+                    assert!(
+                        moved <= bound + 1e-12,
+                        "link {} moved {moved} > bound {bound} in {s}",
+                        robot.links()[l].name
+                    );
+                }
+            }
+        }
+    }
+    gains.sort_by(|a, b| a.total_cmp(b));
+    gains[gains.len() / 2]
+}
+
+#[test]
+fn the_bound_at_a_configuration_holds_and_is_tighter() {
+    let median = local_bound_holds(&gantry(), 0.15, 0x2545_f491_4f6c_dd1d);
+    println!("gantry: median bound at a configuration / configuration-free bound at s = 0.05: {median:.3}");
+    assert!(median < 1.0);
+    let panda = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/peers/robots/panda/panda.urdf");
+    let Ok(panda) = RobotModel::from_urdf_file(&panda) else {
+        eprintln!("skipped the Panda: the URDF of ../shared/peers/robots is not there");
+        return;
+    };
+    let median = local_bound_holds(&panda, 0.12, 0x9e37_79b9_7f4a_7c15);
+    println!("panda: median bound at a configuration / configuration-free bound at s = 0.05: {median:.3}");
+    assert!(median < 0.8, "{median}");
+}
+
 #[test]
 fn a_one_joint_arm_is_bounded_by_its_arc_length() {
     let urdf = r#"<robot name="arm"><link name="a"/><link name="b"/>
