@@ -82,6 +82,9 @@ pub struct MotionChecker<'c, 'r> {
     bounds: MotionBounds,
 }
 
+/// A world pair `(g, Some(o))` or self pair `(k, None)` of the refinement queue.
+type PairKey = (usize, Option<usize>);
+
 /// A pair in the refinement queue: smallest ratio first.
 struct Queued {
     ratio: Real,
@@ -188,7 +191,7 @@ impl<'c, 'r> MotionChecker<'c, 'r> {
         let refine_below = options.padding + 10.0 * options.tolerance;
         // The pairs that move, with their links (one for a world pair); the others keep q₀'s
         // verdict.
-        let mut moving: Vec<((usize, Option<usize>), (usize, Option<usize>))> = Vec::new();
+        let mut moving: Vec<(PairKey, (usize, Option<usize>))> = Vec::new();
         for (g, &link) in geometries.iter().enumerate() {
             if speed[link] > 0.0 {
                 moving.extend(self.checker.world_pairs_of(g).iter().map(|&o| ((g, Some(o)), (link, None))));

@@ -92,8 +92,7 @@ fn local_bound_holds(robot: &RobotModel, radius: Real, seed: u64) -> Real {
         let at = |t: Real| -> Vec<Real> { q0.iter().zip(&dq).map(|(a, d)| a + t * d).collect() };
         let start = robot.link_poses(&at(t), &Isometry3::identity()).unwrap();
         let motion: Vec<_> = (0..robot.links().len()).map(|l| bounds.at(robot, l, &start, &dq)).collect();
-        for l in 0..robot.links().len() {
-            let m = &motion[l];
+        for m in &motion {
             if m.full > 0.0 {
                 let s = 0.05;
                 gains.push((s * m.linear + s * s * m.quadratic / 2.0).min(s * m.full) / (s * m.full));
