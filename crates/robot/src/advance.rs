@@ -7,6 +7,8 @@
 //! loop:  place the geometries at q(t); every moving pair p gets a cheap lower bound b_p of its
 //!        distance (ball and box gaps) and the bound of how far it can close in a step of s:
 //!            m_L(s) = min(s·D_L, s·A_L + s²·B_L / 2) for a link–world pair, m_a + m_b for a self pair
+//!            (counting only the joints below the two links' common ancestor, which alone move them
+//!            apart)
 //!            D_L = Σ_j c_Lj |Δq_j| over the whole segment, A_L and B_L from the joint axes' distances
 //!            to the link at q(t) ([`crate::motion`])
 //!        take pairs by their step s_p (the largest s with m(s) ≤ b_p − padding), smallest first;
@@ -20,7 +22,8 @@
 //!
 //! No point of link L moves farther than `m_L(Δt)` during a step (the motion bound,
 //! [`crate::motion`]), and a geometry at distance `d_g` from the world cannot touch it before moving
-//! `d_g`; two links close by at most `m_a + m_b`.
+//! `d_g`; two links close by at most `m_a + m_b`, each measured in the frame of their nearest common
+//! ancestor (the joints above it move both together).
 //! So each step is free, and the steps cover `[0, 1]` with no gap: there is no sampling
 //! resolution to choose (Schwarzer, Saha and Latombe, IEEE T-RO 2005). A contact is reported at
 //! the first `t` where a bound falls to `padding + tolerance`; the motion is free before it, so the
@@ -84,6 +87,14 @@ pub struct MotionChecker<'c, 'r> {
 
 /// A world pair `(g, Some(o))` or self pair `(k, None)` of the refinement queue.
 type PairKey = (usize, Option<usize>);
+
+/// How a moving pair closes: a link against the world, or two links (with the number of moving
+/// joints of each chain below their common ancestor, [`MotionBounds::below_common`]).
+#[derive(Clone, Copy, Debug)]
+enum Closing {
+    World(usize),
+    Pair((usize, usize), (usize, usize)),
+}
 
 /// A pair in the refinement queue: smallest ratio first.
 struct Queued {
@@ -191,15 +202,17 @@ impl<'c, 'r> MotionChecker<'c, 'r> {
         let refine_below = options.padding + 10.0 * options.tolerance;
         // The pairs that move, with their links (one for a world pair); the others keep q₀'s
         // verdict.
-        let mut moving: Vec<(PairKey, (usize, Option<usize>))> = Vec::new();
+        let mut moving: Vec<(PairKey, Closing)> = Vec::new();
         for (g, &link) in geometries.iter().enumerate() {
             if speed[link] > 0.0 {
-                moving.extend(self.checker.world_pairs_of(g).iter().map(|&o| ((g, Some(o)), (link, None))));
+                moving.extend(self.checker.world_pairs_of(g).iter().map(|&o| ((g, Some(o)), Closing::World(link))));
             }
         }
         for (k, &(a, b)) in self_pairs.iter().enumerate() {
-            if speed[geometries[a]] + speed[geometries[b]] > 0.0 {
-                moving.push(((k, None), (geometries[a], Some(geometries[b]))));
+            let links = (geometries[a], geometries[b]);
+            let counts = self.bounds.below_common(links.0, links.1);
+            if counts != (0, 0) && speed[links.0] + speed[links.1] > 0.0 {
+                moving.push(((k, None), Closing::Pair(links, counts)));
             }
         }
         let mut motion = vec![LinkMotion::default(); links];
@@ -241,10 +254,12 @@ impl<'c, 'r> MotionChecker<'c, 'r> {
                 };
             }
             heap.clear();
-            for &(pair, (la, lb)) in &moving {
-                let m = match lb {
-                    Some(lb) => motion[la].plus(&motion[lb]),
-                    None => motion[la],
+            for &(pair, closing) in &moving {
+                let m = match closing {
+                    Closing::World(l) => motion[l],
+                    Closing::Pair(links, counts) => {
+                        self.bounds.relative(model, links, counts, self.checker.link_poses(), &dq)
+                    }
                 };
                 let (bound, exact) = self.bound(pair, 0)?;
                 heap.push(Queued { ratio: step(bound - options.padding, &m), bound, level: 0, exact, motion: m, pair });

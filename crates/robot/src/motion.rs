@@ -143,10 +143,42 @@ impl MotionBounds {
     /// # Panics
     /// Never for `poses` and `dq` of the robot's lengths.
     pub fn at(&self, model: &RobotModel, link: usize, poses: &[Isometry3], dq: &[Real]) -> LinkMotion {
+        let mut m = self.below(model, link, self.chains[link].len(), poses, dq);
+        m.full = m.full.min(self.displacement(link, dq));
+        m
+    }
+
+    /// The moving joints of link `a`'s and link `b`'s chains below their nearest common ancestor
+    /// (the joints above it move both links together, leaving their distance unchanged): how many
+    /// of each chain's first entries [`MotionBounds::relative`] counts.
+    pub fn below_common(&self, a: usize, b: usize) -> (usize, usize) {
+        let (ca, cb) = (&self.chains[a], &self.chains[b]);
+        let shared = ca.iter().rev().zip(cb.iter().rev()).take_while(|(x, y)| x.joint == y.joint).count();
+        (ca.len() - shared, cb.len() - shared)
+    }
+
+    /// The bound of how fast links `a` and `b` can close from the configuration of `poses` along
+    /// `dq`: the motion of each in the frame of their nearest common ancestor (`counts` from
+    /// [`MotionBounds::below_common`]), summed.
+    pub fn relative(
+        &self,
+        model: &RobotModel,
+        (a, b): (usize, usize),
+        counts: (usize, usize),
+        poses: &[Isometry3],
+        dq: &[Real],
+    ) -> LinkMotion {
+        self.below(model, a, counts.0, poses, dq).plus(&self.below(model, b, counts.1, poses, dq))
+    }
+
+    /// The bound of link `link`'s motion from the first `count` moving joints of its chain alone
+    /// (all of them: its motion in the world; the joints below an ancestor: its motion in that
+    /// ancestor's frame, where the distance from each of those joints' axes is the same).
+    fn below(&self, model: &RobotModel, link: usize, count: usize, poses: &[Isometry3], dq: &[Real]) -> LinkMotion {
         let joints = model.joints();
         let origin = poses[link].translation.vector;
         let (mut linear, mut quadratic, mut after) = (0.0, 0.0, 0.0);
-        for c in &self.chains[link] {
+        for c in &self.chains[link][..count] {
             let rate = c.gain * dq[c.variable].abs();
             if c.prismatic {
                 linear += rate;
@@ -161,7 +193,8 @@ impl MotionBounds {
             quadratic += rate * after;
             after += rate * c.reach;
         }
-        LinkMotion { full: self.displacement(link, dq), linear, quadratic }
+        // `after` is now Σ c'|Δq| over the counted joints: the configuration-free bound.
+        LinkMotion { full: after, linear, quadratic }
     }
 }
 

@@ -71,7 +71,8 @@ fn no_point_moves_farther_than_the_bound() {
 
 /// The bound at a configuration ([`sublevel_robot::MotionBounds::at`]) against brute force: from a
 /// random point q(t) of 200 random segments, no point within a link's radius moves farther in a
-/// step of s (at 20 steps up to the segment's end) than `min(s·D, s·A + s²·B/2)`; returns the
+/// step of s (at 20 steps up to the segment's end) than `min(s·D, s·A + s²·B/2)`, and no two points
+/// of two links come closer by more than their relative bound ([`MotionBounds::relative`]); returns the
 /// median ratio of that bound to the configuration-free `s·D` at s = 0.05.
 fn local_bound_holds(robot: &RobotModel, radius: Real, seed: u64) -> Real {
     let bounds = robot.motion_bounds(&vec![radius; robot.links().len()]).unwrap();
@@ -98,9 +99,26 @@ fn local_bound_holds(robot: &RobotModel, radius: Real, seed: u64) -> Real {
                 gains.push((s * m.linear + s * s * m.quadratic / 2.0).min(s * m.full) / (s * m.full));
             }
         }
+        let links = robot.links().len();
+        let pairs: Vec<_> = (0..links)
+            .flat_map(|a| (a + 1..links).map(move |b| (a, b)))
+            .map(|(a, b)| ((a, b), bounds.relative(robot, (a, b), bounds.below_common(a, b), &start, &dq)))
+            .collect();
         for k in 1..=20 {
             let s = (1.0 - t) * k as Real / 20.0;
             let now = robot.link_poses(&at(t + s), &Isometry3::identity()).unwrap();
+            // Two links close by no more than their relative bound: every point pair's distance.
+            for &((a, b), m) in &pairs {
+                let bound = (s * m.full).min(s * m.linear + s * s * m.quadratic / 2.0);
+                for p in &points {
+                    for r in &points {
+                        let gap =
+                            |poses: &[Isometry3]| (poses[a] * Point3::from(*p) - poses[b] * Point3::from(*r)).norm();
+                        let closed = gap(&start) - gap(&now);
+                        assert!(closed <= bound + 1e-12, "links {a}, {b} closed {closed} > bound {bound}");
+                    }
+                }
+            }
             for (l, m) in motion.iter().enumerate() {
                 let bound = (s * m.full).min(s * m.linear + s * s * m.quadratic / 2.0);
                 for p in &points {
