@@ -40,9 +40,11 @@
 //! ```
 //!
 //! Every step is proven free by the motion bound, and the steps cover `[0, s]` with no gap. A
-//! contact answer says the padded body comes within `tolerance` of an obstacle at `s` and is free
-//! before it; for an approach whose distance closes at speed `w` per unit of s, the true first
-//! contact `t*` lies within `tolerance / w` after the reported parameter, never before it. Every
+//! contact answer says the body is free (farther than `padding`) before `s`, and at `s` a
+//! certified lower bound of its distance to the other instance is at most `padding + tolerance`
+//! and within `tolerance / 4` ([`EXACT_FRACTION`]) of the solver's distance; for an approach whose
+//! distance closes at speed `w` per unit of s, the true first contact `t*` lies within
+//! `1.25 · tolerance / w` after the reported parameter, never before it. Every
 //! bound a step rests on is proven (bounds module): exact distances and separating-plane
 //! certificates of primitives, tangent-plane bounds at Newton's witnesses for sos-convex bodies,
 //! verified SDP bounds for what Newton does not prove, and the tree search's lower bound for
