@@ -9,6 +9,7 @@
 //! robots.rs   StartRobotFitJob, UploadRobot, GetRobot, ListRobots, DeleteRobot, CheckConfigurations, CheckMotions
 //! queries.rs  Distance, Growth, BatchQuery, Query, QueryStream, CheckScene, and where query work
 //!             runs (inline on the async workers, or on the SDP slots)
+//! motions.rs  CheckInstanceMotions
 //! ```
 //!
 //! Validation and conversions live in [`crate::convert`], blocking work goes through
@@ -16,6 +17,7 @@
 
 mod bodies;
 mod jobs;
+mod motions;
 mod queries;
 mod robots;
 mod scenes;
@@ -226,5 +228,12 @@ impl Sublevel for SublevelService {
 
     async fn check_motions(&self, request: Request<pb::CheckMotionsRequest>) -> Reply<pb::CheckMotionsResponse> {
         robots::check_motions(self, request).await.map_err(Status::from)
+    }
+
+    async fn check_instance_motions(
+        &self,
+        request: Request<pb::CheckInstanceMotionsRequest>,
+    ) -> Reply<pb::CheckInstanceMotionsResponse> {
+        motions::check_instance_motions(self, request).await.map_err(Status::from)
     }
 }

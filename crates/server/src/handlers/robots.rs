@@ -187,7 +187,7 @@ fn with_attached(entry: &RobotEntry, attached: &[pb::AttachedObject]) -> Result<
 
 /// Whether the robot and the scene of a check read from memory alone: no shared store (which may
 /// load them from the database) and every stored body built (a first use builds it).
-fn in_memory(svc: &SublevelService) -> bool {
+pub(super) fn in_memory(svc: &SublevelService) -> bool {
     !svc.catalog.shared_store() && svc.catalog.bodies_pending() == 0
 }
 
@@ -220,7 +220,7 @@ async fn setting(
 
 /// Splits `0..n` into balanced chunks for the batch slots: at most one per slot, and none under
 /// half of [`MIN_CHUNK`].
-fn chunks(n: usize, slots: usize) -> Vec<std::ops::Range<usize>> {
+pub(super) fn chunks(n: usize, slots: usize) -> Vec<std::ops::Range<usize>> {
     let count = n.div_ceil(MIN_CHUNK).clamp(1, slots.max(1));
     // Balanced: sizes differ by at most one.
     (0..count).map(|i| i * n / count..(i + 1) * n / count).filter(|r| !r.is_empty()).collect()
