@@ -6,6 +6,7 @@ mod fit;
 mod gradient;
 mod group;
 mod hardening;
+mod instance_motions;
 mod jobs_api;
 mod ops;
 mod planner;

@@ -149,6 +149,7 @@ const READ_METHODS: &[&str] = &[
     "ListRobots",
     "CheckConfigurations",
     "CheckMotions",
+    "CheckInstanceMotions",
 ];
 
 /// The role a request path needs: None for health and reflection (always open), Read for the
@@ -286,6 +287,7 @@ mod tests {
             "ListRobots",
             "CheckConfigurations",
             "CheckMotions",
+            "CheckInstanceMotions",
         ] {
             assert_eq!(method_role(&format!("/sublevel.v1.Sublevel/{read}")), Some(Role::Read), "{read}");
         }

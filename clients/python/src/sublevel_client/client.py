@@ -31,6 +31,7 @@ from .types import (
     GrowthAnswer,
     ImportedScene,
     Instance,
+    InstanceMotionColumns,
     MotionColumns,
     QueryResult,
     RobotInfo,
@@ -200,6 +201,19 @@ def _state_columns(instance_ids: Sequence[str], poses: Any) -> pb.StateColumns:
             f"`poses`: expected shape (states, {len(ids)}, 7) (w, x, y, z, tx, ty, tz per instance), got {arr.shape}"
         )
     return pb.StateColumns(instance_ids=ids, poses=arr.ravel().tolist())
+
+
+def _motion_poses(poses: Any, count: int, name: str) -> np.ndarray:
+    """The poses of ``count`` motions as an array of shape (count, 7) (w, x, y, z, tx, ty, tz);
+    a (7,) array for one motion."""
+    arr = np.asarray(poses, dtype=float)
+    if arr.ndim == 1 and count == 1:
+        arr = arr[None, :]
+    if arr.shape != (count, 7):
+        raise ValueError(f"`{name}`: expected shape ({count}, 7) (w, x, y, z, tx, ty, tz per motion), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"`{name}`: expected finite numbers")
+    return arr
 
 
 def _state_columns_query(
@@ -760,6 +774,65 @@ class Client:
         if base is not None:
             req.base.CopyFrom(_pose_pb(base, "base"))
         return MotionColumns.from_proto(self._call("CheckMotions", req))
+
+    def check_instance_motions(
+        self,
+        scene: str,
+        instance_ids: Union[str, Sequence[str]],
+        start_poses: Any,
+        end_poses: Any,
+        *,
+        padding: float = 0.0,
+        tolerance: float = 1e-3,
+        max_steps: int = 0,
+    ) -> InstanceMotionColumns:
+        """Checks rigid-body motions of scene instances by conservative advancement: motion m
+        moves ``instance_ids[m]`` from ``start_poses[m]`` to ``end_poses[m]`` (translation along the
+        segment, rotation along the shorter arc, both at constant speed) while every other
+        instance stays at its stored pose. Each is proven free, or answered with its first contact
+        parameter t* (within ``tolerance``), the pose there and the instance it touches. No
+        sampling resolution to choose.
+
+        Args:
+            scene: the scene id; its instances at their stored poses are the obstacles.
+            instance_ids: the moving instance of each motion (M ids; one id for one motion).
+            start_poses, end_poses: array-like of shape (M, 7) (or (7,) for one motion): per
+                motion the unit quaternion w, x, y, z, then the translation x, y, z in meters.
+            padding: meters (>= 0) around the moving instance: it is in contact within this
+                distance.
+            tolerance: meters (> 0): a certified distance bound at or below ``padding +
+                tolerance`` is a contact.
+            max_steps: most advancement steps per motion before it is answered undecided
+                (``decided`` false); 0: the server's default (100 000).
+
+        Returns :class:`InstanceMotionColumns` (numpy columns of M rows). Raises ValueError
+        naming the argument when ``instance_ids``, a pose array, ``padding``, ``tolerance`` or
+        ``max_steps`` is malformed (nothing is sent), and SublevelError for the server's
+        refusals (INVALID_ARGUMENT naming the field, e.g. a non-unit quaternion at
+        ``start_poses[7m]`` or a halfspace at ``instance_ids[m]``; NOT_FOUND for an unknown scene or
+        instance).
+        """
+        ids = [instance_ids] if isinstance(instance_ids, str) else list(instance_ids)
+        if not ids or not all(isinstance(i, str) and i for i in ids):
+            raise ValueError(f"`instance_ids`: expected one or more instance id strings, got {instance_ids!r}")
+        start = _motion_poses(start_poses, len(ids), "start_poses")
+        end = _motion_poses(end_poses, len(ids), "end_poses")
+        if not (float(padding) >= 0.0) or not math.isfinite(float(padding)):
+            raise ValueError(f"`padding`: expected a non-negative number of meters, got {padding!r}")
+        if not (float(tolerance) > 0.0) or not math.isfinite(float(tolerance)):
+            raise ValueError(f"`tolerance`: expected a positive number of meters, got {tolerance!r}")
+        if int(max_steps) < 0:
+            raise ValueError(f"`max_steps`: expected >= 0, got {max_steps!r}")
+        req = pb.CheckInstanceMotionsRequest(
+            scene_id=scene,
+            instance_ids=ids,
+            start_poses=start.ravel().tolist(),
+            end_poses=end.ravel().tolist(),
+            padding=float(padding),
+            tolerance=float(tolerance),
+            max_steps=int(max_steps),
+        )
+        return InstanceMotionColumns.from_proto(self._call("CheckInstanceMotions", req))
 
     # -- queries ------------------------------------------------------------------------------
     def distance(

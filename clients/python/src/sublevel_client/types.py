@@ -897,3 +897,46 @@ class MotionColumns:
             self_contact=np.asarray(m.self_contact, dtype=bool),
             steps=np.asarray(m.steps, dtype=np.int64),
         )
+
+
+@dataclass
+class InstanceMotionColumns:
+    """The answer of ``Client.check_instance_motions``: row m is the motion of
+    ``instance_ids[m]`` from ``start_poses[m]`` to ``end_poses[m]``.
+
+    Attributes:
+        valid: shape (M,), bool: the whole motion is proven free.
+        decided: shape (M,), bool: false when the step limit was reached or a contact could not be
+            proven within the tolerance (then ``valid`` is false and there is no contact).
+        contact_t: shape (M,): the first contact parameter t* in [0, 1] (within the tolerance:
+            free before it); NaN when none.
+        contact_pose: shape (M, 7): the moving instance's pose at t* (w, x, y, z, tx, ty, tz;
+            meters); NaN rows when none.
+        other: length-M list of str: the instance it comes into contact with; "" when none.
+        steps: shape (M,), int: advancement steps taken (poses bounded).
+    """
+
+    valid: np.ndarray
+    decided: np.ndarray
+    contact_t: np.ndarray
+    contact_pose: np.ndarray
+    other: List[str]
+    steps: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.valid)
+
+    @classmethod
+    def from_proto(cls, m) -> "InstanceMotionColumns":
+        n = m.count
+        contact_t = np.asarray(m.contact_t, dtype=float)
+        if contact_t.size == 0:
+            contact_t = np.full(n, np.nan)
+        return cls(
+            valid=np.asarray(m.valid, dtype=bool),
+            decided=np.asarray(m.decided, dtype=bool),
+            contact_t=contact_t,
+            contact_pose=_columns(m.contact_pose, n, 7),
+            other=list(m.other),
+            steps=np.asarray(m.steps, dtype=np.int64),
+        )

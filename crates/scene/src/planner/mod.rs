@@ -12,6 +12,8 @@
 //! check_scene    posed bounding boxes grown by m/2 → BVH (parry) → candidate pairs
 //!                → bounding spheres, separating axis → distance solves → pairs closer than m,
 //!                by distance
+//! MotionScene    one instance moving pose to pose (slerp) among the others, certified by
+//!                conservative advancement: free, or its first contact parameter
 //! ```
 //!
 //! Nothing here takes a scene's lock while solving: the instances a request names are read (a
@@ -22,6 +24,7 @@
 //! view.rs    QueryView: a client's private view, and the routing of a request's candidate
 //!            states to the batch solver's lanes
 //! check.rs   check_scene: the broad phase and the narrow phase
+//! motion/    MotionScene: rigid-body motions of instances, and the proven pair bounds they step on
 //! ```
 //!
 //! How each pair is answered (compound trees, cheap collide bounds, the batch solver's lanes, one
@@ -29,12 +32,14 @@
 //! per-pair answer path are re-exported here.
 
 mod check;
+mod motion;
 #[cfg(test)]
 mod tests;
 mod view;
 
 pub use crate::answer::{answer_pair, answer_pair_with, CollideReply, Posed};
 pub use check::{check_scene, SceneCheck, ScenePair};
+pub use motion::{InstanceMotionAnswer, InstanceMotionOptions, MotionScene, Moving, Slerp, EXACT_FRACTION};
 pub use sublevel_query::dispatch::{collide_cheap, collide_lower_bound, sphere_lower_bound, Ahead, CheapCollide};
 pub use view::QueryView;
 

@@ -25,6 +25,7 @@
 //! | `queries.rs`    | answers, certificates, gradients, query options, batch pairs                  |
 //! | `planner.rs`    | pair / answer columns, planner requests and answers, scene checks             |
 //! | `robots.rs`     | robot summaries, configuration columns, configuration and motion answers      |
+//! | `motions.rs`    | rigid-body motions of scene instances: pose columns, options, answer columns  |
 //!
 //! Ids and pages, shared by every area, are here.
 
@@ -32,6 +33,7 @@ use crate::{Error, Result};
 
 mod bodies;
 mod errors;
+mod motions;
 mod planner;
 mod primitives;
 #[cfg(test)]
@@ -47,6 +49,7 @@ pub use bodies::{
     uploaded_report, FitOptions, MAX_COMPOUND_NODES,
 };
 pub use errors::{prefix_field, to_status};
+pub use motions::{instance_motions_from_proto, instance_motions_to_proto, InstanceMotions};
 pub use planner::{
     answers_to_columns, columns_kind, pair_columns_from_proto, planner_answers_to_proto, planner_request_from_proto,
     scene_check_to_proto, ColumnsSink, PairColumns,

@@ -10,6 +10,7 @@
 //! scene_robots.rs  SetSceneRobot, ClearSceneRobot, SetJointPositions, AttachObject, DetachObject
 //! queries.rs  Distance, Growth, BatchQuery, Query, QueryStream, CheckScene, and where query work
 //!             runs (inline on the async workers, or on the SDP slots)
+//! motions.rs  CheckInstanceMotions
 //! ```
 //!
 //! Validation and conversions live in [`crate::convert`], blocking work goes through
@@ -17,6 +18,7 @@
 
 mod bodies;
 mod jobs;
+mod motions;
 mod queries;
 mod robots;
 mod scene_robots;
@@ -254,5 +256,12 @@ impl Sublevel for SublevelService {
 
     async fn detach_object(&self, request: Request<pb::DetachObjectRequest>) -> Reply<pb::DetachObjectResponse> {
         scene_robots::detach_object(self, request).await.map_err(Status::from)
+    }
+
+    async fn check_instance_motions(
+        &self,
+        request: Request<pb::CheckInstanceMotionsRequest>,
+    ) -> Reply<pb::CheckInstanceMotionsResponse> {
+        motions::check_instance_motions(self, request).await.map_err(Status::from)
     }
 }

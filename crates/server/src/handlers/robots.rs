@@ -186,6 +186,12 @@ fn with_attached(robot: &Arc<FittedRobot>, attached: &[pb::AttachedObject]) -> R
     Ok(Arc::new(robot))
 }
 
+/// Whether the robot and the scene of a check read from memory alone: no shared store (which may
+/// load them from the database) and every stored body built (a first use builds it).
+pub(super) fn in_memory(svc: &SublevelService) -> bool {
+    !svc.catalog.shared_store() && svc.catalog.bodies_pending() == 0
+}
+
 /// What the robot checks need of the service: the catalog, the batch slots and their number.
 /// The unary checks and the query streams (whose requests may carry robot checks) share it.
 #[derive(Clone, Debug)]
@@ -395,7 +401,7 @@ impl RobotChecks {
 
 /// Splits `0..n` into balanced chunks for the batch slots: at most one per slot, and none under
 /// half of [`MIN_CHUNK`].
-fn chunks(n: usize, slots: usize) -> Vec<std::ops::Range<usize>> {
+pub(super) fn chunks(n: usize, slots: usize) -> Vec<std::ops::Range<usize>> {
     let count = n.div_ceil(MIN_CHUNK).clamp(1, slots.max(1));
     // Balanced: sizes differ by at most one.
     (0..count).map(|i| i * n / count..(i + 1) * n / count).filter(|r| !r.is_empty()).collect()
