@@ -162,6 +162,7 @@ def test_check_scene(client):
     # Pairs: 0-1 overlap (centers 0.9 < 1); 0-2 0.3 apart; 1-2 √(0.81+1.69) − 1 ≈ 0.581; 3 far.
     r = client.check_scene(scene, margin=0.4)
     assert r.instances == 4 and r.all_pairs == 6
+    assert r.robot is None  # no robot placed (and fitted bodies, which robot checks refuse)
     found = {frozenset((p.first, p.second)): p for p in r.pairs}
     assert set(found) == {frozenset(ids[:2]), frozenset((ids[0], ids[2]))}
     assert [p.distance.distance for p in r.pairs] == sorted(p.distance.distance for p in r.pairs)

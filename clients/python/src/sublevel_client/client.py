@@ -13,7 +13,7 @@ import queue
 import threading
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable, Iterator, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Iterable, Iterator, List, Mapping, Optional, Sequence, Tuple, Union
 
 import grpc
 import numpy as np
@@ -37,6 +37,7 @@ from .types import (
     RobotInfo,
     Scene,
     SceneCheck,
+    SceneRobot,
     SceneSummary,
     StateAnswers,
     UploadedBody,
@@ -304,6 +305,31 @@ def _configuration_columns(values: np.ndarray, joint_names: List[str]) -> pb.Con
     return pb.ConfigurationColumns(joint_names=joint_names, values=np.ascontiguousarray(values).ravel().tolist())
 
 
+def _joint_positions(positions: Any, name: str) -> pb.ConfigurationColumns:
+    """One configuration from a mapping ``{joint name: value}`` (radians or meters), in the
+    mapping's order. ValueError naming ``name`` (``name[joint]`` for a value) when it is not a
+    mapping of strings to finite numbers."""
+    if not isinstance(positions, Mapping):
+        raise ValueError(f"`{name}`: expected a mapping {{joint name: value}}, got {type(positions).__name__}")
+    names, values = [], []
+    for joint, value in positions.items():
+        if not isinstance(joint, str):
+            raise ValueError(f"`{name}`: joint names must be strings, got {joint!r}")
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            raise ValueError(f"`{name}[{joint}]`: expected a number, got {value!r}") from None
+        if not math.isfinite(v):
+            raise ValueError(f"`{name}[{joint}]`: not finite ({v})")
+        names.append(joint)
+        values.append(v)
+    return pb.ConfigurationColumns(joint_names=names, values=values)
+
+
+def _link_padding(link_padding: Optional[Mapping[str, float]]) -> dict:
+    return {str(k): float(v) for k, v in (link_padding or {}).items()}
+
+
 class Client:
     """A connection to a Sublevel server.
 
@@ -446,9 +472,16 @@ class Client:
         return self._call("CreateScene", pb.CreateSceneRequest(name=name)).scene_id
 
     def get_scene(self, scene_id: str) -> Scene:
-        """A scene with its instances and their poses."""
+        """A scene with its instances and their poses, its robot (:class:`SceneRobot`, None when
+        it has none) and its joint positions by name."""
         r = self._call("GetScene", pb.GetSceneRequest(scene_id=scene_id))
-        return Scene(scene_id=r.scene_id, name=r.name, instances=[Instance.from_proto(i) for i in r.instances])
+        return Scene(
+            scene_id=r.scene_id,
+            name=r.name,
+            instances=[Instance.from_proto(i) for i in r.instances],
+            robot=SceneRobot.from_proto(r.robot) if r.HasField("robot") else None,
+            joint_positions={j.name: j.position for j in r.joint_positions},
+        )
 
     def list_scenes(self) -> List[SceneSummary]:
         """All scenes (summaries), ordered by id (every page of ListScenes)."""
@@ -648,9 +681,129 @@ class Client:
             info = self.get_robot(robot)
         return info.dof, f"robot {robot} has {info.dof} joints"
 
+    def _scene_robot_joints(self, scene: str) -> List[str]:
+        """The joint names of the robot of ``scene``, in its order (one GetScene). SublevelError
+        INVALID_ARGUMENT naming ``robot_id`` when the scene has no robot, as the server answers a
+        check naming no robot there."""
+        placed = self.get_scene(scene).robot
+        if placed is None:
+            raise SublevelError(
+                grpc.StatusCode.INVALID_ARGUMENT,
+                f"invalid argument `robot_id`: required: name a robot, or a scene holding one "
+                f"(scene `{scene}` has none; see set_scene_robot)",
+                "robot_id",
+            )
+        return placed.joint_names
+
+    def _joints(
+        self,
+        robot: Optional[str],
+        scene: str,
+        joint_names: Optional[Sequence[str]],
+        scene_joints: Optional[Callable[[str], List[str]]] = None,
+    ) -> Tuple[str, List[str], int, str]:
+        """The robot id to send ("" for the scene's robot), the joint names to send, the values per
+        configuration and where that count comes from (for the shape errors).
+
+        With no ``robot`` and no ``joint_names``, the joints are every joint of the scene's robot,
+        in its order, sent by name (``scene_joints(scene)``, default one GetScene): a robot
+        replaced in between then fails loudly on an unknown joint instead of reading the values
+        with another robot's joints."""
+        if robot is not None and not isinstance(robot, str):
+            raise ValueError(f"`robot`: expected a robot id string or None, got {robot!r}")
+        if not isinstance(scene, str):
+            raise ValueError(f"`scene`: expected a scene id string, got {scene!r}")
+        names = _joint_names(joint_names)
+        if robot:
+            n, what = self._joint_count(robot, names)
+            return robot, names, n, what
+        if not scene:
+            raise ValueError("`robot`: required without `scene`: name a robot, or a scene holding one")
+        if names:
+            return "", names, len(names), f"{len(names)} joint_names"
+        names = (scene_joints or self._scene_robot_joints)(scene)
+        return "", list(names), len(names), f"the robot of scene {scene} has {len(names)} joints"
+
+    def _configurations_request(
+        self,
+        robot: Optional[str],
+        q: Any,
+        *,
+        scene: str = "",
+        joint_names: Optional[Sequence[str]] = None,
+        base: Any = None,
+        padding: float = 0.0,
+        distance: bool = False,
+        self_collision: bool = True,
+        gradient: bool = False,
+        attached: Optional[Sequence[dict]] = None,
+        link_padding: Optional[Mapping[str, float]] = None,
+        scene_joints: Optional[Callable[[str], List[str]]] = None,
+    ) -> pb.CheckConfigurationsRequest:
+        """The ``CheckConfigurationsRequest`` of :meth:`check_configurations` (same arguments),
+        validated here; also ``QueryRequest.robot_states`` on a stream."""
+        robot_id, names, n, what = self._joints(robot, scene, joint_names, scene_joints)
+        values = _configurations(q, n, "q", what)
+        req = pb.CheckConfigurationsRequest(
+            robot_id=robot_id,
+            scene_id=scene,
+            configurations=_configuration_columns(values, names),
+            padding=float(padding),
+            distance=bool(distance or gradient),
+            skip_self=not self_collision,
+            gradient=bool(gradient),
+            attached=_attached_pb(attached),
+            link_padding=_link_padding(link_padding),
+        )
+        if base is not None:
+            req.base.CopyFrom(_pose_pb(base, "base"))
+        return req
+
+    def _motions_request(
+        self,
+        robot: Optional[str],
+        q0: Any,
+        q1: Any,
+        *,
+        scene: str = "",
+        joint_names: Optional[Sequence[str]] = None,
+        base: Any = None,
+        padding: float = 0.0,
+        tolerance: float = 1e-3,
+        max_steps: int = 0,
+        attached: Optional[Sequence[dict]] = None,
+        link_padding: Optional[Mapping[str, float]] = None,
+        scene_joints: Optional[Callable[[str], List[str]]] = None,
+    ) -> pb.CheckMotionsRequest:
+        """The ``CheckMotionsRequest`` of :meth:`check_motions` (same arguments), validated here;
+        also ``QueryRequest.robot_motions`` on a stream."""
+        robot_id, names, n, what = self._joints(robot, scene, joint_names, scene_joints)
+        start = _configurations(q0, n, "q0", what)
+        end = _configurations(q1, n, "q1", what)
+        if start.shape != end.shape:
+            raise ValueError(f"`q1`: {end.shape[0]} configurations, `q0` has {start.shape[0]}")
+        if not (float(tolerance) > 0.0) or not math.isfinite(float(tolerance)):
+            raise ValueError(f"`tolerance`: expected a positive number of meters, got {tolerance!r}")
+        if int(max_steps) < 0:
+            raise ValueError(f"`max_steps`: expected >= 0, got {max_steps!r}")
+        req = pb.CheckMotionsRequest(
+            robot_id=robot_id,
+            scene_id=scene,
+            start=_configuration_columns(start, names),
+            end=_configuration_columns(end, names),
+            padding=float(padding),
+            tolerance=float(tolerance),
+            max_steps=int(max_steps),
+            attached=_attached_pb(attached),
+            link_padding=_link_padding(link_padding),
+        )
+        if base is not None:
+            req.base.CopyFrom(_pose_pb(base, "base"))
+        return req
+
     def check_configurations(
         self,
-        robot: str,
+        robot: Optional[str],
         q: Any,
         *,
         scene: str = "",
@@ -669,16 +822,21 @@ class Client:
         free is answered colliding; the distance is the meshes' (docs/robots.md).
 
         Args:
-            robot: the robot's id (:meth:`upload_robot`).
+            robot: the robot's id (:meth:`upload_robot`); None (or ""): the robot of ``scene``
+                (:meth:`set_scene_robot`) with its base unless ``base`` is given, its attached
+                objects plus ``attached``, and its link padding overridden link by link by
+                ``link_padding``.
             q: the configurations, array-like of shape (N, n), or (n,) for one: radians for
                 revolute and continuous joints, meters for prismatic ones.
             scene: the world: a scene of primitive instances (e.g. :meth:`import_scene`'s, whose
                 allowed-collision matrix then applies); empty: no world (self-collision only).
             joint_names: the n joints of ``q``'s columns, each once; None: every joint of the
-                robot in :attr:`RobotInfo.joint_names` order. Joints not named take the scene's
-                robot state, else 0.
+                robot in :attr:`RobotInfo.joint_names` order (with ``robot`` None: of the scene's
+                robot, looked up with one GetScene per call; name the joints to skip it). Joints
+                not named take the scene's joint positions, else 0.
             base: the pose of the robot's root link in the scene (a :class:`Pose`, a 7-vector
-                ``[w, x, y, z, tx, ty, tz]`` or a 4x4 matrix; meters); None: the identity.
+                ``[w, x, y, z, tx, ty, tz]`` or a 4x4 matrix; meters); None: the identity (the
+                scene robot's base with ``robot`` None).
             padding: meters (>= 0) around every robot geometry: a pair closer than it collides.
             distance: also compute the minimum robot–world distance, its pair and witnesses
                 (else the world pairs stop at the first collision).
@@ -692,32 +850,21 @@ class Client:
                 ``padding + p(a) + p(b)``; distances stay unpadded.
 
         Returns :class:`ConfigurationColumns` (numpy columns of N rows). Raises ValueError naming
-        the argument when ``q``, ``joint_names`` or ``base`` is malformed (nothing is sent), and
-        SublevelError for the server's refusals: NOT_FOUND for an unknown robot or scene,
-        INVALID_ARGUMENT naming the field (``configurations.joint_names[2]`` for an unknown
-        joint), FAILED_PRECONDITION for a scene holding a fitted body.
+        the argument when ``q``, ``joint_names`` or ``base`` is malformed, or ``robot`` is None
+        without a ``scene`` (nothing is sent), and SublevelError for the server's refusals:
+        NOT_FOUND for an unknown robot or scene, INVALID_ARGUMENT naming the field
+        (``configurations.joint_names[2]`` for an unknown joint, ``robot_id`` for ``robot`` None
+        in a scene without a robot), FAILED_PRECONDITION for a scene holding a fitted body.
         """
-        names = _joint_names(joint_names)
-        n, what = self._joint_count(robot, names)
-        values = _configurations(q, n, "q", what)
-        req = pb.CheckConfigurationsRequest(
-            robot_id=robot,
-            scene_id=scene,
-            configurations=_configuration_columns(values, names),
-            padding=float(padding),
-            distance=bool(distance or gradient),
-            skip_self=not self_collision,
-            gradient=bool(gradient),
-            attached=_attached_pb(attached),
-            link_padding={str(k): float(v) for k, v in (link_padding or {}).items()},
+        req = self._configurations_request(
+            robot, q, scene=scene, joint_names=joint_names, base=base, padding=padding, distance=distance,
+            self_collision=self_collision, gradient=gradient, attached=attached, link_padding=link_padding,
         )
-        if base is not None:
-            req.base.CopyFrom(_pose_pb(base, "base"))
         return ConfigurationColumns.from_proto(self._call("CheckConfigurations", req), gradient=bool(gradient))
 
     def check_motions(
         self,
-        robot: str,
+        robot: Optional[str],
         q0: Any,
         q1: Any,
         *,
@@ -737,7 +884,7 @@ class Client:
 
         Args:
             robot, scene, joint_names, base, padding, attached, link_padding: as in
-                :meth:`check_configurations`.
+                :meth:`check_configurations` (``robot`` None: the scene's robot).
             q0, q1: start and end configurations, array-like of the same shape, (M, n) or (n,)
                 for one motion (radians, meters).
             tolerance: meters (> 0): a distance bound at or below ``padding + tolerance`` is a
@@ -750,30 +897,113 @@ class Client:
         (nothing is sent), and SublevelError for the server's refusals, as
         :meth:`check_configurations`.
         """
-        names = _joint_names(joint_names)
-        n, what = self._joint_count(robot, names)
-        start = _configurations(q0, n, "q0", what)
-        end = _configurations(q1, n, "q1", what)
-        if start.shape != end.shape:
-            raise ValueError(f"`q1`: {end.shape[0]} configurations, `q0` has {start.shape[0]}")
-        if not (float(tolerance) > 0.0) or not math.isfinite(float(tolerance)):
-            raise ValueError(f"`tolerance`: expected a positive number of meters, got {tolerance!r}")
-        if int(max_steps) < 0:
-            raise ValueError(f"`max_steps`: expected >= 0, got {max_steps!r}")
-        req = pb.CheckMotionsRequest(
-            robot_id=robot,
+        req = self._motions_request(
+            robot, q0, q1, scene=scene, joint_names=joint_names, base=base, padding=padding, tolerance=tolerance,
+            max_steps=max_steps, attached=attached, link_padding=link_padding,
+        )
+        return MotionColumns.from_proto(self._call("CheckMotions", req))
+
+    # -- robots in scenes ---------------------------------------------------------------------
+    def set_scene_robot(
+        self,
+        scene: str,
+        robot: str,
+        base: Any = None,
+        attached: Optional[Sequence[dict]] = None,
+        link_padding: Optional[Mapping[str, float]] = None,
+        joint_positions: Optional[Mapping[str, float]] = None,
+    ) -> SceneRobot:
+        """Places a stored robot in a scene, replacing the scene's robot (a scene holds at most
+        one, as a MoveIt planning scene does). It is stored with the scene: :meth:`check_scene`
+        then checks it at the scene's joint positions, and :meth:`check_configurations` /
+        :meth:`check_motions` (and the stream's) with ``robot=None`` check it.
+
+        Args:
+            robot: the stored robot's id (:meth:`upload_robot`).
+            base: the pose of its root link in the scene (a :class:`Pose`, a 7-vector or a 4x4
+                matrix; meters); None: the identity.
+            attached: objects attached to its links, dicts as :meth:`check_configurations` takes
+                (names unique; no halfspace).
+            link_padding: meters (>= 0) per link name.
+            joint_positions: ``{joint name: value}`` (radians or meters) to set; None or empty:
+                the scene's joint positions stay as they are.
+
+        Returns the scene's :class:`SceneRobot` as it now is. All or nothing: ValueError naming
+        the argument when one is malformed (nothing is sent), SublevelError NOT_FOUND for an
+        unknown robot or scene, INVALID_ARGUMENT naming the field (``joint_positions.joint_names[0]``,
+        ``attached[1].link``, ``link_padding[hand]``) and nothing changes.
+        """
+        req = pb.SetSceneRobotRequest(
             scene_id=scene,
-            start=_configuration_columns(start, names),
-            end=_configuration_columns(end, names),
-            padding=float(padding),
-            tolerance=float(tolerance),
-            max_steps=int(max_steps),
+            robot_id=robot,
             attached=_attached_pb(attached),
-            link_padding={str(k): float(v) for k, v in (link_padding or {}).items()},
+            link_padding=_link_padding(link_padding),
         )
         if base is not None:
             req.base.CopyFrom(_pose_pb(base, "base"))
-        return MotionColumns.from_proto(self._call("CheckMotions", req))
+        if joint_positions:
+            req.joint_positions.CopyFrom(_joint_positions(joint_positions, "joint_positions"))
+        return SceneRobot.from_proto(self._call("SetSceneRobot", req).robot)
+
+    def clear_scene_robot(self, scene: str) -> bool:
+        """Removes the robot of a scene; returns whether it had one. The scene's joint positions
+        stay."""
+        return self._call("ClearSceneRobot", pb.ClearSceneRobotRequest(scene_id=scene)).removed
+
+    def set_joint_positions(self, scene: str, positions: Mapping[str, float]) -> SceneRobot:
+        """Sets joint positions of the scene's robot, ``{joint name: value}`` (radians or
+        meters); joints not named keep theirs.
+
+        Returns the scene's :class:`SceneRobot` as it now is. All or nothing: ValueError naming
+        ``positions[joint]`` for a value that is not a finite number (nothing is sent);
+        SublevelError INVALID_ARGUMENT naming ``joint_positions.joint_names[k]`` for an unknown,
+        fixed, mimic or repeated joint, FAILED_PRECONDITION when the scene has no robot, and
+        nothing changes.
+        """
+        req = pb.SetJointPositionsRequest(scene_id=scene, joint_positions=_joint_positions(positions, "positions"))
+        return SceneRobot.from_proto(self._call("SetJointPositions", req).robot)
+
+    def attach_object(
+        self,
+        scene: str,
+        link: str,
+        name: str,
+        kind: str,
+        *,
+        size: Optional[Sequence[float]] = None,
+        radius: Optional[float] = None,
+        height: Optional[float] = None,
+        origin: Any = None,
+    ) -> SceneRobot:
+        """Attaches an exact primitive to a link of the scene's robot (a grasped object): it
+        moves with the link and is checked like it; an attached object of the same ``name`` is
+        replaced. The arguments are the keys of the dicts :meth:`check_configurations` takes for
+        ``attached`` (so ``attach_object(scene, **robot.attached[k])`` re-attaches one).
+
+        Args:
+            link: the robot link.
+            name: the object's name (required; ``robot_geometry`` in answers).
+            kind, size, radius, height: the primitive, as :meth:`upload_primitive` (meters; no
+                halfspace).
+            origin: its pose in the link's frame (a :class:`Pose`, a 7-vector or a 4x4 matrix);
+                None: the identity.
+
+        Returns the scene's :class:`SceneRobot` as it now is. ValueError for an unknown ``kind``,
+        an empty ``name`` or a malformed ``origin``; SublevelError INVALID_ARGUMENT naming the
+        field (``attached.link``), FAILED_PRECONDITION when the scene has no robot.
+        """
+        if not isinstance(name, str) or not name:
+            raise ValueError(f"`name`: required (a non-empty string), got {name!r}")
+        obj = {"link": link, "name": name, "kind": kind, "size": size, "radius": radius, "height": height,
+               "origin": origin}
+        req = pb.AttachObjectRequest(scene_id=scene, attached=_attached_one(obj, "attached"))
+        return SceneRobot.from_proto(self._call("AttachObject", req).robot)
+
+    def detach_object(self, scene: str, name: str) -> SceneRobot:
+        """Detaches the object ``name`` from the scene's robot; returns the :class:`SceneRobot`
+        as it now is (SublevelError NOT_FOUND when it has no object of that name)."""
+        req = pb.DetachObjectRequest(scene_id=scene, name=name)
+        return SceneRobot.from_proto(self._call("DetachObject", req).robot)
 
     def check_instance_motions(
         self,
@@ -965,6 +1195,9 @@ class PlannerStream:
     >>> with client.stream(scene) as s:                                        # doctest: +SKIP
     ...     answers = s.check(poses={robot: pose}, queries=[Query.collide(robot, wall, 0.05)])
 
+    Joint configurations and motions of a robot (the scene's, by default) are checked against
+    the stream's view too (:meth:`check_configurations`, :meth:`check_motions`).
+
     Thread-safe: calls from several threads are serialized (one request in flight). A request the
     server refuses ends the stream on the server side: the call raises :class:`SublevelError` and
     every later call raises it again; open a new stream.
@@ -972,6 +1205,8 @@ class PlannerStream:
 
     def __init__(self, client: Client, scene: str, timeout: Optional[float] = None):
         self.scene = scene
+        self._client = client
+        self._scene_joints: Optional[List[str]] = None  # the scene robot's joints, looked up once
         self._requests: "queue.Queue[Any]" = queue.Queue()
         self._lock = threading.Lock()
         self._next_id = 1
@@ -1030,6 +1265,10 @@ class PlannerStream:
         return self._send(req)
 
     def _send(self, req: pb.QueryRequest) -> QueryResult:
+        return QueryResult.from_proto(self._exchange(req))
+
+    def _exchange(self, req: pb.QueryRequest) -> pb.QueryResponse:
+        """Sends one request and returns its response message (in order; see the class)."""
         with self._lock:
             if self._error is not None:
                 raise self._error
@@ -1048,7 +1287,80 @@ class PlannerStream:
                 raise self._error from None
         if resp.request_id != req.request_id:
             raise RuntimeError(f"stream out of order: sent request {req.request_id}, got {resp.request_id}")
-        return QueryResult.from_proto(resp)
+        return resp
+
+    def _scene_robot_joints(self, scene: str) -> List[str]:
+        """The scene robot's joint names, looked up (one unary GetScene) at the stream's first
+        check that needs them and kept for the stream's life."""
+        if self._scene_joints is None:
+            self._scene_joints = self._client._scene_robot_joints(scene)
+        return self._scene_joints
+
+    def check_configurations(
+        self,
+        q: Any,
+        joint_names: Optional[Sequence[str]] = None,
+        distance: bool = False,
+        padding: float = 0.0,
+        *,
+        robot: Optional[str] = None,
+        base: Any = None,
+        self_collision: bool = True,
+        gradient: bool = False,
+        attached: Optional[Sequence[dict]] = None,
+        link_padding: Optional[Mapping[str, float]] = None,
+        poses: PosesLike = None,
+    ) -> ConfigurationColumns:
+        """Checks joint configurations against the stream's view of the scene (its poses, after
+        ``poses`` ``{instance_id: pose}`` are applied to it and kept, as in :meth:`check`): one
+        request with ``QueryRequest.robot_states``. The arguments and the answer are those of
+        :meth:`Client.check_configurations`, the world being the stream's scene; ``robot`` None
+        (the default) is the scene's robot.
+
+        With ``robot`` and ``joint_names`` None, the scene robot's joints are looked up once per
+        stream (one unary GetScene at the first such call) and sent by name: a robot replaced
+        during the stream is then refused on an unknown joint rather than read with other joints.
+
+        Raises ValueError as :meth:`Client.check_configurations` (nothing is sent, the stream
+        stays open), and SublevelError for the server's refusals with the field prefixed
+        (``robot_states.configurations.joint_names[0]``); a refusal ends the stream.
+        """
+        req = self._client._configurations_request(
+            robot, q, scene=self.scene, joint_names=joint_names, base=base, padding=padding, distance=distance,
+            self_collision=self_collision, gradient=gradient, attached=attached, link_padding=link_padding,
+            scene_joints=self._scene_robot_joints,
+        )
+        query = pb.QueryRequest(scene_id=self.scene, poses=_instance_poses(poses, "poses"), robot_states=req)
+        return ConfigurationColumns.from_proto(self._exchange(query).robot_states, gradient=bool(gradient))
+
+    def check_motions(
+        self,
+        q0: Any,
+        q1: Any,
+        joint_names: Optional[Sequence[str]] = None,
+        padding: float = 0.0,
+        tolerance: float = 1e-3,
+        *,
+        robot: Optional[str] = None,
+        base: Any = None,
+        max_steps: int = 0,
+        attached: Optional[Sequence[dict]] = None,
+        link_padding: Optional[Mapping[str, float]] = None,
+        poses: PosesLike = None,
+    ) -> MotionColumns:
+        """Certifies joint-space motions ``q0[m] -> q1[m]`` against the stream's view of the scene
+        (after ``poses`` are applied to it and kept): one request with
+        ``QueryRequest.robot_motions``. The arguments and the answer are those of
+        :meth:`Client.check_motions`; ``robot``, ``joint_names`` and errors as in
+        :meth:`check_configurations` (fields prefixed ``robot_motions.``).
+        """
+        req = self._client._motions_request(
+            robot, q0, q1, scene=self.scene, joint_names=joint_names, base=base, padding=padding,
+            tolerance=tolerance, max_steps=max_steps, attached=attached, link_padding=link_padding,
+            scene_joints=self._scene_robot_joints,
+        )
+        query = pb.QueryRequest(scene_id=self.scene, poses=_instance_poses(poses, "poses"), robot_motions=req)
+        return MotionColumns.from_proto(self._exchange(query).robot_motions)
 
     def check_columns(
         self,
@@ -1140,18 +1452,21 @@ def _primitive_pb(kind: str, *, size=None, radius=None, height=None, normal=None
     return p
 
 
+def _attached_one(a: Any, name: str) -> "pb.AttachedObject":
+    """One ``AttachedObject`` message from a dict ``{"link", "name", "kind", size / radius /
+    height, "origin"}`` (origin: a pose as ``base`` takes it, default identity). Raises ValueError
+    naming ``name``."""
+    if not isinstance(a, Mapping) or "link" not in a or "kind" not in a:
+        raise ValueError(f"`{name}`: a dict with `link`, `kind` and its dimensions")
+    dims = {d: a[d] for d in ("size", "radius", "height") if a.get(d) is not None}
+    msg = pb.AttachedObject(link=str(a["link"]), name=str(a.get("name", "")),
+                            primitive=_primitive_pb(a["kind"], **dims))
+    if a.get("origin") is not None:
+        msg.origin.CopyFrom(_pose_pb(a["origin"], f"{name}.origin"))
+    return msg
+
+
 def _attached_pb(attached) -> List["pb.AttachedObject"]:
-    """``AttachedObject`` messages from dicts ``{"link", "name", "kind", size / radius / height,
-    "origin"}`` (origin: a pose as ``base`` takes it, default identity). Raises ValueError naming
-    ``attached[k]``."""
-    out = []
-    for k, a in enumerate(attached or ()):
-        if not isinstance(a, dict) or "link" not in a or "kind" not in a:
-            raise ValueError(f"`attached[{k}]`: a dict with `link`, `kind` and its dimensions")
-        dims = {d: a[d] for d in ("size", "radius", "height") if d in a}
-        msg = pb.AttachedObject(link=str(a["link"]), name=str(a.get("name", "")),
-                                primitive=_primitive_pb(a["kind"], **dims))
-        if a.get("origin") is not None:
-            msg.origin.CopyFrom(_pose_pb(a["origin"], f"attached[{k}].origin"))
-        out.append(msg)
-    return out
+    """``AttachedObject`` messages from dicts (see :func:`_attached_one`). Raises ValueError
+    naming ``attached[k]``."""
+    return [_attached_one(a, f"attached[{k}]") for k, a in enumerate(attached or ())]

@@ -32,6 +32,7 @@ __all__ = [
     "SceneSummary",
     "Instance",
     "Scene",
+    "SceneRobot",
     "UploadedBody",
     "AllowedCollisionMatrix",
     "ImportedInstance",
@@ -456,6 +457,10 @@ class QueryResult:
         server_seconds: seconds the server spent (not the transport).
         request_id: the request's id, echoed.
         columns: the answers in columns (requests in columns without states).
+        robot_states: the answers of the request's joint configurations (requests with
+            ``robot_states``), else None.
+        robot_motions: the answers of the request's joint-space motions (requests with
+            ``robot_motions``), else None.
     """
 
     answers: List[Answer]
@@ -463,15 +468,25 @@ class QueryResult:
     server_seconds: float
     request_id: int
     columns: Optional["AnswerColumns"] = None
+    robot_states: Optional["ConfigurationColumns"] = None
+    robot_motions: Optional["MotionColumns"] = None
 
     @classmethod
-    def from_proto(cls, m) -> "QueryResult":
+    def from_proto(cls, m, gradient: Optional[bool] = None) -> "QueryResult":
+        """``gradient``: whether ``robot_states.gradient`` was asked for (None: when the server
+        sent one)."""
+        robot_states = None
+        if m.HasField("robot_states"):
+            grad = len(m.robot_states.gradient) > 0 if gradient is None else gradient
+            robot_states = ConfigurationColumns.from_proto(m.robot_states, gradient=grad)
         return cls(
             answers=[answer_from_proto(a) for a in m.answers],
             states=[StateAnswers.from_proto(s) for s in m.states],
             columns=AnswerColumns.from_proto(m.columns) if m.HasField("columns") else None,
             server_seconds=m.server_seconds,
             request_id=m.request_id,
+            robot_states=robot_states,
+            robot_motions=MotionColumns.from_proto(m.robot_motions) if m.HasField("robot_motions") else None,
         )
 
 
@@ -499,6 +514,10 @@ class SceneCheck:
         narrow_phase_solves: distance solves run.
         all_pairs: pairs a brute-force check would have examined.
         server_seconds: seconds the server spent.
+        robot: the scene's robot (``Client.set_scene_robot``) at the scene's joint positions,
+            checked against the scene's objects (at the check's poses) and itself with the
+            check's margin as padding, with its distance: :class:`ConfigurationColumns` of one
+            row. None when the scene has no robot.
     """
 
     pairs: List[ScenePair]
@@ -507,6 +526,7 @@ class SceneCheck:
     narrow_phase_solves: int
     all_pairs: int
     server_seconds: float
+    robot: Optional["ConfigurationColumns"] = None
 
     @classmethod
     def from_proto(cls, m) -> "SceneCheck":
@@ -517,6 +537,7 @@ class SceneCheck:
             narrow_phase_solves=m.narrow_phase_solves,
             all_pairs=m.all_pairs,
             server_seconds=m.server_seconds,
+            robot=ConfigurationColumns.from_proto(m.robot, gradient=False) if m.HasField("robot") else None,
         )
 
 
@@ -567,13 +588,87 @@ class Instance:
         return cls(instance_id=m.instance_id, body_id=m.body_id, pose=_pose(m.pose, m.HasField("pose")))
 
 
+def _primitive_dict(m) -> Dict[str, object]:
+    """A ``Primitive`` message as the keys ``Client.check_configurations`` takes for an attached
+    object: ``kind`` and its dimensions (meters)."""
+    from ._pb.sublevel.v1 import sublevel_pb2 as pb
+
+    kind = _enum_name(pb.PrimitiveKind, m.kind, "PRIMITIVE_KIND_").lower()
+    if kind == "box":
+        return {"kind": kind, "size": tuple(float(x) for x in m.size)}
+    if kind == "sphere":
+        return {"kind": kind, "radius": m.radius}
+    if kind in ("cylinder", "capsule"):
+        return {"kind": kind, "radius": m.radius, "height": m.height}
+    return {"kind": kind}
+
+
+@dataclass
+class SceneRobot:
+    """The robot placed in a scene (``Client.set_scene_robot``; a scene holds at most one).
+
+    Attributes:
+        robot_id: the stored robot.
+        base: the pose of its root link in the scene (:class:`Pose`, meters).
+        attached: the objects attached to its links, in attachment order, each a dict in the form
+            ``Client.check_configurations`` and ``Client.attach_object`` take: ``{"link", "name",
+            "kind", "size" / "radius" / "height", "origin"}`` (meters; ``origin`` a :class:`Pose`
+            in the link's frame), so ``client.attach_object(scene, **robot.attached[0])``
+            re-attaches one.
+        link_padding: padding per link name (meters).
+        joint_positions: the scene's joint positions of every joint of the robot, in
+            :attr:`RobotInfo.joint_names` order (radians or meters; joints never set are 0).
+    """
+
+    robot_id: str
+    base: Pose
+    attached: List[Dict[str, object]] = field(default_factory=list)
+    link_padding: Dict[str, float] = field(default_factory=dict)
+    joint_positions: Dict[str, float] = field(default_factory=dict)
+
+    @property
+    def joint_names(self) -> List[str]:
+        """The robot's joints in order (the keys of :attr:`joint_positions`)."""
+        return list(self.joint_positions)
+
+    @property
+    def q(self) -> np.ndarray:
+        """The joint positions as a configuration, shape (dof,), in :attr:`joint_names` order."""
+        return np.array(list(self.joint_positions.values()), dtype=float)
+
+    @classmethod
+    def from_proto(cls, m) -> "SceneRobot":
+        attached = [
+            {"link": a.link, "name": a.name, **_primitive_dict(a.primitive), "origin": _pose(a.origin, a.HasField("origin"))}
+            for a in m.attached
+        ]
+        return cls(
+            robot_id=m.robot_id,
+            base=_pose(m.base, m.HasField("base")),
+            attached=attached,
+            link_padding={k: float(v) for k, v in sorted(m.link_padding.items())},
+            joint_positions={j.name: j.position for j in m.joint_positions},
+        )
+
+
 @dataclass
 class Scene:
-    """A scene with its instances (ordered by id)."""
+    """A scene with its instances (ordered by id), its robot and its joint positions.
+
+    Attributes:
+        scene_id, name: the scene.
+        instances: its instances with their stored poses.
+        robot: its robot (:class:`SceneRobot`), None when it has none.
+        joint_positions: the scene's robot state by joint name (radians or meters): set by
+            ``Client.import_scene``, ``Client.set_scene_robot`` and ``Client.set_joint_positions``;
+            it stays when the robot is removed.
+    """
 
     scene_id: str
     name: str
     instances: List[Instance] = field(default_factory=list)
+    robot: Optional[SceneRobot] = None
+    joint_positions: Dict[str, float] = field(default_factory=dict)
 
     def instance(self, instance_id: str) -> Instance:
         """The instance with this id (KeyError if absent)."""

@@ -239,6 +239,11 @@ impl Catalog {
         options: &CheckOptions,
         poses: &[(String, Isometry3)],
     ) -> Result<Option<SceneRobotCheck>> {
+        // A scene without a robot has nothing to check, whatever its bodies (fitted bodies, which
+        // robot checks refuse as obstacles, included).
+        if !self.with_scene(scene_id, |s| Ok(s.planning.robot.is_some()))? {
+            return Ok(None);
+        }
         let mut world = self.robot_world(scene_id)?;
         let Some(placed) = world.robot.clone() else { return Ok(None) };
         world.with_poses(poses.iter().map(|(id, p)| (id.as_str(), p)));
