@@ -112,6 +112,11 @@ def test_closed_forms_check_the_scene_robot(client, cell):
     assert not m.valid[0] and m.decided[0]
     assert t_star - 1e-3 / (0.6 * HALF_PI) - 1e-9 <= m.contact_t[0] <= t_star + 1e-12, (m.contact_t[0], t_star)
     assert (m.robot_link[0], m.other[0]) == ("arm", obstacle)
+    # Stopping at the first collision: the ball at 45° touches the obstacle, so π/2 is not checked.
+    q, at45 = [[0.0], [math.pi / 4], [HALF_PI]], Pose(t=O - [C45, C45, 0.0])
+    r = client.check_configurations(None, q, scene=scene, base=at45, stop_at_first_collision=True)
+    assert r.collides.tolist() == [False, True]
+    assert client.check_configurations(None, q, scene=scene, base=at45).collides.tolist() == [False, True, False]
 
 
 def test_attached_objects_move_with_their_link(client, cell):

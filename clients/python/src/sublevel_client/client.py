@@ -738,6 +738,7 @@ class Client:
         gradient: bool = False,
         attached: Optional[Sequence[dict]] = None,
         link_padding: Optional[Mapping[str, float]] = None,
+        stop_at_first_collision: bool = False,
         scene_joints: Optional[Callable[[str], List[str]]] = None,
     ) -> pb.CheckConfigurationsRequest:
         """The ``CheckConfigurationsRequest`` of :meth:`check_configurations` (same arguments),
@@ -754,6 +755,7 @@ class Client:
             gradient=bool(gradient),
             attached=_attached_pb(attached),
             link_padding=_link_padding(link_padding),
+            stop_at_first_collision=bool(stop_at_first_collision),
         )
         if base is not None:
             req.base.CopyFrom(_pose_pb(base, "base"))
@@ -815,6 +817,7 @@ class Client:
         gradient: bool = False,
         attached: Optional[Sequence[dict]] = None,
         link_padding: Optional[Mapping[str, float]] = None,
+        stop_at_first_collision: bool = False,
     ) -> ConfigurationColumns:
         """Checks joint configurations of a stored robot among a scene's primitives, in columns.
 
@@ -848,8 +851,12 @@ class Client:
             link_padding: meters (>= 0) per link name, on top of ``padding``, as MoveIt's link
                 padding: a world pair collides within ``padding + p(link)``, a self pair within
                 ``padding + p(a) + p(b)``; distances stay unpadded.
+            stop_at_first_collision: check the rows in order and stop at the first that
+                collides: the answer then has that many rows, the last one colliding (a sampled
+                motion's states in van der Corput order find a collision in a few checks).
 
-        Returns :class:`ConfigurationColumns` (numpy columns of N rows). Raises ValueError naming
+        Returns :class:`ConfigurationColumns` (numpy columns of N rows, fewer with
+        ``stop_at_first_collision``). Raises ValueError naming
         the argument when ``q``, ``joint_names`` or ``base`` is malformed, or ``robot`` is None
         without a ``scene`` (nothing is sent), and SublevelError for the server's refusals:
         NOT_FOUND for an unknown robot or scene, INVALID_ARGUMENT naming the field
@@ -859,6 +866,7 @@ class Client:
         req = self._configurations_request(
             robot, q, scene=scene, joint_names=joint_names, base=base, padding=padding, distance=distance,
             self_collision=self_collision, gradient=gradient, attached=attached, link_padding=link_padding,
+            stop_at_first_collision=stop_at_first_collision,
         )
         return ConfigurationColumns.from_proto(self._call("CheckConfigurations", req), gradient=bool(gradient))
 
@@ -1309,6 +1317,7 @@ class PlannerStream:
         gradient: bool = False,
         attached: Optional[Sequence[dict]] = None,
         link_padding: Optional[Mapping[str, float]] = None,
+        stop_at_first_collision: bool = False,
         poses: PosesLike = None,
     ) -> ConfigurationColumns:
         """Checks joint configurations against the stream's view of the scene (its poses, after
@@ -1328,7 +1337,7 @@ class PlannerStream:
         req = self._client._configurations_request(
             robot, q, scene=self.scene, joint_names=joint_names, base=base, padding=padding, distance=distance,
             self_collision=self_collision, gradient=gradient, attached=attached, link_padding=link_padding,
-            scene_joints=self._scene_robot_joints,
+            stop_at_first_collision=stop_at_first_collision, scene_joints=self._scene_robot_joints,
         )
         query = pb.QueryRequest(scene_id=self.scene, poses=_instance_poses(poses, "poses"), robot_states=req)
         return ConfigurationColumns.from_proto(self._exchange(query).robot_states, gradient=bool(gradient))
