@@ -64,6 +64,52 @@ async fn instance_motions_answer_their_closed_forms() {
     server.stop().await;
 }
 
+/// On a planner stream the motions run among the stream's own poses: with b moved privately to
+/// (2, 0, 0), motion 0 touches it at centre distance 0.8, t* = 1.2 / 4, while a unary Query still
+/// answers t* = 2.2 / 4 among the stored poses.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn instance_motions_on_a_stream_use_its_view() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(config(dir.path())).await;
+    let mut c = server.client().await;
+    let big = upload_primitive(&mut c, "big", primitive(pb::PrimitiveKind::Sphere, &[], 0.5, 0.0)).await;
+    let small = upload_primitive(&mut c, "small", primitive(pb::PrimitiveKind::Sphere, &[], 0.3, 0.0)).await;
+    let scene = c.create_scene(pb::CreateSceneRequest { name: "s".into() }).await.unwrap().into_inner().scene_id;
+    let a = add(&mut c, &scene, &big, at([0.0; 3])).await;
+    let b = add(&mut c, &scene, &small, at([3.0, 0.0, 0.0])).await;
+    let tolerance = 1e-4;
+    let motions = pb::CheckInstanceMotionsRequest {
+        instance_ids: vec![a.clone()],
+        start_poses: columns(&[[0.0; 3]]),
+        end_poses: columns(&[[4.0, 0.0, 0.0]]),
+        tolerance,
+        ..Default::default()
+    };
+    let close = |t: f64, t_star: f64| t <= t_star + 1e-12 && t_star - t <= 1.25 * tolerance / 4.0 + 1e-12;
+
+    let (tx, rx) = tokio::sync::mpsc::channel(4);
+    let mut answers = c.query_stream(tokio_stream::wrappers::ReceiverStream::new(rx)).await.unwrap().into_inner();
+    tx.send(pb::QueryRequest {
+        scene_id: scene.clone(),
+        poses: vec![pb::InstancePose { instance_id: b.clone(), pose: Some(at([2.0, 0.0, 0.0])) }],
+        instance_motions: Some(motions.clone()),
+        ..Default::default()
+    })
+    .await
+    .unwrap();
+    let r = answers.message().await.unwrap().unwrap().instance_motions.unwrap();
+    assert!(close(r.contact_t[0], 1.2 / 4.0) && r.other == [b.clone()], "{r:?}");
+    let req =
+        pb::QueryRequest { scene_id: scene.clone(), instance_motions: Some(motions.clone()), ..Default::default() };
+    let r = c.query(req).await.unwrap().into_inner().instance_motions.unwrap();
+    assert!(close(r.contact_t[0], 2.2 / 4.0), "{r:?}");
+    // Another scene is refused naming the field.
+    let other = pb::CheckInstanceMotionsRequest { scene_id: "s-0000000000000000".into(), ..motions };
+    tx.send(pb::QueryRequest { instance_motions: Some(other), ..Default::default() }).await.unwrap();
+    assert_status(answers.message().await, Code::InvalidArgument, "instance_motions.scene_id");
+    server.stop().await;
+}
+
 /// Bad input: each error names its field (INVALID_ARGUMENT with a BadRequest field violation),
 /// an unknown instance is NOT_FOUND naming its entry, and a halfspace cannot move.
 #[tokio::test]

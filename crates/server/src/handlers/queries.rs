@@ -171,18 +171,37 @@ async fn query_work<T: Send + 'static>(
     pools.sdp.run(move || f(&catalog, None)).await
 }
 
-/// Answers the robot checks a planner request carries (`robot_states`, `robot_motions`) on the
-/// view the request left (its poses applied), into `reply`.
-///
-/// # Errors
-/// INVALID_ARGUMENT naming `robot_states.scene_id` / `robot_motions.scene_id` when it names
-/// another scene than the view's; the checks' own errors, their fields prefixed by
-/// `robot_states.` / `robot_motions.`.
-async fn robot_checks(
-    robots: &RobotChecks,
-    view: &QueryView,
+/// The checks a planner request carries beside its queries: robot states and motions, instance
+/// motions.
+#[derive(Default)]
+struct ViewChecks {
     states: Option<pb::CheckConfigurationsRequest>,
     motions: Option<pb::CheckMotionsRequest>,
+    instance_motions: Option<pb::CheckInstanceMotionsRequest>,
+}
+
+impl ViewChecks {
+    /// Takes them out of `req` (the queries are answered without them).
+    fn take(req: &mut pb::QueryRequest) -> Self {
+        Self {
+            states: req.robot_states.take(),
+            motions: req.robot_motions.take(),
+            instance_motions: req.instance_motions.take(),
+        }
+    }
+}
+
+/// Answers the checks a planner request carries beside its queries ([`ViewChecks`]) on the view
+/// the request left (its poses applied), into `reply`.
+///
+/// # Errors
+/// INVALID_ARGUMENT naming `robot_states.scene_id` (`robot_motions.`, `instance_motions.`) when
+/// it names another scene than the view's; the checks' own errors, their fields prefixed by
+/// `robot_states.` (`robot_motions.`, `instance_motions.`).
+async fn view_checks(
+    robots: &RobotChecks,
+    view: &QueryView,
+    checks: ViewChecks,
     reply: &mut pb::QueryResponse,
 ) -> Result<(), Status> {
     let scene = |field: &str, id: &mut String| {
@@ -199,15 +218,22 @@ async fn robot_checks(
             other => Status::from(other),
         }
     };
-    if let Some(mut req) = states {
+    if let Some(mut req) = checks.states {
         scene("robot_states", &mut req.scene_id)?;
         let out = robots.configurations(req, view.pose_overrides()).await.map_err(prefixed("robot_states"))?;
         reply.robot_states = Some(out);
     }
-    if let Some(mut req) = motions {
+    if let Some(mut req) = checks.motions {
         scene("robot_motions", &mut req.scene_id)?;
         let out = robots.motions(req, view.pose_overrides()).await.map_err(prefixed("robot_motions"))?;
         reply.robot_motions = Some(out);
+    }
+    if let Some(mut req) = checks.instance_motions {
+        scene("instance_motions", &mut req.scene_id)?;
+        let out = super::motions::instance_motions(robots, req, view.pose_overrides())
+            .await
+            .map_err(prefixed("instance_motions"))?;
+        reply.instance_motions = Some(out);
     }
     Ok(())
 }
@@ -229,7 +255,7 @@ impl QueryStreamState {
     /// may repeat its scene id or leave it empty).
     async fn answer(&mut self, mut req: pb::QueryRequest) -> Result<pb::QueryResponse, Status> {
         let start = std::time::Instant::now();
-        let (robot_states, robot_motions) = (req.robot_states.take(), req.robot_motions.take());
+        let checks = ViewChecks::take(&mut req);
         let planner = cv::planner_request_from_proto(&req, self.limits.0, self.limits.1).map_err(to_status)?;
         let current = match self.view.take() {
             None => QueryView::new(require_id("scene_id", &req.scene_id).map_err(to_status)?),
@@ -247,7 +273,7 @@ impl QueryStreamState {
         let (back, reply) = answer_planner(self.catalog.clone(), &self.pools, current, &req, planner, start).await;
         let mut reply = reply;
         if let Ok(out) = &mut reply {
-            if let Err(e) = robot_checks(&self.robots, &back, robot_states, robot_motions, out).await {
+            if let Err(e) = view_checks(&self.robots, &back, checks, out).await {
                 reply = Err(e);
             } else {
                 out.server_seconds = start.elapsed().as_secs_f64();
@@ -376,12 +402,12 @@ pub(super) async fn query(svc: &SublevelService, request: Request<pb::QueryReque
     let start = std::time::Instant::now();
     let mut req = request.into_inner();
     require_id("scene_id", &req.scene_id)?;
-    let (robot_states, robot_motions) = (req.robot_states.take(), req.robot_motions.take());
+    let checks = ViewChecks::take(&mut req);
     let planner = cv::planner_request_from_proto(&req, svc.config.max_batch_pairs, svc.config.max_poses_per_call)?;
     let view = QueryView::new(&req.scene_id);
     let (view, reply) = answer_planner(svc.catalog.clone(), &svc.pools, view, &req, planner, start).await;
     let mut reply = reply?;
-    robot_checks(&RobotChecks::of(svc), &view, robot_states, robot_motions, &mut reply).await?;
+    view_checks(&RobotChecks::of(svc), &view, checks, &mut reply).await?;
     reply.server_seconds = start.elapsed().as_secs_f64();
     Ok(Response::new(reply))
 }

@@ -186,19 +186,13 @@ fn with_attached(robot: &Arc<FittedRobot>, attached: &[pb::AttachedObject]) -> R
     Ok(Arc::new(robot))
 }
 
-/// Whether the robot and the scene of a check read from memory alone: no shared store (which may
-/// load them from the database) and every stored body built (a first use builds it).
-pub(super) fn in_memory(svc: &SublevelService) -> bool {
-    !svc.catalog.shared_store() && svc.catalog.bodies_pending() == 0
-}
-
 /// What the robot checks need of the service: the catalog, the batch slots and their number.
 /// The unary checks and the query streams (whose requests may carry robot checks) share it.
 #[derive(Clone, Debug)]
 pub(super) struct RobotChecks {
-    catalog: Arc<sublevel_scene::Catalog>,
-    pools: crate::limits::QueryPools,
-    slots: usize,
+    pub(super) catalog: Arc<sublevel_scene::Catalog>,
+    pub(super) pools: crate::limits::QueryPools,
+    pub(super) slots: usize,
 }
 
 /// What a check request says of its robot and world (see [`RobotChecks::setting`]).
@@ -221,7 +215,7 @@ impl RobotChecks {
     /// Whether the robot and the scene of a check read from memory alone: no shared store
     /// (which may load them from the database) and every stored body built (a first use builds
     /// it).
-    fn in_memory(&self) -> bool {
+    pub(super) fn in_memory(&self) -> bool {
         !self.catalog.shared_store() && self.catalog.bodies_pending() == 0
     }
 

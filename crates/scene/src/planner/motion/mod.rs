@@ -153,7 +153,22 @@ impl MotionScene {
     /// [`Error::NotFound`] for the scene; [`Error::FailedPrecondition`] naming a body that does
     /// not validate.
     pub fn read(catalog: &Catalog, scene_id: &str) -> Result<Self> {
-        Ok(Self::new(catalog.posed_instances(scene_id, &[])?, catalog.certify_params()))
+        Self::read_at(catalog, scene_id, &[])
+    }
+
+    /// [`MotionScene::read`] with the instances `poses` names (instance id, pose) moved there,
+    /// e.g. a planner stream's view; ids the scene lacks are ignored.
+    ///
+    /// # Errors
+    /// As [`MotionScene::read`].
+    pub fn read_at(catalog: &Catalog, scene_id: &str, poses: &[(String, Isometry3)]) -> Result<Self> {
+        let mut instances = catalog.posed_instances(scene_id, &[])?;
+        for (id, pose) in poses {
+            if let Some(i) = instances.iter_mut().find(|i| i.id == *id) {
+                i.pose = *pose;
+            }
+        }
+        Ok(Self::new(instances, catalog.certify_params()))
     }
 
     /// Motion checks among `instances` (ids unique; a repeated id keeps its last entry), solved
