@@ -119,7 +119,8 @@ impl Planner<'_, '_> {
         self.checker.check(q, &Isometry3::identity(), &options).map(|a| !a.collides).unwrap_or(false)
     }
 
-    /// The edge a → b: sampled at 32 per unit of joint distance (b included), or certified.
+    /// The edge a → b: sampled at 32 per unit of joint distance (b included, in van der Corput
+    /// order), or certified.
     fn edge_free(&mut self, a: &[Real], b: &[Real]) -> bool {
         self.counts.edges += 1;
         if self.certified {
@@ -130,12 +131,31 @@ impl Planner<'_, '_> {
                 .unwrap_or(false);
         }
         let n = ((distance(a, b) * 32.0).ceil() as usize).max(1);
-        (1..=n).all(|i| {
+        van_der_corput(n).into_iter().all(|i| {
             let t = i as Real / n as Real;
             let q: Vec<Real> = a.iter().zip(b).map(|(x, y)| x + t * (y - x)).collect();
             self.state_free(&q)
         })
     }
+}
+
+/// `1..=n` ordered as OMPL's discrete motion validator checks an edge: the end first, then each
+/// next index halving the largest gap left, so a collision anywhere is found in a few checks.
+fn van_der_corput(n: usize) -> Vec<usize> {
+    let mut order = vec![n];
+    let mut seen = vec![false; n + 1];
+    seen[n] = true;
+    let mut step = n;
+    while step > 1 {
+        step = step.div_ceil(2);
+        for k in (step..n).step_by(step) {
+            if !std::mem::replace(&mut seen[k], true) {
+                order.push(k);
+            }
+        }
+    }
+    order.extend((1..n).filter(|&k| !seen[k]));
+    order
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
