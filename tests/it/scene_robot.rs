@@ -188,22 +188,11 @@ async fn a_scene_robot_is_checked_at_its_joint_positions_against_the_mesh_labels
     server.stop().await;
 }
 
-/// A revolute joint `j` about z at the base; link `arm` holds a ball of radius 0.1 m at
-/// (0.5, 0, 0) in its frame, so at j = θ the ball's center is (0.5 cos θ, 0.5 sin θ, 0).
+/// The one-joint arm of `tests/data/arm.robot.json`: a revolute joint `j` about z at the base;
+/// link `arm` holds a ball of radius 0.1 m at (0.5, 0, 0) in its frame, so at j = θ the ball's
+/// center is (0.5 cos θ, 0.5 sin θ, 0).
 fn arm_file() -> Vec<u8> {
-    serde_json::to_vec(&serde_json::json!({
-        "format": "sublevel.robot.v1",
-        "name": "arm",
-        "urdf": "<robot name=\"arm\"><link name=\"base\"/><link name=\"arm\"/>\
-                 <joint name=\"j\" type=\"revolute\"><parent link=\"base\"/><child link=\"arm\"/>\
-                 <axis xyz=\"0 0 1\"/><limit lower=\"-3\" upper=\"3\" effort=\"1\" velocity=\"1\"/></joint></robot>",
-        "geometries": [{
-            "link": "arm", "index": 0,
-            "origin": {"translation": [0.5, 0.0, 0.0], "rotation": [1.0, 0.0, 0.0, 0.0]},
-            "primitive": {"primitive": "sphere", "radius": 0.1}
-        }]
-    }))
-    .unwrap()
+    include_bytes!("../data/arm.robot.json").to_vec()
 }
 
 fn at(x: f64, y: f64) -> pb::Pose {

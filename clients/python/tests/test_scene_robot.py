@@ -3,8 +3,8 @@ whose link holds a ball, and a ball obstacle. Checks naming no robot use the sce
 base, attached objects, link padding and joint positions), CheckScene checks it at the scene's
 joint positions, and a planner stream checks configurations and motions on its private view."""
 
-import json
 import math
+from pathlib import Path
 
 import grpc
 import numpy as np
@@ -17,22 +17,13 @@ from sublevel_client import ConfigurationColumns, MotionColumns, Pose, SceneRobo
 L, RA, RO = 0.5, 0.1, 0.2
 O = np.array([0.5, 1.0, 0.0])
 HALF_PI = math.pi / 2
+ARM = Path(__file__).resolve().parents[3] / "tests" / "data" / "arm.robot.json"
 C45 = L * math.cos(math.pi / 4)  # the obstacle's private pose on a stream: on the arm ball's circle at 45°
 
 
 def arm_file() -> bytes:
-    return json.dumps({
-        "format": "sublevel.robot.v1",
-        "name": "arm",
-        "urdf": '<robot name="arm"><link name="base"/><link name="arm"/>'
-                '<joint name="j" type="revolute"><parent link="base"/><child link="arm"/>'
-                '<axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint></robot>',
-        "geometries": [{
-            "link": "arm", "index": 0,
-            "origin": {"translation": [L, 0.0, 0.0], "rotation": [1.0, 0.0, 0.0, 0.0]},
-            "primitive": {"primitive": "sphere", "radius": RA},
-        }],
-    }).encode()
+    """The arm's robot file (the repository's tests/data/arm.robot.json)."""
+    return ARM.read_bytes()
 
 
 def ball_distance(j, at, radius, obstacle=O, base=np.zeros(3)):

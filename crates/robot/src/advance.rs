@@ -59,6 +59,26 @@ impl Default for MotionOptions {
     }
 }
 
+impl MotionOptions {
+    /// Checks the settings.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `padding` (negative or not finite), `tolerance` (not
+    /// finite and > 0) or `max_steps` (0).
+    pub fn validate(&self) -> Result<()> {
+        if !(self.padding.is_finite() && self.padding >= 0.0) {
+            return Err(Error::invalid("padding", format!("must be finite and ≥ 0 m, got {}", self.padding)));
+        }
+        if !(self.tolerance.is_finite() && self.tolerance > 0.0) {
+            return Err(Error::invalid("tolerance", format!("must be finite and > 0 m, got {}", self.tolerance)));
+        }
+        if self.max_steps == 0 {
+            return Err(Error::invalid("max_steps", "must be ≥ 1"));
+        }
+        Ok(())
+    }
+}
+
 /// The answer for one motion.
 #[derive(Clone, Debug, PartialEq)]
 pub struct MotionAnswer {
@@ -159,15 +179,7 @@ impl<'c, 'r> MotionChecker<'c, 'r> {
         let model = &self.checker.robot().model;
         model.check_configuration("q0", q0)?;
         model.check_configuration("q1", q1)?;
-        if !(options.padding.is_finite() && options.padding >= 0.0) {
-            return Err(Error::invalid("padding", format!("must be finite and ≥ 0 m, got {}", options.padding)));
-        }
-        if !(options.tolerance.is_finite() && options.tolerance > 0.0) {
-            return Err(Error::invalid("tolerance", format!("must be finite and > 0 m, got {}", options.tolerance)));
-        }
-        if options.max_steps == 0 {
-            return Err(Error::invalid("max_steps", "must be ≥ 1"));
-        }
+        options.validate()?;
         let dq: Vec<Real> = (0..model.dof())
             .map(|k| {
                 let d = q1[k] - q0[k];

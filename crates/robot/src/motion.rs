@@ -143,9 +143,7 @@ impl MotionBounds {
     /// # Panics
     /// Never for `poses` and `dq` of the robot's lengths.
     pub fn at(&self, model: &RobotModel, link: usize, poses: &[Isometry3], dq: &[Real]) -> LinkMotion {
-        let mut m = self.below(model, link, self.chains[link].len(), poses, dq);
-        m.full = m.full.min(self.displacement(link, dq));
-        m
+        self.below(model, link, self.chains[link].len(), poses, dq)
     }
 
     /// The moving joints of link `a`'s and link `b`'s chains below their nearest common ancestor

@@ -8,22 +8,10 @@ use sublevel_core::math::pose_from_parts;
 use sublevel_core::primitive::Primitive;
 use sublevel_robot::{CheckOptions, RobotFile};
 
-/// A revolute joint `j` about z at the base; link `arm` holds a ball of radius 0.1 m at
-/// (0.5, 0, 0) in its frame.
+/// The one-joint arm of `tests/data/arm.robot.json`: a revolute joint `j` about z at the base;
+/// link `arm` holds a ball of radius 0.1 m at (0.5, 0, 0) in its frame.
 fn arm() -> RobotFile {
-    serde_json::from_value(serde_json::json!({
-        "format": "sublevel.robot.v1",
-        "name": "arm",
-        "urdf": "<robot name=\"arm\"><link name=\"base\"/><link name=\"arm\"/>\
-                 <joint name=\"j\" type=\"revolute\"><parent link=\"base\"/><child link=\"arm\"/>\
-                 <axis xyz=\"0 0 1\"/><limit lower=\"-3\" upper=\"3\" effort=\"1\" velocity=\"1\"/></joint></robot>",
-        "geometries": [{
-            "link": "arm", "index": 0,
-            "origin": {"translation": [0.5, 0.0, 0.0], "rotation": [1.0, 0.0, 0.0, 0.0]},
-            "primitive": {"primitive": "sphere", "radius": 0.1}
-        }]
-    }))
-    .unwrap()
+    serde_json::from_str(include_str!("../../../../tests/data/arm.robot.json")).unwrap()
 }
 
 fn open(dir: &std::path::Path) -> Catalog {

@@ -39,7 +39,7 @@ mod view;
 
 pub use crate::answer::{answer_pair, answer_pair_with, CollideReply, Posed};
 pub use check::{check_scene, SceneCheck, ScenePair};
-pub use motion::{InstanceMotionAnswer, InstanceMotionOptions, MotionScene, Moving, Slerp, EXACT_FRACTION};
+pub use motion::{InstanceMotionAnswer, MotionOptions, MotionScene, Moving, Slerp, EXACT_FRACTION};
 pub use sublevel_query::dispatch::{collide_cheap, collide_lower_bound, sphere_lower_bound, Ahead, CheapCollide};
 pub use view::QueryView;
 

@@ -5,7 +5,7 @@ use super::{require_id, MAX_CONFIGURATIONS_PER_CALL, MAX_ID_BYTES};
 use crate::pb;
 use crate::{Error, Result};
 use sublevel_core::math::{pose_from_parts, pose_to_parts, Isometry3, Real};
-use sublevel_scene::planner::{InstanceMotionAnswer, InstanceMotionOptions};
+use sublevel_scene::planner::{InstanceMotionAnswer, MotionOptions};
 
 /// The motions of a `CheckInstanceMotions` request, validated: the moving instances' ids, the
 /// start and end poses, and the options.
@@ -16,7 +16,7 @@ pub struct InstanceMotions {
     /// Start and end pose of each motion.
     pub poses: Vec<(Isometry3, Isometry3)>,
     /// Padding, tolerance and step limit.
-    pub options: InstanceMotionOptions,
+    pub options: MotionOptions,
 }
 
 /// The motions of `request` (the scene id is checked by the handler).
@@ -44,13 +44,7 @@ pub fn instance_motions_from_proto(request: &pb::CheckInstanceMotionsRequest) ->
     }
     let start = poses("start_poses", &request.start_poses, n)?;
     let end = poses("end_poses", &request.end_poses, n)?;
-    let defaults = InstanceMotionOptions::default();
-    let options = InstanceMotionOptions {
-        padding: request.padding,
-        tolerance: if request.tolerance == 0.0 { defaults.tolerance } else { request.tolerance },
-        max_steps: if request.max_steps == 0 { defaults.max_steps } else { request.max_steps as usize },
-    };
-    options.validate()?;
+    let options = super::motion_options(request.padding, request.tolerance, request.max_steps)?;
     Ok(InstanceMotions {
         instance_ids: request.instance_ids.clone(),
         poses: start.into_iter().zip(end).collect(),

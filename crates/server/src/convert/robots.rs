@@ -74,12 +74,13 @@ pub fn padding(value: Real) -> Result<Real> {
 /// [`Error::InvalidArgument`] naming `padding` or `tolerance`.
 pub fn motion_options(pad: Real, tolerance: Real, max_steps: u32) -> Result<MotionOptions> {
     let defaults = MotionOptions::default();
-    let tolerance = if tolerance == 0.0 { defaults.tolerance } else { tolerance };
-    if !(tolerance.is_finite() && tolerance > 0.0) {
-        return Err(Error::invalid("tolerance", format!("must be finite and > 0 m, got {tolerance}")));
-    }
-    let max_steps = if max_steps == 0 { defaults.max_steps } else { max_steps as usize };
-    Ok(MotionOptions { padding: padding(pad)?, tolerance, max_steps })
+    let options = MotionOptions {
+        padding: padding(pad)?,
+        tolerance: if tolerance == 0.0 { defaults.tolerance } else { tolerance },
+        max_steps: if max_steps == 0 { defaults.max_steps } else { max_steps as usize },
+    };
+    options.validate()?;
+    Ok(options)
 }
 
 /// The link name of geometry `g`.

@@ -72,42 +72,9 @@ use sublevel_core::math::{Isometry3, Real, UnitQuaternion, Vector3};
 use sublevel_query::dispatch::PosedRef;
 use sublevel_query::CertifyParams;
 
-/// Settings of [`MotionScene::check_motion`].
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct InstanceMotionOptions {
-    /// Padding around the moving body (meters, ≥ 0): it is in contact within this distance.
-    pub padding: Real,
-    /// Contact tolerance (meters, > 0): a bound at or below `padding + tolerance` is a contact.
-    pub tolerance: Real,
-    /// Most steps one motion may take before it is answered undecided (≥ 1).
-    pub max_steps: usize,
-}
-
-impl Default for InstanceMotionOptions {
-    fn default() -> Self {
-        Self { padding: 0.0, tolerance: 1e-3, max_steps: 100_000 }
-    }
-}
-
-impl InstanceMotionOptions {
-    /// Checks the settings.
-    ///
-    /// # Errors
-    /// [`Error::InvalidArgument`] naming `padding` (negative or not finite), `tolerance` (not
-    /// finite and > 0) or `max_steps` (0).
-    pub fn validate(&self) -> Result<()> {
-        if !(self.padding.is_finite() && self.padding >= 0.0) {
-            return Err(Error::invalid("padding", format!("must be finite and >= 0 m, got {}", self.padding)));
-        }
-        if !(self.tolerance.is_finite() && self.tolerance > 0.0) {
-            return Err(Error::invalid("tolerance", format!("must be finite and > 0 m, got {}", self.tolerance)));
-        }
-        if self.max_steps == 0 {
-            return Err(Error::invalid("max_steps", "must be >= 1"));
-        }
-        Ok(())
-    }
-}
+/// Settings of [`MotionScene::check_motion`]: those of the robot motions (padding around the
+/// moving body, contact tolerance, most steps), validated as they are.
+pub use sublevel_robot::MotionOptions;
 
 /// The answer for one motion.
 #[derive(Clone, Debug, PartialEq)]
@@ -215,14 +182,14 @@ impl MotionScene {
     /// instances at their poses.
     ///
     /// # Errors
-    /// [`Error::InvalidArgument`] as [`InstanceMotionOptions::validate`]; [`Error::Cancelled`]
+    /// [`Error::InvalidArgument`] as [`MotionOptions::validate`]; [`Error::Cancelled`]
     /// when the calling request was abandoned ([`sublevel_core::cancel`]).
     pub fn check_motion(
         &self,
         moving: &Moving,
         start: &Isometry3,
         end: &Isometry3,
-        options: &InstanceMotionOptions,
+        options: &MotionOptions,
     ) -> Result<InstanceMotionAnswer> {
         options.validate()?;
         let path = Slerp::new(start, end);

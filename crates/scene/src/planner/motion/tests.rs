@@ -36,13 +36,7 @@ impl World {
         self.catalog.add_instance(&self.scene, &body, pose).unwrap()
     }
 
-    fn check(
-        &self,
-        id: &str,
-        start: Isometry3,
-        end: Isometry3,
-        options: &InstanceMotionOptions,
-    ) -> InstanceMotionAnswer {
+    fn check(&self, id: &str, start: Isometry3, end: Isometry3, options: &MotionOptions) -> InstanceMotionAnswer {
         let scene = MotionScene::read(&self.catalog, &self.scene).unwrap();
         let moving = scene.moving("instance", id).unwrap();
         scene.check_motion(&moving, &start, &end, options).unwrap()
@@ -86,7 +80,7 @@ fn assert_contact(a: &InstanceMotionAnswer, other: &str, t_star: Real, closing: 
 #[test]
 fn a_sphere_translating_into_a_sphere_stops_at_the_closed_form() {
     for tolerance in [1e-3, 1e-5] {
-        let options = InstanceMotionOptions { tolerance, ..InstanceMotionOptions::default() };
+        let options = MotionOptions { tolerance, ..MotionOptions::default() };
         for (moving_body, obstacle_body) in [(false, false), (true, false), (false, true), (true, true)] {
             let w = World::new();
             let m = if moving_body {
@@ -114,10 +108,10 @@ fn a_sphere_passing_a_sphere_is_free_unless_padded() {
     let w = World::new();
     let m = w.primitive(sphere(0.5), at(0.0, 0.0, 0.0));
     let o = w.primitive(sphere(0.3), at(3.0, 1.0, 0.0));
-    let free = w.check(&m, at(0.0, 0.0, 0.0), at(4.0, 0.0, 0.0), &InstanceMotionOptions::default());
+    let free = w.check(&m, at(0.0, 0.0, 0.0), at(4.0, 0.0, 0.0), &MotionOptions::default());
     assert!(free.valid && free.decided && free.contact.is_none() && free.other.is_none(), "{free:?}");
     assert!(free.steps > 1, "{free:?}");
-    let padded = InstanceMotionOptions { padding: 0.25, ..InstanceMotionOptions::default() };
+    let padded = MotionOptions { padding: 0.25, ..MotionOptions::default() };
     let a = w.check(&m, at(0.0, 0.0, 0.0), at(4.0, 0.0, 0.0), &padded);
     let back = (1.05_f64 * 1.05 - 1.0).sqrt();
     assert_contact(&a, &o, (3.0 - back) / 4.0, back / 1.05 * 4.0, padded.tolerance);
@@ -130,7 +124,7 @@ fn a_box_moving_into_a_box_face_stops_at_the_closed_form() {
     let w = World::new();
     let m = w.primitive(cuboid(0.5, 0.5, 0.5), at(0.0, 0.0, 0.0));
     let o = w.primitive(cuboid(0.2, 1.0, 1.0), at(2.0, 0.0, 0.0));
-    let options = InstanceMotionOptions::default();
+    let options = MotionOptions::default();
     let a = w.check(&m, at(0.0, 0.0, 0.0), at(3.0, 0.0, 0.0), &options);
     assert_contact(&a, &o, 1.3 / 3.0, 3.0, options.tolerance);
 }
@@ -145,7 +139,7 @@ fn a_turning_bar_sweeps_into_a_ball_at_the_closed_form_angle() {
     let w = World::new();
     let m = w.primitive(cuboid(1.0, 0.05, 0.05), at(0.0, 0.0, 0.0));
     let o = w.primitive(sphere(0.1), at(rho * alpha.cos(), rho * alpha.sin(), 0.0));
-    let options = InstanceMotionOptions::default();
+    let options = MotionOptions::default();
     let a = w.check(&m, turned(0.0, [0.0; 3]), turned(PI / 2.0, [0.0; 3]), &options);
     let phi = alpha - (0.15 / rho).asin();
     assert_contact(&a, &o, phi / (PI / 2.0), rho * (alpha - phi).cos() * PI / 2.0, options.tolerance);
@@ -173,7 +167,7 @@ fn advancement_finds_a_thin_plate_that_sampling_steps_over() {
                 .unwrap();
         assert!(!d.overlapping && d.distance > 0.004, "sample {k}: {}", d.distance);
     }
-    let options = InstanceMotionOptions::default();
+    let options = MotionOptions::default();
     let a = w.check(&m, start, end, &options);
     assert_contact(&a, &o, (1.0 - 0.0005 - 0.01 - 0.015) / 2.0, 2.0, options.tolerance);
 }
@@ -184,7 +178,7 @@ fn a_ball_falls_onto_a_floor() {
     let w = World::new();
     let m = w.primitive(sphere(0.5), at(0.0, 0.0, 2.0));
     let floor = w.primitive(Primitive::Halfspace { normal: Vector3::z(), offset: 0.0 }, at(0.0, 0.0, 0.0));
-    let options = InstanceMotionOptions::default();
+    let options = MotionOptions::default();
     let a = w.check(&m, at(0.0, 0.0, 2.0), at(1.0, 0.0, 0.0), &options);
     assert_contact(&a, &floor, 0.75, 2.0, options.tolerance);
 }
@@ -198,7 +192,7 @@ fn a_free_motion_is_valid_in_few_steps() {
     w.primitive(cuboid(0.5, 0.5, 0.5), at(2.0, 2.0, 0.0));
     w.body(ellipsoid([0.0; 3], [0.4, 0.3, 0.2]).unwrap(), at(2.0, -2.0, 0.0));
     w.primitive(sphere(1.0), at(100.0, 0.0, 0.0));
-    let a = w.check(&m, at(0.0, 0.0, 0.0), turned(1.0, [4.0, 0.0, 0.0]), &InstanceMotionOptions::default());
+    let a = w.check(&m, at(0.0, 0.0, 0.0), turned(1.0, [4.0, 0.0, 0.0]), &MotionOptions::default());
     assert!(a.valid && a.decided && a.contact.is_none(), "{a:?}");
     assert!((2..=40).contains(&a.steps), "{a:?}");
 }
@@ -210,10 +204,10 @@ fn a_colliding_start_answers_zero_and_max_steps_answers_undecided() {
     let w = World::new();
     let m = w.primitive(sphere(0.5), at(0.0, 0.0, 0.0));
     let o = w.primitive(cuboid(0.5, 0.5, 0.5), at(0.8, 0.0, 0.0));
-    let a = w.check(&m, at(0.0, 0.0, 0.0), at(-4.0, 0.0, 0.0), &InstanceMotionOptions::default());
+    let a = w.check(&m, at(0.0, 0.0, 0.0), at(-4.0, 0.0, 0.0), &MotionOptions::default());
     assert_eq!((a.contact, a.other.as_deref(), a.steps), (Some(0.0), Some(o.as_str()), 1), "{a:?}");
     assert_eq!(a.contact_pose, Some(at(0.0, 0.0, 0.0)));
-    let short = InstanceMotionOptions { max_steps: 2, ..InstanceMotionOptions::default() };
+    let short = MotionOptions { max_steps: 2, ..MotionOptions::default() };
     let b = w.check(&m, at(0.0, 0.0, 2.0), at(3.0, 0.0, 2.0), &short);
     assert!(!b.valid && !b.decided && b.contact.is_none() && b.steps == 2, "{b:?}");
 }
@@ -233,10 +227,10 @@ fn bad_input_is_refused_naming_the_field() {
     let moving = scene.moving("instance_ids[0]", &m).unwrap();
     let id = Isometry3::identity();
     for (bad, field) in [
-        (InstanceMotionOptions { padding: -1.0, ..Default::default() }, "padding"),
-        (InstanceMotionOptions { tolerance: 0.0, ..Default::default() }, "tolerance"),
-        (InstanceMotionOptions { tolerance: Real::NAN, ..Default::default() }, "tolerance"),
-        (InstanceMotionOptions { max_steps: 0, ..Default::default() }, "max_steps"),
+        (MotionOptions { padding: -1.0, ..Default::default() }, "padding"),
+        (MotionOptions { tolerance: 0.0, ..Default::default() }, "tolerance"),
+        (MotionOptions { tolerance: Real::NAN, ..Default::default() }, "tolerance"),
+        (MotionOptions { max_steps: 0, ..Default::default() }, "max_steps"),
     ] {
         let e = scene.check_motion(&moving, &id, &id, &bad).unwrap_err();
         assert!(matches!(&e, Error::InvalidArgument { field: f, .. } if f == field), "{e}");
@@ -330,7 +324,7 @@ fn dumbbell() -> sublevel_core::compound::CompoundBody {
 /// are 0.5 apart at sin φ* = 0.9025 / 0.95, closing at 0.95 cos φ* per radian.
 #[test]
 fn compound_bodies_move_and_are_met_at_their_closed_forms() {
-    let options = InstanceMotionOptions::default();
+    let options = MotionOptions::default();
     for fitted in [false, true] {
         let w = World::new();
         let tree = w.catalog.add_compound_body("dumbbell", dumbbell()).unwrap();
