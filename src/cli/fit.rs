@@ -3,7 +3,7 @@
 //! summary to stdout. `--degree auto --volume-tolerance τ` fits 2, 4, 6, 8 in turn and keeps the
 //! lowest degree within τ of the next one (see [`sublevel::fit::auto`]).
 //!
-//! With `--parts N|auto` the mesh (a triangle mesh: OFF, OBJ, STL or PLY) becomes a compound
+//! With `--parts N|auto` the mesh (a triangle mesh: OFF, OBJ, STL, PLY or COLLADA) becomes a compound
 //! body instead: a convex decomposition fitted part by part under a containment tree (see
 //! [`super::fit_compound`] and [`sublevel::compound`]); `--tolerance T` is then the leaf-excess
 //! tolerance in meters (for `--parts auto` by default 1 % of the mesh's bounding-box diagonal).
@@ -57,7 +57,7 @@ pub struct FitArgs {
     /// Where to write the body file (JSON); defaults to the mesh path with extension `.body.json`.
     #[arg(long, short)]
     pub output: Option<PathBuf>,
-    /// Format of MESH when its extension does not say (off, obj, stl, ply, xyz).
+    /// Format of MESH when its extension does not say (off, obj, stl, ply, dae, xyz).
     #[arg(long)]
     pub format: Option<String>,
     /// Monte Carlo samples for the volume estimate (raised until the std. error is below 1 %).
@@ -82,7 +82,7 @@ pub struct FitArgs {
     #[arg(long)]
     pub solver_tolerance: Option<f64>,
     /// Fit a compound body: at most N convex parts (VHACD), or `auto` (the fewest parts within
-    /// --tolerance). The mesh must be a triangle mesh (OFF, OBJ, STL or PLY with faces); its
+    /// --tolerance). The mesh must be a triangle mesh (OFF, OBJ, STL, PLY or COLLADA with faces); its
     /// vertices are welded first (a triangle soup becomes an indexed mesh). Without it, one body
     /// is fitted.
     #[arg(long)]

@@ -6,10 +6,12 @@
 //! world pairs (every geometry × every object, minus the allowed ones), by increasing ball gap:
 //!   ball gap > padding (verdict) or ≥ best distance so far (distance)       → decided, no solve
 //!   sos bound: the link's compound root body (contains every leaf, hence every triangle) against
-//!              the object's exact primitive, one Newton / active-set solve: d_sos ≤ d_mesh
+//!              the object's exact primitive, or the body containing a mesh object (none: skipped),
+//!              one Newton / active-set solve: d_sos ≤ d_mesh
 //!   d_sos > padding (verdict) or ≥ best (distance)                           → decided
-//!   mesh:  the link's triangles against the primitive (parry's BVH): intersecting or within the
-//!          padding → collides; else the exact mesh distance, the new best
+//!   mesh:  the link's triangles against the primitive or the object's triangles (parry's BVH):
+//!          intersecting or within the padding → collides; else the exact mesh distance, the new
+//!          best
 //! self pairs (the SRDF's allowed pairs left out): ball gap, root–root sos bound, then the two
 //!   meshes' triangles
 //! ```
@@ -31,6 +33,7 @@
 //! (`crates/robot/examples/check_profile.rs` measures it).
 
 use crate::fitted::{FittedRobot, LinkShape};
+use crate::world::{WorldObject, WorldShape};
 use crate::{Error, Result};
 use parry3d_f64::query::ClosestPoints;
 use parry3d_f64::shape::SharedShape;
@@ -38,17 +41,6 @@ use std::f64::consts::FRAC_PI_2;
 use sublevel_core::math::{Isometry3, Point3, Real, UnitQuaternion, Vector3};
 use sublevel_core::primitive::Primitive;
 use sublevel_query::shape::{shape_distance, ShapeRef};
-
-/// An object of the world: an exact primitive placed in the world frame.
-#[derive(Clone, Debug)]
-pub struct WorldObject {
-    /// Its name (a MoveIt collision object's id, with `#k` for its k-th shape, k ≥ 1).
-    pub name: String,
-    /// The shape.
-    pub primitive: Primitive,
-    /// Shape frame → world.
-    pub pose: Isometry3,
-}
 
 /// What a check computes.
 #[derive(Clone, Copy, Debug)]
@@ -291,11 +283,14 @@ impl<'r> RobotChecker<'r> {
                 LinkShape::Mesh { exact, .. } => ExactShape { shape: exact.clone(), offset: Isometry3::identity() },
             })
             .collect();
-        let world_exact = world.iter().map(|o| exact_primitive(&o.primitive)).collect();
-        let world_boxes = world
+        let world_exact = world
             .iter()
-            .map(|o| o.primitive.local_half_extents().map(|h| PlacedBox::new(&o.pose, &(Vector3::zeros(), h))))
+            .map(|o| match &o.shape {
+                WorldShape::Primitive(p) => exact_primitive(p),
+                WorldShape::Mesh(m) => ExactShape { shape: m.exact.clone(), offset: Isometry3::identity() },
+            })
             .collect();
+        let world_boxes = world.iter().map(|o| o.shape.local_box().map(|b| PlacedBox::new(&o.pose, &b))).collect();
         Ok(Self {
             robot,
             world,
@@ -448,7 +443,7 @@ impl<'r> RobotChecker<'r> {
     /// # Errors
     /// A query that fails outright.
     pub(crate) fn world_bound(&self, g: usize, o: usize, level: u8) -> Result<(Real, bool)> {
-        let primitive = matches!(self.robot.geometries[g].shape, LinkShape::Primitive(_));
+        let primitive = self.both_primitive(g, o);
         match level {
             0 => Ok((self.world_gap(g, o).max(self.world_box_gap(g, o)), false)),
             1 => Ok((self.sos_world_bound(g, o)?, primitive)),
@@ -514,17 +509,31 @@ impl<'r> RobotChecker<'r> {
         }
     }
 
-    /// The sos root bound of a world pair (its distance; 0 when overlapping or not converged).
+    /// Whether robot geometry `g` and world object `o` are both exact primitives (their sos
+    /// answer is then the exact one).
+    fn both_primitive(&self, g: usize, o: usize) -> bool {
+        matches!(
+            (&self.robot.geometries[g].shape, &self.world[o].shape),
+            (LinkShape::Primitive(_), WorldShape::Primitive(_))
+        )
+    }
+
+    /// World object `o` as the sos bound sees it: the primitive, or the body containing the
+    /// mesh; `None` for a mesh without one.
+    fn world_sos_shape(&self, o: usize) -> Option<ShapeRef<'_>> {
+        match &self.world[o].shape {
+            WorldShape::Primitive(p) => Some(ShapeRef::Primitive(p)),
+            WorldShape::Mesh(m) => m.body().map(ShapeRef::Body),
+        }
+    }
+
+    /// The sos root bound of a world pair (its distance; 0 when overlapping, not converged, or
+    /// for a mesh object without a body).
     fn sos_world_bound(&self, g: usize, o: usize) -> Result<Real> {
         let geometry = &self.robot.geometries[g];
         let obj = &self.world[o];
-        let d = shape_distance(
-            root_shape(&geometry.shape),
-            &self.poses[g],
-            ShapeRef::Primitive(&obj.primitive),
-            &obj.pose,
-            None,
-        )?;
+        let Some(shape) = self.world_sos_shape(o) else { return Ok(0.0) };
+        let d = shape_distance(root_shape(&geometry.shape), &self.poses[g], shape, &obj.pose, None)?;
         Ok(if d.status.converged() && !d.overlapping { d.distance.max(0.0) } else { 0.0 })
     }
 
@@ -537,14 +546,13 @@ impl<'r> RobotChecker<'r> {
     fn world_gap(&self, g: usize, o: usize) -> Real {
         let r = self.robot.geometries[g].sphere.1;
         let obj = &self.world[o];
-        match obj.primitive {
-            Primitive::Halfspace { normal, offset } => {
-                let n = obj.pose.rotation * normal;
-                let d = offset + n.dot(&obj.pose.translation.vector);
-                n.dot(&self.centers[g]) - d - r
-            }
-            p => (self.centers[g] - obj.pose.translation.vector).norm() - r - p.bounding_radius(),
+        if let WorldShape::Primitive(Primitive::Halfspace { normal, offset }) = obj.shape {
+            let n = obj.pose.rotation * normal;
+            let d = offset + n.dot(&obj.pose.translation.vector);
+            return n.dot(&self.centers[g]) - d - r;
         }
+        let (center, radius) = obj.shape.ball();
+        (self.centers[g] - obj.pose.transform_point(&center.into()).coords).norm() - r - radius
     }
 
     /// The box gap of robot geometry `g` and world object `o` (a lower bound of their distance;
@@ -636,20 +644,27 @@ impl<'r> RobotChecker<'r> {
         let geometry = &self.robot.geometries[g];
         let obj = &self.world[o];
         let pose = &self.poses[g];
-        answer.pairs_model += 1;
-        let d =
-            shape_distance(root_shape(&geometry.shape), pose, ShapeRef::Primitive(&obj.primitive), &obj.pose, None)?;
-        let converged = d.status.converged();
-        if let (LinkShape::Primitive(_), true) = (&geometry.shape, converged) {
-            // Both exact: the primitive answer is the verdict and the distance.
-            return Ok(Some(if d.overlapping || d.distance <= padding {
-                PairOutcome::Collides
-            } else {
-                PairOutcome::Free { distance: d.distance, witnesses: Some((d.witness_a, d.witness_b)) }
-            }));
-        }
-        if converged && !d.overlapping && d.distance > padding && d.distance >= bound {
-            return Ok(None);
+        // A mesh object without a body has no sos bound: its pairs go to the triangles.
+        let d = match self.world_sos_shape(o) {
+            Some(shape) => {
+                answer.pairs_model += 1;
+                Some(shape_distance(root_shape(&geometry.shape), pose, shape, &obj.pose, None)?)
+            }
+            None => None,
+        };
+        let d = d.filter(|d| d.status.converged());
+        if let Some(d) = &d {
+            if self.both_primitive(g, o) {
+                // Both exact: the primitive answer is the verdict and the distance.
+                return Ok(Some(if d.overlapping || d.distance <= padding {
+                    PairOutcome::Collides
+                } else {
+                    PairOutcome::Free { distance: d.distance, witnesses: Some((d.witness_a, d.witness_b)) }
+                }));
+            }
+            if !d.overlapping && d.distance > padding && d.distance >= bound {
+                return Ok(None);
+            }
         }
         if bound <= padding {
             // A verdict only: no distance needed.
@@ -664,12 +679,14 @@ impl<'r> RobotChecker<'r> {
             )?;
             return Ok(collides.then_some(PairOutcome::Collides));
         }
-        // An upper bound of the mesh's distance: from the object's witness (a point of the
-        // object) to the mesh's surface. The search for the closest triangles stops a little
-        // beyond it (parry's GJK distances can exceed the true one by a few µm), and where its
-        // answer is not below the bound, the bound and its points are the answer.
+        // An upper bound of the mesh's distance: from the primitive's witness (a point of the
+        // object; a mesh object's body witness is not one) to the link mesh's surface. The
+        // search for the closest triangles stops a little beyond it (parry's GJK distances can
+        // exceed the true one by a few µm), and where its answer is not below the bound, the
+        // bound and its points are the answer.
         let mut upper = None;
-        if let (true, Some(mesh)) = (converged, self.robot_exact[g].shape.as_trimesh()) {
+        let primitive_object = matches!(obj.shape, WorldShape::Primitive(_));
+        if let (Some(d), true, Some(mesh)) = (&d, primitive_object, self.robot_exact[g].shape.as_trimesh()) {
             use parry3d_f64::query::PointQuery;
             let y = pose.inverse_transform_point(&d.witness_b);
             let p = mesh.project_local_point(parry3d_f64::math::Vector::new(y.x, y.y, y.z), false).point;

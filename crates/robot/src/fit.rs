@@ -3,7 +3,7 @@
 //!
 //! ```text
 //! URDF ──► links' <collision> ──► box / cylinder / sphere / capsule  →  Primitive (exact)
-//!                              └► mesh (package://…, relative)      →  read (OBJ, STL, PLY, OFF), scaled,
+//!                              └► mesh (package://…, relative)      →  read (OBJ, STL, PLY, OFF, DAE), scaled,
 //!                                                                      fitted once per distinct content:
 //!                                                                      fit_compound(--parts auto), cached
 //! SRDF ──► disable_collisions ──► allowed pairs (the robot's allowed-collision matrix)

@@ -17,7 +17,8 @@
 //! - [`fit`]: a robot fitted once — every link mesh a compound sos-convex body containing it
 //!   (paper §V), URDF primitives exact, the SRDF's allowed pairs — saved as a robot file
 //!   ([`fitted`]).
-//! - [`check`]: configurations checked against a world of exact primitives and for
+//! - [`world`]: the world a robot is checked in — named exact primitives and triangle meshes.
+//! - [`check`]: configurations checked against the world and for
 //!   self-collision: the sos model decides what is far, the meshes what is near; no missed
 //!   collision, and the minimum distance never above the meshes'.
 //!
@@ -39,10 +40,12 @@ pub mod kinematics;
 pub mod model;
 pub mod motion;
 pub mod srdf;
+pub mod world;
 
 pub use advance::{MotionAnswer, MotionChecker, MotionOptions};
-pub use check::{CheckOptions, ConfigurationAnswer, RobotChecker, WorldObject};
+pub use check::{CheckOptions, ConfigurationAnswer, RobotChecker};
 pub use fit::{fit_robot, RobotFitProgress, RobotFitSettings};
 pub use fitted::{FittedRobot, LinkShape, RobotFile, RobotGeometry};
 pub use model::{resolve_mesh_path, CollisionGeometry, Joint, JointKind, JointValue, Link, RobotModel};
 pub use srdf::Semantics;
+pub use world::{WorldMesh, WorldObject, WorldShape};

@@ -10,7 +10,7 @@
 use sublevel_core::math::{Isometry3, Point3, Real, Vector3};
 use sublevel_core::primitive::Primitive;
 use sublevel_robot::fitted::LinkShape;
-use sublevel_robot::{fit_robot, CheckOptions, FittedRobot, RobotChecker, RobotFitSettings, WorldObject};
+use sublevel_robot::{fit_robot, CheckOptions, FittedRobot, RobotChecker, RobotFitSettings, WorldMesh, WorldObject};
 
 const URDF: &str = r#"<robot name="slider">
   <link name="base"><collision><geometry><mesh filename="cube.obj" scale="0.2 0.2 0.2"/></geometry></collision></link>
@@ -45,11 +45,11 @@ fn box_distance(c1: Vector3, h1: Vector3, c2: Vector3, h2: Vector3) -> Real {
 }
 
 fn boxed(name: &str, half: Real, at: [Real; 3]) -> WorldObject {
-    WorldObject {
-        name: name.into(),
-        primitive: Primitive::Box { half_extents: Vector3::repeat(half) },
-        pose: Isometry3::translation(at[0], at[1], at[2]),
-    }
+    WorldObject::primitive(
+        name,
+        Primitive::Box { half_extents: Vector3::repeat(half) },
+        Isometry3::translation(at[0], at[1], at[2]),
+    )
 }
 
 #[test]
@@ -93,8 +93,8 @@ fn world_distances_and_verdicts_match_the_closed_form() {
             .iter()
             .flat_map(|o| {
                 let c = o.pose.translation.vector;
-                let h = match o.primitive {
-                    Primitive::Box { half_extents } => half_extents,
+                let h = match o.as_primitive() {
+                    Some(Primitive::Box { half_extents }) => *half_extents,
                     _ => unreachable!(),
                 };
                 [
@@ -162,11 +162,11 @@ fn world_distances_and_verdicts_match_the_closed_form() {
 fn a_turned_mesh_link_against_a_sphere_matches_the_closed_form() {
     let (robot, _dir) = robot();
     let center = Vector3::new(0.7, 0.12, 0.5);
-    let world = vec![WorldObject {
-        name: "ball".into(),
-        primitive: Primitive::Sphere { radius: 0.03 },
-        pose: Isometry3::translation(center.x, center.y, center.z),
-    }];
+    let world = vec![WorldObject::primitive(
+        "ball",
+        Primitive::Sphere { radius: 0.03 },
+        Isometry3::translation(center.x, center.y, center.z),
+    )];
     let mut checker = RobotChecker::new(&robot, world, &|_, _| None).unwrap();
     for k in 0..12 {
         let turn = -3.0 + 0.5 * k as Real;
@@ -238,11 +238,7 @@ fn bad_input_is_refused_naming_the_field() {
 fn the_distance_gradient_matches_central_differences() {
     let (robot, _dir) = robot();
     let world = vec![
-        WorldObject {
-            name: "ball".into(),
-            primitive: Primitive::Sphere { radius: 0.03 },
-            pose: Isometry3::translation(0.62, 0.2, 0.55),
-        },
+        WorldObject::primitive("ball", Primitive::Sphere { radius: 0.03 }, Isometry3::translation(0.62, 0.2, 0.55)),
         boxed("low", 0.05, [0.8, 0.0, -0.4]),
     ];
     let mut checker = RobotChecker::new(&robot, world, &|_, _| None).unwrap();
@@ -301,4 +297,104 @@ fn an_attached_object_moves_with_its_link_and_collides_like_it() {
     let half = Primitive::Halfspace { normal: Vector3::z(), offset: 0.0 };
     assert_eq!(field(robot.attach("nowhere", "x", Primitive::Sphere { radius: 0.1 }, id).unwrap_err()), "link");
     assert_eq!(field(robot.attach("tip", "x", half, id).unwrap_err()), "primitive");
+}
+
+/// A box of half side `half` as a closed 12-triangle mesh in its own frame, with the ellipsoid of
+/// semi-axes 1.75·half (which contains the box's corners at √3·half) as its body when `with_body`.
+fn box_mesh(half: Real, with_body: bool) -> std::sync::Arc<WorldMesh> {
+    let v = |x: Real, y: Real, z: Real| Point3::new(x * half, y * half, z * half);
+    let vertices = vec![
+        v(-1.0, -1.0, -1.0),
+        v(1.0, -1.0, -1.0),
+        v(1.0, 1.0, -1.0),
+        v(-1.0, 1.0, -1.0),
+        v(-1.0, -1.0, 1.0),
+        v(1.0, -1.0, 1.0),
+        v(1.0, 1.0, 1.0),
+        v(-1.0, 1.0, 1.0),
+    ];
+    let triangles = vec![
+        [0, 3, 2],
+        [0, 2, 1],
+        [4, 5, 6],
+        [4, 6, 7],
+        [0, 1, 5],
+        [0, 5, 4],
+        [1, 2, 6],
+        [1, 6, 5],
+        [2, 3, 7],
+        [2, 7, 6],
+        [3, 0, 4],
+        [3, 4, 7],
+    ];
+    let body = with_body.then(|| sublevel_core::body::ellipsoid([0.0; 3], [1.75 * half; 3]).unwrap());
+    std::sync::Arc::new(WorldMesh::new(vertices, triangles, body).unwrap())
+}
+
+#[test]
+fn a_box_mesh_object_answers_as_the_box_primitive() {
+    let (robot, _dir) = robot();
+    // `low` and `side` stay apart; the arm runs into `wall` from slide 0.29 on and through it (the
+    // wall, smaller than the arm, never holds the arm wholly inside it).
+    let place: [(&str, Real, [Real; 3]); 3] =
+        [("low", 0.05, [0.8, 0.0, -0.4]), ("side", 0.1, [0.0, 0.45, 0.0]), ("wall", 0.06, [1.05, 0.0, 0.0])];
+    let primitives: Vec<_> = place.iter().map(|&(name, half, at)| boxed(name, half, at)).collect();
+    let mut reference = RobotChecker::new(&robot, primitives, &|_, _| None).unwrap();
+    for with_body in [false, true] {
+        let meshes = place
+            .iter()
+            .map(|&(name, half, at)| {
+                WorldObject::mesh(name, box_mesh(half, with_body), Isometry3::translation(at[0], at[1], at[2]))
+            })
+            .collect();
+        let mut checker = RobotChecker::new(&robot, meshes, &|_, _| None).unwrap();
+        let (mut free, mut colliding) = (0, 0);
+        for k in 0..=60 {
+            let q = [-0.29 + 0.02 * k as Real, 0.4];
+            let a = reference.check(&q, &Isometry3::identity(), &CheckOptions::default()).unwrap();
+            let b = checker.check(&q, &Isometry3::identity(), &CheckOptions::default()).unwrap();
+            assert!(a.converged && b.converged);
+            assert_eq!((b.world, b.collides), (a.world, a.collides), "body {with_body}, q {q:?}");
+            if a.world {
+                colliding += 1;
+                assert_eq!(b.distance, 0.0);
+            } else {
+                free += 1;
+                // Triangle against triangle (parry's GJK): agreement to 1e-8 m.
+                assert!((b.distance - a.distance).abs() < 1e-8, "q {q:?}: {} vs {}", b.distance, a.distance);
+                assert_eq!(b.pair, a.pair);
+                let (x, y) = b.witnesses.unwrap();
+                assert!(((x - y).norm() - b.distance).abs() < 1e-8);
+            }
+            let options = CheckOptions { distance: false, ..Default::default() };
+            assert_eq!(checker.check(&q, &Isometry3::identity(), &options).unwrap().world, a.world, "q {q:?}");
+        }
+        assert!(free > 10 && colliding > 10, "{free} free, {colliding} colliding");
+        // A motion into the wall stops where the arm's face (x = 0.6 + slide) meets the wall's
+        // (x = 0.99): slide 0.39, t* = 0.49 / 0.8.
+        let mut motions = sublevel_robot::MotionChecker::new(&mut checker).unwrap();
+        let options = sublevel_robot::MotionOptions { tolerance: 1e-6, ..Default::default() };
+        let m = motions.check_motion(&[-0.1, 0.0], &[0.7, 0.0], &Isometry3::identity(), &options).unwrap();
+        let (t, exact) = (m.contact.unwrap(), 0.49 / 0.8);
+        assert!(!m.valid && t <= exact + 1e-12 && t >= exact - 1e-6 / 0.8 - 1e-9, "body {with_body}: t {t} vs {exact}");
+    }
+}
+
+#[test]
+fn a_bad_mesh_object_is_refused_naming_the_field() {
+    let field = |e| match e {
+        sublevel_core::Error::InvalidArgument { field, .. } => field,
+        other => panic!("{other:?}"),
+    };
+    let p = |x: Real| Point3::new(x, 0.0, 0.0);
+    let tri = || vec![p(0.0), Point3::new(0.0, 1.0, 0.0), Point3::new(0.0, 0.0, 1.0)];
+    assert_eq!(field(WorldMesh::new(tri(), vec![], None).unwrap_err()), "triangles");
+    assert_eq!(field(WorldMesh::new(tri(), vec![[0, 1, 3]], None).unwrap_err()), "triangles[0]");
+    assert_eq!(
+        field(WorldMesh::new(vec![p(Real::NAN), p(1.0), p(2.0)], vec![[0, 1, 2]], None).unwrap_err()),
+        "vertices[0]"
+    );
+    // A body too small to hold the mesh.
+    let small = sublevel_core::body::ellipsoid([0.0; 3], [0.5; 3]).unwrap();
+    assert_eq!(field(WorldMesh::new(tri(), vec![[0, 1, 2]], Some(small)).unwrap_err()), "body");
 }

@@ -22,7 +22,7 @@ fn rail(r: Real) -> (FittedRobot, tempfile::TempDir) {
 }
 
 fn object(name: &str, primitive: Primitive, at: [Real; 3]) -> WorldObject {
-    WorldObject { name: name.into(), primitive, pose: Isometry3::translation(at[0], at[1], at[2]) }
+    WorldObject::primitive(name, primitive, Isometry3::translation(at[0], at[1], at[2]))
 }
 
 #[test]

@@ -1,8 +1,9 @@
-//! Mesh and point-cloud loading: OFF, OBJ, STL (ASCII and binary), PLY (ASCII and binary), XYZ.
+//! Mesh and point-cloud loading: OFF, OBJ, STL (ASCII and binary), PLY (ASCII and binary),
+//! COLLADA, XYZ.
 //!
 //! A single-body fit needs only the vertices ([`parse_points`]: the convex hull is recomputed);
 //! a compound fit and the exact mesh–mesh distance of `sublevel-lab bench` and `chart` need the
-//! faces too: [`load_triangle_mesh`] reads a [`TriangleMesh`] from OFF, OBJ, STL or PLY (the
+//! faces too: [`load_triangle_mesh`] reads a [`TriangleMesh`] from OFF, OBJ, STL, PLY or COLLADA (the
 //! same parsers and limits, faces split into triangle fans), and [`weld_mesh`] merges the
 //! repeated vertices of a triangle soup before a decomposition.
 //!
@@ -14,6 +15,8 @@
 //! ply   the `vertex` element's x, y, z properties (any numeric type) and the `face`  (ply.rs)
 //!       element's `vertex_indices` lists; ascii, binary_little_endian or binary_big_endian;
 //!       other elements are checked and skipped
+//! dae   COLLADA: every instanced mesh, in meters (unit, up axis and node transforms  (dae.rs,
+//!       applied)                                                        via mesh-loader)
 //! xyz   one "x y z" per line (commas allowed, extra columns ignored; no faces)       (xyz.rs)
 //! ```
 //!
@@ -48,6 +51,7 @@
 //! The limits, error constructors and the clipping of client text every format shares live in
 //! `limits.rs`.
 
+mod dae;
 mod limits;
 mod obj;
 mod off;
@@ -95,22 +99,25 @@ pub enum MeshFormat {
     Stl,
     /// PLY, ASCII or binary.
     Ply,
+    /// COLLADA (`.dae`): the triangles of every instanced mesh, in meters.
+    Dae,
     /// One `x y z` line per point (also `.txt`, `.pts`).
     Xyz,
 }
 
 impl MeshFormat {
     /// Every format.
-    pub const ALL: [MeshFormat; 5] =
-        [MeshFormat::Off, MeshFormat::Obj, MeshFormat::Stl, MeshFormat::Ply, MeshFormat::Xyz];
+    pub const ALL: [MeshFormat; 6] =
+        [MeshFormat::Off, MeshFormat::Obj, MeshFormat::Stl, MeshFormat::Ply, MeshFormat::Dae, MeshFormat::Xyz];
 
-    /// The lower-case name (`"off"`, `"obj"`, `"stl"`, `"ply"`, `"xyz"`).
+    /// The lower-case name (`"off"`, `"obj"`, `"stl"`, `"ply"`, `"dae"`, `"xyz"`).
     pub fn name(&self) -> &'static str {
         match self {
             MeshFormat::Off => "off",
             MeshFormat::Obj => "obj",
             MeshFormat::Stl => "stl",
             MeshFormat::Ply => "ply",
+            MeshFormat::Dae => "dae",
             MeshFormat::Xyz => "xyz",
         }
     }
@@ -127,7 +134,7 @@ impl MeshFormat {
 impl std::str::FromStr for MeshFormat {
     type Err = sublevel_core::Error;
 
-    /// Parses a format name: `off`, `obj`, `stl`, `ply`, or `xyz` / `txt` / `pts`
+    /// Parses a format name: `off`, `obj`, `stl`, `ply`, `dae`, or `xyz` / `txt` / `pts`
     /// (case-insensitive, a leading dot is ignored).
     ///
     /// # Errors
@@ -138,8 +145,11 @@ impl std::str::FromStr for MeshFormat {
             "obj" => Ok(MeshFormat::Obj),
             "stl" => Ok(MeshFormat::Stl),
             "ply" => Ok(MeshFormat::Ply),
+            "dae" => Ok(MeshFormat::Dae),
             "xyz" | "txt" | "pts" => Ok(MeshFormat::Xyz),
-            other => Err(invalid(format!("unknown format `{}`; expected one of off, obj, stl, ply, xyz", echo(other)))),
+            other => {
+                Err(invalid(format!("unknown format `{}`; expected one of off, obj, stl, ply, dae, xyz", echo(other))))
+            }
         }
     }
 }
@@ -181,6 +191,7 @@ pub fn parse_points_limited(bytes: &[u8], format: MeshFormat, max_points: usize)
             guarded("stl", || stl::parse_stl(bytes))?
         }
         MeshFormat::Ply => ply::parse_ply(bytes, max_points)?,
+        MeshFormat::Dae => dae::parse_dae_mesh(bytes, max_points)?.vertices,
     };
     if points.is_empty() {
         return Err(invalid(format!("the {fmt} file has no vertices")));
@@ -198,8 +209,8 @@ pub fn parse_points_limited(bytes: &[u8], format: MeshFormat, max_points: usize)
 }
 
 /// Parses a triangle mesh — vertices and faces, every face split into a triangle fan — from OFF,
-/// OBJ (every object and group merged), STL (ASCII or binary) or PLY (the `face` element's
-/// `vertex_indices`), with the limits of [`parse_points_limited`] (at most `max_points`
+/// OBJ (every object and group merged), STL (ASCII or binary), PLY (the `face` element's
+/// `vertex_indices`) or COLLADA (every instanced mesh, in meters), with the limits of [`parse_points_limited`] (at most `max_points`
 /// vertices; counts checked against the size of `bytes` first). Coordinates are as in the file
 /// (meters for a fit); vertices are not welded ([`weld_mesh`] does that).
 ///
@@ -217,9 +228,10 @@ pub fn load_triangle_mesh(bytes: &[u8], format: MeshFormat, max_points: usize) -
             guarded("stl", || stl::parse_stl_mesh(bytes))?
         }
         MeshFormat::Ply => ply::parse_ply_mesh(bytes, max_points)?,
+        MeshFormat::Dae => dae::parse_dae_mesh(bytes, max_points)?,
         MeshFormat::Xyz => {
             return Err(invalid(
-                "an xyz file is a point cloud without faces; a triangle mesh needs off, obj, stl or ply",
+                "an xyz file is a point cloud without faces; a triangle mesh needs off, obj, stl, ply or dae",
             ))
         }
     };

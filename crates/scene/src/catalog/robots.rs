@@ -164,7 +164,7 @@ impl Catalog {
                 )));
             };
             let name = view.planning.names.get(&inst.id).cloned().unwrap_or_else(|| inst.id.clone());
-            objects.push(WorldObject { name, primitive, pose: inst.pose });
+            objects.push(WorldObject::primitive(name, primitive, inst.pose));
             instance_ids.push(inst.id.clone());
         }
         let robot = self.placed_robot(scene_id)?;

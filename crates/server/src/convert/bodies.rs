@@ -545,6 +545,7 @@ pub fn mesh_format_from_proto(mesh: &pb::Mesh) -> Result<MeshFormat> {
         Ok(pb::MeshFormat::Stl) => Some(MeshFormat::Stl),
         Ok(pb::MeshFormat::Ply) => Some(MeshFormat::Ply),
         Ok(pb::MeshFormat::Xyz) => Some(MeshFormat::Xyz),
+        Ok(pb::MeshFormat::Dae) => Some(MeshFormat::Dae),
         Err(_) => return Err(Error::invalid("mesh.mesh_format", format!("undefined value {}", mesh.mesh_format))),
     };
     #[allow(deprecated)]

@@ -1,0 +1,159 @@
+//! The world a robot is checked in: named objects, each an exact primitive or a triangle mesh,
+//! placed in the world frame.
+//!
+//! A mesh object is exact the way a link mesh is: its triangles decide contact (parry's BVH, as
+//! coal and FCL decide it). It may carry a sos-convex body that contains it — the root of the
+//! compound body it was fitted to (paper §V) — which then gives the cheap lower bound of the
+//! checks' model stage; without one, pairs go from the ball and box gaps straight to the
+//! triangles.
+
+use crate::fitted::{bounding_ball, bounding_box, MAX_MESH_TRIANGLES};
+use crate::{Error, Result};
+use std::sync::Arc;
+use sublevel_core::body::Body;
+use sublevel_core::math::{Isometry3, Point3, Real, Vector3};
+use sublevel_core::primitive::Primitive;
+
+/// An object of the world: a shape placed in the world frame.
+#[derive(Clone, Debug)]
+pub struct WorldObject {
+    /// Its name (a MoveIt collision object's id, with `#k` for its k-th shape, k ≥ 1).
+    pub name: String,
+    /// The shape, in its own frame.
+    pub shape: WorldShape,
+    /// Shape frame → world.
+    pub pose: Isometry3,
+}
+
+impl WorldObject {
+    /// An exact primitive named `name` at `pose`.
+    pub fn primitive(name: impl Into<String>, primitive: Primitive, pose: Isometry3) -> Self {
+        Self { name: name.into(), shape: WorldShape::Primitive(primitive), pose }
+    }
+
+    /// A triangle mesh named `name` at `pose`.
+    pub fn mesh(name: impl Into<String>, mesh: Arc<WorldMesh>, pose: Isometry3) -> Self {
+        Self { name: name.into(), shape: WorldShape::Mesh(mesh), pose }
+    }
+
+    /// The primitive, for a primitive object.
+    pub fn as_primitive(&self) -> Option<&Primitive> {
+        match &self.shape {
+            WorldShape::Primitive(p) => Some(p),
+            WorldShape::Mesh(_) => None,
+        }
+    }
+}
+
+/// The shape of a [`WorldObject`].
+#[derive(Clone, Debug)]
+pub enum WorldShape {
+    /// An exact primitive (box, sphere, cylinder, capsule, halfspace).
+    Primitive(Primitive),
+    /// A triangle mesh, shared by the objects that place it.
+    Mesh(Arc<WorldMesh>),
+}
+
+impl WorldShape {
+    /// The shape's kind: the primitive's (`box`, `sphere`, …) or `mesh`.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            WorldShape::Primitive(p) => p.kind(),
+            WorldShape::Mesh(_) => "mesh",
+        }
+    }
+
+    /// A ball containing the shape in its own frame: center and radius (meters; infinite for a
+    /// halfspace).
+    pub fn ball(&self) -> (Vector3, Real) {
+        match self {
+            WorldShape::Primitive(p) => (Vector3::zeros(), p.bounding_radius()),
+            WorldShape::Mesh(m) => m.ball,
+        }
+    }
+
+    /// The axis-aligned box containing the shape in its own frame: center and half extents
+    /// (meters); `None` for a halfspace.
+    pub fn local_box(&self) -> Option<(Vector3, Vector3)> {
+        match self {
+            WorldShape::Primitive(p) => p.local_half_extents().map(|h| (Vector3::zeros(), h)),
+            WorldShape::Mesh(m) => Some(m.local_box),
+        }
+    }
+}
+
+/// A triangle mesh obstacle, validated, with its BVH built once (see the module docs).
+#[derive(Clone, Debug)]
+pub struct WorldMesh {
+    vertices: Vec<Point3>,
+    triangles: Vec<[u32; 3]>,
+    body: Option<Body>,
+    pub(crate) exact: parry3d_f64::shape::SharedShape,
+    ball: (Vector3, Real),
+    local_box: (Vector3, Vector3),
+}
+
+/// Slack of the containment check of a mesh's vertices in its body (`p ≤ 1 + slack`).
+const CONTAINMENT_SLACK: Real = 1e-9;
+
+impl WorldMesh {
+    /// A mesh of `vertices` (its own frame, meters) and `triangles` (indices into `vertices`),
+    /// with `body`, when given, a sos-convex body containing it (the root of the compound body
+    /// fitted to it), verified on every vertex.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `triangles` (none, more than 2 000 000, or not a valid
+    /// triangle mesh), `triangles[k]` (an index beyond the vertices), `vertices[k]` (not finite or
+    /// beyond ±1e6 m) or `body` (a vertex outside it).
+    pub fn new(vertices: Vec<Point3>, triangles: Vec<[u32; 3]>, body: Option<Body>) -> Result<Self> {
+        if triangles.is_empty() || triangles.len() > MAX_MESH_TRIANGLES {
+            return Err(Error::invalid(
+                "triangles",
+                format!("must hold 1 to {MAX_MESH_TRIANGLES} triangles, got {}", triangles.len()),
+            ));
+        }
+        if let Some(i) = vertices.iter().position(|v| v.iter().any(|c| !c.is_finite() || c.abs() > 1e6)) {
+            return Err(Error::invalid(format!("vertices[{i}]"), "must be finite, within ±1e6 m"));
+        }
+        if let Some(i) = triangles.iter().position(|t| t.iter().any(|&v| v as usize >= vertices.len())) {
+            return Err(Error::invalid(
+                format!("triangles[{i}]"),
+                format!("names a vertex beyond the {} vertices", vertices.len()),
+            ));
+        }
+        if let Some(body) = &body {
+            if let Some((i, p)) = vertices
+                .iter()
+                .map(|v| body.value_at(v))
+                .enumerate()
+                .find(|(_, p)| p.is_nan() || *p > 1.0 + CONTAINMENT_SLACK)
+            {
+                return Err(Error::invalid(
+                    "body",
+                    format!("mesh vertex {i} lies outside the body (p = {p}): the body does not contain the mesh"),
+                ));
+            }
+        }
+        let points = vertices.iter().map(|p| parry3d_f64::math::Vector::new(p.x, p.y, p.z)).collect();
+        let exact = parry3d_f64::shape::SharedShape::trimesh(points, triangles.clone())
+            .map_err(|e| Error::invalid("triangles", format!("not a valid triangle mesh: {e:?}")))?;
+        let ball = bounding_ball(&vertices);
+        let local_box = bounding_box(&vertices);
+        Ok(Self { vertices, triangles, body, exact, ball, local_box })
+    }
+
+    /// The vertices (own frame, meters).
+    pub fn vertices(&self) -> &[Point3] {
+        &self.vertices
+    }
+
+    /// The triangles, as indices into [`WorldMesh::vertices`].
+    pub fn triangles(&self) -> &[[u32; 3]] {
+        &self.triangles
+    }
+
+    /// The sos-convex body containing the mesh, when it has one.
+    pub fn body(&self) -> Option<&Body> {
+        self.body.as_ref()
+    }
+}
