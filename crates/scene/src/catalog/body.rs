@@ -19,7 +19,7 @@
 
 use super::{lock, read, Catalog};
 use crate::store::Store;
-use crate::{BodyRecord, Error, Result};
+use crate::{BodyRecord, Error, MeshRecord, Result};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
 use sublevel_core::body::{Body, BodyFile};
@@ -249,6 +249,9 @@ pub struct BodyEntry {
     built: OnceLock<std::result::Result<BuiltBody, String>>,
     /// `None` for an entry built when it was created.
     builds: Option<Arc<Builds>>,
+    /// The mesh the body was fitted to, kept apart from the record (the build takes the record
+    /// and does not need it).
+    mesh: Option<Arc<MeshRecord>>,
 }
 
 impl std::fmt::Debug for BodyEntry {
@@ -272,13 +275,21 @@ impl BodyEntry {
             record: Mutex::new(None),
             built: OnceLock::from(Ok(built)),
             builds: None,
+            mesh: None,
         }
+    }
+
+    /// The entry with `mesh` as the mesh its body was fitted to ([`BodyEntry::mesh`]).
+    pub(super) fn with_mesh(mut self, mesh: Option<Arc<MeshRecord>>) -> Self {
+        self.mesh = mesh;
+        self
     }
 
     /// An entry of a stored record, built on first use; a body that then fails to validate is
     /// quarantined through `builds`.
-    pub(super) fn of_record(id: &str, rec: BodyRecord, builds: &Arc<Builds>) -> Self {
+    pub(super) fn of_record(id: &str, mut rec: BodyRecord, builds: &Arc<Builds>) -> Self {
         builds.pending.fetch_add(1, Ordering::Relaxed);
+        let mesh = rec.mesh.take().map(Arc::new);
         Self {
             id: id.to_owned(),
             name: rec.name.clone(),
@@ -286,7 +297,15 @@ impl BodyEntry {
             record: Mutex::new(Some(rec)),
             built: OnceLock::new(),
             builds: Some(builds.clone()),
+            mesh,
         }
+    }
+
+    /// The triangle mesh the body was fitted to, when it was kept with it
+    /// ([`BodyRecord::mesh`]: a mesh of an imported planning scene), in the body's frame
+    /// (meters); `None` for other bodies. Needs no build.
+    pub fn mesh(&self) -> Option<&Arc<MeshRecord>> {
+        self.mesh.as_ref()
     }
 
     /// The built body, building it now if this is its first use (concurrent first users wait

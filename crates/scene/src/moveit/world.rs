@@ -4,16 +4,16 @@
 //! [`ImportPlan`] imports them (cones as the cylinders that contain them, meshes skipped with
 //! the reason).
 
-use super::{AllowedCollisionMatrix, ImportPlan, PlanningScene, SkippedShape};
+use super::{AllowedCollisionMatrix, ImportPlan, MeshImport, PlanningScene, SkippedShape};
 use crate::Result;
 use sublevel_robot::WorldObject;
 
 /// The world objects of `scene` and the shapes left out (meshes).
 ///
 /// # Errors
-/// As [`ImportPlan::new`].
+/// As [`ImportPlan::new`] (meshes skipped: robot checks take exact primitives).
 pub fn world_objects(scene: &PlanningScene) -> Result<(Vec<WorldObject>, Vec<SkippedShape>)> {
-    let plan = ImportPlan::new(scene)?;
+    let plan = ImportPlan::new(scene, MeshImport::Skip)?;
     let objects = plan
         .instances
         .iter()

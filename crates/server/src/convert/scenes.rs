@@ -109,7 +109,7 @@ pub fn planning_scene_from_proto(
         other => super::prefix_field(other, field),
     };
     let scene = parsed.map_err(located)?;
-    let plan = ImportPlan::new(&scene).map_err(located)?;
+    let plan = ImportPlan::new(&scene, sublevel_scene::moveit::MeshImport::Skip).map_err(located)?;
     Ok((scene, plan))
 }
 
