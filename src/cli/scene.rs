@@ -144,8 +144,8 @@ async fn follow_job(
     let mut last = None;
     let mut shown = String::new();
     while let Some(update) = stream.message().await? {
-        let part = if update.parts > 0 { format!(" part {}/{}", update.part, update.parts) } else { String::new() };
-        let line = format!("  {name}: {:3.0} %{part} {}", 100.0 * update.fraction, update.message);
+        // The message names the part being fitted (`part j/n`).
+        let line = format!("  {name}: {:3.0} % {}", 100.0 * update.fraction, update.message);
         if line != shown {
             eprintln!("{line}");
             shown = line;
