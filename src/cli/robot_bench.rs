@@ -240,6 +240,9 @@ async fn remote(
         } else {
             pb::import_scene_request::Scene::Yaml(scene_bytes)
         }),
+        // Robot checks take exact primitives: a mesh's fitted body would be refused.
+        skip_meshes: true,
+        ..Default::default()
     };
     let imported = admin.import_scene(scene).await.map_err(|s| io("ImportScene", s))?.into_inner();
 

@@ -44,6 +44,7 @@ async fn import(c: &mut SublevelClient<Channel>, yaml: &[u8]) -> String {
     let req = pb::ImportSceneRequest {
         name: String::new(),
         scene: Some(pb::import_scene_request::Scene::Yaml(yaml.to_vec())),
+        ..Default::default()
     };
     c.import_scene(req).await.unwrap().into_inner().scene_id
 }

@@ -44,7 +44,11 @@ async fn setup(c: &mut SublevelClient<Channel>) -> (String, String) {
     let bytes = std::fs::read(data("panda/panda.robot.json")).unwrap();
     let robot = c.upload_robot(pb::UploadRobotRequest { name: "panda".into(), robot_file: bytes }).await.unwrap();
     let yaml = std::fs::read(data("mbm_panda/scenes/bookshelf_small/scene0001.yaml")).unwrap();
-    let req = pb::ImportSceneRequest { name: String::new(), scene: Some(pb::import_scene_request::Scene::Yaml(yaml)) };
+    let req = pb::ImportSceneRequest {
+        name: String::new(),
+        scene: Some(pb::import_scene_request::Scene::Yaml(yaml)),
+        ..Default::default()
+    };
     let scene_id = c.import_scene(req).await.unwrap().into_inner().scene_id;
     (robot.into_inner().robot.unwrap().robot_id, scene_id)
 }

@@ -2,6 +2,7 @@
 their field, and an imported scene with its instances by name, skipped mesh, ACM and robot state."""
 
 import math
+from pathlib import Path
 
 import grpc
 import numpy as np
@@ -95,7 +96,7 @@ def test_bad_primitives_and_growth_are_refused_naming_the_field(client):
 def test_a_planning_scene_imports_with_its_instances_by_name(client, tmp_path):
     path = tmp_path / "kitchen.yaml"
     path.write_text(KITCHEN)
-    r = client.import_scene(path)
+    r = client.import_scene(path, skip_meshes=True)
     assert isinstance(r, ImportedScene)
     assert r.name == "kitchen"
     assert [(i.name, i.kind) for i in r.instances] == [
@@ -117,8 +118,36 @@ def test_a_planning_scene_imports_with_its_instances_by_name(client, tmp_path):
     # The tabletop's underside (0.70) above the floor.
     assert client.distance(r.scene_id, ids["floor"], ids["table#0"]).distance == pytest.approx(0.70, abs=1e-12)
     # The same scene as bytes, named.
-    again = client.import_scene(KITCHEN.encode(), name="copy")
+    again = client.import_scene(KITCHEN.encode(), name="copy", skip_meshes=True)
     assert again.name == "copy" and again.scene_id != r.scene_id
+    assert again.meshes == []
+
+
+BOX_MESH_SCENE = Path(__file__).resolve().parents[3] / "tests" / "data" / "box_mesh.scene.yaml"
+
+
+def test_a_planning_scene_mesh_is_fitted_and_placed_when_waited_for(client):
+    # tests/data/box_mesh.scene.yaml: a closed box mesh under an object pose and a mesh pose,
+    # composed at (1, 2.1, 0.7) with quaternion (1/2, 1/2, 1/2, 1/2); a ball beside it.
+    updates = []
+    r = client.import_scene(BOX_MESH_SCENE, mesh_tolerance=0.02, wait=True, progress=updates.append)
+    assert r.skipped == []
+    assert [(m.name, m.object_id, m.vertices, m.triangles) for m in r.meshes] == [("crate", "crate", 8, 12)]
+    mesh = r.meshes[0]
+    assert mesh.state == "SUCCEEDED" and mesh.body_id, mesh
+    assert "`crate` added" in mesh.message
+    assert updates and updates[-1].job_id == mesh.job_id
+    np.testing.assert_allclose(mesh.pose.t, [1.0, 2.1, 0.7], atol=1e-15)
+    ids = r.ids
+    assert set(ids) == {"ball", "crate"}
+    placed = {i.instance_id: i for i in client.get_scene(r.scene_id).instances}
+    assert placed[ids["crate"]].body_id == mesh.body_id
+    np.testing.assert_allclose(placed[ids["crate"]].pose.t, [1.0, 2.1, 0.7], atol=1e-15)
+    # The box spans [1, 1.3] x [2.0, 2.2] x [0.65, 0.75]; the ball (r 0.05) is (0.2, 0.2, 0.15)
+    # from it. The fitted body contains the box: at most the exact distance.
+    exact = math.sqrt(0.2**2 + 0.2**2 + 0.15**2) - 0.05
+    d = client.distance(r.scene_id, ids["crate"], ids["ball"]).distance
+    assert exact - 0.1 < d <= exact + 1e-9
 
 
 def test_a_bad_planning_scene_names_its_field(client):

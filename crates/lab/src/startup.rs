@@ -221,6 +221,7 @@ fn write_store(args: &StartupArgs, dir: &Path) -> Result<(usize, usize, usize, u
                 body: file.nodes[file.root].body.clone(),
                 compound: Some(file),
                 primitive: None,
+                mesh: None,
             }
         } else {
             BodyRecord::single(&format!("body-{k}"), singles[k % singles.len()].clone())

@@ -32,7 +32,8 @@
 //!   the store committed, so bad input never loses or half-writes data.
 //! - [`moveit`]: MoveIt planning scenes (`moveit_msgs/PlanningScene` in YAML or JSON) read into
 //!   typed, validated collision objects, allowed-collision matrix and robot state, and imported
-//!   into the catalog as scenes of exact primitives ([`moveit::ImportPlan`]).
+//!   into the catalog as scenes of exact primitives, their meshes planned for compound fits
+//!   ([`moveit::ImportPlan`]).
 //! - [`planner`]: what a motion planner asks of a scene — private views with pose overrides and
 //!   warm starts of their own, candidate states, scene-wide checks with a broad phase.
 //!
@@ -118,12 +119,51 @@ pub struct BodyRecord {
     /// The exact primitive the record stands for; absent for a fitted body.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub primitive: Option<PrimitiveFile>,
+    /// The triangle mesh the body was fitted to, in the body's frame, when it was kept with it
+    /// (a mesh of an imported planning scene); absent otherwise, and in records written before
+    /// meshes were kept.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mesh: Option<MeshRecord>,
+}
+
+/// A triangle mesh as stored with the body fitted to it ([`BodyRecord::mesh`]): the exact
+/// geometry the fitted (containing) body stands for.
+///
+/// Vertices are in meters in the body's frame (the frame of the body's polynomial and of an
+/// instance's pose); triangles index `vertices` (each index `< vertices.len()`, checked when the
+/// record is stored by [`Catalog::add_fitted_body`]).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct MeshRecord {
+    /// Vertex positions `[x, y, z]`, meters, body frame.
+    pub vertices: Vec<[Real; 3]>,
+    /// Triangles as three indices into `vertices`.
+    pub triangles: Vec<[u32; 3]>,
+}
+
+impl MeshRecord {
+    /// Checks that every vertex is finite and every index is in range.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `field.vertices[k]` or `field.triangles[k]`.
+    pub fn validate(&self, field: &str) -> Result<()> {
+        if let Some(k) = self.vertices.iter().position(|v| v.iter().any(|c| !c.is_finite())) {
+            return Err(Error::invalid(format!("{field}.vertices[{k}]"), "coordinates must be finite"));
+        }
+        let n = self.vertices.len();
+        if let Some(k) = self.triangles.iter().position(|t| t.iter().any(|&i| i as usize >= n)) {
+            return Err(Error::invalid(
+                format!("{field}.triangles[{k}]"),
+                format!("an index is outside the {n} vertices"),
+            ));
+        }
+        Ok(())
+    }
 }
 
 impl BodyRecord {
     /// The record of a single body.
     pub fn single(name: &str, body: BodyFile) -> Self {
-        Self { name: name.to_owned(), body, compound: None, primitive: None }
+        Self { name: name.to_owned(), body, compound: None, primitive: None, mesh: None }
     }
 
     /// The record of an exact primitive, with its bounding ellipsoid as `body` (see
@@ -148,7 +188,7 @@ impl BodyRecord {
                 },
             },
         };
-        Ok(Self { name: name.to_owned(), body, compound: None, primitive: Some(primitive.to_file()) })
+        Ok(Self { name: name.to_owned(), body, compound: None, primitive: Some(primitive.to_file()), mesh: None })
     }
 }
 

@@ -276,6 +276,20 @@ pub(crate) struct GroupJob {
     pub(crate) settings: sublevel_fit::containment::ContainmentSettings,
 }
 
+/// Where a compound fit's body goes once stored (see [`FitJobs::start_compound_placed`]): an
+/// instance in a scene, as `ImportScene` places a planning scene's mesh.
+#[derive(Debug)]
+pub(crate) struct MeshPlacement {
+    /// The scene the instance is added to.
+    pub(crate) scene_id: String,
+    /// The instance's planning name ([`sublevel_scene::PlanningContext::names`]).
+    pub(crate) name: String,
+    /// Its pose: the mesh's frame (the body's frame) in the scene.
+    pub(crate) pose: sublevel_core::math::Isometry3,
+    /// The scene's instance limit (`--max-instances-per-scene`) when the job ends.
+    pub(crate) max_instances: usize,
+}
+
 /// What a job's work returns: the stored body's id and the final message.
 type Outcome = Result<(String, String)>;
 
@@ -303,6 +317,11 @@ impl FitJobs {
         for job in self.jobs.lock().unwrap_or_else(|e| e.into_inner()).values() {
             job.cancel();
         }
+    }
+
+    /// Jobs queued or running now (the `--max-fit-queue` count).
+    pub(crate) fn queued(&self) -> usize {
+        self.pending.load(Ordering::SeqCst)
     }
 
     /// Completes once every registered job has recorded its end (at once when none runs).
@@ -531,9 +550,29 @@ impl FitJobs {
         parts: sublevel_fit::compound::PartCount,
         settings: sublevel_fit::compound::CompoundSettings,
     ) -> Result<String, Status> {
+        self.start_compound_placed(name, mesh, parts, settings, None).await
+    }
+
+    /// [`FitJobs::start_compound`] that, with a placement, also keeps the mesh with the stored
+    /// body ([`sublevel_scene::MeshRecord`], the mesh's vertices as given: the body's frame) and
+    /// then adds an instance of the body to the placement's scene
+    /// ([`sublevel_scene::Catalog::add_named_instance`]). When the instance cannot be added (the
+    /// scene was deleted, or is full) the job still succeeds, the body stored, and its message
+    /// says why the instance was not added.
+    ///
+    /// # Errors
+    /// UNAVAILABLE when the job's record cannot be written.
+    pub(crate) async fn start_compound_placed(
+        &self,
+        name: String,
+        mesh: sublevel_fit::mesh::OffMesh,
+        parts: sublevel_fit::compound::PartCount,
+        settings: sublevel_fit::compound::CompoundSettings,
+        placement: Option<MeshPlacement>,
+    ) -> Result<String, Status> {
         let job = self.register("fit", name).await?;
         let (job_id, name) = (job.job_id.clone(), job.name.clone());
-        tracing::info!(job_id = %job_id, vertices = mesh.vertices.len(), triangles = mesh.triangles.len(), ?parts, "compound fit queued");
+        tracing::info!(job_id = %job_id, vertices = mesh.vertices.len(), triangles = mesh.triangles.len(), ?parts, placed = placement.is_some(), "compound fit queued");
         let catalog = self.catalog.clone();
         self.spawn(job, "fit", move |progress| {
             let body = sublevel_fit::compound::fit_compound(&mesh, Some(&name), parts, &settings, progress)?;
@@ -558,7 +597,21 @@ impl FitJobs {
                 body.node_count(),
                 body.max_leaf_excess()
             );
-            Ok((catalog.add_compound_body(&name, body)?, message))
+            let Some(place) = placement else {
+                return Ok((catalog.add_compound_body(&name, body)?, message));
+            };
+            let kept = sublevel_scene::MeshRecord {
+                vertices: mesh.vertices.iter().map(|p| [p.x, p.y, p.z]).collect(),
+                triangles: mesh.triangles.clone(),
+            };
+            let body_id = catalog.add_fitted_body(&name, body, Some(kept))?;
+            let scene = &place.scene_id;
+            let added = catalog.add_named_instance(scene, &body_id, place.pose, &place.name, place.max_instances);
+            let message = match added {
+                Ok(iid) => format!("{message}; instance {iid} `{}` added to scene {scene}", place.name),
+                Err(e) => format!("{message}; the instance `{}` was not added to scene {scene}: {e}", place.name),
+            };
+            Ok((body_id, message))
         });
         Ok(job_id)
     }

@@ -29,6 +29,7 @@ from .types import (
     ConfigurationColumns,
     DistanceAnswer,
     GrowthAnswer,
+    ImportedInstance,
     ImportedScene,
     Instance,
     InstanceMotionColumns,
@@ -500,21 +501,42 @@ class Client:
                 return s.scene_id
         raise KeyError(f"no scene named {name!r}")
 
-    def import_scene(self, scene: Any, name: Optional[str] = None) -> ImportedScene:
+    def import_scene(
+        self,
+        scene: Any,
+        name: Optional[str] = None,
+        *,
+        skip_meshes: bool = False,
+        mesh_tolerance: float = 0.0,
+        wait: bool = False,
+        progress: Any = None,
+        timeout: Optional[float] = None,
+    ) -> ImportedScene:
         """Imports a MoveIt planning scene (``moveit_msgs/PlanningScene``) as a new scene: each
         collision object's primitives (box, sphere, cylinder; a cone as its cylinder) and planes
         (the halfspace opposite the normal) become instances of exact primitive bodies at their
-        composed poses; meshes are skipped (``ImportedScene.skipped``, with their poses).
+        composed poses; each mesh is fitted as a compound body containing it by a fit job of its
+        own (``ImportedScene.meshes``), which adds the body's instance at the mesh's composed pose
+        under the object's name when it ends.
 
         Args:
             scene: the scene as YAML or JSON — a path (``str`` or ``os.PathLike``; JSON when it
                 ends in ``.json``), ``bytes``, or the text itself (JSON when it starts with ``{``).
             name: the new scene's name (default: the planning scene's ``name``, else
                 ``"imported"``).
+            skip_meshes: skip the meshes instead (``ImportedScene.skipped``, with their poses).
+            mesh_tolerance: leaf-excess tolerance of the meshes' fits, meters; 0: 1 % of each
+                mesh's bounding-box diagonal.
+            wait: wait for the meshes' jobs, so the returned scene is complete: each
+                :class:`ImportedMesh` then carries its job's state, body and message, and the
+                meshes' instances are in ``instances`` (and ``.ids``).
+            progress: with ``wait``, called with each ``FitJobUpdate`` of the meshes' jobs.
+            timeout: with ``wait``, seconds to wait for each job (None: no limit).
 
         Returns the :class:`ImportedScene` (instance ids by name in ``.ids``, the allowed-collision
         matrix and joint positions). A bad scene raises SublevelError naming its field
-        (``yaml.world.collision_objects[3].primitive_poses[0]``).
+        (``yaml.world.collision_objects[3].primitive_poses[0]``); with ``wait``, a mesh job that
+        does not succeed raises SublevelError (ABORTED) with its error (the scene stays).
         """
         json_form = False
         if isinstance(scene, os.PathLike) or (isinstance(scene, str) and os.path.isfile(scene)):
@@ -530,12 +552,64 @@ class Client:
             json_form = scene.lstrip().startswith("{")
         else:
             raise ValueError(f"`scene`: expected a path, bytes or text, got {type(scene).__name__}")
-        req = pb.ImportSceneRequest(name=name or "")
+        req = pb.ImportSceneRequest(
+            name=name or "", skip_meshes=bool(skip_meshes), mesh_tolerance=float(mesh_tolerance)
+        )
         if json_form:
             req.json = data
         else:
             req.yaml = data
-        return ImportedScene.from_proto(self._call("ImportScene", req))
+        imported = ImportedScene.from_proto(self._call("ImportScene", req))
+        if wait and imported.meshes:
+            self._wait_meshes(imported, progress, timeout)
+        return imported
+
+    def _wait_meshes(self, imported: ImportedScene, progress: Any, timeout: Optional[float]) -> None:
+        """Waits for each mesh job of ``imported``, records its outcome in its
+        :class:`ImportedMesh` and adds the instances the jobs placed to ``imported.instances``."""
+        for mesh in imported.meshes:
+            last = self._wait_job(mesh.job_id, progress, timeout)
+            mesh.state = pb.JobState.Name(last.state).removeprefix("JOB_STATE_")
+            mesh.body_id, mesh.message, mesh.error = last.body_id, last.message, last.error
+            if last.state != pb.JOB_STATE_SUCCEEDED:
+                raise SublevelError(
+                    grpc.StatusCode.ABORTED,
+                    f"mesh {mesh.name!r} of scene {imported.scene_id}: fit job {mesh.job_id} did not succeed: {last.error}",
+                )
+        by_body = {i.body_id: i for i in self.get_scene(imported.scene_id).instances}
+        for mesh in imported.meshes:
+            placed = by_body.get(mesh.body_id)
+            if placed is None:
+                continue  # not added (the scene filled up): the job's message says why
+            imported.instances.append(
+                ImportedInstance(
+                    name=mesh.name,
+                    object_id=mesh.object_id,
+                    shape_index=mesh.shape_index,
+                    instance_id=placed.instance_id,
+                    body_id=mesh.body_id,
+                    kind="mesh",
+                    pose=mesh.pose,
+                    frame_id=mesh.frame_id,
+                    note="a compound body fitted to the mesh (it contains the mesh)",
+                )
+            )
+
+    def _wait_job(self, job_id: str, progress: Any = None, timeout: Optional[float] = None) -> Any:
+        """Follows fit job ``job_id`` (``WatchFitJob``) until it ends, calling ``progress`` with
+        each ``FitJobUpdate``; returns the terminal update. Raises SublevelError for the stream's
+        errors and for a stream that ends without an update."""
+        last = None
+        try:
+            for update in self.stub.WatchFitJob(pb.WatchFitJobRequest(job_id=job_id), timeout=timeout):
+                last = update
+                if progress is not None:
+                    progress(update)
+        except grpc.RpcError as e:
+            raise SublevelError.from_rpc_error(e) from None
+        if last is None:
+            raise SublevelError(grpc.StatusCode.ABORTED, f"fit job {job_id}: no update")
+        return last
 
     def delete_scene(self, scene_id: str) -> None:
         """Deletes a scene with its instances (the bodies stay)."""
@@ -625,16 +699,9 @@ class Client:
             max_parts=int(max_parts),
         )
         job_id = self._call("StartRobotFitJob", req).job_id
-        last = None
-        try:
-            for update in self.stub.WatchFitJob(pb.WatchFitJobRequest(job_id=job_id), timeout=timeout):
-                last = update
-                if progress is not None:
-                    progress(update)
-        except grpc.RpcError as e:
-            raise SublevelError.from_rpc_error(e) from None
-        if last is None or last.state != pb.JOB_STATE_SUCCEEDED or not last.robot_id:
-            error = last.error if last is not None else "no update"
+        last = self._wait_job(job_id, progress, timeout)
+        if last.state != pb.JOB_STATE_SUCCEEDED or not last.robot_id:
+            error = last.error
             raise SublevelError(grpc.StatusCode.ABORTED, f"robot fit job {job_id} did not succeed: {error}")
         return self.get_robot(last.robot_id)
 

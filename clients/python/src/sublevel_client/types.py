@@ -775,6 +775,52 @@ class SkippedShape:
 
 
 @dataclass
+class ImportedMesh:
+    """A mesh of the planning scene being fitted as a compound body (a body containing it, its
+    frame the mesh's frame) by its own fit job, which then adds its instance at ``pose``.
+
+    Attributes:
+        name: the instance's name (the collision object's id, with ``#k`` when the object has
+            several shapes).
+        object_id, shape_index: the object and the shape's index in it.
+        job_id: the compound fit job (``WatchFitJob`` / ``GetFitJob``).
+        pose: the instance's pose in the scene (object pose composed with the mesh pose);
+            frame_id: the object's header frame.
+        vertices, triangles: the mesh's counts.
+        state: the job's final state (``"SUCCEEDED"``, ``"FAILED"``, ``"CANCELLED"``) once waited
+            for (``import_scene(wait=True)``), else ``""``.
+        body_id: the stored body, once the job succeeded; message, error: the job's final
+            message (it says whether the instance was added) and error.
+    """
+
+    name: str
+    object_id: str
+    shape_index: int
+    job_id: str
+    pose: Pose
+    frame_id: str
+    vertices: int
+    triangles: int
+    state: str = ""
+    body_id: str = ""
+    message: str = ""
+    error: str = ""
+
+    @classmethod
+    def from_proto(cls, m) -> "ImportedMesh":
+        return cls(
+            name=m.name,
+            object_id=m.object_id,
+            shape_index=m.shape_index,
+            job_id=m.job_id,
+            pose=_pose(m.pose, m.HasField("pose")),
+            frame_id=m.frame_id,
+            vertices=m.vertices,
+            triangles=m.triangles,
+        )
+
+
+@dataclass
 class ImportedScene:
     """The answer of ``Client.import_scene``: the new scene, its instances by name, the skipped
     shapes, and the planning scene's allowed-collision matrix and robot state (not stored by the
@@ -782,8 +828,10 @@ class ImportedScene:
 
     Attributes:
         scene_id, name: the new scene.
-        instances: the imported shapes, object by object.
-        skipped: the shapes not imported (meshes).
+        instances: the imported shapes, object by object; with ``import_scene(wait=True)`` also
+            the meshes' instances once their fits ended (kind ``"mesh"``).
+        meshes: the meshes being fitted, one job each (:class:`ImportedMesh`).
+        skipped: the shapes not imported (meshes, with ``skip_meshes``).
         objects: collision objects in the planning scene; bodies: primitive bodies stored.
         allowed_collision: the matrix, or None.
         joint_positions: the robot state's joint positions by name (radians or meters).
@@ -797,6 +845,7 @@ class ImportedScene:
     bodies: int
     allowed_collision: Optional[AllowedCollisionMatrix]
     joint_positions: Dict[str, float]
+    meshes: List[ImportedMesh] = field(default_factory=list)
 
     @property
     def ids(self) -> Dict[str, str]:
@@ -816,6 +865,7 @@ class ImportedScene:
             if m.HasField("allowed_collision")
             else None,
             joint_positions={j.name: j.position for j in m.joint_positions},
+            meshes=[ImportedMesh.from_proto(x) for x in m.meshes],
         )
 
 

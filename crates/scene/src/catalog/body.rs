@@ -19,7 +19,7 @@
 
 use super::{lock, read, Catalog};
 use crate::store::Store;
-use crate::{BodyRecord, Error, Result};
+use crate::{BodyRecord, Error, MeshRecord, Result};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
 use sublevel_core::body::{Body, BodyFile};
@@ -249,6 +249,11 @@ pub struct BodyEntry {
     built: OnceLock<std::result::Result<BuiltBody, String>>,
     /// `None` for an entry built when it was created.
     builds: Option<Arc<Builds>>,
+    /// The mesh the body was fitted to, kept apart from the record (the build takes the record
+    /// and does not need it).
+    mesh: Option<Arc<MeshRecord>>,
+    /// `mesh` as a robot-check obstacle (its BVH and the body's root), built on first use.
+    world_mesh: OnceLock<std::result::Result<Arc<sublevel_robot::WorldMesh>, String>>,
 }
 
 impl std::fmt::Debug for BodyEntry {
@@ -272,13 +277,22 @@ impl BodyEntry {
             record: Mutex::new(None),
             built: OnceLock::from(Ok(built)),
             builds: None,
+            mesh: None,
+            world_mesh: OnceLock::new(),
         }
+    }
+
+    /// The entry with `mesh` as the mesh its body was fitted to ([`BodyEntry::mesh`]).
+    pub(super) fn with_mesh(mut self, mesh: Option<Arc<MeshRecord>>) -> Self {
+        self.mesh = mesh;
+        self
     }
 
     /// An entry of a stored record, built on first use; a body that then fails to validate is
     /// quarantined through `builds`.
-    pub(super) fn of_record(id: &str, rec: BodyRecord, builds: &Arc<Builds>) -> Self {
+    pub(super) fn of_record(id: &str, mut rec: BodyRecord, builds: &Arc<Builds>) -> Self {
         builds.pending.fetch_add(1, Ordering::Relaxed);
+        let mesh = rec.mesh.take().map(Arc::new);
         Self {
             id: id.to_owned(),
             name: rec.name.clone(),
@@ -286,7 +300,38 @@ impl BodyEntry {
             record: Mutex::new(Some(rec)),
             built: OnceLock::new(),
             builds: Some(builds.clone()),
+            mesh,
+            world_mesh: OnceLock::new(),
         }
+    }
+
+    /// The triangle mesh the body was fitted to, when it was kept with it
+    /// ([`BodyRecord::mesh`]: a mesh of an imported planning scene), in the body's frame
+    /// (meters); `None` for other bodies. Needs no build.
+    pub fn mesh(&self) -> Option<&Arc<MeshRecord>> {
+        self.mesh.as_ref()
+    }
+
+    /// The kept mesh ([`BodyEntry::mesh`]) as an obstacle of the robot checks: its triangles,
+    /// with the built body's root (which contains them) for the sos bound; built once, on first
+    /// use (the BVH of a large mesh takes milliseconds). `None` for a body without a kept mesh.
+    ///
+    /// # Errors
+    /// As [`BodyEntry::built`]; [`Error::FailedPrecondition`] when the mesh does not validate
+    /// against the body ([`sublevel_robot::WorldMesh::new`]: a vertex outside the root body).
+    pub fn world_mesh(&self) -> Option<Result<Arc<sublevel_robot::WorldMesh>>> {
+        let mesh = self.mesh.as_ref()?;
+        let built = match self.built() {
+            Ok(b) => b,
+            Err(e) => return Some(Err(e)),
+        };
+        let made = self.world_mesh.get_or_init(|| {
+            let vertices = mesh.vertices.iter().map(|v| sublevel_core::math::Point3::new(v[0], v[1], v[2])).collect();
+            sublevel_robot::WorldMesh::new(vertices, mesh.triangles.clone(), Some((*built.body).clone()))
+                .map(Arc::new)
+                .map_err(|e| format!("the mesh kept with body `{}` is not a valid obstacle: {e}", self.id))
+        });
+        Some(made.clone().map_err(Error::FailedPrecondition))
     }
 
     /// The built body, building it now if this is its first use (concurrent first users wait

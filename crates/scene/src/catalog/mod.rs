@@ -28,7 +28,9 @@ pub use scene_robot::{PlacedRobot, SceneRobotCheck};
 
 use super::cache::WarmStartCache;
 use super::store::Store;
-use super::{BodyRecord, InstanceRecord, JobRecord, JobRecordState, PlanningContext, SceneMeta, StoredPose};
+use super::{
+    BodyRecord, InstanceRecord, JobRecord, JobRecordState, MeshRecord, PlanningContext, SceneMeta, StoredPose,
+};
 use crate::{Error, Result};
 use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex, MutexGuard, RwLock, RwLockReadGuard, RwLockWriteGuard};
@@ -317,20 +319,39 @@ impl Catalog {
     /// # Errors
     /// [`Error::InvalidArgument`] naming `name` for an over-long name; [`Error::Storage`].
     pub fn add_compound_body(&self, name: &str, tree: CompoundBody) -> Result<String> {
-        if tree.node_count() == 1 {
-            return self.add_body(name, tree.body(tree.root()).clone());
-        }
+        self.add_fitted_body(name, tree, None)
+    }
+
+    /// [`Catalog::add_compound_body`], keeping `mesh` (the triangle mesh the body was fitted to,
+    /// in the body's frame, meters) with the body ([`BodyRecord::mesh`]); the entry answers it
+    /// from [`BodyEntry::mesh`].
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `name` for an over-long name, or `mesh.vertices[k]` /
+    /// `mesh.triangles[k]` for a non-finite vertex or an index out of range
+    /// ([`MeshRecord::validate`]); [`Error::Storage`].
+    pub fn add_fitted_body(&self, name: &str, tree: CompoundBody, mesh: Option<MeshRecord>) -> Result<String> {
         check_name("name", name)?;
+        if let Some(m) = &mesh {
+            m.validate("mesh")?;
+        }
         let id = new_id("b");
         let root = tree.body(tree.root()).clone();
-        let rec =
-            BodyRecord { name: name.to_owned(), body: root.to_file(), compound: Some(tree.to_file()), primitive: None };
+        let (rec, built) = if tree.node_count() == 1 {
+            let rec = BodyRecord { mesh, ..BodyRecord::single(name, root.to_file()) };
+            (rec, BuiltBody { body: Arc::new(root), tree: None, primitive: None })
+        } else {
+            let rec = BodyRecord {
+                name: name.to_owned(),
+                body: root.to_file(),
+                compound: Some(tree.to_file()),
+                primitive: None,
+                mesh,
+            };
+            (rec, BuiltBody { body: Arc::new(root), tree: Some(Arc::new(tree)), primitive: None })
+        };
         self.store.put_body(&id, &rec)?;
-        let entry = BodyEntry::of_built(
-            &id,
-            name,
-            BuiltBody { body: Arc::new(root), tree: Some(Arc::new(tree)), primitive: None },
-        );
+        let entry = BodyEntry::of_built(&id, name, built).with_mesh(rec.mesh.map(Arc::new));
         write(&self.bodies).insert(id.clone(), Arc::new(entry));
         Ok(id)
     }
@@ -535,6 +556,50 @@ impl Catalog {
             let rec = InstanceRecord { body_id: body_id.to_owned(), pose: StoredPose::from_isometry(&pose) };
             self.store.put_instances(scene_id, &[(&id, &rec)], false)?;
             s.instances.insert(id.clone(), Instance::of(&entry, pose));
+            Ok(id)
+        })
+    }
+
+    /// Adds an instance of body `body_id` to scene `scene_id` under `pose` and registers `name`
+    /// as its planning name ([`PlanningContext::names`], the name the allowed-collision matrix
+    /// and the robot checks use), under the scene's lock, so concurrent additions keep every
+    /// name. Refused when the scene already holds `max_instances` instances. Returns the new
+    /// instance's id.
+    ///
+    /// # Errors
+    /// [`Error::NotFound`] for the scene or the body; [`Error::ResourceExhausted`] when the scene
+    /// is full; [`Error::Storage`] (nothing changes then).
+    pub fn add_named_instance(
+        &self,
+        scene_id: &str,
+        body_id: &str,
+        pose: Isometry3,
+        name: &str,
+        max_instances: usize,
+    ) -> Result<String> {
+        self.body(body_id)?;
+        self.scene(scene_id)?;
+        let bodies = read(&self.bodies);
+        let entry = bodies.get(body_id).ok_or_else(|| Error::not_found("body", body_id))?.clone();
+        self.with_scene(scene_id, |s| {
+            if s.instances.len() >= max_instances {
+                return Err(Error::ResourceExhausted(format!(
+                    "scene `{scene_id}` holds {} instances, the most a scene may hold",
+                    s.instances.len()
+                )));
+            }
+            let id = new_id("i");
+            let mut planning = (*s.planning).clone();
+            planning.names.insert(id.clone(), name.to_owned());
+            let meta = SceneMeta { name: s.name.clone(), planning };
+            let rec = InstanceRecord { body_id: body_id.to_owned(), pose: StoredPose::from_isometry(&pose) };
+            self.store.put_instances(scene_id, &[(&id, &rec)], false)?;
+            if let Err(e) = self.store.put_scene(scene_id, &meta) {
+                let _ = self.store.delete_instance(scene_id, &id);
+                return Err(e);
+            }
+            s.instances.insert(id.clone(), Instance::of(&entry, pose));
+            s.planning = Arc::new(meta.planning);
             Ok(id)
         })
     }

@@ -143,28 +143,34 @@ impl Catalog {
     }
 
     /// Scene `scene_id` as the world of the robot checks: every instance as a [`WorldObject`]
-    /// named by the planning scene's name for it (else its instance id), at its stored pose, and
-    /// the scene's robot ([`Catalog::placed_robot`]).
+    /// named by the planning scene's name for it (else its instance id), at its stored pose — an
+    /// exact primitive, or the mesh kept with a body fitted to it (an imported planning scene's
+    /// mesh, with the body's root for the sos bound) — and the scene's robot
+    /// ([`Catalog::placed_robot`]).
     ///
     /// # Errors
     /// [`Error::NotFound`] (kind `scene`); [`Error::FailedPrecondition`] naming an instance of a
-    /// fitted body (robot checks take exact primitives as obstacles) or of a body that no longer
-    /// validates, or a scene robot that was deleted.
+    /// fitted body without a kept mesh (robot checks take exact primitives and meshes as
+    /// obstacles) or of a body that no longer validates, or a scene robot that was deleted.
     pub fn robot_world(&self, scene_id: &str) -> Result<RobotWorld> {
         let view = self.get_scene(scene_id)?;
         let mut objects = Vec::with_capacity(view.instances.len());
         let mut instance_ids = Vec::with_capacity(view.instances.len());
         for inst in &view.instances {
-            let built = self.body(&inst.body_id)?;
-            let Some(primitive) = built.built()?.primitive else {
+            let entry = self.body(&inst.body_id)?;
+            let name = view.planning.names.get(&inst.id).cloned().unwrap_or_else(|| inst.id.clone());
+            if let Some(mesh) = entry.world_mesh() {
+                objects.push(WorldObject::mesh(name, mesh?, inst.pose));
+            } else if let Some(primitive) = entry.built()?.primitive {
+                objects.push(WorldObject::primitive(name, primitive, inst.pose));
+            } else {
                 return Err(Error::FailedPrecondition(format!(
-                    "instance `{}` of scene `{scene_id}` is the fitted body `{}`: robot checks take exact \
-                     primitives (box, sphere, cylinder, capsule, halfspace) as obstacles; use a scene of primitives",
+                    "instance `{}` of scene `{scene_id}` is the fitted body `{}` without its mesh: robot checks take \
+                     exact primitives (box, sphere, cylinder, capsule, halfspace) and the meshes of imported planning \
+                     scenes as obstacles",
                     inst.id, inst.body_id
                 )));
-            };
-            let name = view.planning.names.get(&inst.id).cloned().unwrap_or_else(|| inst.id.clone());
-            objects.push(WorldObject::primitive(name, primitive, inst.pose));
+            }
             instance_ids.push(inst.id.clone());
         }
         let robot = self.placed_robot(scene_id)?;

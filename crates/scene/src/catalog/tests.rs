@@ -136,6 +136,46 @@ fn old_single_records_load_and_compound_bodies_survive_a_reopen() {
     assert_eq!(c.cached_warm_starts(&scene).unwrap(), 0, "tree warm starts go with their instance");
 }
 
+/// A fitted body stored with its mesh answers the mesh from its entry, also after a reopen
+/// (read from the record, without building the body); a bad mesh is refused before anything is
+/// written. A named instance registers its planning name and respects the scene's limit.
+#[test]
+fn a_fitted_body_keeps_its_mesh_and_named_instances_keep_their_names() {
+    let dir = tempfile::tempdir().unwrap();
+    let mesh = MeshRecord {
+        vertices: vec![[0.0, 0.0, 0.0], [0.5, 0.0, 0.0], [0.0, 0.5, 0.0], [0.0, 0.0, 0.5]],
+        triangles: vec![[0, 2, 1], [0, 1, 3], [1, 2, 3], [2, 0, 3]],
+    };
+    let (tree_id, scene, named);
+    {
+        let c = open(dir.path());
+        let bad = MeshRecord { triangles: vec![[0, 1, 4]], ..mesh.clone() };
+        let e = c.add_fitted_body("bad", dumbbell(), Some(bad)).unwrap_err();
+        assert!(e.to_string().contains("mesh.triangles[0]"), "{e}");
+        assert!(c.bodies().is_empty());
+        tree_id = c.add_fitted_body("crate", dumbbell(), Some(mesh.clone())).unwrap();
+        assert_eq!(c.body(&tree_id).unwrap().mesh().map(|m| m.as_ref()), Some(&mesh));
+        let plain = c.add_compound_body("plain", dumbbell()).unwrap();
+        assert!(c.body(&plain).unwrap().mesh().is_none());
+        scene = c.create_scene("s").unwrap();
+        named = c.add_named_instance(&scene, &tree_id, at(1.0), "crate#1", 2).unwrap();
+        c.add_instance(&scene, &plain, at(5.0)).unwrap();
+        let e = c.add_named_instance(&scene, &tree_id, at(2.0), "crate#2", 2).unwrap_err();
+        assert!(matches!(e, Error::ResourceExhausted(_)), "{e}");
+        let view = c.get_scene(&scene).unwrap();
+        assert_eq!(view.instances.len(), 2);
+        assert_eq!(view.planning.names.get(&named).map(String::as_str), Some("crate#1"));
+    }
+    let c = open(dir.path());
+    let entry = c.body(&tree_id).unwrap();
+    assert!(!entry.is_settled(), "not built by the reopen");
+    assert_eq!(entry.mesh().map(|m| m.as_ref()), Some(&mesh));
+    assert_eq!(entry.node_count(), 3);
+    let view = c.get_scene(&scene).unwrap();
+    assert_eq!(view.planning.names.get(&named).map(String::as_str), Some("crate#1"));
+    assert_eq!(view.instances.iter().find(|i| i.id == named).unwrap().pose.translation.vector.x, 1.0);
+}
+
 /// A store with three sphere bodies, the dumbbell compound body and one instance of each in one
 /// scene (x = 0, 3, 6, 9); returns the scene id and the instance ids in that order.
 fn store_with_bodies(dir: &std::path::Path) -> (String, Vec<String>) {

@@ -1,5 +1,6 @@
 //! Importing a [`PlanningScene`] into the catalog: one new scene whose instances are the
-//! collision objects' shapes as exact primitives, at their composed poses.
+//! collision objects' shapes as exact primitives, at their composed poses, and whose meshes are
+//! planned for compound fits.
 //!
 //! ```text
 //! box, sphere, cylinder   the primitive of the same dimensions
@@ -7,16 +8,24 @@
 //!                         conservative), with a note saying so
 //! plane a·x + d = 0       the halfspace {n·u ≤ −d} (n = a/‖a‖): the side opposite the normal is
 //!                         solid, as a floor whose normal points up
-//! mesh                    skipped, with the reason and its pose: fit it (StartFitJob, `parts`
-//!                         for a compound body) and add the body at that pose
+//! mesh                    with MeshImport::Fit, a planned mesh (ImportPlan::meshes): its
+//!                         vertices and triangles in the mesh's own frame and its composed pose,
+//!                         for the caller to fit as a compound body (a body containing the mesh)
+//!                         and add at that pose; with MeshImport::Skip, skipped with the reason
 //! ```
+//!
+//! A pose composes as MoveIt composes it: the shape's frame maps into the object's header frame
+//! by `object pose ∘ shape pose` (`mesh_poses[k]` after `pose`), so a mesh's vertices stay as
+//! written and its fitted body's frame is the mesh's frame.
 //!
 //! Identical primitives (same kind and dimensions, bit for bit) share one stored body within an
 //! import. An object with one imported shape names its instance by the object's id; an object
 //! with several names each `id#k`, k the shape's index in the object (primitives first, then
-//! meshes, then planes, as [`CollisionObject::shapes`] orders them). The allowed-collision matrix
-//! and the robot state are returned with the plan, for the caller to keep; the catalog stores
-//! the scene, its bodies and its instances.
+//! meshes, then planes, as [`CollisionObject::shapes`] orders them); a planned mesh is named
+//! the same way. The allowed-collision matrix and the robot state are returned with the plan,
+//! for the caller to keep; the catalog stores the scene, its bodies and its instances
+//! ([`Catalog::import_plan`] writes the primitives; the meshes' bodies and instances are added
+//! once their fits end, by [`Catalog::add_fitted_body`] and [`Catalog::add_named_instance`]).
 //!
 //! The plan is made first ([`ImportPlan::new`]), so a caller can check its counts against its
 //! limits before anything is written; [`Catalog::import_plan`] then writes it, and removes what it
@@ -48,6 +57,35 @@ pub struct PlannedInstance {
     pub note: String,
 }
 
+/// What an import does with the scene's meshes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MeshImport {
+    /// Each mesh is planned for a compound fit ([`ImportPlan::meshes`]).
+    Fit,
+    /// Each mesh is skipped with the reason ([`ImportPlan::skipped`]).
+    Skip,
+}
+
+/// One mesh of the scene planned for a compound fit: the caller fits its triangles, stores the
+/// body with the mesh in the mesh's frame, and adds an instance at `pose` named `name`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlannedMesh {
+    /// The instance's name: the object's id, with `#k` when the object has several shapes.
+    pub name: String,
+    /// The collision object's id.
+    pub object_id: String,
+    /// The shape's index in its object ([`CollisionObject::shapes`]).
+    pub shape_index: usize,
+    /// The frame the pose is given in (the object's `header.frame_id`; empty when absent).
+    pub frame_id: String,
+    /// Mesh frame → the object's header frame (the object's pose composed with the mesh's).
+    pub pose: Isometry3,
+    /// Vertices, meters, in the mesh's own frame (as written in the message).
+    pub vertices: Vec<[Real; 3]>,
+    /// Triangles as indices into `vertices` (validated: in range).
+    pub triangles: Vec<[u32; 3]>,
+}
+
 /// One shape of the scene that is not imported.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SkippedShape {
@@ -72,7 +110,9 @@ pub struct ImportPlan {
     pub bodies: Vec<(String, Primitive)>,
     /// The instances, object by object, shape by shape.
     pub instances: Vec<PlannedInstance>,
-    /// The shapes not imported.
+    /// The meshes to fit (with [`MeshImport::Fit`]; empty with [`MeshImport::Skip`]).
+    pub meshes: Vec<PlannedMesh>,
+    /// The shapes not imported (the meshes, with [`MeshImport::Skip`]).
     pub skipped: Vec<SkippedShape>,
     /// The planning scene's allowed-collision matrix, kept with the imported scene.
     pub allowed_collision: Option<super::AllowedCollisionMatrix>,
@@ -81,17 +121,19 @@ pub struct ImportPlan {
 }
 
 impl ImportPlan {
-    /// The plan of `scene` (module docs).
+    /// The plan of `scene` (module docs); `meshes` says whether its meshes are planned for
+    /// fits or skipped.
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] naming the shape (`world.collision_objects[id].shapes[k]`) whose
     /// dimensions a primitive refuses (the parser's checks admit what a primitive does, so this is
     /// a broken invariant rather than a user's error).
-    pub fn new(scene: &PlanningScene) -> Result<Self> {
+    pub fn new(scene: &PlanningScene, meshes: MeshImport) -> Result<Self> {
         let mut plan = ImportPlan {
             scene_name: scene.name.clone(),
             bodies: Vec::new(),
             instances: Vec::new(),
+            meshes: Vec::new(),
             skipped: Vec::new(),
             allowed_collision: scene.allowed_collision.clone(),
             joint_positions: scene.joint_positions.clone(),
@@ -99,7 +141,7 @@ impl ImportPlan {
         // Dedupe by the primitive file's exact JSON (kind and dimensions, bit for bit).
         let mut seen: std::collections::HashMap<String, usize> = std::collections::HashMap::new();
         for object in &scene.objects {
-            plan.add_object(object, &mut seen)?;
+            plan.add_object(object, meshes, &mut seen)?;
         }
         Ok(plan)
     }
@@ -107,9 +149,11 @@ impl ImportPlan {
     fn add_object(
         &mut self,
         object: &CollisionObject,
+        meshes: MeshImport,
         seen: &mut std::collections::HashMap<String, usize>,
     ) -> Result<()> {
         let several = object.shapes.len() > 1;
+        let name = |k: usize| if several { format!("{}#{k}", object.id) } else { object.id.clone() };
         for (k, placed) in object.shapes.iter().enumerate() {
             let (file, note) = match &placed.shape {
                 Shape::Box { size } => (PrimitiveFile::Box { size: *size }, String::new()),
@@ -124,6 +168,18 @@ impl ImportPlan {
                 Shape::Plane { normal, offset } => {
                     (PrimitiveFile::Halfspace { normal: *normal, offset: -*offset }, String::new())
                 }
+                Shape::Mesh { vertices, triangles } if meshes == MeshImport::Fit => {
+                    self.meshes.push(PlannedMesh {
+                        name: name(k),
+                        object_id: object.id.clone(),
+                        shape_index: k,
+                        frame_id: object.frame_id.clone(),
+                        pose: placed.pose,
+                        vertices: vertices.clone(),
+                        triangles: triangles.clone(),
+                    });
+                    continue;
+                }
                 Shape::Mesh { vertices, triangles } => {
                     self.skipped.push(SkippedShape {
                         object_id: object.id.clone(),
@@ -131,7 +187,7 @@ impl ImportPlan {
                         kind: "mesh",
                         pose: placed.pose,
                         reason: format!(
-                            "meshes are not imported ({} vertices, {} triangles): fit it with StartFitJob (`parts` for a compound body) and add the body at this pose",
+                            "a mesh of {} vertices and {} triangles, not imported: fit it with StartFitJob (`parts` for a compound body) and add the body at this pose",
                             vertices.len(),
                             triangles.len()
                         ),
@@ -147,7 +203,7 @@ impl ImportPlan {
                 self.bodies.len() - 1
             });
             self.instances.push(PlannedInstance {
-                name: if several { format!("{}#{k}", object.id) } else { object.id.clone() },
+                name: name(k),
                 object_id: object.id.clone(),
                 shape_index: k,
                 frame_id: object.frame_id.clone(),
@@ -271,7 +327,7 @@ mod tests {
     #[test]
     fn a_plan_names_its_instances_and_skips_meshes() {
         let scene = PlanningScene::from_yaml(super::super::tests::ROS_SCENE.as_bytes()).unwrap();
-        let plan = ImportPlan::new(&scene).unwrap();
+        let plan = ImportPlan::new(&scene, MeshImport::Skip).unwrap();
         let names: Vec<&str> = plan.instances.iter().map(|i| i.name.as_str()).collect();
         assert_eq!(names, ["table#0", "table#1", "table#2", "table#3"]);
         let kinds: Vec<&str> = plan.instances.iter().map(|i| i.kind).collect();
@@ -286,11 +342,51 @@ mod tests {
         assert_eq!((plan.skipped[0].object_id.as_str(), plan.skipped[0].kind), ("wedge", "mesh"));
         assert_eq!(plan.skipped[0].pose.translation.vector.z, 2.0);
         let twins = "world:\n  collision_objects:\n    - id: a\n      primitives: [{type: box, dimensions: [1, 2, 3]}]\n      primitive_poses: [{position: [0, 0, 0]}]\n    - id: b\n      primitives: [{type: box, dimensions: [1, 2, 3]}, {type: cone, dimensions: [1, 0.5]}]\n      primitive_poses: [{position: [5, 0, 0]}, {position: [9, 0, 0]}]\n";
-        let plan = ImportPlan::new(&PlanningScene::from_yaml(twins.as_bytes()).unwrap()).unwrap();
+        let plan = ImportPlan::new(&PlanningScene::from_yaml(twins.as_bytes()).unwrap(), MeshImport::Fit).unwrap();
         assert_eq!(plan.bodies.len(), 2, "the two boxes share a body; the cone is a cylinder");
         assert_eq!((plan.instances[0].body, plan.instances[1].body), (0, 0));
         assert_eq!((plan.instances[0].name.as_str(), plan.instances[1].name.as_str()), ("a", "b#0"));
         assert!(plan.instances[2].note.contains("cone"), "{:?}", plan.instances[2].note);
+    }
+
+    /// A closed box mesh (8 vertices, 12 triangles) under an object pose and a mesh pose
+    /// (`tests/data/box_mesh.scene.yaml`): planned for a fit with the vertices as written and
+    /// the composed pose of a hand computation, named by the object's id; the ball stays a
+    /// primitive. With [`MeshImport::Skip`] the mesh is skipped at the same pose.
+    #[test]
+    fn a_mesh_is_planned_at_its_composed_pose_or_skipped() {
+        let yaml = include_str!("../../../../tests/data/box_mesh.scene.yaml");
+        let scene = PlanningScene::from_yaml(yaml.as_bytes()).unwrap();
+        let plan = ImportPlan::new(&scene, MeshImport::Fit).unwrap();
+        assert!(plan.skipped.is_empty());
+        assert_eq!(plan.instances.iter().map(|i| i.name.as_str()).collect::<Vec<_>>(), ["ball"]);
+        assert_eq!(plan.meshes.len(), 1);
+        let mesh = &plan.meshes[0];
+        assert_eq!((mesh.name.as_str(), mesh.object_id.as_str(), mesh.shape_index), ("crate", "crate", 0));
+        assert_eq!(mesh.frame_id, "world");
+        assert_eq!((mesh.vertices.len(), mesh.triangles.len()), (8, 12));
+        assert_eq!(mesh.vertices[6], [0.1, 0.05, 0.3]);
+        // Object: t_o = (1, 2, 0.5), R_o = 90° about z; mesh: t_m = (0.1, 0, 0.2), R_m = 90° about
+        // x. t = t_o + R_o t_m = (1, 2, 0.5) + (0, 0.1, 0.2) = (1, 2.1, 0.7); q = q_o ⊗ q_m =
+        // (√½, 0, 0, √½) ⊗ (√½, √½, 0, 0) = (½, ½, ½, ½): x → y, y → z, z → x.
+        let (q, t) = sublevel_core::math::pose_to_parts(&mesh.pose);
+        for (got, want) in t.iter().zip([1.0, 2.1, 0.7]) {
+            assert!((got - want).abs() < 1e-15, "{t:?}");
+        }
+        for got in q {
+            assert!((got - 0.5).abs() < 1e-15, "{q:?}");
+        }
+        // The vertex (0.1, 0.05, 0.3) lands at (1 + 0.3, 2.1 + 0.1, 0.7 + 0.05).
+        let corner = mesh.pose * sublevel_core::math::Point3::new(0.1, 0.05, 0.3);
+        assert!((corner.coords - sublevel_core::math::Vector3::new(1.3, 2.2, 0.75)).norm() < 1e-15, "{corner:?}");
+
+        let skipped = ImportPlan::new(&scene, MeshImport::Skip).unwrap();
+        assert!(skipped.meshes.is_empty());
+        assert_eq!(skipped.skipped.len(), 1);
+        let s = &skipped.skipped[0];
+        assert_eq!((s.object_id.as_str(), s.shape_index, s.kind), ("crate", 0, "mesh"));
+        assert_eq!(s.pose, mesh.pose);
+        assert!(s.reason.contains("8 vertices and 12 triangles"), "{}", s.reason);
     }
 
     /// The test scene written to a catalog: its instances at their composed poses answer as
@@ -302,7 +398,7 @@ mod tests {
         let catalog =
             Catalog::open(Box::new(RedbStore::open_dir(dir.path()).unwrap()), NewtonParams::default()).unwrap();
         let scene = PlanningScene::from_yaml(super::super::tests::ROS_SCENE.as_bytes()).unwrap();
-        let plan = ImportPlan::new(&scene).unwrap();
+        let plan = ImportPlan::new(&scene, MeshImport::Skip).unwrap();
         let imported = catalog.import_plan("", &plan).unwrap();
         assert_eq!(imported.name, "kitchen");
         assert_eq!(catalog.get_scene(&imported.scene_id).unwrap().instances.len(), 4);

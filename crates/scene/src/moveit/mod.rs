@@ -648,6 +648,6 @@ mod request;
 mod tests;
 mod world;
 
-pub use import::{ImportPlan, ImportedInstance, ImportedScene, PlannedInstance, SkippedShape};
+pub use import::{ImportPlan, ImportedInstance, ImportedScene, MeshImport, PlannedInstance, PlannedMesh, SkippedShape};
 pub use request::MotionPlanRequest;
 pub use world::{acm_override, allowed_override, world_objects};

@@ -4,7 +4,7 @@
 //! an object's k-th shape, k ≥ 1), as [`ImportPlan`] names them (cones as the cylinders that
 //! contain them).
 
-use super::{AllowedCollisionMatrix, ImportPlan, PlanningScene, Shape, SkippedShape};
+use super::{AllowedCollisionMatrix, ImportPlan, MeshImport, PlanningScene, Shape, SkippedShape};
 use crate::Result;
 use std::sync::Arc;
 use sublevel_core::math::Point3;
@@ -18,7 +18,7 @@ use sublevel_robot::{WorldMesh, WorldObject};
 /// `world.collision_objects[ID].meshes[k]` for a mesh that does not validate
 /// ([`WorldMesh::new`]).
 pub fn world_objects(scene: &PlanningScene) -> Result<(Vec<WorldObject>, Vec<SkippedShape>)> {
-    let plan = ImportPlan::new(scene)?;
+    let plan = ImportPlan::new(scene, MeshImport::Skip)?;
     let mut objects: Vec<WorldObject> =
         plan.instances.iter().map(|i| WorldObject::primitive(i.name.clone(), plan.bodies[i.body].1, i.pose)).collect();
     for object in &scene.objects {

@@ -3,7 +3,8 @@
 
 use super::Store;
 use crate::{
-    BodyRecord, InstanceRecord, JobRecord, JobRecordState, PlanningContext, RobotRecord, SceneMeta, StoredPose,
+    BodyRecord, InstanceRecord, JobRecord, JobRecordState, MeshRecord, PlanningContext, RobotRecord, SceneMeta,
+    StoredPose,
 };
 use sublevel_core::body::ellipsoid;
 
@@ -24,6 +25,15 @@ fn job(state: JobRecordState, created: u64) -> JobRecord {
         message: String::new(),
         created_unix_ms: created,
         finished_unix_ms: 0,
+    }
+}
+
+/// The mesh kept with body `b-3`: a tetrahedron (meters; the last coordinate not a short decimal,
+/// so a lossy float encoding would show).
+pub(crate) fn tetra() -> MeshRecord {
+    MeshRecord {
+        vertices: vec![[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.2, 0.0], [0.0, 0.0, 1.0 / 3.0]],
+        triangles: vec![[0, 2, 1], [0, 1, 3], [1, 2, 3], [2, 0, 3]],
     }
 }
 
@@ -53,6 +63,7 @@ pub(crate) fn check_store(open: &dyn Fn() -> Box<dyn Store>) {
         assert!(s.list_bodies().unwrap().is_empty() && s.list_scenes().unwrap().is_empty());
         s.put_body("b-1", &BodyRecord::single("egg", body.to_file())).unwrap();
         s.put_body("b-2", &BodyRecord::single("two", body.to_file())).unwrap();
+        s.put_body("b-3", &BodyRecord { mesh: Some(tetra()), ..BodyRecord::single("meshed", body.to_file()) }).unwrap();
         s.put_scene("s-1", &SceneMeta::named("one")).unwrap();
         // "s-10" shares the prefix "s-1": its instances must not leak into s-1.
         let mut ten = SceneMeta::named("ten");
@@ -95,7 +106,9 @@ pub(crate) fn check_store(open: &dyn Fn() -> Box<dyn Store>) {
     let b = s.get_body("b-1").unwrap().unwrap();
     assert_eq!(b.name, "egg");
     assert_eq!(b.body.coefficients, body.to_file().coefficients);
-    assert_eq!(s.list_bodies().unwrap().iter().map(|(k, _)| k.as_str()).collect::<Vec<_>>(), ["b-1", "b-2"]);
+    assert!(b.mesh.is_none(), "a body stored without a mesh reads back without one");
+    assert_eq!(s.get_body("b-3").unwrap().unwrap().mesh, Some(tetra()), "the mesh kept with a body reads back");
+    assert_eq!(s.list_bodies().unwrap().iter().map(|(k, _)| k.as_str()).collect::<Vec<_>>(), ["b-1", "b-2", "b-3"]);
     let one = s.get_scene("s-1").unwrap().unwrap();
     assert_eq!(one.meta.name, "one");
     assert_eq!(one.instances.keys().collect::<Vec<_>>(), ["i-a", "i-b"]);

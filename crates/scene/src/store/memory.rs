@@ -177,6 +177,14 @@ mod tests {
         assert_eq!(store.get_scene("s-1").unwrap().unwrap().instances.len(), 2, "s-10's instance is not s-1's");
         assert!(store.delete_scene("s-1").unwrap());
         assert!(store.get_scene("s-1").unwrap().is_none());
+        // A body's mesh is kept with its record.
+        let mesh = crate::MeshRecord {
+            vertices: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+            triangles: vec![[0, 1, 2]],
+        };
+        let ball = ellipsoid([0.0; 3], [0.5; 3]).unwrap().to_file();
+        store.put_body("b-m", &BodyRecord { mesh: Some(mesh.clone()), ..BodyRecord::single("m", ball) }).unwrap();
+        assert_eq!(store.get_body("b-m").unwrap().unwrap().mesh, Some(mesh));
 
         let catalog = Catalog::open(Box::new(MemoryStore::new()), Default::default()).unwrap();
         let b = catalog.add_body("ball", ellipsoid([0.0; 3], [0.5; 3]).unwrap()).unwrap();

@@ -65,8 +65,8 @@ pub use robots::{
     push_motion_answers, robot_summary, scene_robot_to_proto, MAX_CONFIGURATIONS_PER_CALL,
 };
 pub use scenes::{
-    imported_scene_to_proto, instance_to_proto, planning_scene_from_proto, point_to_proto, pose_from_proto,
-    pose_to_proto, poses_from_proto, scene_to_proto, vector_to_proto,
+    import_mesh_settings, imported_scene_to_proto, instance_to_proto, planned_mesh_to_fit, planning_scene_from_proto,
+    point_to_proto, pose_from_proto, pose_to_proto, poses_from_proto, scene_to_proto, vector_to_proto,
 };
 
 /// Longest accepted id, in bytes (ids the server makes are 18 bytes, e.g. `b-3f29c0d1a4e5b6c7`).

@@ -88,7 +88,8 @@ pub fn poses_from_proto(poses: &[pb::InstancePose], max_poses: usize) -> Result<
 }
 
 /// Reads `ImportSceneRequest.scene` (YAML or JSON bytes) into a planning scene and its import
-/// plan ([`sublevel_scene::moveit::ImportPlan`]).
+/// plan ([`sublevel_scene::moveit::ImportPlan`]), its meshes planned for fits or skipped as
+/// `meshes` says.
 ///
 /// # Errors
 /// [`Error::InvalidArgument`] naming `scene` when neither form is set, `yaml` / `json` for bytes
@@ -96,6 +97,7 @@ pub fn poses_from_proto(poses: &[pb::InstancePose], max_poses: usize) -> Result<
 /// validate (e.g. `yaml.world.collision_objects[3].primitive_poses[0]`).
 pub fn planning_scene_from_proto(
     scene: Option<&pb::import_scene_request::Scene>,
+    meshes: sublevel_scene::moveit::MeshImport,
 ) -> Result<(sublevel_scene::moveit::PlanningScene, sublevel_scene::moveit::ImportPlan)> {
     use sublevel_scene::moveit::{ImportPlan, PlanningScene};
     let (parsed, field) = match scene {
@@ -109,16 +111,52 @@ pub fn planning_scene_from_proto(
         other => super::prefix_field(other, field),
     };
     let scene = parsed.map_err(located)?;
-    let plan = ImportPlan::new(&scene).map_err(located)?;
+    let plan = ImportPlan::new(&scene, meshes).map_err(located)?;
     Ok((scene, plan))
 }
 
+/// The compound settings of `ImportScene`'s mesh fits: the server's fit settings `fit` for every
+/// leaf, the default leaf degrees (2, 4, 6) and parents, and the leaf-excess tolerance
+/// `mesh_tolerance` in meters (0: the default, 1 % of each mesh's bounding-box diagonal, as
+/// `sublevel fit --parts auto`).
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `mesh_tolerance` when it is not a finite number ≥ 0, or a
+/// field of [`sublevel_fit::compound::CompoundSettings::validate`].
+pub fn import_mesh_settings(
+    mesh_tolerance: f64,
+    fit: sublevel_fit::FitSettings,
+) -> Result<sublevel_fit::compound::CompoundSettings> {
+    let t = mesh_tolerance;
+    if !(t.is_finite() && t >= 0.0) {
+        return Err(Error::invalid("mesh_tolerance", format!("must be a finite number >= 0 meters, got {t}")));
+    }
+    let settings = sublevel_fit::compound::CompoundSettings {
+        fit,
+        excess_tolerance: (t > 0.0).then_some(t),
+        ..sublevel_fit::compound::CompoundSettings::default()
+    };
+    settings.validate()?;
+    Ok(settings)
+}
+
+/// A planned mesh as the triangle mesh a compound fit takes (vertices as written: the mesh's
+/// frame, meters).
+pub fn planned_mesh_to_fit(mesh: &sublevel_scene::moveit::PlannedMesh) -> sublevel_fit::mesh::TriangleMesh {
+    sublevel_fit::mesh::TriangleMesh {
+        vertices: mesh.vertices.iter().map(|v| Point3::new(v[0], v[1], v[2])).collect(),
+        triangles: mesh.triangles.clone(),
+    }
+}
+
 /// An imported planning scene as the `ImportScene` response: the instances and skipped shapes of
-/// `plan` as written (`imported`), with `scene`'s allowed-collision matrix and robot state.
+/// `plan` as written (`imported`), its meshes with their fit jobs (`mesh_jobs[k]` the job of
+/// `plan.meshes[k]`), with `scene`'s allowed-collision matrix and robot state.
 pub fn imported_scene_to_proto(
     imported: &sublevel_scene::moveit::ImportedScene,
     plan: &sublevel_scene::moveit::ImportPlan,
     scene: &sublevel_scene::moveit::PlanningScene,
+    mesh_jobs: &[String],
 ) -> pb::ImportSceneResponse {
     let count = |n: usize| u32::try_from(n).unwrap_or(u32::MAX);
     let instances = imported
@@ -147,6 +185,21 @@ pub fn imported_scene_to_proto(
             reason: s.reason.clone(),
         })
         .collect();
+    let meshes = plan
+        .meshes
+        .iter()
+        .zip(mesh_jobs)
+        .map(|(m, job_id)| pb::ImportedMesh {
+            name: m.name.clone(),
+            object_id: m.object_id.clone(),
+            shape_index: count(m.shape_index),
+            job_id: job_id.clone(),
+            pose: Some(pose_to_proto(&m.pose)),
+            frame_id: m.frame_id.clone(),
+            vertices: count(m.vertices.len()),
+            triangles: count(m.triangles.len()),
+        })
+        .collect();
     let allowed_collision = scene.allowed_collision.as_ref().map(|acm| pb::AllowedCollisionMatrix {
         names: acm.names.clone(),
         rows: acm.allowed.iter().map(|r| pb::AllowedCollisionRow { allowed: r.clone() }).collect(),
@@ -167,6 +220,7 @@ pub fn imported_scene_to_proto(
         bodies: count(imported.body_ids.len()),
         allowed_collision,
         joint_positions,
+        meshes,
     }
 }
 

@@ -108,6 +108,8 @@ pub(super) async fn get_body(
             body_json: serde_json::to_string(&p.to_file()).map_err(Error::from)?,
             nodes: 1,
             primitive: Some(cv::primitive_to_proto(p)),
+            mesh_vertices: 0,
+            mesh_triangles: 0,
         }));
     }
     let file = built.body.to_file();
@@ -123,7 +125,13 @@ pub(super) async fn get_body(
         body_json,
         nodes: u32::try_from(entry.node_count()).unwrap_or(u32::MAX),
         primitive: None,
+        mesh_vertices: count(entry.mesh().map_or(0, |m| m.vertices.len())),
+        mesh_triangles: count(entry.mesh().map_or(0, |m| m.triangles.len())),
     }))
+}
+
+fn count(n: usize) -> u32 {
+    u32::try_from(n).unwrap_or(u32::MAX)
 }
 
 /// `ListBodies`: a page of the bodies, by id.

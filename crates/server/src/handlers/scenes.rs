@@ -3,10 +3,13 @@
 
 use super::{Handled, SublevelService};
 use crate::convert::{self as cv, require_id};
+use crate::jobs::MeshPlacement;
 use crate::limits::{self, check_room, check_room_for};
 use crate::pb;
 use crate::runtime::blocking;
-use tonic::{Request, Response};
+use sublevel_fit::compound::PartCount;
+use sublevel_scene::moveit::{ImportPlan, MeshImport};
+use tonic::{Request, Response, Status};
 
 /// `CreateScene`: a new empty scene.
 pub(super) async fn create_scene(
@@ -114,20 +117,82 @@ pub(super) async fn remove_instance(
     Ok(Response::new(pb::RemoveInstanceResponse {}))
 }
 
-/// `ImportScene`: reads a MoveIt planning scene, checks its counts against the limits, and writes
-/// it as a new scene of primitive instances ([`sublevel_scene::moveit::ImportPlan`]).
+/// `ImportScene`: reads a MoveIt planning scene, checks its counts against the limits, writes
+/// it as a new scene of primitive instances ([`sublevel_scene::moveit::ImportPlan`]), then starts
+/// one compound fit job per mesh ([`start_mesh_fits`]).
 pub(super) async fn import_scene(
     svc: &SublevelService,
     request: Request<pb::ImportSceneRequest>,
 ) -> Handled<pb::ImportSceneResponse> {
     let req = request.into_inner();
+    let settings = cv::import_mesh_settings(req.mesh_tolerance, svc.config.fit.clone())?;
+    let meshes = if req.skip_meshes { MeshImport::Skip } else { MeshImport::Fit };
     // Parsing a large scene takes milliseconds: off the async workers.
     let source = req.scene;
-    let (scene, plan) = blocking(move || cv::planning_scene_from_proto(source.as_ref())).await?;
+    let (scene, plan) = blocking(move || cv::planning_scene_from_proto(source.as_ref(), meshes)).await?;
+    let fitted = plan.meshes.len();
     check_room(limits::SCENES, svc.catalog.scenes().len(), svc.config.max_scenes)?;
-    check_room_for(limits::BODIES, svc.catalog.bodies().len(), plan.bodies.len(), svc.config.max_bodies)?;
-    check_room_for(limits::INSTANCES, 0, plan.instances.len(), svc.config.max_instances_per_scene)?;
+    check_room_for(limits::BODIES, svc.catalog.bodies().len(), plan.bodies.len() + fitted, svc.config.max_bodies)?;
+    check_room_for(limits::INSTANCES, 0, plan.instances.len() + fitted, svc.config.max_instances_per_scene)?;
+    check_room_for(limits::FIT_QUEUE, svc.jobs.queued(), fitted, svc.config.max_fit_queue)?;
+    for m in &plan.meshes {
+        cv::check_point_count(&format!("mesh `{}`", m.name), m.vertices.len(), svc.config.max_fit_points)?;
+    }
     let catalog = svc.catalog.clone();
     let (imported, plan) = blocking(move || catalog.import_plan(&req.name, &plan).map(|i| (i, plan))).await?;
-    Ok(Response::new(cv::imported_scene_to_proto(&imported, &plan, &scene)))
+    let jobs = start_mesh_fits(svc, &imported.scene_id, &plan, settings).await?;
+    Ok(Response::new(cv::imported_scene_to_proto(&imported, &plan, &scene, &jobs)))
+}
+
+/// Starts the compound fit job of each planned mesh of an imported scene (`parts` auto; the fit
+/// runs on the fitting slots, off the async workers): each stores its body with the mesh and
+/// adds the instance to `scene_id` at the mesh's pose, under its planning name. Returns the job
+/// ids in the plan's order. Should a job not start (the queue filled meanwhile, the server
+/// stopping), the scene is deleted again (the jobs already started then store their bodies and
+/// say that the instance was not added) and the error returned.
+async fn start_mesh_fits(
+    svc: &SublevelService,
+    scene_id: &str,
+    plan: &ImportPlan,
+    settings: sublevel_fit::compound::CompoundSettings,
+) -> Result<Vec<String>, Status> {
+    let mut jobs = Vec::with_capacity(plan.meshes.len());
+    for m in &plan.meshes {
+        let place = MeshPlacement {
+            scene_id: scene_id.to_owned(),
+            name: m.name.clone(),
+            pose: m.pose,
+            max_instances: svc.config.max_instances_per_scene,
+        };
+        let started = svc
+            .jobs
+            .start_compound_placed(
+                body_name(&m.name),
+                cv::planned_mesh_to_fit(m),
+                PartCount::Auto,
+                settings.clone(),
+                Some(place),
+            )
+            .await;
+        match started {
+            Ok(job_id) => jobs.push(job_id),
+            Err(status) => {
+                let catalog = svc.catalog.clone();
+                let id = scene_id.to_owned();
+                let _ = blocking(move || catalog.delete_scene(&id)).await;
+                return Err(status);
+            }
+        }
+    }
+    Ok(jobs)
+}
+
+/// A mesh body's name: its planning name, cut at a character boundary to the longest name the
+/// catalog stores ([`sublevel_scene::MAX_NAME_BYTES`]).
+fn body_name(name: &str) -> String {
+    let mut end = name.len().min(sublevel_scene::MAX_NAME_BYTES);
+    while !name.is_char_boundary(end) {
+        end -= 1;
+    }
+    name[..end].to_owned()
 }
