@@ -21,7 +21,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         eprintln!("usage: check_profile ROBOT.json SCENES_DIR LABELS.csv [EVERY] (scenes as SCENES_DIR/SCENARIO/sceneNNNN.yaml)");
         std::process::exit(2);
     }
+    let start = Instant::now();
     let robot = FittedRobot::load(args[1].as_ref())?;
+    println!("robot read in {:.3} s (sphere trees included)", start.elapsed().as_secs_f64());
     let every: usize = args.get(4).map_or(Ok(10), |s| s.parse())?;
     let text = std::fs::read_to_string(&args[3])?;
     let mut rows: Vec<(String, u32, Vec<Real>)> = Vec::new();

@@ -4,7 +4,11 @@
 //! ```text
 //! q ──FK──► link poses ──► geometry poses (link pose · URDF collision origin)
 //! world pairs (every geometry × every object, minus the allowed ones), by increasing ball gap:
-//!   ball gap > padding (verdict) or ≥ best distance so far (distance)       → decided, no solve
+//!   ball gap, then box gap (15 axes, stopped at the first that separates)
+//!          > padding (verdict) or ≥ best distance so far (distance)          → decided, no solve
+//!   sphere tree (a mesh link against a primitive object): the link's nested balls, every
+//!          triangle piece inside a chain of them, descended against the object's closed form;
+//!          every branch farther than the padding (verdict) or than best (distance) → decided
 //!   sos bound: the link's compound root body (contains every leaf, hence every triangle) against
 //!              the object's exact primitive, or the body containing a mesh object (none: skipped),
 //!              one Newton / active-set solve: d_sos ≤ d_mesh
@@ -12,25 +16,37 @@
 //!   mesh:  the link's triangles against the primitive or the object's triangles (parry's BVH):
 //!          intersecting or within the padding → collides; else the exact mesh distance, the new
 //!          best
-//! self pairs (the SRDF's allowed pairs left out): ball gap, root–root sos bound, then the two
-//!   meshes' triangles
+//! self pairs (the SRDF's allowed pairs left out): ball gap, box gap, the two sphere trees' dual
+//!   descent (a mesh and a primitive: the tree against the primitive), root–root sos bound, then
+//!   the two meshes' triangles
 //! ```
 //!
-//! **No missed collision.** The root body contains the mesh, so `d_sos` never exceeds the mesh's
-//! distance: a pair it calls free is free. A pair it cannot call free (overlap, within the
-//! padding, or a solve that did not converge) is decided on the mesh itself, exactly as a mesh
-//! checker (coal, FCL) decides it: triangles against the primitive or the other mesh's triangles
-//! (a shape wholly inside a closed mesh, touching no triangle, is not a contact for either). So
-//! the verdict is the mesh's, and the sos bodies decide, cheaply, what is far.
+//! **No missed collision.** The sphere trees and the root body contain the mesh: a pair the
+//! trees show farther than the padding has no triangle within it, and `d_sos` never exceeds the
+//! mesh's distance, so a pair either calls free is free. A pair neither can call free (overlap,
+//! within the padding, or a solve that did not converge) is decided on the mesh itself, exactly
+//! as a mesh checker (coal, FCL) decides it: triangles against the primitive or the other mesh's
+//! triangles (a shape wholly inside a closed mesh, touching no triangle, is not a contact for
+//! either). So the verdict is the mesh's, and the trees and sos bodies decide, cheaply, what is
+//! far.
 //!
 //! **Distance.** The minimum robot–world distance is the exact mesh distance of the closest pair:
-//! pairs are taken by their ball gap, the sos bound prunes those that cannot beat the best, and
-//! the rest get the mesh distance.
+//! pairs are taken by their ball gap, the sphere trees and the sos bound prune those that cannot
+//! beat the best, and the rest get the mesh distance.
+//!
+//! **What each stage decides** (the MotionBenchMaker Panda, 1 400 labelled configurations,
+//! `crates/lab/examples/check_profile.rs`, one thread of the 2-core VM, release): per
+//! configuration the ball and box gaps decide 142.6 pairs of the verdict, the sphere trees 0.89
+//! (0.80 of them self pairs, mostly link5–link7 at 2 cm, where the root bodies overlap), and
+//! 0.37 reach the sos solve and 0.36 the mesh, against 1.25 and 1.15 without the trees; the
+//! verdict's median falls from 8.9 µs to 5.7 µs in the same run.
 //!
 //! **Why the root and not the leaves.** On the Panda's links the branch-and-bound descent of a
 //! 32-leaf tree against a box costs tens of µs, the mesh's own BVH distance 1–8 µs and the root's
 //! sos solve 0.4–2 µs: near pairs are cheaper on the mesh than down the tree
-//! (`crates/robot/examples/check_profile.rs` measures it).
+//! (`crates/lab/examples/check_profile.rs` measures it). The sphere trees are another matter:
+//! a ball against a primitive is a closed form of a few ns, so a descent of tens of nodes costs
+//! less than one solve.
 
 use crate::fitted::{FittedRobot, LinkShape};
 use crate::spheres::SphereTree;
