@@ -1,12 +1,15 @@
 //! Where a configuration check spends its time, on a fitted robot and the MotionBenchMaker
 //! labels: the verdict with world pairs only, self pairs only, both, and the full answer with the
-//! minimum distance (medians per configuration, one thread), with the pairs each stage took.
+//! minimum distance (medians per configuration, one thread, overall and per scenario), with the
+//! pairs each stage took — with the sphere stage off and on, each configuration timed both ways
+//! in turn, and the answers that differ between the two (none expected).
 //!
 //! ```text
 //! cargo run --release -p sublevel-lab --example check_profile -- \
 //!     data/robots/panda/panda.robot.json data/robots/mbm_panda/scenes data/robots/mbm_panda/labels_obj.csv [EVERY]
 //! ```
 
+use std::collections::BTreeMap;
 use std::time::Instant;
 use sublevel_core::math::{Isometry3, Real};
 use sublevel_robot::{CheckOptions, FittedRobot, RobotChecker};
@@ -18,7 +21,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         eprintln!("usage: check_profile ROBOT.json SCENES_DIR LABELS.csv [EVERY] (scenes as SCENES_DIR/SCENARIO/sceneNNNN.yaml)");
         std::process::exit(2);
     }
+    let start = Instant::now();
     let robot = FittedRobot::load(args[1].as_ref())?;
+    println!("robot read in {:.3} s (sphere trees included)", start.elapsed().as_secs_f64());
     let every: usize = args.get(4).map_or(Ok(10), |s| s.parse())?;
     let text = std::fs::read_to_string(&args[3])?;
     let mut rows: Vec<(String, u32, Vec<Real>)> = Vec::new();
@@ -37,12 +42,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         ("distance + self", CheckOptions::default()),
     ];
     for (name, options) in variants {
-        let mut times = Vec::new();
-        let (mut model, mut exact, mut pruned) = (0, 0, 0);
+        // Two checkers per scene, the sphere stage off and on, timed on the same configuration
+        // one after the other (the same run, the same machine state).
+        let mut times = [Vec::new(), Vec::new()];
+        let mut by_scenario: BTreeMap<String, [Vec<Real>; 2]> = BTreeMap::new();
+        let mut counts = [[0usize; 4]; 2];
+        let mut disagree = 0;
         let mut current = None;
-        let mut checker = None;
+        let mut checkers = None;
         let mut scene_keep;
-        for (scenario, scene, q) in &rows {
+        for (row, (scenario, scene, q)) in rows.iter().enumerate() {
             if current != Some((scenario.clone(), *scene)) {
                 let path = format!("{}/{scenario}/scene{scene:04}.yaml", args[2]);
                 scene_keep = PlanningScene::from_yaml(&std::fs::read(path)?)?;
@@ -51,27 +60,55 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     world.clear();
                 }
                 let allowed = allowed_override(&scene_keep);
-                checker = Some(RobotChecker::new(&robot, world, &allowed)?);
+                let mut off = RobotChecker::new(&robot, world.clone(), &allowed)?;
+                off.set_sphere_stage(false);
+                checkers = Some([off, RobotChecker::new(&robot, world, &allowed)?]);
                 current = Some((scenario.clone(), *scene));
             }
-            let c = checker.as_mut().ok_or("no checker")?;
-            let t = Instant::now();
-            let a = c.check(q, &Isometry3::identity(), &options)?;
-            times.push(t.elapsed().as_nanos() as Real / 1e3);
-            model += a.pairs_model;
-            exact += a.pairs_exact;
-            pruned += a.pairs_pruned;
+            let cs = checkers.as_mut().ok_or("no checker")?;
+            let mut answers = [None, None];
+            // Alternate which goes first: the second finds the caches warm.
+            let turns = if row % 2 == 0 { [0, 1] } else { [1, 0] };
+            for k in turns {
+                let c = &mut cs[k];
+                let t = Instant::now();
+                let a = c.check(q, &Isometry3::identity(), &options)?;
+                let us = t.elapsed().as_nanos() as Real / 1e3;
+                times[k].push(us);
+                by_scenario.entry(scenario.clone()).or_default()[k].push(us);
+                counts[k][0] += a.pairs_pruned;
+                counts[k][1] += a.pairs_spheres;
+                counts[k][2] += a.pairs_model;
+                counts[k][3] += a.pairs_exact;
+                answers[k] = Some(a);
+            }
+            let (Some(a), Some(b)) = (&answers[0], &answers[1]) else { continue };
+            let same_distance = !options.distance || a.distance == b.distance || (a.distance - b.distance).abs() < 1e-9;
+            if a.world != b.world || a.self_collision != b.self_collision || !same_distance {
+                disagree += 1;
+            }
         }
-        times.sort_by(Real::total_cmp);
         let n = rows.len() as Real;
-        println!(
-            "{name:24} median {:7.1} µs  p90 {:7.1} µs  per configuration: {:.2} pairs by balls, {:.2} sos solves, {:.2} on the meshes",
-            times[times.len() / 2],
-            times[times.len() * 9 / 10],
-            pruned as Real / n,
-            model as Real / n,
-            exact as Real / n
-        );
+        for (k, stage) in ["spheres off", "spheres on "].iter().enumerate() {
+            let t = &mut times[k];
+            t.sort_by(Real::total_cmp);
+            println!(
+                "{name:24} {stage} median {:7.2} µs  p90 {:7.2} µs  per configuration: {:.2} pairs by balls/boxes, {:.2} by spheres, {:.2} sos solves, {:.2} on the meshes",
+                t[t.len() / 2],
+                t[t.len() * 9 / 10],
+                counts[k][0] as Real / n,
+                counts[k][1] as Real / n,
+                counts[k][2] as Real / n,
+                counts[k][3] as Real / n
+            );
+        }
+        println!("{name:24} answers that differ with the stage on: {disagree}");
+        for (scenario, t) in &mut by_scenario {
+            let [off, on] = t;
+            off.sort_by(Real::total_cmp);
+            on.sort_by(Real::total_cmp);
+            println!("    {scenario:18} median off {:7.2} µs  on {:7.2} µs", off[off.len() / 2], on[on.len() / 2]);
+        }
     }
     Ok(())
 }

@@ -44,6 +44,10 @@ pub struct RobotLabelsArgs {
     /// Print every miss and the worst distance errors.
     #[arg(long)]
     verbose: bool,
+    /// Check without the sphere-tree stage (`RobotChecker::set_sphere_stage`), the reference it
+    /// is measured against.
+    #[arg(long)]
+    no_sphere_stage: bool,
 }
 
 #[derive(Default)]
@@ -97,7 +101,9 @@ fn scene_checker<'r>(
     let scene = PlanningScene::from_yaml(&bytes)?;
     let (world, _) = world_objects(&scene)?;
     let allowed = allowed_override(&scene);
-    RobotChecker::new(robot, world, &allowed)
+    let mut checker = RobotChecker::new(robot, world, &allowed)?;
+    checker.set_sphere_stage(!args.no_sphere_stage);
+    Ok(checker)
 }
 
 /// Runs `sublevel-lab robot-labels`.
@@ -375,6 +381,7 @@ mod tests {
             suffix: String::new(),
             every,
             verbose,
+            no_sphere_stage: false,
         }
     }
 

@@ -24,6 +24,7 @@
 //! Building the ~350 nodes of the Panda's trees took seconds of support tables nothing reads.
 
 use crate::model::RobotModel;
+use crate::spheres::{SphereTree, DEFAULT_LEAF_RADIUS};
 use crate::{Error, Result};
 use nalgebra::{Quaternion, Translation3};
 use serde::{Deserialize, Serialize};
@@ -160,6 +161,9 @@ pub enum LinkShape {
         /// parry's triangle mesh of `vertices` and `triangles` with its BVH, built once when the
         /// robot is read (the exact stage of [`crate::check`]).
         exact: parry3d_f64::shape::SharedShape,
+        /// The sphere tree (geometry frame): every point of every triangle inside a chain of its
+        /// balls, built when the robot is read ([`crate::spheres`]); the checks' first stage.
+        spheres: SphereTree,
     },
 }
 
@@ -271,7 +275,13 @@ impl FittedRobot {
                     let exact = parry3d_f64::shape::SharedShape::trimesh(points, triangles.clone()).map_err(|e| {
                         Error::invalid(format!("{field}.mesh"), format!("not a valid triangle mesh: {e:?}"))
                     })?;
-                    (LinkShape::Mesh { body: Box::new(body), vertices, triangles, exact }, sphere, local_box)
+                    let spheres = SphereTree::build(&vertices, &triangles, DEFAULT_LEAF_RADIUS);
+                    if let Some(i) = vertices.iter().position(|v| !spheres.covers(&v.coords)) {
+                        return Err(Error::Numerical(format!(
+                            "{field}.mesh: vertex {i} lies outside the mesh's sphere tree"
+                        )));
+                    }
+                    (LinkShape::Mesh { body: Box::new(body), vertices, triangles, exact, spheres }, sphere, local_box)
                 }
                 _ => {
                     return Err(Error::invalid(

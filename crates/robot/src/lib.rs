@@ -18,6 +18,8 @@
 //!   (paper §V), URDF primitives exact, the SRDF's allowed pairs — saved as a robot file
 //!   ([`fitted`]).
 //! - [`world`]: the world a robot is checked in — named exact primitives and triangle meshes.
+//! - [`spheres`]: sphere trees of link meshes (every point of every triangle inside a chain of
+//!   nested balls), the checks' first stage after the ball and box gaps.
 //! - [`check`]: configurations checked against the world and for
 //!   self-collision: the sos model decides what is far, the meshes what is near; no missed
 //!   collision, and the minimum distance never above the meshes'.
@@ -39,6 +41,7 @@ pub mod fitted;
 pub mod kinematics;
 pub mod model;
 pub mod motion;
+pub mod spheres;
 pub mod srdf;
 pub mod world;
 

@@ -398,3 +398,160 @@ fn a_bad_mesh_object_is_refused_naming_the_field() {
     let small = sublevel_core::body::ellipsoid([0.0; 3], [0.5; 3]).unwrap();
     assert_eq!(field(WorldMesh::new(tri(), vec![[0, 1, 2]], Some(small)).unwrap_err()), "body");
 }
+
+/// A small deterministic generator (xorshift64*), uniform in [0, 1).
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> Real {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        (self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as Real / (1u64 << 53) as Real
+    }
+
+    fn range(&mut self, lo: Real, hi: Real) -> Real {
+        lo + (hi - lo) * self.next()
+    }
+
+    fn pose(&mut self, spread: Real) -> Isometry3 {
+        let axis = Vector3::new(self.range(-1.0, 1.0), self.range(-1.0, 1.0), self.range(-1.0, 1.0));
+        let angle = self.range(-3.1, 3.1);
+        Isometry3::new(
+            Vector3::new(self.range(-spread, spread), self.range(-spread, spread), self.range(-spread, spread)),
+            axis.normalize() * angle,
+        )
+    }
+}
+
+fn panda() -> FittedRobot {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/robots/panda/panda.robot.json");
+    FittedRobot::load(&path).unwrap()
+}
+
+#[test]
+fn sphere_trees_cover_every_triangle_of_the_link_meshes() {
+    let (robot, _dir) = robot();
+    let panda = panda();
+    let mut meshes = 0;
+    for g in robot.geometries.iter().chain(&panda.geometries) {
+        if let LinkShape::Mesh { vertices, triangles, spheres, .. } = &g.shape {
+            meshes += 1;
+            assert_eq!(spheres.uncovered_triangle(vertices, triangles, 6), None, "{}", g.name);
+            // Every node's ball holds its children's leaves' balls' worth of mesh: the leaves are
+            // small, and the root is no larger than needed to hold the mesh's bounding ball.
+            assert!(spheres.leaves().all(|s| s.radius <= spheres.leaf_radius + 1e-6), "{}", g.name);
+            assert!(spheres.nodes[0].sphere.radius <= g.sphere.1 * 1.001 + 1e-9, "{}", g.name);
+        }
+    }
+    assert_eq!(meshes, 2 + 11);
+}
+
+#[test]
+fn ball_distances_to_primitives_match_shape_distance() {
+    use sublevel_query::shape::{shape_distance, ShapeRef};
+    use sublevel_robot::spheres::primitive_signed_distance;
+    let shapes = [
+        Primitive::Box { half_extents: Vector3::new(0.3, 0.1, 0.2) },
+        Primitive::Sphere { radius: 0.25 },
+        Primitive::Cylinder { radius: 0.15, half_height: 0.3 },
+        Primitive::Capsule { radius: 0.1, half_height: 0.25 },
+        Primitive::Halfspace { normal: Vector3::new(0.0, 0.6, 0.8), offset: 0.1 },
+    ];
+    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+    let mut compared = 0;
+    for p in &shapes {
+        for _ in 0..400 {
+            let pose_p = rng.pose(0.5);
+            let radius = rng.range(0.01, 0.2);
+            let center = Isometry3::translation(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
+            let ball = Primitive::Sphere { radius };
+            let local = pose_p.inverse_transform_point(&Point3::from(center.translation.vector)).coords;
+            let ours = primitive_signed_distance(p, &local) - radius;
+            let d = shape_distance(ShapeRef::Primitive(&ball), &center, ShapeRef::Primitive(p), &pose_p, None).unwrap();
+            assert_eq!(d.overlapping, ours <= 0.0, "{p:?}: {ours} vs {}", d.distance);
+            if !d.overlapping {
+                assert!((d.distance - ours).abs() < 1e-9, "{p:?}: {ours} vs {}", d.distance);
+                compared += 1;
+            }
+        }
+    }
+    assert!(compared > 500, "{compared} free pairs compared");
+}
+
+/// The world of a MotionBenchMaker planning scene (its boxes and cylinders; MoveIt's YAML as
+/// the scenes write it: `dimensions` full box sizes or [height, radius], orientation x, y, z, w).
+fn mbm_world(path: &str) -> Vec<WorldObject> {
+    let text = std::fs::read_to_string(std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(path)).unwrap();
+    let numbers = |line: &str| -> Vec<Real> {
+        let inner = &line[line.find('[').unwrap() + 1..line.find(']').unwrap()];
+        inner.split(',').map(|x| x.trim().parse().unwrap()).collect()
+    };
+    let (mut world, mut name, mut kind, mut dims, mut position) = (Vec::new(), String::new(), "", vec![], vec![]);
+    for line in text.lines().map(str::trim) {
+        if let Some(id) = line.strip_prefix("- id: ") {
+            name = id.to_owned();
+        } else if let Some(k) = line.strip_prefix("- type: ") {
+            kind = if k == "box" { "box" } else { "cylinder" };
+        } else if line.starts_with("dimensions:") {
+            dims = numbers(line);
+        } else if line.starts_with("- position:") {
+            position = numbers(line);
+        } else if line.starts_with("orientation:") && !name.is_empty() {
+            let q = numbers(line);
+            let rotation =
+                sublevel_core::math::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[3], q[0], q[1], q[2]));
+            let pose =
+                Isometry3::from_parts(nalgebra::Translation3::new(position[0], position[1], position[2]), rotation);
+            let p = if kind == "box" {
+                Primitive::Box { half_extents: Vector3::new(dims[0], dims[1], dims[2]) / 2.0 }
+            } else {
+                Primitive::Cylinder { radius: dims[1], half_height: dims[0] / 2.0 }
+            };
+            world.push(WorldObject::primitive(&name, p, pose));
+            name.clear();
+        }
+    }
+    world
+}
+
+#[test]
+fn panda_verdicts_and_distances_agree_with_and_without_the_sphere_stage() {
+    let robot = panda();
+    let world = mbm_world("../../data/robots/mbm_panda/scenes/bookshelf_small/scene0001.yaml");
+    assert_eq!(world.len(), 7);
+    let mut off = RobotChecker::new(&robot, world.clone(), &|_, _| None).unwrap();
+    off.set_sphere_stage(false);
+    let mut on = RobotChecker::new(&robot, world, &|_, _| None).unwrap();
+    let limits: Vec<(Real, Real)> = (0..robot.model.dof())
+        .map(|k| robot.model.variable_joint(k).limits.unwrap_or((-std::f64::consts::PI, std::f64::consts::PI)))
+        .collect();
+    let mut rng = Rng(42);
+    let (mut decided, mut colliding, mut free) = (0, 0, 0);
+    for k in 0..300 {
+        let q: Vec<Real> = limits.iter().map(|&(lo, hi)| rng.range(lo, hi)).collect();
+        let base = Isometry3::identity();
+        for padding in [0.0, 0.01] {
+            let verdict = CheckOptions { padding, distance: false, ..Default::default() };
+            let (a, b) = (off.check(&q, &base, &verdict).unwrap(), on.check(&q, &base, &verdict).unwrap());
+            assert_eq!(
+                (a.world, a.self_collision),
+                (b.world, b.self_collision),
+                "configuration {k}, padding {padding}"
+            );
+            decided += b.pairs_spheres;
+            if b.collides {
+                colliding += 1;
+            } else {
+                free += 1;
+            }
+        }
+        if k % 3 == 0 {
+            let full = CheckOptions::default();
+            let (a, b) = (off.check(&q, &base, &full).unwrap(), on.check(&q, &base, &full).unwrap());
+            assert_eq!((a.world, a.self_collision), (b.world, b.self_collision), "configuration {k}");
+            assert!(a.distance == b.distance || (a.distance - b.distance).abs() < 1e-9, "configuration {k}");
+        }
+    }
+    assert!(decided > 100 && colliding > 30 && free > 30, "{decided} pairs by spheres, {colliding} / {free}");
+}
