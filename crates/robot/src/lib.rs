@@ -36,6 +36,7 @@ pub use sublevel_core::{Error, Result};
 
 pub mod advance;
 pub mod check;
+mod exact;
 pub mod fit;
 pub mod fitted;
 pub mod kinematics;
