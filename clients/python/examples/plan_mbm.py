@@ -828,11 +828,20 @@ def main(argv=None) -> int:
             try:
                 before_s, before_m = checker.count.states, checker.count.motions
                 before_r = getattr(checker.count, "rejected", 0)
+                # Start and goal are judged unpadded; when either lies within the search padding,
+                # the problem is searched without it (OMPL refuses an invalid start).
+                search_padding = getattr(checker, "padding", 0.0)
+                checker.padding = 0.0
                 start_ok, goal_ok = checker.valid(start), checker.valid(goal)
+                if search_padding and start_ok and goal_ok:
+                    checker.padding = search_padding
+                    if not (checker.valid(start) and checker.valid(goal)):
+                        checker.padding = 0.0
                 if start_ok and goal_ok:
                     solved, planning, simplify, path = plan_one(args, checker, joints, plan_idx, start, goal)
                 else:
                     solved, planning, simplify, path = False, 0.0, 0.0, []
+                checker.padding = search_padding
                 row = {
                     "scenario": p.scenario,
                     "scene": p.scene_name,
