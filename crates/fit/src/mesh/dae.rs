@@ -40,7 +40,6 @@ pub(super) fn parse_dae_mesh(bytes: &[u8], max_points: usize) -> Result<Triangle
 #[cfg(test)]
 mod tests {
     use super::super::{load_triangle_mesh, MeshFormat};
-    use super::*;
 
     /// A cube of side 100 (UNIT), its node moved by NODE.
     const CUBE: &str = r##"<?xml version="1.0" encoding="utf-8"?>

@@ -4,8 +4,9 @@
 //! [`FittedRobot`] (kinematic model, link bodies, meshes with their BVHs), built once when it is
 //! uploaded or the catalog opens, and shared by every check through an `Arc`. A scene becomes the
 //! world of [`sublevel_robot::RobotChecker`] through [`Catalog::robot_world`]: its instances of
-//! exact primitives, named as the planning scene it was imported from names them, with that
-//! scene's allowed-collision matrix and robot state.
+//! exact primitives and of bodies that kept the mesh they were fitted to (exact mesh obstacles),
+//! named as the planning scene it was imported from names them, with that scene's
+//! allowed-collision matrix and robot state.
 
 use super::{check_name, new_id, read, write, Catalog};
 use crate::store::Store;
