@@ -1,12 +1,15 @@
 //! Where a configuration check spends its time, on a fitted robot and the MotionBenchMaker
 //! labels: the verdict with world pairs only, self pairs only, both, and the full answer with the
 //! minimum distance (medians per configuration, one thread, overall and per scenario), with the
-//! pairs each stage took — with the sphere stage off and on, each configuration timed both ways
-//! in turn, and the answers that differ between the two (none expected).
+//! pairs each stage took — with one stage (`inner`: the inner balls' contact proofs, the default;
+//! `spheres`: the sphere trees) off and on, each configuration timed both ways in turn, and the
+//! answers that differ between the two (none expected). The mean is what a batch costs per
+//! configuration.
 //!
 //! ```text
 //! cargo run --release -p sublevel-lab --example check_profile -- \
-//!     data/robots/panda/panda.robot.json data/robots/mbm_panda/scenes data/robots/mbm_panda/labels_obj.csv [EVERY]
+//!     data/robots/panda/panda.robot.json data/robots/mbm_panda/scenes data/robots/mbm_panda/labels_obj.csv \
+//!     [EVERY] [inner|spheres]
 //! ```
 
 use std::collections::BTreeMap;
@@ -25,6 +28,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let robot = FittedRobot::load(args[1].as_ref())?;
     println!("robot read in {:.3} s (sphere trees included)", start.elapsed().as_secs_f64());
     let every: usize = args.get(4).map_or(Ok(10), |s| s.parse())?;
+    let stage = args.get(5).map_or("inner", String::as_str);
+    if stage != "inner" && stage != "spheres" {
+        return Err(format!("the stage is inner or spheres, got {stage:?}").into());
+    }
     let text = std::fs::read_to_string(&args[3])?;
     let mut rows: Vec<(String, u32, Vec<Real>)> = Vec::new();
     for (k, line) in text.lines().skip(1).enumerate() {
@@ -46,7 +53,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         // one after the other (the same run, the same machine state).
         let mut times = [Vec::new(), Vec::new()];
         let mut by_scenario: BTreeMap<String, [Vec<Real>; 2]> = BTreeMap::new();
-        let mut counts = [[0usize; 4]; 2];
+        let mut counts = [[0usize; 5]; 2];
         let mut disagree = 0;
         let mut current = None;
         let mut checkers = None;
@@ -61,7 +68,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 }
                 let allowed = allowed_override(&scene_keep);
                 let mut off = RobotChecker::new(&robot, world.clone(), &allowed)?;
-                off.set_sphere_stage(false);
+                if stage == "inner" {
+                    off.set_contact_proofs(false);
+                } else {
+                    off.set_sphere_stage(false);
+                }
                 checkers = Some([off, RobotChecker::new(&robot, world, &allowed)?]);
                 current = Some((scenario.clone(), *scene));
             }
@@ -80,6 +91,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 counts[k][1] += a.pairs_spheres;
                 counts[k][2] += a.pairs_model;
                 counts[k][3] += a.pairs_exact;
+                counts[k][4] += a.pairs_proved;
                 answers[k] = Some(a);
             }
             let (Some(a), Some(b)) = (&answers[0], &answers[1]) else { continue };
@@ -89,15 +101,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
         }
         let n = rows.len() as Real;
-        for (k, stage) in ["spheres off", "spheres on "].iter().enumerate() {
+        for (k, state) in ["off", "on "].iter().enumerate() {
             let t = &mut times[k];
+            let mean = t.iter().sum::<Real>() / n;
             t.sort_by(Real::total_cmp);
             println!(
-                "{name:24} {stage} median {:7.2} µs  p90 {:7.2} µs  per configuration: {:.2} pairs by balls/boxes, {:.2} by spheres, {:.2} sos solves, {:.2} on the meshes",
+                "{name:24} {stage} {state} median {:7.2} µs  mean {:7.2} µs  p90 {:7.2} µs  per configuration: {:.2} pairs by balls/boxes, {:.2} by sphere trees, {:.3} proved by inner balls, {:.2} sos solves, {:.2} on the meshes",
                 t[t.len() / 2],
+                mean,
                 t[t.len() * 9 / 10],
                 counts[k][0] as Real / n,
                 counts[k][1] as Real / n,
+                counts[k][4] as Real / n,
                 counts[k][2] as Real / n,
                 counts[k][3] as Real / n
             );
@@ -107,7 +122,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let [off, on] = t;
             off.sort_by(Real::total_cmp);
             on.sort_by(Real::total_cmp);
-            println!("    {scenario:18} median off {:7.2} µs  on {:7.2} µs", off[off.len() / 2], on[on.len() / 2]);
+            let mean = |t: &[Real]| t.iter().sum::<Real>() / t.len() as Real;
+            println!(
+                "    {scenario:18} median off {:7.2} µs  on {:7.2} µs   mean off {:7.2} µs  on {:7.2} µs",
+                off[off.len() / 2],
+                on[on.len() / 2],
+                mean(off),
+                mean(on)
+            );
         }
     }
     Ok(())

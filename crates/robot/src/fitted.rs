@@ -23,6 +23,7 @@
 //! vertices holds the mesh, which is what makes the root's distance a lower bound of the mesh's.
 //! Building the ~350 nodes of the Panda's trees took seconds of support tables nothing reads.
 
+use crate::inner::InnerBalls;
 use crate::model::RobotModel;
 use crate::spheres::{SphereTree, DEFAULT_LEAF_RADIUS};
 use crate::{Error, Result};
@@ -164,6 +165,9 @@ pub enum LinkShape {
         /// The sphere tree (geometry frame): every point of every triangle inside a chain of its
         /// balls, built when the robot is read ([`crate::spheres`]); the checks' first stage.
         spheres: SphereTree,
+        /// Balls inside the mesh's closed components (geometry frame), built when the robot is
+        /// read ([`crate::inner`]): quick proofs of contact.
+        inner: InnerBalls,
     },
 }
 
@@ -281,7 +285,9 @@ impl FittedRobot {
                             "{field}.mesh: vertex {i} lies outside the mesh's sphere tree"
                         )));
                     }
-                    (LinkShape::Mesh { body: Box::new(body), vertices, triangles, exact, spheres }, sphere, local_box)
+                    let inner = InnerBalls::build(&vertices, &triangles);
+                    let shape = LinkShape::Mesh { body: Box::new(body), vertices, triangles, exact, spheres, inner };
+                    (shape, sphere, local_box)
                 }
                 _ => {
                     return Err(Error::invalid(

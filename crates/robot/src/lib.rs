@@ -20,6 +20,7 @@
 //! - [`world`]: the world a robot is checked in — named exact primitives and triangle meshes.
 //! - [`spheres`]: sphere trees of link meshes (every point of every triangle inside a chain of
 //!   nested balls), the checks' first stage after the ball and box gaps.
+//! - [`inner`]: balls inside closed link meshes, which prove a pair colliding without the mesh.
 //! - [`check`]: configurations checked against the world and for
 //!   self-collision: the sos model decides what is far, the meshes what is near; no missed
 //!   collision, and the minimum distance never above the meshes'.
@@ -39,6 +40,7 @@ pub mod check;
 mod exact;
 pub mod fit;
 pub mod fitted;
+pub mod inner;
 pub mod kinematics;
 pub mod model;
 pub mod motion;

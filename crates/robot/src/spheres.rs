@@ -49,6 +49,22 @@ pub const MAX_PIECES: usize = 200_000;
 /// exceed it; it sizes the descents' fixed stacks.
 const MAX_DEPTH: usize = 60;
 
+/// Leaves a descent against a primitive may find undecided (within the threshold, not wholly
+/// within the padding) while it goes on looking for a node that proves contact.
+pub const PROOF_LEAVES: usize = 8;
+
+/// What a sphere tree shows of a pair ([`SphereTree::against_primitive`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TreeAnswer {
+    /// Every piece is farther than the threshold: the pair is free (and farther than it).
+    Apart,
+    /// A node's whole ball, hence a part of a triangle, lies within the padding: the pair
+    /// collides as a mesh checker decides it.
+    Touches,
+    /// Neither.
+    Unknown,
+}
+
 /// A ball: center and radius (meters), in the frame of the mesh it bounds.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Sphere {
@@ -167,26 +183,63 @@ impl SphereTree {
     /// `p`'s frame, is farther than `threshold` from `p` (meters, ≥ 0), with a hair for rounding.
     /// `false` for an empty tree.
     pub fn apart_from_primitive(&self, r: &Matrix3, t: &Vector3, p: &Primitive, threshold: Real) -> bool {
+        self.against_primitive(r, t, p, threshold, Real::NEG_INFINITY) == TreeAnswer::Apart
+    }
+
+    /// The tree against the primitive `p` (its centers mapped by `x ↦ r·x + t` into `p`'s frame):
+    /// [`TreeAnswer::Apart`] when every piece is farther than `threshold` (meters, ≥ 0),
+    /// [`TreeAnswer::Touches`] when a node's whole ball lies closer than `padding` to `p` (inside
+    /// it for padding 0), so that the pieces it holds — parts of triangles — do too, else
+    /// [`TreeAnswer::Unknown`]. The descent takes the deeper child first and gives up the search
+    /// for a touching node after [`PROOF_LEAVES`] leaves it could not decide. Empty: `Unknown`.
+    pub fn against_primitive(
+        &self,
+        r: &Matrix3,
+        t: &Vector3,
+        p: &Primitive,
+        threshold: Real,
+        padding: Real,
+    ) -> TreeAnswer {
         if self.nodes.is_empty() {
-            return false;
+            return TreeAnswer::Unknown;
         }
-        let mut stack = [0u32; MAX_DEPTH + 2];
+        // Each entry: a node and its center's signed distance to `p`.
+        let sd = |k: u32| primitive_signed_distance(p, &(r * self.nodes[k as usize].sphere.center + t));
+        let mut stack = [(0u32, 0.0); MAX_DEPTH + 2];
+        stack[0] = (0, sd(0));
         let mut len = 1;
+        let mut undecided = 0;
         while len > 0 {
             len -= 1;
-            let node = &self.nodes[stack[len] as usize];
-            let d = primitive_signed_distance(p, &(r * node.sphere.center + t)) - node.sphere.radius;
-            if d > threshold + 1e-12 {
+            let (k, d) = stack[len];
+            let node = &self.nodes[k as usize];
+            if d - node.sphere.radius > threshold + 1e-12 {
                 continue;
             }
-            if node.children == 0 {
-                return false;
+            if d + node.sphere.radius < padding - 1e-12 {
+                return TreeAnswer::Touches;
             }
-            stack[len] = node.children;
-            stack[len + 1] = node.children + 1;
+            if node.children == 0 {
+                undecided += 1;
+                if undecided > PROOF_LEAVES || padding == Real::NEG_INFINITY {
+                    return TreeAnswer::Unknown;
+                }
+                continue;
+            }
+            // The deeper child on top of the stack.
+            let c = node.children;
+            let (da, db) = (sd(c), sd(c + 1));
+            let (ra, rb) = (self.nodes[c as usize].sphere.radius, self.nodes[c as usize + 1].sphere.radius);
+            let (first, second) = if da - ra <= db - rb { ((c, da), (c + 1, db)) } else { ((c + 1, db), (c, da)) };
+            stack[len] = second;
+            stack[len + 1] = first;
             len += 2;
         }
-        true
+        if undecided > 0 {
+            TreeAnswer::Unknown
+        } else {
+            TreeAnswer::Apart
+        }
     }
 
     /// Whether every piece of this tree is farther than `threshold` (meters, ≥ 0) from every

@@ -516,18 +516,20 @@ fn mbm_world(path: &str) -> Vec<WorldObject> {
 }
 
 #[test]
-fn panda_verdicts_and_distances_agree_with_and_without_the_sphere_stage() {
+fn panda_verdicts_and_distances_agree_with_and_without_the_sphere_stages() {
     let robot = panda();
     let world = mbm_world("../../data/robots/mbm_panda/scenes/bookshelf_small/scene0001.yaml");
     assert_eq!(world.len(), 7);
+    // The reference: the sphere trees and the inner balls off (the sos bound and the meshes).
     let mut off = RobotChecker::new(&robot, world.clone(), &|_, _| None).unwrap();
     off.set_sphere_stage(false);
+    off.set_contact_proofs(false);
     let mut on = RobotChecker::new(&robot, world, &|_, _| None).unwrap();
     let limits: Vec<(Real, Real)> = (0..robot.model.dof())
         .map(|k| robot.model.variable_joint(k).limits.unwrap_or((-std::f64::consts::PI, std::f64::consts::PI)))
         .collect();
     let mut rng = Rng(42);
-    let (mut decided, mut colliding, mut free) = (0, 0, 0);
+    let (mut decided, mut proved, mut colliding, mut free) = (0, 0, 0, 0);
     for k in 0..300 {
         let q: Vec<Real> = limits.iter().map(|&(lo, hi)| rng.range(lo, hi)).collect();
         let base = Isometry3::identity();
@@ -540,6 +542,8 @@ fn panda_verdicts_and_distances_agree_with_and_without_the_sphere_stage() {
                 "configuration {k}, padding {padding}"
             );
             decided += b.pairs_spheres;
+            proved += b.pairs_proved;
+            assert_eq!(a.pairs_proved, 0);
             if b.collides {
                 colliding += 1;
             } else {
@@ -553,5 +557,71 @@ fn panda_verdicts_and_distances_agree_with_and_without_the_sphere_stage() {
             assert!(a.distance == b.distance || (a.distance - b.distance).abs() < 1e-9, "configuration {k}");
         }
     }
-    assert!(decided > 100 && colliding > 30 && free > 30, "{decided} pairs by spheres, {colliding} / {free}");
+    assert!(
+        decided > 100 && proved > 30 && colliding > 30 && free > 30,
+        "{decided} pairs by spheres, {proved} proved, {colliding} / {free}"
+    );
+}
+
+/// Crossings of the ray from `x` along `dir` with the triangles (Möller and Trumbore's test).
+fn ray_crossings(vertices: &[Point3], triangles: &[[u32; 3]], x: &Vector3, dir: &Vector3) -> usize {
+    triangles
+        .iter()
+        .filter(|t| {
+            let [a, b, c] = t.map(|i| vertices[i as usize].coords);
+            let (e1, e2) = (b - a, c - a);
+            let p = dir.cross(&e2);
+            let det = e1.dot(&p);
+            if det.abs() < 1e-15 {
+                return false;
+            }
+            let s = x - a;
+            let u = s.dot(&p) / det;
+            let q = s.cross(&e1);
+            let v = dir.dot(&q) / det;
+            let t = e2.dot(&q) / det;
+            (0.0..=1.0).contains(&u) && v >= 0.0 && u + v <= 1.0 && t > 0.0
+        })
+        .count()
+}
+
+#[test]
+fn inner_balls_lie_inside_the_link_meshes() {
+    use parry3d_f64::query::PointQuery;
+    let (robot, _dir) = robot();
+    let panda = panda();
+    let (mut meshes, mut balls) = (0, 0);
+    for g in robot.geometries.iter().chain(&panda.geometries) {
+        let LinkShape::Mesh { vertices, triangles, inner, .. } = &g.shape else { continue };
+        meshes += usize::from(!inner.is_empty());
+        for c in &inner.components {
+            for s in &c.balls {
+                balls += 1;
+                // Inside: an odd number of crossings along three rays (brute force, every
+                // triangle of the mesh; the Panda's balls lie in one component each).
+                for dir in [Vector3::new(0.31, 0.52, 0.79), Vector3::new(-0.7, 0.2, 0.1), Vector3::new(0.1, -0.3, -0.9)]
+                {
+                    assert_eq!(ray_crossings(vertices, triangles, &s.center, &dir) % 2, 1, "{}: {s:?}", g.name);
+                }
+                // No triangle within the radius (each triangle's own distance, parry).
+                let x = parry3d_f64::math::Vector::new(s.center.x, s.center.y, s.center.z);
+                for t in triangles {
+                    let [a, b, c] = t.map(|i| {
+                        parry3d_f64::math::Vector::new(
+                            vertices[i as usize].x,
+                            vertices[i as usize].y,
+                            vertices[i as usize].z,
+                        )
+                    });
+                    let d = parry3d_f64::shape::Triangle::new(a, b, c).distance_to_local_point(x, true);
+                    assert!(d >= s.radius, "{}: a triangle at {d} m from {s:?}", g.name);
+                }
+                // The component's bounding ball holds the ball.
+                assert!((s.center - c.bound.center).norm() + s.radius <= c.bound.radius, "{}", g.name);
+            }
+        }
+    }
+    // The test robot's two closed meshes and the Panda's ten closed links (link6's welded soup
+    // is open in places).
+    assert!(meshes >= 12 && balls >= 100, "{meshes} meshes with inner balls, {balls} balls");
 }
