@@ -48,6 +48,10 @@ pub struct RobotLabelsArgs {
     /// is measured against.
     #[arg(long)]
     no_sphere_stage: bool,
+    /// Check without the contact proofs (`RobotChecker::set_contact_proofs`), the reference they
+    /// are measured against.
+    #[arg(long)]
+    no_contact_proofs: bool,
 }
 
 #[derive(Default)]
@@ -103,6 +107,7 @@ fn scene_checker<'r>(
     let allowed = allowed_override(&scene);
     let mut checker = RobotChecker::new(robot, world, &allowed)?;
     checker.set_sphere_stage(!args.no_sphere_stage);
+    checker.set_contact_proofs(!args.no_contact_proofs);
     Ok(checker)
 }
 
@@ -382,6 +387,7 @@ mod tests {
             every,
             verbose,
             no_sphere_stage: false,
+            no_contact_proofs: false,
         }
     }
 

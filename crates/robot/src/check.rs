@@ -12,6 +12,7 @@
 //!          triangle piece inside a chain of them, descended against the object's closed form;
 //!          every branch farther than the padding (verdict) or than best (distance) → decided;
 //!          a node's whole ball within the padding                      → collides, no mesh test
+//!   vertices (a mesh link against a primitive): a vertex within the padding → collides
 //!   sos bound: the link's compound root body (contains every leaf, hence every triangle) against
 //!              the object's exact primitive, or the body containing a mesh object (none: skipped),
 //!              one Newton / active-set solve: d_sos ≤ d_mesh
@@ -21,8 +22,8 @@
 //!          best
 //! self pairs (the SRDF's allowed pairs left out): ball gap, box gap, the two sphere trees' dual
 //!   descent (a mesh and a primitive: the tree against the primitive), the contact proofs (two
-//!   closed meshes' inner balls; a tree node inside the other's inner ball), root–root sos
-//!   bound, then the two meshes' triangles
+//!   closed meshes' inner balls; a vertex or tree node inside the other's inner ball),
+//!   root–root sos bound, then the two meshes' triangles
 //! ```
 //!
 //! **No false collision from the proofs.** The contact proofs ([`crate::inner`]) show that a
@@ -62,7 +63,7 @@
 use crate::exact::{box_gap, box_gap_past, exact_collides, exact_pair, exact_primitive, parry_pose};
 use crate::exact::{ExactShape, PairOutcome, PlacedBox};
 use crate::fitted::{FittedRobot, LinkShape};
-use crate::inner::{link_touches_primitive, links_touch};
+use crate::inner::{link_touches_primitive, link_vertex_touches, links_touch};
 use crate::spheres::{SphereTree, TreeAnswer};
 use crate::world::{WorldObject, WorldShape};
 use crate::{Error, Result};
@@ -70,65 +71,7 @@ use sublevel_core::math::{Isometry3, Point3, Real, Vector3};
 use sublevel_core::primitive::Primitive;
 use sublevel_query::shape::{shape_distance, ShapeRef};
 
-/// What a check computes.
-#[derive(Clone, Copy, Debug)]
-pub struct CheckOptions {
-    /// Padding added around every robot geometry (meters, ≥ 0): a pair closer than it collides.
-    pub padding: Real,
-    /// Whether the minimum robot–world distance is computed (else the world pairs stop at the
-    /// first collision and far pairs are not solved).
-    pub distance: bool,
-    /// Whether self-collision pairs are checked.
-    pub self_collision: bool,
-    /// Whether the minimum distance's joint-space gradient is computed (with `distance`).
-    pub gradient: bool,
-}
-
-impl Default for CheckOptions {
-    fn default() -> Self {
-        Self { padding: 0.0, distance: true, self_collision: true, gradient: false }
-    }
-}
-
-/// The answer for one configuration.
-#[derive(Clone, Debug, PartialEq)]
-pub struct ConfigurationAnswer {
-    /// Whether the robot collides with the world or itself.
-    pub collides: bool,
-    /// Whether a robot geometry collides with a world object.
-    pub world: bool,
-    /// Whether two robot geometries of a checked self pair collide.
-    pub self_collision: bool,
-    /// Minimum robot–world distance (meters): the closest pair's mesh distance (module docs); 0
-    /// when the robot collides with the world; +∞ with no world pair; NaN when not asked for.
-    pub distance: Real,
-    /// The world pair of `distance` (or the colliding one), as (geometry index, object index).
-    pub pair: Option<(usize, usize)>,
-    /// Witness points of `distance` on the robot and on the object (world frame, meters), when
-    /// the robot is free of the world.
-    pub witnesses: Option<(Point3, Point3)>,
-    /// A colliding self pair, as geometry indices.
-    pub self_pair: Option<(usize, usize)>,
-    /// With [`CheckOptions::gradient`], when the robot is free of the world at a finite distance:
-    /// ∂distance/∂q, one entry per configuration entry (meters per radian or per meter). The
-    /// closest points' normal `n` (from the object's witness to the robot's) times the point
-    /// Jacobian of the robot's witness ([`crate::RobotModel::point_jacobian`]): `∂d/∂q_k = n·∂x/∂q_k`,
-    /// the derivative wherever the closest pair and its closest features do not switch.
-    pub gradient: Option<Vec<Real>>,
-    /// Whether every solve the answer rests on converged (pairs resolved on the mesh count as
-    /// converged: the mesh test is exact).
-    pub converged: bool,
-    /// Pairs decided by their bounding balls.
-    pub pairs_pruned: usize,
-    /// Pairs decided by the links' sphere trees ([`crate::spheres`]), no solve.
-    pub pairs_spheres: usize,
-    /// Pairs proved colliding by the link meshes' inner balls ([`crate::inner`]), no mesh test.
-    pub pairs_proved: usize,
-    /// Pairs bounded by the sos bodies (one solve each).
-    pub pairs_model: usize,
-    /// Pairs resolved on the meshes.
-    pub pairs_exact: usize,
-}
+pub use crate::answer::{CheckOptions, ConfigurationAnswer};
 
 /// A link shape as the sos bound sees it: the primitive, or the compound body's root (which
 /// contains every leaf, hence every triangle).
@@ -139,6 +82,15 @@ fn root_shape(s: &LinkShape) -> ShapeRef<'_> {
     }
 }
 
+/// A world object's bound for the ball gaps, in the world frame.
+#[derive(Clone, Copy, Debug)]
+enum WorldBall {
+    /// A ball containing the object (meters).
+    Ball { center: Vector3, radius: Real },
+    /// A halfspace {x : normal·x ≤ offset} (unit normal).
+    Plane { normal: Vector3, offset: Real },
+}
+
 /// Checks configurations of one robot in one world (module docs). Holds the world's exact shapes
 /// and scratch space; one checker per thread.
 pub struct RobotChecker<'r> {
@@ -147,6 +99,8 @@ pub struct RobotChecker<'r> {
     world_exact: Vec<ExactShape>,
     /// Each world object's placed box (`None` for a halfspace).
     world_boxes: Vec<Option<PlacedBox>>,
+    /// Each world object's ball in the world frame, or its plane (a halfspace).
+    world_balls: Vec<WorldBall>,
     robot_exact: Vec<ExactShape>,
     /// Checked world pairs per geometry (objects not allowed to touch it).
     world_pairs: Vec<Vec<usize>>,
@@ -231,11 +185,25 @@ impl<'r> RobotChecker<'r> {
             })
             .collect();
         let world_boxes = world.iter().map(|o| o.shape.local_box().map(|b| PlacedBox::new(&o.pose, &b))).collect();
+        let world_balls = world
+            .iter()
+            .map(|o| match o.shape {
+                WorldShape::Primitive(Primitive::Halfspace { normal, offset }) => {
+                    let n = o.pose.rotation * normal;
+                    WorldBall::Plane { normal: n, offset: offset + n.dot(&o.pose.translation.vector) }
+                }
+                _ => {
+                    let (center, radius) = o.shape.ball();
+                    WorldBall::Ball { center: o.pose.transform_point(&center.into()).coords, radius }
+                }
+            })
+            .collect();
         Ok(Self {
             robot,
             world,
             world_exact,
             world_boxes,
+            world_balls,
             robot_exact,
             world_pairs,
             self_pairs,
@@ -507,14 +475,10 @@ impl<'r> RobotChecker<'r> {
     /// Ball gap of robot geometry `g` and world object `o` (a lower bound of their distance).
     fn world_gap(&self, g: usize, o: usize) -> Real {
         let r = self.robot.geometries[g].sphere.1;
-        let obj = &self.world[o];
-        if let WorldShape::Primitive(Primitive::Halfspace { normal, offset }) = obj.shape {
-            let n = obj.pose.rotation * normal;
-            let d = offset + n.dot(&obj.pose.translation.vector);
-            return n.dot(&self.centers[g]) - d - r;
+        match self.world_balls[o] {
+            WorldBall::Plane { normal, offset } => normal.dot(&self.centers[g]) - offset - r,
+            WorldBall::Ball { center, radius } => (self.centers[g] - center).norm() - r - radius,
         }
-        let (center, radius) = obj.shape.ball();
-        (self.centers[g] - obj.pose.transform_point(&center.into()).coords).norm() - r - radius
     }
 
     /// Whether the inner balls of robot geometry `g` prove that it meets world object `o` (a
@@ -523,6 +487,14 @@ impl<'r> RobotChecker<'r> {
         let obj = &self.world[o];
         let WorldShape::Primitive(p) = &obj.shape else { return false };
         link_touches_primitive(&self.robot.geometries[g].shape, &self.poses[g], p, &obj.pose)
+    }
+
+    /// Whether a vertex of robot geometry `g` lies within `padding` of world object `o` (a
+    /// primitive; [`crate::inner`]).
+    fn vertex_touches_world(&self, g: usize, o: usize, padding: Real) -> bool {
+        let obj = &self.world[o];
+        let WorldShape::Primitive(p) = &obj.shape else { return false };
+        link_vertex_touches(&self.robot.geometries[g].shape, &self.poses[g], p, &obj.pose, padding)
     }
 
     /// The sphere tree of robot geometry `g` against world object `o` ([`crate::spheres`]):
@@ -623,6 +595,10 @@ impl<'r> RobotChecker<'r> {
                     continue;
                 }
                 TreeAnswer::Touches => {
+                    answer.pairs_proved += 1;
+                    Ok(Some(PairOutcome::Collides))
+                }
+                TreeAnswer::Unknown if self.contact_proofs && self.vertex_touches_world(g, o, padding) => {
                     answer.pairs_proved += 1;
                     Ok(Some(PairOutcome::Collides))
                 }

@@ -19,6 +19,15 @@
 //!      w_B ≠ 0 on U and on its boundary, which lies in C_A: a contradiction)
 //! ```
 //!
+//! Two more proofs need no closed component:
+//!
+//! ```text
+//! a mesh vertex v closer than the padding to O                    ⇒ the triangles at v are too
+//! a vertex (or a sphere-tree node) of a connected mesh A inside an inner ball of C_B, and A
+//!     reaching outside C_B's bounding ball                        ⇒ A meets C_B (as above: A
+//!     is connected and holds points where w_B ≠ 0 and where w_B = 0)
+//! ```
+//!
 //! A mesh checker (coal, FCL, parry's triangle BVH) calls such a pair in contact, so a proof
 //! gives the mesh's own verdict without the mesh. "Reaches outside" is what keeps the proofs
 //! exact against those checkers: an obstacle wholly inside a closed link mesh touches no triangle,
@@ -69,6 +78,9 @@ pub struct InnerBalls {
     pub connected: bool,
     /// The whole mesh's extreme vertices, as [`InnerComponent::extremes`].
     pub extremes: Vec<Vector3>,
+    /// A ball tree over the mesh's vertices (welded), one vertex per leaf: a vertex strictly
+    /// within the padding of an obstacle proves contact, whatever the mesh's topology.
+    pub vertex_tree: SphereTree,
 }
 
 impl InnerBalls {
@@ -88,7 +100,10 @@ impl InnerBalls {
             tris.iter().flatten().for_each(|&i| seen[i as usize] = true);
             welded.iter().zip(seen).filter(|(_, s)| *s).map(|(v, _)| *v).collect()
         };
-        Self { components, connected, extremes: extremes(&used) }
+        let points: Vec<Point3> = used.iter().map(|v| Point3::from(*v)).collect();
+        let singles: Vec<[u32; 3]> = (0..points.len() as u32).map(|i| [i, i, i]).collect();
+        let vertex_tree = SphereTree::build(&points, &singles, 0.0);
+        Self { components, connected, extremes: extremes(&used), vertex_tree }
     }
 
     /// Whether the mesh, its points mapped by `x ↦ r·x + t` into the frame of the primitive `p`,
@@ -101,6 +116,13 @@ impl InnerBalls {
                     .iter()
                     .any(|s| crate::spheres::primitive_signed_distance(p, &(r * s.center + t)) < s.radius - ROUNDING)
         })
+    }
+
+    /// Whether a vertex of the mesh, mapped by `x ↦ r·x + t` into the frame of the primitive
+    /// `p`, lies closer than `padding` (meters, ≥ 0) to `p` (inside it for padding 0): the
+    /// triangles at that vertex then come within the padding too.
+    pub fn vertex_touches_primitive(&self, r: &Matrix3, t: &Vector3, p: &Primitive, padding: Real) -> bool {
+        self.vertex_tree.against_primitive(r, t, p, padding, padding) == TreeAnswer::Touches
     }
 
     /// Whether this mesh and `other`, whose points map into this mesh's frame by `x ↦ r·x + t`,
@@ -144,7 +166,9 @@ impl InnerBalls {
             reaches
                 && c.balls.iter().any(|s| {
                     let ball = Primitive::Sphere { radius: s.radius };
-                    tree.against_primitive(&rt, &(tt - s.center), &ball, 0.0, 0.0) == TreeAnswer::Touches
+                    let t = tt - s.center;
+                    self.vertex_tree.against_primitive(&rt, &t, &ball, 0.0, 0.0) == TreeAnswer::Touches
+                        || tree.against_primitive(&rt, &t, &ball, 0.0, 0.0) == TreeAnswer::Touches
                 })
         })
     }
@@ -169,6 +193,20 @@ pub(crate) fn link_touches_primitive(shape: &LinkShape, pose: &Isometry3, p: &Pr
     }
     let rel = pose_p.inv_mul(pose);
     inner.touch_primitive(rel.rotation.to_rotation_matrix().matrix(), &rel.translation.vector, p)
+}
+
+/// Whether a vertex of link shape `shape` at `pose` lies within `padding` of the primitive `p`
+/// at `pose_p` ([`InnerBalls::vertex_touches_primitive`]); `false` for a primitive link.
+pub(crate) fn link_vertex_touches(
+    shape: &LinkShape,
+    pose: &Isometry3,
+    p: &Primitive,
+    pose_p: &Isometry3,
+    padding: Real,
+) -> bool {
+    let LinkShape::Mesh { inner, .. } = shape else { return false };
+    let rel = pose_p.inv_mul(pose);
+    inner.vertex_touches_primitive(rel.rotation.to_rotation_matrix().matrix(), &rel.translation.vector, p, padding)
 }
 
 /// Whether two link shapes at their poses are proved to meet (module docs): two meshes' inner
@@ -421,6 +459,22 @@ mod tests {
         let w: Vec<Vector3> = v.iter().map(|p| p.coords).collect();
         assert!((winding_number(&w, &t, &Vector3::zeros()).abs() - 1.0).abs() < 1e-12);
         assert!(winding_number(&w, &t, &Vector3::new(0.3, 0.0, 0.0)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_vertex_within_the_padding_proves_contact() {
+        let (v, t) = cube(0.1);
+        let inner = InnerBalls::build(&v, &t);
+        let id = Matrix3::identity();
+        let small = Primitive::Box { half_extents: Vector3::repeat(0.02) };
+        // A small box around the corner (0.1, 0.1, 0.1): the corner lies inside it.
+        assert!(inner.vertex_touches_primitive(&id, &Vector3::repeat(-0.1), &small, 0.0));
+        // The box 0.01 m beyond the corner along x: within a padding of 0.02 m, not of 0.005 m.
+        let t = -Vector3::new(0.13, 0.1, 0.1);
+        assert!(inner.vertex_touches_primitive(&id, &t, &small, 0.02));
+        assert!(!inner.vertex_touches_primitive(&id, &t, &small, 0.005));
+        // Touching a face's middle holds no vertex: no proof from the vertices.
+        assert!(!inner.vertex_touches_primitive(&id, &-Vector3::new(0.11, 0.0, 0.0), &small, 0.0));
     }
 
     #[test]

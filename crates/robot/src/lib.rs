@@ -36,6 +36,7 @@
 pub use sublevel_core::{Error, Result};
 
 pub mod advance;
+mod answer;
 pub mod check;
 mod exact;
 pub mod fit;
