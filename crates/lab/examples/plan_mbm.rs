@@ -9,10 +9,14 @@
 //! ```text
 //! cargo run --release -p sublevel-lab --example plan_mbm -- [--edges sampled|certified] [--timeout S]
 //!     [--range R] [--seed N] [--robot data/robots/panda/panda.robot.json]
-//!     [--problems data/robots/mbm_panda] [--scenarios a,b,...]
+//!     [--problems data/robots/mbm_panda] [--scenarios a,b,...] [--limit 10]
 //! ```
 //!
-//! Problems: `PROBLEMS/scenes/SCENARIO/sceneNNNN.yaml` with `PROBLEMS/requests/SCENARIO/requestNNNN.yaml`.
+//! Problems 1 to `--limit` of each scenario: `PROBLEMS/scenes/SCENARIO/sceneNNNN.yaml` with
+//! `PROBLEMS/requests/SCENARIO/requestNNNN.yaml` (the repository's 10 per scenario), or the
+//! MotionBenchMaker archive's layout, `PROBLEMS/problems/SCENARIO_panda/{scene,request}NNNN.yaml`
+//! (all 100: `tar xjf ../shared/peers/robots/panda/problems.tar.bz2 -C /tmp`, then
+//! `--problems /tmp --limit 100`).
 //! RRT-Connect (Kuffner and LaValle, ICRA 2000): two trees, from the start and from the goal; each
 //! round samples a configuration uniformly in the joint limits, extends one tree towards it by at
 //! most `range` (joint-space Euclidean, radians), then grows the other tree towards the new node
@@ -32,6 +36,7 @@ struct Settings {
     robot: String,
     problems: String,
     scenarios: Vec<String>,
+    limit: usize,
 }
 
 fn settings() -> Result<Settings, String> {
@@ -53,6 +58,7 @@ fn settings() -> Result<Settings, String> {
         ]
         .map(String::from)
         .to_vec(),
+        limit: 10,
     };
     let args: Vec<String> = std::env::args().skip(1).collect();
     let mut i = 0;
@@ -66,6 +72,7 @@ fn settings() -> Result<Settings, String> {
             "--robot" => s.robot = value,
             "--problems" => s.problems = value,
             "--scenarios" => s.scenarios = value.split(',').map(String::from).collect(),
+            "--limit" => s.limit = value.parse().map_err(|e| format!("--limit: {e}"))?,
             other => return Err(format!("unknown argument {other}")),
         }
         i += 2;
@@ -177,9 +184,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for scenario in &s.scenarios {
         let (mut solved, mut total, mut crossing, mut near) = (0, 0, 0, 0);
         let (mut times, mut states, mut edges) = (Vec::new(), Vec::new(), Vec::new());
-        for k in 1..=10 {
-            let scene_path = format!("{}/scenes/{scenario}/scene{k:04}.yaml", s.problems);
-            let request_path = format!("{}/requests/{scenario}/request{k:04}.yaml", s.problems);
+        for k in 1..=s.limit {
+            let mut scene_path = format!("{}/scenes/{scenario}/scene{k:04}.yaml", s.problems);
+            let mut request_path = format!("{}/requests/{scenario}/request{k:04}.yaml", s.problems);
+            if !std::path::Path::new(&scene_path).exists() {
+                scene_path = format!("{}/problems/{scenario}_panda/scene{k:04}.yaml", s.problems);
+                request_path = format!("{}/problems/{scenario}_panda/request{k:04}.yaml", s.problems);
+            }
             let Ok(scene_bytes) = std::fs::read(&scene_path) else { continue };
             let scene = PlanningScene::from_yaml(&scene_bytes)?;
             let request = MotionPlanRequest::from_yaml(&std::fs::read(&request_path)?)?;

@@ -2,7 +2,7 @@
 //! the sphere trees' proofs that it is free ([`crate::spheres`]).
 //!
 //! ```text
-//! mesh M, split into its edge-connected components C (vertices welded by position);
+//! mesh M, split into its connected components C (vertices welded by position);
 //! a component is closed when every directed edge (i, j) of its triangles appears once and
 //! (j, i) once: its winding number w_C(x) is then an integer off C, 0 outside C's hull
 //! inner ball S = B(c, r) of C:  |w_C(c)| ≥ 1 and r < dist(c, C)   ⇒   w_C ≠ 0 on all of S
@@ -72,7 +72,7 @@ pub struct InnerComponent {
 pub struct InnerBalls {
     /// The closed components that hold at least one ball.
     pub components: Vec<InnerComponent>,
-    /// Whether the whole mesh is one edge-connected component (closed or not): then any part of
+    /// Whether the whole mesh is one connected component (closed or not): then any part of
     /// it inside another mesh's closed component, with a vertex outside that component's
     /// bounding ball, proves that the two meet ([`InnerBalls::tree_touches`]).
     pub connected: bool,
@@ -95,15 +95,10 @@ impl InnerBalls {
             .filter(|c| closed(c.iter().map(|&k| &tris[k])))
             .filter_map(|c| component(&welded, &c.iter().map(|&k| tris[k]).collect::<Vec<_>>()))
             .collect();
-        let used: Vec<Vector3> = {
-            let mut seen = vec![false; welded.len()];
-            tris.iter().flatten().for_each(|&i| seen[i as usize] = true);
-            welded.iter().zip(seen).filter(|(_, s)| *s).map(|(v, _)| *v).collect()
-        };
-        let points: Vec<Point3> = used.iter().map(|v| Point3::from(*v)).collect();
+        let points: Vec<Point3> = welded.iter().map(|v| Point3::from(*v)).collect();
         let singles: Vec<[u32; 3]> = (0..points.len() as u32).map(|i| [i, i, i]).collect();
         let vertex_tree = SphereTree::build(&points, &singles, 0.0);
-        Self { components, connected, extremes: extremes(&used), vertex_tree }
+        Self { components, connected, extremes: extremes(&welded), vertex_tree }
     }
 
     /// Whether the mesh, its points mapped by `x ↦ r·x + t` into the frame of the primitive `p`,
@@ -260,25 +255,18 @@ pub fn winding_number(vertices: &[Vector3], tris: &[[u32; 3]], x: &Vector3) -> R
     total / (4.0 * std::f64::consts::PI)
 }
 
-/// Vertices welded by exact position, and the triangles over the welded indices.
+/// Vertices welded by exact position (the fit crate's welding at tolerance 0: repeated and
+/// collapsed triangles dropped, unused vertices too), and the triangles over the welded indices;
+/// empty when nothing is left.
 fn weld(vertices: &[Point3], triangles: &[[u32; 3]]) -> (Vec<Vector3>, Vec<[u32; 3]>) {
-    let mut index: HashMap<[u64; 3], u32> = HashMap::new();
-    let mut welded = Vec::new();
-    let map: Vec<u32> = vertices
-        .iter()
-        .map(|v| {
-            // +0.0 and −0.0 are one position.
-            let key = [v.x + 0.0, v.y + 0.0, v.z + 0.0].map(Real::to_bits);
-            *index.entry(key).or_insert_with(|| {
-                welded.push(v.coords);
-                (welded.len() - 1) as u32
-            })
-        })
-        .collect();
-    (welded, triangles.iter().map(|t| t.map(|i| map[i as usize])).collect())
+    let mesh = sublevel_fit::mesh::TriangleMesh { vertices: vertices.to_vec(), triangles: triangles.to_vec() };
+    match sublevel_fit::mesh::weld_mesh(&mesh, 0.0) {
+        Ok(w) => (w.mesh.vertices.iter().map(|p| p.coords).collect(), w.mesh.triangles),
+        Err(_) => (Vec::new(), Vec::new()),
+    }
 }
 
-/// The triangles' edge-connected components (triangle indices), by union–find over vertices.
+/// The triangles' connected components (triangles sharing a vertex; triangle indices), by union–find.
 fn components(n: usize, tris: &[[u32; 3]]) -> Vec<Vec<usize>> {
     let mut parent: Vec<u32> = (0..n as u32).collect();
     fn find(parent: &mut [u32], mut x: u32) -> u32 {
