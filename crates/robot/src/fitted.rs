@@ -275,10 +275,7 @@ impl FittedRobot {
                     let body = root_body(&format!("{field}.compound"), c, &vertices)?;
                     let sphere = bounding_ball(&vertices);
                     let local_box = Some(bounding_box(&vertices));
-                    let points = vertices.iter().map(|p| parry3d_f64::math::Vector::new(p.x, p.y, p.z)).collect();
-                    let exact = parry3d_f64::shape::SharedShape::trimesh(points, triangles.clone()).map_err(|e| {
-                        Error::invalid(format!("{field}.mesh"), format!("not a valid triangle mesh: {e:?}"))
-                    })?;
+                    let exact = exact_trimesh(&format!("{field}.mesh"), &vertices, &triangles)?;
                     let spheres = SphereTree::build(&vertices, &triangles, DEFAULT_LEAF_RADIUS);
                     if let Some(i) = vertices.iter().position(|v| !spheres.covers(&v.coords)) {
                         return Err(Error::Numerical(format!(
@@ -406,22 +403,57 @@ fn root_body(field: &str, c: &CompoundFile, vertices: &[Point3]) -> Result<Body>
     Ok(body)
 }
 
-/// A stored mesh, validated.
+/// A stored mesh, validated ([`validate_mesh`]).
 fn mesh_of(field: &str, m: &MeshFile) -> Result<(Vec<Point3>, Vec<[u32; 3]>)> {
-    if m.triangles.is_empty() || m.triangles.len() > MAX_MESH_TRIANGLES {
+    let vertices: Vec<Point3> = m.vertices.iter().map(|v| Point3::new(v[0], v[1], v[2])).collect();
+    validate_mesh(field, &vertices, &m.triangles)?;
+    Ok((vertices, m.triangles.clone()))
+}
+
+/// The field name `name` under `prefix` (`prefix.name`, or `name` alone for an empty prefix).
+fn under(prefix: &str, name: &str) -> String {
+    if prefix.is_empty() {
+        name.to_owned()
+    } else {
+        format!("{prefix}.{name}")
+    }
+}
+
+/// Checks a triangle mesh as the robot checks take it: 1 to [`MAX_MESH_TRIANGLES`] triangles,
+/// every vertex finite and within ±1e6 m, every index naming a vertex.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `PREFIX.triangles`, `PREFIX.vertices[k]` or
+/// `PREFIX.triangles[k]` (the bare names for an empty prefix).
+pub(crate) fn validate_mesh(prefix: &str, vertices: &[Point3], triangles: &[[u32; 3]]) -> Result<()> {
+    if triangles.is_empty() || triangles.len() > MAX_MESH_TRIANGLES {
         return Err(Error::invalid(
-            format!("{field}.triangles"),
-            format!("must hold 1 to {MAX_MESH_TRIANGLES} triangles, got {}", m.triangles.len()),
+            under(prefix, "triangles"),
+            format!("must hold 1 to {MAX_MESH_TRIANGLES} triangles, got {}", triangles.len()),
         ));
     }
-    if let Some(i) = m.vertices.iter().position(|v| v.iter().any(|c| !c.is_finite() || c.abs() > 1e6)) {
-        return Err(Error::invalid(format!("{field}.vertices[{i}]"), "must be finite, within ±1e6 m"));
+    if let Some(i) = vertices.iter().position(|v| v.iter().any(|c| !c.is_finite() || c.abs() > 1e6)) {
+        return Err(Error::invalid(under(prefix, &format!("vertices[{i}]")), "must be finite, within ±1e6 m"));
     }
-    if let Some(i) = m.triangles.iter().position(|t| t.iter().any(|&v| v as usize >= m.vertices.len())) {
+    if let Some(i) = triangles.iter().position(|t| t.iter().any(|&v| v as usize >= vertices.len())) {
         return Err(Error::invalid(
-            format!("{field}.triangles[{i}]"),
-            format!("names a vertex beyond the {} vertices", m.vertices.len()),
+            under(prefix, &format!("triangles[{i}]")),
+            format!("names a vertex beyond the {} vertices", vertices.len()),
         ));
     }
-    Ok((m.vertices.iter().map(|v| Point3::new(v[0], v[1], v[2])).collect(), m.triangles.clone()))
+    Ok(())
+}
+
+/// parry's triangle mesh (its BVH built) of a validated mesh, for the exact stage.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `field` when parry refuses the mesh.
+pub(crate) fn exact_trimesh(
+    field: &str,
+    vertices: &[Point3],
+    triangles: &[[u32; 3]],
+) -> Result<parry3d_f64::shape::SharedShape> {
+    let points = vertices.iter().map(|p| parry3d_f64::math::Vector::new(p.x, p.y, p.z)).collect();
+    parry3d_f64::shape::SharedShape::trimesh(points, triangles.to_vec())
+        .map_err(|e| Error::invalid(field, format!("not a valid triangle mesh: {e:?}")))
 }

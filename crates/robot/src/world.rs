@@ -7,7 +7,7 @@
 //! checks' model stage; without one, pairs go from the ball and box gaps straight to the
 //! triangles.
 
-use crate::fitted::{bounding_ball, bounding_box, MAX_MESH_TRIANGLES};
+use crate::fitted::{bounding_ball, bounding_box, exact_trimesh, validate_mesh};
 use crate::{Error, Result};
 use std::sync::Arc;
 use sublevel_core::body::Body;
@@ -106,21 +106,7 @@ impl WorldMesh {
     /// triangle mesh), `triangles[k]` (an index beyond the vertices), `vertices[k]` (not finite or
     /// beyond ±1e6 m) or `body` (a vertex outside it).
     pub fn new(vertices: Vec<Point3>, triangles: Vec<[u32; 3]>, body: Option<Body>) -> Result<Self> {
-        if triangles.is_empty() || triangles.len() > MAX_MESH_TRIANGLES {
-            return Err(Error::invalid(
-                "triangles",
-                format!("must hold 1 to {MAX_MESH_TRIANGLES} triangles, got {}", triangles.len()),
-            ));
-        }
-        if let Some(i) = vertices.iter().position(|v| v.iter().any(|c| !c.is_finite() || c.abs() > 1e6)) {
-            return Err(Error::invalid(format!("vertices[{i}]"), "must be finite, within ±1e6 m"));
-        }
-        if let Some(i) = triangles.iter().position(|t| t.iter().any(|&v| v as usize >= vertices.len())) {
-            return Err(Error::invalid(
-                format!("triangles[{i}]"),
-                format!("names a vertex beyond the {} vertices", vertices.len()),
-            ));
-        }
+        validate_mesh("", &vertices, &triangles)?;
         if let Some(body) = &body {
             if let Some((i, p)) = vertices
                 .iter()
@@ -134,9 +120,7 @@ impl WorldMesh {
                 ));
             }
         }
-        let points = vertices.iter().map(|p| parry3d_f64::math::Vector::new(p.x, p.y, p.z)).collect();
-        let exact = parry3d_f64::shape::SharedShape::trimesh(points, triangles.clone())
-            .map_err(|e| Error::invalid("triangles", format!("not a valid triangle mesh: {e:?}")))?;
+        let exact = exact_trimesh("triangles", &vertices, &triangles)?;
         let ball = bounding_ball(&vertices);
         let local_box = bounding_box(&vertices);
         Ok(Self { vertices, triangles, body, exact, ball, local_box })
