@@ -127,6 +127,19 @@ pub(crate) fn exact_collides(
     padding: Real,
 ) -> Result<bool> {
     let unsupported = |_| Error::Numerical("the exact mesh stage does not support this shape pair".into());
+    if let (Some(ma), Some(mb)) = (a.shape.as_trimesh(), b.shape.as_trimesh()) {
+        return Ok(meshes_touch(ma, pa, mb, pb, padding));
+    }
+    if let Some(m) = a.shape.as_trimesh() {
+        if let Some(touch) = mesh_touches_solid(m, pa, b.shape.as_ref(), pb, padding) {
+            return Ok(touch);
+        }
+    }
+    if let Some(m) = b.shape.as_trimesh() {
+        if let Some(touch) = mesh_touches_solid(m, pb, a.shape.as_ref(), pa, padding) {
+            return Ok(touch);
+        }
+    }
     if padding == 0.0 {
         return parry3d_f64::query::intersection_test(pa, a.shape.as_ref(), pb, b.shape.as_ref())
             .map(|r| r.intersecting)
@@ -151,9 +164,17 @@ pub(crate) fn exact_pair(
 ) -> Result<PairOutcome> {
     let unsupported = |_| Error::Numerical("the exact mesh stage does not support this shape pair".into());
     let max_dist = if max_dist.is_finite() { max_dist.max(padding) } else { Real::MAX };
-    match parry3d_f64::query::closest_points(pa, a.shape.as_ref(), pb, b.shape.as_ref(), max_dist)
-        .map_err(unsupported)?
-    {
+    let points = match (a.shape.as_trimesh(), b.shape.as_trimesh()) {
+        (Some(m), None) => mesh_solid_closest_points(m, pa, b.shape.as_ref(), pb, max_dist),
+        (None, Some(m)) => mesh_solid_closest_points(m, pb, a.shape.as_ref(), pa, max_dist).map(|c| c.flipped()),
+        _ => None,
+    };
+    let points = match points {
+        Some(points) => points,
+        None => parry3d_f64::query::closest_points(pa, a.shape.as_ref(), pb, b.shape.as_ref(), max_dist)
+            .map_err(unsupported)?,
+    };
+    match points {
         ClosestPoints::Intersecting => Ok(PairOutcome::Collides),
         ClosestPoints::WithinMargin(p1, p2) => {
             let (x, y) = (Point3::new(p1.x, p1.y, p1.z), Point3::new(p2.x, p2.y, p2.z));
@@ -165,5 +186,298 @@ pub(crate) fn exact_pair(
             }
         }
         ClosestPoints::Disjoint => Ok(PairOutcome::Free { distance: Real::INFINITY, witnesses: None }),
+    }
+}
+
+/// Whether two triangle meshes (posed by `pa`, `pb`) have triangles within `padding` ≥ 0 of each
+/// other (intersecting at 0): the verdict of parry's `intersection_test` (`closest_points` with
+/// the padding as margin) on the two meshes, found by a simultaneous descent of both BVHs.
+///
+/// parry tests a mesh against a mesh one triangle of the first at a time, each against the whole
+/// of the second: every triangle whose box meets the second mesh's box costs a descent of the
+/// second's BVH, which is most of the first mesh when two links nearly touch. Here a pair of
+/// nodes goes on only while their boxes meet — the second's box placed in the first's frame and
+/// bounded there by an axis-aligned box, loosened by the padding — so only pairs of triangles
+/// with overlapping boxes are tested, each with the triangle–triangle test parry's dispatch
+/// reaches. Boxes that meet are a necessary condition for triangles within the padding, so the
+/// answer is parry's.
+pub(crate) fn meshes_touch(
+    ma: &parry3d_f64::shape::TriMesh,
+    pa: &parry3d_f64::math::Pose,
+    mb: &parry3d_f64::shape::TriMesh,
+    pb: &parry3d_f64::math::Pose,
+    padding: Real,
+) -> bool {
+    use parry3d_f64::math::{Matrix, Vector};
+    let rel = pa.inv_mul(pb);
+    let r = Matrix::from_quat(rel.rotation);
+    let abs_r = Matrix::from_cols(r.x_axis.abs(), r.y_axis.abs(), r.z_axis.abs());
+    let t = rel.translation;
+    // Rounding of the placed boxes: a hair of slack, as the boxes only prune.
+    let slack = padding + 1e-9 * (1.0 + t.length() + ma.local_aabb().extents().length());
+    let overlap = |n1: &parry3d_f64::partitioning::BvhNode, n2: &parry3d_f64::partitioning::BvhNode| {
+        let (c1, h1) = ((n1.mins() + n1.maxs()) * 0.5, (n1.maxs() - n1.mins()) * 0.5);
+        let (c2, h2) = ((n2.mins() + n2.maxs()) * 0.5, (n2.maxs() - n2.mins()) * 0.5);
+        let d = (r * c2 + t - c1).abs();
+        let reach = h1 + abs_r * h2 + Vector::splat(slack);
+        d.x <= reach.x && d.y <= reach.y && d.z <= reach.z
+    };
+    let identity = parry3d_f64::math::Pose::IDENTITY;
+    ma.bvh().leaf_pairs(mb.bvh(), overlap).any(|(i, j)| {
+        let (ta, tb) = (ma.triangle(i), mb.triangle(j));
+        let tb_in_a = [rel.transform_point(tb.a), rel.transform_point(tb.b), rel.transform_point(tb.c)];
+        if beyond_plane([ta.a, ta.b, ta.c], tb_in_a, padding) || beyond_plane(tb_in_a, [ta.a, ta.b, ta.c], padding) {
+            return false;
+        }
+        if padding == 0.0 {
+            parry3d_f64::query::intersection_test(&identity, &ta, &rel, &tb).is_ok_and(|r| r.intersecting)
+        } else {
+            parry3d_f64::query::closest_points(&identity, &ta, &rel, &tb, padding)
+                .is_ok_and(|c| !matches!(c, ClosestPoints::Disjoint))
+        }
+    })
+}
+
+/// Whether every vertex of triangle `v` lies farther than `padding` on one side of the plane of
+/// triangle `u` (so the two are farther apart than `padding`); `false` for a degenerate `u`.
+fn beyond_plane(u: [parry3d_f64::math::Vector; 3], v: [parry3d_f64::math::Vector; 3], padding: Real) -> bool {
+    let n = (u[1] - u[0]).cross(u[2] - u[0]);
+    let len = n.length();
+    if len <= Real::EPSILON * (u[1] - u[0]).length() * (u[2] - u[0]).length() || len == 0.0 {
+        return false;
+    }
+    let reach = padding * len;
+    let s = v.map(|x| n.dot(x - u[0]));
+    s.iter().all(|&s| s > reach) || s.iter().all(|&s| s < -reach)
+}
+
+/// Whether a triangle mesh (posed by `pm`) has a triangle within `padding` ≥ 0 of a bounded
+/// convex shape (posed by `ps`): parry's verdict on each triangle, found by a descent of the
+/// mesh's BVH that keeps a node only while its box meets the shape's box (an oriented box in the
+/// mesh's frame, loosened by the padding; the separating-axis test on both boxes' six face
+/// axes). parry keeps the triangles whose boxes meet the shape's axis-aligned bounding box, which
+/// for a rotated board or wall holds far more of the mesh. `None` when the shape is unbounded
+/// (a halfspace) or composite, which parry's own test answers.
+pub(crate) fn mesh_touches_solid(
+    mesh: &parry3d_f64::shape::TriMesh,
+    pm: &parry3d_f64::math::Pose,
+    shape: &dyn parry3d_f64::shape::Shape,
+    ps: &parry3d_f64::math::Pose,
+    padding: Real,
+) -> Option<bool> {
+    use parry3d_f64::math::{Matrix, Vector};
+    // parry bounds a halfspace by a box of half the largest float: no use as a box.
+    if shape.as_composite_shape().is_some() || shape.as_halfspace().is_some() {
+        return None;
+    }
+    let local = shape.compute_local_aabb();
+    let (cs, hs) = (local.center(), local.half_extents());
+    if !(cs.is_finite() && hs.is_finite()) {
+        return None;
+    }
+    let rel = pm.inv_mul(ps);
+    let r = Matrix::from_quat(rel.rotation);
+    let abs_r = Matrix::from_cols(r.x_axis.abs(), r.y_axis.abs(), r.z_axis.abs());
+    let center = r * cs + rel.translation;
+    let slack = padding + 1e-9 * (1.0 + center.length() + hs.length() + mesh.local_aabb().extents().length());
+    let reach_mesh_axes = abs_r * hs + Vector::splat(slack);
+    let reach_shape_axes = hs + Vector::splat(slack);
+    let meets = |node: &parry3d_f64::partitioning::BvhNode| {
+        let (c1, h1) = ((node.mins() + node.maxs()) * 0.5, (node.maxs() - node.mins()) * 0.5);
+        let d = center - c1;
+        let on_mesh = d.abs();
+        let reach = reach_mesh_axes + h1;
+        if on_mesh.x > reach.x || on_mesh.y > reach.y || on_mesh.z > reach.z {
+            return false;
+        }
+        let on_shape = (r.transpose() * d).abs();
+        let reach = reach_shape_axes + abs_r.transpose() * h1;
+        on_shape.x <= reach.x && on_shape.y <= reach.y && on_shape.z <= reach.z
+    };
+    let identity = parry3d_f64::math::Pose::IDENTITY;
+    Some(mesh.bvh().leaves(meets).any(|i| {
+        let triangle = mesh.triangle(i);
+        if padding == 0.0 {
+            parry3d_f64::query::intersection_test(&identity, &triangle, &rel, shape).is_ok_and(|r| r.intersecting)
+        } else {
+            parry3d_f64::query::closest_points(&identity, &triangle, &rel, shape, padding)
+                .is_ok_and(|c| !matches!(c, ClosestPoints::Disjoint))
+        }
+    }))
+}
+
+/// The closest points of a triangle mesh (posed by `pm`) and a bounded convex shape (posed by
+/// `ps`) within `max_dist`, in the world frame, as parry's `closest_points` gives them: a
+/// best-first search of the mesh's BVH, each node bounded below by the larger of two box
+/// distances — its box to the shape's box bounded in the mesh's frame, and the shape's box to the
+/// node's box bounded in the shape's frame — where parry uses only the first with the shape's
+/// box bounded in the world's axes. `None` where [`mesh_touches_solid`] is.
+pub(crate) fn mesh_solid_closest_points(
+    mesh: &parry3d_f64::shape::TriMesh,
+    pm: &parry3d_f64::math::Pose,
+    shape: &dyn parry3d_f64::shape::Shape,
+    ps: &parry3d_f64::math::Pose,
+    max_dist: Real,
+) -> Option<ClosestPoints> {
+    use parry3d_f64::math::{Matrix, Vector};
+    if shape.as_composite_shape().is_some() || shape.as_halfspace().is_some() {
+        return None;
+    }
+    let local = shape.compute_local_aabb();
+    let (cs, hs) = (local.center(), local.half_extents());
+    if !(cs.is_finite() && hs.is_finite()) {
+        return None;
+    }
+    let rel = pm.inv_mul(ps);
+    let r = Matrix::from_quat(rel.rotation);
+    let abs_r = Matrix::from_cols(r.x_axis.abs(), r.y_axis.abs(), r.z_axis.abs());
+    let center = r * cs + rel.translation;
+    // Rounding of the placed boxes: the bounds are lowered by a hair.
+    let hair = 1e-9 * (1.0 + center.length() + hs.length() + mesh.local_aabb().extents().length());
+    let shape_in_mesh = abs_r * hs;
+    let lower = |node: &parry3d_f64::partitioning::BvhNode, _: Real| {
+        let (c1, h1) = ((node.mins() + node.maxs()) * 0.5, (node.maxs() - node.mins()) * 0.5);
+        let d = center - c1;
+        let on_mesh = (d.abs() - h1 - shape_in_mesh).max(Vector::ZERO).length();
+        let on_shape = ((r.transpose() * d).abs() - hs - abs_r.transpose() * h1).max(Vector::ZERO).length();
+        (on_mesh.max(on_shape) - hair).max(0.0)
+    };
+    let identity = parry3d_f64::math::Pose::IDENTITY;
+    let leaf = |i: u32, best: Real| {
+        let points = parry3d_f64::query::closest_points(&identity, &mesh.triangle(i), &rel, shape, best).ok()?;
+        Some(match points {
+            ClosestPoints::WithinMargin(p1, p2) => ((p1 - p2).length(), points),
+            ClosestPoints::Intersecting => (-Real::MAX, points),
+            ClosestPoints::Disjoint => (Real::MAX, points),
+        })
+    };
+    Some(match mesh.bvh().find_best(max_dist, lower, leaf) {
+        Some((_, (_, points))) => points.transform_by(pm, pm),
+        None => ClosestPoints::Disjoint,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A torus about z (major radius `big`, minor `small`), `n × m` quads cut in triangles: a
+    /// non-convex closed mesh whose pairs touch in many places.
+    fn torus(big: Real, small: Real, n: u32, m: u32) -> SharedShape {
+        let tau = std::f64::consts::TAU;
+        let mut points = Vec::new();
+        for i in 0..n {
+            for j in 0..m {
+                let (u, v) = (tau * Real::from(i) / Real::from(n), tau * Real::from(j) / Real::from(m));
+                let rho = big + small * v.cos();
+                points.push(parry3d_f64::math::Vector::new(rho * u.cos(), rho * u.sin(), small * v.sin()));
+            }
+        }
+        let mut triangles = Vec::new();
+        for i in 0..n {
+            for j in 0..m {
+                let k = |a: u32, b: u32| (a % n) * m + (b % m);
+                triangles.push([k(i, j), k(i + 1, j), k(i + 1, j + 1)]);
+                triangles.push([k(i, j), k(i + 1, j + 1), k(i, j + 1)]);
+            }
+        }
+        SharedShape::trimesh(points, triangles).expect("a valid torus")
+    }
+
+    /// A deterministic pose near the origin: a rotation from a random unit quaternion and a
+    /// translation in a cube of half side `reach` (xorshift, so the test needs no crate).
+    fn pose(state: &mut u64, reach: Real) -> parry3d_f64::math::Pose {
+        let mut next = || {
+            *state ^= *state << 13;
+            *state ^= *state >> 7;
+            *state ^= *state << 17;
+            (*state >> 11) as Real / (1u64 << 53) as Real * 2.0 - 1.0
+        };
+        let q = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(next(), next(), next(), next()));
+        let t = Vector3::new(next(), next(), next()) * reach;
+        parry_pose(&Isometry3::from_parts(t.into(), q))
+    }
+
+    /// parry's own verdict on the whole shapes: the reference the descents must reproduce.
+    fn parry_verdict(
+        pa: &parry3d_f64::math::Pose,
+        a: &SharedShape,
+        pb: &parry3d_f64::math::Pose,
+        b: &SharedShape,
+        padding: Real,
+    ) -> bool {
+        if padding == 0.0 {
+            parry3d_f64::query::intersection_test(pa, a.as_ref(), pb, b.as_ref()).expect("supported").intersecting
+        } else {
+            !matches!(
+                parry3d_f64::query::closest_points(pa, a.as_ref(), pb, b.as_ref(), padding).expect("supported"),
+                ClosestPoints::Disjoint
+            )
+        }
+    }
+
+    #[test]
+    fn mesh_pairs_match_parrys_verdict_on_random_poses() {
+        let (a, b) = (torus(0.1, 0.03, 24, 12), torus(0.08, 0.02, 20, 10));
+        let mut state = 0x9e37_79b9_7f4a_7c15;
+        let mut counts = [0usize; 2];
+        for k in 0..600 {
+            let padding = if k % 2 == 0 { 0.0 } else { 0.01 };
+            let (pa, pb) = (pose(&mut state, 0.02), pose(&mut state, 0.16));
+            let expected = parry_verdict(&pa, &a, &pb, &b, padding);
+            let (ma, mb) = (a.as_trimesh().expect("mesh"), b.as_trimesh().expect("mesh"));
+            assert_eq!(meshes_touch(ma, &pa, mb, &pb, padding), expected, "pose {k}, padding {padding}");
+            counts[usize::from(expected)] += 1;
+        }
+        // Both verdicts occur often: the poses straddle contact.
+        assert!(counts[0] > 100 && counts[1] > 100, "{counts:?}");
+    }
+
+    #[test]
+    fn a_mesh_against_primitives_matches_parrys_verdict_on_random_poses() {
+        let mesh = ExactShape { shape: torus(0.1, 0.03, 24, 12), offset: Isometry3::identity() };
+        let primitives = [
+            Primitive::Box { half_extents: Vector3::new(0.3, 0.2, 0.01) },
+            Primitive::Cylinder { radius: 0.02, half_height: 0.15 },
+            Primitive::Sphere { radius: 0.04 },
+            Primitive::Capsule { radius: 0.015, half_height: 0.1 },
+        ];
+        let mut state = 0x2545_f491_4f6c_dd1d;
+        for p in &primitives {
+            let solid = exact_primitive(p);
+            let (mut counts, mut near) = ([0usize; 2], 0);
+            for k in 0..400 {
+                let padding = if k % 2 == 0 { 0.0 } else { 0.01 };
+                let (pm, ps) = (pose(&mut state, 0.02), pose(&mut state, 0.15));
+                let ps = ps * parry_pose(&solid.offset);
+                let expected = parry_verdict(&pm, &mesh.shape, &ps, &solid.shape, padding);
+                let m = mesh.shape.as_trimesh().expect("mesh");
+                let got = mesh_touches_solid(m, &pm, solid.shape.as_ref(), &ps, padding);
+                assert_eq!(got, Some(expected), "{p:?}, pose {k}, padding {padding}");
+                counts[usize::from(expected)] += 1;
+                // The closest points within 5 cm: parry's answer, the same distance.
+                let reference =
+                    parry3d_f64::query::closest_points(&pm, mesh.shape.as_ref(), &ps, solid.shape.as_ref(), 0.05)
+                        .expect("supported");
+                let got = mesh_solid_closest_points(m, &pm, solid.shape.as_ref(), &ps, 0.05).expect("bounded");
+                match (reference, got) {
+                    (ClosestPoints::WithinMargin(a1, a2), ClosestPoints::WithinMargin(b1, b2)) => {
+                        let (da, db) = ((a1 - a2).length(), (b1 - b2).length());
+                        assert!((da - db).abs() < 1e-9, "{p:?}, pose {k}: {da} against {db}");
+                        // Witness points: on the mesh's surface and the solid's.
+                        assert!(mesh.shape.distance_to_point(&pm, b1, false) < 1e-9);
+                        assert!(solid.shape.distance_to_point(&ps, b2, false) < 1e-9);
+                        near += 1;
+                    }
+                    (reference, got) => assert_eq!(reference, got, "{p:?}, pose {k}"),
+                }
+            }
+            assert!(counts[0] > 50 && counts[1] > 50 && near > 30, "{p:?}: {counts:?}, {near} within 5 cm");
+        }
+        // A halfspace is unbounded: parry's own test answers it.
+        let plane = exact_primitive(&Primitive::Halfspace { normal: Vector3::z(), offset: 0.0 });
+        let m = mesh.shape.as_trimesh().expect("mesh");
+        let id = parry3d_f64::math::Pose::IDENTITY;
+        assert_eq!(mesh_touches_solid(m, &id, plane.shape.as_ref(), &id, 0.0), None);
     }
 }
