@@ -481,6 +481,19 @@ impl<'r> RobotChecker<'r> {
         }
     }
 
+    /// Whether the balls of robot geometry `g` and world object `o` are farther apart than
+    /// `padding` ≥ 0: [`RobotChecker::world_gap`] `> padding`, with squared lengths (no root).
+    fn world_apart(&self, g: usize, o: usize, padding: Real) -> bool {
+        let r = self.robot.geometries[g].sphere.1;
+        match self.world_balls[o] {
+            WorldBall::Plane { normal, offset } => normal.dot(&self.centers[g]) - offset - r > padding,
+            WorldBall::Ball { center, radius } => {
+                let reach = r + radius + padding;
+                (self.centers[g] - center).norm_squared() > reach * reach
+            }
+        }
+    }
+
     /// Whether the inner balls of robot geometry `g` prove that it meets world object `o` (a
     /// primitive; [`crate::inner`]).
     fn inner_touches_world(&self, g: usize, o: usize) -> bool {
@@ -553,13 +566,12 @@ impl<'r> RobotChecker<'r> {
         for g in 0..self.robot.geometries.len() {
             let padding = options.padding + self.pad[g];
             for &o in &self.world_pairs[g] {
-                let gap = self.world_gap(g, o);
-                if !options.distance && gap > padding {
+                if !options.distance && self.world_apart(g, o, padding) {
                     // A verdict only: a pair apart by its balls is decided here, unsorted.
                     answer.pairs_pruned += 1;
                     continue;
                 }
-                order.push((gap, g, o));
+                order.push((self.world_gap(g, o), g, o));
             }
         }
         order.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));

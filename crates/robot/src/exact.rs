@@ -66,7 +66,8 @@ impl PlacedBox {
         }
     }
 
-    /// Half the box's extent along the unit axis `n`.
+    /// Half the box's extent along the unit axis `n` (the tests' reference gap uses it).
+    #[cfg(test)]
     pub(crate) fn radius(&self, n: &Vector3) -> Real {
         (0..3).map(|i| self.half[i] * self.axes.column(i).dot(n).abs()).sum()
     }
@@ -82,26 +83,44 @@ pub(crate) fn box_gap(a: &PlacedBox, b: &PlacedBox) -> Real {
 /// As [`box_gap`], the axes tried faces first and the search stopped at the first gap above
 /// `stop` (still a lower bound of the distance; the callers only ask whether it exceeds `stop`).
 pub(crate) fn box_gap_past(a: &PlacedBox, b: &PlacedBox, stop: Real) -> Real {
+    // The separating-axis test of two oriented boxes in a's frame (Gottschalk, Lin and Manocha,
+    // SIGGRAPH 1996; Ericson, Real-Time Collision Detection §4.4.1): with C = Aᵀ B, the 15 axes'
+    // projections are sums over C's entries, and a cross axis a_i × b_j has length √(1 − C_ij²).
     let d = b.center - a.center;
-    // Rounding of the projections: a hair below the exact gap.
-    let hair = 1e-12 * (d.norm() + a.half.norm() + b.half.norm());
+    let (ea, eb) = (&a.half, &b.half);
+    // Rounding of the projections: a hair below the exact gap (1-norms bound the 2-norms).
+    let hair = 1e-12 * (d.abs().sum() + ea.abs().sum() + eb.abs().sum());
+    let c = a.axes.transpose() * b.axes;
+    let abs_c = c.abs();
+    let t = a.axes.transpose() * d;
     let mut gap = Real::NEG_INFINITY;
-    let mut axis = |n: Vector3| {
-        let len = n.norm();
-        if len > 1e-9 {
-            let n = n / len;
-            gap = gap.max(n.dot(&d).abs() - a.radius(&n) - b.radius(&n) - hair);
-        }
-        gap > stop
-    };
     for i in 0..3 {
-        if axis(a.axes.column(i).into_owned()) || axis(b.axes.column(i).into_owned()) {
+        let on_a = t[i].abs() - ea[i] - (eb[0] * abs_c[(i, 0)] + eb[1] * abs_c[(i, 1)] + eb[2] * abs_c[(i, 2)]);
+        gap = gap.max(on_a - hair);
+        if gap > stop {
+            return gap;
+        }
+        let tb = t[0] * c[(0, i)] + t[1] * c[(1, i)] + t[2] * c[(2, i)];
+        let on_b = tb.abs() - (ea[0] * abs_c[(0, i)] + ea[1] * abs_c[(1, i)] + ea[2] * abs_c[(2, i)]) - eb[i];
+        gap = gap.max(on_b - hair);
+        if gap > stop {
             return gap;
         }
     }
     for i in 0..3 {
+        let (i1, i2) = ((i + 1) % 3, (i + 2) % 3);
         for j in 0..3 {
-            if axis(a.axes.column(i).cross(&b.axes.column(j))) {
+            let len2 = 1.0 - c[(i, j)] * c[(i, j)];
+            if len2 <= 1e-18 {
+                // a_i ∥ b_j: the face axes already cover it.
+                continue;
+            }
+            let (j1, j2) = ((j + 1) % 3, (j + 2) % 3);
+            let projection = (t[i2] * c[(i1, j)] - t[i1] * c[(i2, j)]).abs();
+            let ra = ea[i1] * abs_c[(i2, j)] + ea[i2] * abs_c[(i1, j)];
+            let rb = eb[j1] * abs_c[(i, j2)] + eb[j2] * abs_c[(i, j1)];
+            gap = gap.max((projection - ra - rb) / len2.sqrt() - hair);
+            if gap > stop {
                 return gap;
             }
         }
@@ -165,6 +184,7 @@ pub(crate) fn exact_pair(
     let unsupported = |_| Error::Numerical("the exact mesh stage does not support this shape pair".into());
     let max_dist = if max_dist.is_finite() { max_dist.max(padding) } else { Real::MAX };
     let points = match (a.shape.as_trimesh(), b.shape.as_trimesh()) {
+        (Some(ma), Some(mb)) => Some(meshes_closest_points(ma, pa, mb, pb, max_dist)),
         (Some(m), None) => mesh_solid_closest_points(m, pa, b.shape.as_ref(), pb, max_dist),
         (None, Some(m)) => mesh_solid_closest_points(m, pb, a.shape.as_ref(), pa, max_dist).map(|c| c.flipped()),
         _ => None,
@@ -357,6 +377,62 @@ pub(crate) fn mesh_solid_closest_points(
     })
 }
 
+/// The closest points of two triangle meshes (posed by `pa`, `pb`) within `max_dist`, in the
+/// world frame, as parry's `closest_points` gives them: a simultaneous descent of both BVHs that
+/// drops a pair of nodes once a lower bound of their distance — their boxes' distance, each box
+/// bounded by an axis-aligned box in the other's frame, the larger of the two — is not below the
+/// best distance found so far; each pair of triangles left is tried with the plane test of
+/// [`meshes_touch`] and then parry's triangle–triangle closest points. parry instead searches
+/// the second mesh once per triangle of the first.
+pub(crate) fn meshes_closest_points(
+    ma: &parry3d_f64::shape::TriMesh,
+    pa: &parry3d_f64::math::Pose,
+    mb: &parry3d_f64::shape::TriMesh,
+    pb: &parry3d_f64::math::Pose,
+    max_dist: Real,
+) -> ClosestPoints {
+    use parry3d_f64::math::{Matrix, Vector};
+    use std::cell::Cell;
+    let rel = pa.inv_mul(pb);
+    let r = Matrix::from_quat(rel.rotation);
+    let abs_r = Matrix::from_cols(r.x_axis.abs(), r.y_axis.abs(), r.z_axis.abs());
+    let t = rel.translation;
+    let hair = 1e-9 * (1.0 + t.length() + ma.local_aabb().extents().length() + mb.local_aabb().extents().length());
+    let best = Cell::new(max_dist);
+    let lower = |n1: &parry3d_f64::partitioning::BvhNode, n2: &parry3d_f64::partitioning::BvhNode| {
+        let (c1, h1) = ((n1.mins() + n1.maxs()) * 0.5, (n1.maxs() - n1.mins()) * 0.5);
+        let (c2, h2) = ((n2.mins() + n2.maxs()) * 0.5, (n2.maxs() - n2.mins()) * 0.5);
+        let d = r * c2 + t - c1;
+        let in_a = (d.abs() - h1 - abs_r * h2).max(Vector::ZERO).length();
+        let in_b = ((r.transpose() * d).abs() - h2 - abs_r.transpose() * h1).max(Vector::ZERO).length();
+        in_a.max(in_b) - hair < best.get()
+    };
+    let identity = parry3d_f64::math::Pose::IDENTITY;
+    let mut found = ClosestPoints::Disjoint;
+    for (i, j) in ma.bvh().leaf_pairs(mb.bvh(), lower) {
+        let (ta, tb) = (ma.triangle(i), mb.triangle(j));
+        let tb_in_a = [rel.transform_point(tb.a), rel.transform_point(tb.b), rel.transform_point(tb.c)];
+        let margin = best.get();
+        if margin.is_finite()
+            && (beyond_plane([ta.a, ta.b, ta.c], tb_in_a, margin) || beyond_plane(tb_in_a, [ta.a, ta.b, ta.c], margin))
+        {
+            continue;
+        }
+        match parry3d_f64::query::closest_points(&identity, &ta, &rel, &tb, margin) {
+            Ok(ClosestPoints::Intersecting) => return ClosestPoints::Intersecting,
+            Ok(ClosestPoints::WithinMargin(p1, p2)) => {
+                let d = (p1 - p2).length();
+                if d < best.get() {
+                    best.set(d);
+                    found = ClosestPoints::WithinMargin(p1, p2);
+                }
+            }
+            _ => {}
+        }
+    }
+    found.transform_by(pa, pa)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -416,11 +492,77 @@ mod tests {
         }
     }
 
+    /// The separating-axis gap over the 15 axes, each normalized and projected directly: the
+    /// reference of the C = Aᵀ B form.
+    fn generic_box_gap(a: &PlacedBox, b: &PlacedBox, stop: Real) -> Real {
+        let d = b.center - a.center;
+        // Rounding of the projections: a hair below the exact gap.
+        let hair = 1e-12 * (d.norm() + a.half.norm() + b.half.norm());
+        let mut gap = Real::NEG_INFINITY;
+        let mut axis = |n: Vector3| {
+            let len = n.norm();
+            if len > 1e-9 {
+                let n = n / len;
+                gap = gap.max(n.dot(&d).abs() - a.radius(&n) - b.radius(&n) - hair);
+            }
+            gap > stop
+        };
+        for i in 0..3 {
+            if axis(a.axes.column(i).into_owned()) || axis(b.axes.column(i).into_owned()) {
+                return gap;
+            }
+        }
+        for i in 0..3 {
+            for j in 0..3 {
+                if axis(a.axes.column(i).cross(&b.axes.column(j))) {
+                    return gap;
+                }
+            }
+        }
+        gap
+    }
+
+    #[test]
+    fn box_gaps_match_the_axes_projected_directly_and_never_exceed_the_distance() {
+        let mut state = 0x1234_5678_9abc_def1;
+        let mut separated = 0;
+        for k in 0..2000 {
+            let (pa, pb) = (pose(&mut state, 0.2), pose(&mut state, 0.4));
+            let half = |s: &mut u64| {
+                let p = pose(s, 0.1);
+                Vector3::new(p.translation.x.abs() + 0.01, p.translation.y.abs() + 1e-6, p.translation.z.abs() + 0.05)
+            };
+            let (ha, hb) = (half(&mut state), half(&mut state));
+            let iso = |p: &parry3d_f64::math::Pose| {
+                let (q, t) = (p.rotation, p.translation);
+                Isometry3::from_parts(
+                    Vector3::new(t.x, t.y, t.z).into(),
+                    UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q.w, q.x, q.y, q.z)),
+                )
+            };
+            let a = PlacedBox::new(&iso(&pa), &(Vector3::zeros(), ha));
+            let b = PlacedBox::new(&iso(&pb), &(Vector3::zeros(), hb));
+            let (got, reference) = (box_gap(&a, &b), generic_box_gap(&a, &b, Real::INFINITY));
+            assert!((got - reference).abs() < 1e-12, "box pair {k}: {got} against {reference}");
+            // A lower bound of the boxes' distance (parry's, 0 when they overlap).
+            let (ca, cb) = (SharedShape::cuboid(ha.x, ha.y, ha.z), SharedShape::cuboid(hb.x, hb.y, hb.z));
+            let distance = parry3d_f64::query::distance(&pa, ca.as_ref(), &pb, cb.as_ref()).expect("boxes").distance;
+            assert!(got <= distance + 1e-12, "box pair {k}: gap {got} above the distance {distance}");
+            if distance > 0.0 {
+                separated += 1;
+                // The stop: the first axis past it ends the search, with its gap.
+                let stopped = box_gap_past(&a, &b, 0.0);
+                assert!(stopped <= got + 1e-15 && (stopped > 0.0) == (got > 0.0), "box pair {k}");
+            }
+        }
+        assert!(separated > 300, "{separated} separated pairs");
+    }
+
     #[test]
     fn mesh_pairs_match_parrys_verdict_on_random_poses() {
         let (a, b) = (torus(0.1, 0.03, 24, 12), torus(0.08, 0.02, 20, 10));
         let mut state = 0x9e37_79b9_7f4a_7c15;
-        let mut counts = [0usize; 2];
+        let (mut counts, mut near) = ([0usize; 2], 0);
         for k in 0..600 {
             let padding = if k % 2 == 0 { 0.0 } else { 0.01 };
             let (pa, pb) = (pose(&mut state, 0.02), pose(&mut state, 0.16));
@@ -428,7 +570,21 @@ mod tests {
             let (ma, mb) = (a.as_trimesh().expect("mesh"), b.as_trimesh().expect("mesh"));
             assert_eq!(meshes_touch(ma, &pa, mb, &pb, padding), expected, "pose {k}, padding {padding}");
             counts[usize::from(expected)] += 1;
+            // The closest points within 5 cm: parry's answer, the same distance.
+            let reference =
+                parry3d_f64::query::closest_points(&pa, a.as_ref(), &pb, b.as_ref(), 0.05).expect("supported");
+            match (reference, meshes_closest_points(ma, &pa, mb, &pb, 0.05)) {
+                (ClosestPoints::WithinMargin(a1, a2), ClosestPoints::WithinMargin(b1, b2)) => {
+                    let (da, db) = ((a1 - a2).length(), (b1 - b2).length());
+                    assert!((da - db).abs() < 1e-9, "pose {k}: {da} against {db}");
+                    assert!(a.distance_to_point(&pa, b1, false) < 1e-9);
+                    assert!(b.distance_to_point(&pb, b2, false) < 1e-9);
+                    near += 1;
+                }
+                (reference, got) => assert_eq!(reference, got, "pose {k}"),
+            }
         }
+        assert!(near > 30, "{near} pairs within 5 cm");
         // Both verdicts occur often: the poses straddle contact.
         assert!(counts[0] > 100 && counts[1] > 100, "{counts:?}");
     }
