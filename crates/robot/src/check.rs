@@ -60,7 +60,7 @@
 //! a ball against a primitive is a closed form of a few ns, so a descent of tens of nodes costs
 //! less than one solve.
 
-use crate::exact::{box_gap, box_gap_past, exact_collides, exact_pair, exact_primitive, parry_pose};
+use crate::exact::{box_gap, box_gap_past, exact_collides, exact_pair, exact_primitive, parry_pose, PairHint};
 use crate::exact::{ExactShape, PairOutcome, PlacedBox};
 use crate::fitted::{FittedRobot, LinkShape};
 use crate::inner::{link_touches_primitive, link_vertex_touches, links_touch};
@@ -106,6 +106,9 @@ pub struct RobotChecker<'r> {
     world_pairs: Vec<Vec<usize>>,
     /// Checked self pairs, as geometry indices.
     self_pairs: Vec<(usize, usize)>,
+    /// Each self pair's closest triangles last found by [`RobotChecker::self_bound`] (a motion's
+    /// warm start).
+    self_hints: Vec<PairHint>,
     link_poses: Vec<Isometry3>,
     poses: Vec<Isometry3>,
     centers: Vec<Vector3>,
@@ -206,6 +209,7 @@ impl<'r> RobotChecker<'r> {
             world_balls,
             robot_exact,
             world_pairs,
+            self_hints: self_pairs.iter().map(|_| PairHint::default()).collect(),
             self_pairs,
             link_poses: Vec::new(),
             poses: Vec::new(),
@@ -385,7 +389,7 @@ impl<'r> RobotChecker<'r> {
                 let pa = parry_pose(&(self.poses[g] * a.offset));
                 let pb = parry_pose(&(self.world[o].pose * b.offset));
                 Ok((
-                    match exact_pair(&pa, a, &pb, b, 0.0, Real::INFINITY)? {
+                    match exact_pair(&pa, a, &pb, b, 0.0, Real::INFINITY, &PairHint::default())? {
                         PairOutcome::Collides => 0.0,
                         PairOutcome::Free { distance, .. } => distance,
                     },
@@ -427,6 +431,7 @@ impl<'r> RobotChecker<'r> {
                     eb,
                     0.0,
                     Real::INFINITY,
+                    &self.self_hints[k],
                 )?;
                 Ok((
                     match outcome {
@@ -734,7 +739,7 @@ impl<'r> RobotChecker<'r> {
         let (a, b) = (&self.robot_exact[g], &self.world_exact[o]);
         let pa = parry_pose(&(self.poses[g] * a.offset));
         let pb = parry_pose(&(self.world[o].pose * b.offset));
-        exact_pair(&pa, a, &pb, b, padding, max_dist)
+        exact_pair(&pa, a, &pb, b, padding, max_dist, &PairHint::default())
     }
 
     fn self_check(&mut self, options: &CheckOptions, answer: &mut ConfigurationAnswer) -> Result<()> {

@@ -170,9 +170,17 @@ pub(crate) fn exact_collides(
     ))
 }
 
+/// The closest pair of triangles of two meshes found last (indices in the first and second
+/// mesh), where [`exact_pair`] starts its next search of the same two meshes.
+pub(crate) type PairHint = std::cell::Cell<Option<(u32, u32)>>;
+
 /// Two exact shapes (parry): collides within `padding`, else their distance and closest points;
 /// a pair farther apart than `max_dist` is answered free at +∞ without its points (the search
 /// stops at that distance, much sooner than a full one).
+///
+/// `hint` holds the closest pair of triangles of the last answer for two meshes, where the search
+/// starts (a warm start: along a motion the closest triangles change little), and receives the
+/// new one; any pair is a valid start, so the answer does not depend on it.
 pub(crate) fn exact_pair(
     pa: &parry3d_f64::math::Pose,
     a: &ExactShape,
@@ -180,11 +188,12 @@ pub(crate) fn exact_pair(
     b: &ExactShape,
     padding: Real,
     max_dist: Real,
+    hint: &PairHint,
 ) -> Result<PairOutcome> {
     let unsupported = |_| Error::Numerical("the exact mesh stage does not support this shape pair".into());
     let max_dist = if max_dist.is_finite() { max_dist.max(padding) } else { Real::MAX };
     let points = match (a.shape.as_trimesh(), b.shape.as_trimesh()) {
-        (Some(ma), Some(mb)) => Some(meshes_closest_points(ma, pa, mb, pb, max_dist)),
+        (Some(ma), Some(mb)) => Some(meshes_closest_points(ma, pa, mb, pb, max_dist, hint)),
         (Some(m), None) => mesh_solid_closest_points(m, pa, b.shape.as_ref(), pb, max_dist),
         (None, Some(m)) => mesh_solid_closest_points(m, pb, a.shape.as_ref(), pa, max_dist).map(|c| c.flipped()),
         _ => None,
@@ -372,6 +381,9 @@ pub(crate) fn mesh_touches_solid(
     let identity = parry3d_f64::math::Pose::IDENTITY;
     Some(mesh.bvh().leaves(meets).any(|i| {
         let triangle = mesh.triangle(i);
+        if triangle_box_gap(&triangle, &r, &center, &hs) > slack {
+            return false;
+        }
         if padding == 0.0 {
             parry3d_f64::query::intersection_test(&identity, &triangle, &rel, shape).is_ok_and(|r| r.intersecting)
         } else {
@@ -379,6 +391,33 @@ pub(crate) fn mesh_touches_solid(
                 .is_ok_and(|c| !matches!(c, ClosestPoints::Disjoint))
         }
     }))
+}
+
+/// A lower bound of the distance from a triangle to an oriented box (center `center`, axes the
+/// columns of `r`, half extents `half`, all in the triangle's frame): the largest gap between
+/// their projections on the box's three axes and the triangle's normal (meters; ≤ 0 when no
+/// such axis separates them).
+fn triangle_box_gap(
+    triangle: &parry3d_f64::shape::Triangle,
+    r: &parry3d_f64::math::Matrix,
+    center: &parry3d_f64::math::Vector,
+    half: &parry3d_f64::math::Vector,
+) -> Real {
+    let v = [triangle.a - *center, triangle.b - *center, triangle.c - *center];
+    let mut gap = Real::NEG_INFINITY;
+    for (axis, h) in [(r.x_axis, half.x), (r.y_axis, half.y), (r.z_axis, half.z)] {
+        let p = v.map(|x| axis.dot(x));
+        let (lo, hi) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
+        gap = gap.max(lo - h).max(-h - hi);
+    }
+    let n = (triangle.b - triangle.a).cross(triangle.c - triangle.a);
+    let len = n.length();
+    if len > 0.0 {
+        let n = n / len;
+        let reach = half.x * n.dot(r.x_axis).abs() + half.y * n.dot(r.y_axis).abs() + half.z * n.dot(r.z_axis).abs();
+        gap = gap.max(n.dot(v[0]).abs() - reach);
+    }
+    gap
 }
 
 /// The closest points of a triangle mesh (posed by `pm`) and a bounded convex shape (posed by
@@ -419,7 +458,11 @@ pub(crate) fn mesh_solid_closest_points(
     };
     let identity = parry3d_f64::math::Pose::IDENTITY;
     let leaf = |i: u32, best: Real| {
-        let points = parry3d_f64::query::closest_points(&identity, &mesh.triangle(i), &rel, shape, best).ok()?;
+        let triangle = mesh.triangle(i);
+        if triangle_box_gap(&triangle, &r, &center, &hs) - hair >= best {
+            return None;
+        }
+        let points = parry3d_f64::query::closest_points(&identity, &triangle, &rel, shape, best).ok()?;
         Some(match points {
             ClosestPoints::WithinMargin(p1, p2) => ((p1 - p2).length(), points),
             ClosestPoints::Intersecting => (-Real::MAX, points),
@@ -445,6 +488,7 @@ pub(crate) fn meshes_closest_points(
     mb: &parry3d_f64::shape::TriMesh,
     pb: &parry3d_f64::math::Pose,
     max_dist: Real,
+    hint: &PairHint,
 ) -> ClosestPoints {
     use parry3d_f64::math::{Matrix, Vector};
     use std::cell::Cell;
@@ -464,6 +508,19 @@ pub(crate) fn meshes_closest_points(
     };
     let identity = parry3d_f64::math::Pose::IDENTITY;
     let mut found = ClosestPoints::Disjoint;
+    let mut closest = None;
+    // The last closest pair first: its distance, an upper bound, prunes the descent from the start.
+    if let Some((i, j)) = hint.get().filter(|&(i, j)| i < ma.num_triangles() as u32 && j < mb.num_triangles() as u32) {
+        match parry3d_f64::query::closest_points(&identity, &ma.triangle(i), &rel, &mb.triangle(j), max_dist) {
+            Ok(ClosestPoints::Intersecting) => return ClosestPoints::Intersecting,
+            Ok(ClosestPoints::WithinMargin(p1, p2)) => {
+                best.set((p1 - p2).length());
+                found = ClosestPoints::WithinMargin(p1, p2);
+                closest = Some((i, j));
+            }
+            _ => {}
+        }
+    }
     for (i, j) in ma.bvh().leaf_pairs(mb.bvh(), lower) {
         let (ta, tb) = (ma.triangle(i), mb.triangle(j));
         let tb_in_a = [rel.transform_point(tb.a), rel.transform_point(tb.b), rel.transform_point(tb.c)];
@@ -474,16 +531,23 @@ pub(crate) fn meshes_closest_points(
             continue;
         }
         match parry3d_f64::query::closest_points(&identity, &ta, &rel, &tb, margin) {
-            Ok(ClosestPoints::Intersecting) => return ClosestPoints::Intersecting,
+            Ok(ClosestPoints::Intersecting) => {
+                hint.set(Some((i, j)));
+                return ClosestPoints::Intersecting;
+            }
             Ok(ClosestPoints::WithinMargin(p1, p2)) => {
                 let d = (p1 - p2).length();
                 if d < best.get() {
                     best.set(d);
                     found = ClosestPoints::WithinMargin(p1, p2);
+                    closest = Some((i, j));
                 }
             }
             _ => {}
         }
+    }
+    if closest.is_some() {
+        hint.set(closest);
     }
     found.transform_by(pa, pa)
 }
@@ -643,6 +707,7 @@ mod tests {
         let (a, b) = (torus(0.1, 0.03, 24, 12), torus(0.08, 0.02, 20, 10));
         let mut state = 0x9e37_79b9_7f4a_7c15;
         let (mut counts, mut near) = ([0usize; 2], 0);
+        let hint = PairHint::default();
         for k in 0..600 {
             let padding = if k % 2 == 0 { 0.0 } else { 0.01 };
             let (pa, pb) = (pose(&mut state, 0.02), pose(&mut state, 0.16));
@@ -653,7 +718,11 @@ mod tests {
             // The closest points within 5 cm: parry's answer, the same distance.
             let reference =
                 parry3d_f64::query::closest_points(&pa, a.as_ref(), &pb, b.as_ref(), 0.05).expect("supported");
-            match (reference, meshes_closest_points(ma, &pa, mb, &pb, 0.05)) {
+            // Cold, and warm from the last pose's closest triangles: the same answer.
+            let cold = meshes_closest_points(ma, &pa, mb, &pb, 0.05, &PairHint::default());
+            let warm = meshes_closest_points(ma, &pa, mb, &pb, 0.05, &hint);
+            assert_eq!(cold, warm, "pose {k}");
+            match (reference, warm) {
                 (ClosestPoints::WithinMargin(a1, a2), ClosestPoints::WithinMargin(b1, b2)) => {
                     let (da, db) = ((a1 - a2).length(), (b1 - b2).length());
                     assert!((da - db).abs() < 1e-9, "pose {k}: {da} against {db}");
