@@ -45,20 +45,13 @@
 //! beat the best, and the rest get the mesh distance.
 //!
 //! **What each stage decides** (the MotionBenchMaker Panda, 1 400 labelled configurations,
-//! `crates/lab/examples/check_profile.rs`, one thread of the 2-core VM, release): per
-//! configuration the ball and box gaps decide 142.6 pairs of the verdict, the sphere trees 0.89
-//! (0.80 of them self pairs, mostly link5–link7 at 2 cm, where the root bodies overlap), and
-//! 0.37 reach the sos solve and 0.36 the mesh, against 1.25 and 1.15 without the trees; the
-//! verdict's median falls from 8.9 µs to 5.7 µs in the same run. The contact proofs then take
-//! 0.26 of those pairs, leaving 0.11 solves and 0.10 mesh tests: the verdict's mean falls from
-//! 31 to 20 µs and its 90th percentile from 74 to 29 µs (the same run).
+//! `crates/lab/examples/check_profile.rs`): per configuration the ball and box gaps decide 142.6
+//! pairs of the verdict, the sphere trees 0.89 (mostly the self pair link5–link7 at 2 cm), the
+//! contact proofs 0.28; 0.08 reach the sos solve and 0.08 the mesh ([`crate::exact`]'s descents).
 //!
-//! **Why the root and not the leaves.** On the Panda's links the branch-and-bound descent of a
-//! 32-leaf tree against a box costs tens of µs, the mesh's own BVH distance 1–8 µs and the root's
-//! sos solve 0.4–2 µs: near pairs are cheaper on the mesh than down the tree
-//! (`crates/lab/examples/check_profile.rs` measures it). The sphere trees are another matter:
-//! a ball against a primitive is a closed form of a few ns, so a descent of tens of nodes costs
-//! less than one solve.
+//! **Why the root and not the leaves.** A 32-leaf tree's descent against a box costs tens of µs,
+//! the root's sos solve 0.4–2 µs and the mesh stage a few µs; the sphere trees are another matter
+//! (a ball against a primitive is a closed form of a few ns).
 
 use crate::exact::{box_gap, box_gap_past, exact_collides, exact_pair, exact_primitive, parry_pose, PairHint};
 use crate::exact::{ExactShape, PairOutcome, PlacedBox};
