@@ -690,6 +690,7 @@ impl<'r> RobotChecker<'r> {
                 &parry_pose(&(obj.pose * b.offset)),
                 b,
                 padding,
+                &PairHint::default(),
             )?;
             return Ok(collides.then_some(PairOutcome::Collides));
         }
@@ -768,7 +769,8 @@ impl<'r> RobotChecker<'r> {
             }
             answer.pairs_exact += 1;
             let (ea, eb) = (&self.robot_exact[a], &self.robot_exact[b]);
-            if exact_collides(&parry_pose(&(pa * ea.offset)), ea, &parry_pose(&(pb * eb.offset)), eb, padding)? {
+            let (pa, pb) = (parry_pose(&(pa * ea.offset)), parry_pose(&(pb * eb.offset)));
+            if exact_collides(&pa, ea, &pb, eb, padding, &self.self_hints[k])? {
                 answer.self_collision = true;
                 answer.self_pair = Some((a, b));
                 break;

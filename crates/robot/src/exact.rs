@@ -158,17 +158,19 @@ pub(crate) enum PairOutcome {
     Collides,
 }
 
-/// Whether two exact shapes (parry) intersect or come within `padding`.
+/// Whether two exact shapes (parry) intersect or come within `padding`. For two meshes, the pair
+/// of triangles in `hint` is tried first and a pair found touching is left there ([`PairHint`]).
 pub(crate) fn exact_collides(
     pa: &parry3d_f64::math::Pose,
     a: &ExactShape,
     pb: &parry3d_f64::math::Pose,
     b: &ExactShape,
     padding: Real,
+    hint: &PairHint,
 ) -> Result<bool> {
     let unsupported = |_| Error::Numerical("the exact mesh stage does not support this shape pair".into());
     if let (Some(ma), Some(mb)) = (a.shape.as_trimesh(), b.shape.as_trimesh()) {
-        return Ok(meshes_touch(ma, pa, mb, pb, padding));
+        return Ok(meshes_touch(ma, pa, mb, pb, padding, hint));
     }
     if let Some(m) = a.shape.as_trimesh() {
         if let Some(touch) = mesh_touches_solid(m, pa, b.shape.as_ref(), pb, padding) {
@@ -257,6 +259,7 @@ pub(crate) fn meshes_touch(
     mb: &parry3d_f64::shape::TriMesh,
     pb: &parry3d_f64::math::Pose,
     padding: Real,
+    hint: &PairHint,
 ) -> bool {
     use parry3d_f64::math::{Matrix, Vector};
     let rel = pa.inv_mul(pb);
@@ -273,7 +276,7 @@ pub(crate) fn meshes_touch(
         d.x <= reach.x && d.y <= reach.y && d.z <= reach.z
     };
     let identity = parry3d_f64::math::Pose::IDENTITY;
-    ma.bvh().leaf_pairs(mb.bvh(), overlap).any(|(i, j)| {
+    let touch = |(i, j): (u32, u32)| {
         let (ta, tb) = (ma.triangle(i), mb.triangle(j));
         let tb_in_a = [r * tb.a + t, r * tb.b + t, r * tb.c + t];
         if beyond_plane([ta.a, ta.b, ta.c], tb_in_a, padding) || beyond_plane(tb_in_a, [ta.a, ta.b, ta.c], padding) {
@@ -288,7 +291,19 @@ pub(crate) fn meshes_touch(
             parry3d_f64::query::closest_points(&identity, &ta, &rel, &tb, padding)
                 .is_ok_and(|c| !matches!(c, ClosestPoints::Disjoint))
         }
-    })
+    };
+    // The last pair found touching first: contacts of two links recur in the same places.
+    if hint.get().is_some_and(|(i, j)| i < ma.num_triangles() as u32 && j < mb.num_triangles() as u32 && touch((i, j)))
+    {
+        return true;
+    }
+    match ma.bvh().leaf_pairs(mb.bvh(), overlap).find(|&pair| touch(pair)) {
+        Some(pair) => {
+            hint.set(Some(pair));
+            true
+        }
+        None => false,
+    }
 }
 
 /// Whether two triangles, each cutting the other's plane, are disjoint: the segments in which
