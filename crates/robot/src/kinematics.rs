@@ -24,15 +24,7 @@ impl RobotModel {
     /// As [`RobotModel::check_configuration`] (field `q`).
     pub fn joint_values(&self, q: &[Real]) -> Result<Vec<Real>> {
         self.check_configuration("q", q)?;
-        Ok(self
-            .joints()
-            .iter()
-            .map(|j| match j.value {
-                JointValue::Fixed => 0.0,
-                JointValue::Variable(k) => q[k],
-                JointValue::Mimic { variable, multiplier, offset } => multiplier * q[variable] + offset,
-            })
-            .collect())
+        Ok(self.joints().iter().map(|j| joint_value(j.value, q)).collect())
     }
 
     /// Every link's pose in the world at configuration `q` (one entry per
@@ -43,12 +35,13 @@ impl RobotModel {
     /// # Errors
     /// [`crate::Error::InvalidArgument`] naming `q` (wrong length) or `q[k]` (not finite).
     pub fn forward_kinematics(&self, q: &[Real], base: &Isometry3, out: &mut Vec<Isometry3>) -> Result<()> {
-        let values = self.joint_values(q)?;
+        self.check_configuration("q", q)?;
         out.clear();
         out.resize(self.links().len(), Isometry3::identity());
         out[self.root()] = *base;
-        for (joint, &v) in self.joints().iter().zip(&values) {
-            out[joint.child] = out[joint.parent] * joint.transform(v);
+        for joint in self.joints() {
+            // No vector of values: this is every check's first step.
+            out[joint.child] = out[joint.parent] * joint.transform(joint_value(joint.value, q));
         }
         Ok(())
     }
@@ -97,5 +90,15 @@ impl RobotModel {
             };
             out[k] += m * dx;
         }
+    }
+}
+
+/// A joint's value at configuration `q` (already checked): 0 fixed, `q[k]`, or a mimic's
+/// `multiplier · q[k] + offset`.
+fn joint_value(value: JointValue, q: &[Real]) -> Real {
+    match value {
+        JointValue::Fixed => 0.0,
+        JointValue::Variable(k) => q[k],
+        JointValue::Mimic { variable, multiplier, offset } => multiplier * q[variable] + offset,
     }
 }
