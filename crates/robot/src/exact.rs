@@ -261,10 +261,8 @@ pub(crate) fn meshes_touch(
     padding: Real,
     hint: &PairHint,
 ) -> bool {
-    use parry3d_f64::math::{Matrix, Vector};
-    let rel = pa.inv_mul(pb);
-    let r = Matrix::from_quat(rel.rotation);
-    let abs_r = Matrix::from_cols(r.x_axis.abs(), r.y_axis.abs(), r.z_axis.abs());
+    use parry3d_f64::math::Vector;
+    let (rel, r, abs_r) = relative(pa, pb);
     let t = rel.translation;
     // Rounding of the placed boxes: a hair of slack, as the boxes only prune.
     let slack = padding + 1e-9 * (1.0 + t.length() + ma.local_aabb().extents().length());
@@ -371,6 +369,56 @@ fn beyond_plane(u: [parry3d_f64::math::Vector; 3], v: [parry3d_f64::math::Vector
     s.iter().all(|&s| s > reach) || s.iter().all(|&s| s < -reach)
 }
 
+/// The pose of `pb` in `pa`'s frame, its rotation matrix and the matrix of the entries'
+/// absolute values (which bounds a box's extents after the rotation).
+fn relative(
+    pa: &parry3d_f64::math::Pose,
+    pb: &parry3d_f64::math::Pose,
+) -> (parry3d_f64::math::Pose, parry3d_f64::math::Matrix, parry3d_f64::math::Matrix) {
+    let rel = pa.inv_mul(pb);
+    let r = parry3d_f64::math::Matrix::from_quat(rel.rotation);
+    (rel, r, parry3d_f64::math::Matrix::from_cols(r.x_axis.abs(), r.y_axis.abs(), r.z_axis.abs()))
+}
+
+/// A bounded convex shape's box in a mesh's frame, for the mesh–primitive descents.
+struct SolidBox {
+    /// The shape's pose in the mesh's frame.
+    rel: parry3d_f64::math::Pose,
+    /// Its rotation (the box's axes as columns) and the entries' absolute values.
+    r: parry3d_f64::math::Matrix,
+    abs_r: parry3d_f64::math::Matrix,
+    /// The box's center (mesh frame) and half extents (its own axes), meters.
+    center: parry3d_f64::math::Vector,
+    half: parry3d_f64::math::Vector,
+    /// Rounding of the placed boxes (meters): a hair the tests loosen their bounds by.
+    hair: Real,
+}
+
+impl SolidBox {
+    /// The box of `shape` (posed by `ps`) in the frame of `mesh` (posed by `pm`); `None` for a
+    /// composite shape or an unbounded one (parry bounds a halfspace by a box of half the largest
+    /// float: no use as a box).
+    fn new(
+        mesh: &parry3d_f64::shape::TriMesh,
+        pm: &parry3d_f64::math::Pose,
+        shape: &dyn parry3d_f64::shape::Shape,
+        ps: &parry3d_f64::math::Pose,
+    ) -> Option<Self> {
+        if shape.as_composite_shape().is_some() || shape.as_halfspace().is_some() {
+            return None;
+        }
+        let local = shape.compute_local_aabb();
+        let (cs, half) = (local.center(), local.half_extents());
+        if !(cs.is_finite() && half.is_finite()) {
+            return None;
+        }
+        let (rel, r, abs_r) = relative(pm, ps);
+        let center = r * cs + rel.translation;
+        let hair = 1e-9 * (1.0 + center.length() + half.length() + mesh.local_aabb().extents().length());
+        Some(Self { rel, r, abs_r, center, half, hair })
+    }
+}
+
 /// Whether a triangle mesh (posed by `pm`) has a triangle within `padding` ≥ 0 of a bounded
 /// convex shape (posed by `ps`): parry's verdict on each triangle, found by a descent of the
 /// mesh's BVH that keeps a node only while its box meets the shape's box (an oriented box in the
@@ -385,21 +433,9 @@ pub(crate) fn mesh_touches_solid(
     ps: &parry3d_f64::math::Pose,
     padding: Real,
 ) -> Option<bool> {
-    use parry3d_f64::math::{Matrix, Vector};
-    // parry bounds a halfspace by a box of half the largest float: no use as a box.
-    if shape.as_composite_shape().is_some() || shape.as_halfspace().is_some() {
-        return None;
-    }
-    let local = shape.compute_local_aabb();
-    let (cs, hs) = (local.center(), local.half_extents());
-    if !(cs.is_finite() && hs.is_finite()) {
-        return None;
-    }
-    let rel = pm.inv_mul(ps);
-    let r = Matrix::from_quat(rel.rotation);
-    let abs_r = Matrix::from_cols(r.x_axis.abs(), r.y_axis.abs(), r.z_axis.abs());
-    let center = r * cs + rel.translation;
-    let slack = padding + 1e-9 * (1.0 + center.length() + hs.length() + mesh.local_aabb().extents().length());
+    use parry3d_f64::math::Vector;
+    let SolidBox { rel, r, abs_r, center, half: hs, hair } = SolidBox::new(mesh, pm, shape, ps)?;
+    let slack = padding + hair;
     let reach_mesh_axes = abs_r * hs + Vector::splat(slack);
     let reach_shape_axes = hs + Vector::splat(slack);
     let meets = |node: &parry3d_f64::partitioning::BvhNode| {
@@ -469,21 +505,8 @@ pub(crate) fn mesh_solid_closest_points(
     ps: &parry3d_f64::math::Pose,
     max_dist: Real,
 ) -> Option<ClosestPoints> {
-    use parry3d_f64::math::{Matrix, Vector};
-    if shape.as_composite_shape().is_some() || shape.as_halfspace().is_some() {
-        return None;
-    }
-    let local = shape.compute_local_aabb();
-    let (cs, hs) = (local.center(), local.half_extents());
-    if !(cs.is_finite() && hs.is_finite()) {
-        return None;
-    }
-    let rel = pm.inv_mul(ps);
-    let r = Matrix::from_quat(rel.rotation);
-    let abs_r = Matrix::from_cols(r.x_axis.abs(), r.y_axis.abs(), r.z_axis.abs());
-    let center = r * cs + rel.translation;
-    // Rounding of the placed boxes: the bounds are lowered by a hair.
-    let hair = 1e-9 * (1.0 + center.length() + hs.length() + mesh.local_aabb().extents().length());
+    use parry3d_f64::math::Vector;
+    let SolidBox { rel, r, abs_r, center, half: hs, hair } = SolidBox::new(mesh, pm, shape, ps)?;
     let shape_in_mesh = abs_r * hs;
     let lower = |node: &parry3d_f64::partitioning::BvhNode, _: Real| {
         let (c1, h1) = ((node.mins() + node.maxs()) * 0.5, (node.maxs() - node.mins()) * 0.5);
@@ -526,11 +549,9 @@ pub(crate) fn meshes_closest_points(
     max_dist: Real,
     hint: &PairHint,
 ) -> ClosestPoints {
-    use parry3d_f64::math::{Matrix, Vector};
+    use parry3d_f64::math::Vector;
     use std::cell::Cell;
-    let rel = pa.inv_mul(pb);
-    let r = Matrix::from_quat(rel.rotation);
-    let abs_r = Matrix::from_cols(r.x_axis.abs(), r.y_axis.abs(), r.z_axis.abs());
+    let (rel, r, abs_r) = relative(pa, pb);
     let t = rel.translation;
     let hair = 1e-9 * (1.0 + t.length() + ma.local_aabb().extents().length() + mb.local_aabb().extents().length());
     let best = Cell::new(max_dist);
