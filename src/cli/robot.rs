@@ -3,6 +3,7 @@
 //!
 //! ```text
 //! sublevel robot fit ROBOT.urdf [--srdf ROBOT.srdf] [--package-dir DIR]... [--tolerance T] --output robot.json
+//! sublevel robot tables robot.json [--max-loss 0.004] [--output OUT.json]
 //! sublevel robot check robot.json --scene SCENE.yaml --configs Q.csv [--json] [--gradient] [--padding P]
 //! sublevel robot bench robot.json --scene SCENE.yaml [--columns 1000] [--addr HOST:PORT]   (robot_bench.rs)
 //! ```
@@ -11,6 +12,7 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::time::Instant;
 use sublevel::math::{Isometry3, Real};
+use sublevel::robot::clearance::{build_clearance_tables, ClearanceSettings};
 use sublevel::robot::{fit_robot, CheckOptions, FittedRobot, RobotChecker, RobotFitSettings};
 use sublevel::scene::moveit::{allowed_override, world_objects, PlanningScene};
 use sublevel::{Error, Result};
@@ -28,6 +30,9 @@ enum RobotCommand {
     /// Fit a robot from its URDF: every link mesh becomes a compound sos-convex body containing
     /// it, URDF primitives stay exact, the SRDF's disabled pairs become the allowed pairs.
     Fit(FitArgs),
+    /// Build (again) a fitted robot's clearance tables: the meshes' distance over the joints of
+    /// the self pairs moved by one or two joints, looked up before the sphere trees.
+    Tables(TablesArgs),
     /// Check joint configurations of a fitted robot against a MoveIt planning scene: collides
     /// (world, self), minimum robot–world distance and its pair.
     Check(CheckArgs),
@@ -65,12 +70,32 @@ struct FitArgs {
     /// Meshes fitted at once (0: one per core).
     #[arg(long, default_value_t = 0)]
     threads: usize,
+    /// Build no clearance tables (self pairs moved by one or two joints are then decided by the
+    /// sphere trees and the meshes alone: the same answers, slower).
+    #[arg(long)]
+    no_clearance_tables: bool,
     /// Where to write the robot file.
     #[arg(short, long)]
     output: PathBuf,
     /// No progress on stderr.
     #[arg(short, long)]
     quiet: bool,
+}
+
+/// Arguments of `sublevel robot tables`.
+#[derive(clap::Args, Debug)]
+struct TablesArgs {
+    /// The robot file (`sublevel robot fit`).
+    robot: PathBuf,
+    /// Most the tables' distance bound may lose at a cell's corner, meters (sets the cell size).
+    #[arg(long, default_value_t = 0.004)]
+    max_loss: Real,
+    /// Most cells per table.
+    #[arg(long, default_value_t = 1 << 17)]
+    max_cells: usize,
+    /// Where to write the robot file (default: over the input).
+    #[arg(short, long)]
+    output: Option<PathBuf>,
 }
 
 /// Arguments of `sublevel robot check`.
@@ -109,6 +134,7 @@ struct CheckArgs {
 pub fn run(args: RobotArgs) -> Result<()> {
     match args.command {
         RobotCommand::Fit(a) => fit(a),
+        RobotCommand::Tables(a) => tables(a),
         RobotCommand::Check(a) => check(a),
         RobotCommand::Bench(a) => super::robot_bench::run(a),
     }
@@ -129,6 +155,7 @@ fn fit(args: FitArgs) -> Result<()> {
     settings.compound.validate()?;
     settings.cache_dir = args.cache.clone().or_else(default_cache);
     settings.refresh_cache = args.no_cache;
+    settings.clearance = (!args.no_clearance_tables).then(ClearanceSettings::default);
     let start = Instant::now();
     let quiet = args.quiet;
     let progress = move |p: &sublevel::robot::RobotFitProgress| {
@@ -154,6 +181,20 @@ fn fit(args: FitArgs) -> Result<()> {
     for n in &r.notes {
         eprintln!("  {n}");
     }
+    Ok(())
+}
+
+fn tables(args: TablesArgs) -> Result<()> {
+    let robot = FittedRobot::load(&args.robot)?;
+    let settings = ClearanceSettings { max_loss: args.max_loss, max_cells: args.max_cells, threads: 0 };
+    let start = Instant::now();
+    let files = build_clearance_tables(&robot, &settings, &|message| eprintln!("{message}"))?;
+    let n = files.len();
+    let robot = robot.with_clearance(files)?;
+    let output = args.output.unwrap_or(args.robot);
+    robot.save(&output)?;
+    let cells: usize = robot.clearance.iter().map(|t| t.len()).sum();
+    eprintln!("{n} clearance tables, {cells} cells, {:.1} s -> {}", start.elapsed().as_secs_f64(), output.display());
     Ok(())
 }
 

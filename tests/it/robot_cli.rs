@@ -112,6 +112,8 @@ fn robot_fit_writes_a_robot_file_and_names_what_it_cannot_read() {
     assert_eq!(robot.model.variable_names(), vec!["j"]);
     assert_eq!(robot.geometries.len(), 2);
     assert_eq!(robot.self_pairs, vec![(0, 1)]);
+    // The pair is moved by one joint: the fit built its clearance table.
+    assert_eq!(robot.clearance.len(), 1);
     // A configuration CSV naming a joint the robot lacks is refused, naming the header cell.
     let q = dir.path().join("q.csv");
     std::fs::write(&q, "k\n0.1\n").unwrap();

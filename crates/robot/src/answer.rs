@@ -53,6 +53,8 @@ pub struct ConfigurationAnswer {
     pub converged: bool,
     /// Pairs decided by their bounding balls.
     pub pairs_pruned: usize,
+    /// Self pairs decided by the robot's clearance tables ([`crate::clearance`]), one lookup each.
+    pub pairs_table: usize,
     /// Pairs decided by the links' sphere trees ([`crate::spheres`]), no solve.
     pub pairs_spheres: usize,
     /// Pairs proved colliding by the link meshes' inner balls ([`crate::inner`]), no mesh test.
@@ -61,4 +63,28 @@ pub struct ConfigurationAnswer {
     pub pairs_model: usize,
     /// Pairs resolved on the meshes.
     pub pairs_exact: usize,
+}
+
+impl ConfigurationAnswer {
+    /// The answer before any pair is checked: free, distance +∞ (NaN when `distance` is not asked
+    /// for), converged, every count 0.
+    pub(crate) fn start(distance: bool) -> Self {
+        Self {
+            collides: false,
+            world: false,
+            self_collision: false,
+            distance: if distance { Real::INFINITY } else { Real::NAN },
+            pair: None,
+            witnesses: None,
+            self_pair: None,
+            gradient: None,
+            converged: true,
+            pairs_pruned: 0,
+            pairs_table: 0,
+            pairs_spheres: 0,
+            pairs_proved: 0,
+            pairs_model: 0,
+            pairs_exact: 0,
+        }
+    }
 }

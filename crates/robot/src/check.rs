@@ -20,10 +20,10 @@
 //!   mesh:  the link's triangles against the primitive or the object's triangles (parry's BVH):
 //!          intersecting or within the padding → collides; else the exact mesh distance, the new
 //!          best
-//! self pairs (the SRDF's allowed pairs left out): ball gap, box gap, the two sphere trees' dual
-//!   descent (a mesh and a primitive: the tree against the primitive), the contact proofs (two
-//!   closed meshes' inner balls; a vertex or tree node inside the other's inner ball),
-//!   root–root sos bound, then the two meshes' triangles
+//! self pairs (the SRDF's allowed pairs left out): ball gap, box gap, the pair's clearance table
+//!   ([`crate::clearance`]), the two sphere trees' dual descent (a mesh and a primitive: the tree
+//!   against the primitive), the contact proofs (two closed meshes' inner balls; a vertex or tree
+//!   node inside the other's inner ball), root–root sos bound, then the two meshes' triangles
 //! ```
 //!
 //! **No false collision from the proofs.** The contact proofs ([`crate::inner`]) show that a
@@ -56,8 +56,8 @@
 use crate::exact::{box_gap, box_gap_past, exact_collides, exact_pair, exact_primitive, parry_pose, PairHint};
 use crate::exact::{ExactShape, PairOutcome, PlacedBox};
 use crate::fitted::{FittedRobot, LinkShape};
-use crate::inner::{link_touches_primitive, link_vertex_touches, links_touch};
-use crate::spheres::{SphereTree, TreeAnswer};
+use crate::inner::{link_touches_primitive, link_vertex_touches};
+use crate::spheres::TreeAnswer;
 use crate::world::{WorldObject, WorldShape};
 use crate::{Error, Result};
 use sublevel_core::math::{Isometry3, Point3, Real, Vector3};
@@ -65,6 +65,8 @@ use sublevel_core::primitive::Primitive;
 use sublevel_query::shape::{shape_distance, ShapeRef};
 
 pub use crate::answer::{CheckOptions, ConfigurationAnswer};
+
+mod self_pairs;
 
 /// A link shape as the sos bound sees it: the primitive, or the compound body's root (which
 /// contains every leaf, hence every triangle).
@@ -102,6 +104,10 @@ pub struct RobotChecker<'r> {
     /// Each self pair's closest triangles last found by [`RobotChecker::self_bound`] (a motion's
     /// warm start).
     self_hints: Vec<PairHint>,
+    /// Each self pair's clearance table in `robot.clearance`, if it has one.
+    self_tables: Vec<Option<usize>>,
+    /// The configuration last placed.
+    q: Vec<Real>,
     link_poses: Vec<Isometry3>,
     poses: Vec<Isometry3>,
     centers: Vec<Vector3>,
@@ -203,6 +209,8 @@ impl<'r> RobotChecker<'r> {
             robot_exact,
             world_pairs,
             self_hints: self_pairs.iter().map(|_| PairHint::default()).collect(),
+            self_tables: self_pairs.iter().map(|&p| robot.clearance.iter().position(|t| t.geometries == p)).collect(),
+            q: Vec::new(),
             self_pairs,
             link_poses: Vec::new(),
             poses: Vec::new(),
@@ -297,22 +305,7 @@ impl<'r> RobotChecker<'r> {
         }
         let robot = self.robot;
         self.place(q, base)?;
-        let mut answer = ConfigurationAnswer {
-            collides: false,
-            world: false,
-            self_collision: false,
-            distance: if options.distance { Real::INFINITY } else { Real::NAN },
-            pair: None,
-            witnesses: None,
-            self_pair: None,
-            gradient: None,
-            converged: true,
-            pairs_pruned: 0,
-            pairs_spheres: 0,
-            pairs_proved: 0,
-            pairs_model: 0,
-            pairs_exact: 0,
-        };
+        let mut answer = ConfigurationAnswer::start(options.distance);
         self.world_check(options, &mut answer)?;
         if options.gradient && options.distance && !answer.world && answer.distance.is_finite() {
             if let (Some((x, y)), Some((g, _))) = (answer.witnesses, answer.pair) {
@@ -340,6 +333,8 @@ impl<'r> RobotChecker<'r> {
     pub(crate) fn place(&mut self, q: &[Real], base: &Isometry3) -> Result<()> {
         let robot = self.robot;
         robot.model.forward_kinematics(q, base, &mut self.link_poses)?;
+        self.q.clear();
+        self.q.extend_from_slice(q);
         self.poses.clear();
         self.centers.clear();
         self.boxes.clear();
@@ -408,7 +403,7 @@ impl<'r> RobotChecker<'r> {
                     (Some(x), Some(y)) => box_gap(x, y),
                     _ => Real::NEG_INFINITY,
                 };
-                Ok((gap.max(box_gap), false))
+                Ok((gap.max(box_gap).max(self.table_bound(k)), false))
             }
             1 => {
                 let d = shape_distance(root_shape(&ga.shape), &pa, root_shape(&gb.shape), &pb, None)?;
@@ -525,27 +520,6 @@ impl<'r> RobotChecker<'r> {
             threshold,
             padding,
         )
-    }
-
-    /// Whether the sphere trees prove self pair (`a`, `b`) farther apart than `padding`: a dual
-    /// descent of two meshes' trees, or a mesh's tree against a primitive; `false` for two
-    /// primitives.
-    fn self_spheres_apart(&self, a: usize, b: usize, padding: Real) -> bool {
-        let (ga, gb) = (&self.robot.geometries[a], &self.robot.geometries[b]);
-        let (pa, pb) = (&self.poses[a], &self.poses[b]);
-        match (&ga.shape, &gb.shape) {
-            (LinkShape::Mesh { spheres: sa, .. }, LinkShape::Mesh { spheres: sb, .. }) => {
-                let rel = pa.inv_mul(pb);
-                sa.apart_from_tree(sb, rel.rotation.to_rotation_matrix().matrix(), &rel.translation.vector, padding)
-            }
-            (LinkShape::Mesh { spheres, .. }, LinkShape::Primitive(p)) => {
-                tree_apart_from_primitive(spheres, pa, p, pb, padding)
-            }
-            (LinkShape::Primitive(p), LinkShape::Mesh { spheres, .. }) => {
-                tree_apart_from_primitive(spheres, pb, p, pa, padding)
-            }
-            _ => false,
-        }
     }
 
     /// The box gap of robot geometry `g` and world object `o` (a lower bound of their distance;
@@ -735,61 +709,4 @@ impl<'r> RobotChecker<'r> {
         let pb = parry_pose(&(self.world[o].pose * b.offset));
         exact_pair(&pa, a, &pb, b, padding, max_dist, &PairHint::default())
     }
-
-    fn self_check(&mut self, options: &CheckOptions, answer: &mut ConfigurationAnswer) -> Result<()> {
-        for k in 0..self.self_pairs.len() {
-            let (a, b) = self.self_pairs[k];
-            let padding = options.padding + self.pad[a] + self.pad[b];
-            let (ga, gb) = (&self.robot.geometries[a], &self.robot.geometries[b]);
-            let gap = (self.centers[a] - self.centers[b]).norm() - ga.sphere.1 - gb.sphere.1;
-            let box_gap = || match (&self.boxes[a], &self.boxes[b]) {
-                (Some(x), Some(y)) => box_gap_past(x, y, padding),
-                _ => Real::NEG_INFINITY,
-            };
-            if gap > padding || box_gap() > padding {
-                answer.pairs_pruned += 1;
-                continue;
-            }
-            if self.sphere_stage && self.self_spheres_apart(a, b, padding) {
-                answer.pairs_spheres += 1;
-                continue;
-            }
-            if self.contact_proofs && links_touch(&ga.shape, &self.poses[a], &gb.shape, &self.poses[b]) {
-                answer.pairs_proved += 1;
-                answer.self_collision = true;
-                answer.self_pair = Some((a, b));
-                break;
-            }
-            answer.pairs_model += 1;
-            let (pa, pb) = (&self.poses[a], &self.poses[b]);
-            let d = shape_distance(root_shape(&ga.shape), pa, root_shape(&gb.shape), pb, None)?;
-            let free = d.status.converged() && !d.overlapping && d.distance > padding;
-            if free {
-                continue;
-            }
-            answer.pairs_exact += 1;
-            let (ea, eb) = (&self.robot_exact[a], &self.robot_exact[b]);
-            let (pa, pb) = (parry_pose(&(pa * ea.offset)), parry_pose(&(pb * eb.offset)));
-            if exact_collides(&pa, ea, &pb, eb, padding, &self.self_hints[k])? {
-                answer.self_collision = true;
-                answer.self_pair = Some((a, b));
-                break;
-            }
-        }
-        Ok(())
-    }
-}
-
-/// Whether the sphere tree `tree` (posed by `pose`) shows the primitive `p` (posed by `pose_p`)
-/// farther than `threshold` from every triangle.
-fn tree_apart_from_primitive(
-    tree: &SphereTree,
-    pose: &Isometry3,
-    p: &Primitive,
-    pose_p: &Isometry3,
-    threshold: Real,
-) -> bool {
-    // Ball centers straight into the primitive's frame: one rotation matrix per pair.
-    let rel = pose_p.inv_mul(pose);
-    tree.apart_from_primitive(rel.rotation.to_rotation_matrix().matrix(), &rel.translation.vector, p, threshold)
 }

@@ -273,23 +273,7 @@ pub(crate) fn meshes_touch(
         let reach = h1 + abs_r * h2 + Vector::splat(slack);
         d.x <= reach.x && d.y <= reach.y && d.z <= reach.z
     };
-    let identity = parry3d_f64::math::Pose::IDENTITY;
-    let touch = |(i, j): (u32, u32)| {
-        let (ta, tb) = (ma.triangle(i), mb.triangle(j));
-        let tb_in_a = [r * tb.a + t, r * tb.b + t, r * tb.c + t];
-        if beyond_plane([ta.a, ta.b, ta.c], tb_in_a, padding) || beyond_plane(tb_in_a, [ta.a, ta.b, ta.c], padding) {
-            return false;
-        }
-        if padding == 0.0 {
-            if apart_on_common_line([ta.a, ta.b, ta.c], tb_in_a) {
-                return false;
-            }
-            parry3d_f64::query::intersection_test(&identity, &ta, &rel, &tb).is_ok_and(|r| r.intersecting)
-        } else {
-            parry3d_f64::query::closest_points(&identity, &ta, &rel, &tb, padding)
-                .is_ok_and(|c| !matches!(c, ClosestPoints::Disjoint))
-        }
-    };
+    let touch = |pair: (u32, u32)| triangles_touch_in(ma, mb, &rel, &r, padding, pair);
     // The last pair found touching first: contacts of two links recur in the same places.
     if hint.get().is_some_and(|(i, j)| i < ma.num_triangles() as u32 && j < mb.num_triangles() as u32 && touch((i, j)))
     {
@@ -301,6 +285,50 @@ pub(crate) fn meshes_touch(
             true
         }
         None => false,
+    }
+}
+
+/// Whether triangle `i` of mesh `ma` (posed by `pa`) and triangle `j` of `mb` (posed by `pb`)
+/// meet or come within `padding`: the triangle test of [`meshes_touch`] on one pair (a contact
+/// witness stored by a clearance table, [`crate::clearance`]). Indices out of range are `false`.
+pub(crate) fn triangles_touch(
+    ma: &parry3d_f64::shape::TriMesh,
+    pa: &parry3d_f64::math::Pose,
+    mb: &parry3d_f64::shape::TriMesh,
+    pb: &parry3d_f64::math::Pose,
+    padding: Real,
+    pair: (u32, u32),
+) -> bool {
+    let (rel, r, _) = relative(pa, pb);
+    pair.0 < ma.num_triangles() as u32
+        && pair.1 < mb.num_triangles() as u32
+        && triangles_touch_in(ma, mb, &rel, &r, padding, pair)
+}
+
+/// [`triangles_touch`] with `mb`'s pose in `ma`'s frame (`rel`, rotation matrix `r`).
+fn triangles_touch_in(
+    ma: &parry3d_f64::shape::TriMesh,
+    mb: &parry3d_f64::shape::TriMesh,
+    rel: &parry3d_f64::math::Pose,
+    r: &parry3d_f64::math::Matrix,
+    padding: Real,
+    (i, j): (u32, u32),
+) -> bool {
+    let t = rel.translation;
+    let (ta, tb) = (ma.triangle(i), mb.triangle(j));
+    let tb_in_a = [*r * tb.a + t, *r * tb.b + t, *r * tb.c + t];
+    if beyond_plane([ta.a, ta.b, ta.c], tb_in_a, padding) || beyond_plane(tb_in_a, [ta.a, ta.b, ta.c], padding) {
+        return false;
+    }
+    let identity = parry3d_f64::math::Pose::IDENTITY;
+    if padding == 0.0 {
+        if apart_on_common_line([ta.a, ta.b, ta.c], tb_in_a) {
+            return false;
+        }
+        parry3d_f64::query::intersection_test(&identity, &ta, rel, &tb).is_ok_and(|r| r.intersecting)
+    } else {
+        parry3d_f64::query::closest_points(&identity, &ta, rel, &tb, padding)
+            .is_ok_and(|c| !matches!(c, ClosestPoints::Disjoint))
     }
 }
 

@@ -15,6 +15,7 @@
 //! above the tolerance is reported in the robot's notes, not refused: the checks resolve the
 //! configurations the model cannot decide against the mesh itself ([`crate::check`]).
 
+use crate::clearance::{build_clearance_tables, ClearanceFile, ClearanceSettings};
 use crate::fitted::{FittedRobot, GeometryFile, MeshFile, PoseFile, RobotFile, RobotFitReport, ROBOT_FORMAT};
 use crate::model::{resolve_mesh_path, CollisionGeometry, RobotModel};
 use crate::srdf::Semantics;
@@ -30,7 +31,7 @@ use sublevel_fit::compound::{fit_compound, CompoundSettings, PartCount};
 use sublevel_fit::mesh::{load_triangle_mesh, MeshFormat, TriangleMesh, DEFAULT_MAX_MESH_POINTS};
 
 /// Settings of [`fit_robot`]; the default fits every mesh with `CompoundSettings::default()`, no
-/// cache, one mesh per core.
+/// cache, one mesh per core, and builds no clearance tables (the CLI and the server build them).
 #[derive(Clone, Debug, Default)]
 pub struct RobotFitSettings {
     /// Directories that hold ROS packages: `package://NAME/PATH` is `DIR/NAME/PATH`.
@@ -44,6 +45,9 @@ pub struct RobotFitSettings {
     pub refresh_cache: bool,
     /// Meshes fitted at once (0: one per available core).
     pub threads: usize,
+    /// Clearance tables of the self pairs moved by one or two joints ([`crate::clearance`]);
+    /// `None` builds none (the checks are the same, slower on those pairs).
+    pub clearance: Option<ClearanceSettings>,
 }
 
 /// Progress of [`fit_robot`]: one message per mesh started or finished.
@@ -142,8 +146,49 @@ pub fn fit_robot(
         allowed_pairs,
         geometries,
         report,
+        clearance: Vec::new(),
     };
-    FittedRobot::from_file(file)
+    let robot = FittedRobot::from_file(file)?;
+    let Some(clearance) = &settings.clearance else { return Ok(robot) };
+    let meshes = robot.file.report.fitted + robot.file.report.cached;
+    let tables = cached_tables(&robot, clearance, settings, &|message: &str| {
+        progress(&RobotFitProgress { done: meshes, total: meshes, message: message.to_owned() });
+    })?;
+    let mut robot = robot.with_clearance(tables)?;
+    robot.file.report.seconds = start.elapsed().as_secs_f64();
+    Ok(robot)
+}
+
+/// The robot's clearance tables, read from `cache_dir` when the same robot was fitted before
+/// (keyed by the robot's geometry, joints and the table settings), else built and cached.
+fn cached_tables(
+    robot: &FittedRobot,
+    clearance: &ClearanceSettings,
+    settings: &RobotFitSettings,
+    progress: &(dyn Fn(&str) + Sync),
+) -> Result<Vec<ClearanceFile>> {
+    let mut h = Sha256::new();
+    h.update(robot.file.urdf.as_bytes());
+    h.update(serde_json::to_string(&robot.file.geometries)?.as_bytes());
+    h.update(format!("{:?} {}", clearance.max_loss, clearance.max_cells).as_bytes());
+    let path = settings.cache_dir.as_ref().map(|d| d.join(format!("clearance-{}.json", hex(&h.finalize()))));
+    if let (Some(path), false) = (&path, settings.refresh_cache) {
+        let cached: Option<Vec<ClearanceFile>> =
+            std::fs::read_to_string(path).ok().and_then(|t| serde_json::from_str(&t).ok());
+        if let Some(tables) = cached {
+            progress("clearance tables: cached");
+            return Ok(tables);
+        }
+    }
+    let tables = build_clearance_tables(robot, clearance, progress)?;
+    if let Some(path) = &path {
+        let tmp = path.with_extension("json.tmp");
+        // A cache that cannot be written only costs the next fit the build.
+        let _ = std::fs::create_dir_all(path.parent().unwrap_or(Path::new(".")))
+            .and_then(|()| std::fs::write(&tmp, serde_json::to_string(&tables).unwrap_or_default()))
+            .and_then(|()| std::fs::rename(&tmp, path));
+    }
+    Ok(tables)
 }
 
 /// The fit settings that change a mesh's compound body, as text for the cache key.

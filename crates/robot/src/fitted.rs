@@ -23,6 +23,7 @@
 //! vertices holds the mesh, which is what makes the root's distance a lower bound of the mesh's.
 //! Building the ~350 nodes of the Panda's trees took seconds of support tables nothing reads.
 
+use crate::clearance::{ClearanceFile, ClearanceTable};
 use crate::inner::InnerBalls;
 use crate::model::RobotModel;
 use crate::spheres::{SphereTree, DEFAULT_LEAF_RADIUS};
@@ -143,6 +144,9 @@ pub struct RobotFile {
     /// What the fit did.
     #[serde(default)]
     pub report: RobotFitReport,
+    /// Clearance tables of self pairs moved by one or two joints ([`crate::clearance`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub clearance: Vec<ClearanceFile>,
 }
 
 /// A link's collision geometry as the checks use it.
@@ -203,6 +207,8 @@ pub struct FittedRobot {
     pub self_pairs: Vec<(usize, usize)>,
     /// The file this robot was read from or is saved as.
     pub file: RobotFile,
+    /// The clearance tables of `file`, validated ([`crate::clearance`]).
+    pub clearance: Vec<ClearanceTable>,
 }
 
 /// The axis-aligned box of points: its center and half extents (zeros for no points).
@@ -295,7 +301,27 @@ impl FittedRobot {
             };
             geometries.push(RobotGeometry { link, name, origin, shape, sphere, local_box });
         }
-        Ok(Self { model, geometries, allowed_pairs: file.allowed_pairs.clone(), self_pairs, file })
+        let robot = Self {
+            model,
+            geometries,
+            allowed_pairs: file.allowed_pairs.clone(),
+            self_pairs,
+            file,
+            clearance: Vec::new(),
+        };
+        let tables = robot.file.clearance.clone();
+        robot.with_clearance(tables)
+    }
+
+    /// The robot with `tables` as its clearance tables (replacing any it had; saved with it).
+    ///
+    /// # Errors
+    /// As [`crate::clearance`]'s validation: [`Error::InvalidArgument`] naming `clearance[k]` and
+    /// the field.
+    pub fn with_clearance(mut self, tables: Vec<ClearanceFile>) -> Result<Self> {
+        self.clearance = crate::clearance::load_tables(&self, &tables)?;
+        self.file.clearance = tables;
+        Ok(self)
     }
 
     /// Reads and validates a robot file.

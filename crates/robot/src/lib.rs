@@ -21,6 +21,8 @@
 //! - [`spheres`]: sphere trees of link meshes (every point of every triangle inside a chain of
 //!   nested balls), the checks' first stage after the ball and box gaps.
 //! - [`inner`]: balls inside closed link meshes, which prove a pair colliding without the mesh.
+//! - [`clearance`]: joint-space tables of the meshes' distance for self pairs moved by one or two
+//!   joints, a lookup before the sphere trees.
 //! - [`check`]: configurations checked against the world and for
 //!   self-collision: the sos model decides what is far, the meshes what is near; no missed
 //!   collision, and the minimum distance never above the meshes'.
@@ -38,6 +40,7 @@ pub use sublevel_core::{Error, Result};
 pub mod advance;
 mod answer;
 pub mod check;
+pub mod clearance;
 mod exact;
 pub mod fit;
 pub mod fitted;

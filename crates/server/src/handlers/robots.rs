@@ -85,6 +85,11 @@ pub(super) async fn start_robot_fit_job(
         cache_dir: Some(svc.config.data_dir.join("robot-fit-cache")),
         // Half the cores: a robot fit must not take every core from the queries.
         threads: (std::thread::available_parallelism().map_or(2, |n| n.get()) / 2).max(1),
+        // Clearance tables on the same half of the cores.
+        clearance: Some(sublevel_robot::clearance::ClearanceSettings {
+            threads: (std::thread::available_parallelism().map_or(2, |n| n.get()) / 2).max(1),
+            ..Default::default()
+        }),
         ..RobotFitSettings::default()
     };
     settings.compound.excess_tolerance = (req.tolerance != 0.0).then_some(req.tolerance);
