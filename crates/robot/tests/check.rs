@@ -12,20 +12,11 @@ use sublevel_core::primitive::Primitive;
 use sublevel_robot::fitted::LinkShape;
 use sublevel_robot::{fit_robot, CheckOptions, FittedRobot, RobotChecker, RobotFitSettings, WorldMesh, WorldObject};
 
-const URDF: &str = r#"<robot name="slider">
-  <link name="base"><collision><geometry><mesh filename="cube.obj" scale="0.2 0.2 0.2"/></geometry></collision></link>
-  <link name="arm"><collision><geometry><box size="0.2 0.2 0.2"/></geometry></collision></link>
-  <link name="tip"><collision><geometry><mesh filename="cube.obj" scale="0.1 0.1 0.1"/></geometry></collision></link>
-  <joint name="slide" type="prismatic"><parent link="base"/><child link="arm"/><origin xyz="0.5 0 0"/>
-    <axis xyz="1 0 0"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
-  <joint name="turn" type="revolute"><parent link="arm"/><child link="tip"/><origin xyz="0 0 0.5"/>
-    <axis xyz="0 0 1"/><limit lower="-3.2" upper="3.2" effort="1" velocity="1"/></joint>
-</robot>"#;
+/// The robot of the module docs.
+const URDF: &str = include_str!("data/slider.urdf");
 
 /// The unit cube [−0.5, 0.5]³ as 12 triangles (OBJ, quads split by the reader).
-const CUBE: &str = "v -0.5 -0.5 -0.5\nv 0.5 -0.5 -0.5\nv 0.5 0.5 -0.5\nv -0.5 0.5 -0.5\n\
-v -0.5 -0.5 0.5\nv 0.5 -0.5 0.5\nv 0.5 0.5 0.5\nv -0.5 0.5 0.5\n\
-f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n";
+const CUBE: &str = include_str!("data/cube.obj");
 
 fn robot() -> (FittedRobot, tempfile::TempDir) {
     let dir = tempfile::tempdir().unwrap();

@@ -13,26 +13,20 @@ use sublevel_core::math::{Isometry3, Real};
 use sublevel_robot::clearance::{ClearanceSettings, ClearanceTable, CLEARANCE_UNIT};
 use sublevel_robot::{fit_robot, CheckOptions, FittedRobot, RobotChecker, RobotFile, RobotFitSettings};
 
-const URDF: &str = r#"<robot name="slider">
-  <link name="base"><collision><geometry><mesh filename="cube.obj" scale="0.2 0.2 0.2"/></geometry></collision></link>
-  <link name="arm"><collision><geometry><box size="0.2 0.2 0.2"/></geometry></collision></link>
-  <link name="tip"><collision><geometry><mesh filename="cube.obj" scale="0.1 0.1 0.1"/></geometry></collision></link>
-  <joint name="slide" type="prismatic"><parent link="base"/><child link="arm"/><origin xyz="0.5 0 0"/>
-    <axis xyz="1 0 0"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
-  <joint name="turn" type="continuous"><parent link="arm"/><child link="tip"/><origin xyz="0 0 0.5"/>
-    <axis xyz="0 0 1"/></joint>
-</robot>"#;
+/// The slider of `check.rs` (`data/slider.urdf`), its tip's joint turned continuous.
+fn urdf() -> String {
+    include_str!("data/slider.urdf").replace(r#"type="revolute""#, r#"type="continuous""#)
+}
 
-const CUBE: &str = "v -0.5 -0.5 -0.5\nv 0.5 -0.5 -0.5\nv 0.5 0.5 -0.5\nv -0.5 0.5 -0.5\n\
-v -0.5 -0.5 0.5\nv 0.5 -0.5 0.5\nv 0.5 0.5 0.5\nv -0.5 0.5 0.5\n\
-f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n";
+/// The unit cube [−0.5, 0.5]³ (OBJ quads).
+const CUBE: &str = include_str!("data/cube.obj");
 
 const MAX_LOSS: Real = 0.004;
 
 fn slider(tables: bool) -> (FittedRobot, tempfile::TempDir) {
     let dir = tempfile::tempdir().unwrap();
     std::fs::write(dir.path().join("cube.obj"), CUBE).unwrap();
-    std::fs::write(dir.path().join("slider.urdf"), URDF).unwrap();
+    std::fs::write(dir.path().join("slider.urdf"), urdf()).unwrap();
     let mut settings = RobotFitSettings {
         cache_dir: Some(dir.path().join("cache")),
         clearance: tables.then_some(ClearanceSettings { max_loss: MAX_LOSS, max_cells: 40_000, threads: 2 }),

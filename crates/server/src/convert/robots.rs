@@ -135,7 +135,7 @@ pub fn push_configuration_answers(
             }
         }
         out.converged.push(a.converged);
-        out.pairs_pruned += a.pairs_pruned as u64;
+        out.pairs_pruned += (a.pairs_pruned + a.pairs_table + a.pairs_spheres) as u64;
         out.pairs_model += a.pairs_model as u64;
         out.pairs_exact += a.pairs_exact as u64;
     }
