@@ -55,7 +55,7 @@
 
 use crate::exact::{box_gap, box_gap_past, exact_collides, exact_pair, exact_primitive, parry_pose, PairHint};
 use crate::exact::{ExactShape, PairOutcome, PlacedBox};
-use crate::fitted::{FittedRobot, LinkShape};
+use crate::fitted::{FittedRobot, LinkShape, RobotGeometry};
 use crate::inner::{link_touches_primitive, link_vertex_touches};
 use crate::spheres::TreeAnswer;
 use crate::world::{WorldObject, WorldShape};
@@ -74,6 +74,14 @@ fn root_shape(s: &LinkShape) -> ShapeRef<'_> {
     match s {
         LinkShape::Primitive(p) => ShapeRef::Primitive(p),
         LinkShape::Mesh { body, .. } => ShapeRef::Body(body),
+    }
+}
+
+/// A robot geometry's exact shape for the mesh stage: its primitive, or its mesh's parry shape.
+pub(crate) fn exact_shape(g: &RobotGeometry) -> ExactShape {
+    match &g.shape {
+        LinkShape::Primitive(p) => exact_primitive(p),
+        LinkShape::Mesh { exact, .. } => ExactShape { shape: exact.clone(), offset: Isometry3::identity() },
     }
 }
 
@@ -171,14 +179,7 @@ impl<'r> RobotChecker<'r> {
                 }
             }
         }
-        let robot_exact = robot
-            .geometries
-            .iter()
-            .map(|g| match &g.shape {
-                LinkShape::Primitive(p) => exact_primitive(p),
-                LinkShape::Mesh { exact, .. } => ExactShape { shape: exact.clone(), offset: Isometry3::identity() },
-            })
-            .collect();
+        let robot_exact = robot.geometries.iter().map(exact_shape).collect();
         let world_exact = world
             .iter()
             .map(|o| match &o.shape {

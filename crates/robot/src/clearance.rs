@@ -32,7 +32,8 @@
 //! geometries (shape and origin), every joint between them, the grid and the unit. A robot file
 //! whose table no longer matches its geometry or joints is refused, naming the table.
 
-use crate::exact::{exact_pair, exact_primitive, meshes_touch, parry_pose, ExactShape, PairHint, PairOutcome};
+use crate::check::exact_shape;
+use crate::exact::{exact_pair, meshes_touch, parry_pose, PairHint, PairOutcome};
 use crate::fitted::{FittedRobot, LinkShape, RobotGeometry};
 use crate::model::{Joint, JointKind, JointValue, RobotModel};
 use crate::{Error, Result};
@@ -353,14 +354,6 @@ fn table_key(
     }
     reals(&mut h, &[unit]);
     h.finalize().iter().map(|b| format!("{b:02x}")).collect()
-}
-
-/// A geometry's exact shape for the mesh stage.
-fn exact_shape(g: &RobotGeometry) -> ExactShape {
-    match &g.shape {
-        LinkShape::Primitive(p) => exact_primitive(p),
-        LinkShape::Mesh { exact, .. } => ExactShape { shape: exact.clone(), offset: Isometry3::identity() },
-    }
 }
 
 /// Builds a clearance table for every geometry pair of the robot's checked self pairs that can

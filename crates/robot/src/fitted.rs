@@ -301,7 +301,7 @@ impl FittedRobot {
             };
             geometries.push(RobotGeometry { link, name, origin, shape, sphere, local_box });
         }
-        let robot = Self {
+        let mut robot = Self {
             model,
             geometries,
             allowed_pairs: file.allowed_pairs.clone(),
@@ -309,7 +309,7 @@ impl FittedRobot {
             file,
             clearance: Vec::new(),
         };
-        let tables = robot.file.clearance.clone();
+        let tables = std::mem::take(&mut robot.file.clearance);
         robot.with_clearance(tables)
     }
 

@@ -81,15 +81,13 @@ pub(super) async fn start_robot_fit_job(
             }
         }
     }
+    // Half the cores, for the meshes and then the clearance tables: a robot fit must not take
+    // every core from the queries.
+    let threads = (std::thread::available_parallelism().map_or(2, |n| n.get()) / 2).max(1);
     let mut settings = RobotFitSettings {
         cache_dir: Some(svc.config.data_dir.join("robot-fit-cache")),
-        // Half the cores: a robot fit must not take every core from the queries.
-        threads: (std::thread::available_parallelism().map_or(2, |n| n.get()) / 2).max(1),
-        // Clearance tables on the same half of the cores.
-        clearance: Some(sublevel_robot::clearance::ClearanceSettings {
-            threads: (std::thread::available_parallelism().map_or(2, |n| n.get()) / 2).max(1),
-            ..Default::default()
-        }),
+        threads,
+        clearance: Some(sublevel_robot::clearance::ClearanceSettings { threads, ..Default::default() }),
         ..RobotFitSettings::default()
     };
     settings.compound.excess_tolerance = (req.tolerance != 0.0).then_some(req.tolerance);
