@@ -23,7 +23,9 @@
 //! self pairs (the SRDF's allowed pairs left out): ball gap, box gap, the pair's clearance table
 //!   ([`crate::clearance`]), the two sphere trees' dual descent (a mesh and a primitive: the tree
 //!   against the primitive), the contact proofs (two closed meshes' inner balls; a vertex or tree
-//!   node inside the other's inner ball), root–root sos bound, then the two meshes' triangles
+//!   node inside the other's inner ball), root–root sos bound, then the two meshes' triangles;
+//!   each stage over every pair still undecided before the next (a verdict stops at the first
+//!   contact found, so a cheap proof on any pair spares the others' triangles)
 //! ```
 //!
 //! **No false collision from the proofs.** The contact proofs ([`crate::inner`]) show that a
@@ -121,6 +123,8 @@ pub struct RobotChecker<'r> {
     centers: Vec<Vector3>,
     boxes: Vec<Option<PlacedBox>>,
     order: Vec<(Real, usize, usize)>,
+    /// Self pairs left to the sphere trees, the sos bound and the meshes (scratch).
+    pending: Vec<usize>,
     /// Extra padding per geometry (meters, ≥ 0): its link's ([`RobotChecker::set_link_padding`]).
     pad: Vec<Real>,
     /// The largest entry of `pad` (0 with none).
@@ -218,6 +222,7 @@ impl<'r> RobotChecker<'r> {
             centers: Vec::new(),
             boxes: Vec::new(),
             order: Vec::new(),
+            pending: Vec::new(),
             pad: vec![0.0; robot.geometries.len()],
             pad_max: 0.0,
             sphere_stage: true,

@@ -248,8 +248,9 @@ pub(crate) fn exact_pair(
 /// parry tests a mesh against a mesh one triangle of the first at a time, each against the whole
 /// of the second: every triangle whose box meets the second mesh's box costs a descent of the
 /// second's BVH, which is most of the first mesh when two links nearly touch. Here a pair of
-/// nodes goes on only while their boxes meet — the second's box placed in the first's frame and
-/// bounded there by an axis-aligned box, loosened by the padding — so only pairs of triangles
+/// nodes goes on only while their boxes meet, loosened by the padding: the separating-axis test
+/// on the six face axes of the two boxes (the first's three, then the second's, which cut the
+/// triangle tests of two nearly touching links by about a third), so only pairs of triangles
 /// with overlapping boxes are tested, each with the triangle–triangle test parry's dispatch
 /// reaches. Boxes that meet are a necessary condition for triangles within the padding, so the
 /// answer is parry's.
@@ -269,9 +270,15 @@ pub(crate) fn meshes_touch(
     let overlap = |n1: &parry3d_f64::partitioning::BvhNode, n2: &parry3d_f64::partitioning::BvhNode| {
         let (c1, h1) = ((n1.mins() + n1.maxs()) * 0.5, (n1.maxs() - n1.mins()) * 0.5);
         let (c2, h2) = ((n2.mins() + n2.maxs()) * 0.5, (n2.maxs() - n2.mins()) * 0.5);
-        let d = (r * c2 + t - c1).abs();
-        let reach = h1 + abs_r * h2 + Vector::splat(slack);
-        d.x <= reach.x && d.y <= reach.y && d.z <= reach.z
+        let v = r * c2 + t - c1;
+        let (d, reach) = (v.abs(), h1 + abs_r * h2 + Vector::splat(slack));
+        if d.x > reach.x || d.y > reach.y || d.z > reach.z {
+            return false;
+        }
+        // The second box's own axes: the separation in its frame, against both boxes' reach.
+        let reach =
+            h2 + Vector::new(abs_r.x_axis.dot(h1), abs_r.y_axis.dot(h1), abs_r.z_axis.dot(h1)) + Vector::splat(slack);
+        r.x_axis.dot(v).abs() <= reach.x && r.y_axis.dot(v).abs() <= reach.y && r.z_axis.dot(v).abs() <= reach.z
     };
     let touch = |pair: (u32, u32)| triangles_touch_in(ma, mb, &rel, &r, padding, pair);
     // The last pair found touching first: contacts of two links recur in the same places.

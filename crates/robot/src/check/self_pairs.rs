@@ -59,7 +59,24 @@ impl RobotChecker<'_> {
         }
     }
 
+    /// The self pairs of the configuration placed, in two passes: the cheap stages (ball and box
+    /// gaps, the clearance table, the contact proofs) over every pair first, so that a colliding
+    /// configuration is decided by the first proof found anywhere, then the sphere trees, the
+    /// sos bound and the meshes for the pairs left.
     pub(super) fn self_check(&mut self, options: &CheckOptions, answer: &mut ConfigurationAnswer) -> Result<()> {
+        let mut pending = std::mem::take(&mut self.pending);
+        pending.clear();
+        let result = self.self_check_passes(options, answer, &mut pending);
+        self.pending = pending;
+        result
+    }
+
+    fn self_check_passes(
+        &self,
+        options: &CheckOptions,
+        answer: &mut ConfigurationAnswer,
+        pending: &mut Vec<usize>,
+    ) -> Result<()> {
         for k in 0..self.self_pairs.len() {
             let (a, b) = self.self_pairs[k];
             let padding = options.padding + self.pad[a] + self.pad[b];
@@ -82,20 +99,36 @@ impl RobotChecker<'_> {
                     answer.pairs_table += 1;
                     answer.self_collision = true;
                     answer.self_pair = Some((a, b));
-                    break;
+                    return Ok(());
                 }
                 None => {}
             }
-            if self.sphere_stage && self.self_spheres_apart(a, b, padding) {
-                answer.pairs_spheres += 1;
-                continue;
+            pending.push(k);
+        }
+        if self.sphere_stage {
+            let before = pending.len();
+            pending.retain(|&k| {
+                let (a, b) = self.self_pairs[k];
+                !self.self_spheres_apart(a, b, options.padding + self.pad[a] + self.pad[b])
+            });
+            answer.pairs_spheres += before - pending.len();
+        }
+        if self.contact_proofs {
+            for &k in pending.iter() {
+                let (a, b) = self.self_pairs[k];
+                let (ga, gb) = (&self.robot.geometries[a], &self.robot.geometries[b]);
+                if links_touch(&ga.shape, &self.poses[a], &gb.shape, &self.poses[b]) {
+                    answer.pairs_proved += 1;
+                    answer.self_collision = true;
+                    answer.self_pair = Some((a, b));
+                    return Ok(());
+                }
             }
-            if self.contact_proofs && links_touch(&ga.shape, &self.poses[a], &gb.shape, &self.poses[b]) {
-                answer.pairs_proved += 1;
-                answer.self_collision = true;
-                answer.self_pair = Some((a, b));
-                break;
-            }
+        }
+        for &k in pending.iter() {
+            let (a, b) = self.self_pairs[k];
+            let padding = options.padding + self.pad[a] + self.pad[b];
+            let (ga, gb) = (&self.robot.geometries[a], &self.robot.geometries[b]);
             answer.pairs_model += 1;
             let (pa, pb) = (&self.poses[a], &self.poses[b]);
             let d = shape_distance(root_shape(&ga.shape), pa, root_shape(&gb.shape), pb, None)?;
@@ -109,7 +142,7 @@ impl RobotChecker<'_> {
             if exact_collides(&pa, ea, &pb, eb, padding, &self.self_hints[k])? {
                 answer.self_collision = true;
                 answer.self_pair = Some((a, b));
-                break;
+                return Ok(());
             }
         }
         Ok(())
