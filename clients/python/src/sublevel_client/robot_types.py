@@ -1,0 +1,230 @@
+"""Robot answer types: a robot's summary, configuration and motion checks in numpy columns, and the
+robot of a scene. Units: radians for revolute and continuous joints, meters for prismatic joints,
+distances and points.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Dict, List, Optional
+
+import numpy as np
+
+from .poses import Pose
+from ._convert import _columns, _pose, _primitive_dict
+
+
+@dataclass
+class SceneRobot:
+    """The robot placed in a scene (``Client.set_scene_robot``; a scene holds at most one).
+
+    Attributes:
+        robot_id: the stored robot.
+        base: the pose of its root link in the scene (:class:`Pose`, meters).
+        attached: the objects attached to its links, in attachment order, each a dict in the form
+            ``Client.check_configurations`` and ``Client.attach_object`` take: ``{"link", "name",
+            "kind", "size" / "radius" / "height", "origin"}`` (meters; ``origin`` a :class:`Pose`
+            in the link's frame), so ``client.attach_object(scene, **robot.attached[0])``
+            re-attaches one.
+        link_padding: padding per link name (meters).
+        joint_positions: the scene's joint positions of every joint of the robot, in
+            :attr:`RobotInfo.joint_names` order (radians or meters; joints never set are 0).
+    """
+
+    robot_id: str
+    base: Pose
+    attached: List[Dict[str, object]] = field(default_factory=list)
+    link_padding: Dict[str, float] = field(default_factory=dict)
+    joint_positions: Dict[str, float] = field(default_factory=dict)
+
+    @property
+    def joint_names(self) -> List[str]:
+        """The robot's joints in order (the keys of :attr:`joint_positions`)."""
+        return list(self.joint_positions)
+
+    @property
+    def q(self) -> np.ndarray:
+        """The joint positions as a configuration, shape (dof,), in :attr:`joint_names` order."""
+        return np.array(list(self.joint_positions.values()), dtype=float)
+
+    @classmethod
+    def from_proto(cls, m) -> "SceneRobot":
+        attached = [
+            {"link": a.link, "name": a.name, **_primitive_dict(a.primitive), "origin": _pose(a.origin, a.HasField("origin"))}
+            for a in m.attached
+        ]
+        return cls(
+            robot_id=m.robot_id,
+            base=_pose(m.base, m.HasField("base")),
+            attached=attached,
+            link_padding={k: float(v) for k, v in sorted(m.link_padding.items())},
+            joint_positions={j.name: j.position for j in m.joint_positions},
+        )
+
+
+
+@dataclass
+class RobotInfo:
+    """A stored robot (``RobotSummary``): what its configurations are made of.
+
+    Attributes:
+        robot_id, name: its id and name.
+        joint_names: the configuration's entries in order (the URDF's revolute, continuous and
+            prismatic joints that are not mimic joints); ``dof == len(joint_names)``.
+        lower, upper: joint limits, shape (dof,), radians or meters (-inf / +inf for a continuous
+            joint).
+        link_names: the links with collision geometry, in URDF order.
+        geometries: collision geometries (a link may have several).
+        self_pairs: link pairs the self-collision check tests (the SRDF's disabled pairs left out).
+    """
+
+    robot_id: str
+    name: str
+    joint_names: List[str]
+    lower: np.ndarray
+    upper: np.ndarray
+    link_names: List[str]
+    geometries: int
+    self_pairs: int
+
+    @property
+    def dof(self) -> int:
+        """The number of joints of a configuration."""
+        return len(self.joint_names)
+
+    @classmethod
+    def from_proto(cls, m) -> "RobotInfo":
+        return cls(
+            robot_id=m.robot_id,
+            name=m.name,
+            joint_names=list(m.joint_names),
+            lower=np.asarray(m.lower, dtype=float),
+            upper=np.asarray(m.upper, dtype=float),
+            link_names=list(m.link_names),
+            geometries=m.geometries,
+            self_pairs=m.self_pairs,
+        )
+
+
+@dataclass
+class ConfigurationColumns:
+    """The answer of ``Client.check_configurations``: row c is configuration c of the request.
+
+    Attributes:
+        joint_names: the robot's joints, the columns of ``gradient`` (dof of them).
+        collides: shape (N,), bool: the robot collides with the world or itself.
+        world: shape (N,), bool: a robot geometry collides with a world object.
+        self_collision: shape (N,), bool: two links of a checked self pair collide.
+        distance: shape (N,), meters: with ``distance=True``, the minimum robot–world distance on
+            the collision meshes (0 when the robot collides with the world, +inf with no world
+            pair); NaN when not asked for.
+        robot_link, robot_geometry, world_object: length-N lists of str: the world pair of
+            ``distance`` (or the colliding one): the link, its geometry (the link's name, ``#k``
+            for its k-th geometry, k >= 1) and the world object; empty strings when none.
+        witnesses: shape (N, 2, 3), meters, world frame: the closest points of that pair, the
+            robot's (``[:, 0]``) and the object's (``[:, 1]``); NaN when the robot collides with
+            the world or no distance was computed.
+        self_link_a, self_link_b: length-N lists of str: a colliding self pair's links, else "".
+        gradient: shape (N, dof): d distance / d q (meters per radian or per meter) with
+            ``gradient=True``, NaN where the robot collides with the world or has no world pair;
+            None when not asked for.
+        converged: shape (N,), bool: every solve the answer rests on converged.
+        pairs_pruned, pairs_model, pairs_exact: pairs decided by bounding volumes, bounded by the
+            sos bodies, and resolved on the meshes, summed over the configurations.
+    """
+
+    joint_names: List[str]
+    collides: np.ndarray
+    world: np.ndarray
+    self_collision: np.ndarray
+    distance: np.ndarray
+    robot_link: List[str]
+    robot_geometry: List[str]
+    world_object: List[str]
+    witnesses: np.ndarray
+    self_link_a: List[str]
+    self_link_b: List[str]
+    gradient: Optional[np.ndarray]
+    converged: np.ndarray
+    pairs_pruned: int
+    pairs_model: int
+    pairs_exact: int
+
+    def __len__(self) -> int:
+        return len(self.collides)
+
+    @classmethod
+    def from_proto(cls, m, gradient: bool = True) -> "ConfigurationColumns":
+        n, dof = m.count, len(m.joint_names)
+        distance = np.asarray(m.distance, dtype=float)
+        if distance.size == 0:
+            distance = np.full(n, np.nan)
+        return cls(
+            joint_names=list(m.joint_names),
+            collides=np.asarray(m.collides, dtype=bool),
+            world=np.asarray(m.world, dtype=bool),
+            self_collision=np.asarray(m.self_collision, dtype=bool),
+            distance=distance,
+            robot_link=list(m.robot_link),
+            robot_geometry=list(m.robot_geometry),
+            world_object=list(m.world_object),
+            witnesses=_columns(m.witnesses, n, 6).reshape(n, 2, 3),
+            self_link_a=list(m.self_link_a),
+            self_link_b=list(m.self_link_b),
+            gradient=_columns(m.gradient, n, dof) if gradient else None,
+            converged=np.asarray(m.converged, dtype=bool),
+            pairs_pruned=m.pairs_pruned,
+            pairs_model=m.pairs_model,
+            pairs_exact=m.pairs_exact,
+        )
+
+
+@dataclass
+class MotionColumns:
+    """The answer of ``Client.check_motions``: row m is the motion from ``q0[m]`` to ``q1[m]``.
+
+    Attributes:
+        joint_names: the robot's joints, the columns of ``contact_configuration`` (dof of them).
+        valid: shape (M,), bool: the whole motion is proven free.
+        decided: shape (M,), bool: false when the step limit was reached (then ``valid`` is false).
+        contact_t: shape (M,): the first contact parameter t* in [0, 1] (within the tolerance);
+            NaN when none.
+        contact_configuration: shape (M, dof): the configuration at t* (radians, meters); NaN
+            rows when none.
+        robot_link: length-M list of str: the robot link in contact at t*, "" when none.
+        other: length-M list of str: the world object in contact, or the other link of a self
+            contact; "" when none.
+        self_contact: shape (M,), bool: the contact at t* is a self contact.
+        steps: shape (M,), int: advancement steps taken (configurations bounded).
+    """
+
+    joint_names: List[str]
+    valid: np.ndarray
+    decided: np.ndarray
+    contact_t: np.ndarray
+    contact_configuration: np.ndarray
+    robot_link: List[str]
+    other: List[str]
+    self_contact: np.ndarray
+    steps: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.valid)
+
+    @classmethod
+    def from_proto(cls, m) -> "MotionColumns":
+        n, dof = m.count, len(m.joint_names)
+        contact_t = np.asarray(m.contact_t, dtype=float)
+        if contact_t.size == 0:
+            contact_t = np.full(n, np.nan)
+        return cls(
+            joint_names=list(m.joint_names),
+            valid=np.asarray(m.valid, dtype=bool),
+            decided=np.asarray(m.decided, dtype=bool),
+            contact_t=contact_t,
+            contact_configuration=_columns(m.contact_configuration, n, dof),
+            robot_link=list(m.robot_link),
+            other=list(m.other),
+            self_contact=np.asarray(m.self_contact, dtype=bool),
+            steps=np.asarray(m.steps, dtype=np.int64),
+        )
