@@ -1,8 +1,9 @@
 """Build hook: compile the service's proto into ``sublevel_client._pb`` with grpcio-tools.
 
-The contract lives in the repository at ``proto/sublevel/v1/sublevel.proto`` (``../../proto`` from
-this file). Nothing generated is committed: ``build_py`` runs ``python -m grpc_tools.protoc`` on
-every build and writes ``sublevel_client/_pb/sublevel/v1/sublevel_pb2{,_grpc}.py{,i}``
+The contract lives in the repository at ``proto/sublevel/v1/`` (``../../proto`` from this file):
+``sublevel.proto`` (the service) and one file of messages per domain. Nothing generated is
+committed: ``build_py`` runs ``python -m grpc_tools.protoc`` on every build and writes
+``sublevel_client/_pb/sublevel/v1/*_pb2{,_grpc}.py{,i}``
 
 * into the build directory for a regular install (``pip install ./clients/python``), and
 * into ``src/sublevel_client/_pb`` for an editable install (``pip install -e ./clients/python``).
@@ -25,7 +26,15 @@ from setuptools.command.build_py import build_py as _build_py
 from setuptools.command.sdist import sdist as _sdist
 
 HERE = Path(__file__).resolve().parent
-PROTO_FILES = ["sublevel/v1/sublevel.proto"]
+# The service's file first (it imports the others publicly, so ``sublevel_pb2`` names every message).
+PROTO_FILES = [
+    "sublevel/v1/sublevel.proto",
+    "sublevel/v1/geometry.proto",
+    "sublevel/v1/bodies.proto",
+    "sublevel/v1/scenes.proto",
+    "sublevel/v1/queries.proto",
+    "sublevel/v1/robots.proto",
+]
 PB_PACKAGE = "sublevel_client._pb"
 
 

@@ -1,4 +1,4 @@
-//! Compiles `proto/sublevel/v1/sublevel.proto` with protox (pure Rust, no system `protoc`) and
+//! Compiles `proto/sublevel/v1/sublevel.proto` and the message files it imports with protox (pure Rust, no system `protoc`) and
 //! tonic-prost-build, and writes the encoded descriptor set for server reflection to
 //! `$OUT_DIR/sublevel_descriptor.bin`.
 

@@ -396,6 +396,23 @@ async fn health_is_serving_and_reflection_lists_the_service() {
     let names: Vec<_> = list.service.iter().map(|s| s.name.as_str()).collect();
     assert!(names.contains(&"sublevel.v1.Sublevel"), "{names:?}");
     assert!(names.contains(&"grpc.health.v1.Health"), "{names:?}");
+
+    // A message of a domain's file resolves to that file (with its imports), as grpcurl's
+    // `describe` asks for it.
+    let req = ServerReflectionRequest {
+        host: String::new(),
+        message_request: Some(MessageRequest::FileContainingSymbol("sublevel.v1.CheckConfigurationsRequest".into())),
+    };
+    let mut stream = refl.server_reflection_info(tokio_stream::iter(vec![req])).await.unwrap().into_inner();
+    let resp = stream.message().await.unwrap().unwrap();
+    let Some(MessageResponse::FileDescriptorResponse(files)) = resp.message_response else { panic!("{resp:?}") };
+    let has =
+        |name: &str| files.file_descriptor_proto.iter().any(|f| f.windows(name.len()).any(|w| w == name.as_bytes()));
+    assert!(
+        has("sublevel/v1/robots.proto") && has("sublevel/v1/geometry.proto"),
+        "{} files",
+        files.file_descriptor_proto.len()
+    );
     server.stop().await;
 }
 

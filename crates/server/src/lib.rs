@@ -44,7 +44,8 @@
 //!
 //! # Adding an RPC
 //!
-//! 1. declare it with commented messages in `proto/sublevel/v1/sublevel.proto`;
+//! 1. declare it in `proto/sublevel/v1/sublevel.proto` and its commented messages in its domain's
+//!    file beside it (`bodies`, `scenes`, `queries`, `robots`; `geometry` for shared types);
 //! 2. add its conversions (and field validation) to [`convert`];
 //! 3. implement it in its domain's module under `handlers/` as validate → core call → convert,
 //!    and delegate to it from the `Sublevel` impl in `handlers/mod.rs`;
@@ -99,7 +100,8 @@ pub fn with_scene_id<T>(mut request: tonic::Request<T>, scene_id: &str) -> tonic
     request
 }
 
-/// Code generated from `proto/sublevel/v1/sublevel.proto` (messages, client and server).
+/// Code generated from `proto/sublevel/v1/` (the service in `sublevel.proto`, its messages in the
+/// files it imports): messages, client and server.
 #[allow(missing_docs, clippy::all, clippy::pedantic)]
 pub mod pb {
     tonic::include_proto!("sublevel.v1");
