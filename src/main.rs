@@ -48,6 +48,9 @@ enum Command {
 }
 
 fn main() -> std::process::ExitCode {
+    // One OpenBLAS thread per SDP solve unless OPENBLAS_NUM_THREADS says otherwise (its workers
+    // spin in the kernel on these small solves; see `sublevel_core::blas`).
+    sublevel_core::blas::init_blas_threads();
     // Parsed through the matches, so that `serve --config` can tell a flag or variable from a default.
     let matches = Cli::command().get_matches();
     let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());

@@ -1,5 +1,5 @@
-// Collide peer (issue 15): coal 3.0.3's boolean collision between the convex hulls of two OFF meshes, at the cold
-// poses of `sublevel bench` and of the shared coal script (../shared/peers/coal/bench_coal.cpp): A at
+// Collide peer: coal 3.0.3's boolean collision between the convex hulls of two OFF meshes, at the cold poses of
+// `sublevel bench` and of the coal peer benchmark (its bench_coal.cpp, not part of this repository): A at
 // t ~ U[-2.5, 2.5]^3, q = normalize(U[-1, 1]^4) from mt19937_64 seeded 7 (drawn in that script's order), B at the
 // identity. The query a sampling planner asks most: "do these bodies touch?" with no contact details
 // (CollisionRequest(NO_REQUEST, 1), security margin 0), so GJK stops as soon as it proves separation or overlap.

@@ -3,7 +3,7 @@
 # cases written by scripts/peers/coal_primitives.py; prints JSON lines (coal's settings, then one per pair).
 #   bash scripts/peers/coal_primitives.sh [CASES.csv]   (default: crates/query/tests/data/coal_primitives.csv)
 # Needs g++ and Eigen (Debian: g++ libeigen3-dev, installed when missing) and coal's C++ library from its PyPI
-# wheel: reuses the venv under ${COAL_WORK:-/tmp/coal-peer} (as ../shared/peers/coal/run.sh does) and
+# wheel: reuses the venv under ${COAL_WORK:-/tmp/coal-peer} (as the coal peer benchmark's run.sh does) and
 # installs coal==3.0.3 into it when absent. The binary is built there too, with -O3 -march=native.
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)

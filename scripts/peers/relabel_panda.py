@@ -1,18 +1,21 @@
 #!/usr/bin/env python3
 """Relabel the MotionBenchMaker Panda configurations with the collision meshes read as written.
 
-The robots peer (`../shared/peers/robots/coal_peer.py`) labels configurations with pinocchio +
-coal, whose mesh loader (assimp) reads `link6.obj` — one object with 17 `usemtl` groups — into a
-different surface: 1 126 of its 1 308 triangles join other vertices than the file's faces name
-(edges shared by up to 27 triangles; some vertices 4.3 mm away from any of the file's). Every
-other Panda link loads as written. This script keeps the peer's code (scenes, pairs, allowed
-collisions, pruned minimum distance) and replaces each robot mesh by a coal BVH of the OBJ's own
-vertices and faces (polygons split into fans), then labels the same configurations again.
+The robots peer (its `coal_peer.py`) labels configurations with pinocchio + coal, whose mesh
+loader (assimp) reads `link6.obj` — one object with 17 `usemtl` groups — into a different surface:
+1 126 of its 1 308 triangles join other vertices than the file's faces name (edges shared by up to
+27 triangles; some vertices 4.3 mm away from any of the file's). Every other Panda link loads as
+written. This script keeps the peer's code (scenes, pairs, allowed collisions, pruned minimum
+distance) and replaces each robot mesh by a coal BVH of the OBJ's own vertices and faces (polygons
+split into fans), then labels the same configurations again.
 
-    python scripts/peers/relabel_panda.py --peer-dir ../shared/peers/robots \
-        --problems-dir /tmp/mbm/problems --out data/robots/mbm_panda_labels_obj.csv
+    mkdir -p /tmp/mbm && tar xjf data/robots/mbm_panda/problems.tar.bz2 -C /tmp/mbm
+    python scripts/peers/relabel_panda.py --peer-dir PEER_DIR \
+        --problems-dir /tmp/mbm/problems --out data/robots/mbm_panda/labels_obj.csv
 
-Needs `pin==4.1.0` (bundles coal 3.0.3), numpy and pyyaml. Prints the rows whose labels change.
+PEER_DIR is a checkout of the robots peer (its `coal_peer.py`, `panda/` and `labels/`); it is not
+part of this repository. Needs `pin==4.1.0` (bundles coal 3.0.3), numpy and pyyaml. Prints the rows
+whose labels change.
 """
 import argparse
 import csv
@@ -40,7 +43,7 @@ def read_obj(path):
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--peer-dir", default = "../shared/peers/robots")
+    ap.add_argument("--peer-dir", required = True, help = "the robots peer's checkout (coal_peer.py, panda/, labels/)")
     ap.add_argument("--problems-dir", required = True, help = "dir with <scenario>_panda/sceneNNNN.yaml")
     ap.add_argument("--labels", default = None, help = "the peer's labels (default PEER/labels/mbm_panda_labels.csv)")
     ap.add_argument("--out", required = True)

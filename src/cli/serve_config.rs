@@ -298,7 +298,9 @@ pub fn config_table() -> String {
     out.push_str(
         "| | `RUST_LOG` | | `info` | log filter (tracing); `sublevel=debug` logs every RPC with its code and time |\n",
     );
-    out.push_str("| | `OPENBLAS_NUM_THREADS` | | (1 in the scripts) | BLAS threads of the SDP solves |\n");
+    out.push_str(
+        "| | `OPENBLAS_NUM_THREADS` | | `1` | BLAS threads of each SDP solve (the binary sets 1 at start-up when the variable is unset) |\n",
+    );
     out
 }
 

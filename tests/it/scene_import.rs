@@ -1,6 +1,6 @@
 //! Integration tests: `ImportScene` and `sublevel scene import`. One MotionBenchMaker Panda scene
-//! of every scenario (`../shared/peers/robots/panda/problems.tar.bz2`, as
-//! `sublevel_scene::moveit`'s tests find it) imported over gRPC: as many instances as the YAML has
+//! of every scenario (`data/robots/mbm_panda/problems.tar.bz2`, as `sublevel_scene::moveit`'s
+//! tests read it) imported over gRPC: as many instances as the YAML has
 //! primitives, and CheckScene / Distance answers equal to `shape_distance` on the parsed shapes;
 //! planes, meshes, JSON, bad scenes and limits; the command line.
 
@@ -17,13 +17,7 @@ use tonic::Code;
 /// The first scene (`scene0001.yaml`) of every MotionBenchMaker Panda scenario, unpacked from the
 /// archive into `dir`: (scenario, YAML text).
 fn motionbenchmaker_scenes(dir: &std::path::Path) -> Vec<(String, String)> {
-    let archive =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/peers/robots/panda/problems.tar.bz2");
-    assert!(
-        archive.exists(),
-        "{} is missing: the MotionBenchMaker scenes are part of the test data",
-        archive.display()
-    );
+    let archive = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/robots/mbm_panda/problems.tar.bz2");
     let status = std::process::Command::new("tar").arg("xjf").arg(&archive).arg("-C").arg(dir).status().unwrap();
     assert!(status.success());
     let mut scenes: Vec<(String, String)> = std::fs::read_dir(dir.join("problems"))

@@ -2,7 +2,7 @@
 """Plan the MotionBenchMaker problems with OMPL, checked by the Sublevel service or by pinocchio + coal.
 
     python clients/python/examples/plan_mbm.py --urdf data/robots/panda/panda.urdf \\
-        --srdf data/robots/panda/panda.srdf --problems ../shared/peers/robots/panda/problems.tar.bz2 \\
+        --srdf data/robots/panda/panda.srdf --problems data/robots/mbm_panda/problems.tar.bz2 \\
         --limit 10 --timeout 1 [--checker sublevel|coal] [--verify] [--json out/plan_mbm.json]
 
 Needs ``pip install ./clients/python ompl==2.0.1 pyyaml``; ``--checker coal`` and ``--verify`` also
@@ -28,8 +28,9 @@ path simplification) with
   path is certified (the search pads the states by ``--search-padding``, 5 mm, so that the simplified
   path keeps clear of the obstacles and certifies at padding 0); ``certified`` certifies every edge the planner tries; ``sampled`` only samples;
 * ``--checker coal``: the robots peer's pinocchio + coal checker (``coal_peer.py`` from ``--peer-dir``,
-  else a minimal one here) on the collision meshes; motions sampled at ``--resolution``
-  configurations per unit of joint-space distance (VAMP's 32), as coal has no certified motion check.
+  a checkout of the robots peer, which is not part of this repository; without it a minimal one
+  here) on the collision meshes; motions sampled at ``--resolution`` configurations per unit of
+  joint-space distance (VAMP's 32), as coal has no certified motion check.
 
 ``--verify`` re-checks every returned path on pinocchio + coal meshes, each edge densified until the end
 effector (``--ee``: panda_hand, else the last link with collision geometry: its frame origin and its
@@ -72,7 +73,6 @@ from mbm_coal import Counts, MeshChecker, Verifier, _peer, van_der_corput
 
 REPO = Path(__file__).resolve().parents[3]
 PANDA_ROBOT = REPO / "data" / "robots" / "panda" / "panda.robot.json"
-DEFAULT_PEER_DIR = REPO.parent / "shared" / "peers" / "robots"
 
 
 # -- the robot ------------------------------------------------------------------------------------
@@ -461,8 +461,9 @@ def main(argv=None) -> int:
                          "(default 0.005): a path kept clear of the obstacles is certified at padding 0 in "
                          "fewer advancement steps, where a path simplified against them is often refused "
                          "within the contact tolerance and searched again")
-    ap.add_argument("--peer-dir", type=Path, default=DEFAULT_PEER_DIR,
-                    help="the robots peer (coal_peer.py) for the coal checker (default ../shared/peers/robots)")
+    ap.add_argument("--peer-dir", type=Path,
+                    help="a checkout of the robots peer, whose coal_peer.py loads the scenes for the coal checker "
+                         "and --verify (default: none, a minimal loader here)")
     ap.add_argument("--mesh-reader", choices=("obj", "assimp"), default="obj",
                     help="coal meshes from the OBJ files' own faces (default) or coal's assimp reading")
     ap.add_argument("--verify", action="store_true", help="re-check every path on the meshes at --verify-step of end-effector travel")

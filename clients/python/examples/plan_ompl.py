@@ -9,13 +9,13 @@ Needs a running server (``cargo run --release -- serve --demo``) and
 
 What it does:
 
-* loads the chair (``data/demo/chair_101.json``) as the robot and the fitted PSB bodies of
-  ``data/demo/*.json`` and ``tests/data/*.json`` (chair and human, degrees 2 to 8) as obstacles
-  into a fresh scene (deleted at the end unless ``--keep``). Bodies are uploaded under names
-  ``plan_ompl/...``; a later run reuses a stored body of the same name and identical polynomial
-  (an upload certifies sos-convexity with an SDP: ~40 s for degree 8), ``--delete-bodies``
-  removes the ones it uploaded. The bodies stand upright (their y
-  axis turned to world z) in two walls across the x axis with gaps on opposite sides, so the
+* loads the chair (``data/demo/chair_101.json``) as the robot and ten fitted PSB bodies
+  (``data/demo/chair_101.json``, ``data/demo/human_10.json`` and ``tests/data/SHAPE.degN.json``:
+  chair and human, degrees 2 to 8) as obstacles into a fresh scene (deleted at the end unless
+  ``--keep``). Bodies are uploaded under names ``plan_ompl/...``; a later run reuses a stored
+  body of the same name and identical polynomial (an upload certifies sos-convexity with an SDP:
+  ~40 s for degree 8), ``--delete-bodies`` removes the ones it uploaded. The bodies stand upright
+  (their y axis turned to world z) in two walls across the x axis with gaps on opposite sides, so the
   path from x = -3.2 m to x = +3.2 m must slalom around them; the robot's height is bounded so
   it cannot pass over or under a wall.
 * OMPL (SE3StateSpace, SimpleSetup, RRTConnect) asks the service through one QueryStream:
@@ -53,10 +53,16 @@ BOUNDS_LOW = (-4.0, -3.4, -0.35)
 BOUNDS_HIGH = (4.0, 3.4, 0.35)
 
 
+# The obstacles: body files of the repository, named one by one (their folders hold other JSON
+# files too, such as robots), one per place of the two walls.
+OBSTACLE_FILES = ["data/demo/chair_101.json", "data/demo/human_10.json"] + [
+    f"tests/data/{shape}.deg{degree}.json" for shape in ("chair_101", "human_10") for degree in (2, 4, 6, 8)
+]
+
+
 def obstacle_files():
-    """The fitted PSB bodies bundled with the repository (name, path)."""
-    files = sorted((REPO / "data" / "demo").glob("*.json")) + sorted((REPO / "tests" / "data").glob("*.json"))
-    return [(str(p.relative_to(REPO).with_suffix("")), p) for p in files]
+    """The fitted PSB bodies bundled with the repository that stand as obstacles (name, path)."""
+    return [(str(Path(f).with_suffix("")), REPO / f) for f in OBSTACLE_FILES]
 
 
 def wall_layout(n):

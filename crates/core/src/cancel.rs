@@ -47,6 +47,16 @@ pub fn cancellable<T>(flag: Arc<AtomicBool>, f: impl FnOnce() -> T) -> T {
     f()
 }
 
+/// Runs `f` in the scope of `flag` when there is one (a flag taken with [`current`] on the thread
+/// that spawned this one), else outside any scope: how a fit's own worker threads share the
+/// caller's cancellation, since the scope is per thread.
+pub fn within<T>(flag: Option<Arc<AtomicBool>>, f: impl FnOnce() -> T) -> T {
+    match flag {
+        Some(flag) => cancellable(flag, f),
+        None => f(),
+    }
+}
+
 /// The cancellation flag of this thread's scope (None outside [`cancellable`]).
 pub fn current() -> Option<Arc<AtomicBool>> {
     CURRENT.with(|c| c.borrow().clone())

@@ -16,12 +16,16 @@
 //! - [`primitive`]: exact primitives (box, sphere, cylinder, capsule, halfspace), bodies given by
 //!   a few affine or quadratic constraints instead of a fitted polynomial.
 //! - [`compound`]: compound bodies, a containment tree of bodies (paper §V), and its file format.
+//! - [`blas`]: the thread count of the BLAS behind the SDP solves (one, unless the user sets
+//!   `OPENBLAS_NUM_THREADS`).
 //!
 //! The fits live in `sublevel-fit`, the queries in `sublevel-query`.
 
 #![warn(missing_docs)]
-#![forbid(unsafe_code)]
+// `deny`, not `forbid`: the `blas` module allows the one foreign call to OpenBLAS.
+#![deny(unsafe_code)]
 
+pub mod blas;
 pub mod body;
 pub mod cancel;
 pub mod compound;

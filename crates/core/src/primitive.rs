@@ -29,6 +29,13 @@ use serde::{Deserialize, Serialize};
 /// error (millimeters given as meters), and would spoil the solvers' relative tolerances.
 pub const MAX_DIMENSION: Real = 1.0e6;
 
+/// The smallest dimension (side length, radius, height) a primitive may have, in meters: one
+/// micrometer, the smallest body scale ([`crate::math::SCALE_RANGE`]). Below it the bounding
+/// ellipsoid a stored primitive keeps does not build, and distances would sit under the solvers'
+/// tolerances. One rule for every way a primitive arrives (upload, MoveIt import, URDF, attached
+/// objects): [`check_dimension`].
+pub const MIN_DIMENSION: Real = 1.0e-6;
+
 /// A primitive's JSON file form: `{"primitive": "box", "size": [x, y, z]}`,
 /// `{"primitive": "sphere", "radius": r}`, `{"primitive": "cylinder", "radius": r, "height": h}`,
 /// `{"primitive": "capsule", "radius": r, "height": h}`,
@@ -106,11 +113,23 @@ pub enum Primitive {
     },
 }
 
-fn positive(field: &str, v: Real) -> Result<Real> {
-    if !v.is_finite() || v <= 0.0 || v > MAX_DIMENSION {
-        return Err(Error::invalid(field, format!("must be a length in (0, {MAX_DIMENSION:e}] meters, got {v}")));
+/// Checks one dimension of a primitive (a full side length, a radius or a height, meters): a
+/// finite number in [[`MIN_DIMENSION`], [`MAX_DIMENSION`]]. Returns it.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `field` otherwise, with both bounds.
+pub fn check_dimension(field: &str, v: Real) -> Result<Real> {
+    if !(v.is_finite() && (MIN_DIMENSION..=MAX_DIMENSION).contains(&v)) {
+        return Err(Error::invalid(
+            field,
+            format!("must be a length in [{MIN_DIMENSION:e}, {MAX_DIMENSION:e}] meters, got {v}"),
+        ));
     }
     Ok(v)
+}
+
+fn positive(field: &str, v: Real) -> Result<Real> {
+    check_dimension(field, v)
 }
 
 impl Primitive {
@@ -118,8 +137,8 @@ impl Primitive {
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] naming the field (`size`, `radius`, `height`, `normal`,
-    /// `offset`) for a nonpositive, non-finite or larger than [`MAX_DIMENSION`] length, or a zero
-    /// normal.
+    /// `offset`) for a non-finite length or one outside [[`MIN_DIMENSION`], [`MAX_DIMENSION`]]
+    /// ([`check_dimension`]; a capsule's height may also be 0), or a zero normal.
     pub fn from_file(file: &PrimitiveFile) -> Result<Self> {
         Ok(match *file {
             PrimitiveFile::Box { size } => {

@@ -1,7 +1,8 @@
 //! # sublevel-kernels
 //!
 //! The evaluation kernels of Sublevel and the only crate of the workspace with `unsafe` code and
-//! `std::arch`: every other crate says `#![forbid(unsafe_code)]`.
+//! `std::arch`: every other crate says `#![forbid(unsafe_code)]`, but for one foreign call in
+//! `sublevel_core::blas` (OpenBLAS's thread count).
 //!
 //! - [`monomial`]: the graded-lex monomial basis in three variables and its O(1) indexing;
 //! - [`fast`]: [`FastPoly`] and [`SoaPoly`], value / gradient / Hessian of a polynomial by nested

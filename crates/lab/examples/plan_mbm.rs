@@ -15,7 +15,7 @@
 //! Problems 1 to `--limit` of each scenario: `PROBLEMS/scenes/SCENARIO/sceneNNNN.yaml` with
 //! `PROBLEMS/requests/SCENARIO/requestNNNN.yaml` (the repository's 10 per scenario), or the
 //! MotionBenchMaker archive's layout, `PROBLEMS/problems/SCENARIO_panda/{scene,request}NNNN.yaml`
-//! (all 100: `tar xjf ../shared/peers/robots/panda/problems.tar.bz2 -C /tmp`, then
+//! (all 100: `tar xjf data/robots/mbm_panda/problems.tar.bz2 -C /tmp`, then
 //! `--problems /tmp --limit 100`).
 //! RRT-Connect (Kuffner and LaValle, ICRA 2000): two trees, from the start and from the goal; each
 //! round samples a configuration uniformly in the joint limits, extends one tree towards it by at

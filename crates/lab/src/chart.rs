@@ -90,8 +90,9 @@ struct CommonArgs {
     /// and of the coal script).
     #[arg(long, default_value_t = 500)]
     motion: usize,
-    /// Speed-accuracy: output of the shared coal peer benchmark (`bash ../shared/peers/coal/run.sh
-    /// > coal.txt`): its hull GJK and exact mesh BVH rows are added.
+    /// Speed-accuracy: output of the coal peer benchmark (`bash PEERS/coal/run.sh A.off B.off >
+    /// coal.txt`, PEERS being where the peer benchmarks are checked out): its hull GJK and exact
+    /// mesh BVH rows are added.
     #[arg(long)]
     peer: Option<std::path::PathBuf>,
 }

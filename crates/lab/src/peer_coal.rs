@@ -1,5 +1,6 @@
-//! Reads the output of the shared coal peer benchmark (`bash ../shared/peers/coal/run.sh > coal.txt`,
-//! coal 3.0.3, `peers/coal/bench_coal.cpp`): one `key value` per line, and `mesh_distance i d` lines
+//! Reads the output of the coal peer benchmark (`bash PEERS/coal/run.sh data/psb/chair_101.off
+//! data/psb/human_10.off > coal.txt`, PEERS being where the peer benchmarks are checked out; coal
+//! 3.0.3, `PEERS/coal/bench_coal.cpp`): one `key value` per line, and `mesh_distance i d` lines
 //! with the exact mesh–mesh distance (BVH of OBBRSS) at coal's own i-th cold pose.
 //!
 //! ```text

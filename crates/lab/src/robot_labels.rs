@@ -28,8 +28,8 @@ pub struct RobotLabelsArgs {
     /// The labels CSV (`scenario, scene, idx, kind, q1..q7, collides, collides_world,
     /// collides_self, min_world_dist_m, colliding_pairs`).
     /// The default holds the labels of the collision meshes as their OBJ files define them
-    /// (`scripts/peers/relabel_panda.py`); the peer's own labels are
-    /// `../shared/peers/robots/labels/mbm_panda_labels.csv`.
+    /// (`scripts/peers/relabel_panda.py`); the robots peer's own labels, read by coal's mesh
+    /// loader, are its `labels/mbm_panda_labels.csv` (data/robots/SOURCE.md).
     #[arg(long, default_value = "data/robots/mbm_panda/labels_obj.csv")]
     labels: PathBuf,
     /// The planning scenes: `DIR/SCENARIO{suffix}/sceneNNNN.yaml`.

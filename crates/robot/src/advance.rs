@@ -151,13 +151,27 @@ impl<'c, 'r> MotionChecker<'c, 'r> {
     /// origin).
     ///
     /// # Errors
-    /// As [`crate::RobotModel::motion_bounds`].
+    /// [`Error::InvalidArgument`] naming `robot_id` (the robot of the request) when a geometry's
+    /// bounding ball reaches no finite distance from its link's origin (a geometry placed beyond
+    /// the coordinate range); otherwise as [`crate::RobotModel::motion_bounds`].
     pub fn new(checker: &'c mut RobotChecker<'r>) -> Result<Self> {
         let robot = checker.robot();
         let mut radius = vec![0.0; robot.model.links().len()];
         for g in &robot.geometries {
             let center = g.origin.transform_point(&g.sphere.0.into());
-            radius[g.link] = Real::max(radius[g.link], center.coords.norm() + g.sphere.1);
+            let reach = center.coords.norm() + g.sphere.1;
+            if !reach.is_finite() {
+                let link = &robot.model.links()[g.link].name;
+                return Err(Error::invalid(
+                    "robot_id",
+                    format!(
+                        "the robot's geometry `{}` of link `{}` lies beyond the supported range (±1e6 m of its link's origin): its motions cannot be bounded",
+                        sublevel_core::error::clip(&g.name),
+                        sublevel_core::error::clip(link)
+                    ),
+                ));
+            }
+            radius[g.link] = Real::max(radius[g.link], reach);
         }
         let bounds = robot.model.motion_bounds(&radius)?;
         Ok(Self { checker, bounds })

@@ -362,7 +362,10 @@ fn table_key(
 ///
 /// # Errors
 /// [`Error::InvalidArgument`] naming `max_loss` (not finite and > 0) or `max_cells` (0);
-/// [`Error::Numerical`] when a distance fails.
+/// [`Error::ResourceExhausted`] for more than [`crate::limits::MAX_CLEARANCE_TABLES`] tables;
+/// [`Error::Numerical`] when a distance fails; [`Error::Cancelled`] once this thread's
+/// [`sublevel_core::cancel`] scope is cancelled (checked between blocks of 256 cells on every
+/// thread).
 pub fn build_clearance_tables(
     robot: &FittedRobot,
     settings: &ClearanceSettings,
@@ -378,27 +381,40 @@ pub fn build_clearance_tables(
         0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
         n => n,
     };
-    let mut files = Vec::new();
+    let mut pairs = Vec::new();
     let n = robot.geometries.len();
+    let self_pairs: std::collections::HashSet<(usize, usize)> = robot.self_pairs.iter().copied().collect();
     for a in 0..n {
         for b in a + 1..n {
             let (la, lb) = (robot.geometries[a].link, robot.geometries[b].link);
-            if !robot.self_pairs.contains(&(la.min(lb), la.max(lb))) {
+            if !self_pairs.contains(&(la.min(lb), la.max(lb))) {
                 continue;
             }
-            let Some(chain) = pair_chain(robot, a, b) else { continue };
-            let start = std::time::Instant::now();
-            let file = build_table(robot, a, b, &chain, settings, threads)?;
-            progress(&format!(
-                "clearance table {}–{}: {:?} cells over {:?}, {:.1} s",
-                robot.geometries[a].name,
-                robot.geometries[b].name,
-                file.cells,
-                file.joints,
-                start.elapsed().as_secs_f64()
-            ));
-            files.push(file);
+            sublevel_core::cancel::check()?;
+            if let Some(chain) = pair_chain(robot, a, b) {
+                pairs.push((a, b, chain));
+            }
         }
+    }
+    if pairs.len() > crate::limits::MAX_CLEARANCE_TABLES {
+        return Err(crate::limits::exceeded("clearance tables", pairs.len(), crate::limits::MAX_CLEARANCE_TABLES));
+    }
+    let count = pairs.len();
+    let mut files = Vec::with_capacity(count);
+    for (k, (a, b, chain)) in pairs.into_iter().enumerate() {
+        sublevel_core::cancel::check()?;
+        let start = std::time::Instant::now();
+        let file = build_table(robot, a, b, &chain, settings, threads)?;
+        progress(&format!(
+            "clearance table {}/{count} {}–{}: {:?} cells over {:?}, {:.1} s",
+            k + 1,
+            robot.geometries[a].name,
+            robot.geometries[b].name,
+            file.cells,
+            file.joints,
+            start.elapsed().as_secs_f64()
+        ));
+        files.push(file);
     }
     Ok(files)
 }
@@ -437,6 +453,8 @@ fn build_table(
     let contacts: std::sync::Mutex<Vec<(u32, u32, u32)>> = std::sync::Mutex::new(Vec::new());
     let meshes = ea.shape.as_trimesh().zip(eb.shape.as_trimesh());
     let failed: std::sync::Mutex<Option<Error>> = std::sync::Mutex::new(None);
+    let cancelled = sublevel_core::cancel::current();
+    let stop = || cancelled.as_ref().is_some_and(|f| f.load(Ordering::Relaxed));
     std::thread::scope(|s| {
         for _ in 0..threads.clamp(1, total.div_ceil(BLOCK)) {
             s.spawn(|| {
@@ -445,7 +463,7 @@ fn build_table(
                 let hint = PairHint::default();
                 loop {
                     let first = next.fetch_add(BLOCK, Ordering::Relaxed);
-                    if first >= total {
+                    if first >= total || stop() {
                         break;
                     }
                     let mut out = Vec::with_capacity(BLOCK);
@@ -495,6 +513,7 @@ fn build_table(
     if let Some(e) = failed.into_inner().ok().flatten() {
         return Err(e);
     }
+    sublevel_core::cancel::check()?;
     let mut blocks = blocks.into_inner().map_err(|_| Error::Numerical("a clearance thread panicked".into()))?;
     blocks.sort_by_key(|b| b.0);
     let cells: Vec<u8> = blocks.into_iter().flat_map(|b| b.1).collect();

@@ -68,32 +68,120 @@ struct MeshJob {
     mesh: TriangleMesh,
 }
 
-/// Fits the robot of `urdf_path` (module docs); `srdf_path` gives the allowed pairs.
+/// Where a robot fit reads the mesh files its URDF names.
+///
+/// A URDF names meshes as `package://NAME/PATH`, `file:///ABS`, absolute or relative paths
+/// (ROS conventions). The command line resolves them on its own disk ([`MeshSource::Files`]); the
+/// service never does: it reads only the bytes the request carried, looked up by the exact name the
+/// URDF writes ([`MeshSource::Memory`]), after [`check_mesh_name`] has refused every name that is
+/// not `package://NAME/PATH` or a plain relative path.
+#[derive(Clone, Copy, Debug)]
+pub enum MeshSource<'a> {
+    /// Files resolved as ROS and pinocchio do ([`resolve_mesh_path`]): relative names against
+    /// `urdf_dir`, `package://` against `package_dirs` (from [`RobotFitSettings::package_dirs`]).
+    Files {
+        /// The URDF's directory (`None`: the working directory).
+        urdf_dir: Option<&'a Path>,
+    },
+    /// The mesh files' bytes by the name the URDF gives them; nothing is read from disk.
+    Memory(&'a std::collections::HashMap<String, Vec<u8>>),
+}
+
+/// Checks a mesh name a client sends for the service to read from its request: `package://NAME/PATH`
+/// (a package name and a path inside it) or a relative path, each made of plain components (no
+/// `..`, no `.`, no root, no drive, no backslash, no URL scheme such as `file://`), at most 1024
+/// bytes. The format comes from the name's extension (OBJ, STL, PLY, OFF, DAE).
 ///
 /// # Errors
-/// As [`RobotModel::from_urdf_str`] and [`Semantics::from_srdf_str`] (naming the element);
-/// [`Error::InvalidArgument`] naming `urdf.link[NAME].collision[k].mesh` when a mesh file is not
-/// found (the places searched listed) or cannot be read as a triangle mesh; [`Error::Io`] for an
-/// unreadable file; the fit's errors naming the mesh.
+/// [`Error::InvalidArgument`] naming `field`, saying what a mesh name may be.
+pub fn check_mesh_name(field: &str, name: &str) -> Result<()> {
+    const MAX_MESH_NAME_BYTES: usize = 1024;
+    let refuse = |why: &str| {
+        Err(Error::invalid(
+            field,
+            format!(
+                "mesh `{}` {why}: a mesh name must be `package://NAME/PATH` or a relative path without `..`",
+                sublevel_core::error::clip(name)
+            ),
+        ))
+    };
+    if name.len() > MAX_MESH_NAME_BYTES {
+        return refuse(&format!("is longer than {MAX_MESH_NAME_BYTES} bytes"));
+    }
+    let (package, rest) = match name.strip_prefix("package://") {
+        Some(rest) => (true, rest),
+        None => (false, name),
+    };
+    if rest.is_empty() || rest.contains('\\') || rest.contains('\0') {
+        return refuse("is empty or holds a backslash or NUL");
+    }
+    if !package && rest.contains(':') {
+        return refuse("names a URL scheme or a drive (the service reads no file of its own disk)");
+    }
+    let parts: Vec<&str> = rest.split('/').collect();
+    if parts.iter().any(|c| c.is_empty() || *c == "." || *c == "..") {
+        return refuse("is absolute or holds an empty, `.` or `..` component");
+    }
+    if package && parts.len() < 2 {
+        return refuse("names a package without a path inside it");
+    }
+    MeshFormat::of_path(Path::new(rest)).map_err(|e| Error::invalid(field, e.to_string()))?;
+    Ok(())
+}
+
+/// Fits the robot of `urdf_path` (module docs); `srdf_path` gives the allowed pairs; meshes are
+/// files resolved from the URDF's directory and [`RobotFitSettings::package_dirs`].
+///
+/// # Errors
+/// [`Error::Io`] for an unreadable URDF or SRDF; as [`fit_robot_text`].
 pub fn fit_robot(
     urdf_path: &Path,
     srdf_path: Option<&Path>,
     settings: &RobotFitSettings,
     progress: &(dyn Fn(&RobotFitProgress) + Sync),
 ) -> Result<FittedRobot> {
-    let start = Instant::now();
     let urdf = std::fs::read_to_string(urdf_path)
         .map_err(|e| std::io::Error::new(e.kind(), format!("cannot read {}: {e}", urdf_path.display())))?;
+    let srdf = match srdf_path {
+        Some(p) => Some(
+            std::fs::read_to_string(p)
+                .map_err(|e| std::io::Error::new(e.kind(), format!("cannot read {}: {e}", p.display())))?,
+        ),
+        None => None,
+    };
+    fit_robot_text(urdf, srdf.as_deref(), MeshSource::Files { urdf_dir: urdf_path.parent() }, settings, progress)
+}
+
+/// Fits the robot of URDF text `urdf` (module docs); `srdf` (SRDF text) gives the allowed pairs,
+/// `meshes` where the link meshes are read. Cancellable: every stage (mesh fits, on their own
+/// threads, and clearance tables) stops at its next check once this thread's
+/// [`sublevel_core::cancel`] scope is cancelled.
+///
+/// # Errors
+/// As [`RobotModel::from_urdf_str`] and [`Semantics::from_srdf_str`] (naming the element);
+/// [`Error::InvalidArgument`] naming `urdf.link[NAME].collision[k].mesh` when a mesh is not
+/// found (for files, the places searched listed; for [`MeshSource::Memory`], only its name) or
+/// cannot be read as a triangle mesh; [`Error::Io`] for an unreadable file;
+/// [`Error::ResourceExhausted`] when the robot exceeds a [`crate::limits`] limit; [`Error::Cancelled`]; the
+/// fit's errors naming the mesh.
+pub fn fit_robot_text(
+    urdf: String,
+    srdf: Option<&str>,
+    meshes: MeshSource<'_>,
+    settings: &RobotFitSettings,
+    progress: &(dyn Fn(&RobotFitProgress) + Sync),
+) -> Result<FittedRobot> {
+    let start = Instant::now();
     let model = RobotModel::from_urdf_str(&urdf)?;
-    let allowed_pairs: Vec<[String; 2]> = match srdf_path {
-        Some(p) => {
-            let srdf = Semantics::from_srdf_file(p)?;
+    let allowed_pairs: Vec<[String; 2]> = match srdf {
+        Some(text) => {
+            let srdf = Semantics::from_srdf_str(text)?;
             model.self_collision_pairs(&srdf.disabled_pairs)?;
             srdf.disabled_pairs.iter().map(|d| [d.link1.clone(), d.link2.clone()]).collect()
         }
         None => Vec::new(),
     };
-    let urdf_dir = urdf_path.parent();
+    crate::limits::check_self_pairs(&model, &allowed_pairs)?;
     let tag = settings_tag(&settings.compound);
     let mut geometries = Vec::new();
     let mut jobs: Vec<MeshJob> = Vec::new();
@@ -112,8 +200,31 @@ pub fn fit_robot(
                     (origin, Some(PrimitiveFile::Capsule { radius: *radius, height: *length }), None)
                 }
                 CollisionGeometry::Mesh { origin, filename, scale } => {
-                    let path = resolve_mesh_path(&format!("{field}.mesh"), filename, urdf_dir, &settings.package_dirs)?;
-                    let (file, job) = read_mesh(&format!("{field}.mesh"), &path, filename, *scale, &tag)?;
+                    let field = format!("{field}.mesh");
+                    let (bytes, shown, format) = match meshes {
+                        MeshSource::Files { urdf_dir } => {
+                            let path = resolve_mesh_path(&field, filename, urdf_dir, &settings.package_dirs)?;
+                            let bytes = std::fs::read(&path).map_err(|e| {
+                                std::io::Error::new(e.kind(), format!("cannot read {}: {e}", path.display()))
+                            })?;
+                            let format =
+                                MeshFormat::of_path(&path).map_err(|e| Error::invalid(&field, e.to_string()))?;
+                            (std::borrow::Cow::Owned(bytes), path.display().to_string(), format)
+                        }
+                        MeshSource::Memory(map) => {
+                            check_mesh_name(&field, filename)?;
+                            let bytes = map.get(filename).ok_or_else(|| {
+                                Error::invalid(
+                                    &field,
+                                    format!("mesh `{}` was not sent", sublevel_core::error::clip(filename)),
+                                )
+                            })?;
+                            let format = MeshFormat::of_path(Path::new(filename))
+                                .map_err(|e| Error::invalid(&field, e.to_string()))?;
+                            (std::borrow::Cow::Borrowed(bytes.as_slice()), filename.clone(), format)
+                        }
+                    };
+                    let (file, job) = read_mesh(&field, &bytes, format, &shown, filename, *scale, &tag)?;
                     if !jobs.iter().any(|j| j.key == job.key) {
                         jobs.push(job);
                     }
@@ -139,7 +250,7 @@ pub fn fit_robot(
         }
     }
     let report = RobotFitReport { seconds: start.elapsed().as_secs_f64(), ..report };
-    let file = RobotFile {
+    let mut file = RobotFile {
         format: ROBOT_FORMAT.to_owned(),
         name: model.name.clone(),
         urdf,
@@ -147,7 +258,9 @@ pub fn fit_robot(
         geometries,
         report,
         clearance: Vec::new(),
+        integrity: String::new(),
     };
+    file.seal()?;
     let robot = FittedRobot::from_file(file)?;
     let Some(clearance) = &settings.clearance else { return Ok(robot) };
     let meshes = robot.file.report.fitted + robot.file.report.cached;
@@ -156,6 +269,7 @@ pub fn fit_robot(
     })?;
     let mut robot = robot.with_clearance(tables)?;
     robot.file.report.seconds = start.elapsed().as_secs_f64();
+    robot.file.seal()?;
     Ok(robot)
 }
 
@@ -220,25 +334,31 @@ fn hex(bytes: &[u8]) -> String {
     bytes.iter().map(|b| format!("{b:02x}")).collect()
 }
 
-/// Reads a link mesh: its stored form and its fit job.
-fn read_mesh(field: &str, path: &Path, source: &str, scale: [Real; 3], tag: &str) -> Result<(MeshFile, MeshJob)> {
-    let bytes = std::fs::read(path)
-        .map_err(|e| std::io::Error::new(e.kind(), format!("cannot read {}: {e}", path.display())))?;
-    let format = MeshFormat::of_path(path).map_err(|e| Error::invalid(field, e.to_string()))?;
-    let mut mesh = load_triangle_mesh(&bytes, format, DEFAULT_MAX_MESH_POINTS)
-        .map_err(|e| Error::invalid(field, format!("{}: {e}", path.display())))?;
+/// Reads a link mesh from its bytes (`shown`: its path or name, for messages): its stored form and
+/// its fit job.
+fn read_mesh(
+    field: &str,
+    bytes: &[u8],
+    format: MeshFormat,
+    shown: &str,
+    source: &str,
+    scale: [Real; 3],
+    tag: &str,
+) -> Result<(MeshFile, MeshJob)> {
+    let mut mesh = load_triangle_mesh(bytes, format, DEFAULT_MAX_MESH_POINTS)
+        .map_err(|e| Error::invalid(field, format!("{shown}: {e}")))?;
     if mesh.triangles.is_empty() {
-        return Err(Error::invalid(field, format!("{} holds no triangles", path.display())));
+        return Err(Error::invalid(field, format!("{shown} holds no triangles")));
     }
-    if scale.iter().any(|s| !(s.is_finite() && *s != 0.0)) {
-        return Err(Error::invalid(format!("{field}.scale"), format!("must be finite and nonzero, got {scale:?}")));
+    if scale.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
+        return Err(Error::invalid(format!("{field}.scale"), format!("must be finite and positive, got {scale:?}")));
     }
     for v in &mut mesh.vertices {
         *v = Point3::new(v.x * scale[0], v.y * scale[1], v.z * scale[2]);
     }
-    let sha256 = hex(&Sha256::digest(&bytes));
+    let sha256 = hex(&Sha256::digest(bytes));
     let key = mesh_key(&sha256, scale, tag);
-    let name = path.file_name().map_or_else(|| source.to_owned(), |n| n.to_string_lossy().into_owned());
+    let name = Path::new(shown).file_name().map_or_else(|| source.to_owned(), |n| n.to_string_lossy().into_owned());
     let file = MeshFile {
         source: source.to_owned(),
         sha256,
@@ -268,10 +388,15 @@ fn fit_meshes(
     let queue = Mutex::new(jobs.into_iter().enumerate().collect::<Vec<_>>());
     let results: Mutex<Vec<MeshOutcome>> = Mutex::new(Vec::new());
     let done = Mutex::new(0usize);
+    let flag = sublevel_core::cancel::current();
     std::thread::scope(|s| {
         for _ in 0..threads {
             s.spawn(|| {
-                while let Some((i, job)) = queue.lock().ok().and_then(|mut q| q.pop()) {
+                sublevel_core::cancel::within(flag.clone(), || loop {
+                    if sublevel_core::cancel::is_cancelled() {
+                        break;
+                    }
+                    let Some((i, job)) = queue.lock().ok().and_then(|mut q| q.pop()) else { break };
                     let t = Instant::now();
                     let outcome = fit_one(&job, settings);
                     let message = match &outcome {
@@ -294,10 +419,11 @@ fn fit_meshes(
                     if let Ok(mut r) = results.lock() {
                         r.push((i, job.key.clone(), outcome.map(|(b, c, note)| (b, c, format!("{}{note}", job.name)))));
                     }
-                }
+                });
             });
         }
     });
+    sublevel_core::cancel::check()?;
     let mut results = results.into_inner().map_err(|_| Error::Numerical("a mesh fit panicked".into()))?;
     results.sort_by_key(|r| r.0);
     let mut report = RobotFitReport::default();

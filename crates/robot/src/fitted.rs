@@ -10,8 +10,23 @@
 //!                           or "mesh": {"source", "sha256", "scale", "vertices", "triangles"},
 //!                              "compound": {…}},                           (sublevel.compound.v1)
 //!                             …],
-//!              "report": {"seconds", "fitted", "cached", "notes"}}
+//!              "report": {"seconds", "fitted", "cached", "notes"},
+//!              "clearance": [{…}, …],                                     (crate::clearance)
+//!              "integrity": "sha256:HEX"}
 //! ```
+//!
+//! **Integrity.** A robot file is read as it was written or not at all. A geometry at a link and
+//! index where the URDF has a `<collision>` element must be that element (same origin, primitive
+//! dimensions, or mesh name and scale); elsewhere only exact primitives may be added by hand (a
+//! collision model of spheres, say), never a halfspace; origins are unit quaternions within
+//! ±1e6 m. `integrity` is the SHA-256 of every other byte of the file in its canonical JSON form
+//! ([`RobotFile::digest`]): the meshes, the bodies, the clearance tables' cells and contacts, the
+//! allowed pairs. It is required of a file holding what the checks cannot re-derive cheaply
+//! (fitted meshes, clearance tables) and verified whenever present: a file edited after it was
+//! written (a table overwritten, a mesh or a body changed, two links' geometries swapped) is
+//! refused naming `integrity`, since the checks trust those bytes to answer "free". The digest
+//! detects edits and corruption; it is not a signature: whoever can write a robot file can also
+//! write a wrong one, as with a wrong URDF.
 //!
 //! A geometry's frame is its URDF `<collision><origin>` in its link's frame; a mesh is stored
 //! scaled, in that frame, and its compound body is fitted to those vertices (every triangle inside
@@ -25,7 +40,7 @@
 
 use crate::clearance::{ClearanceFile, ClearanceTable};
 use crate::inner::InnerBalls;
-use crate::model::RobotModel;
+use crate::model::{CollisionGeometry, RobotModel};
 use crate::spheres::{SphereTree, DEFAULT_LEAF_RADIUS};
 use crate::{Error, Result};
 use nalgebra::{Quaternion, Translation3};
@@ -147,6 +162,69 @@ pub struct RobotFile {
     /// Clearance tables of self pairs moved by one or two joints ([`crate::clearance`]).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub clearance: Vec<ClearanceFile>,
+    /// `sha256:HEX`, the [`RobotFile::digest`] of every other field (module docs: Integrity).
+    #[serde(default)]
+    pub integrity: String,
+}
+
+/// The fields of a [`RobotFile`] that its digest covers, in file order.
+#[derive(Serialize)]
+struct Covered<'a> {
+    format: &'a str,
+    name: &'a str,
+    urdf: &'a str,
+    allowed_pairs: &'a [[String; 2]],
+    geometries: &'a [GeometryFile],
+    report: &'a RobotFitReport,
+    clearance: &'a [ClearanceFile],
+}
+
+/// Feeds serialized bytes into a hash.
+struct HashWriter(sha2::Sha256);
+
+impl std::io::Write for HashWriter {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        sha2::Digest::update(&mut self.0, buf);
+        Ok(buf.len())
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+impl RobotFile {
+    /// `sha256:HEX`: SHA-256 of the file's canonical JSON (compact, fields in declaration order,
+    /// numbers as serde_json writes them) without its `integrity` field. Parsing and writing a
+    /// file again gives the same digest.
+    ///
+    /// # Errors
+    /// [`Error::Json`] when a field cannot be serialized.
+    pub fn digest(&self) -> Result<String> {
+        let covered = Covered {
+            format: &self.format,
+            name: &self.name,
+            urdf: &self.urdf,
+            allowed_pairs: &self.allowed_pairs,
+            geometries: &self.geometries,
+            report: &self.report,
+            clearance: &self.clearance,
+        };
+        let mut w = HashWriter(<sha2::Sha256 as sha2::Digest>::new());
+        serde_json::to_writer(&mut w, &covered)?;
+        let hash = sha2::Digest::finalize(w.0);
+        Ok(format!("sha256:{}", hash.iter().map(|b| format!("{b:02x}")).collect::<String>()))
+    }
+
+    /// Sets `integrity` to the file's [`RobotFile::digest`]: done by whatever writes a robot
+    /// file (the fit, [`FittedRobot::with_clearance`]).
+    ///
+    /// # Errors
+    /// As [`RobotFile::digest`].
+    pub fn seal(&mut self) -> Result<()> {
+        self.integrity = self.digest()?;
+        Ok(())
+    }
 }
 
 /// A link's collision geometry as the checks use it.
@@ -246,7 +324,10 @@ impl FittedRobot {
     /// [`RobotModel::from_urdf_str`]), `allowed_pairs[k]` (a link the robot lacks),
     /// `geometries[k].link`, `.origin`, `.primitive`, `.mesh` (an index out of range, a
     /// non-finite vertex, too many triangles), `.compound` (its format, root index and root body, and a mesh vertex outside the root), or a
-    /// geometry with neither a primitive nor a mesh and its compound body.
+    /// geometry with neither a primitive nor a mesh and its compound body; `geometries` or
+    /// `geometries[k]…` for a geometry that is not the URDF's collision element at its place;
+    /// `integrity` for a file changed after it was written (module docs);
+    /// [`Error::ResourceExhausted`] for a robot over a [`crate::limits`] limit.
     pub fn from_file(file: RobotFile) -> Result<Self> {
         if file.format != ROBOT_FORMAT {
             return Err(Error::invalid(
@@ -262,6 +343,20 @@ impl FittedRobot {
             .collect();
         let self_pairs =
             model.self_collision_pairs(&disabled).map_err(|e| rename(e, "srdf.disable_collisions", "allowed_pairs"))?;
+        crate::limits::check_self_pairs(&model, &file.allowed_pairs)?;
+        if file.clearance.len() > crate::limits::MAX_CLEARANCE_TABLES {
+            return Err(crate::limits::exceeded(
+                "clearance tables",
+                file.clearance.len(),
+                crate::limits::MAX_CLEARANCE_TABLES,
+            ));
+        }
+        let urdf_elements: std::collections::HashMap<(&str, usize), &CollisionGeometry> = model
+            .links()
+            .iter()
+            .flat_map(|l| l.collision.iter().enumerate().map(move |(k, c)| ((l.name.as_str(), k), c)))
+            .collect();
+        let mut placed = std::collections::HashSet::new();
         let mut geometries = Vec::with_capacity(file.geometries.len());
         for (k, g) in file.geometries.iter().enumerate() {
             let field = format!("geometries[{k}]");
@@ -269,6 +364,33 @@ impl FittedRobot {
                 .link_index(&g.link)
                 .ok_or_else(|| Error::invalid(format!("{field}.link"), "names a link the URDF does not have"))?;
             let origin = g.origin.to_pose(&format!("{field}.origin"))?;
+            if !placed.insert((g.link.as_str(), g.index)) {
+                return Err(Error::invalid(
+                    format!("{field}.index"),
+                    format!("link `{}` collision {} is given twice", sublevel_core::error::clip(&g.link), g.index),
+                ));
+            }
+            match urdf_elements.get(&(g.link.as_str(), g.index)) {
+                Some(c) => matches_urdf(&field, g, c)?,
+                None if g.mesh.is_some() => {
+                    return Err(Error::invalid(
+                        format!("{field}.mesh"),
+                        format!(
+                            "link `{}` has no collision element {} in the URDF: a mesh geometry is the URDF's",
+                            sublevel_core::error::clip(&g.link),
+                            g.index
+                        ),
+                    ))
+                }
+                None => {}
+            }
+            check_origin(&format!("{field}.origin"), &g.origin)?;
+            if matches!(g.primitive, Some(PrimitiveFile::Halfspace { .. })) {
+                return Err(Error::invalid(
+                    format!("{field}.primitive"),
+                    "a halfspace is no link geometry (it has no bounded extent); it belongs to the world",
+                ));
+            }
             let name = if g.index == 0 { g.link.clone() } else { format!("{}#{}", g.link, g.index) };
             let (shape, sphere, local_box) = match (&g.primitive, &g.mesh, &g.compound) {
                 (Some(p), None, None) => {
@@ -309,18 +431,39 @@ impl FittedRobot {
             file,
             clearance: Vec::new(),
         };
-        let tables = std::mem::take(&mut robot.file.clearance);
-        robot.with_clearance(tables)
+        robot.clearance = crate::clearance::load_tables(&robot, &robot.file.clearance)?;
+        let derived = robot.file.geometries.iter().any(|g| g.mesh.is_some() || g.compound.is_some())
+            || !robot.file.clearance.is_empty();
+        if robot.file.integrity.is_empty() && derived {
+            return Err(Error::invalid(
+                "integrity",
+                "missing: a robot file with fitted meshes or clearance tables carries the SHA-256 of its contents, \
+                 as `sublevel robot fit` writes it",
+            ));
+        }
+        if !robot.file.integrity.is_empty() && robot.file.digest()? != robot.file.integrity {
+            return Err(Error::invalid(
+                "integrity",
+                "the file's contents do not match its SHA-256: it was changed after it was written \
+                 (fit the robot again, or `sublevel robot tables` to rebuild its tables)",
+            ));
+        }
+        Ok(robot)
     }
 
-    /// The robot with `tables` as its clearance tables (replacing any it had; saved with it).
+    /// The robot with `tables` as its clearance tables (replacing any it had; saved with it, the
+    /// file sealed again: [`RobotFile::seal`]).
     ///
     /// # Errors
     /// As [`crate::clearance`]'s validation: [`Error::InvalidArgument`] naming `clearance[k]` and
     /// the field.
     pub fn with_clearance(mut self, tables: Vec<ClearanceFile>) -> Result<Self> {
+        if tables.len() > crate::limits::MAX_CLEARANCE_TABLES {
+            return Err(crate::limits::exceeded("clearance tables", tables.len(), crate::limits::MAX_CLEARANCE_TABLES));
+        }
         self.clearance = crate::clearance::load_tables(&self, &tables)?;
         self.file.clearance = tables;
+        self.file.seal()?;
         Ok(self)
     }
 
@@ -482,4 +625,77 @@ pub(crate) fn exact_trimesh(
     let points = vertices.iter().map(|p| parry3d_f64::math::Vector::new(p.x, p.y, p.z)).collect();
     parry3d_f64::shape::SharedShape::trimesh(points, triangles.to_vec())
         .map_err(|e| Error::invalid(field, format!("not a valid triangle mesh: {e:?}")))
+}
+
+/// Checks a geometry's origin: translation within ±1e6 m, rotation a unit quaternion (within 1e-6).
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `field`.
+fn check_origin(field: &str, o: &PoseFile) -> Result<()> {
+    let norm = o.rotation.iter().map(|v| v * v).sum::<Real>().sqrt();
+    let near = o.translation.iter().all(|v| v.abs() <= sublevel_core::math::MAX_COORDINATE);
+    let unit = (norm - 1.0).abs() <= 1e-6;
+    if !(near && unit) {
+        return Err(Error::invalid(
+            field,
+            format!(
+                "translation {:?} must lie within ±1e6 m and rotation {:?} be a unit quaternion (w, x, y, z)",
+                o.translation, o.rotation
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Checks that a file's geometry is the URDF's `<collision>` element of its link and index: the
+/// same origin (within 1e-9 m and 1e-9 in the quaternion, either sign), the same primitive, or a
+/// mesh of the same name and scale with a SHA-256 in hex.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `field.origin`, `.primitive` or `.mesh`.
+fn matches_urdf(field: &str, g: &GeometryFile, c: &CollisionGeometry) -> Result<()> {
+    let (origin, primitive, mesh) = match c {
+        CollisionGeometry::Box { origin, size } => (origin, Some(PrimitiveFile::Box { size: *size }), None),
+        CollisionGeometry::Sphere { origin, radius } => (origin, Some(PrimitiveFile::Sphere { radius: *radius }), None),
+        CollisionGeometry::Cylinder { origin, radius, length } => {
+            (origin, Some(PrimitiveFile::Cylinder { radius: *radius, height: *length }), None)
+        }
+        CollisionGeometry::Capsule { origin, radius, length } => {
+            (origin, Some(PrimitiveFile::Capsule { radius: *radius, height: *length }), None)
+        }
+        CollisionGeometry::Mesh { origin, filename, scale } => (origin, None, Some((filename, scale))),
+    };
+    let want = PoseFile::of(origin);
+    let close = |a: &[Real], b: &[Real]| a.iter().zip(b).all(|(x, y)| (x - y).abs() <= 1e-9);
+    let negated = want.rotation.map(|v| -v);
+    if !close(&g.origin.translation, &want.translation)
+        || !(close(&g.origin.rotation, &want.rotation) || close(&g.origin.rotation, &negated))
+    {
+        return Err(Error::invalid(
+            format!("{field}.origin"),
+            format!("differs from the URDF's collision origin {want:?}"),
+        ));
+    }
+    match (primitive, mesh) {
+        (Some(p), _) if g.primitive.as_ref() != Some(&p) || g.mesh.is_some() => Err(Error::invalid(
+            format!("{field}.primitive"),
+            format!("the URDF's collision element is the primitive {p:?}"),
+        )),
+        (None, Some((filename, scale))) => {
+            let Some(m) = &g.mesh else {
+                return Err(Error::invalid(format!("{field}.mesh"), "the URDF's collision element is a mesh"));
+            };
+            if &m.source != filename || m.scale != *scale {
+                return Err(Error::invalid(
+                    format!("{field}.mesh"),
+                    format!("the URDF's collision element is mesh `{filename}` at scale {scale:?}"),
+                ));
+            }
+            if m.sha256.len() != 64 || !m.sha256.bytes().all(|b| b.is_ascii_hexdigit()) {
+                return Err(Error::invalid(format!("{field}.mesh.sha256"), "must be 64 hexadecimal digits"));
+            }
+            Ok(())
+        }
+        _ => Ok(()),
+    }
 }

@@ -46,6 +46,7 @@ pub mod fit;
 pub mod fitted;
 pub mod inner;
 pub mod kinematics;
+pub mod limits;
 pub mod model;
 pub mod motion;
 pub mod spheres;
@@ -54,7 +55,7 @@ pub mod world;
 
 pub use advance::{MotionAnswer, MotionChecker, MotionOptions};
 pub use check::{CheckOptions, ConfigurationAnswer, RobotChecker};
-pub use fit::{fit_robot, RobotFitProgress, RobotFitSettings};
+pub use fit::{check_mesh_name, fit_robot, fit_robot_text, MeshSource, RobotFitProgress, RobotFitSettings};
 pub use fitted::{FittedRobot, LinkShape, RobotFile, RobotGeometry};
 pub use model::{resolve_mesh_path, CollisionGeometry, Joint, JointKind, JointValue, Link, RobotModel};
 pub use srdf::Semantics;

@@ -209,8 +209,14 @@ fn collision(field: &str, c: &urdf_rs::Collision) -> Result<CollisionGeometry> {
         }
         urdf_rs::Geometry::Mesh { filename, scale } => {
             let scale = scale.map_or([1.0; 3], |s| *s);
-            if scale.iter().any(|v| !v.is_finite() || *v == 0.0) {
-                return Err(Error::invalid(format!("{field}.mesh.scale"), "must be finite and nonzero"));
+            if scale.iter().any(|v| !(v.is_finite() && *v > 0.0 && *v <= MAX_COORDINATE)) {
+                return Err(Error::invalid(
+                    format!("{field}.mesh.scale"),
+                    format!(
+                        "must be finite and positive, got {scale:?} (a negative scale mirrors the mesh, turning \
+                         its triangles inside out: mirror the file instead)"
+                    ),
+                ));
             }
             CollisionGeometry::Mesh { origin, filename: filename.clone(), scale }
         }
@@ -240,6 +246,12 @@ impl RobotModel {
     }
 
     fn from_urdf(robot: &urdf_rs::Robot) -> Result<Self> {
+        crate::limits::check_urdf(
+            robot.links.len(),
+            robot.joints.len(),
+            robot.joints.iter().filter(|j| !matches!(j.joint_type, urdf_rs::JointType::Fixed)).count(),
+            robot.links.iter().map(|l| l.collision.len()).sum(),
+        )?;
         let mut link_index = HashMap::new();
         let mut links = Vec::with_capacity(robot.links.len());
         for l in &robot.links {
@@ -460,10 +472,14 @@ impl RobotModel {
     /// (radians, meters), configuration-major. Entries not named take `defaults` (by joint name;
     /// names the robot lacks are ignored), else 0.
     ///
+    /// Every value must lie within its joint's URDF limits, ends included (revolute and
+    /// prismatic joints; continuous joints take any finite value, wrapped by the kinematics): a
+    /// state outside them is not one a planner may take, so it is refused rather than answered.
+    ///
     /// # Errors
     /// [`Error::InvalidArgument`] naming `field.joint_names[c]` (a joint the robot lacks, a fixed
     /// or mimic joint, or a repeat), `field.values` (a length that is not a positive multiple of
-    /// the columns) or `field.values[i]` (not finite).
+    /// the columns) or `field.values[i]` (not finite, or outside its joint's limits).
     pub fn configurations(
         &self,
         field: &str,
@@ -512,6 +528,21 @@ impl RobotModel {
                 base[k] = *v;
             }
         }
+        for (i, &v) in values.iter().enumerate() {
+            let joint = &self.joints[self.variables[columns[i % n]]];
+            if let Some((lo, hi)) = joint.limits {
+                if !(lo..=hi).contains(&v) {
+                    return Err(Error::invalid(
+                        format!("{field}.values[{i}]"),
+                        format!(
+                            "joint `{}` at {v} is outside its URDF limits [{lo}, {hi}] (a planner's state must lie \
+                             within them; continuous joints take any value)",
+                            joint.name
+                        ),
+                    ));
+                }
+            }
+        }
         Ok(values
             .chunks_exact(n)
             .map(|row| {
@@ -547,6 +578,9 @@ impl RobotModel {
 /// - `package://NAME/PATH` → the first existing `DIR/NAME/PATH` over `package_dirs`;
 /// - `file:///ABS` and absolute paths → themselves;
 /// - a relative path → relative to the URDF's directory `urdf_dir`.
+///
+/// For the command line only: the service never resolves a name on its disk
+/// ([`crate::fit::MeshSource::Memory`]).
 ///
 /// # Errors
 /// [`Error::InvalidArgument`] naming `field` when no candidate file exists, listing the places

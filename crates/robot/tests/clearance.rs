@@ -9,6 +9,7 @@
 //!           (the tip's extreme vertex along x lies within the base's y range; two entries)
 //! ```
 
+use base64::Engine;
 use sublevel_core::math::{Isometry3, Real};
 use sublevel_robot::clearance::{ClearanceSettings, ClearanceTable, CLEARANCE_UNIT};
 use sublevel_robot::{fit_robot, CheckOptions, FittedRobot, RobotChecker, RobotFile, RobotFitSettings};
@@ -185,6 +186,32 @@ fn tables_survive_a_save_and_a_stale_or_damaged_table_is_refused_by_name() {
     assert_eq!(refused(&|f| f.clearance[0].joints = vec!["x".into()]), "clearance[0].joints");
     assert_eq!(refused(&|f| f.clearance[0].unit = -1.0), "clearance[0].unit");
     assert_eq!(refused(&|f| f.clearance[1].contacts = "AAAA".into()), "clearance[1].contacts");
+    // Well-formed edits the tables' own checks cannot see are caught by the file's digest: every
+    // cell of a table changed (its lowest bit flipped), the key left as it was.
+    let ff = |f: &mut RobotFile| {
+        let cells = base64::engine::general_purpose::STANDARD.decode(&f.clearance[0].data).unwrap();
+        let flipped: Vec<u8> = cells.iter().map(|c| c ^ 1).collect();
+        f.clearance[0].data = base64::engine::general_purpose::STANDARD.encode(flipped);
+    };
+    assert_eq!(refused(&ff), "integrity");
+    assert_eq!(refused(&|f| f.integrity.clear()), "integrity");
+    // Sealed again, the same edit loads: the digest detects changes, it does not sign.
+    let mut f = file.clone();
+    ff(&mut f);
+    f.seal().unwrap();
+    assert!(FittedRobot::from_file(f).is_ok());
+}
+
+/// A build of the tables inside a cancelled scope stops with `Cancelled` (the job's
+/// `CancelFitJob` reaches this stage through its threads).
+#[test]
+fn a_cancelled_scope_stops_the_tables_build() {
+    let (robot, _dir) = slider(false);
+    let flag = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(true));
+    let built = sublevel_core::cancel::cancellable(flag, || {
+        sublevel_robot::clearance::build_clearance_tables(&robot, &ClearanceSettings::default(), &|_| {})
+    });
+    assert!(matches!(built, Err(sublevel_core::Error::Cancelled(_))), "{:?}", built.map(|t| t.len()));
 }
 
 /// The Panda's stored tables against parry's whole-mesh distance (an independent reference).

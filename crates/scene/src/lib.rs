@@ -81,6 +81,20 @@ impl StoredPose {
         Self { rotation, translation }
     }
 
+    /// The stored form of `pose`, refused unless it reads back: the one rule every stored pose
+    /// passes, applied when it is written (instances added, poses set, planning scenes imported
+    /// at their composed poses) and again when the store reopens ([`StoredPose::to_isometry`]),
+    /// so that no acknowledged pose is quarantined at the next start.
+    ///
+    /// # Errors
+    /// [`sublevel_core::Error::InvalidArgument`] naming `field` for a translation beyond
+    /// ±[`sublevel_core::math::MAX_COORDINATE`] m, a non-finite entry or a non-unit quaternion.
+    pub fn checked(field: &str, pose: &Isometry3) -> Result<Self> {
+        let stored = Self::from_isometry(pose);
+        stored.to_isometry(field)?;
+        Ok(stored)
+    }
+
     /// The pose, validated as by [`pose_from_parts`].
     ///
     /// # Errors

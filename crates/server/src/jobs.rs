@@ -84,59 +84,11 @@ pub(crate) struct RobotFitInput {
     pub(crate) urdf: String,
     /// The SRDF text, when given.
     pub(crate) srdf: Option<String>,
-    /// Mesh files by the name the URDF gives them: (`package://NAME/PATH` or a relative path,
-    /// bytes).
-    pub(crate) meshes: Vec<(String, Vec<u8>)>,
-    /// The fit's settings (package directory set by [`RobotFitInput::write`]).
+    /// Mesh files by the exact name the URDF gives them (`package://NAME/PATH` or a relative
+    /// path, checked by [`sublevel_robot::check_mesh_name`]): the only mesh bytes the job reads.
+    pub(crate) meshes: HashMap<String, Vec<u8>>,
+    /// The fit's settings.
     pub(crate) settings: sublevel_robot::RobotFitSettings,
-    /// Where jobs write their inputs.
-    pub(crate) work_dir: std::path::PathBuf,
-}
-
-impl RobotFitInput {
-    /// Writes the inputs under `dir` as a ROS workspace: `dir/urdf/robot.urdf`, relative meshes
-    /// beside it, `package://NAME/PATH` as `dir/packages/NAME/PATH`; returns the URDF's and the
-    /// SRDF's paths and the settings with `dir/packages` as package directory.
-    fn write(
-        &self,
-        dir: &std::path::Path,
-    ) -> Result<(std::path::PathBuf, Option<std::path::PathBuf>, sublevel_robot::RobotFitSettings)> {
-        let urdf_dir = dir.join("urdf");
-        let packages = dir.join("packages");
-        std::fs::create_dir_all(&urdf_dir)?;
-        for (name, bytes) in &self.meshes {
-            let path = match name.strip_prefix("package://") {
-                Some(rest) => packages.join(rest),
-                None => urdf_dir.join(name),
-            };
-            if let Some(parent) = path.parent() {
-                std::fs::create_dir_all(parent)?;
-            }
-            std::fs::write(&path, bytes)?;
-        }
-        let urdf = urdf_dir.join("robot.urdf");
-        std::fs::write(&urdf, &self.urdf)?;
-        let srdf = match &self.srdf {
-            Some(text) => {
-                let path = dir.join("robot.srdf");
-                std::fs::write(&path, text)?;
-                Some(path)
-            }
-            None => None,
-        };
-        let mut settings = self.settings.clone();
-        settings.package_dirs = vec![packages];
-        Ok((urdf, srdf, settings))
-    }
-}
-
-/// A directory removed (with everything in it) when dropped.
-struct RemoveOnDrop(std::path::PathBuf);
-
-impl Drop for RemoveOnDrop {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
 }
 
 /// One `FitJobUpdate`; `part` is the compound fit's part being fitted (`part` / `parts` 0 without).
@@ -616,12 +568,13 @@ impl FitJobs {
         Ok(job_id)
     }
 
-    /// Starts a robot fit ([`sublevel_robot::fit_robot`]) of validated inputs and returns the job
-    /// id. The URDF, SRDF and meshes are written under `input.work_dir/JOB_ID` (removed at the
-    /// end), the meshes fitted one per thread of `input.settings.threads` (cached in
-    /// `input.settings.cache_dir`); progress reports each mesh fitted or read from the cache. On
-    /// success the robot is stored under `name`. A cancellation stops the job once its meshes are
-    /// fitted (the fits run on their own threads), and nothing is stored.
+    /// Starts a robot fit ([`sublevel_robot::fit_robot_text`]) of validated inputs and returns the
+    /// job id. The meshes are read from the request's bytes only (nothing is written or read on
+    /// the server's disk but the fit cache `input.settings.cache_dir`), fitted one per thread of
+    /// `input.settings.threads`; progress reports each mesh fitted or read from the cache and each
+    /// clearance table. On success the robot is stored under `name`. A cancellation reaches every
+    /// stage: the mesh fits stop at their next Clarabel iteration, the clearance tables at their
+    /// next block of cells, and nothing is stored.
     ///
     /// # Errors
     /// UNAVAILABLE when the job's record cannot be written.
@@ -630,18 +583,20 @@ impl FitJobs {
         let (job_id, name) = (job.job_id.clone(), job.name.clone());
         tracing::info!(job_id = %job_id, meshes = input.meshes.len(), "robot fit queued");
         let catalog = self.catalog.clone();
-        let dir = input.work_dir.join(&job_id);
         self.spawn(job, ROBOT_KIND, move |progress| {
-            let _cleanup = RemoveOnDrop(dir.clone());
-            let (urdf, srdf, settings) = input.write(&dir)?;
+            let RobotFitInput { urdf, srdf, meshes, settings } = input;
             let (tx, rx) = std::sync::mpsc::channel::<sublevel_robot::RobotFitProgress>();
+            let flag = sublevel_core::cancel::current();
             // The fit reports from its own threads; this thread relays to the job's progress.
             let robot = std::thread::scope(|scope| {
                 let fit = scope.spawn(move || {
                     let report = move |p: &sublevel_robot::RobotFitProgress| {
                         let _ = tx.send(p.clone());
                     };
-                    sublevel_robot::fit_robot(&urdf, srdf.as_deref(), &settings, &report)
+                    sublevel_core::cancel::within(flag, || {
+                        let source = sublevel_robot::MeshSource::Memory(&meshes);
+                        sublevel_robot::fit_robot_text(urdf, srdf.as_deref(), source, &settings, &report)
+                    })
                 });
                 for p in rx {
                     progress(&FitProgress {

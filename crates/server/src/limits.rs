@@ -113,9 +113,9 @@ pub fn default_batch_workers() -> usize {
     std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get)
 }
 
-/// The default number of SDP slots: half the CPUs, at least 2 (an SDP solve is single-threaded
-/// with `OPENBLAS_NUM_THREADS=1` and takes milliseconds to seconds; half the cores keeps the rest
-/// for batches and the async workers).
+/// The default number of SDP slots: half the CPUs, at least 2 (an SDP solve is single-threaded,
+/// on one OpenBLAS thread unless `OPENBLAS_NUM_THREADS` says otherwise, and takes milliseconds to
+/// seconds; half the cores keeps the rest for batches and the async workers).
 pub fn default_sdp_slots() -> usize {
     (default_batch_workers() / 2).max(2)
 }

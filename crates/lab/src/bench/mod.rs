@@ -59,9 +59,11 @@ pub struct BenchArgs {
     /// Optional CSV output of the summary table.
     #[arg(long)]
     csv: Option<std::path::PathBuf>,
-    /// Output of the coal peer script (`bash ../shared/peers/coal/run.sh > coal.txt`, run just
-    /// before on the same machine, whose speed drifts between minutes): its figures and the ratios
-    /// ours / coal are printed beside ours and fill the `coal_*` / `*_over_coal` CSV columns.
+    /// Output of the coal peer script (`bash PEERS/coal/run.sh data/psb/chair_101.off
+    /// data/psb/human_10.off > coal.txt`, PEERS being where the peer benchmarks are checked out;
+    /// run just before on the same machine, whose speed drifts between minutes): its figures and
+    /// the ratios ours / coal are printed beside ours and fill the `coal_*` / `*_over_coal` CSV
+    /// columns.
     #[arg(long)]
     peer: Option<std::path::PathBuf>,
 }

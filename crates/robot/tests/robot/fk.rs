@@ -55,11 +55,8 @@ fn every_joint_kind_matches_pinocchio() {
 
 #[test]
 fn the_panda_matches_pinocchio() {
-    let model = RobotModel::from_urdf_file(&data("../../../../../shared/peers/robots/panda/panda.urdf"));
-    let Ok(model) = model else {
-        eprintln!("skipped: the Panda URDF of ../shared/peers/robots is not there");
-        return;
-    };
+    let urdf = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/robots/panda/panda.urdf");
+    let model = RobotModel::from_urdf_file(&urdf).unwrap();
     let reference: Reference = serde_json::from_str(&std::fs::read_to_string(data("panda_fk.json")).unwrap()).unwrap();
     assert_eq!(model.dof(), 7);
     assert_eq!(model.links().len(), 13);

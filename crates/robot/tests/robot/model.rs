@@ -111,10 +111,11 @@ fn configurations_from_named_columns_fill_the_rest_from_defaults() {
     assert_eq!(gantry.variable_names(), ["rail", "spin", "shoulder", "elbow"]);
     let defaults = [("shoulder".to_owned(), 0.5), ("not_a_joint".to_owned(), 9.0)];
     let names = ["elbow".to_owned(), "rail".to_owned()];
-    let q = gantry.configurations("c", &names, &[1.0, 2.0, 3.0, 4.0], &defaults).unwrap();
-    assert_eq!(q, [vec![2.0, 0.0, 0.5, 1.0], vec![4.0, 0.0, 0.5, 3.0]]);
-    // No names: every entry, in order.
-    assert_eq!(gantry.configurations("c", &[], &[1.0, 2.0, 3.0, 4.0], &[]).unwrap(), [vec![1.0, 2.0, 3.0, 4.0]]);
+    let q = gantry.configurations("c", &names, &[1.0, 0.2, 2.0, 0.4], &defaults).unwrap();
+    assert_eq!(q, [vec![0.2, 0.0, 0.5, 1.0], vec![0.4, 0.0, 0.5, 2.0]]);
+    // No names: every entry, in order; the continuous `spin` takes any value, the limits are states.
+    let q = gantry.configurations("c", &[], &[0.8, 100.0, -2.0, 2.5], &[]).unwrap();
+    assert_eq!(q, [vec![0.8, 100.0, -2.0, 2.5]]);
     let err = |names: &[&str], values: &[f64]| {
         let names: Vec<String> = names.iter().map(|s| (*s).to_owned()).collect();
         match gantry.configurations("c", &names, values, &[]) {
@@ -128,4 +129,8 @@ fn configurations_from_named_columns_fill_the_rest_from_defaults() {
     assert_eq!(err(&["rail", "spin"], &[0.0, 0.0, 0.0]), "c.values");
     assert_eq!(err(&["rail"], &[]), "c.values");
     assert_eq!(err(&["rail", "spin"], &[0.0, f64::NAN]), "c.values[1]");
+    // Outside the URDF limits, by however little.
+    assert_eq!(err(&["rail"], &[0.8 + 1e-9]), "c.values[0]");
+    assert_eq!(err(&["spin", "shoulder"], &[100.0, -2.5]), "c.values[1]");
+    assert_eq!(err(&["elbow"], &[0.0, 1e300]), "c.values[1]");
 }

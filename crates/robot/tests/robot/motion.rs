@@ -141,11 +141,8 @@ fn the_bound_at_a_configuration_holds_and_is_tighter() {
     let median = local_bound_holds(&gantry(), 0.15, 0x2545_f491_4f6c_dd1d);
     println!("gantry: median bound at a configuration / configuration-free bound at s = 0.05: {median:.3}");
     assert!(median < 1.0);
-    let panda = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/peers/robots/panda/panda.urdf");
-    let Ok(panda) = RobotModel::from_urdf_file(&panda) else {
-        eprintln!("skipped the Panda: the URDF of ../shared/peers/robots is not there");
-        return;
-    };
+    let urdf = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/robots/panda/panda.urdf");
+    let panda = RobotModel::from_urdf_file(&urdf).unwrap();
     let median = local_bound_holds(&panda, 0.12, 0x9e37_79b9_7f4a_7c15);
     println!("panda: median bound at a configuration / configuration-free bound at s = 0.05: {median:.3}");
     assert!(median < 0.8, "{median}");

@@ -92,7 +92,7 @@ impl Catalog {
                 instance(s, id)?;
             }
             let id = new_id("i");
-            let rec = InstanceRecord { body_id: body_id.to_owned(), pose: StoredPose::from_isometry(&pose) };
+            let rec = InstanceRecord { body_id: body_id.to_owned(), pose: StoredPose::checked("pose", &pose)? };
             let removed: Vec<&str> = remove.iter().map(String::as_str).collect();
             self.store.replace_instances(scene_id, &removed, &[(id.as_str(), &rec)])?;
             for old in remove {

@@ -151,7 +151,7 @@ pub(crate) fn new_id(prefix: &str) -> String {
 }
 
 /// Rejects a body or scene name longer than [`MAX_NAME_BYTES`].
-fn check_name(field: &str, name: &str) -> Result<()> {
+pub(crate) fn check_name(field: &str, name: &str) -> Result<()> {
     if name.len() > MAX_NAME_BYTES {
         return Err(Error::invalid(field, format!("at most {MAX_NAME_BYTES} bytes, got {}", name.len())));
     }
@@ -188,6 +188,7 @@ impl Catalog {
                     tracing::warn!(scene_id = %id, instance_id = %iid, body_id = %inst.body_id, "skipping instance of missing body");
                     continue;
                 };
+                // The rule every write applied ([`StoredPose::checked`]).
                 match inst.pose.to_isometry("pose") {
                     Ok(pose) => {
                         instances.insert(iid, Instance::of(entry, pose));
@@ -543,7 +544,8 @@ impl Catalog {
     /// Adds an instance of body `body_id` to scene `scene_id` under `pose`; returns its id.
     ///
     /// # Errors
-    /// [`Error::NotFound`] for the scene or the body; [`Error::Storage`].
+    /// [`Error::NotFound`] for the scene or the body; [`Error::InvalidArgument`] naming `pose`
+    /// when it would not read back from the store ([`StoredPose::checked`]); [`Error::Storage`].
     pub fn add_instance(&self, scene_id: &str, body_id: &str, pose: Isometry3) -> Result<String> {
         // Load it first if another replica stored it (shared store); then hold the bodies lock
         // so the body cannot be deleted between the check and the insert.
@@ -551,9 +553,10 @@ impl Catalog {
         self.scene(scene_id)?;
         let bodies = read(&self.bodies);
         let entry = bodies.get(body_id).ok_or_else(|| Error::not_found("body", body_id))?.clone();
+        let stored = StoredPose::checked("pose", &pose)?;
         self.with_scene(scene_id, |s| {
             let id = new_id("i");
-            let rec = InstanceRecord { body_id: body_id.to_owned(), pose: StoredPose::from_isometry(&pose) };
+            let rec = InstanceRecord { body_id: body_id.to_owned(), pose: stored };
             self.store.put_instances(scene_id, &[(&id, &rec)], false)?;
             s.instances.insert(id.clone(), Instance::of(&entry, pose));
             Ok(id)
@@ -567,8 +570,10 @@ impl Catalog {
     /// instance's id.
     ///
     /// # Errors
-    /// [`Error::NotFound`] for the scene or the body; [`Error::ResourceExhausted`] when the scene
-    /// is full; [`Error::Storage`] (nothing changes then).
+    /// [`Error::NotFound`] for the scene or the body; [`Error::InvalidArgument`] naming `name`
+    /// (longer than [`MAX_NAME_BYTES`]) or `pose` ([`StoredPose::checked`]);
+    /// [`Error::ResourceExhausted`] when the scene is full; [`Error::Storage`] (nothing changes
+    /// then).
     pub fn add_named_instance(
         &self,
         scene_id: &str,
@@ -577,6 +582,8 @@ impl Catalog {
         name: &str,
         max_instances: usize,
     ) -> Result<String> {
+        check_name("name", name)?;
+        let stored = StoredPose::checked("pose", &pose)?;
         self.body(body_id)?;
         self.scene(scene_id)?;
         let bodies = read(&self.bodies);
@@ -592,7 +599,7 @@ impl Catalog {
             let mut planning = (*s.planning).clone();
             planning.names.insert(id.clone(), name.to_owned());
             let meta = SceneMeta { name: s.name.clone(), planning };
-            let rec = InstanceRecord { body_id: body_id.to_owned(), pose: StoredPose::from_isometry(&pose) };
+            let rec = InstanceRecord { body_id: body_id.to_owned(), pose: stored };
             self.store.put_instances(scene_id, &[(&id, &rec)], false)?;
             if let Err(e) = self.store.put_scene(scene_id, &meta) {
                 let _ = self.store.delete_instance(scene_id, &id);
@@ -609,8 +616,17 @@ impl Catalog {
     ///
     /// # Errors
     /// [`Error::NotFound`] for the scene or a body (naming `instances[k].body_id`; nothing is
-    /// added then); [`Error::Storage`].
+    /// added then); [`Error::InvalidArgument`] naming `instances[k].pose` for a pose that would
+    /// not read back from the store ([`StoredPose::checked`]); [`Error::Storage`].
     pub fn add_instances(&self, scene_id: &str, instances: &[(&str, Isometry3)]) -> Result<Vec<String>> {
+        let records: Vec<InstanceRecord> = instances
+            .iter()
+            .enumerate()
+            .map(|(k, (body_id, pose))| {
+                let pose = StoredPose::checked(&format!("instances[{k}].pose"), pose)?;
+                Ok(InstanceRecord { body_id: (*body_id).to_owned(), pose })
+            })
+            .collect::<Result<_>>()?;
         for (body_id, _) in instances {
             self.body(body_id)?;
         }
@@ -626,13 +642,6 @@ impl Catalog {
             .collect::<Result<Vec<_>>>()?;
         self.with_scene(scene_id, |s| {
             let ids: Vec<String> = instances.iter().map(|_| new_id("i")).collect();
-            let records: Vec<InstanceRecord> = instances
-                .iter()
-                .map(|(body_id, pose)| InstanceRecord {
-                    body_id: (*body_id).to_owned(),
-                    pose: StoredPose::from_isometry(pose),
-                })
-                .collect();
             let rows: Vec<(&str, &InstanceRecord)> = ids.iter().map(String::as_str).zip(records.iter()).collect();
             self.store.put_instances(scene_id, &rows, false)?;
             for ((id, entry), (_, pose)) in ids.iter().zip(&entries).zip(instances) {
@@ -649,8 +658,9 @@ impl Catalog {
     ///
     /// # Errors
     /// [`Error::NotFound`] for the scene, or for an unknown instance (naming `poses[k].instance_id`);
-    /// [`Error::InvalidArgument`] naming `poses[k].instance_id` for a repeated one (nothing changes
-    /// then); [`Error::Storage`].
+    /// [`Error::InvalidArgument`] naming `poses[k].instance_id` for a repeated one, or
+    /// `poses[k].pose` for a pose that would not read back from the store
+    /// ([`StoredPose::checked`]; nothing changes then); [`Error::Storage`].
     pub fn set_poses(&self, scene_id: &str, poses: &[(String, Isometry3)]) -> Result<usize> {
         self.with_scene(scene_id, |s| {
             let mut seen = std::collections::HashSet::new();
@@ -661,8 +671,8 @@ impl Catalog {
                 if !seen.insert(iid.as_str()) {
                     return Err(Error::invalid(field, format!("instance `{iid}` appears twice")));
                 }
-                records
-                    .push(InstanceRecord { body_id: inst.body_id().to_owned(), pose: StoredPose::from_isometry(pose) });
+                let pose = StoredPose::checked(&format!("poses[{k}].pose"), pose)?;
+                records.push(InstanceRecord { body_id: inst.body_id().to_owned(), pose });
             }
             let rows: Vec<(&str, &InstanceRecord)> =
                 poses.iter().zip(records.iter()).map(|((iid, _), rec)| (iid.as_str(), rec)).collect();

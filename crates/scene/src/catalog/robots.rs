@@ -45,7 +45,12 @@ pub struct RobotWorld {
 pub(super) fn load(store: &dyn Store) -> Result<BTreeMap<String, Arc<RobotEntry>>> {
     let mut robots = BTreeMap::new();
     for (id, rec) in store.list_robots()? {
-        match FittedRobot::from_file(rec.file) {
+        let mut file = rec.file;
+        // Robots stored before robot files carried their digest were validated when stored.
+        if file.integrity.is_empty() {
+            file.seal()?;
+        }
+        match FittedRobot::from_file(file) {
             Ok(robot) => {
                 robots.insert(id.clone(), Arc::new(RobotEntry { id, name: rec.name, robot: Arc::new(robot) }));
             }
@@ -127,14 +132,26 @@ impl Catalog {
         read(&self.robots).values().cloned().collect()
     }
 
-    /// Deletes a robot.
+    /// Deletes a robot that no scene holds (as [`Catalog::delete_body`] refuses a body an
+    /// instance uses).
     ///
     /// # Errors
-    /// [`Error::NotFound`]; [`Error::Storage`].
+    /// [`Error::NotFound`]; [`Error::FailedPrecondition`] naming a scene whose robot it is
+    /// ([`Catalog::set_scene_robot`]); [`Error::Storage`].
     pub fn delete_robot(&self, id: &str) -> Result<()> {
+        // Lock order: robots, then scenes, then one scene (as bodies → scenes → scene).
         let mut robots = write(&self.robots);
         if !robots.contains_key(id) && !self.store.shared() {
             return Err(Error::not_found("robot", id));
+        }
+        for scene in super::read(&self.scenes).values() {
+            let s = super::lock(scene);
+            if s.planning.robot.as_ref().is_some_and(|r| r.robot_id == id) {
+                return Err(Error::FailedPrecondition(format!(
+                    "robot `{id}` is the robot of scene `{}`; remove it from the scene first (ClearSceneRobot) or delete the scene",
+                    s.id
+                )));
+            }
         }
         let removed = self.store.delete_robot(id)?;
         if robots.remove(id).is_none() && !removed {

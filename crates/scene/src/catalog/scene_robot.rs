@@ -60,7 +60,8 @@ pub struct SceneRobotCheck {
 ///
 /// # Errors
 /// [`Error::InvalidArgument`] naming `base`, `attached[k]` and its field (an unknown link, a
-/// repeated name, a halfspace, a pose that is not finite), or `link_padding[LINK]`.
+/// name that is repeated, longer than [`crate::MAX_NAME_BYTES`] or a link's name, a halfspace, a
+/// pose that is not finite), or `link_padding[LINK]`.
 fn build(stored: &Arc<FittedRobot>, record: &SceneRobot) -> Result<PlacedRobot> {
     let base = record.base.to_isometry("base")?;
     let robot = if record.attached.is_empty() {
@@ -69,8 +70,18 @@ fn build(stored: &Arc<FittedRobot>, record: &SceneRobot) -> Result<PlacedRobot> 
         let mut robot = (**stored).clone();
         for (k, a) in record.attached.iter().enumerate() {
             let field = format!("attached[{k}]");
+            super::check_name(&format!("{field}.name"), &a.name)?;
+            let shown = sublevel_core::error::clip(&a.name);
             if record.attached[..k].iter().any(|b| b.name == a.name) {
-                return Err(Error::invalid(format!("{field}.name"), format!("`{}` is attached twice", a.name)));
+                return Err(Error::invalid(format!("{field}.name"), format!("`{shown}` is attached twice")));
+            }
+            // Contacts are reported, and allowed, by name: an attached object named as a link
+            // would be mistaken for it.
+            if stored.model.link_index(&a.name).is_some() {
+                return Err(Error::invalid(
+                    format!("{field}.name"),
+                    format!("`{shown}` is the name of a link of the robot: name the attached object otherwise"),
+                ));
             }
             let primitive = Primitive::from_file(&a.primitive).map_err(|e| prefix(e, &format!("{field}.primitive")))?;
             let origin = a.origin.to_isometry(&format!("{field}.origin"))?;
@@ -105,8 +116,8 @@ impl Catalog {
     ///
     /// # Errors
     /// [`Error::NotFound`] (kinds `scene`, `robot`); [`Error::InvalidArgument`] naming `base`,
-    /// `attached[k]…`, `link_padding[LINK]` or `joint_positions…` (nothing changes then);
-    /// [`Error::Storage`].
+    /// `attached[k]…` (`attached[k].name` also for the name of one of the scene's objects),
+    /// `link_padding[LINK]` or `joint_positions…` (nothing changes then); [`Error::Storage`].
     pub fn set_scene_robot(
         &self,
         scene_id: &str,
@@ -116,6 +127,15 @@ impl Catalog {
         let entry = self.robot(&record.robot_id)?;
         let placed = Arc::new(build(&entry.robot, &record)?);
         self.update_planning(scene_id, |planning| {
+            if let Some(k) = record.attached.iter().position(|a| planning.names.values().any(|n| *n == a.name)) {
+                return Err(Error::invalid(
+                    format!("attached[{k}].name"),
+                    format!(
+                        "`{}` is the name of an object of the scene: name the attached object otherwise",
+                        sublevel_core::error::clip(&record.attached[k].name)
+                    ),
+                ));
+            }
             let mut next = planning.clone();
             if let Some((names, values)) = joint_positions {
                 next.joint_positions = merged_positions(&placed.robot, planning, names, values)?;

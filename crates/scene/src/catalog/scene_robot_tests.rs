@@ -107,10 +107,13 @@ fn a_scene_robot_is_placed_moved_attached_and_survives_a_restart() {
         assert!((distance(&c, &scene) - 0.45).abs() < 1e-9);
         c.detach_object(&scene, "can").unwrap();
         assert!((distance(&c, &scene) - 0.7).abs() < 1e-9);
-        // Deleting the stored robot leaves the scene's robot unusable, with the reason.
-        c.delete_robot(&placed.robot_id).unwrap();
-        assert!(matches!(c.placed_robot(&scene), Err(Error::FailedPrecondition(_))));
+        // The stored robot is not deleted while the scene holds it (naming the scene); once the
+        // scene lets it go, it is.
+        let e = c.delete_robot(&placed.robot_id).unwrap_err();
+        assert!(matches!(&e, Error::FailedPrecondition(m) if m.contains(&scene)), "{e}");
+        assert!(c.placed_robot(&scene).unwrap().is_some());
         assert!(c.clear_scene_robot(&scene).unwrap());
         assert!(c.placed_robot(&scene).unwrap().is_none());
+        c.delete_robot(&placed.robot_id).unwrap();
     }
 }

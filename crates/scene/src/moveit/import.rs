@@ -152,8 +152,7 @@ impl ImportPlan {
         meshes: MeshImport,
         seen: &mut std::collections::HashMap<String, usize>,
     ) -> Result<()> {
-        let several = object.shapes.len() > 1;
-        let name = |k: usize| if several { format!("{}#{k}", object.id) } else { object.id.clone() };
+        let name = |k: usize| super::instance_name(&object.id, object.shapes.len(), k);
         for (k, placed) in object.shapes.iter().enumerate() {
             let (file, note) = match &placed.shape {
                 Shape::Box { size } => (PrimitiveFile::Box { size: *size }, String::new()),
@@ -218,9 +217,18 @@ impl ImportPlan {
 }
 
 /// A body's name from its primitive: kind and dimensions, e.g. `box 1.2x1x0.04`,
-/// `cylinder r0.05 h0.3`, `halfspace n(0,0,1) d-0.5`.
+/// `cylinder r0.05 h0.3`, `halfspace n(0,0,1) d-0.5`. Each number is written in at most 24
+/// characters (in exponent form when its decimal form is longer, e.g. a normal's `1e-300`), so
+/// the name always fits [`crate::MAX_NAME_BYTES`].
 fn body_name(file: &PrimitiveFile) -> String {
-    let v = |x: Real| format!("{x}");
+    let v = |x: Real| {
+        let plain = format!("{x}");
+        if plain.len() <= 24 {
+            plain
+        } else {
+            format!("{x:e}")
+        }
+    };
     match file {
         PrimitiveFile::Box { size } => format!("box {}x{}x{}", v(size[0]), v(size[1]), v(size[2])),
         PrimitiveFile::Sphere { radius } => format!("sphere r{}", v(*radius)),
@@ -263,8 +271,22 @@ impl Catalog {
     /// error returned.
     ///
     /// # Errors
-    /// [`Error::InvalidArgument`] naming `name` for an over-long name; [`Error::Storage`].
+    /// [`Error::InvalidArgument`] naming `name` for an over-long name, or `instances[k].name` /
+    /// `meshes[k].name` for an instance name longer than [`crate::MAX_NAME_BYTES`] or used twice
+    /// (a plan of [`ImportPlan::new`] has none); [`Error::Storage`].
     pub fn import_plan(&self, name: &str, plan: &ImportPlan) -> Result<ImportedScene> {
+        let mut names = std::collections::HashSet::new();
+        let planned = plan.instances.iter().map(|p| ("instances", &p.name));
+        let meshes = plan.meshes.iter().map(|m| ("meshes", &m.name));
+        for (k, (list, n)) in planned.chain(meshes).enumerate() {
+            let k = if list == "instances" { k } else { k - plan.instances.len() };
+            let field = format!("{list}[{k}].name");
+            crate::catalog::check_name(&field, n)?;
+            if !names.insert(n.as_str()) {
+                let shown = sublevel_core::error::clip(n);
+                return Err(Error::invalid(field, format!("instance name `{shown}` is used twice")));
+            }
+        }
         let name = if !name.is_empty() {
             name
         } else if !plan.scene_name.is_empty() {

@@ -9,6 +9,15 @@
 //! network (`ImportScene`); JSON is YAML 1.2 and goes through the same path. `serde_yaml` is
 //! archived and its forks either keep `unsafe-libyaml` or lack the budget.
 //!
+//! The budget is proportional to the text ([`YamlBudget::for_text`]): a text of n bytes may
+//! produce at most 3n + [`YAML_BUDGET_BASE`] parser events and nodes, and replay (or keep for
+//! replay) at most n + [`YAML_BUDGET_BASE`] events through anchors and aliases. A text without
+//! aliases never comes near it — every node costs at least one byte of text — so no scene is
+//! refused for its size (the object count is bounded separately: `max_objects` of
+//! [`PlanningScene::from_yaml_with_limit`]); an alias "billion laughs" is refused after at most
+//! n + [`YAML_BUDGET_BASE`] replayed events, that is after memory in proportion to its text
+//! (a 516-byte bomb: under 5 000 events, not the parser's default million).
+//!
 //! Message conventions followed (ROS `shape_msgs`, `geometry_msgs`, `moveit_msgs`):
 //!
 //! - a pose's `position` is `{x, y, z}` or `[x, y, z]` (meters), its `orientation` `{x, y, z, w}` or
@@ -30,16 +39,156 @@
 //! Every error is [`Error::InvalidArgument`] naming the field by its path, e.g.
 //! `world.collision_objects[3].primitives[0].dimensions`.
 
-use crate::{Error, Result};
+use crate::{Error, Result, StoredPose, MAX_NAME_BYTES};
 use serde::Deserialize;
+use std::cell::Cell;
 use sublevel_core::math::{pose_from_parts, Isometry3, Real, MAX_COORDINATE};
 
 /// How far a quaternion's norm may be from 1 and still be normalized (hand-written scenes round
 /// `√½` to 0.707).
 pub const QUATERNION_NORM_SLACK: Real = 1e-3;
 
-/// Most collision objects, shapes or mesh vertices one scene may hold (each bounded separately).
+/// Most collision objects, shapes or mesh vertices one scene may hold (each bounded separately;
+/// a caller bounds the objects lower with [`PlanningScene::from_yaml_with_limit`]).
 pub const MAX_SCENE_ITEMS: usize = 1_000_000;
+
+/// What every YAML text may spend, whatever its size, beyond its proportional budget
+/// ([`YamlBudget::for_text`]): parser events, nodes, and replayed alias events.
+pub const YAML_BUDGET_BASE: usize = 4096;
+
+/// The resource budget of one YAML parse ([`YamlBudget::for_text`]), checked by the parser as it
+/// reads, before the events it counts are kept or expanded.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct YamlBudget {
+    /// Most parser events (every event, alias replays included).
+    pub max_events: usize,
+    /// Most nodes (scalars, sequence and mapping starts; alias replays included).
+    pub max_nodes: usize,
+    /// Most events replayed through aliases, all aliases together.
+    pub max_replayed_events: usize,
+    /// Most event copies kept for anchors (each copy into each open anchored node counted).
+    pub max_recorded_anchor_events: usize,
+    /// Most bytes of scalar text (alias replays included).
+    pub max_scalar_bytes: usize,
+}
+
+impl YamlBudget {
+    /// The budget of a text of `len` bytes: 3·len + [`YAML_BUDGET_BASE`] events and nodes,
+    /// len + [`YAML_BUDGET_BASE`] replayed and recorded alias events, 4·len +
+    /// [`YAML_BUDGET_BASE`] scalar bytes (module docs).
+    pub fn for_text(len: usize) -> Self {
+        let per = |k: usize| len.saturating_mul(k).saturating_add(YAML_BUDGET_BASE);
+        Self {
+            max_events: per(3),
+            max_nodes: per(3),
+            max_replayed_events: per(1),
+            max_recorded_anchor_events: per(1),
+            max_scalar_bytes: per(4),
+        }
+    }
+
+    /// The parser options that enforce it (serde-saphyr's budget and alias limits; everything else
+    /// at its default).
+    fn options(&self) -> serde_saphyr::Options {
+        let mut budget = serde_saphyr::Budget::default();
+        budget.max_events = self.max_events;
+        budget.max_nodes = self.max_nodes;
+        budget.max_recorded_anchor_events = self.max_recorded_anchor_events;
+        budget.max_total_scalar_bytes = self.max_scalar_bytes;
+        let mut options = serde_saphyr::Options::default();
+        options.budget = Some(budget);
+        options.alias_limits.max_total_replayed_events = self.max_replayed_events;
+        options
+    }
+}
+
+/// Reads YAML `bytes` into `T` under the budget of their length ([`YamlBudget::for_text`]).
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `field`, with the parser's message (and the budget when it
+/// was breached).
+pub(crate) fn parse_yaml<'de, T: Deserialize<'de>>(field: &str, bytes: &'de [u8]) -> Result<T> {
+    let budget = YamlBudget::for_text(bytes.len());
+    serde_saphyr::from_slice_with_options(bytes, budget.options()).map_err(|e| {
+        let text = e.to_string();
+        if text.contains("budget") || text.contains("replay") || text.contains("alias") {
+            Error::invalid(
+                field,
+                format!(
+                    "{text} (the budget of a {}-byte text: at most {} events, {} replayed alias events)",
+                    bytes.len(),
+                    budget.max_events,
+                    budget.max_replayed_events
+                ),
+            )
+        } else {
+            Error::invalid(field, text)
+        }
+    })
+}
+
+thread_local! {
+    /// The object limit of the parse running on this thread ([`with_object_limit`]): a derived
+    /// field deserializer takes no argument, so the limit travels beside it.
+    static OBJECT_LIMIT: Cell<usize> = const { Cell::new(MAX_SCENE_ITEMS) };
+    /// Set when that parse met more objects than its limit.
+    static OBJECTS_OVER: Cell<bool> = const { Cell::new(false) };
+}
+
+/// Runs `parse` with `world.collision_objects` bounded to `max_objects` elements: the parser
+/// stops at the first one past it, so a scene over the limit costs no more than one at it.
+fn with_object_limit<T>(max_objects: usize, parse: impl FnOnce() -> Result<T>) -> Result<T> {
+    let before = OBJECT_LIMIT.with(|l| l.replace(max_objects));
+    OBJECTS_OVER.with(|o| o.set(false));
+    let out = parse();
+    OBJECT_LIMIT.with(|l| l.set(before));
+    if OBJECTS_OVER.with(|o| o.replace(false)) {
+        return Err(Error::ResourceExhausted(format!(
+            "`world.collision_objects` holds more than {max_objects} collision objects, the most one scene may hold"
+        )));
+    }
+    out
+}
+
+/// `world.collision_objects`, refused at the first element past [`OBJECT_LIMIT`].
+fn bounded_objects<'de, D: serde::Deserializer<'de>>(deserializer: D) -> std::result::Result<Vec<RawObject>, D::Error> {
+    struct Visitor;
+    impl<'de> serde::de::Visitor<'de> for Visitor {
+        type Value = Vec<RawObject>;
+        fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+            f.write_str("a list of collision objects")
+        }
+        fn visit_unit<E: serde::de::Error>(self) -> std::result::Result<Self::Value, E> {
+            Ok(Vec::new())
+        }
+        fn visit_none<E: serde::de::Error>(self) -> std::result::Result<Self::Value, E> {
+            Ok(Vec::new())
+        }
+        fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> std::result::Result<Self::Value, A::Error> {
+            let max = OBJECT_LIMIT.with(Cell::get);
+            let mut out = Vec::with_capacity(seq.size_hint().unwrap_or(0).min(max).min(4096));
+            while let Some(object) = seq.next_element::<RawObject>()? {
+                if out.len() >= max {
+                    OBJECTS_OVER.with(|o| o.set(true));
+                    return Err(serde::de::Error::custom(format!("more than {max} collision objects")));
+                }
+                out.push(object);
+            }
+            Ok(out)
+        }
+    }
+    deserializer.deserialize_seq(Visitor)
+}
+
+/// The instance name of shape `k` of an object with id `id` and `shapes` shapes: the id alone
+/// for an object of one shape, else `id#k` ([`ImportPlan`] and [`world_objects`] name them so).
+pub(crate) fn instance_name(id: &str, shapes: usize, k: usize) -> String {
+    if shapes > 1 {
+        format!("{id}#{k}")
+    } else {
+        id.to_owned()
+    }
+}
 
 /// A shape of a collision object, in its own frame (meters; centered at the origin, axis along z
 /// where it has one).
@@ -144,14 +293,26 @@ pub struct PlanningScene {
 }
 
 impl PlanningScene {
-    /// Reads a `moveit_msgs/PlanningScene` from YAML or JSON bytes (see the module docs).
+    /// Reads a `moveit_msgs/PlanningScene` from YAML or JSON bytes (see the module docs), with
+    /// at most [`MAX_SCENE_ITEMS`] collision objects.
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] naming `scene` for bytes that are not a YAML mapping of the
-    /// message (with the parser's line and column), or the path of the first field that does not
-    /// validate.
+    /// message (with the parser's line and column) or that breach the parser's budget
+    /// ([`YamlBudget::for_text`]), or the path of the first field that does not validate.
     pub fn from_yaml(bytes: &[u8]) -> Result<Self> {
-        let raw: RawScene = serde_saphyr::from_slice(bytes).map_err(|e| Error::invalid("scene", e.to_string()))?;
+        Self::from_yaml_with_limit(bytes, MAX_SCENE_ITEMS)
+    }
+
+    /// [`PlanningScene::from_yaml`] with at most `max_objects` collision objects (entries of
+    /// `world.collision_objects`, APPENDs counted): the parser stops at the first object past it,
+    /// before any object is validated.
+    ///
+    /// # Errors
+    /// As [`PlanningScene::from_yaml`]; [`Error::ResourceExhausted`] naming
+    /// `world.collision_objects` and the limit for more objects.
+    pub fn from_yaml_with_limit(bytes: &[u8], max_objects: usize) -> Result<Self> {
+        let raw: RawScene = with_object_limit(max_objects, || parse_yaml("scene", bytes))?;
         raw.validate()
     }
 
@@ -161,7 +322,18 @@ impl PlanningScene {
     /// # Errors
     /// As [`PlanningScene::from_yaml`].
     pub fn from_json(bytes: &[u8]) -> Result<Self> {
-        let raw: RawScene = serde_json::from_slice(bytes).map_err(|e| Error::invalid("scene", e.to_string()))?;
+        Self::from_json_with_limit(bytes, MAX_SCENE_ITEMS)
+    }
+
+    /// [`PlanningScene::from_json`] with at most `max_objects` collision objects, as
+    /// [`PlanningScene::from_yaml_with_limit`].
+    ///
+    /// # Errors
+    /// As [`PlanningScene::from_yaml_with_limit`].
+    pub fn from_json_with_limit(bytes: &[u8], max_objects: usize) -> Result<Self> {
+        let raw: RawScene = with_object_limit(max_objects, || {
+            serde_json::from_slice(bytes).map_err(|e| Error::invalid("scene", e.to_string()))
+        })?;
         raw.validate()
     }
 
@@ -187,7 +359,7 @@ struct RawScene {
 
 #[derive(Deserialize, Default)]
 struct RawWorld {
-    #[serde(default)]
+    #[serde(default, deserialize_with = "bounded_objects")]
     collision_objects: Vec<RawObject>,
 }
 
@@ -344,13 +516,11 @@ struct RawAcm {
 
 // ---- Validation. ----
 
-/// Checks that a length or radius is a finite positive number of meters.
+/// Checks that a length or radius is a primitive's dimension: finite, within
+/// [[`sublevel_core::primitive::MIN_DIMENSION`], [`sublevel_core::primitive::MAX_DIMENSION`]]
+/// meters — the rule every stored primitive passes.
 fn positive(field: &str, v: Real) -> Result<Real> {
-    if v.is_finite() && v > 0.0 && v <= MAX_COORDINATE {
-        Ok(v)
-    } else {
-        Err(Error::invalid(field, format!("must be a positive length in meters (at most {MAX_COORDINATE:e}), got {v}")))
-    }
+    sublevel_core::primitive::check_dimension(field, v)
 }
 
 fn vec3(field: &str, v: &Coords) -> Result<[Real; 3]> {
@@ -522,8 +692,18 @@ fn placed<T>(
         .enumerate()
         .map(|(k, (item, p))| {
             let shape = shape(&format!("{field}[{k}]"), item)?;
-            let local = pose(&format!("{poses_field}[{k}]"), p)?;
-            Ok(PlacedShape { shape, pose: object * local })
+            let pose_field = format!("{poses_field}[{k}]");
+            let local = pose(&pose_field, p)?;
+            // The shape is stored at the composed pose: checked in that form, by the rule the
+            // store applies when it reopens.
+            let composed = object * local;
+            StoredPose::checked(&pose_field, &composed).map_err(|e| match e {
+                Error::InvalidArgument { field, reason } => {
+                    Error::InvalidArgument { field, reason: format!("composed with the object's `pose`: {reason}") }
+                }
+                other => other,
+            })?;
+            Ok(PlacedShape { shape, pose: composed })
         })
         .collect()
 }
@@ -532,6 +712,12 @@ impl RawObject {
     fn validate(&self, field: &str) -> Result<CollisionObject> {
         if self.id.is_empty() {
             return Err(Error::invalid(format!("{field}.id"), "a collision object needs an id"));
+        }
+        if self.id.len() > MAX_NAME_BYTES {
+            return Err(Error::invalid(
+                format!("{field}.id"),
+                format!("at most {MAX_NAME_BYTES} bytes, got {}", self.id.len()),
+            ));
         }
         let object = match &self.pose {
             Some(p) => pose(&format!("{field}.pose"), p)?,
@@ -557,6 +743,42 @@ impl RawObject {
             shapes,
         })
     }
+}
+
+/// Checks that the instance names of `objects` ([`instance_name`]) are unique and at most
+/// [`MAX_NAME_BYTES`] long: an object `a` of two shapes names `a#0` and `a#1`, so an object whose
+/// id is `a#1` would share a name with it (the allowed-collision matrix and the robot checks know
+/// instances by these names). `first[i]` is object i's index in the message.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `world.collision_objects[k].id` of the later object.
+fn unique_instance_names(objects: &[CollisionObject], first: &[usize]) -> Result<()> {
+    let mut seen: std::collections::HashMap<String, usize> = std::collections::HashMap::new();
+    for (object, &k) in objects.iter().zip(first) {
+        let field = || format!("world.collision_objects[{k}].id");
+        for s in 0..object.shapes.len() {
+            let name = instance_name(&object.id, object.shapes.len(), s);
+            if name.len() > MAX_NAME_BYTES {
+                return Err(Error::invalid(
+                    field(),
+                    format!(
+                        "its instance name `{}` is longer than {MAX_NAME_BYTES} bytes",
+                        sublevel_core::error::clip(&name)
+                    ),
+                ));
+            }
+            if let Some(other) = seen.insert(name.clone(), k) {
+                return Err(Error::invalid(
+                    field(),
+                    format!(
+                        "its instance name `{}` is also the name of a shape of `world.collision_objects[{other}]` (an object of several shapes names them `ID#k`)",
+                        sublevel_core::error::clip(&name)
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 impl RawAcm {
@@ -603,6 +825,8 @@ impl RawScene {
             return Err(Error::invalid("world.collision_objects", format!("more than {MAX_SCENE_ITEMS} objects")));
         }
         let mut objects: Vec<CollisionObject> = Vec::new();
+        // The message index of each object (its first entry; APPENDs merge into it).
+        let mut first: Vec<usize> = Vec::new();
         for (k, raw) in self.world.collision_objects.iter().enumerate() {
             let field = format!("world.collision_objects[{k}]");
             let append =
@@ -623,9 +847,13 @@ impl RawScene {
                     let shown = sublevel_core::error::clip(&object.id);
                     return Err(Error::invalid(format!("{field}.id"), format!("id `{shown}` is used twice")));
                 }
-                None => objects.push(object),
+                None => {
+                    objects.push(object);
+                    first.push(k);
+                }
             }
         }
+        unique_instance_names(&objects, &first)?;
         let allowed_collision = self.allowed_collision_matrix.as_ref().map(RawAcm::validate).transpose()?;
         let joints = self.robot_state.unwrap_or_default().joint_state;
         if !joints.position.is_empty() && joints.position.len() != joints.name.len() {

@@ -62,7 +62,7 @@ impl MotionPlanRequest {
     /// `start_state.joint_state` when names and positions differ in number,
     /// `goal_constraints` when there is no joint goal, or the first non-finite position.
     pub fn from_yaml(bytes: &[u8]) -> Result<Self> {
-        let raw: RawRequest = serde_saphyr::from_slice(bytes).map_err(|e| Error::invalid("request", e.to_string()))?;
+        let raw: RawRequest = super::parse_yaml("request", bytes)?;
         let js = raw.start_state.joint_state;
         if js.name.len() != js.position.len() {
             return Err(Error::invalid(

@@ -22,7 +22,6 @@ pub fn world_objects(scene: &PlanningScene) -> Result<(Vec<WorldObject>, Vec<Ski
     let mut objects: Vec<WorldObject> =
         plan.instances.iter().map(|i| WorldObject::primitive(i.name.clone(), plan.bodies[i.body].1, i.pose)).collect();
     for object in &scene.objects {
-        let several = object.shapes.len() > 1;
         for (k, placed) in object.shapes.iter().enumerate() {
             let Shape::Mesh { vertices, triangles } = &placed.shape else { continue };
             let points = vertices.iter().map(|v| Point3::new(v[0], v[1], v[2])).collect();
@@ -32,7 +31,7 @@ pub fn world_objects(scene: &PlanningScene) -> Result<(Vec<WorldObject>, Vec<Ski
                     e.to_string(),
                 )
             })?;
-            let name = if several { format!("{}#{k}", object.id) } else { object.id.clone() };
+            let name = super::instance_name(&object.id, object.shapes.len(), k);
             objects.push(WorldObject::mesh(name, Arc::new(mesh), placed.pose));
         }
     }

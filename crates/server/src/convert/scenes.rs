@@ -89,25 +89,41 @@ pub fn poses_from_proto(poses: &[pb::InstancePose], max_poses: usize) -> Result<
 
 /// Reads `ImportSceneRequest.scene` (YAML or JSON bytes) into a planning scene and its import
 /// plan ([`sublevel_scene::moveit::ImportPlan`]), its meshes planned for fits or skipped as
-/// `meshes` says.
+/// `meshes` says, with at most `max_objects` collision objects (the server's
+/// `--max-instances-per-scene`: every object is at least one instance), counted as the parser
+/// reads them, before any is validated.
 ///
 /// # Errors
 /// [`Error::InvalidArgument`] naming `scene` when neither form is set, `yaml` / `json` for bytes
-/// that do not parse, or `yaml.<path>` / `json.<path>` for the scene's first field that does not
-/// validate (e.g. `yaml.world.collision_objects[3].primitive_poses[0]`).
+/// that do not parse (or breach the YAML budget of their size), or `yaml.<path>` /
+/// `json.<path>` for the scene's first field that does not validate (e.g.
+/// `yaml.world.collision_objects[3].primitive_poses[0]`); [`Error::ResourceExhausted`] naming
+/// `yaml.world.collision_objects` (or `json.…`) and `--max-instances-per-scene` for more objects.
 pub fn planning_scene_from_proto(
     scene: Option<&pb::import_scene_request::Scene>,
     meshes: sublevel_scene::moveit::MeshImport,
+    max_objects: usize,
 ) -> Result<(sublevel_scene::moveit::PlanningScene, sublevel_scene::moveit::ImportPlan)> {
     use sublevel_scene::moveit::{ImportPlan, PlanningScene};
     let (parsed, field) = match scene {
         None => return Err(Error::invalid("scene", "set `yaml` or `json`")),
-        Some(pb::import_scene_request::Scene::Yaml(bytes)) => (PlanningScene::from_yaml(bytes), "yaml"),
-        Some(pb::import_scene_request::Scene::Json(bytes)) => (PlanningScene::from_json(bytes), "json"),
+        Some(pb::import_scene_request::Scene::Yaml(bytes)) => {
+            (PlanningScene::from_yaml_with_limit(bytes, max_objects), "yaml")
+        }
+        Some(pb::import_scene_request::Scene::Json(bytes)) => {
+            (PlanningScene::from_json_with_limit(bytes, max_objects), "json")
+        }
     };
     // The parser names the whole document `scene`; the request's field is `yaml` or `json`.
     let located = |e: Error| match e {
         Error::InvalidArgument { field: f, reason } if f == "scene" => Error::invalid(field, reason),
+        Error::ResourceExhausted(_) => {
+            let limit = crate::limits::INSTANCES;
+            Error::ResourceExhausted(format!(
+                "limit reached: `{field}.world.collision_objects` holds more than {max_objects} collision objects, and a scene holds at most {max_objects} instances (set by {} / {})",
+                limit.flag, limit.env
+            ))
+        }
         other => super::prefix_field(other, field),
     };
     let scene = parsed.map_err(located)?;

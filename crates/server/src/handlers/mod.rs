@@ -44,6 +44,8 @@ pub struct SublevelService {
     /// Slots of blocking query work: batches (`ServerConfig::batch_workers`) and SDPs
     /// (`ServerConfig::max_concurrent_sdp`).
     pools: QueryPools,
+    /// Mebibytes of robot files being validated at once ([`robots::ROBOT_BUILD_BUDGET_MIB`]).
+    robot_builds: Arc<tokio::sync::Semaphore>,
 }
 
 impl SublevelService {
@@ -51,7 +53,8 @@ impl SublevelService {
     pub fn new(catalog: Arc<Catalog>, config: ServerConfig) -> Self {
         let jobs = Arc::new(FitJobs::new(catalog.clone(), config.max_concurrent_fits, config.max_fit_queue));
         let pools = QueryPools::new(config.batch_workers, config.max_concurrent_sdp);
-        Self { catalog, config, jobs, pools }
+        let robot_builds = Arc::new(tokio::sync::Semaphore::new(robots::ROBOT_BUILD_BUDGET_MIB as usize));
+        Self { catalog, config, jobs, pools, robot_builds }
     }
 }
 

@@ -42,28 +42,20 @@ pub(super) async fn start_robot_fit_job(
         return Err(Error::invalid("name", format!("at most {} bytes", sublevel_scene::MAX_NAME_BYTES)).into());
     }
     let model = RobotModel::from_urdf_str(&req.urdf).map_err(|e| cv::prefix_field(e, "urdf"))?;
-    let srdf = if req.srdf.trim().is_empty() {
-        None
+    let (srdf, allowed) = if req.srdf.trim().is_empty() {
+        (None, Vec::new())
     } else {
         let semantics = Semantics::from_srdf_str(&req.srdf).map_err(|e| cv::prefix_field(e, "srdf"))?;
         model.self_collision_pairs(&semantics.disabled_pairs)?;
-        Some(req.srdf)
+        let allowed: Vec<[String; 2]> =
+            semantics.disabled_pairs.iter().map(|d| [d.link1.clone(), d.link2.clone()]).collect();
+        (Some(req.srdf), allowed)
     };
+    // One rule for mesh names, the URDF's and the request's keys alike; the job reads only the
+    // bytes sent, by the exact name the URDF writes, and never a file of the server's disk.
     for (name, bytes) in &req.meshes {
         let field = format!("meshes[{}]", sublevel_core::error::clip(name));
-        let rest = name.strip_prefix("package://").unwrap_or(name);
-        let path = std::path::Path::new(rest);
-        // Only plain components (no `..`, no root), and a package name with its path.
-        let safe = !rest.is_empty()
-            && path.components().all(|c| matches!(c, std::path::Component::Normal(_)))
-            && (!name.starts_with("package://") || rest.contains('/'));
-        if !safe {
-            return Err(Error::invalid(
-                field,
-                "a mesh name must be `package://NAME/PATH` or a relative path without `..`",
-            )
-            .into());
-        }
+        sublevel_robot::check_mesh_name(&field, name)?;
         if bytes.is_empty() {
             return Err(Error::invalid(field, "empty file").into());
         }
@@ -71,6 +63,8 @@ pub(super) async fn start_robot_fit_job(
     for link in model.links() {
         for (k, c) in link.collision.iter().enumerate() {
             if let CollisionGeometry::Mesh { filename, .. } = c {
+                let field = format!("urdf.link[{}].collision[{k}].mesh", sublevel_core::error::clip(&link.name));
+                sublevel_robot::check_mesh_name(&field, filename)?;
                 if !req.meshes.contains_key(filename) {
                     return Err(Error::invalid(
                         format!("meshes[{}]", sublevel_core::error::clip(filename)),
@@ -81,6 +75,7 @@ pub(super) async fn start_robot_fit_job(
             }
         }
     }
+    sublevel_robot::limits::check_self_pairs(&model, &allowed)?;
     // Half the cores, for the meshes and then the clearance tables: a robot fit must not take
     // every core from the queries.
     let threads = (std::thread::available_parallelism().map_or(2, |n| n.get()) / 2).max(1);
@@ -99,25 +94,33 @@ pub(super) async fn start_robot_fit_job(
         other => other,
     })?;
     let name = if req.name.is_empty() { model.name.clone() } else { req.name };
-    let input = RobotFitInput {
-        urdf: req.urdf,
-        srdf,
-        meshes: req.meshes.into_iter().collect(),
-        settings,
-        work_dir: svc.config.data_dir.join("robot-fit-jobs"),
-    };
+    let input = RobotFitInput { urdf: req.urdf, srdf, meshes: req.meshes.into_iter().collect(), settings };
     let job_id = svc.jobs.start_robot(name, input).await?;
     Ok(Response::new(pb::StartRobotFitJobResponse { job_id }))
 }
 
+/// Mebibytes of robot files `UploadRobot` validates at once. Building a robot from its file (the
+/// parsed vertices, the bodies, the meshes' BVHs, sphere trees and inner balls) takes about ten
+/// times the file's size at its peak, so this bounds the memory of concurrent uploads near
+/// 700 MB; a file takes one unit per started MiB (at most the whole budget) and larger uploads
+/// wait their turn, holding no thread.
+pub(crate) const ROBOT_BUILD_BUDGET_MIB: u32 = 64;
+
 /// `UploadRobot`: validates the robot file (building its bodies and mesh BVHs, off the async
-/// workers) and stores it.
+/// workers, within [`ROBOT_BUILD_BUDGET_MIB`]) and stores it.
 pub(super) async fn upload_robot(
     svc: &SublevelService,
     request: Request<pb::UploadRobotRequest>,
 ) -> Handled<pb::UploadRobotResponse> {
     let req = request.into_inner();
     let catalog = svc.catalog.clone();
+    let units = req.robot_file.len().div_ceil(1 << 20).clamp(1, ROBOT_BUILD_BUDGET_MIB as usize) as u32;
+    let _budget = svc
+        .robot_builds
+        .clone()
+        .acquire_many_owned(units)
+        .await
+        .map_err(|_| tonic::Status::unavailable("the server is shutting down"))?;
     let entry = blocking(move || {
         let file = serde_json::from_slice(&req.robot_file)
             .map_err(|e| Error::invalid("robot_file", format!("not a robot file (sublevel.robot.v1 JSON): {e}")))?;
@@ -355,6 +358,17 @@ impl RobotChecks {
         };
         let Setting { robot, world, base, link_padding } = self.setting(asked).await?;
         let defaults = &world.planning.joint_positions;
+        let names = |c: &Option<pb::ConfigurationColumns>| c.as_ref().map(|c| c.joint_names.clone());
+        if let (Some(start), Some(end)) = (names(&req.start), names(&req.end)) {
+            if start != end {
+                return Err(Error::invalid(
+                    "end.joint_names",
+                    "names other joints than `start.joint_names`: a motion's end names the joints its start names, \
+                     in the same order",
+                )
+                .into());
+            }
+        }
         let start = cv::configurations_from_proto("start", req.start.as_ref(), &robot, defaults)?;
         let end = cv::configurations_from_proto("end", req.end.as_ref(), &robot, defaults)?;
         if start.len() != end.len() {

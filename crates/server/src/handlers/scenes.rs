@@ -129,7 +129,8 @@ pub(super) async fn import_scene(
     let meshes = if req.skip_meshes { MeshImport::Skip } else { MeshImport::Fit };
     // Parsing a large scene takes milliseconds: off the async workers.
     let source = req.scene;
-    let (scene, plan) = blocking(move || cv::planning_scene_from_proto(source.as_ref(), meshes)).await?;
+    let max_objects = svc.config.max_instances_per_scene;
+    let (scene, plan) = blocking(move || cv::planning_scene_from_proto(source.as_ref(), meshes, max_objects)).await?;
     let fitted = plan.meshes.len();
     check_room(limits::SCENES, svc.catalog.scenes().len(), svc.config.max_scenes)?;
     check_room_for(limits::BODIES, svc.catalog.bodies().len(), plan.bodies.len() + fitted, svc.config.max_bodies)?;
