@@ -31,9 +31,6 @@ async fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut client = SublevelClient::connect(format!("http://{addr}")).await?;
 
     let bodies = client.list_bodies(pb::ListBodiesRequest::default()).await?.into_inner().bodies;
-    for b in &bodies {
-        println!("body {:<10} {} degree {} volume {:.3}", b.name, b.body_id, b.degree, b.volume);
-    }
     let scenes = client.list_scenes(pb::ListScenesRequest::default()).await?.into_inner().scenes;
     let Some(demo) = scenes.iter().find(|s| s.name == "demo") else {
         return Err("no scene named `demo`: start the server with `sublevel serve --demo`".into());
@@ -42,6 +39,10 @@ async fn main() -> Result<(), Box<dyn std::error::Error>> {
         .get_scene(scene_request(&demo.scene_id, pb::GetSceneRequest { scene_id: demo.scene_id.clone() }))
         .await?
         .into_inner();
+    // The demo scene's bodies (the store holds others, such as the demo bookshelf's boards).
+    for b in bodies.iter().filter(|b| scene.instances.iter().any(|i| i.body_id == b.body_id)) {
+        println!("body {:<10} {} degree {} volume {:.3}", b.name, b.body_id, b.degree, b.volume);
+    }
     let name_of =
         |body_id: &str| bodies.iter().find(|b| b.body_id == body_id).map(|b| b.name.clone()).unwrap_or_default();
     let chair = scene.instances.iter().find(|i| name_of(&i.body_id) == "chair_101").ok_or("no chair instance")?;

@@ -2,7 +2,7 @@
 //! configurations checked against a MoveIt planning scene, offline (no server).
 //!
 //! ```text
-//! sublevel robot fit ROBOT.urdf [--srdf ROBOT.srdf] [--package-dir DIR]... [--tolerance T] --output robot.json
+//! sublevel robot fit ROBOT.urdf [--srdf ROBOT.srdf] [--package-dir DIR]... [--leaves [--tolerance T]] --output robot.json
 //! sublevel robot tables robot.json [--max-loss 0.004] [--output OUT.json]
 //! sublevel robot check robot.json --scene SCENE.yaml --configs Q.csv [--json] [--gradient] [--padding P]
 //! sublevel robot bench robot.json --scene SCENE.yaml [--columns 1000] [--addr HOST:PORT]   (robot_bench.rs)
@@ -53,11 +53,15 @@ struct FitArgs {
     /// (repeatable; relative mesh paths are read from the URDF's directory).
     #[arg(long = "package-dir")]
     package_dirs: Vec<PathBuf>,
-    /// Leaf-excess tolerance T of every link mesh's compound fit, meters (default: 1 % of each
-    /// mesh's bounding-box diagonal). Leaves above it are reported; the checks stay exact.
+    /// Also fit each link mesh's compound tree (its leaves under the root, `--parts auto`): minutes
+    /// per robot. Default: one sos-convex body per mesh, what the checks read, about a second each.
+    #[arg(long)]
+    leaves: bool,
+    /// With `--leaves`: leaf-excess tolerance T of every link mesh's compound fit, meters (default:
+    /// 1 % of each mesh's bounding-box diagonal). Leaves above it are reported; the checks stay exact.
     #[arg(long)]
     tolerance: Option<Real>,
-    /// Most leaves of one link's compound body (2..=64).
+    /// With `--leaves`: most leaves of one link's compound body (2..=64).
     #[arg(long, default_value_t = 32)]
     max_parts: usize,
     /// Where fitted link meshes are cached (by content): default `$XDG_CACHE_HOME/sublevel/links`
@@ -156,6 +160,7 @@ fn fit(args: FitArgs) -> Result<()> {
     settings.cache_dir = args.cache.clone().or_else(default_cache);
     settings.refresh_cache = args.no_cache;
     settings.clearance = (!args.no_clearance_tables).then(ClearanceSettings::default);
+    settings.leaves = args.leaves;
     let start = Instant::now();
     let quiet = args.quiet;
     let progress = move |p: &sublevel::robot::RobotFitProgress| {
@@ -180,6 +185,9 @@ fn fit(args: FitArgs) -> Result<()> {
     );
     for n in &r.notes {
         eprintln!("  {n}");
+    }
+    for f in &r.fallbacks {
+        eprintln!("  fallback taken: {f}");
     }
     Ok(())
 }

@@ -3,7 +3,10 @@
 //! stdout carries only the demo ids and the `listening on ADDR` line.
 //!
 //! `--demo` makes sure the store holds two bodies named `chair_101` and `human_10` (embedded in
-//! the binary) and a scene `demo` with one instance of each, side by side, and prints their ids;
+//! the binary) and a scene `demo` with one instance of each, side by side; the fitted Panda
+//! (`data/robots/panda/panda.robot.json`, embedded) as the robot `panda`; and the MotionBenchMaker
+//! planning scene `bookshelf_small/scene0001.yaml` (embedded) imported as the scene `mbm_bookshelf`
+//! with the Panda placed in it at the origin, at the scene's joint positions. It prints their ids;
 //! a second start finds them by name and adds nothing.
 
 use std::net::SocketAddr;
@@ -11,7 +14,9 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use sublevel::body::BodyFile;
 use sublevel::math::{pose_from_parts, Isometry3};
-use sublevel::scene::Catalog;
+use sublevel::robot::RobotFile;
+use sublevel::scene::moveit::{ImportPlan, MeshImport, PlanningScene};
+use sublevel::scene::{Catalog, SceneRobot, StoredPose};
 use sublevel::service::{open_catalog, serve_catalog, ServerConfig};
 use sublevel::{Body, Error, Result};
 
@@ -21,6 +26,16 @@ const DEMO_CHAIR: &str = include_str!("../../data/demo/chair_101.json");
 const DEMO_HUMAN: &str = include_str!("../../data/demo/human_10.json");
 /// Name of the demo scene.
 const DEMO_SCENE: &str = "demo";
+/// The demo robot: the Panda fitted from its URDF, SRDF and meshes (`sublevel robot fit`, a
+/// robot file of about 1.2 MB).
+const DEMO_PANDA: &str = include_str!("../../data/robots/panda/panda.robot.json");
+/// Name of the demo robot.
+const DEMO_ROBOT: &str = "panda";
+/// The demo planning scene: MotionBenchMaker's first `bookshelf_small` scene for the Panda
+/// (MoveIt YAML, primitives only).
+const DEMO_MBM_SCENE: &[u8] = include_bytes!("../../data/robots/mbm_panda/scenes/bookshelf_small/scene0001.yaml");
+/// Name of the scene imported from [`DEMO_MBM_SCENE`].
+const DEMO_MBM_SCENE_NAME: &str = "mbm_bookshelf";
 
 /// Arguments of `sublevel serve`.
 #[derive(clap::Args, Debug)]
@@ -31,7 +46,8 @@ pub struct ServeArgs {
     /// Directory of the database (created if missing).
     #[arg(long, env = "SUBLEVEL_DATA_DIR", default_value = "./sublevel-data")]
     data_dir: PathBuf,
-    /// Preload the demo bodies `chair_101`, `human_10` and the scene `demo` (idempotent).
+    /// Preload the demo bodies `chair_101`, `human_10` and the scene `demo`, the robot `panda` and
+    /// the scene `mbm_bookshelf` holding it (idempotent).
     #[arg(long, env = "SUBLEVEL_DEMO")]
     demo: bool,
     /// Async worker threads (connections, HTTP/2, small queries). Default: one less than the
@@ -73,6 +89,8 @@ pub fn run(args: ServeArgs) -> Result<()> {
             println!("demo: body chair_101 = {}", demo.chair);
             println!("demo: body human_10  = {}", demo.human);
             println!("demo: scene demo     = {} (instances {}, {})", demo.scene, demo.instances[0], demo.instances[1]);
+            println!("demo: robot panda = {}", demo.robot);
+            println!("demo: scene mbm_bookshelf = {} (robot panda)", demo.mbm_scene);
         }
         let listener = tokio::net::TcpListener::bind(args.addr).await?;
         let addr = listener.local_addr()?;
@@ -118,6 +136,8 @@ struct Demo {
     human: String,
     scene: String,
     instances: [String; 2],
+    robot: String,
+    mbm_scene: String,
 }
 
 /// Finds a body by name, or stores the embedded one.
@@ -154,5 +174,48 @@ fn seed_demo(catalog: &Arc<Catalog>) -> Result<Demo> {
         Some(id) => id,
         None => catalog.add_instance(&scene, &human, at(gap)?)?,
     };
-    Ok(Demo { chair, human, scene, instances: [i_chair, i_human] })
+    let robot = ensure_robot(catalog)?;
+    let mbm_scene = ensure_robot_scene(catalog, &robot)?;
+    Ok(Demo { chair, human, scene, instances: [i_chair, i_human], robot, mbm_scene })
+}
+
+/// Finds the robot named `panda`, or stores the embedded one. Building it (its bodies and its
+/// meshes' BVHs) takes a fraction of a second on a release build.
+fn ensure_robot(catalog: &Catalog) -> Result<String> {
+    if let Some(e) = catalog.robots().into_iter().find(|e| e.name == DEMO_ROBOT) {
+        return Ok(e.id.clone());
+    }
+    let file: RobotFile = serde_json::from_str(DEMO_PANDA)?;
+    let entry =
+        catalog.add_robot(DEMO_ROBOT, file).map_err(|e| Error::invalid("embedded demo robot panda", e.to_string()))?;
+    Ok(entry.id.clone())
+}
+
+/// Finds the scene named `mbm_bookshelf`, or imports the embedded planning scene under that name
+/// (as `ImportScene` does: one primitive body per distinct shape, the objects as named
+/// instances, the allowed-collision matrix and the robot state kept with the scene). Places
+/// robot `robot_id` in it at the origin (MotionBenchMaker's virtual joint is the identity) unless
+/// it already holds that robot; the scene's joint positions stay those of its robot state.
+fn ensure_robot_scene(catalog: &Catalog, robot_id: &str) -> Result<String> {
+    let scene_id = match catalog.scenes().into_iter().find(|s| s.name == DEMO_MBM_SCENE_NAME) {
+        Some(s) => s.id,
+        None => {
+            let invalid = |e: Error| Error::invalid("embedded demo scene mbm_bookshelf", e.to_string());
+            let parsed = PlanningScene::from_yaml(DEMO_MBM_SCENE).map_err(invalid)?;
+            let plan = ImportPlan::new(&parsed, MeshImport::Skip).map_err(invalid)?;
+            catalog.import_plan(DEMO_MBM_SCENE_NAME, &plan)?.scene_id
+        }
+    };
+    // A robot deleted since it was placed reads as an error here: place the demo robot again.
+    let placed = catalog.placed_robot(&scene_id).ok().flatten();
+    if placed.is_none_or(|p| p.robot_id != robot_id) {
+        let record = SceneRobot {
+            robot_id: robot_id.to_owned(),
+            base: StoredPose::from_isometry(&Isometry3::identity()),
+            attached: Vec::new(),
+            link_padding: Vec::new(),
+        };
+        catalog.set_scene_robot(&scene_id, record, None)?;
+    }
+    Ok(scene_id)
 }

@@ -28,7 +28,15 @@ fn one_mesh_urdf(name: &str) -> String {
 }
 
 fn fit_request(urdf: String, meshes: HashMap<String, Vec<u8>>) -> pb::StartRobotFitJobRequest {
-    pb::StartRobotFitJobRequest { name: String::new(), urdf, srdf: String::new(), meshes, tolerance: 0.2, max_parts: 2 }
+    pb::StartRobotFitJobRequest {
+        name: String::new(),
+        urdf,
+        srdf: String::new(),
+        meshes,
+        tolerance: 0.2,
+        max_parts: 2,
+        leaves: false,
+    }
 }
 
 /// A URDF mesh named `file:///ABS`, an absolute path, a `..` path or another URL scheme is
@@ -115,8 +123,8 @@ async fn cancel_reaches_a_robot_fits_mesh_stage() {
     let dir = tempfile::tempdir().unwrap();
     let server = Server::start(config(dir.path())).await;
     let mut c = server.client().await;
-    // 24 links, each a distinct mesh (by scale), fitted with up to 8 leaves at a tight tolerance:
-    // minutes of SDPs.
+    // 24 links, each a distinct mesh (by scale), fitted as trees of up to 8 leaves at a tight
+    // tolerance: minutes of SDPs.
     let mut urdf = String::from(r#"<robot name="many"><link name="l0"/>"#);
     for i in 1..=24 {
         let s = 0.1 + 0.01 * i as f64;
@@ -132,6 +140,7 @@ async fn cancel_reaches_a_robot_fits_mesh_stage() {
     let mut req = fit_request(urdf, meshes.clone());
     req.tolerance = 1e-4;
     req.max_parts = 8;
+    req.leaves = true;
     let job_id = c.start_robot_fit_job(req).await.unwrap().into_inner().job_id;
     let mut stream = c.watch_fit_job(pb::WatchFitJobRequest { job_id: job_id.clone() }).await.unwrap().into_inner();
     // Wait until the fit is running (its first mesh under way or done).

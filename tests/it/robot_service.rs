@@ -343,6 +343,7 @@ async fn a_robot_fit_job_stores_a_robot_whose_checks_meet_the_closed_forms() {
         meshes,
         tolerance: 0.2,
         max_parts: 2,
+        leaves: false,
     };
     // Validated before a job exists: a missing mesh, an unsafe name, a broken SRDF.
     let mut missing = meshes.clone();

@@ -1,5 +1,6 @@
 //! Integration tests: fit jobs through the service (progress streams, auto degree, validated
-//! options), `serve --demo` seeding across restarts, and the end-to-end run of the paper's chair
+//! options), `serve --demo` seeding (bodies, scenes, the Panda and its bookshelf scene) across
+//! restarts, and the end-to-end run of the paper's chair
 //! sliding through the human.
 
 use crate::util::{add, assert_status, at, config, distance, growth, set_pose, sphere_points, ChildServer, Server};
@@ -107,29 +108,91 @@ async fn fit_job_with_auto_degree_and_validated_options() {
     server.stop().await;
 }
 
-/// `sublevel serve --demo` seeds the demo bodies and scene once, across restarts.
+/// The labelled configurations of MotionBenchMaker's bookshelf_small scene 1 (the demo's
+/// `mbm_bookshelf`): panda_joint1..7 in radians, and whether the collision meshes collide.
+fn bookshelf_labels() -> Vec<(Vec<f64>, bool)> {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("data/robots/mbm_panda/labels_obj.csv");
+    let text = std::fs::read_to_string(path).unwrap();
+    text.lines()
+        .skip(1)
+        .filter_map(|line| {
+            let c: Vec<&str> = line.split(',').collect();
+            (c[0] == "bookshelf_small" && c[1] == "1")
+                .then(|| (c[4..11].iter().map(|v| v.parse().unwrap()).collect(), c[11] == "1"))
+        })
+        .collect()
+}
+
+/// The demo's ids as `serve --demo` printed them: `(what, name)` → id (the word after `=`).
+fn demo_ids(startup: &[String]) -> std::collections::HashMap<(String, String), String> {
+    startup
+        .iter()
+        .filter_map(|l| {
+            let rest = l.strip_prefix("demo: ")?;
+            let (left, right) = rest.split_once('=')?;
+            let mut what = left.split_whitespace();
+            let key = (what.next()?.to_owned(), what.next()?.to_owned());
+            Some((key, right.split_whitespace().next()?.to_owned()))
+        })
+        .collect()
+}
+
+/// `sublevel serve --demo` seeds the demo bodies and scene, the robot `panda` and the scene
+/// `mbm_bookshelf` holding it once, across restarts; the ids it prints are those the API lists,
+/// and the Panda in `mbm_bookshelf` answers the labelled configurations as the meshes do.
 ///
 /// Multi-threaded: the test blocks a thread on the child process while the client's connection
 /// task must stay alive to answer the server's graceful-shutdown GOAWAY.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn demo_seeding_is_idempotent_across_restarts() {
     let dir = tempfile::tempdir().unwrap();
+    let labels = bookshelf_labels();
+    assert_eq!(labels.len(), 200);
     let mut seen = Vec::new();
     for _ in 0..2 {
         let mut server = ChildServer::spawn_with(dir.path(), &["--demo"]);
+        let ids = demo_ids(&server.startup);
+        let id = |what: &str, name: &str| ids[&(what.to_owned(), name.to_owned())].clone();
         let mut c = server.client().await;
         let bodies = c.list_bodies(pb::ListBodiesRequest::default()).await.unwrap().into_inner().bodies;
-        let mut names: Vec<_> = bodies.iter().map(|b| b.name.clone()).collect();
-        names.sort();
-        assert_eq!(names, ["chair_101", "human_10"]);
+        for name in ["chair_101", "human_10"] {
+            let named: Vec<_> = bodies.iter().filter(|b| b.name == name).map(|b| b.body_id.clone()).collect();
+            assert_eq!(named, [id("body", name)]);
+        }
         let scenes = c.list_scenes(pb::ListScenesRequest::default()).await.unwrap().into_inner().scenes;
-        assert_eq!(scenes.len(), 1);
-        assert_eq!((scenes[0].name.as_str(), scenes[0].num_instances), ("demo", 2));
+        let mut names: Vec<_> = scenes.iter().map(|s| s.name.as_str()).collect();
+        names.sort();
+        assert_eq!(names, ["demo", "mbm_bookshelf"]);
+        let demo = scenes.iter().find(|s| s.name == "demo").unwrap();
+        assert_eq!((demo.scene_id.clone(), demo.num_instances), (id("scene", "demo"), 2));
         // The demo pair starts apart.
-        let view =
-            c.get_scene(pb::GetSceneRequest { scene_id: scenes[0].scene_id.clone() }).await.unwrap().into_inner();
+        let view = c.get_scene(pb::GetSceneRequest { scene_id: demo.scene_id.clone() }).await.unwrap().into_inner();
         let d = distance(&mut c, &view.scene_id, &view.instances[0].instance_id, &view.instances[1].instance_id).await;
         assert!(d.distance > 0.0 && !d.overlapping, "{d:?}");
+
+        // The robot, once, and the bookshelf scene holding it.
+        let robots = c.list_robots(pb::ListRobotsRequest::default()).await.unwrap().into_inner().robots;
+        assert_eq!(robots.len(), 1);
+        assert_eq!((robots[0].name.as_str(), robots[0].robot_id.clone()), ("panda", id("robot", "panda")));
+        let shelf = scenes.iter().find(|s| s.name == "mbm_bookshelf").unwrap();
+        assert_eq!(shelf.scene_id, id("scene", "mbm_bookshelf"));
+        let view = c.get_scene(pb::GetSceneRequest { scene_id: shelf.scene_id.clone() }).await.unwrap().into_inner();
+        assert_eq!(view.instances.len(), shelf.num_instances as usize);
+        assert!(view.instances.len() >= 3, "the bookshelf's boards: {view:?}");
+        assert_eq!(view.robot.as_ref().map(|r| r.robot_id.as_str()), Some(robots[0].robot_id.as_str()));
+        // Every labelled configuration, the robot taken from the scene: the meshes' verdicts.
+        let req = pb::CheckConfigurationsRequest {
+            scene_id: shelf.scene_id.clone(),
+            configurations: Some(pb::ConfigurationColumns {
+                joint_names: (1..=7).map(|k| format!("panda_joint{k}")).collect(),
+                values: labels.iter().flat_map(|(q, _)| q.iter().copied()).collect(),
+            }),
+            ..Default::default()
+        };
+        let answer = c.check_configurations(req).await.unwrap().into_inner();
+        let want: Vec<bool> = labels.iter().map(|(_, collides)| *collides).collect();
+        assert_eq!(answer.collides, want);
+        assert!(want.contains(&true) && want.contains(&false));
         seen.push(std::mem::take(&mut server.startup));
         drop(c);
         // Graceful stop by SIGTERM to the child we started.
@@ -139,6 +202,8 @@ async fn demo_seeding_is_idempotent_across_restarts() {
     }
     assert_eq!(seen[0], seen[1], "a restart must report the same ids");
     assert!(seen[0].iter().any(|l| l.contains("chair_101")));
+    assert!(seen[0].iter().any(|l| l.starts_with("demo: robot panda = r-")), "{:?}", seen[0]);
+    assert!(seen[0].iter().any(|l| l.starts_with("demo: scene mbm_bookshelf = s-")), "{:?}", seen[0]);
 }
 
 /// The point 6: fit the paper's chair and human at degree 4 through the service, slide

@@ -3,9 +3,11 @@
 as the collision checker.
 
     python clients/python/examples/plan_ompl.py [--addr 127.0.0.1:50051] [--png out/plan_ompl.png]
+        [--max-degree 2|4|6|8] [--time SECONDS] [--seed N]
 
 Needs a running server (``cargo run --release -- serve --demo``) and
-``pip install ./clients/python ompl matplotlib``.
+``pip install ./clients/python ompl matplotlib`` (matplotlib only for the figure: ``--png ''``
+draws none).
 
 What it does:
 
@@ -60,9 +62,18 @@ OBSTACLE_FILES = ["data/demo/chair_101.json", "data/demo/human_10.json"] + [
 ]
 
 
-def obstacle_files():
-    """The fitted PSB bodies bundled with the repository that stand as obstacles (name, path)."""
-    return [(str(Path(f).with_suffix("")), REPO / f) for f in OBSTACLE_FILES]
+def obstacle_files(max_degree=8):
+    """The fitted PSB bodies bundled with the repository that stand as obstacles (name, path).
+    A body of degree above ``max_degree`` is replaced by the same shape's fit of degree
+    ``max_degree`` (``tests/data/SHAPE.degN.json``), at the same place: the walls stay closed and
+    every upload certifies a smaller polynomial."""
+    out = []
+    for f in OBSTACLE_FILES:
+        stem = Path(f).name.split(".")
+        if len(stem) == 3 and stem[1].startswith("deg") and int(stem[1][3:]) > max_degree:
+            f = f"tests/data/{stem[0]}.deg{max_degree}.json"
+        out.append((str(Path(f).with_suffix("")), REPO / f))
+    return out
 
 
 def wall_layout(n):
@@ -188,7 +199,9 @@ class ServiceChecker:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--addr", default="127.0.0.1:50051", help="server host:port (default: the demo server)")
-    ap.add_argument("--png", default="out/plan_ompl.png", help="where to write the figure")
+    ap.add_argument("--png", default="out/plan_ompl.png", help="where to write the figure (empty: draw none)")
+    ap.add_argument("--max-degree", type=int, choices=(2, 4, 6, 8), default=8,
+                    help="obstacles of a higher degree are replaced by their shape's fit of this degree (default 8: none)")
     ap.add_argument("--margin", type=float, default=0.02, help="collision margin, meters (default 0.02)")
     ap.add_argument("--resolution", type=float, default=0.05, help="motion-check step in OMPL's SE(3) distance (m + rad)")
     ap.add_argument("--time", type=float, default=60.0, help="planning time limit, seconds")
@@ -227,7 +240,7 @@ _BODY_KEYS = ("degree", "exponents", "coefficients", "center", "scale")
 
 def load_body(client, name, body, stored, uploaded):
     """The id of a stored body named ``name`` with exactly this polynomial, else of a new upload
-    (appended to ``uploaded``). Returns (id, reused)."""
+    (appended to ``uploaded``, and to ``stored`` for the obstacles after it). Returns (id, reused)."""
     want = {k: body[k] for k in _BODY_KEYS}
     for body_id in stored.get(name, []):
         have = json.loads(client.get_body_json(body_id))
@@ -235,6 +248,7 @@ def load_body(client, name, body, stored, uploaded):
             return body_id, True
     body_id = client.upload_body(name, body)
     uploaded.append(body_id)
+    stored.setdefault(name, []).append(body_id)
     return body_id, False
 
 
@@ -246,7 +260,7 @@ def run(args, client, scene, bodies) -> int:
     # --- the scene ---------------------------------------------------------------------------
     robot_file = REPO / "data" / "demo" / "chair_101.json"
     robot_json = json.loads(robot_file.read_text())
-    files = obstacle_files()
+    files = obstacle_files(args.max_degree)
     t0 = time.perf_counter()
     stored = {}
     for b in client.list_bodies():
@@ -345,8 +359,9 @@ def run(args, client, scene, bodies) -> int:
             )
             for i, w in enumerate(waypoints):
                 print(f"  waypoint {i}: t = ({w.t[0]:+.3f}, {w.t[1]:+.3f}, {w.t[2]:+.3f}) m, q = ({', '.join(f'{v:+.3f}' for v in w.quat)})")
-            draw(args.png, drawn, robot_json, waypoints, dense, clearance)
-            print(f"wrote {args.png}")
+            if args.png:
+                draw(args.png, drawn, robot_json, waypoints, dense, clearance)
+                print(f"wrote {args.png}")
 
     return exit_code
 

@@ -48,6 +48,10 @@ pub struct RobotFitSettings {
     /// Clearance tables of the self pairs moved by one or two joints ([`crate::clearance`]);
     /// `None` builds none (the checks are the same, slower on those pairs).
     pub clearance: Option<ClearanceSettings>,
+    /// Fit each mesh's compound tree, its leaves under a root (`--leaves`, `--parts auto` within
+    /// `compound.max_parts`). Default `false`: one sos-convex body per mesh, what the checks read
+    /// (the root), fitted in about a second where a tree takes a minute.
+    pub leaves: bool,
 }
 
 /// Progress of [`fit_robot`]: one message per mesh started or finished.
@@ -182,7 +186,7 @@ pub fn fit_robot_text(
         None => Vec::new(),
     };
     crate::limits::check_self_pairs(&model, &allowed_pairs)?;
-    let tag = settings_tag(&settings.compound);
+    let tag = settings_tag(&settings.compound, settings.leaves);
     let mut geometries = Vec::new();
     let mut jobs: Vec<MeshJob> = Vec::new();
     for link in model.links() {
@@ -306,9 +310,10 @@ fn cached_tables(
 }
 
 /// The fit settings that change a mesh's compound body, as text for the cache key.
-fn settings_tag(s: &CompoundSettings) -> String {
+fn settings_tag(s: &CompoundSettings, leaves: bool) -> String {
     format!(
-        "parts=auto tol={:?} rel={} weld={:?} degrees={:?} parent={} res={} samples={} max_parts={} vtol={}",
+        "parts={} tol={:?} rel={} weld={:?} degrees={:?} parent={} res={} samples={} max_parts={} vtol={}",
+        if leaves { "auto" } else { "1" },
         s.excess_tolerance,
         s.relative_tolerance,
         s.weld_tolerance,
@@ -388,6 +393,7 @@ fn fit_meshes(
     let queue = Mutex::new(jobs.into_iter().enumerate().collect::<Vec<_>>());
     let results: Mutex<Vec<MeshOutcome>> = Mutex::new(Vec::new());
     let done = Mutex::new(0usize);
+    let started = Instant::now();
     let flag = sublevel_core::cancel::current();
     std::thread::scope(|s| {
         for _ in 0..threads {
@@ -411,11 +417,18 @@ fn fit_meshes(
                         ),
                         Err(e) => format!("{}: failed: {e}", job.name),
                     };
-                    let n = done.lock().map(|mut d| {
-                        *d += 1;
-                        *d
-                    });
-                    progress(&RobotFitProgress { done: n.unwrap_or(0), total, message });
+                    let n = done
+                        .lock()
+                        .map(|mut d| {
+                            *d += 1;
+                            *d
+                        })
+                        .unwrap_or(0);
+                    // The time left, from the mean time per mesh so far over the threads.
+                    let elapsed = started.elapsed().as_secs_f64();
+                    let left = elapsed / n.max(1) as Real * total.saturating_sub(n) as Real;
+                    let message = format!("{message} — {elapsed:.0} s so far, about {left:.0} s of meshes left");
+                    progress(&RobotFitProgress { done: n, total, message });
                     if let Ok(mut r) = results.lock() {
                         r.push((i, job.key.clone(), outcome.map(|(b, c, note)| (b, c, format!("{}{note}", job.name)))));
                     }
@@ -435,6 +448,9 @@ fn fit_meshes(
         } else {
             report.fitted += 1;
         }
+        if let Some(k) = name.find(" (fallback:") {
+            report.fallbacks.push(format!("{}:{}", &name[..k], &name[k..]));
+        }
         let tol = body.report.tolerance.map_or_else(|| "none".to_owned(), |t| format!("{t:.4} m"));
         report.notes.push(format!(
             "{name}: {} leaves, worst leaf excess {:.4} m (tolerance {tol}){}",
@@ -450,6 +466,34 @@ fn fit_meshes(
     Ok((bodies, report))
 }
 
+/// The fits tried for one mesh, in order, until one succeeds (the fallback path; the robot's report
+/// names each mesh that needed more than the first in [`RobotFitReport::fallbacks`]).
+///
+/// One body per mesh (the default): the settings as given (leaf degrees 2, 4, 6 by volume), then
+/// degrees 2 and 4 with the default solver settings, then degree 2 alone — the minimum-volume
+/// ellipsoid, a well-conditioned SDP that always contains the mesh. With `leaves`: the tree at
+/// `--max-parts`, then with at most 16 and 8 leaves, then one body (no tree to certify).
+fn fallback_ladder(settings: &RobotFitSettings) -> Vec<(PartCount, CompoundSettings)> {
+    let given = settings.compound.clone();
+    if settings.leaves {
+        let mut ladder = vec![(PartCount::Auto, given.clone())];
+        for m in [16, 8] {
+            if m < given.max_parts {
+                ladder.push((PartCount::Auto, CompoundSettings { max_parts: m, ..given.clone() }));
+            }
+        }
+        ladder.push((PartCount::Fixed(1), given));
+        return ladder;
+    }
+    let plain =
+        |degrees: Vec<usize>| CompoundSettings { degrees, fit: CompoundSettings::default().fit, ..given.clone() };
+    vec![
+        (PartCount::Fixed(1), given.clone()),
+        (PartCount::Fixed(1), plain(vec![2, 4])),
+        (PartCount::Fixed(1), plain(vec![2])),
+    ]
+}
+
 /// One mesh: from the cache when there, else fitted (and cached).
 fn fit_one(job: &MeshJob, settings: &RobotFitSettings) -> Result<(CompoundBody, bool, String)> {
     let cached = settings.cache_dir.as_ref().map(|d| d.join(format!("{}.json", job.key)));
@@ -459,28 +503,20 @@ fn fit_one(job: &MeshJob, settings: &RobotFitSettings) -> Result<(CompoundBody, 
         }
     }
     let mut no_progress = |_: &sublevel_fit::FitProgress| {};
-    // A tree whose containment cannot be certified is fitted again with fewer leaves, and at the
-    // last as one body (always certified: no tree).
-    let mut fallbacks = vec![(PartCount::Auto, settings.compound.max_parts)];
-    for m in [16, 8] {
-        if m < settings.compound.max_parts {
-            fallbacks.push((PartCount::Auto, m));
-        }
-    }
-    fallbacks.push((PartCount::Fixed(1), settings.compound.max_parts));
     let mut note = String::new();
     let mut body = None;
     let mut last_error = None;
-    for (parts, max_parts) in fallbacks {
-        let s = CompoundSettings { max_parts, ..settings.compound.clone() };
+    for (parts, s) in fallback_ladder(settings) {
         match fit_compound(&job.mesh, Some(&job.name), parts, &s, &mut no_progress) {
             Ok(b) => {
                 body = Some(b);
                 break;
             }
+            Err(e @ Error::Cancelled(_)) => return Err(e),
             Err(e) => {
                 note.push_str(&format!(
-                    " (at {parts:?}, --max-parts {max_parts}: {e}; fitted again with fewer leaves)"
+                    " (fallback: at {parts:?}, degrees {:?}, --max-parts {}: {e}; fitted again with the next rung)",
+                    s.degrees, s.max_parts
                 ));
                 last_error = Some(e);
             }

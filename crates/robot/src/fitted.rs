@@ -140,6 +140,11 @@ pub struct RobotFitReport {
     pub cached: usize,
     /// Per mesh: leaves, worst leaf excess and the tolerance, and anything the reader should know.
     pub notes: Vec<String>,
+    /// The meshes whose first fit failed numerically and that took the fallback path (the fit
+    /// module's ladder: lower degrees, then the minimum-volume ellipsoid), each with the
+    /// failures on the way.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub fallbacks: Vec<String>,
 }
 
 /// A robot file (see the module docs).

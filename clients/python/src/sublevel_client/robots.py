@@ -47,13 +47,14 @@ class RobotCalls:
         name: str = "",
         tolerance: float = 0.0,
         max_parts: int = 0,
+        leaves: bool = False,
         progress: Any = None,
         timeout: Optional[float] = None,
     ) -> RobotInfo:
         """Fits a robot on the server from its URDF (``StartRobotFitJob``) and waits for it, as
-        ``sublevel robot fit`` does: URDF primitives stay exact, each link mesh becomes a compound
-        sos-convex body containing it (cached by content on the server, so a re-fit is quick), the
-        SRDF's disabled pairs become the allowed pairs.
+        ``sublevel robot fit`` does: URDF primitives stay exact, each link mesh becomes one
+        sos-convex body containing it (a compound tree with ``leaves``; cached by content on the
+        server, so a re-fit is quick), the SRDF's disabled pairs become the allowed pairs.
 
         Args:
             urdf: the URDF file. Every mesh its collision elements name is read and sent:
@@ -62,9 +63,11 @@ class RobotCalls:
                 directory.
             srdf: the SRDF file, if any.
             name: the stored robot's name; empty: the URDF's robot name.
-            tolerance: leaf-excess tolerance of each mesh's fit, meters; 0: 1 % of each mesh's
-                bounding-box diagonal.
-            max_parts: most leaves per link (2..64); 0: 32.
+            tolerance: with ``leaves``, leaf-excess tolerance of each mesh's fit, meters; 0: 1 %
+                of each mesh's bounding-box diagonal.
+            max_parts: with ``leaves``, most leaves per link (2..64); 0: 32.
+            leaves: also fit each mesh's compound tree (minutes per robot); default one body per
+                mesh, what the checks read (seconds).
             progress: called with each ``FitJobUpdate`` (``fraction``, ``message``: one per mesh).
             timeout: seconds to wait for the job (None: no limit; the Panda takes minutes).
 
@@ -97,6 +100,7 @@ class RobotCalls:
             meshes=meshes,
             tolerance=float(tolerance),
             max_parts=int(max_parts),
+            leaves=bool(leaves),
         )
         job_id = self._call("StartRobotFitJob", req).job_id
         last = self._wait_job(job_id, progress, timeout)

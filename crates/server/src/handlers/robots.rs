@@ -85,6 +85,7 @@ pub(super) async fn start_robot_fit_job(
         clearance: Some(sublevel_robot::clearance::ClearanceSettings { threads, ..Default::default() }),
         ..RobotFitSettings::default()
     };
+    settings.leaves = req.leaves;
     settings.compound.excess_tolerance = (req.tolerance != 0.0).then_some(req.tolerance);
     if req.max_parts != 0 {
         settings.compound.max_parts = req.max_parts as usize;
