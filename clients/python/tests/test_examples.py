@@ -152,11 +152,12 @@ def test_plan_ompl_finds_a_path_through_the_walls(server):
     assert "obstacle tests/data/chair_101.deg2" in out and ".deg8" not in out
 
 
-def test_plan_mbm_plans_a_bookshelf_problem_with_certified_edges(server):
+def plan_mbm(server, *extra):
+    """Runs plan_mbm.py on the first bookshelf_small problem with ``extra`` arguments."""
     need("ompl")
     need("yaml")
     panda = REPO / "data" / "robots" / "panda"
-    out = example(
+    return example(
         "plan_mbm.py",
         server,
         "--urdf", panda / "panda.urdf",
@@ -164,9 +165,13 @@ def test_plan_mbm_plans_a_bookshelf_problem_with_certified_edges(server):
         "--problems", REPO / "data" / "robots" / "mbm_panda" / "problems.tar.bz2",
         "--scenarios", "bookshelf_small",
         "--limit", "1",
-        "--timeout", "20",
+        *extra,
         timeout=600,
     )  # fmt: skip
+
+
+def test_plan_mbm_plans_a_bookshelf_problem_with_certified_edges(server):
+    out = plan_mbm(server, "--timeout", "20")
     assert re.search(r"^robot panda \(r-\w+\) from \S*panda.robot.json: 7 joints", out, re.M), out
     row = re.search(r"^bookshelf_small +(\S+) +(True|False) ", out, re.M)
     assert row, out
@@ -176,22 +181,8 @@ def test_plan_mbm_plans_a_bookshelf_problem_with_certified_edges(server):
 
 
 def test_plan_mbm_with_the_coal_checker(server):
-    need("ompl")
-    need("yaml")
     need("pinocchio")  # pin==4.1.0 (pinocchio with coal): large wheels, not in requirements-test.txt
-    panda = REPO / "data" / "robots" / "panda"
-    out = example(
-        "plan_mbm.py",
-        server,
-        "--urdf", panda / "panda.urdf",
-        "--srdf", panda / "panda.srdf",
-        "--problems", REPO / "data" / "robots" / "mbm_panda" / "problems.tar.bz2",
-        "--scenarios", "bookshelf_small",
-        "--limit", "1",
-        "--timeout", "5",
-        "--checker", "coal",
-        timeout=600,
-    )  # fmt: skip
+    out = plan_mbm(server, "--timeout", "5", "--checker", "coal")
     assert re.search(r"^bookshelf_small +\S+ +(True|False) ", out, re.M), out
 
 
