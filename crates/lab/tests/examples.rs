@@ -18,14 +18,14 @@ fn repository() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
 
-/// `plan_mbm` (RRT-Connect in process, the README's tour) on the first problem of two scenarios,
-/// edges certified by conservative advancement: every problem solved (the sampling is seeded, so
-/// the run is the same every time; the timeout leaves a debug build room).
+/// `plan_mbm` (`sublevel-plan` in process, the README's tour) on the first problem of two
+/// scenarios: every problem solved with a certified path (the sampling is seeded, so the run is
+/// the same every time; the timeout leaves a debug build room).
 #[test]
-fn plan_mbm_solves_its_first_problems_with_certified_edges() {
+fn plan_mbm_solves_its_first_problems_with_certified_paths() {
     let out = Command::new(example("plan_mbm"))
         .current_dir(repository())
-        .args(["--scenarios", "bookshelf_small,box", "--limit", "1", "--timeout", "30", "--edges", "certified"])
+        .args(["--scenarios", "bookshelf_small,box", "--limit", "1", "--timeout", "30"])
         .output()
         .unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);

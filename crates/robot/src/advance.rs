@@ -177,6 +177,12 @@ impl<'c, 'r> MotionChecker<'c, 'r> {
         Ok(Self { checker, bounds })
     }
 
+    /// The configuration checker the motions are checked with (its robot, world and padding),
+    /// for the single configurations a caller checks between motions.
+    pub fn checker(&mut self) -> &mut RobotChecker<'r> {
+        self.checker
+    }
+
     /// Checks the motion from `q0` to `q1` (radians, meters; continuous joints the shorter way)
     /// with the robot's root at `base`.
     ///

@@ -14,6 +14,8 @@
 
 use crate::model::{JointKind, JointValue, RobotModel};
 use crate::Result;
+use nalgebra::Matrix6xX;
+use std::ops::AddAssign;
 use sublevel_core::math::{Isometry3, Point3, Real, Vector3};
 
 impl RobotModel {
@@ -72,6 +74,55 @@ impl RobotModel {
     pub fn point_jacobian(&self, link_poses: &[Isometry3], link: usize, x: &Point3, out: &mut Vec<Vector3>) {
         out.clear();
         out.resize(self.dof(), Vector3::zeros());
+        self.for_each_chain_joint(link_poses, link, |k, m, kind, a, p| {
+            out[k] += m * linear_column(kind, a, p, x);
+        });
+    }
+
+    /// The frame (geometric) Jacobian of link `link` at the point `x` fixed on it: a 6 × dof
+    /// matrix whose column k is the twist per unit of configuration entry k, linear rows first —
+    /// rows 0..3 are ∂x/∂q_k (the point's velocity, world frame, meters per radian or per meter,
+    /// exactly [`RobotModel::point_jacobian`]) and rows 3..6 are the link's angular velocity
+    /// (world frame, radians per radian, 0 per meter). With each chain joint's world axis `a`
+    /// through its frame's origin `p` (Siciliano et al., *Robotics*, §3.1.3, eq. 3.30):
+    ///
+    /// ```text
+    ///                        linear         angular
+    /// revolute, continuous   a × (x − p)    a
+    /// prismatic              a              0
+    /// ```
+    ///
+    /// and a mimic joint `v = m · q_k + c` adds m times its column to column k. `link_poses` are
+    /// [`RobotModel::forward_kinematics`]' at the configuration; `out` is resized to 6 × dof.
+    /// Checked against central differences of forward kinematics on the Panda and on a test robot
+    /// with every joint kind to 1e-6 (`tests/ik.rs`).
+    pub fn frame_jacobian(&self, link_poses: &[Isometry3], link: usize, x: &Point3, out: &mut Matrix6xX<Real>) {
+        if out.ncols() != self.dof() {
+            *out = Matrix6xX::zeros(self.dof());
+        } else {
+            out.fill(0.0);
+        }
+        self.for_each_chain_joint(link_poses, link, |k, m, kind, a, p| {
+            let linear = m * linear_column(kind, a, p, x);
+            let angular = match kind {
+                JointKind::Prismatic => Vector3::zeros(),
+                _ => m * a,
+            };
+            let mut column = out.column_mut(k);
+            column.fixed_rows_mut::<3>(0).add_assign(&linear);
+            column.fixed_rows_mut::<3>(3).add_assign(&angular);
+        });
+    }
+
+    /// Calls `f(k, m, kind, a, p)` for each moving joint on the chain from `link` to the root:
+    /// configuration entry `k`, multiplier `m` (1, or a mimic's), the joint's kind, its world axis
+    /// `a` and its frame's world origin `p`.
+    fn for_each_chain_joint(
+        &self,
+        link_poses: &[Isometry3],
+        link: usize,
+        mut f: impl FnMut(usize, Real, JointKind, &Vector3, &Vector3),
+    ) {
         let mut at = link;
         while let Some(j) = self.links().get(at).and_then(|l| l.parent_joint) {
             let joint = &self.joints()[j];
@@ -81,15 +132,21 @@ impl RobotModel {
                 JointValue::Variable(k) => (k, 1.0),
                 JointValue::Mimic { variable, multiplier, .. } => (variable, multiplier),
             };
+            if joint.kind == JointKind::Fixed {
+                continue;
+            }
             let frame = link_poses[joint.parent] * joint.origin;
-            let a = frame.rotation * joint.axis;
-            let dx = match joint.kind {
-                JointKind::Revolute | JointKind::Continuous => a.cross(&(x.coords - frame.translation.vector)),
-                JointKind::Prismatic => a,
-                JointKind::Fixed => continue,
-            };
-            out[k] += m * dx;
+            f(k, m, joint.kind, &(frame.rotation * joint.axis), &frame.translation.vector);
         }
+    }
+}
+
+/// The linear velocity of point `x` per unit of a joint's value: `a × (x − p)` (revolute,
+/// continuous) or `a` (prismatic).
+fn linear_column(kind: JointKind, a: &Vector3, p: &Vector3, x: &Point3) -> Vector3 {
+    match kind {
+        JointKind::Prismatic => *a,
+        _ => a.cross(&(x.coords - p)),
     }
 }
 

@@ -12,7 +12,10 @@
 //! - [`motion`]: how far a link can move along a joint-space segment (the bound of conservative
 //!   advancement), from the kinematic chain.
 //! - [`kinematics`]: forward kinematics — every link's pose in the world for a configuration and a
-//!   base pose — checked against pinocchio's `framesForwardKinematics` to 1e-12 m.
+//!   base pose — checked against pinocchio's `framesForwardKinematics` to 1e-12 m; point and frame
+//!   Jacobians.
+//! - [`ik`]: inverse kinematics — configurations that put a link at a pose goal, by damped least
+//!   squares with random restarts, handed over one distinct solution at a time.
 //!
 //! - [`fit`]: a robot fitted once — every link mesh a compound sos-convex body containing it
 //!   (paper §V), URDF primitives exact, the SRDF's allowed pairs — saved as a robot file
@@ -44,6 +47,7 @@ pub mod clearance;
 mod exact;
 pub mod fit;
 pub mod fitted;
+pub mod ik;
 pub mod inner;
 pub mod kinematics;
 pub mod limits;
@@ -57,6 +61,7 @@ pub use advance::{MotionAnswer, MotionChecker, MotionOptions};
 pub use check::{CheckOptions, ConfigurationAnswer, RobotChecker};
 pub use fit::{check_mesh_name, fit_robot, fit_robot_text, MeshSource, RobotFitProgress, RobotFitSettings};
 pub use fitted::{FittedRobot, LinkShape, RobotFile, RobotGeometry};
+pub use ik::{solve_ik, IkSettings, IkSolution, IkSolver, PoseGoal};
 pub use model::{resolve_mesh_path, CollisionGeometry, Joint, JointKind, JointValue, Link, RobotModel};
 pub use srdf::Semantics;
 pub use world::{WorldMesh, WorldObject, WorldShape};

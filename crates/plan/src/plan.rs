@@ -1,0 +1,365 @@
+//! One planning request answered: the request checked, the goals made configurations, the
+//! search, the simplification and the certification, each timed (see the crate docs).
+
+use crate::certify::{certify_path, CertifySettings};
+use crate::rrt::{connect, Budget, SearchSettings, SearchStop};
+use crate::simplify::{simplify, SimplifySettings};
+use crate::space::{HaltonSampler, JointSpace};
+use crate::validity::{CheckCounts, Validity};
+use rand::{Rng, SeedableRng};
+use std::sync::atomic::AtomicBool;
+use std::time::{Duration, Instant};
+use sublevel_core::math::Real;
+use sublevel_core::{Error, Result};
+
+/// Planner settings; [`PlanSettings::default`] gives the service's defaults.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlanSettings {
+    /// The time the whole plan may take: goals, search, simplification and certification
+    /// (> 0; default 1 s).
+    pub timeout: Duration,
+    /// The seed of the sampler and of the simplification's random choices: the same request with
+    /// the same seed on the same checker gives the same path (default 1).
+    pub seed: u64,
+    /// The longest step of an extension (joint-space distance, > 0; default 1.0).
+    pub range: Real,
+    /// Samples per unit of joint-space distance on the search's edges (> 0; default 32, VAMP's).
+    pub resolution: Real,
+    /// The chance that a round of the search draws a goal instead of a sample ([0, 1); default
+    /// 0.05).
+    pub goal_bias: Real,
+    /// Padding around every robot geometry (meters, ≥ 0; default 0): the path keeps this clearance.
+    pub padding: Real,
+    /// Whether the path is simplified (default true).
+    pub simplify: bool,
+    /// Most shortcut tries of the simplification (default 64).
+    pub shortcut_attempts: usize,
+    /// Corner-cutting passes after the shortcuts (default 0: none).
+    pub smoothing_passes: usize,
+    /// Contact tolerance of the edges' certificates (meters, > 0; default 1 mm).
+    pub tolerance: Real,
+    /// Most goal configurations the goal tree is rooted at (≥ 1; default 8): the joint goals
+    /// given first, then samples of a goal region or inverse kinematics solutions.
+    pub max_goals: usize,
+}
+
+impl Default for PlanSettings {
+    fn default() -> Self {
+        Self {
+            timeout: Duration::from_secs(1),
+            seed: 1,
+            range: 1.0,
+            resolution: 32.0,
+            goal_bias: 0.05,
+            padding: 0.0,
+            simplify: true,
+            shortcut_attempts: 64,
+            smoothing_passes: 0,
+            tolerance: 1e-3,
+            max_goals: 8,
+        }
+    }
+}
+
+impl PlanSettings {
+    /// Checks the settings.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming the setting out of its range (`timeout`, `range`,
+    /// `resolution`, `goal_bias`, `padding`, `tolerance`, `max_goals`).
+    pub fn validate(&self) -> Result<()> {
+        let positive = |field: &str, v: Real, unit: &str| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(Error::invalid(field, format!("must be finite and > 0{unit}, got {v}")))
+            }
+        };
+        if self.timeout.is_zero() {
+            return Err(Error::invalid("timeout", "must be > 0 s: a plan needs time to check its ends"));
+        }
+        positive("range", self.range, "")?;
+        positive("resolution", self.resolution, " samples per unit of joint distance")?;
+        positive("tolerance", self.tolerance, " m")?;
+        if !(self.goal_bias.is_finite() && (0.0..1.0).contains(&self.goal_bias)) {
+            return Err(Error::invalid("goal_bias", format!("must be in [0, 1), got {}", self.goal_bias)));
+        }
+        if !(self.padding.is_finite() && self.padding >= 0.0) {
+            return Err(Error::invalid("padding", format!("must be finite and ≥ 0 m, got {}", self.padding)));
+        }
+        if self.max_goals == 0 {
+            return Err(Error::invalid("max_goals", "must be ≥ 1"));
+        }
+        Ok(())
+    }
+}
+
+/// A goal region in joint space: every entry within its tolerances of a center (MoveIt's joint
+/// constraints).
+#[derive(Clone, Debug, PartialEq)]
+pub struct JointRegion {
+    /// The center configuration.
+    pub center: Vec<Real>,
+    /// How far below the center each entry may be (≥ 0, radians or meters).
+    pub below: Vec<Real>,
+    /// How far above the center each entry may be (≥ 0).
+    pub above: Vec<Real>,
+}
+
+/// How the plan ended.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum PlanStatus {
+    /// A path, every edge certified.
+    Solved,
+    /// The deadline passed before a path was found, or before every edge of the path found was
+    /// certified (then the path is returned, uncertified).
+    TimedOut,
+    /// The start configuration collides: the pair, in words.
+    StartInCollision(String),
+    /// Every goal configuration collides: the first's pair, in words.
+    GoalInCollision(String),
+    /// No goal configuration exists (inverse kinematics found none): why, in words.
+    GoalUnreachable(String),
+    /// The plan was cancelled.
+    Cancelled,
+}
+
+/// Time spent in each stage.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PlanTiming {
+    /// Checking the ends and making the goal configurations.
+    pub goals: Duration,
+    /// The RRT-Connect search.
+    pub search: Duration,
+    /// The simplification.
+    pub simplify: Duration,
+    /// The certification and the repairs.
+    pub certify: Duration,
+}
+
+/// The answer to a plan.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlanOutcome {
+    /// How the plan ended.
+    pub status: PlanStatus,
+    /// The path, start first (empty with no path); rows of configuration entries (radians,
+    /// meters).
+    pub path: Vec<Vec<Real>>,
+    /// Its joint-space length (0 with no path).
+    pub length: Real,
+    /// Whether every edge of the path is proven free (conservative advancement).
+    pub certified: bool,
+    /// The edges (`path[i] → path[i+1]`) left unproven.
+    pub unproven: Vec<usize>,
+    /// Which of the goal configurations the path reaches.
+    pub goal: Option<Vec<Real>>,
+    /// Time per stage.
+    pub timing: PlanTiming,
+    /// Checks made.
+    pub counts: CheckCounts,
+    /// Nodes of the search's two trees.
+    pub nodes: usize,
+    /// Edges the certification repaired.
+    pub repaired: usize,
+}
+
+/// What a plan is asked for.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Goal {
+    /// One or more goal configurations: the path reaches one of them.
+    Configurations(Vec<Vec<Real>>),
+    /// Any configuration of a joint region: its center first, then samples inside it.
+    Region(JointRegion),
+}
+
+/// Checks a configuration against `space`: its length, finite entries, inside the bounds of
+/// every entry that does not wrap.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `field` (the length) or `field[k]`.
+pub fn check_configuration(space: &JointSpace, field: &str, q: &[Real]) -> Result<()> {
+    if q.len() != space.dof() {
+        return Err(Error::invalid(
+            field,
+            format!("has {} entries, the robot {} joint variables", q.len(), space.dof()),
+        ));
+    }
+    for (k, (&v, &(lo, hi))) in q.iter().zip(&space.bounds).enumerate() {
+        if !v.is_finite() {
+            return Err(Error::invalid(format!("{field}[{k}]"), format!("must be finite, got {v}")));
+        }
+        if !space.wraps[k] && !(lo..=hi).contains(&v) {
+            return Err(Error::invalid(
+                format!("{field}[{k}]"),
+                format!("{v} is outside the joint's limits [{lo}, {hi}]"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Plans from `start` to `goal` on `checker` (the crate docs); `cancel` stops it early. Goal
+/// configurations beyond those given (region samples) are drawn from the seed, so the answer is
+/// reproducible.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `start`, `goal...` or a setting; the checker's errors.
+pub fn plan(
+    checker: &mut dyn Validity,
+    start: &[Real],
+    goal: &Goal,
+    settings: &PlanSettings,
+    cancel: &AtomicBool,
+) -> Result<PlanOutcome> {
+    settings.validate()?;
+    let clock = Instant::now();
+    let deadline = clock + settings.timeout;
+    let space = checker.space().clone();
+    check_configuration(&space, "start", start)?;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(settings.seed);
+    let candidates = goal_candidates(&space, goal, settings.max_goals, &mut rng)?;
+    let mut outcome = PlanOutcome {
+        status: PlanStatus::TimedOut,
+        path: Vec::new(),
+        length: 0.0,
+        certified: false,
+        unproven: Vec::new(),
+        goal: None,
+        timing: PlanTiming::default(),
+        counts: CheckCounts::default(),
+        nodes: 0,
+        repaired: 0,
+    };
+    let finish = |mut o: PlanOutcome, checker: &dyn Validity| {
+        o.counts = checker.counts();
+        o
+    };
+    if let Some(why) = checker.collision(start)? {
+        outcome.status = PlanStatus::StartInCollision(why);
+        outcome.timing.goals = clock.elapsed();
+        return Ok(finish(outcome, checker));
+    }
+    let mut goals = Vec::new();
+    let mut first_collision = None;
+    for q in candidates {
+        match checker.collision(&q)? {
+            None => goals.push(q),
+            Some(why) => {
+                first_collision.get_or_insert(why);
+            }
+        }
+    }
+    outcome.timing.goals = clock.elapsed();
+    if goals.is_empty() {
+        outcome.status = PlanStatus::GoalInCollision(first_collision.unwrap_or_default());
+        return Ok(finish(outcome, checker));
+    }
+    plan_to(checker, start, goals, settings, &mut rng, deadline, cancel, outcome).map(|o| finish(o, checker))
+}
+
+/// The search, simplification and certification from a free `start` to free `goals`.
+#[allow(clippy::too_many_arguments)]
+fn plan_to(
+    checker: &mut dyn Validity,
+    start: &[Real],
+    goals: Vec<Vec<Real>>,
+    settings: &PlanSettings,
+    rng: &mut impl Rng,
+    deadline: Instant,
+    cancel: &AtomicBool,
+    mut outcome: PlanOutcome,
+) -> Result<PlanOutcome> {
+    let search =
+        SearchSettings { range: settings.range, resolution: settings.resolution, goal_bias: settings.goal_bias };
+    let mut sampler = HaltonSampler::new(start.len(), rng);
+    let clock = Instant::now();
+    let budget = Budget { deadline, cancel };
+    let found = connect(checker, start, &goals, &search, &mut sampler, rng, budget)?;
+    outcome.timing.search = clock.elapsed();
+    let found = match found {
+        Ok(found) => found,
+        Err(SearchStop::Deadline) => return Ok(outcome),
+        Err(SearchStop::Cancelled) => {
+            outcome.status = PlanStatus::Cancelled;
+            return Ok(outcome);
+        }
+    };
+    outcome.nodes = found.nodes;
+    outcome.goal = Some(goals[found.goal].clone());
+    let mut path = found.path;
+    if settings.simplify {
+        let clock = Instant::now();
+        let s = SimplifySettings {
+            resolution: settings.resolution,
+            shortcut_attempts: settings.shortcut_attempts,
+            smoothing_passes: settings.smoothing_passes,
+        };
+        path = simplify(checker, path, &s, rng, deadline)?;
+        outcome.timing.simplify = clock.elapsed();
+    }
+    let clock = Instant::now();
+    let c = CertifySettings { tolerance: settings.tolerance, max_depth: 4, search };
+    let certified = certify_path(checker, &path, &c, rng, budget)?;
+    outcome.timing.certify = clock.elapsed();
+    outcome.certified = certified.unproven.is_empty();
+    outcome.status = if outcome.certified {
+        PlanStatus::Solved
+    } else if cancel.load(std::sync::atomic::Ordering::Relaxed) {
+        PlanStatus::Cancelled
+    } else {
+        PlanStatus::TimedOut
+    };
+    outcome.unproven = certified.unproven;
+    outcome.repaired = certified.repaired;
+    outcome.length = checker.space().length(&certified.path);
+    outcome.path = certified.path;
+    Ok(outcome)
+}
+
+/// The goal configurations to try, checked against the space: those given (at most
+/// `max_goals`), or a region's center then samples inside it.
+fn goal_candidates(space: &JointSpace, goal: &Goal, max_goals: usize, rng: &mut impl Rng) -> Result<Vec<Vec<Real>>> {
+    match goal {
+        Goal::Configurations(qs) => {
+            if qs.is_empty() {
+                return Err(Error::invalid("goal", "needs at least one goal configuration"));
+            }
+            for (k, q) in qs.iter().enumerate() {
+                check_configuration(space, &format!("goal.configurations[{k}]"), q)?;
+            }
+            Ok(qs.iter().take(max_goals).cloned().collect())
+        }
+        Goal::Region(r) => {
+            check_configuration(space, "goal.center", &r.center)?;
+            for (field, t) in [("goal.below", &r.below), ("goal.above", &r.above)] {
+                if t.len() != space.dof() {
+                    return Err(Error::invalid(field, format!("has {} entries, the robot {}", t.len(), space.dof())));
+                }
+                if let Some(k) = t.iter().position(|v| !(v.is_finite() && *v >= 0.0)) {
+                    return Err(Error::invalid(
+                        format!("{field}[{k}]"),
+                        format!("must be finite and ≥ 0, got {}", t[k]),
+                    ));
+                }
+            }
+            let mut out = vec![r.center.clone()];
+            let wide = r.below.iter().zip(&r.above).any(|(b, a)| b + a > 1e-9);
+            while wide && out.len() < max_goals {
+                let q = (0..space.dof())
+                    .map(|k| {
+                        let (lo, hi) = space.bounds[k];
+                        let (a, b) = (r.center[k] - r.below[k], r.center[k] + r.above[k]);
+                        let (a, b) = if space.wraps[k] { (a, b) } else { (a.max(lo), b.min(hi)) };
+                        if b > a {
+                            rng.random_range(a..=b)
+                        } else {
+                            a
+                        }
+                    })
+                    .collect();
+                out.push(q);
+            }
+            Ok(out)
+        }
+    }
+}

@@ -1,0 +1,187 @@
+//! What a planner asks of a collision checker: whether a configuration is free, whether a
+//! straight joint-space segment is free at a sampling resolution (the search's edges), and
+//! whether a segment is *proven* free (the returned path's edges, certified).
+//!
+//! [`RobotValidity`] answers all three for a fitted robot among a world: states by
+//! [`sublevel_robot::RobotChecker::check`] (the verdict alone, no distance), sampled edges as
+//! OMPL's discrete motion validator orders its samples, certified edges by conservative
+//! advancement ([`sublevel_robot::MotionChecker::check_motion`]).
+
+use crate::space::JointSpace;
+use sublevel_core::math::{Isometry3, Real};
+use sublevel_core::Result;
+use sublevel_robot::{CheckOptions, MotionChecker, MotionOptions};
+
+/// The answer of a certified edge check.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Certificate {
+    /// The whole segment is proven free at the padding.
+    Free,
+    /// The first contact (within the tolerance) at this segment parameter in [0, 1].
+    Contact(Real),
+    /// The check ran out of steps before deciding.
+    Undecided,
+}
+
+/// Counts of the checks a plan made.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct CheckCounts {
+    /// Configurations checked (alone or as an edge's samples).
+    pub states: usize,
+    /// Edges checked by sampling.
+    pub edges: usize,
+    /// Edges checked by conservative advancement.
+    pub edges_certified: usize,
+    /// Advancement steps of the certified edges (configurations bounded).
+    pub advancement_steps: usize,
+}
+
+/// A collision checker for planners (module docs).
+pub trait Validity {
+    /// The space the configurations live in.
+    fn space(&self) -> &JointSpace;
+
+    /// Whether configuration `q` is free.
+    ///
+    /// # Errors
+    /// The checker's errors (a malformed configuration names its field).
+    fn state_free(&mut self, q: &[Real]) -> Result<bool>;
+
+    /// Whether the segment from `a` to `b` is free at `resolution` samples per unit of joint
+    /// distance: `b` and the interior samples are checked (`a` is known free), ordered so that a
+    /// collision anywhere is met early ([`sample_order`]).
+    ///
+    /// # Errors
+    /// As [`Validity::state_free`].
+    fn edge_free(&mut self, a: &[Real], b: &[Real], resolution: Real) -> Result<bool> {
+        let n = ((self.space().distance(a, b) * resolution).ceil() as usize).max(1);
+        let mut q = Vec::with_capacity(a.len());
+        for i in sample_order(n) {
+            self.space().interpolate(a, b, i as Real / n as Real, &mut q);
+            if !self.state_free(&q)? {
+                return Ok(false);
+            }
+        }
+        Ok(true)
+    }
+
+    /// Whether the segment from `a` to `b` is proven free at the checker's padding, with
+    /// contacts reported within `tolerance` meters.
+    ///
+    /// # Errors
+    /// As [`Validity::state_free`].
+    fn certify(&mut self, a: &[Real], b: &[Real], tolerance: Real) -> Result<Certificate>;
+
+    /// The counts of the checks made so far.
+    fn counts(&self) -> CheckCounts;
+
+    /// Why `q` collides, in words (the colliding pair), or `None` when it is free.
+    ///
+    /// # Errors
+    /// As [`Validity::state_free`].
+    fn collision(&mut self, q: &[Real]) -> Result<Option<String>>;
+}
+
+/// `1..=n` in the order OMPL's discrete motion validator checks a segment's samples: the end
+/// first, then each next index halving the largest gap left.
+pub fn sample_order(n: usize) -> Vec<usize> {
+    let mut order = vec![n];
+    let mut seen = vec![false; n + 1];
+    seen[n] = true;
+    let mut step = n;
+    while step > 1 {
+        step = step.div_ceil(2);
+        for k in (step..n).step_by(step) {
+            if !std::mem::replace(&mut seen[k], true) {
+                order.push(k);
+            }
+        }
+    }
+    order.extend((1..n).filter(|&k| !seen[k]));
+    order
+}
+
+/// A fitted robot among a world, as a planner's checker (module docs).
+pub struct RobotValidity<'c, 'r> {
+    motion: MotionChecker<'c, 'r>,
+    space: JointSpace,
+    base: Isometry3,
+    padding: Real,
+    max_steps: usize,
+    counts: CheckCounts,
+}
+
+impl<'c, 'r> RobotValidity<'c, 'r> {
+    /// The checker of `motion`'s robot and world with the robot's root at `base`, every geometry
+    /// padded by `padding` meters (≥ 0; on top of the checker's link padding).
+    pub fn new(mut motion: MotionChecker<'c, 'r>, base: Isometry3, padding: Real) -> Self {
+        let space = JointSpace::of(&motion.checker().robot().model);
+        Self { motion, space, base, padding, max_steps: 100_000, counts: CheckCounts::default() }
+    }
+}
+
+impl Validity for RobotValidity<'_, '_> {
+    fn space(&self) -> &JointSpace {
+        &self.space
+    }
+
+    fn state_free(&mut self, q: &[Real]) -> Result<bool> {
+        self.counts.states += 1;
+        let options = CheckOptions { padding: self.padding, distance: false, self_collision: true, gradient: false };
+        Ok(!self.motion.checker().check(q, &self.base, &options)?.collides)
+    }
+
+    fn certify(&mut self, a: &[Real], b: &[Real], tolerance: Real) -> Result<Certificate> {
+        self.counts.edges_certified += 1;
+        let options = MotionOptions { padding: self.padding, tolerance, max_steps: self.max_steps };
+        let answer = self.motion.check_motion(a, b, &self.base, &options)?;
+        self.counts.advancement_steps += answer.steps;
+        Ok(match (answer.valid, answer.decided, answer.contact) {
+            (true, _, _) => Certificate::Free,
+            (false, true, Some(t)) => Certificate::Contact(t),
+            _ => Certificate::Undecided,
+        })
+    }
+
+    fn counts(&self) -> CheckCounts {
+        self.counts
+    }
+
+    fn collision(&mut self, q: &[Real]) -> Result<Option<String>> {
+        let options = CheckOptions { padding: self.padding, distance: false, self_collision: true, gradient: false };
+        let checker = self.motion.checker();
+        let answer = checker.check(q, &self.base, &options)?;
+        if !answer.collides {
+            return Ok(None);
+        }
+        let robot = checker.robot();
+        let geometry = |g: usize| {
+            let geometry = &robot.geometries[g];
+            format!("link `{}` (geometry `{}`)", robot.model.links()[geometry.link].name, geometry.name)
+        };
+        Ok(Some(match (answer.pair, answer.self_pair) {
+            (Some((g, o)), _) if answer.world => {
+                format!("{} collides with object `{}`", geometry(g), checker.world()[o].name)
+            }
+            (_, Some((a, b))) => format!("{} collides with {}", geometry(a), geometry(b)),
+            _ => "the robot collides".to_string(),
+        }))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sample_order_visits_every_index_once_end_first_then_halving() {
+        for n in 1..200 {
+            let order = sample_order(n);
+            let mut sorted = order.clone();
+            sorted.sort_unstable();
+            assert_eq!(sorted, (1..=n).collect::<Vec<_>>(), "n = {n}");
+            assert_eq!(order[0], n);
+        }
+        assert_eq!(sample_order(8), vec![8, 4, 2, 6, 1, 3, 5, 7]);
+    }
+}
