@@ -28,6 +28,7 @@ pub use sublevel_core::{body, cancel, conic, error, math, poly, primitive, repor
 pub use sublevel_core::{Body, Error, PosedBody, Primitive, Result};
 pub use sublevel_fit as fit;
 pub use sublevel_fit::compound;
+pub use sublevel_plan as plan;
 pub use sublevel_query as query;
 pub use sublevel_robot as robot;
 pub use sublevel_scene as scene;

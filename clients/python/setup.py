@@ -34,6 +34,7 @@ PROTO_FILES = [
     "sublevel/v1/scenes.proto",
     "sublevel/v1/queries.proto",
     "sublevel/v1/robots.proto",
+    "sublevel/v1/planning.proto",
 ]
 PB_PACKAGE = "sublevel_client._pb"
 

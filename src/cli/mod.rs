@@ -9,6 +9,7 @@ pub mod primitive;
 pub mod query;
 pub mod robot;
 pub mod robot_bench;
+mod robot_plan;
 pub mod scene;
 pub mod serve;
 pub mod serve_config;

@@ -6,6 +6,7 @@
 //! sublevel robot tables robot.json [--max-loss 0.004] [--output OUT.json]
 //! sublevel robot check robot.json --scene SCENE.yaml --configs Q.csv [--json] [--gradient] [--padding P]
 //! sublevel robot bench robot.json --scene SCENE.yaml [--columns 1000] [--addr HOST:PORT]   (robot_bench.rs)
+//! sublevel robot plan robot.json --scene SCENE.yaml --request REQUEST.yaml [--json]        (robot_plan.rs)
 //! ```
 
 use std::io::Write;
@@ -39,6 +40,9 @@ enum RobotCommand {
     /// Measure configuration checks: in process on one thread (single, in blocks, with
     /// distance) and over gRPC in columns.
     Bench(super::robot_bench::BenchArgs),
+    /// Plan a MoveIt MotionPlanRequest among a planning scene: RRT-Connect, simplification, every
+    /// edge of the path certified by conservative advancement (docs/planning.md).
+    Plan(super::robot_plan::PlanArgs),
 }
 
 /// Arguments of `sublevel robot fit`.
@@ -141,6 +145,7 @@ pub fn run(args: RobotArgs) -> Result<()> {
         RobotCommand::Tables(a) => tables(a),
         RobotCommand::Check(a) => check(a),
         RobotCommand::Bench(a) => super::robot_bench::run(a),
+        RobotCommand::Plan(a) => super::robot_plan::run(a),
     }
 }
 

@@ -9,6 +9,7 @@ mod hardening;
 mod instance_motions;
 mod jobs_api;
 mod ops;
+mod plan_service;
 mod planner;
 mod primitive_cli;
 mod primitives;

@@ -1,13 +1,15 @@
 #!/usr/bin/env python3
-"""Plan the MotionBenchMaker problems with OMPL, checked by the Sublevel service or by pinocchio + coal.
+"""Plan the MotionBenchMaker problems with OMPL, checked by the Sublevel service or by pinocchio + coal,
+or with the service's own planner (one ``Plan`` RPC per problem).
 
     python clients/python/examples/plan_mbm.py --urdf data/robots/panda/panda.urdf \\
         --srdf data/robots/panda/panda.srdf --problems data/robots/mbm_panda/problems.tar.bz2 \\
-        --limit 10 --timeout 1 [--checker sublevel|coal] [--verify] [--json out/plan_mbm.json]
+        --limit 10 --timeout 1 [--mode ompl|service] [--checker sublevel|coal] [--verify] [--json out/plan_mbm.json]
 
-Needs ``pip install ./clients/python ompl==2.0.1 pyyaml``; ``--checker coal`` and ``--verify`` also
-``pin==4.1.0`` (pinocchio with coal). ``--checker sublevel`` needs a running server (``sublevel serve``;
-``--serve`` starts one from the binary for the run, its store in a temporary folder).
+Needs ``pip install ./clients/python pyyaml``, and ``ompl==2.0.1`` for ``--mode ompl``; ``--checker coal``
+and ``--verify`` also ``pin==4.1.0`` (pinocchio with coal). ``--checker sublevel`` and ``--mode service``
+need a running server (``sublevel serve``; ``--serve`` starts one from the binary for the run, its store
+in a temporary folder).
 
 Problems: MotionBenchMaker's layout, a tar (read in place) or a folder holding
 ``<scenario>_<robot>/sceneNNNN.yaml`` with ``requestNNNN.yaml`` beside it, or ``scenes/<scenario>/`` with
@@ -15,8 +17,16 @@ Problems: MotionBenchMaker's layout, a tar (read in place) or a folder holding
 ``MotionPlanRequest``: its start state's joint positions and its first goal's joint constraints. The
 planning joints are the goal's joints; the robot's other joints stay at the start state's values.
 
-Per problem: OMPL (``RealVectorStateSpace`` in the URDF's joint limits, ``SimpleSetup``, the planner,
-path simplification) with
+Per problem, ``--mode service``: the fitted robot uploaded and the scene imported as ``--checker
+sublevel`` does (below), then one ``Client.plan`` call (the ``Plan`` RPC, docs/planning.md): RRT-Connect,
+simplification and every edge certified by conservative advancement on the server, within
+``--timeout`` (``--seed``, ``--range``, ``--resolution`` and ``--tolerance`` are its settings; ``--planner``,
+``--checker`` and ``--sublevel-motions`` do not apply). ``--request-as text`` (the default) sends the
+request file's MotionPlanRequest text as it is; ``typed`` sends the start and goal read here (all the
+robot's joints). A solved path is certified; a start or goal in collision makes the problem invalid.
+
+Per problem, ``--mode ompl`` (the default): OMPL (``RealVectorStateSpace`` in the URDF's joint limits,
+``SimpleSetup``, the planner, path simplification) with
 
 * ``--checker sublevel``: the fitted robot uploaded (``--robot``; for the Panda's URDF
   ``data/robots/panda/panda.robot.json``, else fitted by ``sublevel robot fit``), the scene imported
@@ -41,10 +51,17 @@ Meshes: coal reads the OBJ files through assimp, which joins ``link6.obj``'s fac
 the file (data/robots/SOURCE.md); by default the meshes are built from the OBJ files' own vertices
 and faces, the surface the fitted robot contains (``--mesh-reader assimp`` keeps coal's reading).
 
-Prints per problem: scenario, scene, solved, planning time, states and motions checked; then per
-scenario: solved %, median planning time. ``--json OUT`` writes ``{"joint_names": [...], "problems":
-[{"scenario", "scene", "request", "solved", "planning_time_s", "states_checked", "motions_checked",
-"path": [[...], ...]}, ...]}`` (radians, meters; the path after simplification).
+Prints per problem: scenario, scene, solved, planning time, simplification time, states and motions
+checked; then per scenario: solved %, median planning time. ``--json OUT`` writes ``{"mode", "joint_names":
+[...], "problems": [{"scenario", "scene", "request", "valid_problem", "solved", "certified",
+"planning_time_s", "simplify_time_s", "states_checked", "motions_checked", "path": [[...], ...]}, ...]}``
+(radians, meters, seconds; the path after simplification, in ``joint_names`` order). With ``--mode
+service``: ``planning_time_s`` is the ``Plan`` call's wall time as the client sees it, ``path`` the path
+it returned (also an uncertified one when it timed out), ``motions_checked`` the edges sampled plus the
+edges certified; each record adds ``status``, ``message``, ``server_time_s`` (the server's time for the
+call), the stage times ``goals_time_s``, ``search_time_s``, ``simplify_time_s`` and ``certify_time_s``,
+and ``edges_certified``, ``advancement_steps``, ``nodes``, ``repaired`` (``paths_rejected`` is 0: the
+service repairs edges instead of rejecting paths).
 """
 
 from __future__ import annotations
@@ -355,6 +372,85 @@ def plan_one(args, checker, joints: List[Joint], plan_idx: List[int], start: np.
     return True, planning, simplify, states
 
 
+def plan_ompl(args, checker, joints: List[Joint], plan_idx: List[int], start: np.ndarray, goal: np.ndarray,
+              problem: Problem) -> dict:
+    """One problem planned by OMPL with ``checker`` (``--mode ompl``): its record, as ``--json``
+    writes it."""
+    before_s, before_m = checker.count.states, checker.count.motions
+    before_r = getattr(checker.count, "rejected", 0)
+    # Start and goal are judged unpadded; when either lies within the search padding, the problem
+    # is searched without it (OMPL refuses an invalid start).
+    search_padding = getattr(checker, "padding", 0.0)
+    checker.padding = 0.0
+    start_ok, goal_ok = checker.valid(start), checker.valid(goal)
+    if search_padding and start_ok and goal_ok:
+        checker.padding = search_padding
+        if not (checker.valid(start) and checker.valid(goal)):
+            checker.padding = 0.0
+    if start_ok and goal_ok:
+        solved, planning, simplify, path = plan_one(args, checker, joints, plan_idx, start, goal)
+    else:
+        solved, planning, simplify, path = False, 0.0, 0.0, []
+    checker.padding = search_padding
+    # Certified: the sublevel checker's lazy and certified motions prove every returned edge free.
+    certifies = isinstance(checker, SublevelChecker) and checker.motions in ("lazy", "certified")
+    return {
+        "scenario": problem.scenario,
+        "scene": problem.scene_name,
+        "request": problem.request_name,
+        "valid_problem": bool(start_ok and goal_ok),
+        "solved": solved,
+        "certified": bool(solved and certifies),
+        "planning_time_s": planning,
+        "simplify_time_s": simplify,
+        "states_checked": checker.count.states - before_s,
+        "motions_checked": checker.count.motions - before_m,
+        "paths_rejected": checker.count.rejected - before_r,
+        "path": [[float(v) for v in q] for q in path],
+    }
+
+
+def plan_service(args, client, robot_id: str, scene: str, problem: Problem, joints: List[Joint]) -> dict:
+    """One ``Plan`` call (``--mode service``): the problem's record, as ``--json`` writes it (the
+    path in the URDF's joint order)."""
+    names = [j.name for j in joints]
+    settings = dict(timeout=args.timeout, seed=args.seed, range=args.range, resolution=args.resolution,
+                    tolerance=args.tolerance)
+    t0 = time.perf_counter()
+    if args.request_as == "text":
+        r = client.plan(robot_id, scene=scene, motion_plan_request=problem.request.decode("utf-8"), **settings)
+    else:
+        _, start, goal = read_request(problem.request, joints)
+        r = client.plan(robot_id, scene=scene, start=start, goal=goal, joint_names=names, **settings)
+    wall = time.perf_counter() - t0
+    columns = [r.joint_names.index(n) for n in names]
+    path = r.path[:, columns]
+    return {
+        "scenario": problem.scenario,
+        "scene": problem.scene_name,
+        "request": problem.request_name,
+        "valid_problem": r.status not in ("start_in_collision", "goal_in_collision"),
+        "solved": r.solved,
+        "certified": r.certified,
+        "status": r.status,
+        "message": r.message,
+        "planning_time_s": wall,
+        "server_time_s": r.timing["total"],
+        "goals_time_s": r.timing["goals"],
+        "search_time_s": r.timing["search"],
+        "simplify_time_s": r.timing["simplify"],
+        "certify_time_s": r.timing["certify"],
+        "states_checked": r.states_checked,
+        "motions_checked": r.edges_checked + r.edges_certified,
+        "edges_certified": r.edges_certified,
+        "advancement_steps": r.advancement_steps,
+        "nodes": r.nodes,
+        "repaired": r.repaired,
+        "paths_rejected": 0,
+        "path": [[float(v) for v in q] for q in path],
+    }
+
+
 def find_binary(explicit: Optional[str]) -> Path:
     """The sublevel binary: ``explicit``, else on PATH, else the newer of target/{release,debug}."""
     if explicit:
@@ -442,9 +538,16 @@ def main(argv=None) -> int:
     ap.add_argument("--limit", type=int, default=0, help="the first N problems of each scenario (default: all)")
     ap.add_argument("--timeout", type=float, default=1.0, help="planning time limit per problem, seconds (default 1)")
     ap.add_argument("--simplify-timeout", type=float, help="path simplification time limit, seconds (default: --timeout)")
+    ap.add_argument("--mode", choices=("ompl", "service"), default="ompl",
+                    help="plan with OMPL here, its checks by --checker (ompl, default), or with the service's "
+                         "Plan RPC, one call per problem (service)")
+    ap.add_argument("--request-as", choices=("text", "typed"), default="text",
+                    help="service mode: send the request file's MotionPlanRequest text (text, default) or the start "
+                         "and goal read here (typed)")
     ap.add_argument("--planner", default="RRTConnect", help="an OMPL geometric planner (default RRTConnect)")
-    ap.add_argument("--range", type=float, help="the planner's range (joint-space distance; default: OMPL's)")
-    ap.add_argument("--seed", type=int, default=1, help="OMPL's random seed (default 1)")
+    ap.add_argument("--range", type=float,
+                    help="the planner's range (joint-space distance; default: OMPL's, or the service's 1.0)")
+    ap.add_argument("--seed", type=int, default=1, help="OMPL's random seed, or the Plan call's seed (default 1)")
     ap.add_argument("--checker", choices=("sublevel", "coal"), default="sublevel", help="collision checker (default sublevel)")
     ap.add_argument("--addr", default="127.0.0.1:50051", help="the Sublevel server (default 127.0.0.1:50051)")
     ap.add_argument("--serve", action="store_true", help="start a server (sublevel serve, a temporary store) for the run")
@@ -471,11 +574,14 @@ def main(argv=None) -> int:
     ap.add_argument("--ee", help="the end-effector link for --verify (default panda_hand, else the last link with geometry)")
     ap.add_argument("--json", type=Path, help="write the problems, paths and figures here")
     args = ap.parse_args(argv)
+    service = args.mode == "service"
+    if service and args.checker != "sublevel":
+        ap.error("--mode service plans on the service: --checker coal does not apply (use --verify for coal)")
+    if not service:
+        from ompl import util as ou
 
-    from ompl import util as ou
-
-    ou.setLogLevel(ou.LOG_ERROR)
-    ou.RNG.setSeed(args.seed)
+        ou.setLogLevel(ou.LOG_ERROR)
+        ou.RNG.setSeed(args.seed)
 
     urdf_text = args.urdf.read_text()
     robot_name, joints = urdf_joints(args.urdf)
@@ -491,10 +597,15 @@ def main(argv=None) -> int:
     if args.checker == "coal" or args.verify:
         mesh = MeshChecker(args.urdf, package_dir, names, disabled, peer, args.mesh_reader == "obj", args.resolution)
     verifier = Verifier(mesh, args.ee, args.verify_step) if args.verify else None
+    if service:
+        how = f"mode service (one Plan call per problem, the request sent {args.request_as})"
+    else:
+        how = f"checker {args.checker}" + (
+            f" (motions {args.sublevel_motions})" if args.checker == "sublevel"
+            else f" (motions sampled at {args.resolution:g}/rad)"
+        ) + f", {args.planner}"
     print(
-        f"{len(problems)} problems, checker {args.checker}"
-        + (f" (motions {args.sublevel_motions})" if args.checker == "sublevel" else f" (motions sampled at {args.resolution:g}/rad)")
-        + f", {args.planner}, timeout {args.timeout:g} s"
+        f"{len(problems)} problems, {how}, timeout {args.timeout:g} s"
         + (f"; coal from {'the peer' if peer else 'the minimal loader'}, meshes read by {args.mesh_reader}" if mesh else "")
         + (f"; verify at {args.verify_step * 1e3:g} mm of {verifier.ee}" if verifier else ""),
         flush=True,
@@ -514,7 +625,7 @@ def main(argv=None) -> int:
                 raise SystemExit(f"the fitted robot's joints {info.joint_names} are not the URDF's {names}")
             print(f"robot {info.name} ({info.robot_id}) from {robot_file}: {info.dof} joints, {info.geometries} geometries, "
                   f"{info.self_pairs} self pairs", flush=True)
-            checker = SublevelChecker(
+            checker = None if service else SublevelChecker(
                 client,
                 info.robot_id,
                 names,
@@ -530,62 +641,51 @@ def main(argv=None) -> int:
         header = f"{'scenario':<18} {'scene':<14} {'solved':<7} {'plan ms':>9} {'simplify ms':>11} {'states':>8} {'motions':>8}"
         print(header + ("  verify" if verifier else ""), flush=True)
         for p in problems:
-            plan_idx, start, goal = read_request(p.request, joints)
-            checker.set_scene(p)
+            if service:
+                scene = client.import_scene(p.scene, name=f"plan_mbm {p.scenario} {p.scene_name}").scene_id
+            else:
+                plan_idx, start, goal = read_request(p.request, joints)
+                checker.set_scene(p)
             if mesh is not None and mesh is not checker:
                 mesh.set_scene(p)
             try:
-                before_s, before_m = checker.count.states, checker.count.motions
-                before_r = getattr(checker.count, "rejected", 0)
-                # Start and goal are judged unpadded; when either lies within the search padding,
-                # the problem is searched without it (OMPL refuses an invalid start).
-                search_padding = getattr(checker, "padding", 0.0)
-                checker.padding = 0.0
-                start_ok, goal_ok = checker.valid(start), checker.valid(goal)
-                if search_padding and start_ok and goal_ok:
-                    checker.padding = search_padding
-                    if not (checker.valid(start) and checker.valid(goal)):
-                        checker.padding = 0.0
-                if start_ok and goal_ok:
-                    solved, planning, simplify, path = plan_one(args, checker, joints, plan_idx, start, goal)
+                if service:
+                    row = plan_service(args, client, info.robot_id, scene, p, joints)
                 else:
-                    solved, planning, simplify, path = False, 0.0, 0.0, []
-                checker.padding = search_padding
-                row = {
-                    "scenario": p.scenario,
-                    "scene": p.scene_name,
-                    "request": p.request_name,
-                    "valid_problem": bool(start_ok and goal_ok),
-                    "solved": solved,
-                    "planning_time_s": planning,
-                    "simplify_time_s": simplify,
-                    "states_checked": checker.count.states - before_s,
-                    "motions_checked": checker.count.motions - before_m,
-                    "paths_rejected": checker.count.rejected - before_r,
-                    "path": [[float(v) for v in q] for q in path],
-                }
+                    row = plan_ompl(args, checker, joints, plan_idx, start, goal, p)
+                solved, path = row["solved"], [np.asarray(q) for q in row["path"]]
                 note = "" if row["valid_problem"] else "  (start or goal in collision)"
+                if service and row["status"] == "timed_out":
+                    note = "  (timed out" + (f", {len(path)} waypoints not all certified)" if path else ")")
                 if verifier is not None and solved:
                     n, hit = verifier.check_path(path)
                     row["verify_states"] = n
                     row["verify_collision"] = None if hit is None else {"edge": hit[0], "t": hit[1]}
                     note = f"  {n} states, " + ("free" if hit is None else f"COLLIDES at edge {hit[0]} t={hit[1]:.6f}")
             finally:
-                checker.clear_scene()
+                if service:
+                    client.delete_scene(scene)
+                else:
+                    checker.clear_scene()
                 if mesh is not None and mesh is not checker:
                     mesh.clear_scene()
             results.append(row)
             print(
-                f"{p.scenario:<18} {p.scene_name:<14} {str(solved):<7} {planning * 1e3:9.1f} {simplify * 1e3:11.1f} "
-                f"{row['states_checked']:8d} {row['motions_checked']:8d}{note}",
+                f"{p.scenario:<18} {p.scene_name:<14} {str(solved):<7} {row['planning_time_s'] * 1e3:9.1f} "
+                f"{row['simplify_time_s'] * 1e3:11.1f} {row['states_checked']:8d} {row['motions_checked']:8d}{note}",
                 flush=True,
             )
 
     print()
     used_range = getattr(args, "used_range", None)
-    print(f"checker {args.checker}" + (f" (motions {args.sublevel_motions})" if args.checker == "sublevel" else "")
-          + f", {args.planner}" + (f" (range {used_range:.3g})" if used_range else "")
-          + f", timeout {args.timeout:g} s, seed {args.seed}:")
+    if service:
+        used_range = args.range if args.range is not None else 1.0  # the Plan call's default range
+        print(f"mode service (Plan, the request sent {args.request_as}, range {used_range:.3g})"
+              f", timeout {args.timeout:g} s, seed {args.seed}:")
+    else:
+        print(f"checker {args.checker}" + (f" (motions {args.sublevel_motions})" if args.checker == "sublevel" else "")
+              + f", {args.planner}" + (f" (range {used_range:.3g})" if used_range else "")
+              + f", timeout {args.timeout:g} s, seed {args.seed}:")
     cols = "| scenario | problems | valid | solved | solved % | median planning time (ms) | median states | median motions |"
     sep = "|---|---|---|---|---|---|---|---|"
     if verifier:
@@ -609,7 +709,8 @@ def main(argv=None) -> int:
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         with open(args.json, "w") as f:
-            json.dump({"joint_names": names, "checker": args.checker, "planner": args.planner,
+            json.dump({"mode": args.mode, "joint_names": names, "checker": args.checker,
+                       "planner": "Plan (RRT-Connect, certified)" if service else args.planner,
                        "range": used_range, "timeout_s": args.timeout, "problems": results}, f, indent=1)
         print(f"wrote {args.json}")
     return 0

@@ -10,6 +10,7 @@ written too."""
 
 import csv
 import importlib.util
+import json
 import os
 import re
 import subprocess
@@ -152,9 +153,10 @@ def test_plan_ompl_finds_a_path_through_the_walls(server):
     assert "obstacle tests/data/chair_101.deg2" in out and ".deg8" not in out
 
 
-def plan_mbm(server, *extra):
-    """Runs plan_mbm.py on the first bookshelf_small problem with ``extra`` arguments."""
-    need("ompl")
+def plan_mbm(server, *extra, scenarios=("bookshelf_small",)):
+    """Runs plan_mbm.py on the first problem of each of ``scenarios`` with ``extra`` arguments."""
+    if "service" not in extra:  # --mode service plans on the server: no OMPL
+        need("ompl")
     need("yaml")
     panda = REPO / "data" / "robots" / "panda"
     return example(
@@ -163,7 +165,7 @@ def plan_mbm(server, *extra):
         "--urdf", panda / "panda.urdf",
         "--srdf", panda / "panda.srdf",
         "--problems", REPO / "data" / "robots" / "mbm_panda" / "problems.tar.bz2",
-        "--scenarios", "bookshelf_small",
+        "--scenarios", *scenarios,
         "--limit", "1",
         *extra,
         timeout=600,
@@ -178,6 +180,41 @@ def test_plan_mbm_plans_a_bookshelf_problem_with_certified_edges(server):
     # The problem is a valid one (start and goal free), solved, and its path certified.
     assert row.group(2) == "True", out
     assert re.search(r"^\| bookshelf_small \| 1 \| 1 \| 1 \| 100 \|", out, re.M), out
+
+
+def test_plan_mbm_service_mode_plans_each_problem_in_one_call(server, tmp_path):
+    scenarios = ("bookshelf_small", "box")
+    out = plan_mbm(server, "--mode", "service", "--timeout", "20", "--json", tmp_path / "text.json", scenarios=scenarios)
+    assert re.search(r"^\d+ problems, mode service \(one Plan call per problem, the request sent text\)", out, re.M), out
+    assert re.search(r"^robot panda \(r-\w+\) from \S*panda.robot.json: 7 joints", out, re.M), out
+    for s in scenarios:
+        assert re.search(rf"^{s} +scene0001.yaml +True +\d+\.\d +\d+\.\d +\d+ +\d+$", out, re.M), out
+        assert re.search(rf"^\| {s} \| 1 \| 1 \| 1 \| 100 \|", out, re.M), out
+    import yaml  # after plan_mbm's need("yaml")
+
+    report = json.loads((tmp_path / "text.json").read_text())
+    assert report["mode"] == "service" and report["joint_names"] == [f"panda_joint{i}" for i in range(1, 8)]
+    rows = {r["scenario"]: r for r in report["problems"]}
+    assert sorted(rows) == sorted(scenarios)
+    for s, r in rows.items():
+        # The path runs from the request's start to its goal (the request file read here), every
+        # edge certified, its figures the call's.
+        req = yaml.safe_load((REPO / "data" / "robots" / "mbm_panda" / "requests" / s / "request0001.yaml").read_text())
+        js = dict(zip(req["start_state"]["joint_state"]["name"], req["start_state"]["joint_state"]["position"]))
+        goal = {c["joint_name"]: c["position"] for c in req["goal_constraints"][0]["joint_constraints"]}
+        assert r["status"] == "solved" and r["solved"] and r["certified"] and r["valid_problem"], r
+        assert r["path"][0] == [js[j] for j in report["joint_names"]]
+        assert r["path"][-1] == [goal[j] for j in report["joint_names"]]
+        assert r["planning_time_s"] >= r["server_time_s"] > 0.0
+        stages = r["goals_time_s"] + r["search_time_s"] + r["simplify_time_s"] + r["certify_time_s"]
+        assert 0.0 < stages <= r["server_time_s"]
+        assert r["edges_certified"] >= len(r["path"]) - 1 and r["states_checked"] > 0
+        assert r["motions_checked"] >= r["edges_certified"]
+    # The start and goal sent typed: the same path as the request's text.
+    plan_mbm(server, "--mode", "service", "--request-as", "typed", "--timeout", "20", "--json", tmp_path / "typed.json",
+             scenarios=("box",))
+    typed = json.loads((tmp_path / "typed.json").read_text())["problems"]
+    assert len(typed) == 1 and typed[0]["path"] == rows["box"]["path"]
 
 
 def test_plan_mbm_with_the_coal_checker(server):

@@ -5,7 +5,7 @@
 //!
 //! ```text
 //! cargo run --release -p sublevel-lab --example plan_mbm -- [--timeout S] [--range R] [--seed N]
-//!     [--no-simplify] [--smoothing PASSES] [--padding M]
+//!     [--no-simplify] [--smoothing PASSES] [--padding M] [--search-margin M]
 //!     [--robot data/robots/panda/panda.robot.json] [--problems data/robots/mbm_panda]
 //!     [--scenarios a,b,...] [--limit 10]
 //! ```
@@ -63,6 +63,7 @@ fn args() -> Result<Args, String> {
             "--timeout" => a.settings.timeout = Duration::from_secs_f64(number("--timeout")?),
             "--range" => a.settings.range = number("--range")?,
             "--padding" => a.settings.padding = number("--padding")?,
+            "--search-margin" => a.settings.search_margin = number("--search-margin")?,
             "--seed" => a.settings.seed = value.parse().map_err(|e| format!("--seed: {e}"))?,
             "--smoothing" => a.settings.smoothing_passes = value.parse().map_err(|e| format!("--smoothing: {e}"))?,
             "--robot" => a.robot = value,

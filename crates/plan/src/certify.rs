@@ -142,4 +142,7 @@ impl Validity for Certified<'_> {
     fn collision(&mut self, q: &[Real]) -> Result<Option<String>> {
         self.inner.collision(q)
     }
+    fn set_search_margin(&mut self, margin: Real) {
+        self.inner.set_search_margin(margin);
+    }
 }

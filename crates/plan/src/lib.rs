@@ -26,12 +26,14 @@
 #![forbid(unsafe_code)]
 
 pub mod certify;
+pub mod joints;
 mod plan;
 pub mod rrt;
 pub mod simplify;
 pub mod space;
 pub mod validity;
 
+pub use joints::{joint_goal, start_from_joints, JointConstraint};
 pub use plan::{check_configuration, plan, Goal, JointRegion, PlanOutcome, PlanSettings, PlanStatus, PlanTiming};
 pub use space::{HaltonSampler, JointSpace};
 pub use validity::{Certificate, CheckCounts, RobotValidity, Validity};

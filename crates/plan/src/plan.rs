@@ -11,6 +11,7 @@ use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 use sublevel_core::math::Real;
 use sublevel_core::{Error, Result};
+use sublevel_robot::ik::{IkSettings, IkSolver, PoseGoal};
 
 /// Planner settings; [`PlanSettings::default`] gives the service's defaults.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -41,6 +42,11 @@ pub struct PlanSettings {
     /// Most goal configurations the goal tree is rooted at (≥ 1; default 8): the joint goals
     /// given first, then samples of a goal region or inverse kinematics solutions.
     pub max_goals: usize,
+    /// Extra clearance the search and the simplification keep (meters, ≥ 0; default 2 mm) when
+    /// the start and a goal have it, so that the path stays clear of the obstacles and its
+    /// certificates take few steps; 0 when an end is closer (the certificates always use the
+    /// padding alone).
+    pub search_margin: Real,
 }
 
 impl Default for PlanSettings {
@@ -57,6 +63,7 @@ impl Default for PlanSettings {
             smoothing_passes: 0,
             tolerance: 1e-3,
             max_goals: 8,
+            search_margin: 2e-3,
         }
     }
 }
@@ -89,6 +96,12 @@ impl PlanSettings {
         }
         if self.max_goals == 0 {
             return Err(Error::invalid("max_goals", "must be ≥ 1"));
+        }
+        if !(self.search_margin.is_finite() && self.search_margin >= 0.0) {
+            return Err(Error::invalid(
+                "search_margin",
+                format!("must be finite and ≥ 0 m, got {}", self.search_margin),
+            ));
         }
         Ok(())
     }
@@ -170,6 +183,10 @@ pub enum Goal {
     Configurations(Vec<Vec<Real>>),
     /// Any configuration of a joint region: its center first, then samples inside it.
     Region(JointRegion),
+    /// A link at a pose: goal configurations by inverse kinematics ([`sublevel_robot::ik`]),
+    /// seeded with the start, each checked for collision; the checker must have a robot
+    /// ([`Validity::kinematics`]).
+    Pose(PoseGoal),
 }
 
 /// Checks a configuration against `space`: its length, finite entries, inside the bounds of
@@ -217,7 +234,23 @@ pub fn plan(
     let space = checker.space().clone();
     check_configuration(&space, "start", start)?;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(settings.seed);
-    let candidates = goal_candidates(&space, goal, settings.max_goals, &mut rng)?;
+    let ik = match goal {
+        Goal::Pose(pose) => {
+            let (model, base) = checker
+                .kinematics()
+                .ok_or_else(|| Error::invalid("goal.pose", "this checker has no robot: pose goals need one"))?;
+            pose.validate(model)?;
+            Some((model.clone(), base))
+        }
+        _ => None,
+    };
+    let candidates = match (goal, &ik) {
+        (Goal::Pose(pose), Some((model, base))) => {
+            let mut solver = IkSolver::new(model, base, pose, &[start.to_vec()], &IkSettings::default())?;
+            pose_candidates(checker, &mut solver, settings.max_goals, deadline, &mut rng)?
+        }
+        _ => goal_candidates(&space, goal, settings.max_goals, &mut rng)?,
+    };
     let mut outcome = PlanOutcome {
         status: PlanStatus::TimedOut,
         path: Vec::new(),
@@ -251,7 +284,14 @@ pub fn plan(
     }
     outcome.timing.goals = clock.elapsed();
     if goals.is_empty() {
-        outcome.status = PlanStatus::GoalInCollision(first_collision.unwrap_or_default());
+        outcome.status = match first_collision {
+            Some(why) => PlanStatus::GoalInCollision(why),
+            None => PlanStatus::GoalUnreachable(
+                "inverse kinematics found no configuration within the pose goal's tolerances (the start and \
+                 random restarts tried)"
+                    .into(),
+            ),
+        };
         return Ok(finish(outcome, checker));
     }
     plan_to(checker, start, goals, settings, &mut rng, deadline, cancel, outcome).map(|o| finish(o, checker))
@@ -271,6 +311,24 @@ fn plan_to(
 ) -> Result<PlanOutcome> {
     let search =
         SearchSettings { range: settings.range, resolution: settings.resolution, goal_bias: settings.goal_bias };
+    // The margin when the start and some goal keep it (only those goals then), else none.
+    let mut goals = goals;
+    if settings.search_margin > 0.0 {
+        checker.set_search_margin(settings.search_margin);
+        let mut kept = Vec::new();
+        if checker.state_free(start)? {
+            for g in &goals {
+                if checker.state_free(g)? {
+                    kept.push(g.clone());
+                }
+            }
+        }
+        if kept.is_empty() {
+            checker.set_search_margin(0.0);
+        } else {
+            goals = kept;
+        }
+    }
     let mut sampler = HaltonSampler::new(start.len(), rng);
     let clock = Instant::now();
     let budget = Budget { deadline, cancel };
@@ -278,8 +336,12 @@ fn plan_to(
     outcome.timing.search = clock.elapsed();
     let found = match found {
         Ok(found) => found,
-        Err(SearchStop::Deadline) => return Ok(outcome),
+        Err(SearchStop::Deadline) => {
+            checker.set_search_margin(0.0);
+            return Ok(outcome);
+        }
         Err(SearchStop::Cancelled) => {
+            checker.set_search_margin(0.0);
             outcome.status = PlanStatus::Cancelled;
             return Ok(outcome);
         }
@@ -297,6 +359,7 @@ fn plan_to(
         path = simplify(checker, path, &s, rng, deadline)?;
         outcome.timing.simplify = clock.elapsed();
     }
+    checker.set_search_margin(0.0);
     let clock = Instant::now();
     let c = CertifySettings { tolerance: settings.tolerance, max_depth: 4, search };
     let certified = certify_path(checker, &path, &c, rng, budget)?;
@@ -316,6 +379,30 @@ fn plan_to(
     Ok(outcome)
 }
 
+/// Inverse kinematics solutions of a pose goal, at most `max` (the free ones first: a colliding
+/// solution is kept only while no free one is found, for the status to name its pair).
+fn pose_candidates(
+    checker: &mut dyn Validity,
+    solver: &mut IkSolver<'_>,
+    max: usize,
+    deadline: Instant,
+    rng: &mut impl Rng,
+) -> Result<Vec<Vec<Real>>> {
+    let (mut free, mut colliding) = (Vec::new(), None);
+    while free.len() < max && Instant::now() < deadline {
+        let Some(solution) = solver.next_solution(rng) else { break };
+        if checker.state_free(&solution.q)? {
+            free.push(solution.q);
+        } else {
+            colliding.get_or_insert(solution.q);
+        }
+    }
+    if free.is_empty() {
+        return Ok(colliding.into_iter().collect());
+    }
+    Ok(free)
+}
+
 /// The goal configurations to try, checked against the space: those given (at most
 /// `max_goals`), or a region's center then samples inside it.
 fn goal_candidates(space: &JointSpace, goal: &Goal, max_goals: usize, rng: &mut impl Rng) -> Result<Vec<Vec<Real>>> {
@@ -329,6 +416,7 @@ fn goal_candidates(space: &JointSpace, goal: &Goal, max_goals: usize, rng: &mut 
             }
             Ok(qs.iter().take(max_goals).cloned().collect())
         }
+        Goal::Pose(_) => Err(Error::invalid("goal.pose", "this checker has no robot: pose goals need one")),
         Goal::Region(r) => {
             check_configuration(space, "goal.center", &r.center)?;
             for (field, t) in [("goal.below", &r.below), ("goal.above", &r.above)] {

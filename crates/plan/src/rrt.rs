@@ -176,6 +176,9 @@ pub fn connect(
         if let Some(new) = extend(checker, &space, &mut a, &sample, settings, &mut step)? {
             let target = a.node(new).to_vec();
             loop {
+                if let Some(stop) = budget.stopped() {
+                    return Ok(Err(stop));
+                }
                 match extend(checker, &space, &mut b, &target, settings, &mut step)? {
                     Some(reached) if space.distance_squared(b.node(reached), &target) < 1e-24 => {
                         let (mut from_a, a_root) = a.to_root(new);

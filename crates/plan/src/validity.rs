@@ -10,7 +10,7 @@
 use crate::space::JointSpace;
 use sublevel_core::math::{Isometry3, Real};
 use sublevel_core::Result;
-use sublevel_robot::{CheckOptions, MotionChecker, MotionOptions};
+use sublevel_robot::{CheckOptions, MotionChecker, MotionOptions, RobotModel};
 
 /// The answer of a certified edge check.
 #[derive(Clone, Debug, PartialEq)]
@@ -54,15 +54,7 @@ pub trait Validity {
     /// # Errors
     /// As [`Validity::state_free`].
     fn edge_free(&mut self, a: &[Real], b: &[Real], resolution: Real) -> Result<bool> {
-        let n = ((self.space().distance(a, b) * resolution).ceil() as usize).max(1);
-        let mut q = Vec::with_capacity(a.len());
-        for i in sample_order(n) {
-            self.space().interpolate(a, b, i as Real / n as Real, &mut q);
-            if !self.state_free(&q)? {
-                return Ok(false);
-            }
-        }
-        Ok(true)
+        sampled_edge_free(self, a, b, resolution)
     }
 
     /// Whether the segment from `a` to `b` is proven free at the checker's padding, with
@@ -80,6 +72,39 @@ pub trait Validity {
     /// # Errors
     /// As [`Validity::state_free`].
     fn collision(&mut self, q: &[Real]) -> Result<Option<String>>;
+
+    /// Sets the extra clearance (meters, ≥ 0) that [`Validity::state_free`] and the sampled edges
+    /// ask for on top of the padding, while the certificates keep the padding alone (a checker
+    /// with no notion of clearance ignores it).
+    fn set_search_margin(&mut self, _margin: Real) {}
+
+    /// The robot's kinematic model and base pose, for pose goals (inverse kinematics); `None` for
+    /// a checker with no robot behind it.
+    fn kinematics(&mut self) -> Option<(&RobotModel, Isometry3)> {
+        None
+    }
+}
+
+/// The sampled edge test of [`Validity::edge_free`]: the samples of `a → b` at `resolution` per
+/// unit of joint distance, `b` first, in [`sample_order`], each by [`Validity::state_free`].
+///
+/// # Errors
+/// As [`Validity::state_free`].
+pub fn sampled_edge_free<V: Validity + ?Sized>(
+    checker: &mut V,
+    a: &[Real],
+    b: &[Real],
+    resolution: Real,
+) -> Result<bool> {
+    let n = ((checker.space().distance(a, b) * resolution).ceil() as usize).max(1);
+    let mut q = Vec::with_capacity(a.len());
+    for i in sample_order(n) {
+        checker.space().interpolate(a, b, i as Real / n as Real, &mut q);
+        if !checker.state_free(&q)? {
+            return Ok(false);
+        }
+    }
+    Ok(true)
 }
 
 /// `1..=n` in the order OMPL's discrete motion validator checks a segment's samples: the end
@@ -107,6 +132,7 @@ pub struct RobotValidity<'c, 'r> {
     space: JointSpace,
     base: Isometry3,
     padding: Real,
+    margin: Real,
     max_steps: usize,
     counts: CheckCounts,
 }
@@ -116,7 +142,7 @@ impl<'c, 'r> RobotValidity<'c, 'r> {
     /// padded by `padding` meters (≥ 0; on top of the checker's link padding).
     pub fn new(mut motion: MotionChecker<'c, 'r>, base: Isometry3, padding: Real) -> Self {
         let space = JointSpace::of(&motion.checker().robot().model);
-        Self { motion, space, base, padding, max_steps: 100_000, counts: CheckCounts::default() }
+        Self { motion, space, base, padding, margin: 0.0, max_steps: 100_000, counts: CheckCounts::default() }
     }
 }
 
@@ -127,8 +153,14 @@ impl Validity for RobotValidity<'_, '_> {
 
     fn state_free(&mut self, q: &[Real]) -> Result<bool> {
         self.counts.states += 1;
-        let options = CheckOptions { padding: self.padding, distance: false, self_collision: true, gradient: false };
+        let padding = self.padding + self.margin;
+        let options = CheckOptions { padding, distance: false, self_collision: true, gradient: false };
         Ok(!self.motion.checker().check(q, &self.base, &options)?.collides)
+    }
+
+    fn edge_free(&mut self, a: &[Real], b: &[Real], resolution: Real) -> Result<bool> {
+        self.counts.edges += 1;
+        sampled_edge_free(self, a, b, resolution)
     }
 
     fn certify(&mut self, a: &[Real], b: &[Real], tolerance: Real) -> Result<Certificate> {
@@ -166,6 +198,15 @@ impl Validity for RobotValidity<'_, '_> {
             (_, Some((a, b))) => format!("{} collides with {}", geometry(a), geometry(b)),
             _ => "the robot collides".to_string(),
         }))
+    }
+
+    fn set_search_margin(&mut self, margin: Real) {
+        self.margin = margin;
+    }
+
+    fn kinematics(&mut self) -> Option<(&RobotModel, Isometry3)> {
+        let base = self.base;
+        Some((&self.motion.checker().robot().model, base))
     }
 }
 

@@ -50,13 +50,14 @@ from ._requests import (
     _states,
     as_query,
 )
+from .plans import PlanCalls
 from .robots import RobotCalls
 from .stream import PlannerStream
 
 __all__ = ["Client", "PlannerStream", "Query", "DEFAULT_ADDR"]
 
 
-class Client(RobotCalls):
+class Client(RobotCalls, PlanCalls):
     """A connection to a Sublevel server.
 
     >>> c = Client("127.0.0.1:50051")                          # doctest: +SKIP

@@ -11,7 +11,7 @@ from typing import Dict, List, Optional
 import numpy as np
 
 from .poses import Pose
-from ._convert import _columns, _pose, _primitive_dict
+from ._convert import _columns, _enum_name, _pose, _primitive_dict
 
 
 @dataclass
@@ -227,4 +227,95 @@ class MotionColumns:
             other=list(m.other),
             self_contact=np.asarray(m.self_contact, dtype=bool),
             steps=np.asarray(m.steps, dtype=np.int64),
+        )
+
+
+#: ``PlanResponse.status`` names as :attr:`PlanResult.status` gives them.
+PLAN_STATUSES = ("solved", "timed_out", "start_in_collision", "goal_in_collision", "goal_unreachable", "cancelled")
+
+
+@dataclass
+class PlanResult:
+    """The answer of ``Client.plan``: a path from the start to a goal whose every edge is proven
+    free by conservative advancement (docs/planning.md). Units: radians for revolute and continuous
+    joints, meters for prismatic ones, seconds for times.
+
+    Attributes:
+        status: how the plan ended: ``"solved"`` (a path, every edge certified), ``"timed_out"``
+            (no path in time, or a path with unproven edges: ``certified`` false), or, with no
+            path, ``"start_in_collision"`` / ``"goal_in_collision"`` (``message`` names the pair),
+            ``"goal_unreachable"`` (no inverse-kinematics solution of a pose goal; ``message`` says
+            why) or ``"cancelled"``.
+        message: the colliding pair or the reason, in words; "" when solved.
+        joint_names: the robot's joints, the columns of ``path`` and ``goal`` (n of them).
+        path: shape (W, n): the waypoints, start first, the goal configuration reached last;
+            shape (0, n) when there is no path.
+        length: the path's joint-space length, the sum of its edges' Euclidean lengths
+            (continuous joints the shorter way); 0 with no path.
+        certified: every edge ``path[i] -> path[i + 1]`` is proven free at the request's padding
+            by conservative advancement, at the contact tolerance or else at a hundredth of it
+            (``Client.check_motions(..., tolerance=tolerance / 100)`` proves each such edge).
+        unproven_edges: shape (E,), int: the edges left unproven (only when ``certified`` is
+            false and there is a path).
+        goal: shape (n,): the goal configuration reached; None when none was.
+        timing: seconds per stage: ``goals`` (the start checked, goal configurations made),
+            ``search`` (RRT-Connect), ``simplify``, ``certify`` (certificates and repairs) and
+            ``total`` (the whole call on the server).
+        states_checked, edges_checked: configurations checked, and edges checked by sampling.
+        edges_certified, advancement_steps: edges checked by conservative advancement and their
+            advancement steps.
+        nodes: nodes of the search's two trees.
+        repaired: edges the certification repaired (split or re-planned).
+    """
+
+    status: str
+    message: str
+    joint_names: List[str]
+    path: np.ndarray
+    length: float
+    certified: bool
+    unproven_edges: np.ndarray
+    goal: Optional[np.ndarray]
+    timing: Dict[str, float]
+    states_checked: int
+    edges_checked: int
+    edges_certified: int
+    advancement_steps: int
+    nodes: int
+    repaired: int
+
+    @property
+    def solved(self) -> bool:
+        """Whether the plan is solved: a path with every edge certified."""
+        return self.status == "solved"
+
+    @property
+    def waypoints(self) -> int:
+        """The number of waypoints of :attr:`path` (0 with no path)."""
+        return int(self.path.shape[0])
+
+    @classmethod
+    def from_proto(cls, m) -> "PlanResult":
+        from ._pb.sublevel.v1 import sublevel_pb2 as pb
+
+        n = len(m.joint_names)
+        path = np.asarray(m.path, dtype=float)
+        path = path.reshape(-1, n) if n else np.zeros((0, 0))
+        t = m.timing
+        return cls(
+            status=_enum_name(pb.PlanStatus, m.status, "PLAN_STATUS_").lower(),
+            message=m.message,
+            joint_names=list(m.joint_names),
+            path=path,
+            length=float(m.length),
+            certified=bool(m.certified),
+            unproven_edges=np.asarray(m.unproven_edges, dtype=np.int64),
+            goal=np.asarray(m.goal, dtype=float) if len(m.goal) else None,
+            timing={k: float(getattr(t, k)) for k in ("goals", "search", "simplify", "certify", "total")},
+            states_checked=int(m.states_checked),
+            edges_checked=int(m.edges_checked),
+            edges_certified=int(m.edges_certified),
+            advancement_steps=int(m.advancement_steps),
+            nodes=int(m.nodes),
+            repaired=int(m.repaired),
         )

@@ -16,7 +16,7 @@ import numpy as np
 from .poses import Pose
 from ._convert import _columns, _enum_name, _pose, _twist, _v3
 from .imported import AllowedCollisionMatrix, ImportedInstance, ImportedMesh, ImportedScene, SkippedShape
-from .robot_types import ConfigurationColumns, MotionColumns, RobotInfo, SceneRobot
+from .robot_types import ConfigurationColumns, MotionColumns, PlanResult, RobotInfo, SceneRobot
 
 __all__ = [
     "SolveInfo",
@@ -44,6 +44,7 @@ __all__ = [
     "RobotInfo",
     "ConfigurationColumns",
     "MotionColumns",
+    "PlanResult",
 ]
 
 

@@ -16,6 +16,9 @@ pub struct MotionPlanRequest {
     pub start: Vec<(String, Real)>,
     /// The first goal constraint's joint positions, in message order.
     pub goal: Vec<(String, Real)>,
+    /// Their tolerances, in the same order: (below, above), radians or meters, ≥ 0 (0 when the
+    /// message leaves them out).
+    pub goal_tolerances: Vec<(Real, Real)>,
 }
 
 #[derive(Deserialize)]
@@ -52,6 +55,10 @@ struct RawGoal {
 struct RawConstraint {
     joint_name: String,
     position: Real,
+    #[serde(default)]
+    tolerance_below: Real,
+    #[serde(default)]
+    tolerance_above: Real,
 }
 
 impl MotionPlanRequest {
@@ -87,7 +94,24 @@ impl MotionPlanRequest {
                 "must be finite",
             ));
         }
-        Ok(Self { group_name: raw.group_name, start: js.name.into_iter().zip(js.position).collect(), goal })
+        let goal_tolerances: Vec<(Real, Real)> =
+            raw.goal_constraints[0].joint_constraints.iter().map(|c| (c.tolerance_below, c.tolerance_above)).collect();
+        for (k, (below, above)) in goal_tolerances.iter().enumerate() {
+            for (name, v) in [("tolerance_below", below), ("tolerance_above", above)] {
+                if !(v.is_finite() && *v >= 0.0) {
+                    return Err(Error::invalid(
+                        format!("goal_constraints[0].joint_constraints[{k}].{name}"),
+                        format!("must be finite and ≥ 0, got {v}"),
+                    ));
+                }
+            }
+        }
+        Ok(Self {
+            group_name: raw.group_name,
+            start: js.name.into_iter().zip(js.position).collect(),
+            goal,
+            goal_tolerances,
+        })
     }
 }
 
@@ -107,6 +131,9 @@ mod tests {
         assert_eq!(r.goal.len(), 7);
         assert_eq!(r.goal[0], ("panda_joint1".to_owned(), -1.451140183264752));
         assert_eq!(r.goal[6], ("panda_joint7".to_owned(), 0.8869533207576928));
+        assert_eq!(r.goal_tolerances, vec![(0.0, 0.0); 7]);
+        let with = "goal_constraints: [{joint_constraints: [{joint_name: a, position: 1, tolerance_below: 0.1, tolerance_above: 0.2}]}]";
+        assert_eq!(MotionPlanRequest::from_yaml(with.as_bytes()).unwrap().goal_tolerances, vec![(0.1, 0.2)]);
     }
 
     #[test]

@@ -26,6 +26,7 @@
 //! | `planner.rs`    | pair / answer columns, planner requests and answers, scene checks             |
 //! | `robots.rs`     | robot summaries, configuration columns, configuration and motion answers      |
 //! | `motions.rs`    | rigid-body motions of scene instances: pose columns, options, answer columns  |
+//! | `plans.rs`      | `Plan`: settings, the start and the goal (typed or MoveIt text), the answer   |
 //!
 //! Ids and pages, shared by every area, are here.
 
@@ -35,6 +36,7 @@ mod bodies;
 mod errors;
 mod motions;
 mod planner;
+mod plans;
 mod primitives;
 #[cfg(test)]
 mod properties;
@@ -54,6 +56,7 @@ pub use planner::{
     answers_to_columns, columns_kind, pair_columns_from_proto, planner_answers_to_proto, planner_request_from_proto,
     scene_check_to_proto, ColumnsSink, PairColumns,
 };
+pub use plans::{plan_ends, plan_response, plan_settings};
 pub use primitives::{primitive_from_proto, primitive_to_proto};
 pub use queries::{
     answer_to_proto, certificate_to_proto, distance_reply_to_proto, distance_to_proto, gradient_to_proto,

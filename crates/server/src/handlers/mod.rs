@@ -19,6 +19,7 @@
 mod bodies;
 mod jobs;
 mod motions;
+mod plans;
 mod queries;
 mod robots;
 mod scene_robots;
@@ -259,6 +260,10 @@ impl Sublevel for SublevelService {
 
     async fn detach_object(&self, request: Request<pb::DetachObjectRequest>) -> Reply<pb::DetachObjectResponse> {
         scene_robots::detach_object(self, request).await.map_err(Status::from)
+    }
+
+    async fn plan(&self, request: Request<pb::PlanRequest>) -> Reply<pb::PlanResponse> {
+        plans::plan(self, request).await.map_err(Status::from)
     }
 
     async fn check_instance_motions(

@@ -164,13 +164,16 @@ pub(super) async fn delete_robot(
 }
 
 /// The robot, the world, the base pose and the link padding of a check request.
-struct Setting {
+pub(super) struct Setting {
     /// The robot, with the request's attached objects (a copy of the stored robot when there
     /// are any: its meshes' BVHs shared, its vertices copied).
-    robot: Arc<FittedRobot>,
-    world: Arc<RobotWorld>,
-    base: Isometry3,
-    link_padding: Arc<[(String, Real)]>,
+    pub(super) robot: Arc<FittedRobot>,
+    /// The scene's world and planning state.
+    pub(super) world: Arc<RobotWorld>,
+    /// The robot's root pose.
+    pub(super) base: Isometry3,
+    /// Padding per link (meters).
+    pub(super) link_padding: Arc<[(String, Real)]>,
 }
 
 /// `robot` with `attached` objects added (`robot` itself when there are none).
@@ -203,14 +206,14 @@ pub(super) struct RobotChecks {
 }
 
 /// What a check request says of its robot and world (see [`RobotChecks::setting`]).
-struct Asked {
-    robot_id: String,
-    scene_id: String,
-    base: Option<pb::Pose>,
-    attached: Vec<pb::AttachedObject>,
-    link_padding: std::collections::HashMap<String, Real>,
+pub(super) struct Asked {
+    pub(super) robot_id: String,
+    pub(super) scene_id: String,
+    pub(super) base: Option<pb::Pose>,
+    pub(super) attached: Vec<pb::AttachedObject>,
+    pub(super) link_padding: std::collections::HashMap<String, Real>,
     /// Pose overrides of scene instances (instance id → pose): a query stream's view.
-    poses: Vec<(String, Isometry3)>,
+    pub(super) poses: Vec<(String, Isometry3)>,
 }
 
 impl RobotChecks {
@@ -230,7 +233,7 @@ impl RobotChecks {
     /// are in memory ([`RobotChecks::in_memory`]), else off the async workers. With no
     /// `robot_id`, the scene's robot with its base (unless the request gives one), attached
     /// objects (the request's added) and link padding (the request's replacing it link by link).
-    async fn setting(&self, asked: Asked) -> Result<Setting, HandlerError> {
+    pub(super) async fn setting(&self, asked: Asked) -> Result<Setting, HandlerError> {
         let Asked { robot_id, scene_id, base, attached, link_padding, poses } = asked;
         let base = base.map(|b| cv::pose_from_proto("base", Some(&b))).transpose().map_err(cv::to_status)?;
         let catalog = self.catalog.clone();

@@ -1,0 +1,201 @@
+//! `Plan`: the request's settings, start and goal as the planner takes them, and its outcome as
+//! the response (docs/planning.md).
+
+use crate::pb;
+use crate::{Error, Result};
+use std::time::Duration;
+use sublevel_core::math::Real;
+use sublevel_plan::{joint_goal, start_from_joints, Goal, JointConstraint, PlanOutcome, PlanSettings, PlanStatus};
+use sublevel_robot::ik::PoseGoal;
+use sublevel_robot::FittedRobot;
+use sublevel_scene::moveit::MotionPlanRequest;
+
+/// The planner settings of a request: absent or zero fields take their defaults.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `settings.FIELD` for a value out of its range (a 0 s
+/// timeout included).
+pub fn plan_settings(s: Option<&pb::PlanSettings>) -> Result<PlanSettings> {
+    let d = PlanSettings::default();
+    let Some(s) = s else { return Ok(d) };
+    let or = |v: Real, default: Real| if v == 0.0 { default } else { v };
+    let timeout = match s.timeout {
+        None => d.timeout,
+        Some(t) if t.is_finite() && t > 0.0 && t <= 3600.0 => Duration::from_secs_f64(t),
+        Some(t) => {
+            return Err(Error::invalid("settings.timeout", format!("must be in (0, 3600] seconds, got {t}")));
+        }
+    };
+    let settings = PlanSettings {
+        timeout,
+        seed: s.seed.unwrap_or(d.seed),
+        range: or(s.range, d.range),
+        resolution: or(s.resolution, d.resolution),
+        goal_bias: s.goal_bias.unwrap_or(d.goal_bias),
+        padding: s.padding,
+        simplify: s.simplify.unwrap_or(d.simplify),
+        shortcut_attempts: d.shortcut_attempts,
+        smoothing_passes: (s.smoothing_passes as usize).min(8),
+        tolerance: or(s.tolerance, d.tolerance),
+        max_goals: if s.max_goals == 0 { d.max_goals } else { (s.max_goals as usize).min(64) },
+        search_margin: d.search_margin,
+    };
+    settings.validate().map_err(|e| crate::convert::prefix_field(e, "settings"))?;
+    Ok(settings)
+}
+
+/// The start configuration and the goal of a request (its typed fields or its MoveIt
+/// MotionPlanRequest text), `defaults` the scene's joint positions.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming the field: no goal or two kinds of goal, a start of more than
+/// one configuration, unknown or repeated joints, values that are not finite or outside the
+/// limits, a malformed MotionPlanRequest.
+pub fn plan_ends(req: &pb::PlanRequest, robot: &FittedRobot, defaults: &[(String, Real)]) -> Result<(Vec<Real>, Goal)> {
+    let model = &robot.model;
+    if let Some(text) = &req.motion_plan_request {
+        let (field, bytes) = match text {
+            pb::plan_request::MotionPlanRequest::MotionPlanRequestYaml(t) => ("motion_plan_request_yaml", t),
+            pb::plan_request::MotionPlanRequest::MotionPlanRequestJson(t) => ("motion_plan_request_json", t),
+        };
+        let given = [
+            ("start", req.start.is_some()),
+            ("goal_configurations", req.goal_configurations.is_some()),
+            ("goal_joint_constraints", !req.goal_joint_constraints.is_empty()),
+            ("goal_pose", req.goal_pose.is_some()),
+        ];
+        if let Some((other, _)) = given.iter().find(|(_, g)| *g) {
+            return Err(Error::invalid(
+                *other,
+                format!("give the start and the goal either in `{field}` or in the typed fields, not both"),
+            ));
+        }
+        let request =
+            MotionPlanRequest::from_yaml(bytes.as_bytes()).map_err(|e| crate::convert::prefix_field(e, field))?;
+        return ends_of_moveit(field, &request, robot, defaults);
+    }
+    let start = match &req.start {
+        Some(columns) => {
+            let mut qs = crate::convert::configurations_from_proto("start", Some(columns), robot, defaults)?;
+            if qs.len() != 1 {
+                return Err(Error::invalid("start.values", format!("one start configuration, got {}", qs.len())));
+            }
+            qs.remove(0)
+        }
+        None => {
+            let names: Vec<&str> = model.variable_names();
+            let q: Vec<Real> =
+                names.iter().map(|n| defaults.iter().find(|(m, _)| m == n).map_or(0.0, |(_, v)| *v)).collect();
+            model.check_limits("start", &q)?;
+            q
+        }
+    };
+    let kinds = [req.goal_configurations.is_some(), !req.goal_joint_constraints.is_empty(), req.goal_pose.is_some()];
+    match kinds.iter().filter(|k| **k).count() {
+        0 => {
+            return Err(Error::invalid(
+                "goal_configurations",
+                "required: goal configurations, joint constraints, a pose goal or a motion_plan_request",
+            ))
+        }
+        1 => {}
+        _ => {
+            return Err(Error::invalid(
+                "goal_pose",
+                "give one kind of goal: configurations, joint constraints or a pose",
+            ))
+        }
+    }
+    if let Some(columns) = &req.goal_configurations {
+        let qs = crate::convert::configurations_from_proto("goal_configurations", Some(columns), robot, defaults)?;
+        return Ok((start, Goal::Configurations(qs)));
+    }
+    if let Some(pose) = &req.goal_pose {
+        if model.link_index(&pose.link).is_none() {
+            return Err(Error::invalid(
+                "goal_pose.link",
+                format!("`{}` is not a link of the robot", sublevel_core::error::clip(&pose.link)),
+            ));
+        }
+        let target = crate::convert::pose_from_proto("goal_pose.pose", pose.pose.as_ref())?;
+        let mut goal = PoseGoal::new(pose.link.clone(), target);
+        for (field, value, slot) in [
+            ("goal_pose.position_tolerance", pose.position_tolerance, &mut goal.position_tolerance),
+            ("goal_pose.orientation_tolerance", pose.orientation_tolerance, &mut goal.orientation_tolerance),
+        ] {
+            if !(value.is_finite() && value >= 0.0) {
+                return Err(Error::invalid(field, format!("must be finite and ≥ 0, got {value}")));
+            }
+            if value > 0.0 {
+                *slot = value;
+            }
+        }
+        return Ok((start, Goal::Pose(goal)));
+    }
+    let constraints: Vec<JointConstraint> = req
+        .goal_joint_constraints
+        .iter()
+        .map(|c| (c.joint_name.clone(), c.position, c.tolerance_below, c.tolerance_above))
+        .collect();
+    let goal = joint_goal(model, "goal_joint_constraints", &constraints, &start)?;
+    Ok((start, goal))
+}
+
+/// The start and goal of a MoveIt MotionPlanRequest: the start state's joints the robot moves
+/// (others, such as fixed fingers, ignored), the scene's joint positions for the rest; the first
+/// goal constraint's joint constraints, each a joint the robot moves.
+fn ends_of_moveit(
+    field: &str,
+    request: &MotionPlanRequest,
+    robot: &FittedRobot,
+    defaults: &[(String, Real)],
+) -> Result<(Vec<Real>, Goal)> {
+    let start = start_from_joints(&robot.model, &format!("{field}.start_state"), &request.start, defaults)?;
+    let constraints: Vec<JointConstraint> = request
+        .goal
+        .iter()
+        .zip(&request.goal_tolerances)
+        .map(|((n, v), (below, above))| (n.clone(), *v, *below, *above))
+        .collect();
+    let goal =
+        joint_goal(&robot.model, &format!("{field}.goal_constraints[0].joint_constraints"), &constraints, &start)?;
+    Ok((start, goal))
+}
+
+/// The response of a plan: its status and message, the path in rows of the robot's joints, the
+/// times and counts; `total` the server's time for the whole call.
+pub fn plan_response(out: &PlanOutcome, robot: &FittedRobot, total: Duration) -> pb::PlanResponse {
+    let (status, message) = match &out.status {
+        PlanStatus::Solved => (pb::PlanStatus::Solved, String::new()),
+        PlanStatus::TimedOut => (pb::PlanStatus::TimedOut, String::new()),
+        PlanStatus::StartInCollision(why) => (pb::PlanStatus::StartInCollision, why.clone()),
+        PlanStatus::GoalInCollision(why) => (pb::PlanStatus::GoalInCollision, why.clone()),
+        PlanStatus::GoalUnreachable(why) => (pb::PlanStatus::GoalUnreachable, why.clone()),
+        PlanStatus::Cancelled => (pb::PlanStatus::Cancelled, String::new()),
+    };
+    let t = &out.timing;
+    pb::PlanResponse {
+        status: status as i32,
+        message,
+        joint_names: robot.model.variable_names().iter().map(|s| (*s).to_owned()).collect(),
+        path: out.path.iter().flatten().copied().collect(),
+        waypoints: out.path.len() as u32,
+        length: out.length,
+        certified: out.certified,
+        unproven_edges: out.unproven.iter().map(|&e| e as u32).collect(),
+        goal: out.goal.clone().unwrap_or_default(),
+        timing: Some(pb::PlanTiming {
+            goals: t.goals.as_secs_f64(),
+            search: t.search.as_secs_f64(),
+            simplify: t.simplify.as_secs_f64(),
+            certify: t.certify.as_secs_f64(),
+            total: total.as_secs_f64(),
+        }),
+        states_checked: out.counts.states as u64,
+        edges_checked: out.counts.edges as u64,
+        edges_certified: out.counts.edges_certified as u64,
+        advancement_steps: out.counts.advancement_steps as u64,
+        nodes: out.nodes as u32,
+        repaired: out.repaired as u32,
+    }
+}
