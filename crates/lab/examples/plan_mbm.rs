@@ -5,10 +5,14 @@
 //!
 //! ```text
 //! cargo run --release -p sublevel-lab --example plan_mbm -- [--timeout S] [--range R] [--seed N]
-//!     [--no-simplify] [--smoothing PASSES] [--padding M] [--search-margin M]
+//!     [--no-simplify] [--smoothing PASSES] [--padding M] [--search-margin M] [--pose-goal LINK]
 //!     [--robot data/robots/panda/panda.robot.json] [--problems data/robots/mbm_panda]
 //!     [--scenarios a,b,...] [--limit 10]
 //! ```
+//!
+//! With `--pose-goal panda_hand` the goal is that link's pose at the request's joint goal (forward
+//! kinematics), reached within 1 mm and 0.01 rad (inverse kinematics, then the plan); the table's
+//! last column counts the paths whose last waypoint, by forward kinematics, is within them.
 //!
 //! Problems 1 to `--limit` of each scenario: `PROBLEMS/scenes/SCENARIO/sceneNNNN.yaml` with
 //! `PROBLEMS/requests/SCENARIO/requestNNNN.yaml` (the repository's 10 per scenario), or the
@@ -20,11 +24,15 @@ use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 use sublevel_core::math::{Isometry3, Real};
 use sublevel_plan::{plan, Goal, PlanSettings, PlanStatus, RobotValidity};
+use sublevel_robot::ik::PoseGoal;
 use sublevel_robot::{FittedRobot, MotionChecker, RobotChecker};
 use sublevel_scene::moveit::{allowed_override, world_objects, MotionPlanRequest, PlanningScene};
 
 struct Args {
     settings: PlanSettings,
+    /// The goal as the end-effector link's pose (forward kinematics of the request's joint goal)
+    /// instead of the joint goal: the link's name.
+    pose_goal: Option<String>,
     robot: String,
     problems: String,
     scenarios: Vec<String>,
@@ -34,6 +42,7 @@ struct Args {
 fn args() -> Result<Args, String> {
     let mut a = Args {
         settings: PlanSettings::default(),
+        pose_goal: None,
         robot: "data/robots/panda/panda.robot.json".into(),
         problems: "data/robots/mbm_panda".into(),
         scenarios: [
@@ -67,6 +76,7 @@ fn args() -> Result<Args, String> {
             "--seed" => a.settings.seed = value.parse().map_err(|e| format!("--seed: {e}"))?,
             "--smoothing" => a.settings.smoothing_passes = value.parse().map_err(|e| format!("--smoothing: {e}"))?,
             "--robot" => a.robot = value,
+            "--pose-goal" => a.pose_goal = Some(value),
             "--problems" => a.problems = value,
             "--scenarios" => a.scenarios = value.split(',').map(String::from).collect(),
             "--limit" => a.limit = value.parse().map_err(|e| format!("--limit: {e}"))?,
@@ -97,10 +107,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         s.timeout.as_secs_f64(),
         s.seed
     );
-    println!("| scenario | problems | solved | median plan (ms) | search | simplify | certify | median length | median waypoints | median certified edges | median advancement steps | median states |");
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("| scenario | problems | solved | median plan (ms) | search | simplify | certify | median length | median waypoints | median certified edges | median advancement steps | median states | pose goal reached |");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for scenario in &a.scenarios {
-        let (mut total, mut solved) = (0, 0);
+        let (mut total, mut solved, mut within) = (0, 0, 0);
         let mut columns: [Vec<Real>; 9] = Default::default();
         for k in 1..=a.limit {
             let mut scene_path = format!("{}/scenes/{scenario}/scene{k:04}.yaml", a.problems);
@@ -122,8 +132,28 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let mut validity = RobotValidity::new(MotionChecker::new(&mut checker)?, Isometry3::identity(), s.padding);
             total += 1;
             let clock = Instant::now();
-            let out = plan(&mut validity, &start, &Goal::Configurations(vec![goal]), s, &AtomicBool::new(false))?;
+            let target = match &a.pose_goal {
+                Some(link) => {
+                    let l = robot.model.link_index(link).ok_or(format!("--pose-goal: no link `{link}`"))?;
+                    Some((l, robot.model.link_poses(&goal, &Isometry3::identity())?[l]))
+                }
+                None => None,
+            };
+            let asked = match (&a.pose_goal, &target) {
+                (Some(link), Some((_, pose))) => Goal::Pose(PoseGoal::new(link.clone(), *pose)),
+                _ => Goal::Configurations(vec![goal]),
+            };
+            let out = plan(&mut validity, &start, &asked, s, &AtomicBool::new(false))?;
+            if let (Some((l, pose)), Some(end)) = (target, out.path.last()) {
+                let reached = robot.model.link_poses(end, &Isometry3::identity())?[l];
+                let (dp, da) = PoseGoal::new("", pose).errors(&reached);
+                within += usize::from(dp <= 1e-3 && da <= 1e-2);
+            }
             let elapsed = clock.elapsed();
+            if out.status != PlanStatus::Solved {
+                let kind = format!("{:?}", out.status);
+                eprintln!("{scenario} {k}: {}", kind.chars().take(160).collect::<String>());
+            }
             if out.status == PlanStatus::Solved {
                 solved += 1;
                 let ms = |d: Duration| d.as_secs_f64() * 1e3;
@@ -145,7 +175,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
         let [plan_ms, search, simplify, certify, length, waypoints, certified, steps, states] = &mut columns;
         println!(
-            "| {scenario} | {total} | {solved} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.0} | {:.0} | {:.0} | {:.0} |",
+            "| {scenario} | {total} | {solved} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.0} | {:.0} | {:.0} | {:.0} | {} |",
             median(plan_ms),
             median(search),
             median(simplify),
@@ -154,7 +184,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             median(waypoints),
             median(certified),
             median(steps),
-            median(states)
+            median(states),
+            if a.pose_goal.is_some() { within.to_string() } else { "—".into() }
         );
     }
     Ok(())

@@ -246,7 +246,10 @@ pub fn plan(
     };
     let candidates = match (goal, &ik) {
         (Goal::Pose(pose), Some((model, base))) => {
-            let mut solver = IkSolver::new(model, base, pose, &[start.to_vec()], &IkSettings::default())?;
+            // Restarts until the deadline rather than a fixed few: where most solutions collide
+            // (a hand inside a cage), free ones are rare, not absent.
+            let ik = IkSettings { random_seeds: POSE_GOAL_RESTARTS, ..IkSettings::default() };
+            let mut solver = IkSolver::new(model, base, pose, &[start.to_vec()], &ik)?;
             pose_candidates(checker, &mut solver, settings.max_goals, deadline, &mut rng)?
         }
         _ => goal_candidates(&space, goal, settings.max_goals, &mut rng)?,
@@ -379,6 +382,13 @@ fn plan_to(
     Ok(outcome)
 }
 
+/// Random restarts of the inverse kinematics of a pose goal (each about 0.2 ms on the Panda; the
+/// plan's deadline stops them first).
+const POSE_GOAL_RESTARTS: usize = 5000;
+
+/// Descents after the first free solution of a pose goal that look for more.
+const POSE_GOAL_MORE: usize = 32;
+
 /// Inverse kinematics solutions of a pose goal, at most `max` (the free ones first: a colliding
 /// solution is kept only while no free one is found, for the status to name its pair).
 fn pose_candidates(
@@ -388,11 +398,16 @@ fn pose_candidates(
     deadline: Instant,
     rng: &mut impl Rng,
 ) -> Result<Vec<Vec<Real>>> {
-    let (mut free, mut colliding) = (Vec::new(), None);
+    let (mut free, mut colliding, mut first_free) = (Vec::new(), None, None);
     while free.len() < max && Instant::now() < deadline {
+        // Once a free solution is known, a few more descents look for others, not thousands.
+        if first_free.is_some_and(|at: usize| solver.attempts() > at + POSE_GOAL_MORE) {
+            break;
+        }
         let Some(solution) = solver.next_solution(rng) else { break };
         if checker.state_free(&solution.q)? {
             free.push(solution.q);
+            first_free.get_or_insert(solver.attempts());
         } else {
             colliding.get_or_insert(solution.q);
         }
