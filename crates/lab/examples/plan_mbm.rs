@@ -5,7 +5,7 @@
 //!
 //! ```text
 //! cargo run --release -p sublevel-lab --example plan_mbm -- [--timeout S] [--range R] [--seed N]
-//!     [--no-simplify] [--smoothing PASSES] [--padding M] [--search-margin M] [--pose-goal LINK]
+//!     [--no-simplify] [--shortcuts N] [--smoothing PASSES] [--padding M] [--search-margin M] [--pose-goal LINK]
 //!     [--robot data/robots/panda/panda.robot.json] [--problems data/robots/mbm_panda]
 //!     [--scenarios a,b,...] [--limit 10]
 //! ```
@@ -74,6 +74,7 @@ fn args() -> Result<Args, String> {
             "--padding" => a.settings.padding = number("--padding")?,
             "--search-margin" => a.settings.search_margin = number("--search-margin")?,
             "--seed" => a.settings.seed = value.parse().map_err(|e| format!("--seed: {e}"))?,
+            "--shortcuts" => a.settings.shortcut_attempts = value.parse().map_err(|e| format!("--shortcuts: {e}"))?,
             "--smoothing" => a.settings.smoothing_passes = value.parse().map_err(|e| format!("--smoothing: {e}"))?,
             "--robot" => a.robot = value,
             "--pose-goal" => a.pose_goal = Some(value),

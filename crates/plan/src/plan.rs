@@ -33,7 +33,7 @@ pub struct PlanSettings {
     pub padding: Real,
     /// Whether the path is simplified (default true).
     pub simplify: bool,
-    /// Most shortcut tries of the simplification (default 64).
+    /// Most shortcut tries of the simplification (default 16).
     pub shortcut_attempts: usize,
     /// Corner-cutting passes after the shortcuts (default 0: none).
     pub smoothing_passes: usize,
@@ -59,7 +59,7 @@ impl Default for PlanSettings {
             goal_bias: 0.05,
             padding: 0.0,
             simplify: true,
-            shortcut_attempts: 64,
+            shortcut_attempts: 16,
             smoothing_passes: 0,
             tolerance: 1e-3,
             max_goals: 8,
