@@ -233,3 +233,84 @@ async fn a_plan_whose_client_went_away_frees_its_slot() {
         Err(e) => assert_eq!(e.code(), Code::DeadlineExceeded),
     }
 }
+
+/// A planar three-joint arm of boxes (not the Panda): links of 0.5, 0.4 and 0.2 m at z = 0.1,
+/// each joint about z. Fitted by the service from its URDF alone (primitives stay exact).
+const ARM_URDF: &str = r#"<robot name="planar3">
+  <link name="base"><collision><geometry><cylinder radius="0.05" length="0.1"/></geometry></collision></link>
+  <link name="l1"><collision><origin xyz="0.25 0 0"/><geometry><box size="0.5 0.06 0.06"/></geometry></collision></link>
+  <link name="l2"><collision><origin xyz="0.2 0 0"/><geometry><box size="0.4 0.05 0.05"/></geometry></collision></link>
+  <link name="l3"><collision><origin xyz="0.1 0 0"/><geometry><box size="0.2 0.04 0.04"/></geometry></collision></link>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><origin xyz="0 0 0.1"/><axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><origin xyz="0.5 0 0"/><axis xyz="0 0 1"/><limit lower="-2.8" upper="2.8" effort="1" velocity="1"/></joint>
+  <joint name="j3" type="revolute"><parent link="l2"/><child link="l3"/><origin xyz="0.4 0 0"/><axis xyz="0 0 1"/><limit lower="-2.8" upper="2.8" effort="1" velocity="1"/></joint>
+</robot>"#;
+
+/// Its SRDF: adjacent links touch at their joints.
+const ARM_SRDF: &str = r#"<robot name="planar3">
+  <disable_collisions link1="base" link2="l1" reason="Adjacent"/>
+  <disable_collisions link1="l1" link2="l2" reason="Adjacent"/>
+  <disable_collisions link1="l2" link2="l3" reason="Adjacent"/>
+</robot>"#;
+
+/// A post (0.1 × 0.1 × 0.4 m box) at (0.7, 0, 0.2): the arm stretched cannot sweep past it.
+const POST_SCENE: &str = "name: post
+world:
+  collision_objects:
+    - id: post
+      header: {frame_id: world}
+      primitives:
+        - type: box
+          dimensions: [0.1, 0.1, 0.4]
+      primitive_poses:
+        - position: [0.7, 0.0, 0.2]
+          orientation: [0, 0, 0, 1]
+";
+
+#[tokio::test]
+async fn a_robot_fitted_from_another_urdf_plans_with_no_code_change() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(config(dir.path())).await;
+    let mut c = server.client().await;
+    let fit = pb::StartRobotFitJobRequest { urdf: ARM_URDF.into(), srdf: ARM_SRDF.into(), ..Default::default() };
+    let job_id = c.start_robot_fit_job(fit).await.unwrap().into_inner().job_id;
+    let last = crate::util::watch_to_end(&mut c, job_id).await.pop().unwrap();
+    assert_eq!(last.state, pb::JobState::Succeeded as i32, "{last:?}");
+    let req = pb::ImportSceneRequest {
+        scene: Some(pb::import_scene_request::Scene::Yaml(POST_SCENE.as_bytes().to_vec())),
+        ..Default::default()
+    };
+    let scene_id = c.import_scene(req).await.unwrap().into_inner().scene_id;
+    // Stretched along +y to stretched along −y: the straight joint-space line sweeps the arm
+    // through the post at x = 0.7.
+    let (start, goal) = (vec![1.5, 0.0, 0.0], vec![-1.5, 0.0, 0.0]);
+    let names = ["j1", "j2", "j3"].map(String::from).to_vec();
+    let cols = |q: &[f64]| Some(pb::ConfigurationColumns { joint_names: names.clone(), values: q.to_vec() });
+    let mut req = plan_request(&last.robot_id, &scene_id);
+    req.start = cols(&start);
+    req.goal_configurations = cols(&goal);
+    let r = c.plan(req).await.unwrap().into_inner();
+    assert_eq!(r.status(), pb::PlanStatus::Solved, "{r:?}");
+    assert!(r.certified);
+    assert_eq!(r.joint_names, names);
+    let path = rows(&r);
+    assert_eq!((path.first(), path.last()), (Some(&start), Some(&goal)));
+    assert!(path.len() > 2, "the straight line collides: the path must go round");
+    // The same robot fitted in process from the same URDF, and the scene: every edge free on
+    // dense samples (the arm's boxes against the post's box, exact).
+    let robot = sublevel::robot::fit_robot_text(
+        ARM_URDF.into(),
+        Some(ARM_SRDF),
+        sublevel::robot::MeshSource::Memory(&Default::default()),
+        &Default::default(),
+        &|_| {},
+    )
+    .unwrap();
+    let scene = PlanningScene::from_yaml(POST_SCENE.as_bytes()).unwrap();
+    assert_dense_free(&robot, &scene, &path);
+    // The straight line itself does collide (so the plan did go round).
+    let (world, _) = world_objects(&scene).unwrap();
+    let mut checker = RobotChecker::new(&robot, world, &|_, _| None).unwrap();
+    let options = CheckOptions { distance: false, ..CheckOptions::default() };
+    assert!(checker.check(&[0.0, 0.0, 0.0], &Isometry3::identity(), &options).unwrap().collides);
+}
