@@ -4,7 +4,7 @@
 //! the median wall time of a plan and of its stages, and the median path length.
 //!
 //! ```text
-//! cargo run --release -p sublevel-lab --example plan_mbm -- [--timeout S] [--range R] [--seed N]
+//! cargo run --release -p sublevel-lab --example plan_mbm -- [--timeout S] [--range R] [--goal-bias P] [--seed N]
 //!     [--no-simplify] [--shortcuts N] [--smoothing PASSES] [--padding M] [--search-margin M] [--pose-goal LINK]
 //!     [--robot data/robots/panda/panda.robot.json] [--problems data/robots/mbm_panda]
 //!     [--scenarios a,b,...] [--limit 10]
@@ -71,6 +71,7 @@ fn args() -> Result<Args, String> {
         match argv[i].as_str() {
             "--timeout" => a.settings.timeout = Duration::from_secs_f64(number("--timeout")?),
             "--range" => a.settings.range = number("--range")?,
+            "--goal-bias" => a.settings.goal_bias = number("--goal-bias")?,
             "--padding" => a.settings.padding = number("--padding")?,
             "--search-margin" => a.settings.search_margin = number("--search-margin")?,
             "--seed" => a.settings.seed = value.parse().map_err(|e| format!("--seed: {e}"))?,
