@@ -55,8 +55,9 @@
 //! the root's sos solve 0.4–2 µs and the mesh stage a few µs; the sphere trees are another matter
 //! (a ball against a primitive is a closed form of a few ns).
 
-use crate::exact::{box_gap, box_gap_past, exact_collides, exact_pair, exact_primitive, parry_pose, PairHint};
+use crate::exact::{box_gap, box_gap_past, exact_collides, exact_pair, exact_pair_within, exact_primitive, parry_pose};
 use crate::exact::{ExactShape, PairOutcome, PlacedBox};
+use crate::exact::{PairHint, Slack};
 use crate::fitted::{FittedRobot, LinkShape, RobotGeometry};
 use crate::inner::{link_touches_primitive, link_vertex_touches};
 use crate::spheres::TreeAnswer;
@@ -114,6 +115,9 @@ pub struct RobotChecker<'r> {
     /// Each self pair's closest triangles last found by [`RobotChecker::self_bound`] (a motion's
     /// warm start).
     self_hints: Vec<PairHint>,
+    /// Each world pair's closest triangle last found by [`RobotChecker::world_bound`] (a motion's
+    /// warm start), at `g · world.len() + o`.
+    world_hints: Vec<PairHint>,
     /// Each self pair's clearance table in `robot.clearance`, if it has one.
     self_tables: Vec<Option<usize>>,
     /// The configuration last placed.
@@ -183,6 +187,7 @@ impl<'r> RobotChecker<'r> {
                 }
             }
         }
+        let hints = robot.geometries.len() * world.len();
         let robot_exact = robot.geometries.iter().map(exact_shape).collect();
         let world_exact = world
             .iter()
@@ -214,6 +219,7 @@ impl<'r> RobotChecker<'r> {
             robot_exact,
             world_pairs,
             self_hints: self_pairs.iter().map(|_| PairHint::default()).collect(),
+            world_hints: (0..hints).map(|_| PairHint::default()).collect(),
             self_tables: self_pairs.iter().map(|&p| robot.clearance.iter().position(|t| t.geometries == p)).collect(),
             q: Vec::new(),
             self_pairs,
@@ -358,19 +364,27 @@ impl<'r> RobotChecker<'r> {
         &self.link_poses
     }
 
+    /// The center of robot geometry `g`'s bounding ball in the world frame, as last placed.
+    pub(crate) fn geometry_center(&self, g: usize) -> &Vector3 {
+        &self.centers[g]
+    }
+
     /// The checked world pairs of geometry `g` (object indices).
     pub(crate) fn world_pairs_of(&self, g: usize) -> &[usize] {
         &self.world_pairs[g]
     }
 
     /// A lower bound of the distance of robot geometry `g` and world object `o` as placed by
-    /// [`RobotChecker::place`] (meters; 0 when they touch), and whether it is exact, at `level`:
+    /// [`RobotChecker::place`] (meters; 0 when they touch), and whether it is the meshes' (or an
+    /// exact primitive's: a motion reports contacts only from these), at `level`:
     /// 0 the ball and box gaps, 1 the sos root bound (exact for a primitive link), 2 the meshes'
-    /// distance.
+    /// distance, to within `slack` ([`Slack::bound`] of the distance of the closest triangles
+    /// found) — or that bound of `cap` when the meshes are farther apart than `cap` (the search
+    /// stops there).
     ///
     /// # Errors
     /// A query that fails outright.
-    pub(crate) fn world_bound(&self, g: usize, o: usize, level: u8) -> Result<(Real, bool)> {
+    pub(crate) fn world_bound(&self, g: usize, o: usize, level: u8, cap: Real, slack: Slack) -> Result<(Real, bool)> {
         let primitive = self.both_primitive(g, o);
         match level {
             0 => Ok((self.world_gap(g, o).max(self.world_box_gap(g, o, Real::INFINITY)), false)),
@@ -383,9 +397,18 @@ impl<'r> RobotChecker<'r> {
                 let pa = parry_pose(&(self.poses[g] * a.offset));
                 let pb = parry_pose(&(self.world[o].pose * b.offset));
                 Ok((
-                    match exact_pair(&pa, a, &pb, b, 0.0, Real::INFINITY, &PairHint::default())? {
+                    match exact_pair_within(
+                        &pa,
+                        a,
+                        &pb,
+                        b,
+                        0.0,
+                        cap,
+                        &self.world_hints[g * self.world.len() + o],
+                        slack,
+                    )? {
                         PairOutcome::Collides => 0.0,
-                        PairOutcome::Free { distance, .. } => distance,
+                        PairOutcome::Free { distance, .. } => slack.bound(distance.min(cap)),
                     },
                     true,
                 ))
@@ -393,11 +416,25 @@ impl<'r> RobotChecker<'r> {
         }
     }
 
+    /// The ball gap of robot geometry `g` and world object `o` as placed: the cheapest lower
+    /// bound of their distance (level 0 of [`RobotChecker::world_bound`] is at least this).
+    pub(crate) fn world_ball_gap(&self, g: usize, o: usize) -> Real {
+        self.world_gap(g, o)
+    }
+
+    /// The ball gap of checked self pair `k` as placed (level 0 of [`RobotChecker::self_bound`]
+    /// is at least this).
+    pub(crate) fn self_ball_gap(&self, k: usize) -> Real {
+        let (a, b) = self.self_pairs[k];
+        let (ga, gb) = (&self.robot.geometries[a], &self.robot.geometries[b]);
+        (self.centers[a] - self.centers[b]).norm() - ga.sphere.1 - gb.sphere.1
+    }
+
     /// As [`RobotChecker::world_bound`] for checked self pair `k` ([`RobotChecker::self_pairs`]).
     ///
     /// # Errors
     /// A query that fails outright.
-    pub(crate) fn self_bound(&self, k: usize, level: u8) -> Result<(Real, bool)> {
+    pub(crate) fn self_bound(&self, k: usize, level: u8, cap: Real, slack: Slack) -> Result<(Real, bool)> {
         let (a, b) = self.self_pairs[k];
         let (ga, gb) = (&self.robot.geometries[a], &self.robot.geometries[b]);
         let both_primitive = matches!((&ga.shape, &gb.shape), (LinkShape::Primitive(_), LinkShape::Primitive(_)));
@@ -418,19 +455,20 @@ impl<'r> RobotChecker<'r> {
             }
             _ => {
                 let (ea, eb) = (&self.robot_exact[a], &self.robot_exact[b]);
-                let outcome = exact_pair(
+                let outcome = exact_pair_within(
                     &parry_pose(&(pa * ea.offset)),
                     ea,
                     &parry_pose(&(pb * eb.offset)),
                     eb,
                     0.0,
-                    Real::INFINITY,
+                    cap,
                     &self.self_hints[k],
+                    slack,
                 )?;
                 Ok((
                     match outcome {
                         PairOutcome::Collides => 0.0,
-                        PairOutcome::Free { distance, .. } => distance,
+                        PairOutcome::Free { distance, .. } => slack.bound(distance.min(cap)),
                     },
                     true,
                 ))

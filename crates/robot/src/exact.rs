@@ -197,13 +197,45 @@ pub(crate) fn exact_collides(
 /// mesh), where [`exact_pair`] starts its next search of the same two meshes.
 pub(crate) type PairHint = std::cell::Cell<Option<(u32, u32)>>;
 
+/// How close to the exact distance a search must come ([`exact_pair_within`]): a part of the
+/// meshes whose lower bound is within `fraction` of the way from `floor` to the best distance
+/// found so far is not searched, so the answer `d` (the distance of two triangles) proves only
+/// [`Slack::bound`]`(d) = floor + (1 − fraction)·(d − floor)` (for `d ≥ floor`; `d` itself below
+/// `floor`, where the search is exact).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Slack {
+    pub(crate) fraction: Real,
+    pub(crate) floor: Real,
+}
+
+impl Slack {
+    /// The exact search.
+    pub(crate) const EXACT: Slack = Slack { fraction: 0.0, floor: 0.0 };
+
+    /// How much less than `best` a part's lower bound may be and the part still be skipped.
+    fn margin(&self, best: Real) -> Real {
+        if best.is_finite() && best > self.floor {
+            self.fraction * (best - self.floor)
+        } else {
+            0.0
+        }
+    }
+
+    /// The lower bound of the distance that a search answering `best` proves (module docs of
+    /// [`Slack`]); for a search that found nothing within `max_dist`, that of `max_dist`.
+    pub(crate) fn bound(&self, best: Real) -> Real {
+        best - self.margin(best)
+    }
+}
+
 /// Two exact shapes (parry): collides within `padding`, else their distance and closest points;
 /// a pair farther apart than `max_dist` is answered free at +∞ without its points (the search
 /// stops at that distance, much sooner than a full one).
 ///
-/// `hint` holds the closest pair of triangles of the last answer for two meshes, where the search
-/// starts (a warm start: along a motion the closest triangles change little), and receives the
-/// new one; any pair is a valid start, so the answer does not depend on it.
+/// `hint` holds the closest pair of triangles of the last answer for two meshes (for a mesh and a
+/// solid, the mesh's closest triangle in the mesh's entry), where the search starts (a warm
+/// start: along a motion the closest triangles change little), and receives the new one; any
+/// pair is a valid start, so the answer does not depend on it.
 pub(crate) fn exact_pair(
     pa: &parry3d_f64::math::Pose,
     a: &ExactShape,
@@ -213,12 +245,32 @@ pub(crate) fn exact_pair(
     max_dist: Real,
     hint: &PairHint,
 ) -> Result<PairOutcome> {
+    exact_pair_within(pa, a, pb, b, padding, max_dist, hint, Slack::EXACT)
+}
+
+/// As [`exact_pair`], with a mesh's search skipping what `slack` allows: the free distance
+/// answered is that of two triangles (an upper bound of the distance), and
+/// `slack.bound(distance)` a lower bound of it (`slack.bound(max_dist)` for a pair answered at
+/// +∞).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn exact_pair_within(
+    pa: &parry3d_f64::math::Pose,
+    a: &ExactShape,
+    pb: &parry3d_f64::math::Pose,
+    b: &ExactShape,
+    padding: Real,
+    max_dist: Real,
+    hint: &PairHint,
+    slack: Slack,
+) -> Result<PairOutcome> {
     let unsupported = |_| Error::Numerical("the exact mesh stage does not support this shape pair".into());
     let max_dist = if max_dist.is_finite() { max_dist.max(padding) } else { Real::MAX };
     let points = match (a.shape.as_trimesh(), b.shape.as_trimesh()) {
-        (Some(ma), Some(mb)) => Some(meshes_closest_points(ma, pa, mb, pb, max_dist, hint)),
-        (Some(m), None) => mesh_solid_closest_points(m, pa, b.shape.as_ref(), pb, max_dist),
-        (None, Some(m)) => mesh_solid_closest_points(m, pb, a.shape.as_ref(), pa, max_dist).map(|c| c.flipped()),
+        (Some(ma), Some(mb)) => Some(meshes_closest_points(ma, pa, mb, pb, max_dist, hint, slack)),
+        (Some(m), None) => mesh_solid_closest_points(m, pa, b.shape.as_ref(), pb, max_dist, hint, false, slack),
+        (None, Some(m)) => {
+            mesh_solid_closest_points(m, pb, a.shape.as_ref(), pa, max_dist, hint, true, slack).map(|c| c.flipped())
+        }
         _ => None,
     };
     let points = match points {
@@ -533,27 +585,37 @@ fn triangle_box_gap(
 /// distances — its box to the shape's box bounded in the mesh's frame, and the shape's box to the
 /// node's box bounded in the shape's frame — where parry uses only the first with the shape's
 /// box bounded in the world's axes. `None` where [`mesh_touches_solid`] is.
+///
+/// The triangle of `hint` (its second entry when `second`, else its first) is tried first: its
+/// distance, an upper bound, prunes the search from the start; the closest triangle found is
+/// left there. A node or triangle whose lower bound is within `slack` of the best distance found
+/// is skipped ([`Slack`]).
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn mesh_solid_closest_points(
     mesh: &parry3d_f64::shape::TriMesh,
     pm: &parry3d_f64::math::Pose,
     shape: &dyn parry3d_f64::shape::Shape,
     ps: &parry3d_f64::math::Pose,
     max_dist: Real,
+    hint: &PairHint,
+    second: bool,
+    slack: Slack,
 ) -> Option<ClosestPoints> {
     use parry3d_f64::math::Vector;
     let SolidBox { rel, r, abs_r, center, half: hs, hair } = SolidBox::new(mesh, pm, shape, ps)?;
     let shape_in_mesh = abs_r * hs;
-    let lower = |node: &parry3d_f64::partitioning::BvhNode, _: Real| {
+    // A node is skipped once its cost reaches the best distance: its lower bound plus the slack.
+    let lower = |node: &parry3d_f64::partitioning::BvhNode, best: Real| {
         let (c1, h1) = ((node.mins() + node.maxs()) * 0.5, (node.maxs() - node.mins()) * 0.5);
         let d = center - c1;
         let on_mesh = (d.abs() - h1 - shape_in_mesh).max(Vector::ZERO).length();
         let on_shape = ((r.transpose() * d).abs() - hs - abs_r.transpose() * h1).max(Vector::ZERO).length();
-        (on_mesh.max(on_shape) - hair).max(0.0)
+        (on_mesh.max(on_shape) - hair).max(0.0) + slack.margin(best)
     };
     let identity = parry3d_f64::math::Pose::IDENTITY;
     let leaf = |i: u32, best: Real| {
         let triangle = mesh.triangle(i);
-        if triangle_box_gap(&triangle, &r, &center, &hs) - hair >= best {
+        if triangle_box_gap(&triangle, &r, &center, &hs) - hair >= best - slack.margin(best) {
             return None;
         }
         let points = parry3d_f64::query::closest_points(&identity, &triangle, &rel, shape, best).ok()?;
@@ -563,9 +625,29 @@ pub(crate) fn mesh_solid_closest_points(
             ClosestPoints::Disjoint => (Real::MAX, points),
         })
     };
-    Some(match mesh.bvh().find_best(max_dist, lower, leaf) {
-        Some((_, (_, points))) => points.transform_by(pm, pm),
-        None => ClosestPoints::Disjoint,
+    let remember = |i: u32| hint.set(Some(if second { (0, i) } else { (i, 0) }));
+    // The last closest triangle first: its distance bounds the search (a triangle not closer
+    // leaves it the answer).
+    let mut start = None;
+    let last = hint.get().map(|(i, j)| if second { j } else { i });
+    if let Some(i) = last.filter(|&i| i < mesh.num_triangles() as u32) {
+        if let Some((d, points)) = leaf(i, max_dist) {
+            if matches!(points, ClosestPoints::Intersecting) {
+                return Some(points.transform_by(pm, pm));
+            }
+            if d < max_dist {
+                start = Some((d, points));
+            }
+        }
+    }
+    let cap = start.as_ref().map_or(max_dist, |s| s.0);
+    Some(match (mesh.bvh().find_best(cap, lower, leaf), start) {
+        (Some((i, (_, points))), _) => {
+            remember(i);
+            points.transform_by(pm, pm)
+        }
+        (None, Some((_, points))) => points.transform_by(pm, pm),
+        (None, None) => ClosestPoints::Disjoint,
     })
 }
 
@@ -583,6 +665,7 @@ pub(crate) fn meshes_closest_points(
     pb: &parry3d_f64::math::Pose,
     max_dist: Real,
     hint: &PairHint,
+    slack: Slack,
 ) -> ClosestPoints {
     use parry3d_f64::math::Vector;
     use std::cell::Cell;
@@ -596,7 +679,8 @@ pub(crate) fn meshes_closest_points(
         let d = r * c2 + t - c1;
         let in_a = (d.abs() - h1 - abs_r * h2).max(Vector::ZERO).length();
         let in_b = ((r.transpose() * d).abs() - h2 - abs_r.transpose() * h1).max(Vector::ZERO).length();
-        in_a.max(in_b) - hair < best.get()
+        let best = best.get();
+        in_a.max(in_b) - hair < best - slack.margin(best)
     };
     let identity = parry3d_f64::math::Pose::IDENTITY;
     let mut found = ClosestPoints::Disjoint;
@@ -617,8 +701,9 @@ pub(crate) fn meshes_closest_points(
         let (ta, tb) = (ma.triangle(i), mb.triangle(j));
         let tb_in_a = [rel.transform_point(tb.a), rel.transform_point(tb.b), rel.transform_point(tb.c)];
         let margin = best.get();
+        let skip = margin - slack.margin(margin);
         if margin.is_finite()
-            && (beyond_plane([ta.a, ta.b, ta.c], tb_in_a, margin) || beyond_plane(tb_in_a, [ta.a, ta.b, ta.c], margin))
+            && (beyond_plane([ta.a, ta.b, ta.c], tb_in_a, skip) || beyond_plane(tb_in_a, [ta.a, ta.b, ta.c], skip))
         {
             continue;
         }

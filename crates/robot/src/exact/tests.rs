@@ -147,12 +147,43 @@ fn triangles_apart_on_the_common_line_never_intersect() {
     assert!(apart > 2_000 && intersecting > 2_000, "{apart} apart, {intersecting} intersecting");
 }
 
+/// A slack the searches are tested with: a third of the way above 5 mm.
+const SLACK: Slack = Slack { fraction: 1.0 / 3.0, floor: 0.005 };
+
+/// A search with [`SLACK`] (`got`, within `max_dist`) against the exact distance (`reference`,
+/// parry's): the triangles it found are no closer than the exact distance, and its bound no
+/// farther. Returns whether it stopped short of the exact distance.
+fn brackets(reference: &ClosestPoints, got: &ClosestPoints, max_dist: Real, what: &str) -> bool {
+    let exact = match reference {
+        ClosestPoints::Intersecting => 0.0,
+        ClosestPoints::WithinMargin(a, b) => (*a - *b).length(),
+        ClosestPoints::Disjoint => Real::INFINITY,
+    };
+    match got {
+        ClosestPoints::Intersecting => {
+            assert_eq!(exact, 0.0, "{what}");
+            false
+        }
+        ClosestPoints::WithinMargin(a, b) => {
+            let d = (*a - *b).length();
+            let bound = SLACK.bound(d);
+            assert!(exact <= d + 1e-9 && bound <= exact + 1e-9, "{what}: {d} (bound {bound}) against {exact}");
+            d > exact + 1e-9
+        }
+        ClosestPoints::Disjoint => {
+            assert!(SLACK.bound(max_dist) <= exact + 1e-9, "{what}: nothing within {max_dist}, {exact}");
+            exact <= max_dist
+        }
+    }
+}
+
 #[test]
 fn mesh_pairs_match_parrys_verdict_on_random_poses() {
     let (a, b) = (torus(0.1, 0.03, 24, 12), torus(0.08, 0.02, 20, 10));
     let mut state = 0x9e37_79b9_7f4a_7c15;
     let (mut counts, mut near) = ([0usize; 2], 0);
     let (hint, touching) = (PairHint::default(), PairHint::default());
+    let mut short = 0;
     for k in 0..600 {
         let padding = if k % 2 == 0 { 0.0 } else { 0.01 };
         let (pa, pb) = (pose(&mut state, 0.02), pose(&mut state, 0.16));
@@ -169,9 +200,11 @@ fn mesh_pairs_match_parrys_verdict_on_random_poses() {
         // The closest points within 5 cm: parry's answer, the same distance.
         let reference = parry3d_f64::query::closest_points(&pa, a.as_ref(), &pb, b.as_ref(), 0.05).expect("supported");
         // Cold, and warm from the last pose's closest triangles: the same answer.
-        let cold = meshes_closest_points(ma, &pa, mb, &pb, 0.05, &PairHint::default());
-        let warm = meshes_closest_points(ma, &pa, mb, &pb, 0.05, &hint);
+        let cold = meshes_closest_points(ma, &pa, mb, &pb, 0.05, &PairHint::default(), Slack::EXACT);
+        let warm = meshes_closest_points(ma, &pa, mb, &pb, 0.05, &hint, Slack::EXACT);
         assert_eq!(cold, warm, "pose {k}");
+        let loose = meshes_closest_points(ma, &pa, mb, &pb, 0.05, &PairHint::default(), SLACK);
+        short += usize::from(brackets(&reference, &loose, 0.05, &format!("pose {k}")));
         match (reference, warm) {
             (ClosestPoints::WithinMargin(a1, a2), ClosestPoints::WithinMargin(b1, b2)) => {
                 let (da, db) = ((a1 - a2).length(), (b1 - b2).length());
@@ -186,6 +219,8 @@ fn mesh_pairs_match_parrys_verdict_on_random_poses() {
     assert!(near > 30, "{near} pairs within 5 cm");
     // Both verdicts occur often: the poses straddle contact.
     assert!(counts[0] > 100 && counts[1] > 100, "{counts:?}");
+    // The slack's searches stop short of the exact distance on some poses.
+    assert!(short > 5, "{short} searches with the slack stopped short");
 }
 
 #[test]
@@ -200,7 +235,8 @@ fn a_mesh_against_primitives_matches_parrys_verdict_on_random_poses() {
     let mut state = 0x2545_f491_4f6c_dd1d;
     for p in &primitives {
         let solid = exact_primitive(p);
-        let (mut counts, mut near) = ([0usize; 2], 0);
+        let (mut counts, mut near, mut short) = ([0usize; 2], 0, 0);
+        let warm = PairHint::default();
         for k in 0..400 {
             let padding = if k % 2 == 0 { 0.0 } else { 0.01 };
             let (pm, ps) = (pose(&mut state, 0.02), pose(&mut state, 0.15));
@@ -214,7 +250,23 @@ fn a_mesh_against_primitives_matches_parrys_verdict_on_random_poses() {
             let reference =
                 parry3d_f64::query::closest_points(&pm, mesh.shape.as_ref(), &ps, solid.shape.as_ref(), 0.05)
                     .expect("supported");
-            let got = mesh_solid_closest_points(m, &pm, solid.shape.as_ref(), &ps, 0.05).expect("bounded");
+            let loose = mesh_solid_closest_points(m, &pm, solid.shape.as_ref(), &ps, 0.05, &warm, false, SLACK);
+            short += usize::from(brackets(&reference, &loose.expect("bounded"), 0.05, &format!("{p:?}, pose {k}")));
+            let cold = PairHint::default();
+            let got = mesh_solid_closest_points(m, &pm, solid.shape.as_ref(), &ps, 0.05, &cold, false, Slack::EXACT)
+                .expect("bounded");
+            // Started from the last pose's closest triangle (any triangle is a valid start): the
+            // same answer.
+            let again = mesh_solid_closest_points(m, &pm, solid.shape.as_ref(), &ps, 0.05, &warm, false, Slack::EXACT);
+            match (got, again.expect("bounded")) {
+                (ClosestPoints::WithinMargin(a1, a2), ClosestPoints::WithinMargin(b1, b2)) => {
+                    assert!(((a1 - a2).length() - (b1 - b2).length()).abs() < 1e-12, "{p:?}, pose {k}");
+                }
+                (a, b) => assert_eq!(a, b, "{p:?}, pose {k}"),
+            }
+            if cold.get().is_some() {
+                warm.set(cold.get());
+            }
             match (reference, got) {
                 (ClosestPoints::WithinMargin(a1, a2), ClosestPoints::WithinMargin(b1, b2)) => {
                     let (da, db) = ((a1 - a2).length(), (b1 - b2).length());
@@ -228,6 +280,7 @@ fn a_mesh_against_primitives_matches_parrys_verdict_on_random_poses() {
             }
         }
         assert!(counts[0] > 50 && counts[1] > 50 && near > 30, "{p:?}: {counts:?}, {near} within 5 cm");
+        assert!(short > 5, "{p:?}: {short} searches with the slack stopped short");
     }
     // A halfspace is unbounded: parry's own test answers it.
     let plane = exact_primitive(&Primitive::Halfspace { normal: Vector3::z(), offset: 0.0 });

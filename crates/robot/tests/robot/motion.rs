@@ -4,6 +4,8 @@
 //! length, so small steps are tight to 1 %.
 
 use sublevel_core::math::{Isometry3, Point3, Real, Vector3};
+#[allow(unused_imports)]
+use sublevel_robot::motion::{LinkMotion, MotionBounds};
 use sublevel_robot::RobotModel;
 
 fn gantry() -> RobotModel {
@@ -71,7 +73,7 @@ fn no_point_moves_farther_than_the_bound() {
 
 /// The bound at a configuration ([`sublevel_robot::MotionBounds::at`]) against brute force: from a
 /// random point q(t) of 200 random segments, no point within a link's radius moves farther in a
-/// step of s (at 20 steps up to the segment's end) than `min(s·D, s·A + s²·B/2)`, and no two points
+/// step of s (at 20 steps up to the segment's end) than `min(s·D, s·A + s²·B/2, s·V + s²·G/2)`, and no two points
 /// of two links come closer by more than their relative bound ([`MotionBounds::relative`]); returns the
 /// median ratio of that bound to the configuration-free `s·D` at s = 0.05.
 fn local_bound_holds(robot: &RobotModel, radius: Real, seed: u64) -> Real {
@@ -96,7 +98,7 @@ fn local_bound_holds(robot: &RobotModel, radius: Real, seed: u64) -> Real {
         for m in &motion {
             if m.full > 0.0 {
                 let s = 0.05;
-                gains.push((s * m.linear + s * s * m.quadratic / 2.0).min(s * m.full) / (s * m.full));
+                gains.push(m.displacement(s) / (s * m.full));
             }
         }
         let links = robot.links().len();
@@ -109,7 +111,7 @@ fn local_bound_holds(robot: &RobotModel, radius: Real, seed: u64) -> Real {
             let now = robot.link_poses(&at(t + s), &Isometry3::identity()).unwrap();
             // Two links close by no more than their relative bound: every point pair's distance.
             for &((a, b), m) in &pairs {
-                let bound = (s * m.full).min(s * m.linear + s * s * m.quadratic / 2.0);
+                let bound = m.displacement(s);
                 for p in &points {
                     for r in &points {
                         let gap =
@@ -120,7 +122,7 @@ fn local_bound_holds(robot: &RobotModel, radius: Real, seed: u64) -> Real {
                 }
             }
             for (l, m) in motion.iter().enumerate() {
-                let bound = (s * m.full).min(s * m.linear + s * s * m.quadratic / 2.0);
+                let bound = m.displacement(s);
                 for p in &points {
                     let moved = (now[l] * Point3::from(*p) - start[l] * Point3::from(*p)).norm();
                     assert!(
@@ -134,6 +136,107 @@ fn local_bound_holds(robot: &RobotModel, radius: Real, seed: u64) -> Real {
     }
     gains.sort_by(|a, b| a.total_cmp(b));
     gains[gains.len() / 2]
+}
+
+/// The bound of a ball on each link ([`MotionBounds::at_ball`], [`MotionBounds::relative_balls`])
+/// against brute force, as [`local_bound_holds`]: a ball of radius `radius / 2` whose center lies
+/// within `radius / 2` of the link's origin (so within the link's radius), its center, 14 points
+/// on its surface and 4 inside; returns the median ratio of the ball's bound to the link's by its
+/// lever arms alone (`min(s·D, s·A + s²·B/2)` of [`MotionBounds::at`]) at s = 0.05.
+fn ball_bound_holds(robot: &RobotModel, radius: Real, seed: u64) -> Real {
+    let bounds = robot.motion_bounds(&vec![radius; robot.links().len()]).unwrap();
+    let limits: Vec<(Real, Real)> = (0..robot.dof())
+        .map(|k| robot.variable_joint(k).limits.unwrap_or((-2.0 * std::f64::consts::PI, 2.0 * std::f64::consts::PI)))
+        .collect();
+    let links = robot.links().len();
+    let mut state = seed;
+    let unit = |state: &mut u64| {
+        let v = Vector3::new(uniform(state, -1.0, 1.0), uniform(state, -1.0, 1.0), uniform(state, -1.0, 1.0));
+        v / v.norm().max(1e-9)
+    };
+    let r = radius / 2.0;
+    let mut ratios = Vec::new();
+    for _ in 0..100 {
+        // Each link's ball (link frame) and points in it.
+        let balls: Vec<(Vector3, Vec<Vector3>)> = (0..links)
+            .map(|_| {
+                let center = unit(&mut state) * uniform(&mut state, 0.0, r);
+                let mut points = vec![center];
+                for d in [Vector3::x(), Vector3::y(), Vector3::z(), -Vector3::x(), -Vector3::y(), -Vector3::z()] {
+                    points.push(center + d * r);
+                }
+                for _ in 0..8 {
+                    points.push(center + unit(&mut state) * r);
+                }
+                for _ in 0..4 {
+                    points.push(center + unit(&mut state) * uniform(&mut state, 0.0, r));
+                }
+                (center, points)
+            })
+            .collect();
+        let q0: Vec<Real> = limits.iter().map(|&(lo, hi)| uniform(&mut state, lo, hi)).collect();
+        let q1: Vec<Real> = limits.iter().map(|&(lo, hi)| uniform(&mut state, lo, hi)).collect();
+        let dq: Vec<Real> = q0.iter().zip(&q1).map(|(a, b)| b - a).collect();
+        let t = uniform(&mut state, 0.0, 0.9);
+        let at = |t: Real| -> Vec<Real> { q0.iter().zip(&dq).map(|(a, d)| a + t * d).collect() };
+        let start = robot.link_poses(&at(t), &Isometry3::identity()).unwrap();
+        let centers: Vec<Vector3> = (0..links).map(|l| (start[l] * Point3::from(balls[l].0)).coords).collect();
+        let motion: Vec<_> = (0..links).map(|l| bounds.at_ball(robot, l, &start, &dq, (&centers[l], r))).collect();
+        for (l, m) in motion.iter().enumerate() {
+            if m.full > 0.0 {
+                // Against the link's bound by its lever arms alone (no speed measured).
+                let link = LinkMotion { speed: Real::INFINITY, ..bounds.at(robot, l, &start, &dq) };
+                ratios.push(m.displacement(0.05) / link.displacement(0.05));
+            }
+        }
+        let pairs: Vec<_> = (0..links)
+            .flat_map(|a| (a + 1..links).map(move |b| (a, b)))
+            .map(|(a, b)| {
+                let balls = ((&centers[a], r), (&centers[b], r));
+                ((a, b), bounds.relative_balls(robot, (a, b), bounds.below_common(a, b), &start, &dq, balls))
+            })
+            .collect();
+        for k in 1..=20 {
+            let s = (1.0 - t) * k as Real / 20.0;
+            let now = robot.link_poses(&at(t + s), &Isometry3::identity()).unwrap();
+            for &((a, b), m) in &pairs {
+                let bound = m.displacement(s);
+                for p in balls[a].1.iter().step_by(2) {
+                    for q in balls[b].1.iter().step_by(2) {
+                        let gap =
+                            |poses: &[Isometry3]| (poses[a] * Point3::from(*p) - poses[b] * Point3::from(*q)).norm();
+                        let closed = gap(&start) - gap(&now);
+                        assert!(closed <= bound + 1e-12, "balls of links {a}, {b} closed {closed} > bound {bound}");
+                    }
+                }
+            }
+            for (l, m) in motion.iter().enumerate() {
+                let bound = m.displacement(s);
+                for p in &balls[l].1 {
+                    let moved = (now[l] * Point3::from(*p) - start[l] * Point3::from(*p)).norm();
+                    assert!(
+                        moved <= bound + 1e-12,
+                        "the ball of link {} moved {moved} > bound {bound} in {s}",
+                        robot.links()[l].name
+                    );
+                }
+            }
+        }
+    }
+    ratios.sort_by(|a, b| a.total_cmp(b));
+    ratios[ratios.len() / 2]
+}
+
+#[test]
+fn the_bound_of_a_ball_on_a_link_holds_and_is_tighter_than_the_links() {
+    let median = ball_bound_holds(&gantry(), 0.15, 0x5851_f42d_4c95_7f2d);
+    println!("gantry: median ball bound / link lever-arm bound at s = 0.05: {median:.3}");
+    assert!(median <= 1.0);
+    let urdf = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/robots/panda/panda.urdf");
+    let panda = RobotModel::from_urdf_file(&urdf).unwrap();
+    let median = ball_bound_holds(&panda, 0.12, 0x1405_7b7e_f767_814f);
+    println!("panda: median ball bound / link lever-arm bound at s = 0.05: {median:.3}");
+    assert!(median < 0.8, "{median}");
 }
 
 #[test]
