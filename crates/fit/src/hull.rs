@@ -211,12 +211,11 @@ impl NormalizedCloud {
     }
 }
 
-/// Validates, normalizes and computes the convex hull of a cloud.
+/// Validates a cloud and normalizes it: (center, scale, uᵢ = (xᵢ − center)/scale).
 ///
 /// # Errors
-/// [`Error::InvalidArgument`] naming `points` for an empty, non-finite, too small or flat cloud,
-/// or when the hull computation fails on it.
-pub fn normalize_and_hull(points: &[Point3]) -> Result<NormalizedCloud> {
+/// As [`normalize_and_hull`], except the hull's own failures.
+fn validate_and_normalize(points: &[Point3]) -> Result<(Vector3, Real, Vec<Vector3>)> {
     if points.is_empty() {
         return Err(Error::invalid("points", "the cloud is empty; need at least 4 non-coplanar points"));
     }
@@ -242,7 +241,16 @@ pub fn normalize_and_hull(points: &[Point3]) -> Result<NormalizedCloud> {
     }
     let u: Vec<Vector3> = points.iter().map(|p| (p.coords - center) / scale).collect();
     check_full_dimensional(&u)?;
+    Ok((center, scale, u))
+}
 
+/// Validates, normalizes and computes the convex hull of a cloud.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `points` for an empty, non-finite, too small or flat cloud,
+/// or when the hull computation fails on it.
+pub fn normalize_and_hull(points: &[Point3]) -> Result<NormalizedCloud> {
+    let (center, scale, u) = validate_and_normalize(points)?;
     let pts: Vec<parry3d_f64::math::Vector3> =
         u.iter().map(|v| parry3d_f64::math::Vector3::new(v.x, v.y, v.z)).collect();
     let hull = std::panic::catch_unwind(|| parry3d_f64::transformation::try_convex_hull(&pts));
@@ -256,6 +264,119 @@ pub fn normalize_and_hull(points: &[Point3]) -> Result<NormalizedCloud> {
     }
     let hull_vertices: Vec<Vector3> = verts.iter().map(|v| Vector3::new(v.x, v.y, v.z)).collect();
     Ok(NormalizedCloud { center, scale, points: u, hull_vertices, hull_triangles: tris })
+}
+
+/// Thickness below which a fit thickens a near-flat cloud ([`thicken_flat`]), relative to the
+/// longest side of the cloud's bounding box.
+///
+/// Why: the log det program's optimum for a slab of relative thickness t has Gram eigenvalues
+/// spread by about t^(−2) (an ellipsoid's axes ratio 1/t at 2d = 2, its powers above), and Clarabel
+/// (tolerance 10⁻⁶, static regularization 10⁻⁷, [`crate::sdp`]) cannot resolve that. A
+/// six-vertex 50 × 30 mm slab, bounding-cube frame: 2d = 2 solves down to t = 3·10⁻⁵ (88
+/// iterations) and fails (`InsufficientProgress`) at 10⁻⁵, 2d = 4 fails below 10⁻³, 2d = 6 takes 79
+/// iterations at 10⁻³ and 37 at 3·10⁻³ (15–20 on a solid part). The UR5's `wrist3.stl` has such a
+/// part: a 7.2 mm hexagonal cap whose six vertices differ by 3.4·10⁻⁸ m across its plane
+/// (t = 4.7·10⁻⁶, float32 rounding of a flat face), above the coplanarity test
+/// ([`FLATNESS_TOLERANCE`]), so `--parts auto` ended `InsufficientProgress`.
+///
+/// Thickening gives such a cloud a hull with volume (at t = 4.7·10⁻⁶ the hull solid's inertia had
+/// no positive eigenvalues, so no principal axes) and bounds the body's coefficients (about
+/// t^(−2d)); the solve itself is then made well conditioned by the principal frame
+/// ([`PRINCIPAL_FRAME_ASPECT`]: on the slab thickened to 3·10⁻³, 2d = 6 still failed in the
+/// bounding cube). Thickening to 3·10⁻³ of the longest side moves the body by at most 1.5·10⁻³ of
+/// it (0.15 × the compound fit's default excess tolerance, 10⁻² of the mesh's diagonal, for a part
+/// as large as the mesh).
+pub const MIN_RELATIVE_THICKNESS: Real = 3e-3;
+
+/// Aspect (thinnest / longest side of the cloud's bounding box in the principal axes of its hull)
+/// below which a log det fit (c = 0) set to solve in the bounding cube solves in the principal box
+/// ([`Normalization::PrincipalBox`]) instead: the same optimum (the program is affine-invariant),
+/// better conditioned. The 50 × 30 mm slab of [`MIN_RELATIVE_THICKNESS`], aspect t: in the cube
+/// 11–16 Clarabel iterations at t = 0.1, 23–28 at 10⁻², 26–37 at 3·10⁻³, and 2d = 6 fails on the
+/// slab thickened to 3·10⁻³ (`InsufficientProgress`); in the principal box 10–14 iterations at every
+/// t and degree (2d = 6 at 10⁻²: 0.9 s instead of 2.8 s).
+pub const PRINCIPAL_FRAME_ASPECT: Real = 1e-2;
+
+/// How [`thicken_flat`] thickened a cloud.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Thickening {
+    /// Each thin principal axis of the cloud (unit vector, input frame) and the cloud's extent
+    /// along it before thickening (input units).
+    pub axes: Vec<(Vector3, Real)>,
+    /// The cloud's extent along each of those axes after (input units).
+    pub thickness: Real,
+    /// The thickness relative to the longest side of the cloud's bounding box.
+    pub relative: Real,
+}
+
+impl Thickening {
+    /// The fit report's note.
+    pub fn note(&self) -> String {
+        let axes: Vec<String> =
+            self.axes.iter().map(|(n, e)| format!("{e:.3e} along ({:.4}, {:.4}, {:.4})", n.x, n.y, n.z)).collect();
+        format!(
+            "near-flat cloud (extent {}, below {} × its longest side): thickened to {:.3e} (every point kept, \
+             and projected onto both faces of a slab of that thickness about it); the body contains the slab, \
+             hence every point",
+            axes.join(", "),
+            self.relative,
+            self.thickness
+        )
+    }
+}
+
+/// A near-flat cloud made thick enough for the fit SDPs to be well conditioned (see
+/// [`MIN_RELATIVE_THICKNESS`]), or None when it already is.
+///
+/// The cloud's principal axes (covariance of its points) are taken in order of increasing
+/// variance; along each axis n over which the cloud extends less than h = `min_relative` × the
+/// longest side of its bounding box, every point x so far is kept and projected onto the two
+/// planes x·n = m ± h/2 (m the middle of the cloud's extent along n), so that the cloud spans the
+/// slab of thickness h about itself. A body containing the returned points contains the input
+/// points (they are among them) and the slab's prism (one axis: 3 × the points; a needle: 9 ×).
+///
+/// # Errors
+/// As [`normalize_and_hull`] for a cloud it refuses (empty, non-finite, fewer than 4 points,
+/// coplanar to within [`FLATNESS_TOLERANCE`]): such a cloud is refused, not thickened.
+pub fn thicken_flat(points: &[Point3], min_relative: Real) -> Result<Option<(Vec<Point3>, Thickening)>> {
+    let (center, scale, u) = validate_and_normalize(points)?;
+    let n = u.len() as Real;
+    let mean = u.iter().fold(Vector3::zeros(), |a, v| a + v) / n;
+    let cov = u.iter().fold(Matrix3::zeros(), |a, v| a + (v - mean) * (v - mean).transpose()) / n;
+    let eig = cov.symmetric_eigen();
+    let mut order = [0usize, 1, 2];
+    order.sort_by(|&i, &j| eig.eigenvalues[i].total_cmp(&eig.eigenvalues[j]));
+    // Normalized units: the longest side of the bounding box is 2.
+    let h = 2.0 * min_relative;
+    let mut cloud: Vec<Vector3> = u;
+    let mut axes = Vec::new();
+    for k in order {
+        let axis = eig.eigenvectors.column(k).normalize();
+        let (lo, hi) = cloud
+            .iter()
+            .map(|v| v.dot(&axis))
+            .fold((Real::INFINITY, Real::NEG_INFINITY), |(l, h), x| (l.min(x), h.max(x)));
+        if hi - lo >= h {
+            continue;
+        }
+        axes.push((axis, (hi - lo) * scale));
+        let mid = 0.5 * (lo + hi);
+        let before = cloud.len();
+        cloud.reserve(2 * before);
+        for i in 0..before {
+            let v = cloud[i];
+            let along = v.dot(&axis);
+            cloud.push(v + axis * (mid - 0.5 * h - along));
+            cloud.push(v + axis * (mid + 0.5 * h - along));
+        }
+    }
+    if axes.is_empty() {
+        return Ok(None);
+    }
+    // The input points unchanged (bit for bit), then the projections back in input units.
+    let mut out: Vec<Point3> = points.to_vec();
+    out.extend(cloud[points.len()..].iter().map(|v| Point3::from(v * scale + center)));
+    Ok(Some((out, Thickening { axes, thickness: h * scale, relative: min_relative })))
 }
 
 /// Rejects normalized clouds (radius 1) that lie within [`FLATNESS_TOLERANCE`] of a plane.
@@ -374,5 +495,45 @@ mod tests {
         let mut inf = flat;
         inf[0].z = Real::INFINITY;
         assert!(field_of(normalize_and_hull(&inf).unwrap_err()).contains("non-finite"));
+    }
+
+    /// A slab is thickened along its normal only, a needle along both thin axes; the output
+    /// starts with the input points unchanged and spans h along every thin axis; a solid cloud
+    /// is left alone and a coplanar one still refused.
+    #[test]
+    fn thicken_flat_spans_the_minimum_thickness_along_the_thin_axes() {
+        let rot = nalgebra::Rotation3::from_euler_angles(0.3, -0.7, 1.1);
+        let corners = |sides: Vector3| -> Vec<Point3> {
+            (0..8)
+                .map(|i| {
+                    let c = Vector3::new((i & 1) as Real, ((i >> 1) & 1) as Real, ((i >> 2) & 1) as Real)
+                        - Vector3::repeat(0.5);
+                    Point3::from(rot * c.component_mul(&sides) + Vector3::new(1.0, 2.0, 3.0))
+                })
+                .collect()
+        };
+        let h = 3e-3;
+        for (sides, thin) in [(Vector3::new(4.0, 2.0, 1e-6), 1), (Vector3::new(4.0, 1e-6, 2e-6), 2)] {
+            let points = corners(sides);
+            let (out, t) = thicken_flat(&points, h).unwrap().expect("thin");
+            assert_eq!(&out[..8], &points[..]);
+            assert_eq!(out.len(), 8 * 3usize.pow(thin as u32));
+            assert_eq!(t.axes.len(), thin);
+            let (lo, hi) = points
+                .iter()
+                .fold((points[0].coords, points[0].coords), |(l, u), p| (l.inf(&p.coords), u.sup(&p.coords)));
+            assert!((t.thickness - h * (hi - lo).max()).abs() < 1e-12, "{}", t.thickness);
+            for (axis, before) in &t.axes {
+                let along: Vec<Real> = out.iter().map(|p| p.coords.dot(axis)).collect();
+                let span = along.iter().fold(Real::NEG_INFINITY, |a, &b| a.max(b))
+                    - along.iter().fold(Real::INFINITY, |a, &b| a.min(b));
+                assert!((span - t.thickness).abs() < 1e-9, "span {span}");
+                assert!(*before < 1e-5);
+            }
+            assert!(t.note().contains(&format!("thickened to {:.3e}", t.thickness)), "{}", t.note());
+        }
+        assert!(thicken_flat(&corners(Vector3::new(4.0, 2.0, 0.1)), h).unwrap().is_none());
+        let flat = corners(Vector3::new(4.0, 2.0, 0.0));
+        assert!(field_of(thicken_flat(&flat, h).unwrap_err()).contains("coplanar"));
     }
 }

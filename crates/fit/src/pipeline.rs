@@ -52,21 +52,57 @@ fn spec_of(settings: &FitSettings, trace_basis: TraceBasis) -> ProblemSpec {
 
 /// [`super::fit_points`]: every candidate frame and basis, each through [`finish`]; the
 /// smallest body is kept.
+///
+/// A near-flat cloud is thickened first ([`hull::thicken_flat`], [`hull::MIN_RELATIVE_THICKNESS`]):
+/// the body is fitted to the thickened cloud, which holds every input point, and its report says so.
 pub(super) fn fit(points: &[Point3], settings: &FitSettings, progress: &mut dyn FnMut(&FitProgress)) -> Result<Body> {
-    let rounds = settings.rows_in_rounds || settings.convexity_relaxation > 0.0;
     let start = std::time::Instant::now();
     settings.validate()?;
     report(progress, FitStage::Hull, 0.0, format!("convex hull of {} points", points.len()));
+    let thickened = hull::thicken_flat(points, hull::MIN_RELATIVE_THICKNESS)?;
+    let cloud = thickened.as_ref().map_or(points, |(p, _)| p.as_slice());
+    let mut body = fit_cloud(start, points.len(), cloud, settings, progress)?;
+    if let Some((_, thickening)) = &thickened {
+        body.report.notes.push(thickening.note());
+    }
+    Ok(body)
+}
+
+/// [`fit`] on the cloud to fit (`points`, the input's `num_points` points or a thickened cloud
+/// holding them).
+fn fit_cloud(
+    start: std::time::Instant,
+    num_points: usize,
+    points: &[Point3],
+    settings: &FitSettings,
+    progress: &mut dyn FnMut(&FitProgress),
+) -> Result<Body> {
+    let rounds = settings.rows_in_rounds || settings.convexity_relaxation > 0.0;
     let body_cloud = hull::normalize_and_hull(points)?;
     // The SDP is solved in the frame of `settings.normalization`; the body is stored in the
-    // bounding-cube frame of `body_cloud` (identity frame by default).
-    let (frame, cloud) = body_cloud.reframed(settings.normalization)?;
+    // bounding-cube frame of `body_cloud` (identity frame by default). A flat cloud is solved in
+    // its principal box instead when the objective gives the same body in every frame.
+    let flat = flat_frame(&body_cloud, settings);
+    let flat_aspect = flat.as_ref().map(|f| f.3);
+    let mut in_flat_frame;
+    let settings = match &flat {
+        Some((normalization, _, _, _)) => {
+            in_flat_frame = FitSettings { normalization: *normalization, ..settings.clone() };
+            in_flat_frame.alternate_normalization = None;
+            &in_flat_frame
+        }
+        None => settings,
+    };
+    let (frame, cloud) = match flat {
+        Some((_, frame, cloud, _)) => (frame, cloud),
+        None => body_cloud.reframed(settings.normalization)?,
+    };
     let frames = Frames { body: &body_cloud, frame, fit: &cloud };
     let d = settings.degree / 2;
     if settings.method == FitMethod::InverseMoment {
         report(progress, FitStage::Build, 0.05, format!("degree-{} moment matrix of {} points", 2 * d, points.len()));
         let solved = inverse_moment::solve(d, &cloud.points)?;
-        return finish(start, points.len(), &frames, solved, settings, progress);
+        return finish(start, num_points, &frames, solved, settings, progress);
     }
     // Frame-dependent objectives are solved in every candidate frame (and, for the trace
     // objectives, in both monomial bases, see `TraceBasis`); the smallest body is kept. Every
@@ -103,7 +139,7 @@ pub(super) fn fit(points: &[Point3], settings: &FitSettings, progress: &mut dyn 
                 TraceBasis::Scaled => format!("{}/scaled basis", normalization.name()),
                 TraceBasis::Plain => normalization.name().to_string(),
             };
-            match solved.and_then(|solved| finish(start, points.len(), &frames, solved, &in_frame, progress)) {
+            match solved.and_then(|solved| finish(start, num_points, &frames, solved, &in_frame, progress)) {
                 Ok(body) => {
                     solve_seconds += body.report.solve_seconds;
                     tried.push(format!("{name} {:.4}", body.report.volume));
@@ -132,7 +168,34 @@ pub(super) fn fit(points: &[Point3], settings: &FitSettings, progress: &mut dyn 
         body.report.total_seconds = start.elapsed().as_secs_f64();
         body.report.candidate_volumes = candidates;
     }
+    if let Some(aspect) = flat_aspect {
+        body.report.notes.push(format!(
+            "flat cloud (principal aspect {aspect:.2e} < {}): solved in the principal box, the same log det optimum, better conditioned",
+            hull::PRINCIPAL_FRAME_ASPECT
+        ));
+    }
     Ok(body)
+}
+
+/// The principal box ([`hull::Normalization::PrincipalBox`]) for a flat cloud, with the cloud in
+/// it and its aspect (thinnest / longest side of the box), when the fit would solve in the bounding
+/// cube and its optimum does not depend on the frame (log det P or H, c = 0); None otherwise.
+fn flat_frame(
+    body_cloud: &hull::NormalizedCloud,
+    settings: &FitSettings,
+) -> Option<(hull::Normalization, hull::Frame, hull::NormalizedCloud, Real)> {
+    if settings.normalization != hull::Normalization::BoundingCube
+        || settings.depends_on_frame()
+        || settings.method == FitMethod::InverseMoment
+    {
+        return None;
+    }
+    let (frame, cloud) = body_cloud.reframed(hull::Normalization::PrincipalBox).ok()?;
+    // linear = D·Rᵀ: its row norms are 1 / the box's half sides.
+    let rows = (0..3).map(|i| frame.linear.row(i).norm());
+    let (lo, hi) = rows.fold((Real::INFINITY, 0.0 as Real), |(lo, hi), r| (lo.min(r), hi.max(r)));
+    let aspect = lo / hi;
+    (aspect < hull::PRINCIPAL_FRAME_ASPECT).then_some((hull::Normalization::PrincipalBox, frame, cloud, aspect))
 }
 
 /// c = 0: one SDP with containment rows on the hull vertices.
@@ -369,4 +432,56 @@ fn finish(
         ),
     );
     Ok(body)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fit_points;
+    use sublevel_core::math::Vector3;
+
+    /// A hexagon 50 mm × 30 mm whose six vertices alternate between two planes 10⁻⁸ m (10⁻⁵ mm)
+    /// apart, turned off the axes and moved: relative thickness 2·10⁻⁷, just above the coplanarity
+    /// test, far below [`hull::MIN_RELATIVE_THICKNESS`].
+    fn sliver() -> Vec<Point3> {
+        let rot = nalgebra::Rotation3::from_euler_angles(0.4, -0.9, 0.3);
+        let offset = Vector3::new(0.1, -0.2, 0.043);
+        [(-25.0, 0.0), (-12.5, 15.0), (12.5, 15.0), (25.0, 0.0), (12.5, -15.0), (-12.5, -15.0)]
+            .iter()
+            .enumerate()
+            .map(|(k, &(x, y))| {
+                let z = if k % 2 == 0 { 0.0 } else { 1e-8 };
+                Point3::from(rot * Vector3::new(x * 1e-3, y * 1e-3, z) + offset)
+            })
+            .collect()
+    }
+
+    /// Before the thickening and the principal frame, every degree ended `InsufficientProgress` or
+    /// `NumericalError` on this cloud (2d = 2 fails from a relative thickness of 10⁻⁵ down).
+    #[test]
+    fn a_near_flat_sliver_fits_solved_and_contains_its_points() {
+        let points = sliver();
+        let normal = nalgebra::Rotation3::from_euler_angles(0.4, -0.9, 0.3) * Vector3::z();
+        let center = points.iter().fold(Vector3::zeros(), |a, p| a + p.coords) / 6.0;
+        for degree in [2, 4, 6] {
+            let settings = FitSettings { degree, volume_samples: 20_000, ..FitSettings::default() };
+            let body = fit_points(&points, &settings, &mut |_| {}).unwrap_or_else(|e| panic!("2d = {degree}: {e}"));
+            assert_eq!(body.report.solver_status, SdpStatus::Solved, "2d = {degree}");
+            assert!(body.report.max_point_value <= 1.0, "2d = {degree}");
+            for p in &points {
+                assert!(body.value_at(p) <= 1.0, "2d = {degree}: p = {} at {p}", body.value_at(p));
+            }
+            let notes = body.report.notes.join("\n");
+            assert!(notes.contains("near-flat cloud") && notes.contains("principal box"), "{notes}");
+            // Thickened to 3·10⁻³ × 50 mm = 0.15 mm: the body stays within a millimeter of the
+            // hexagon's plane, and spans it (its center is inside).
+            assert!(body.value_at(&Point3::from(center)) < 1.0, "2d = {degree}");
+            for side in [-1.0, 1.0] {
+                let off = Point3::from(center + normal * (side * 1e-3));
+                assert!(body.value_at(&off) > 1.0, "2d = {degree}: 1 mm off the plane, p = {}", body.value_at(&off));
+            }
+            let iterations = body.report.solve.as_ref().map_or(0, |s| s.iterations);
+            assert!(iterations <= 30, "2d = {degree}: {iterations} Clarabel iterations");
+        }
+    }
 }

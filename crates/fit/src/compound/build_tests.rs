@@ -353,3 +353,39 @@ fn auto_without_a_tolerance_takes_one_percent_of_the_diagonal() {
     assert!(c.report.misses.windows(2).all(|w| w[0].excess >= w[1].excess));
     assert!(c.report.notes.iter().any(|n| n.contains("bounding-box diagonal")), "{:?}", c.report.notes);
 }
+
+/// The UR5 `wrist3.stl` case: VHACD makes a flat cap its own part, and the cap's six vertices
+/// (a 7.2 mm hexagon, copied from the mesh) differ by 3.4·10⁻⁸ m across its plane (float32
+/// rounding): above the coplanarity test, so the part is fitted as it is. Its degree-2 SDP ended
+/// `InsufficientProgress` (log det P stalled near 15.3) and `--parts auto` failed; the fit now
+/// thickens the part (to 3·10⁻³ of its size) and solves it in its principal box.
+#[test]
+fn a_wrist3_like_mesh_with_a_near_flat_part_fits() {
+    let (mut vertices, mut triangles) = cube([0.0, 0.062, 0.015], 0.04, 0);
+    let cap = [
+        [0.001044748, 0.058689475, 0.042999987],
+        [0.001984747, 0.065441087, 0.042999975],
+        [-0.001793829, 0.065470628, 0.042999979],
+        [-0.002593549, 0.059880737, 0.042999953],
+        [0.003607971, 0.062014043, 0.042999979],
+        [-0.003607963, 0.062635578, 0.042999983],
+    ];
+    vertices.extend(cap.iter().map(|c| Point3::new(c[0], c[1], c[2])));
+    // A fan about vertex 3, counter-clockwise seen from +z: 3, 0, 4, 1, 2, 5.
+    triangles.extend([[3, 0, 4], [3, 4, 1], [3, 1, 2], [3, 2, 5]].map(|t: [u32; 3]| t.map(|i| i + 8)));
+    let mesh = TriangleMesh { vertices, triangles };
+    let s = quick_settings(vec![2, 4, 6]);
+    let c = fit_compound(&mesh, Some("wrist3_like"), PartCount::Fixed(2), &s, &mut |_| {}).unwrap();
+    assert_eq!(c.leaf_count(), 2);
+    assert!(uncovered_triangles(&c, &mesh).is_empty());
+    let flat = c.leaves().find(|&l| c.node(l).triangles == 4).expect("the cap is a part of its own");
+    let body = &c.node(flat).body;
+    assert!(body.report.solver_status.is_usable(), "{:?}", body.report.solver_status);
+    assert!(cap.iter().all(|p| body.value_at(&Point3::new(p[0], p[1], p[2])) <= 1.0));
+    assert!(body.report.notes.iter().any(|n| n.contains("thickened")), "{:?}", body.report.notes);
+    // Thickened by 3·10⁻³ × 7.2 mm: the cap's leaf stays within a millimeter of the cap.
+    assert!(c.node(flat).excess < 1e-3, "excess {}", c.node(flat).excess);
+    // And `--parts auto` (the command that failed) goes through.
+    let c = fit_compound(&mesh, None, PartCount::Auto, &CompoundSettings { max_parts: 4, ..s }, &mut |_| {}).unwrap();
+    assert!(uncovered_triangles(&c, &mesh).is_empty());
+}
