@@ -11,7 +11,7 @@ use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 use sublevel::math::{Isometry3, Real};
-use sublevel::plan::{joint_goal, plan, start_from_joints, JointConstraint, PlanSettings, PlanStatus, RobotValidity};
+use sublevel::plan::{joint_goal, plan, start_from_joints, PlanSettings, PlanStatus, RobotValidity};
 use sublevel::robot::{FittedRobot, MotionChecker, RobotChecker};
 use sublevel::scene::moveit::{allowed_override, world_objects, MotionPlanRequest, PlanningScene};
 use sublevel::Result;
@@ -77,8 +77,7 @@ pub fn run(args: PlanArgs) -> Result<()> {
         eprintln!("warning: {}[{}] ({}) left out: {}", s.object_id, s.shape_index, s.kind, s.reason);
     }
     let start = start_from_joints(&robot.model, "request.start_state", &request.start, &scene.joint_positions)?;
-    let constraints: Vec<JointConstraint> =
-        request.goal.iter().zip(&request.goal_tolerances).map(|((n, v), (b, a))| (n.clone(), *v, *b, *a)).collect();
+    let constraints = request.goal_constraints();
     let goal = joint_goal(&robot.model, "request.goal_constraints[0].joint_constraints", &constraints, &start)?;
     if !(args.timeout.is_finite() && args.timeout > 0.0) {
         return Err(sublevel::Error::invalid("--timeout", format!("must be > 0 s, got {}", args.timeout)));

@@ -62,6 +62,16 @@ struct RawConstraint {
 }
 
 impl MotionPlanRequest {
+    /// The goal's joint constraints as `(joint, position, tolerance below, tolerance above)`, in
+    /// message order (radians or meters).
+    pub fn goal_constraints(&self) -> Vec<(String, Real, Real, Real)> {
+        self.goal
+            .iter()
+            .zip(&self.goal_tolerances)
+            .map(|((n, v), (below, above))| (n.clone(), *v, *below, *above))
+            .collect()
+    }
+
     /// Reads a request from YAML (or JSON) bytes.
     ///
     /// # Errors

@@ -82,13 +82,7 @@ pub fn plan_ends(req: &pb::PlanRequest, robot: &FittedRobot, defaults: &[(String
             }
             qs.remove(0)
         }
-        None => {
-            let names: Vec<&str> = model.variable_names();
-            let q: Vec<Real> =
-                names.iter().map(|n| defaults.iter().find(|(m, _)| m == n).map_or(0.0, |(_, v)| *v)).collect();
-            model.check_limits("start", &q)?;
-            q
-        }
+        None => start_from_joints(model, "start", &[], defaults)?,
     };
     let kinds = [req.goal_configurations.is_some(), !req.goal_joint_constraints.is_empty(), req.goal_pose.is_some()];
     match kinds.iter().filter(|k| **k).count() {
@@ -151,12 +145,7 @@ fn ends_of_moveit(
     defaults: &[(String, Real)],
 ) -> Result<(Vec<Real>, Goal)> {
     let start = start_from_joints(&robot.model, &format!("{field}.start_state"), &request.start, defaults)?;
-    let constraints: Vec<JointConstraint> = request
-        .goal
-        .iter()
-        .zip(&request.goal_tolerances)
-        .map(|((n, v), (below, above))| (n.clone(), *v, *below, *above))
-        .collect();
+    let constraints = request.goal_constraints();
     let goal =
         joint_goal(&robot.model, &format!("{field}.goal_constraints[0].joint_constraints"), &constraints, &start)?;
     Ok((start, goal))
