@@ -2,8 +2,8 @@
 //! gRPC in columns, on one robot in one planning scene.
 //!
 //! ```text
-//! sublevel robot bench robot.json --scene SCENE.yaml [--samples 1000] [--batch 64] [--columns 1000]
-//!                      [--concurrency 2] [--seconds 3] [--addr HOST:PORT] [--json OUT]
+//! sublevel robot bench robot.json --scene SCENE.yaml [--samples 1000] [--batch 64] [--repeats 5]
+//!                      [--columns 1000] [--concurrency 2] [--seconds 3] [--addr HOST:PORT] [--json OUT]
 //! ```
 //!
 //! The configurations are `--samples` uniform draws within the joint limits (continuous joints in
@@ -11,8 +11,14 @@
 //! thread ([`RobotChecker`], the server's own code):
 //!
 //! - **single**: every configuration checked alone (verdict: world and self), each call timed;
-//! - **batch**: blocks of `--batch` configurations checked back to back, time per configuration;
+//! - **block**: blocks of [`BLOCK`] (8) configurations, one [`RobotChecker::check_block`] call
+//!   each (the SIMD kernel decides the lanes it can), time per configuration, beside the same
+//!   blocks checked one `check` call per configuration (the single path's mean per block);
+//! - **batch**: the same for blocks of `--batch` configurations;
 //! - **distance**: the verdict plus the minimum robot–world distance, each call timed.
+//!
+//! Each figure is the median over every timing of `--repeats` passes over the configurations;
+//! the block verdicts are compared with the single ones (a disagreement is an error).
 //!
 //! Over gRPC: the robot uploaded and the scene imported into a server (`--addr`, else one started
 //! in this process on a loopback port over a temporary data directory), then `--concurrency`
@@ -26,7 +32,7 @@ use rand::{Rng, SeedableRng};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 use sublevel::math::{Isometry3, Real};
-use sublevel::robot::{CheckOptions, FittedRobot, RobotChecker};
+use sublevel::robot::{CheckOptions, FittedRobot, RobotChecker, BLOCK};
 use sublevel::scene::moveit::{allowed_override, world_objects, PlanningScene};
 use sublevel::service::pb::{self, sublevel_client::SublevelClient};
 use sublevel::{Error, Result};
@@ -48,6 +54,9 @@ pub struct BenchArgs {
     /// Configurations per block of the in-process batch figure.
     #[arg(long, default_value_t = 64)]
     batch: usize,
+    /// Passes over the configurations of each in-process figure (its median is over all of them).
+    #[arg(long, default_value_t = 5)]
+    repeats: usize,
     /// Configurations per `CheckConfigurations` request.
     #[arg(long, default_value_t = 1000)]
     columns: usize,
@@ -77,6 +86,9 @@ pub fn run(args: BenchArgs) -> Result<()> {
             "must be ≥ 1 (concurrency at most 64)",
         ));
     }
+    if !(1..=1000).contains(&args.repeats) {
+        return Err(Error::invalid("--repeats", format!("must be in [1, 1000], got {}", args.repeats)));
+    }
     if !(args.seconds.is_finite() && (0.0..=600.0).contains(&args.seconds)) {
         return Err(Error::invalid("--seconds", format!("must be in [0, 600], got {}", args.seconds)));
     }
@@ -92,32 +104,72 @@ pub fn run(args: BenchArgs) -> Result<()> {
     let mut checker = RobotChecker::new(&robot, world, &allowed)?;
     let base = Isometry3::identity();
     let verdict = CheckOptions { distance: false, ..CheckOptions::default() };
-    let mut colliding = 0usize;
-    let single = median(configs.iter().map(|q| {
+    let repeats = args.repeats;
+    // The single verdicts, the reference of the block ones.
+    let verdicts: Vec<bool> =
+        configs.iter().map(|q| checker.check(q, &base, &verdict).map(|a| a.collides)).collect::<Result<_>>()?;
+    let colliding = verdicts.iter().filter(|&&c| c).count();
+    let single = median((0..repeats).flat_map(|_| configs.iter()).map(|q| {
         let start = Instant::now();
         let a = checker.check(q, &base, &verdict);
-        let t = start.elapsed().as_secs_f64();
-        colliding += usize::from(a.as_ref().is_ok_and(|a| a.collides));
-        a.map(|_| t)
+        a.map(|_| start.elapsed().as_secs_f64())
     }))?;
-    let batch = median(configs.chunks(args.batch).map(|block| {
-        let start = Instant::now();
-        for q in block {
-            checker.check(q, &base, &verdict)?;
+    let mut disagreements = 0usize;
+    let mut blocks = |size: usize, checker: &mut RobotChecker| -> Result<Real> {
+        let mut flat = Vec::new();
+        let mut out = Vec::new();
+        let mut times = Vec::new();
+        for _ in 0..repeats {
+            for (k, block) in configs.chunks(size).enumerate() {
+                flat.clear();
+                flat.extend(block.iter().flatten());
+                out.clear();
+                let start = Instant::now();
+                checker.check_block(&flat, &base, &verdict, false, &mut out)?;
+                times.push(start.elapsed().as_secs_f64() / block.len() as Real);
+                let expected = &verdicts[k * size..k * size + block.len()];
+                disagreements += out.iter().zip(expected).filter(|(a, &e)| a.collides != e).count();
+            }
         }
-        Ok(start.elapsed().as_secs_f64() / block.len() as Real)
-    }))?;
-    let distance = median(configs.iter().map(|q| {
+        median(times.into_iter().map(Ok))
+    };
+    let block = blocks(BLOCK, &mut checker)?;
+    let batch = blocks(args.batch, &mut checker)?;
+    if disagreements > 0 {
+        return Err(Error::Numerical(format!(
+            "{disagreements} block verdicts differ from the single checks' (over {repeats} passes)"
+        )));
+    }
+    // The same blocks, one `check` call per configuration: the single path's mean per block.
+    let singles = |size: usize, checker: &mut RobotChecker| {
+        median((0..repeats).flat_map(|_| configs.chunks(size)).map(|block| {
+            let start = Instant::now();
+            for q in block {
+                checker.check(q, &base, &verdict)?;
+            }
+            Ok(start.elapsed().as_secs_f64() / block.len() as Real)
+        }))
+    };
+    let block_single = singles(BLOCK, &mut checker)?;
+    let batch_single = singles(args.batch, &mut checker)?;
+    let distance = median((0..repeats).flat_map(|_| configs.iter()).map(|q| {
         let start = Instant::now();
         checker.check(q, &base, &CheckOptions::default()).map(|_| start.elapsed().as_secs_f64())
     }))?;
     println!(
-        "{} configurations ({colliding} colliding), {} world objects, one thread:",
+        "{} configurations ({colliding} colliding), {} world objects, one thread, medians over {repeats} passes:",
         configs.len(),
         checker.world().len()
     );
     println!("  single           median {:>9.2} µs per configuration", 1e6 * single);
-    println!("  batch of {:<6}  median {:>9.2} µs per configuration", args.batch, 1e6 * batch);
+    println!("  block of {:<6}  median {:>9.2} µs per configuration (check_block)", BLOCK, 1e6 * block);
+    println!("  block of {:<6}  median {:>9.2} µs per configuration (check, one by one)", BLOCK, 1e6 * block_single);
+    println!("  batch of {:<6}  median {:>9.2} µs per configuration (check_block)", args.batch, 1e6 * batch);
+    println!(
+        "  batch of {:<6}  median {:>9.2} µs per configuration (check, one by one)",
+        args.batch,
+        1e6 * batch_single
+    );
     println!("  with distance    median {:>9.2} µs per configuration", 1e6 * distance);
 
     let grpc = if args.seconds > 0.0 {
@@ -141,6 +193,11 @@ pub fn run(args: BenchArgs) -> Result<()> {
             "batch": args.batch,
             "batch_us": 1e6 * batch,
             "distance_us": 1e6 * distance,
+            "repeats": repeats,
+            "block": BLOCK,
+            "block_us": 1e6 * block,
+            "block_single_us": 1e6 * block_single,
+            "batch_single_us": 1e6 * batch_single,
             "grpc": grpc.map(|g| serde_json::json!({
                 "concurrency": args.concurrency,
                 "columns": args.columns,

@@ -18,6 +18,7 @@ mod query_compound;
 mod robot;
 mod robot_cli;
 mod robot_hardening;
+mod robot_sampled;
 mod robot_service;
 mod scene_import;
 mod scene_import_hardening;

@@ -438,6 +438,47 @@ def test_motions_are_free_or_stop_at_their_first_contact(client, panda, mbm_scen
     assert len(one) == 1 and one.valid[0]
 
 
+def test_sampled_motions_answer_as_configuration_checks_of_their_samples(client, panda, mbm_scenes):
+    """``resolution`` > 0: motion k's samples t = i / n, n = max(1, ceil(|q1 - q0| * resolution)),
+    i = 1 .. n, recomputed here and checked by CheckConfigurations: the motion is valid exactly
+    when none collides; otherwise its contact_t is one of its colliding samples, and its contact
+    configuration that sample."""
+    scene = mbm_scenes["bookshelf_small"]
+    q = labels("bookshelf_small", 1)["q"]
+    q0, q1 = q[:24], q[1:25]
+    resolution = 6.0
+    m = client.check_motions(panda.robot_id, q0, q1, scene=scene, resolution=resolution)
+    assert len(m) == len(q0) and m.decided.all() and (m.steps == 0).all()
+    valid = invalid = 0
+    for k in range(len(q0)):
+        # The length as the server sums it: in joint order.
+        length = math.sqrt(sum(float(d) * float(d) for d in q1[k] - q0[k]))
+        n = max(1, math.ceil(length * resolution))
+        ts = np.arange(1, n + 1) / n
+        samples = q0[k][None, :] + ts[:, None] * (q1[k] - q0[k])[None, :]
+        states = client.check_configurations(panda.robot_id, samples, scene=scene)
+        assert m.valid[k] == (not states.collides.any()), k
+        if m.valid[k]:
+            valid += 1
+            assert m.samples[k] == n and math.isnan(m.contact_t[k]) and m.robot_link[k] == ""
+            continue
+        invalid += 1
+        i = int(round(m.contact_t[k] * n))
+        assert m.contact_t[k] == i / n, k
+        assert states.collides[i - 1], k
+        np.testing.assert_array_equal(m.contact_configuration[k], samples[i - 1])
+        assert 0 < m.samples[k] <= n
+        assert m.robot_link[k] in panda.link_names and m.other[k]
+    assert valid >= 3 and invalid >= 3, (valid, invalid)
+
+    # The certified check of the same motions: one proven free has no colliding sample.
+    certified = client.check_motions(panda.robot_id, q0, q1, scene=scene)
+    assert (certified.samples == 0).all()
+    assert m.valid[certified.valid].all()
+    with pytest.raises(ValueError, match="resolution"):
+        client.check_motions(panda.robot_id, q0, q1, scene=scene, resolution=-1.0)
+
+
 def test_self_collision_and_base_pose(client, panda):
     scenario = "bookshelf_small"
     lab = labels(scenario, 1)

@@ -1,6 +1,7 @@
 //! The `sublevel-lab` command: the paper's reproduction (`table1`, `fit-time`), benchmarks against
 //! peers (`bench`), charts (`chart`), the stability suite (`stability`) and the server's start-up
-//! time on a large store (`startup`), the exact primitives beside coal (`primitives`).
+//! time on a large store (`startup`), the exact primitives beside coal (`primitives`), a fitted
+//! robot's checks against mesh labels (`robot-labels`) and its sampled edges (`robot-edges`).
 //!
 //! ```text
 //! cargo run --release -p sublevel-lab -- bench --csv out/bench.csv
@@ -20,6 +21,7 @@ mod fit_time;
 mod peer_coal;
 mod peer_parry;
 mod primitives;
+mod robot_edges;
 mod robot_labels;
 mod stability;
 mod startup;
@@ -58,6 +60,9 @@ enum Command {
     /// A fitted robot's configuration checks against mesh-exact labels (misses, false
     /// collisions, distance error, time per configuration), per scenario.
     RobotLabels(robot_labels::RobotLabelsArgs),
+    /// Sampled start–goal edges of the MotionBenchMaker problems: rakes (`rake_motion`, blocks of
+    /// 8) beside one sample at a time, time per checked sample.
+    RobotEdges(robot_edges::RobotEdgesArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -75,6 +80,7 @@ fn main() -> std::process::ExitCode {
         Command::Startup(a) => startup::run(a),
         Command::Primitives(a) => primitives::run(a),
         Command::RobotLabels(a) => robot_labels::run(a),
+        Command::RobotEdges(a) => robot_edges::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -9,6 +9,11 @@
 //!   worst error where both call the robot free of the world);
 //! - time per configuration, one thread: the full answer (distance, world, self) and the verdict
 //!   alone (world pairs stop at the first collision, no distance), medians.
+//!
+//! The verdicts the misses and false collisions are counted from are the block path's
+//! ([`RobotChecker::check_block`], the scene's configurations in blocks of [`BLOCK`], the time
+//! per configuration a block's over its size), or with `--single` one
+//! [`RobotChecker::check`] call per configuration; either must agree with the full answer's.
 
 use csv::StringRecord;
 use std::collections::BTreeMap;
@@ -16,7 +21,9 @@ use std::path::PathBuf;
 use std::time::Instant;
 use sublevel_core::math::{Isometry3, Real};
 use sublevel_core::{Error, Result};
-use sublevel_robot::{CheckOptions, FittedRobot, MotionChecker, MotionOptions, RobotChecker};
+use sublevel_robot::{
+    CheckOptions, ConfigurationAnswer, FittedRobot, MotionChecker, MotionOptions, RobotChecker, BLOCK,
+};
 use sublevel_scene::moveit::{allowed_override, world_objects, PlanningScene};
 
 /// Arguments of `sublevel-lab robot-labels`.
@@ -52,6 +59,9 @@ pub struct RobotLabelsArgs {
     /// are measured against.
     #[arg(long)]
     no_contact_proofs: bool,
+    /// The verdicts one `check` call per configuration instead of in blocks of 8 (`check_block`).
+    #[arg(long)]
+    single: bool,
 }
 
 #[derive(Default)]
@@ -117,6 +127,11 @@ fn scene_checker<'r>(
 /// Files that cannot be read; a label row or a scene that does not parse; a check that fails.
 pub fn run(args: RobotLabelsArgs) -> Result<()> {
     let mut tallies = evaluate(&args)?;
+    if args.single {
+        println!("verdicts: one `check` call per configuration");
+    } else {
+        println!("verdicts: `check_block` in blocks of {BLOCK} (time per configuration: a block's over its size)");
+    }
     print_table(&mut tallies);
     let motions = evaluate_motions(&args, None)?;
     println!("\nstart–goal motions of the scenes (conservative advancement, tolerance 1 mm), against their 100 labelled samples:");
@@ -205,6 +220,38 @@ fn evaluate_motions(args: &RobotLabelsArgs, only: Option<&[&str]>) -> Result<BTr
     Ok(out)
 }
 
+/// The verdicts of `qs` under `options`: one [`RobotChecker::check`] call each with `single`,
+/// else [`RobotChecker::check_block`] on blocks of [`BLOCK`]; each configuration's time
+/// (nanoseconds; in a block, the block's over its size) pushed to `times`.
+fn verdicts(
+    checker: &mut RobotChecker<'_>,
+    qs: &[Vec<Real>],
+    options: &CheckOptions,
+    single: bool,
+    times: &mut Vec<Real>,
+) -> Result<Vec<ConfigurationAnswer>> {
+    let base = Isometry3::identity();
+    let mut out = Vec::with_capacity(qs.len());
+    if single {
+        for q in qs {
+            let s = Instant::now();
+            out.push(checker.check(q, &base, options)?);
+            times.push(s.elapsed().as_nanos() as Real);
+        }
+        return Ok(out);
+    }
+    let mut flat = Vec::new();
+    for block in qs.chunks(BLOCK) {
+        flat.clear();
+        flat.extend(block.iter().flatten());
+        let s = Instant::now();
+        checker.check_block(&flat, &base, options, false, &mut out)?;
+        let each = s.elapsed().as_nanos() as Real / block.len() as Real;
+        times.extend(std::iter::repeat_n(each, block.len()));
+    }
+    Ok(out)
+}
+
 /// Checks the labelled configurations, per scenario.
 fn evaluate(args: &RobotLabelsArgs) -> Result<BTreeMap<String, Tally>> {
     let robot = FittedRobot::load(&args.robot)?;
@@ -229,19 +276,20 @@ fn evaluate(args: &RobotLabelsArgs) -> Result<BTreeMap<String, Tally>> {
     for ((scenario, scene_no), rows) in &by_scene {
         let mut checker = scene_checker(args, &robot, scenario, *scene_no)?;
         let t = tallies.entry(scenario.clone()).or_default();
-        for r in rows {
-            let q: Vec<Real> = (1..=dof).map(|j| num(r, &header, &format!("q{j}"))).collect::<Result<_>>()?;
+        let qs: Vec<Vec<Real>> = rows
+            .iter()
+            .map(|r| (1..=dof).map(|j| num(r, &header, &format!("q{j}"))).collect::<Result<_>>())
+            .collect::<Result<_>>()?;
+        let verdicts = verdicts(&mut checker, &qs, &verdict, args.single, &mut t.verdict_ns)?;
+        for ((r, q), v) in rows.iter().zip(&qs).zip(&verdicts) {
             let mesh = num(r, &header, "collides")? > 0.5;
             let mesh_world = num(r, &header, "collides_world")? > 0.5;
             let mesh_self = num(r, &header, "collides_self")? > 0.5;
             let mesh_dist = num(r, &header, "min_world_dist_m")?;
             let s = Instant::now();
-            let a = checker.check(&q, &base, &full)?;
+            let a = checker.check(q, &base, &full)?;
             t.full_ns.push(s.elapsed().as_nanos() as Real);
-            let s = Instant::now();
-            let v = checker.check(&q, &base, &verdict)?;
-            t.verdict_ns.push(s.elapsed().as_nanos() as Real);
-            if v.world != a.world || v.self_collision != a.self_collision {
+            if v.world != a.world || v.self_collision != a.self_collision || v.collides != a.collides {
                 return Err(Error::Numerical(format!(
                     "{scenario} scene {scene_no} idx {}: the verdict-only check disagrees with the full one",
                     field(r, &header, "idx")?
@@ -250,14 +298,14 @@ fn evaluate(args: &RobotLabelsArgs) -> Result<BTreeMap<String, Tally>> {
             t.n += 1;
             t.exact_pairs += a.pairs_exact;
             t.unconverged += usize::from(!a.converged);
-            t.ours_colliding += usize::from(a.collides);
+            t.ours_colliding += usize::from(v.collides);
             if mesh {
                 t.mesh_colliding += 1;
             } else {
                 t.mesh_free += 1;
             }
             let idx = field(r, &header, "idx")?;
-            if mesh_world && !a.world {
+            if mesh_world && !v.world {
                 t.miss_world += 1;
                 if args.verbose {
                     eprintln!(
@@ -266,7 +314,7 @@ fn evaluate(args: &RobotLabelsArgs) -> Result<BTreeMap<String, Tally>> {
                     );
                 }
             }
-            if mesh_self && !a.self_collision {
+            if mesh_self && !v.self_collision {
                 t.miss_self += 1;
                 if args.verbose {
                     eprintln!(
@@ -275,9 +323,9 @@ fn evaluate(args: &RobotLabelsArgs) -> Result<BTreeMap<String, Tally>> {
                     );
                 }
             }
-            t.false_world += usize::from(!mesh_world && a.world);
-            t.false_self += usize::from(!mesh_self && a.self_collision);
-            if !mesh && a.collides {
+            t.false_world += usize::from(!mesh_world && v.world);
+            t.false_self += usize::from(!mesh_self && v.self_collision);
+            if !mesh && v.collides {
                 if args.verbose {
                     let pair =
                         a.pair.map(|(g, o)| format!("{} – {}", robot.geometries[g].name, checker.world()[o].name));
@@ -388,6 +436,7 @@ mod tests {
             verbose,
             no_sphere_stage: false,
             no_contact_proofs: false,
+            single: false,
         }
     }
 
@@ -411,6 +460,19 @@ mod tests {
             assert_eq!(t.unconverged, 0, "{name}: not converged");
             let worst = t.dist_err.iter().fold(0.0, |m: Real, e| m.max(e.abs()));
             assert!(worst < 1e-5, "{name}: distance differs from coal's by {worst} m");
+        }
+    }
+
+    /// The block path and the single path count the same verdicts (every 25th configuration).
+    #[test]
+    fn the_block_and_the_single_verdicts_give_the_same_tallies() {
+        let block = evaluate(&repository_args(25, false)).unwrap();
+        let single = evaluate(&RobotLabelsArgs { single: true, ..repository_args(25, false) }).unwrap();
+        assert_eq!(block.len(), 7);
+        let counts = |t: &Tally| (t.n, t.ours_colliding, t.miss_world, t.miss_self, t.false_world, t.false_self);
+        for (name, b) in &block {
+            assert_eq!(counts(b), counts(&single[name]), "{name}");
+            assert_eq!(b.verdict_ns.len(), b.n, "{name}: a time per configuration");
         }
     }
 

@@ -9,7 +9,8 @@
 //! goals     the start and the goal configurations checked: a colliding start or no free goal
 //!           ends the plan, naming the pair
 //! search    RRT-Connect (Kuffner and LaValle, 2000) from the start to every goal at once, Halton
-//!           samples, edges checked at 32 samples per unit of joint distance      [`rrt`]
+//!           samples, edges checked at 32 samples per unit of joint distance, in
+//!           blocks of 8 spread along the edge (rakes)                            [`rrt`]
 //! simplify  redundant waypoints dropped, random shortcuts, optional corner cutting [`simplify`]
 //! certify   every edge proven free by conservative advancement; one that is not is split, or
 //!           re-planned with certified edges in the time left                     [`certify`]

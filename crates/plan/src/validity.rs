@@ -3,14 +3,17 @@
 //! whether a segment is *proven* free (the returned path's edges, certified).
 //!
 //! [`RobotValidity`] answers all three for a fitted robot among a world: states by
-//! [`sublevel_robot::RobotChecker::check`] (the verdict alone, no distance), sampled edges as
-//! OMPL's discrete motion validator orders its samples, certified edges by conservative
-//! advancement ([`sublevel_robot::MotionChecker::check_motion`]).
+//! [`sublevel_robot::RobotChecker::check`] (the verdict alone, no distance), sampled edges in
+//! rakes of [`sublevel_robot::BLOCK`] samples spread along the edge
+//! ([`sublevel_robot::rake_order`], [`sublevel_robot::RobotChecker::first_collision`]), certified
+//! edges by conservative advancement ([`sublevel_robot::MotionChecker::check_motion`]). Other
+//! checkers sample their edges one configuration at a time, as OMPL's discrete motion validator
+//! orders them ([`sampled_edge_free`]).
 
 use crate::space::JointSpace;
 use sublevel_core::math::{Isometry3, Real};
 use sublevel_core::Result;
-use sublevel_robot::{CheckOptions, MotionChecker, MotionOptions, RobotModel};
+use sublevel_robot::{rake_order, CheckOptions, MotionChecker, MotionOptions, RobotModel, BLOCK};
 
 /// The answer of a certified edge check.
 #[derive(Clone, Debug, PartialEq)]
@@ -28,7 +31,7 @@ pub enum Certificate {
 pub struct CheckCounts {
     /// Configurations checked (alone or as an edge's samples).
     pub states: usize,
-    /// Edges checked by sampling.
+    /// Edges checked by sampling (their samples count in `states`).
     pub edges: usize,
     /// Edges checked by conservative advancement.
     pub edges_certified: usize,
@@ -49,7 +52,8 @@ pub trait Validity {
 
     /// Whether the segment from `a` to `b` is free at `resolution` samples per unit of joint
     /// distance: `b` and the interior samples are checked (`a` is known free), ordered so that a
-    /// collision anywhere is met early ([`sample_order`]).
+    /// collision anywhere is met early (the default: one at a time in [`sample_order`]; a checker
+    /// may take the same samples in another order, or several at once, for the same verdict).
     ///
     /// # Errors
     /// As [`Validity::state_free`].
@@ -135,6 +139,10 @@ pub struct RobotValidity<'c, 'r> {
     margin: Real,
     max_steps: usize,
     counts: CheckCounts,
+    /// The samples of one rake, row by row (reused).
+    block: Vec<Real>,
+    /// One sample (reused).
+    sample: Vec<Real>,
 }
 
 impl<'c, 'r> RobotValidity<'c, 'r> {
@@ -142,7 +150,17 @@ impl<'c, 'r> RobotValidity<'c, 'r> {
     /// padded by `padding` meters (≥ 0; on top of the checker's link padding).
     pub fn new(mut motion: MotionChecker<'c, 'r>, base: Isometry3, padding: Real) -> Self {
         let space = JointSpace::of(&motion.checker().robot().model);
-        Self { motion, space, base, padding, margin: 0.0, max_steps: 100_000, counts: CheckCounts::default() }
+        Self {
+            motion,
+            space,
+            base,
+            padding,
+            margin: 0.0,
+            max_steps: 100_000,
+            counts: CheckCounts::default(),
+            block: Vec::new(),
+            sample: Vec::new(),
+        }
     }
 }
 
@@ -158,9 +176,39 @@ impl Validity for RobotValidity<'_, '_> {
         Ok(!self.motion.checker().check(q, &self.base, &options)?.collides)
     }
 
+    /// The samples of [`sampled_edge_free`] (the same configurations: `n = max(1, ⌈distance ·
+    /// resolution⌉)`, t = i / n for i = 1..=n, made by [`JointSpace::interpolate`], so continuous
+    /// joints take the shorter way round), checked in rakes: blocks of [`BLOCK`] samples in
+    /// [`rake_order`], each by [`sublevel_robot::RobotChecker::first_collision`] at the padding
+    /// plus the search margin, stopping at the first block that holds a colliding sample. The
+    /// verdict is the one-at-a-time check's; only the order of the samples differs (the first
+    /// block already spans the whole edge). The samples are made here rather than by
+    /// [`sublevel_robot::RobotChecker::rake_motion`], whose linear interpolation would take a
+    /// continuous joint the long way round. `counts.states` grows by every sample of the blocks
+    /// checked (a colliding block's in full).
+    ///
+    /// # Errors
+    /// [`sublevel_core::Error::InvalidArgument`] naming `start` / `end` (a length other than the
+    /// robot's entries, a value that is not finite); the checker's errors.
     fn edge_free(&mut self, a: &[Real], b: &[Real], resolution: Real) -> Result<bool> {
         self.counts.edges += 1;
-        sampled_edge_free(self, a, b, resolution)
+        let model = &self.motion.checker().robot().model;
+        model.check_configuration("start", a)?;
+        model.check_configuration("end", b)?;
+        let n = ((self.space.distance(a, b) * resolution).ceil() as usize).max(1);
+        let padding = self.padding + self.margin;
+        for rake in rake_order(n, BLOCK).chunks(BLOCK) {
+            self.block.clear();
+            for &i in rake {
+                self.space.interpolate(a, b, i as Real / n as Real, &mut self.sample);
+                self.block.extend_from_slice(&self.sample);
+            }
+            self.counts.states += rake.len();
+            if self.motion.checker().first_collision(&self.block, &self.base, padding)?.is_some() {
+                return Ok(false);
+            }
+        }
+        Ok(true)
     }
 
     fn certify(&mut self, a: &[Real], b: &[Real], tolerance: Real) -> Result<Certificate> {

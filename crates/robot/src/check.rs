@@ -69,6 +69,7 @@ use sublevel_query::shape::{shape_distance, ShapeRef};
 
 pub use crate::answer::{CheckOptions, ConfigurationAnswer};
 
+pub mod block;
 mod self_pairs;
 
 /// A link shape as the sos bound sees it: the primitive, or the compound body's root (which
@@ -139,6 +140,9 @@ pub struct RobotChecker<'r> {
     /// Whether the inner balls and the sphere trees prove pairs colliding
     /// ([`RobotChecker::set_contact_proofs`]).
     contact_proofs: bool,
+    /// The block kernel's view of the robot and world, built at the first block check
+    /// ([`block`]).
+    block: Option<Box<block::BlockPlan>>,
 }
 
 impl<'r> RobotChecker<'r> {
@@ -233,6 +237,7 @@ impl<'r> RobotChecker<'r> {
             pad_max: 0.0,
             sphere_stage: true,
             contact_proofs: true,
+            block: None,
         })
     }
 
@@ -318,7 +323,7 @@ impl<'r> RobotChecker<'r> {
         let robot = self.robot;
         self.place(q, base)?;
         let mut answer = ConfigurationAnswer::start(options.distance);
-        self.world_check(options, &mut answer)?;
+        self.world_check(options, &mut answer, None)?;
         if options.gradient && options.distance && !answer.world && answer.distance.is_finite() {
             if let (Some((x, y)), Some((g, _))) = (answer.witnesses, answer.pair) {
                 let d = x - y;
@@ -331,7 +336,7 @@ impl<'r> RobotChecker<'r> {
             }
         }
         if options.self_collision {
-            self.self_check(options, &mut answer)?;
+            self.self_check(options, &mut answer, None)?;
         }
         answer.collides = answer.world || answer.self_collision;
         Ok(answer)
@@ -575,11 +580,23 @@ impl<'r> RobotChecker<'r> {
         }
     }
 
-    fn world_check(&mut self, options: &CheckOptions, answer: &mut ConfigurationAnswer) -> Result<()> {
+    /// The world pairs of the configuration placed, or only the pairs `only` (geometry, object).
+    fn world_check(
+        &mut self,
+        options: &CheckOptions,
+        answer: &mut ConfigurationAnswer,
+        only: Option<&[(usize, usize)]>,
+    ) -> Result<()> {
         let mut order = std::mem::take(&mut self.order);
         order.clear();
         let most = options.padding + self.pad_max;
+        if let Some(pairs) = only {
+            order.extend(pairs.iter().map(|&(g, o)| (self.world_gap(g, o), g, o)));
+        }
         for g in 0..self.robot.geometries.len() {
+            if only.is_some() {
+                break;
+            }
             let padding = options.padding + self.pad[g];
             for &o in &self.world_pairs[g] {
                 if !options.distance && self.world_apart(g, o, padding) {

@@ -58,6 +58,7 @@ pub mod srdf;
 pub mod world;
 
 pub use advance::{MotionAnswer, MotionChecker, MotionOptions};
+pub use check::block::{rake_order, RakeAnswer, BLOCK};
 pub use check::{CheckOptions, ConfigurationAnswer, RobotChecker};
 pub use fit::{check_mesh_name, fit_robot, fit_robot_text, MeshSource, RobotFitProgress, RobotFitSettings};
 pub use fitted::{FittedRobot, LinkShape, RobotFile, RobotGeometry};

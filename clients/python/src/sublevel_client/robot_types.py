@@ -179,6 +179,13 @@ class ConfigurationColumns:
         )
 
 
+def _counts(values, count: int) -> np.ndarray:
+    """An integer column of ``count`` rows: zeros when the server sent none (a server older than
+    the column)."""
+    column = np.asarray(values, dtype=np.int64)
+    return column if column.size == count else np.zeros(count, dtype=np.int64)
+
+
 @dataclass
 class MotionColumns:
     """The answer of ``Client.check_motions``: row m is the motion from ``q0[m]`` to ``q1[m]``.
@@ -195,7 +202,14 @@ class MotionColumns:
         other: length-M list of str: the world object in contact, or the other link of a self
             contact; "" when none.
         self_contact: shape (M,), bool: the contact at t* is a self contact.
-        steps: shape (M,), int: advancement steps taken (configurations bounded).
+        steps: shape (M,), int: advancement steps taken (configurations bounded); 0 for a
+            sampled check.
+        samples: shape (M,), int: samples checked by a sampled check (``resolution`` > 0; it
+            stops at its first block of samples holding a colliding one); 0 for a certified one.
+
+    A sampled check's ``valid`` means no sample collides, its ``contact_t`` is a colliding
+    sample's t and ``contact_configuration``, ``robot_link``, ``other``, ``self_contact`` are that
+    sample's; it can miss a collision between samples, which the certified check cannot.
     """
 
     joint_names: List[str]
@@ -207,6 +221,7 @@ class MotionColumns:
     other: List[str]
     self_contact: np.ndarray
     steps: np.ndarray
+    samples: np.ndarray
 
     def __len__(self) -> int:
         return len(self.valid)
@@ -227,6 +242,7 @@ class MotionColumns:
             other=list(m.other),
             self_contact=np.asarray(m.self_contact, dtype=bool),
             steps=np.asarray(m.steps, dtype=np.int64),
+            samples=_counts(m.samples, n),
         )
 
 

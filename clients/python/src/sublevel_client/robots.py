@@ -247,6 +247,7 @@ class RobotCalls:
         attached: Optional[Sequence[dict]] = None,
         link_padding: Optional[Mapping[str, float]] = None,
         scene_joints: Optional[Callable[[str], List[str]]] = None,
+        resolution: float = 0.0,
     ) -> pb.CheckMotionsRequest:
         """The ``CheckMotionsRequest`` of :meth:`check_motions` (same arguments), validated here;
         also ``QueryRequest.robot_motions`` on a stream."""
@@ -259,6 +260,10 @@ class RobotCalls:
             raise ValueError(f"`tolerance`: expected a positive number of meters, got {tolerance!r}")
         if int(max_steps) < 0:
             raise ValueError(f"`max_steps`: expected >= 0, got {max_steps!r}")
+        if not (float(resolution) >= 0.0) or not math.isfinite(float(resolution)):
+            raise ValueError(
+                f"`resolution`: expected samples per unit of joint distance >= 0 (0: certified), got {resolution!r}"
+            )
         req = pb.CheckMotionsRequest(
             robot_id=robot_id,
             scene_id=scene,
@@ -269,6 +274,7 @@ class RobotCalls:
             max_steps=int(max_steps),
             attached=_attached_pb(attached),
             link_padding=_link_padding(link_padding),
+            resolution=float(resolution),
         )
         if base is not None:
             req.base.CopyFrom(_pose_pb(base, "base"))
@@ -355,11 +361,12 @@ class RobotCalls:
         max_steps: int = 0,
         attached: Optional[Sequence[dict]] = None,
         link_padding: Optional[Mapping[str, float]] = None,
+        resolution: float = 0.0,
     ) -> MotionColumns:
         """Checks straight joint-space motions ``q0[m] -> q1[m]`` (continuous joints the shorter
         way) by conservative advancement: each is proven free, or answered with its first contact
         parameter t* (within ``tolerance``), the configuration and the pair there. No sampling
-        resolution to choose.
+        resolution to choose — unless ``resolution`` asks for a sampled check instead.
 
         Args:
             robot, scene, joint_names, base, padding, attached, link_padding: as in
@@ -370,6 +377,15 @@ class RobotCalls:
                 contact.
             max_steps: most advancement steps per motion before it is answered undecided
                 (``decided`` false); 0: the server's default (100 000).
+            resolution: 0 (the default): certified, as above. > 0: sampled, in samples per unit
+                of joint distance (VAMP uses 32): motion m is checked at the ``n = max(1,
+                ceil(|q1[m] - q0[m]| * resolution))`` configurations ``q0 + t (q1 - q0)``, ``t = i /
+                n``, ``i = 1 .. n`` (``q0`` itself is not checked); ``valid`` then means no sample
+                collides, ``decided`` is true, ``contact_t`` is a colliding sample's t (the smallest
+                of the first block of samples holding one, not necessarily the first contact),
+                ``samples`` the samples checked; ``tolerance`` and ``max_steps`` do not apply. A
+                sampled check can miss a collision between its samples; the certified one cannot.
+                At most 100 000 samples per motion.
 
         Returns :class:`MotionColumns` (numpy columns of M rows). Raises ValueError naming the
         argument when ``q0``, ``q1``, ``joint_names``, ``base`` or ``tolerance`` is malformed
@@ -378,7 +394,7 @@ class RobotCalls:
         """
         req = self._motions_request(
             robot, q0, q1, scene=scene, joint_names=joint_names, base=base, padding=padding, tolerance=tolerance,
-            max_steps=max_steps, attached=attached, link_padding=link_padding,
+            max_steps=max_steps, attached=attached, link_padding=link_padding, resolution=resolution,
         )
         return MotionColumns.from_proto(self._call("CheckMotions", req))
 

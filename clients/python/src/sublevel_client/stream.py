@@ -197,17 +197,18 @@ class PlannerStream:
         attached: Optional[Sequence[dict]] = None,
         link_padding: Optional[Mapping[str, float]] = None,
         poses: PosesLike = None,
+        resolution: float = 0.0,
     ) -> MotionColumns:
-        """Certifies joint-space motions ``q0[m] -> q1[m]`` against the stream's view of the scene
-        (after ``poses`` are applied to it and kept): one request with
-        ``QueryRequest.robot_motions``. The arguments and the answer are those of
+        """Certifies (or, with ``resolution`` > 0, samples) joint-space motions ``q0[m] -> q1[m]``
+        against the stream's view of the scene (after ``poses`` are applied to it and kept): one
+        request with ``QueryRequest.robot_motions``. The arguments and the answer are those of
         :meth:`Client.check_motions`; ``robot``, ``joint_names`` and errors as in
         :meth:`check_configurations` (fields prefixed ``robot_motions.``).
         """
         req = self._client._motions_request(
             robot, q0, q1, scene=self.scene, joint_names=joint_names, base=base, padding=padding,
             tolerance=tolerance, max_steps=max_steps, attached=attached, link_padding=link_padding,
-            scene_joints=self._scene_robot_joints,
+            scene_joints=self._scene_robot_joints, resolution=resolution,
         )
         query = pb.QueryRequest(scene_id=self.scene, poses=_instance_poses(poses, "poses"), robot_motions=req)
         return MotionColumns.from_proto(self._exchange(query).robot_motions)

@@ -63,10 +63,16 @@ impl RobotChecker<'_> {
     /// gaps, the clearance table, the contact proofs) over every pair first, so that a colliding
     /// configuration is decided by the first proof found anywhere, then the sphere trees, the
     /// sos bound and the meshes for the pairs left.
-    pub(super) fn self_check(&mut self, options: &CheckOptions, answer: &mut ConfigurationAnswer) -> Result<()> {
+    /// Only the pairs `only` (indices of checked self pairs, increasing) when given.
+    pub(super) fn self_check(
+        &mut self,
+        options: &CheckOptions,
+        answer: &mut ConfigurationAnswer,
+        only: Option<&[usize]>,
+    ) -> Result<()> {
         let mut pending = std::mem::take(&mut self.pending);
         pending.clear();
-        let result = self.self_check_passes(options, answer, &mut pending);
+        let result = self.self_check_passes(options, answer, &mut pending, only);
         self.pending = pending;
         result
     }
@@ -76,8 +82,12 @@ impl RobotChecker<'_> {
         options: &CheckOptions,
         answer: &mut ConfigurationAnswer,
         pending: &mut Vec<usize>,
+        only: Option<&[usize]>,
     ) -> Result<()> {
         for k in 0..self.self_pairs.len() {
+            if only.is_some_and(|o| o.binary_search(&k).is_err()) {
+                continue;
+            }
             let (a, b) = self.self_pairs[k];
             let padding = options.padding + self.pad[a] + self.pad[b];
             let (ga, gb) = (&self.robot.geometries[a], &self.robot.geometries[b]);

@@ -56,6 +56,76 @@ pub fn configurations_from_proto(
     robot.model.configurations(field, &columns.joint_names, &columns.values, defaults)
 }
 
+/// The configurations of `robot` from columns, row by row in one vector (n × dof reals, the
+/// robot's variable order): the request's own values, moved, when its columns are the robot's
+/// joints in order (no names, or every name in order) and every value is finite and within its
+/// joint's limits; otherwise [`configurations_from_proto`]'s rows (and its errors), joined.
+///
+/// # Errors
+/// As [`configurations_from_proto`].
+pub fn configuration_rows(
+    field: &str,
+    columns: Option<pb::ConfigurationColumns>,
+    robot: &FittedRobot,
+    defaults: &[(String, Real)],
+) -> Result<Vec<Real>> {
+    let columns = columns.ok_or_else(|| Error::invalid(field, "required: joint names and values"))?;
+    let model = &robot.model;
+    let dof = model.dof();
+    let in_order = columns.joint_names.is_empty()
+        || (columns.joint_names.len() == dof
+            && columns.joint_names.iter().zip(model.variable_names()).all(|(given, name)| given == name));
+    let limits: Vec<Option<(Real, Real)>> = (0..dof).map(|k| model.variable_joint(k).limits).collect();
+    let fits = |(i, v): (usize, &Real)| v.is_finite() && limits[i % dof].is_none_or(|(lo, hi)| (lo..=hi).contains(v));
+    if in_order
+        && dof > 0
+        && !columns.values.is_empty()
+        && columns.values.len().is_multiple_of(dof)
+        && columns.values.len() <= MAX_CONFIGURATIONS_PER_CALL * dof
+        && columns.values.iter().enumerate().all(fits)
+    {
+        return Ok(columns.values);
+    }
+    Ok(configurations_from_proto(field, Some(&columns), robot, defaults)?.concat())
+}
+
+/// Most samples one motion of a sampled `CheckMotions` may take.
+pub const MAX_SAMPLES_PER_MOTION: usize = 100_000;
+
+/// Checks a sampled check's resolution (samples per unit of joint distance; finite, ≥ 0; 0: the
+/// certified check).
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `resolution`.
+pub fn resolution(value: Real) -> Result<Real> {
+    if value.is_finite() && value >= 0.0 {
+        Ok(value)
+    } else {
+        Err(Error::invalid("resolution", format!("must be finite and >= 0 (0: certified), got {value}")))
+    }
+}
+
+/// The samples of motion `m` from `a` to `b` at `resolution` (> 0): `max(1, ⌈‖b − a‖ ·
+/// resolution⌉)`, as [`sublevel_robot::RobotChecker::rake_motion`] takes them.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `resolution` beyond [`MAX_SAMPLES_PER_MOTION`].
+pub fn motion_samples(m: usize, a: &[Real], b: &[Real], resolution: Real) -> Result<usize> {
+    let length = a.iter().zip(b).map(|(x, y)| (y - x) * (y - x)).sum::<Real>().sqrt();
+    let samples = (length * resolution).ceil();
+    if samples <= MAX_SAMPLES_PER_MOTION as Real {
+        Ok((samples as usize).max(1))
+    } else {
+        Err(Error::invalid(
+            "resolution",
+            format!(
+                "motion {m} ({length:.3} long in joint space) would take {samples} samples at resolution {resolution}; \
+                 at most {MAX_SAMPLES_PER_MOTION} per motion"
+            ),
+        ))
+    }
+}
+
 /// Checks padding (meters, finite, ≥ 0).
 ///
 /// # Errors
@@ -142,15 +212,17 @@ pub fn push_configuration_answers(
     out.count = out.collides.len() as u32;
 }
 
-/// Appends the answers of motions to the response columns.
+/// Appends the answers of motions to the response columns: each motion's answer and the samples
+/// its sampled check took (0: certified).
 pub fn push_motion_answers(
     out: &mut pb::CheckMotionsResponse,
-    answers: &[MotionAnswer],
+    answers: &[(MotionAnswer, usize)],
     robot: &FittedRobot,
     world: &[WorldObject],
 ) {
     let dof = robot.model.dof();
-    for a in answers {
+    for (a, samples) in answers {
+        out.samples.push(u32::try_from(*samples).unwrap_or(u32::MAX));
         out.valid.push(a.valid);
         out.decided.push(a.decided);
         out.contact_t.push(a.contact.unwrap_or(Real::NAN));

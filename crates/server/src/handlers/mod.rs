@@ -7,6 +7,8 @@
 //! scenes.rs   CreateScene, GetScene, ListScenes, DeleteScene, AddInstance, SetPoses, RemoveInstance,
 //!             ImportScene
 //! robots.rs   StartRobotFitJob, UploadRobot, GetRobot, ListRobots, DeleteRobot, CheckConfigurations, CheckMotions
+//! robot_checks.rs  the configuration and motion checks of those (and of query streams)
+//! prepared.rs the robot checkers kept across requests until their robot or scene changes
 //! scene_robots.rs  SetSceneRobot, ClearSceneRobot, SetJointPositions, AttachObject, DetachObject
 //! queries.rs  Distance, Growth, BatchQuery, Query, QueryStream, CheckScene, and where query work
 //!             runs (inline on the async workers, or on the SDP slots)
@@ -20,7 +22,9 @@ mod bodies;
 mod jobs;
 mod motions;
 mod plans;
+mod prepared;
 mod queries;
+mod robot_checks;
 mod robots;
 mod scene_robots;
 mod scenes;
@@ -47,6 +51,8 @@ pub struct SublevelService {
     pools: QueryPools,
     /// Mebibytes of robot files being validated at once ([`robots::ROBOT_BUILD_BUDGET_MIB`]).
     robot_builds: Arc<tokio::sync::Semaphore>,
+    /// Robot checkers kept across requests ([`prepared`]).
+    prepared: Arc<prepared::PreparedCheckers>,
 }
 
 impl SublevelService {
@@ -55,7 +61,8 @@ impl SublevelService {
         let jobs = Arc::new(FitJobs::new(catalog.clone(), config.max_concurrent_fits, config.max_fit_queue));
         let pools = QueryPools::new(config.batch_workers, config.max_concurrent_sdp);
         let robot_builds = Arc::new(tokio::sync::Semaphore::new(robots::ROBOT_BUILD_BUDGET_MIB as usize));
-        Self { catalog, config, jobs, pools, robot_builds }
+        let prepared = Arc::new(prepared::PreparedCheckers::new(config.batch_workers));
+        Self { catalog, config, jobs, pools, robot_builds, prepared }
     }
 }
 

@@ -2,34 +2,26 @@
 //! `CheckMotions`.
 //!
 //! Checks run on the batch slots, split in chunks of configurations (or motions) over as many
-//! slots as the batch pool has and the work fills ([`chunks`]); each chunk makes its own
-//! [`RobotChecker`] (the robot's meshes and bodies are shared, only the world's pair lists are
-//! built, in microseconds).
+//! slots as the batch pool has and the work fills ([`chunks`]), on checkers prepared once per
+//! robot and scene and kept across requests ([`super::prepared`], [`super::robot_checks`]).
 
+pub(super) use super::prepared::Asked;
+use super::prepared::PreparedCheckers;
 use super::{Handled, HandlerError, SublevelService};
 use crate::convert::{self as cv, require_id};
 use crate::jobs::RobotFitInput;
 use crate::pb;
 use crate::runtime::blocking;
-use crate::{Error, Result};
-use futures_util::future::try_join_all;
-use std::ops::Range;
+use crate::Error;
 use std::sync::Arc;
 use sublevel_core::math::{Isometry3, Real};
 use sublevel_robot::srdf::Semantics;
-use sublevel_robot::{
-    CheckOptions, CollisionGeometry, FittedRobot, MotionChecker, RobotChecker, RobotFitSettings, RobotModel,
-};
+use sublevel_robot::{CollisionGeometry, FittedRobot, RobotFitSettings, RobotModel};
 use sublevel_scene::RobotWorld;
 use tonic::{Request, Response};
 
 /// Fewest configurations worth a chunk of their own (a configuration takes 5–200 µs).
 const MIN_CHUNK: usize = 32;
-
-/// Most configurations whose verdicts (no distance) are answered inline on the async worker
-/// (tens of µs each, as small query requests are), saving the two hand-offs to the blocking pool
-/// that would cost more than the check.
-const INLINE_CONFIGURATIONS: usize = 4;
 
 /// `StartRobotFitJob`: validates the URDF, the SRDF and the meshes (every mesh the URDF names is
 /// sent, under a safe name), then starts the fit as a job.
@@ -159,7 +151,9 @@ pub(super) async fn delete_robot(
     let id = request.into_inner().robot_id;
     require_id("robot_id", &id)?;
     let catalog = svc.catalog.clone();
+    let forget = id.clone();
     blocking(move || catalog.delete_robot(&id)).await?;
+    svc.prepared.forget_robot(&forget);
     Ok(Response::new(pb::DeleteRobotResponse {}))
 }
 
@@ -176,50 +170,26 @@ pub(super) struct Setting {
     pub(super) link_padding: Arc<[(String, Real)]>,
 }
 
-/// `robot` with `attached` objects added (`robot` itself when there are none).
-///
-/// # Errors
-/// [`Error::InvalidArgument`] naming `attached[k]` and its field.
-fn with_attached(robot: &Arc<FittedRobot>, attached: &[pb::AttachedObject]) -> Result<Arc<FittedRobot>> {
-    if attached.is_empty() {
-        return Ok(robot.clone());
-    }
-    let mut robot = (**robot).clone();
-    for (k, a) in attached.iter().enumerate() {
-        let field = format!("attached[{k}]");
-        let primitive = a.primitive.as_ref().ok_or_else(|| Error::invalid(format!("{field}.primitive"), "required"))?;
-        let primitive = cv::primitive_from_proto(primitive, &format!("{field}.primitive"))?;
-        let origin = cv::pose_from_proto(&format!("{field}.origin"), a.origin.as_ref())?;
-        let name = if a.name.is_empty() { format!("attached#{k}") } else { a.name.clone() };
-        robot.attach(&a.link, &name, primitive, origin).map_err(|e| cv::prefix_field(e, &field))?;
-    }
-    Ok(Arc::new(robot))
-}
-
-/// What the robot checks need of the service: the catalog, the batch slots and their number.
-/// The unary checks and the query streams (whose requests may carry robot checks) share it.
+/// What the robot checks need of the service: the catalog, the batch slots and their number,
+/// the prepared checkers. The unary checks and the query streams (whose requests may carry robot
+/// checks) share it.
 #[derive(Clone, Debug)]
 pub(super) struct RobotChecks {
     pub(super) catalog: Arc<sublevel_scene::Catalog>,
     pub(super) pools: crate::limits::QueryPools,
     pub(super) slots: usize,
-}
-
-/// What a check request says of its robot and world (see [`RobotChecks::setting`]).
-pub(super) struct Asked {
-    pub(super) robot_id: String,
-    pub(super) scene_id: String,
-    pub(super) base: Option<pb::Pose>,
-    pub(super) attached: Vec<pb::AttachedObject>,
-    pub(super) link_padding: std::collections::HashMap<String, Real>,
-    /// Pose overrides of scene instances (instance id → pose): a query stream's view.
-    pub(super) poses: Vec<(String, Isometry3)>,
+    pub(super) prepared: Arc<PreparedCheckers>,
 }
 
 impl RobotChecks {
     /// The robot checks of `svc`.
     pub(super) fn of(svc: &SublevelService) -> Self {
-        Self { catalog: svc.catalog.clone(), pools: svc.pools.clone(), slots: svc.config.batch_workers }
+        Self {
+            catalog: svc.catalog.clone(),
+            pools: svc.pools.clone(),
+            slots: svc.config.batch_workers,
+            prepared: svc.prepared.clone(),
+        }
     }
 
     /// Whether the robot and the scene of a check read from memory alone: no shared store
@@ -229,188 +199,20 @@ impl RobotChecks {
         !self.catalog.shared_store() && self.catalog.bodies_pending() == 0
     }
 
-    /// Reads a check's robot, scene (empty: no world), base and link padding: inline when they
-    /// are in memory ([`RobotChecks::in_memory`]), else off the async workers. With no
-    /// `robot_id`, the scene's robot with its base (unless the request gives one), attached
-    /// objects (the request's added) and link padding (the request's replacing it link by link).
-    pub(super) async fn setting(&self, asked: Asked) -> Result<Setting, HandlerError> {
-        let Asked { robot_id, scene_id, base, attached, link_padding, poses } = asked;
-        let base = base.map(|b| cv::pose_from_proto("base", Some(&b))).transpose().map_err(cv::to_status)?;
-        let catalog = self.catalog.clone();
-        let read = move || -> Result<Setting> {
-            let mut world = if scene_id.is_empty() {
-                RobotWorld::empty()
-            } else {
-                catalog.robot_world(require_id("scene_id", &scene_id)?)?
-            };
-            world.with_poses(poses.iter().map(|(id, p)| (id.as_str(), p)));
-            let (robot, base, mut padding) = if robot_id.is_empty() {
-                let placed = world.robot.clone().ok_or_else(|| {
-                    Error::invalid("robot_id", "required: name a robot, or a scene holding one (SetSceneRobot)")
-                })?;
-                (placed.robot.clone(), base.unwrap_or(placed.base), placed.link_padding.clone())
-            } else {
-                let entry = catalog.robot(require_id("robot_id", &robot_id)?)?;
-                (entry.robot.clone(), base.unwrap_or_else(Isometry3::identity), Vec::new())
-            };
-            for (link, p) in link_padding {
-                match padding.iter_mut().find(|(l, _)| *l == link) {
-                    Some(entry) => entry.1 = p,
-                    None => padding.push((link, p)),
-                }
-            }
-            Ok(Setting {
-                robot: with_attached(&robot, &attached)?,
-                world: Arc::new(world),
-                base,
-                link_padding: padding.into(),
-            })
-        };
-        if self.in_memory() {
-            Ok(read()?)
-        } else {
-            // The check's own error stays a core error (its field can still be prefixed).
-            Ok(blocking(move || Ok(read())).await??)
-        }
-    }
-
-    /// Answers a `CheckConfigurations` request, the scene's instances in `poses` moved there:
-    /// configurations checked in chunks on the batch slots, answered in columns.
-    pub(super) async fn configurations(
-        &self,
-        req: pb::CheckConfigurationsRequest,
-        poses: Vec<(String, Isometry3)>,
-    ) -> Result<pb::CheckConfigurationsResponse, HandlerError> {
-        let padding = cv::padding(req.padding)?;
-        let asked = Asked {
-            robot_id: req.robot_id,
-            scene_id: req.scene_id,
-            base: req.base,
-            attached: req.attached,
-            link_padding: req.link_padding,
-            poses,
-        };
-        let Setting { robot, world, base, link_padding } = self.setting(asked).await?;
-        let configs = Arc::new(cv::configurations_from_proto(
-            "configurations",
-            req.configurations.as_ref(),
-            &robot,
-            &world.planning.joint_positions,
-        )?);
-        let options = CheckOptions {
-            padding,
-            distance: req.distance || req.gradient,
-            self_collision: !req.skip_self,
-            gradient: req.gradient,
-        };
-        let stop = req.stop_at_first_collision;
-        let check = move |robot: &FittedRobot, world: &RobotWorld, configs: &[Vec<Real>], range: Range<usize>| {
-            let allowed = world.planning.allowed_override();
-            let mut checker = RobotChecker::new(robot, world.objects.clone(), &allowed)?;
-            checker.set_link_padding(&link_padding)?;
-            let mut out = Vec::with_capacity(range.len());
-            for c in range {
-                let answer = checker
-                    .check(&configs[c], &base, &options)
-                    .map_err(|e| cv::prefix_field(e, &format!("configurations[{c}]")))?;
-                let collides = answer.collides;
-                out.push(answer);
-                if stop && collides {
-                    break;
-                }
-            }
-            Ok(out)
-        };
-        // A few verdicts are microseconds: answered inline, as small query requests are; the
-        // rest (distances reach the meshes' distance searches) in chunks on the batch slots, or
-        // in one chunk, in order, when the check stops at the first collision.
-        let answers = if configs.len() <= INLINE_CONFIGURATIONS && !options.distance && self.in_memory() {
-            vec![check(&robot, &world, &configs, 0..configs.len())?]
-        } else {
-            let slots = if stop { 1 } else { self.slots };
-            let work = chunks(configs.len(), slots).into_iter().map(|range| {
-                let (robot, world, configs, check) = (robot.clone(), world.clone(), configs.clone(), check.clone());
-                self.pools.batch.run(move || Ok(check(&robot, &world, &configs, range)))
-            });
-            try_join_all(work).await?.into_iter().collect::<Result<Vec<_>>>()?
-        };
-        let mut out = pb::CheckConfigurationsResponse {
-            joint_names: robot.model.variable_names().iter().map(|s| (*s).to_owned()).collect(),
-            ..Default::default()
-        };
-        for chunk in &answers {
-            cv::push_configuration_answers(&mut out, chunk, &robot, &world.objects, req.gradient);
-        }
-        Ok(out)
-    }
-
-    /// Answers a `CheckMotions` request, the scene's instances in `poses` moved there: motions
-    /// checked by conservative advancement in chunks on the batch slots, answered in columns.
-    pub(super) async fn motions(
-        &self,
-        req: pb::CheckMotionsRequest,
-        poses: Vec<(String, Isometry3)>,
-    ) -> Result<pb::CheckMotionsResponse, HandlerError> {
-        let options = cv::motion_options(req.padding, req.tolerance, req.max_steps)?;
-        let asked = Asked {
-            robot_id: req.robot_id,
-            scene_id: req.scene_id,
-            base: req.base,
-            attached: req.attached,
-            link_padding: req.link_padding,
-            poses,
-        };
-        let Setting { robot, world, base, link_padding } = self.setting(asked).await?;
-        let defaults = &world.planning.joint_positions;
-        let names = |c: &Option<pb::ConfigurationColumns>| c.as_ref().map(|c| c.joint_names.clone());
-        if let (Some(start), Some(end)) = (names(&req.start), names(&req.end)) {
-            if start != end {
-                return Err(Error::invalid(
-                    "end.joint_names",
-                    "names other joints than `start.joint_names`: a motion's end names the joints its start names, \
-                     in the same order",
-                )
-                .into());
-            }
-        }
-        let start = cv::configurations_from_proto("start", req.start.as_ref(), &robot, defaults)?;
-        let end = cv::configurations_from_proto("end", req.end.as_ref(), &robot, defaults)?;
-        if start.len() != end.len() {
-            return Err(Error::invalid(
-                "end.values",
-                format!("{} end configurations for {} start configurations", end.len(), start.len()),
-            )
-            .into());
-        }
-        let motions = Arc::new((start, end));
-        let work = chunks(motions.0.len(), self.slots).into_iter().map(|range| {
-            let (robot, world, motions, link_padding) =
-                (robot.clone(), world.clone(), motions.clone(), link_padding.clone());
-            self.pools.batch.run(move || {
-                Ok((|| {
-                    let allowed = world.planning.allowed_override();
-                    let mut checker = RobotChecker::new(&robot, world.objects.clone(), &allowed)?;
-                    checker.set_link_padding(&link_padding)?;
-                    let mut motion = MotionChecker::new(&mut checker)?;
-                    range
-                        .map(|m| {
-                            motion
-                                .check_motion(&motions.0[m], &motions.1[m], &base, &options)
-                                .map_err(|e| cv::prefix_field(e, &format!("motions[{m}]")))
-                        })
-                        .collect::<Result<Vec<_>>>()
-                })())
-            })
-        });
-        let answers = try_join_all(work).await?.into_iter().collect::<Result<Vec<_>>>()?;
-        let mut out = pb::CheckMotionsResponse {
-            joint_names: robot.model.variable_names().iter().map(|s| (*s).to_owned()).collect(),
-            ..Default::default()
-        };
-        for chunk in &answers {
-            cv::push_motion_answers(&mut out, chunk, &robot, &world.objects);
-        }
-        Ok(out)
+    /// A check's robot, scene (empty: no world), base and link padding, from its prepared setting
+    /// ([`super::prepared`]): read inline when they are in memory ([`RobotChecks::in_memory`]),
+    /// else off the async workers. With no `robot_id`, the scene's robot with its base (unless
+    /// the request gives one), attached objects (the request's added) and link padding (the
+    /// request's replacing it link by link).
+    pub(super) async fn setting(&self, mut asked: Asked) -> Result<Setting, HandlerError> {
+        let base = asked.base.take().map(|b| cv::pose_from_proto("base", Some(&b))).transpose()?;
+        let prepared = self.prepared(asked).await?;
+        Ok(Setting {
+            robot: prepared.robot.clone(),
+            world: prepared.world.clone(),
+            base: base.unwrap_or(prepared.base),
+            link_padding: prepared.link_padding.clone().into(),
+        })
     }
 }
 
@@ -431,8 +233,8 @@ pub(super) async fn check_configurations(
     Ok(Response::new(out))
 }
 
-/// `CheckMotions`: motions checked by conservative advancement in chunks on the batch slots,
-/// answered in columns.
+/// `CheckMotions`: motions certified by conservative advancement, or sampled at the request's
+/// resolution, in chunks on the batch slots, answered in columns.
 pub(super) async fn check_motions(
     svc: &SublevelService,
     request: Request<pb::CheckMotionsRequest>,

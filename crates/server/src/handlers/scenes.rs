@@ -69,7 +69,9 @@ pub(super) async fn delete_scene(
     let id = request.into_inner().scene_id;
     require_id("scene_id", &id)?;
     let catalog = svc.catalog.clone();
+    let forget = id.clone();
     blocking(move || catalog.delete_scene(&id)).await?;
+    svc.prepared.forget_scene(&forget);
     Ok(Response::new(pb::DeleteSceneResponse {}))
 }
 

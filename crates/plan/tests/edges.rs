@@ -1,0 +1,165 @@
+//! The sampled edge check of [`RobotValidity`] (its samples in rakes, checked in blocks) against
+//! the one-sample-at-a-time check in OMPL's order ([`sampled_edge_free`]) and against every
+//! sample checked alone by [`RobotChecker::check`]: the verdicts are equal on random Panda
+//! segments among MotionBenchMaker scenes, and a continuous joint's edge goes the shorter way
+//! round (a closed-form world).
+
+use rand::{Rng, SeedableRng};
+use std::f64::consts::PI;
+use sublevel_core::math::{Isometry3, Real};
+use sublevel_core::primitive::Primitive;
+use sublevel_plan::validity::sampled_edge_free;
+use sublevel_plan::{JointSpace, RobotValidity, Validity};
+use sublevel_robot::{
+    fit_robot_text, CheckOptions, FittedRobot, MeshSource, MotionChecker, RobotChecker, RobotFitSettings, WorldObject,
+};
+use sublevel_scene::moveit::{allowed_override, world_objects, PlanningScene};
+
+fn root() -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// Whether every sample `i / n`, i = 1..=n, of `a → b` is free, each checked alone (the
+/// reference: no order, no blocks).
+fn every_sample_free(
+    checker: &mut RobotChecker<'_>,
+    space: &JointSpace,
+    a: &[Real],
+    b: &[Real],
+    resolution: Real,
+    padding: Real,
+) -> bool {
+    let n = ((space.distance(a, b) * resolution).ceil() as usize).max(1);
+    let options = CheckOptions { padding, distance: false, self_collision: true, gradient: false };
+    let mut q = Vec::new();
+    (1..=n).all(|i| {
+        space.interpolate(a, b, i as Real / n as Real, &mut q);
+        !checker.check(&q, &Isometry3::identity(), &options).unwrap().collides
+    })
+}
+
+#[test]
+fn rake_edges_agree_with_one_sample_at_a_time_on_random_panda_segments() {
+    let robot = FittedRobot::load(&root().join("data/robots/panda/panda.robot.json")).unwrap();
+    let space = JointSpace::of(&robot.model);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    let (mut free, mut colliding, mut samples) = (0, 0, 0);
+    for (scenario, padding, margin) in [("bookshelf_small", 0.0, 0.0), ("box", 0.0, 0.002), ("cage", 0.01, 0.0)] {
+        let path = root().join(format!("data/robots/mbm_panda/scenes/{scenario}/scene0001.yaml"));
+        let scene = PlanningScene::from_yaml(&std::fs::read(path).unwrap()).unwrap();
+        let (world, _) = world_objects(&scene).unwrap();
+        let allowed = allowed_override(&scene);
+        let mut reference = RobotChecker::new(&robot, world.clone(), &allowed).unwrap();
+        let mut checker = RobotChecker::new(&robot, world, &allowed).unwrap();
+        let mut validity =
+            RobotValidity::new(MotionChecker::new(&mut checker).unwrap(), Isometry3::identity(), padding);
+        validity.set_search_margin(margin);
+        let options =
+            CheckOptions { padding: padding + margin, distance: false, self_collision: true, gradient: false };
+        let mut edges = 0;
+        while edges < 250 {
+            // A free start (as the planner's edges have), an end up to 3 away within the limits.
+            let a: Vec<Real> = space.bounds.iter().map(|&(lo, hi)| rng.random_range(lo..hi)).collect();
+            if reference.check(&a, &Isometry3::identity(), &options).unwrap().collides {
+                continue;
+            }
+            let direction: Vec<Real> = (0..a.len()).map(|_| rng.random_range(-1.0..1.0)).collect();
+            let norm = direction.iter().map(|d| d * d).sum::<Real>().sqrt();
+            let length = rng.random_range(0.02..3.0);
+            let b: Vec<Real> = (0..a.len())
+                .map(|k| {
+                    let (lo, hi) = space.bounds[k];
+                    (a[k] + length * direction[k] / norm).clamp(lo, hi)
+                })
+                .collect();
+            let resolution = if edges % 4 == 3 { 8.0 } else { 32.0 };
+            let n = ((space.distance(&a, &b) * resolution).ceil() as usize).max(1);
+            let before = validity.counts();
+            let rake = validity.edge_free(&a, &b, resolution).unwrap();
+            let after = validity.counts();
+            let one_at_a_time = sampled_edge_free(&mut validity, &a, &b, resolution).unwrap();
+            let every = every_sample_free(&mut reference, &space, &a, &b, resolution, padding + margin);
+            assert_eq!(rake, one_at_a_time, "{scenario} edge {edges}: rakes vs sample order, {a:?} → {b:?}");
+            assert_eq!(rake, every, "{scenario} edge {edges}: rakes vs every sample alone, {a:?} → {b:?}");
+            assert_eq!(after.edges, before.edges + 1);
+            let checked = after.states - before.states;
+            if rake {
+                assert_eq!(checked, n, "{scenario} edge {edges}: a free edge checks its {n} samples");
+                free += 1;
+            } else {
+                assert!(checked >= 1 && checked <= n, "{scenario} edge {edges}: {checked} of {n} samples");
+                colliding += 1;
+            }
+            samples += n;
+            edges += 1;
+        }
+    }
+    assert!(free >= 200 && colliding >= 100, "both verdicts present: {free} free, {colliding} colliding edges");
+    eprintln!("{free} free, {colliding} colliding edges, {samples} samples");
+}
+
+#[test]
+fn bad_edges_are_refused_naming_the_end() {
+    let robot = FittedRobot::load(&root().join("data/robots/panda/panda.robot.json")).unwrap();
+    let mut checker = RobotChecker::new(&robot, Vec::new(), &|_, _| None).unwrap();
+    let mut validity = RobotValidity::new(MotionChecker::new(&mut checker).unwrap(), Isometry3::identity(), 0.0);
+    let field = |e: sublevel_core::Error| match e {
+        sublevel_core::Error::InvalidArgument { field, .. } => field,
+        other => panic!("{other}"),
+    };
+    let q = [0.0, -0.5, 0.0, -2.0, 0.0, 1.5, 0.7];
+    assert_eq!(field(validity.edge_free(&q[..6], &q, 32.0).unwrap_err()), "start");
+    let mut bad = q;
+    bad[3] = Real::NAN;
+    assert_eq!(field(validity.edge_free(&q, &bad, 32.0).unwrap_err()), "end[3]");
+    assert!(validity.edge_free(&q, &q, 32.0).unwrap(), "a free point is a free edge");
+}
+
+/// One link on a continuous joint about z: a box 0.4 × 0.1 × 0.1 centered 0.5 m along the link's
+/// x axis, so at angle θ it spans radii [0.3, 0.7] in direction θ.
+const TURNER: &str = r#"<robot name="turner">
+  <link name="base"/>
+  <link name="arm"><collision><origin xyz="0.5 0 0"/><geometry><box size="0.4 0.1 0.1"/></geometry></collision></link>
+  <joint name="turn" type="continuous"><parent link="base"/><child link="arm"/><axis xyz="0 0 1"/></joint>
+</robot>"#;
+
+#[test]
+fn a_continuous_joint_edge_goes_the_shorter_way_round() {
+    let meshes = std::collections::HashMap::new();
+    let robot = fit_robot_text(TURNER.into(), None, MeshSource::Memory(&meshes), &RobotFitSettings::default(), &|_| {})
+        .unwrap();
+    // A ball at angle 0 (x = 0.5): the arm meets it for |θ| ≤ about 0.18 rad (the box's half
+    // width 0.05 plus the ball's radius 0.03, at radius 0.5), never near θ = ±π.
+    let world =
+        vec![WorldObject::primitive("ball", Primitive::Sphere { radius: 0.03 }, Isometry3::translation(0.5, 0.0, 0.0))];
+    let mut checker = RobotChecker::new(&robot, world, &|_, _| None).unwrap();
+    let id = Isometry3::identity();
+    // Linear interpolation from 3.0 to −3.0 passes θ = 0: the rake along the straight line collides.
+    let linear = checker.rake_motion(&[3.0], &[-3.0], 32.0, &id, 0.0).unwrap();
+    let t = linear.collision.expect("the long way round passes the ball");
+    assert!((t - 0.5).abs() < 0.05, "{t}");
+    let mut validity = RobotValidity::new(MotionChecker::new(&mut checker).unwrap(), id, 0.0);
+    assert!(validity.space().wraps[0]);
+    // The short way, through ±π, is free (the arm's closest approach to the ball: at θ = ±3.0).
+    assert!(validity.edge_free(&[3.0], &[-3.0], 32.0).unwrap());
+    assert!(sampled_edge_free(&mut validity, &[3.0], &[-3.0], 32.0).unwrap());
+    let n = ((2.0 * PI - 6.0) * 32.0).ceil() as usize;
+    assert_eq!(validity.counts().states, n + n, "the rakes and the one-at-a-time check, every sample");
+    // From 1.0 to −1.0 the short way passes θ = 0.
+    assert!(!validity.edge_free(&[1.0], &[-1.0], 32.0).unwrap());
+    assert!(!sampled_edge_free(&mut validity, &[1.0], &[-1.0], 32.0).unwrap());
+    drop(validity);
+    // The ball at θ = π instead (x = −0.5): the short way from 2.8 to −2.8 meets it (both ends 0.34 rad off it, free), the straight
+    // line does not.
+    let behind = vec![WorldObject::primitive(
+        "ball",
+        Primitive::Sphere { radius: 0.03 },
+        Isometry3::translation(-0.5, 0.0, 0.0),
+    )];
+    let mut checker = RobotChecker::new(&robot, behind, &|_, _| None).unwrap();
+    assert_eq!(checker.rake_motion(&[2.8], &[-2.8], 32.0, &id, 0.0).unwrap().collision, None);
+    let mut validity = RobotValidity::new(MotionChecker::new(&mut checker).unwrap(), id, 0.0);
+    assert!(!validity.edge_free(&[2.8], &[-2.8], 32.0).unwrap());
+    assert!(!sampled_edge_free(&mut validity, &[2.8], &[-2.8], 32.0).unwrap());
+    assert!(validity.state_free(&[2.8]).unwrap() && validity.state_free(&[-2.8]).unwrap());
+}
