@@ -10,6 +10,10 @@
 //! - time per configuration, one thread: the full answer (distance, world, self) and the verdict
 //!   alone (world pairs stop at the first collision, no distance), medians.
 //!
+//! The table's last column times the other path (single with blocks, blocks with `--single`) on
+//! the same configurations right after, so that the two means compare within one run; their
+//! verdicts must agree.
+//!
 //! The verdicts the misses and false collisions are counted from are the block path's
 //! ([`RobotChecker::check_block`], the scene's configurations in blocks of [`BLOCK`], the time
 //! per configuration a block's over its size), or with `--single` one
@@ -82,6 +86,13 @@ struct Tally {
     exact_pairs: usize,
     full_ns: Vec<Real>,
     verdict_ns: Vec<Real>,
+    /// The other path's verdict times on the same configurations (the single path's with blocks,
+    /// the blocks' with `--single`), timed right after, for a ratio in one run.
+    other_ns: Vec<Real>,
+}
+
+fn average(v: &[Real]) -> Real {
+    v.iter().sum::<Real>() / v.len().max(1) as Real
 }
 
 fn median(v: &mut [Real]) -> Real {
@@ -281,6 +292,11 @@ fn evaluate(args: &RobotLabelsArgs) -> Result<BTreeMap<String, Tally>> {
             .map(|r| (1..=dof).map(|j| num(r, &header, &format!("q{j}"))).collect::<Result<_>>())
             .collect::<Result<_>>()?;
         let verdicts = verdicts(&mut checker, &qs, &verdict, args.single, &mut t.verdict_ns)?;
+        let other = self::verdicts(&mut checker, &qs, &verdict, !args.single, &mut t.other_ns)?;
+        let flags = |v: &[ConfigurationAnswer]| v.iter().map(|a| (a.world, a.self_collision)).collect::<Vec<_>>();
+        if flags(&other) != flags(&verdicts) {
+            return Err(Error::Numerical(format!("{scenario} scene {scene_no}: the block and single verdicts differ")));
+        }
         for ((r, q), v) in rows.iter().zip(&qs).zip(&verdicts) {
             let mesh = num(r, &header, "collides")? > 0.5;
             let mesh_world = num(r, &header, "collides_world")? > 0.5;
@@ -357,9 +373,9 @@ fn evaluate(args: &RobotLabelsArgs) -> Result<BTreeMap<String, Tally>> {
 
 fn print_table(tallies: &mut BTreeMap<String, Tally>) {
     println!(
-        "| scenario | configs | mesh colliding | misses (world / self) | false collisions (world / self) | false % of mesh-free | distance above mesh | mean / max distance error (mm) | pairs on meshes per config | not converged | full check median (µs) | verdict median (µs) |"
+        "| scenario | configs | mesh colliding | misses (world / self) | false collisions (world / self) | false % of mesh-free | distance above mesh | mean / max distance error (mm) | pairs on meshes per config | not converged | full check median (µs) | verdict median (µs) | verdict mean (µs) | other path's mean (µs) |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     let mut all = Tally::default();
     for (name, t) in tallies.iter_mut() {
         row(name, t);
@@ -378,6 +394,7 @@ fn print_table(tallies: &mut BTreeMap<String, Tally>) {
         all.exact_pairs += t.exact_pairs;
         all.full_ns.extend(&t.full_ns);
         all.verdict_ns.extend(&t.verdict_ns);
+        all.other_ns.extend(&t.other_ns);
     }
     row("all", &mut all);
     let mut c = all.false_clearance.clone();
@@ -402,7 +419,7 @@ fn row(name: &str, t: &mut Tally) {
         if t.dist_err.is_empty() { Real::NAN } else { t.dist_err.iter().sum::<Real>() / t.dist_err.len() as Real };
     let max = t.dist_err.iter().copied().fold(0.0, Real::max);
     println!(
-        "| {name} | {} | {} | {} / {} | {} / {} | {:.2} % | {} | {:.2} / {:.1} | {:.2} | {} | {:.1} | {:.1} |",
+        "| {name} | {} | {} | {} / {} | {} / {} | {:.2} % | {} | {:.2} / {:.1} | {:.2} | {} | {:.1} | {:.1} | {:.2} | {:.2} |",
         t.n,
         t.mesh_colliding,
         t.miss_world,
@@ -417,6 +434,8 @@ fn row(name: &str, t: &mut Tally) {
         t.unconverged,
         median(&mut t.full_ns) / 1e3,
         median(&mut t.verdict_ns) / 1e3,
+        average(&t.verdict_ns) / 1e3,
+        average(&t.other_ns) / 1e3,
     );
 }
 

@@ -62,6 +62,27 @@ pub(super) struct Asked {
     pub(super) poses: Vec<(String, Isometry3)>,
 }
 
+impl Asked {
+    /// The setting a request names, its fields moved out of the request (`base` left to the
+    /// caller, which passes it to each check).
+    pub(super) fn taken(
+        robot_id: &mut String,
+        scene_id: &mut String,
+        attached: &mut Vec<pb::AttachedObject>,
+        link_padding: &mut HashMap<String, Real>,
+        poses: Vec<(String, Isometry3)>,
+    ) -> Self {
+        Self {
+            robot_id: std::mem::take(robot_id),
+            scene_id: std::mem::take(scene_id),
+            base: None,
+            attached: std::mem::take(attached),
+            link_padding: std::mem::take(link_padding),
+            poses,
+        }
+    }
+}
+
 /// The key of a prepared setting (module docs).
 #[derive(Clone, Debug, Hash, PartialEq, Eq)]
 struct Key {

@@ -122,14 +122,7 @@ impl RobotChecks {
     ) -> Result<pb::CheckConfigurationsResponse, HandlerError> {
         let padding = cv::padding(req.padding)?;
         let base = req.base.as_ref().map(|b| cv::pose_from_proto("base", Some(b))).transpose()?;
-        let asked = Asked {
-            robot_id: std::mem::take(&mut req.robot_id),
-            scene_id: std::mem::take(&mut req.scene_id),
-            base: None,
-            attached: std::mem::take(&mut req.attached),
-            link_padding: std::mem::take(&mut req.link_padding),
-            poses,
-        };
+        let asked = Asked::taken(&mut req.robot_id, &mut req.scene_id, &mut req.attached, &mut req.link_padding, poses);
         let prepared = self.prepared(asked).await?;
         let base = base.unwrap_or(prepared.base);
         let configs = Arc::new(cv::configuration_rows(
@@ -192,14 +185,7 @@ impl RobotChecks {
         let options = cv::motion_options(req.padding, req.tolerance, req.max_steps)?;
         let resolution = cv::resolution(req.resolution)?;
         let base = req.base.as_ref().map(|b| cv::pose_from_proto("base", Some(b))).transpose()?;
-        let asked = Asked {
-            robot_id: std::mem::take(&mut req.robot_id),
-            scene_id: std::mem::take(&mut req.scene_id),
-            base: None,
-            attached: std::mem::take(&mut req.attached),
-            link_padding: std::mem::take(&mut req.link_padding),
-            poses,
-        };
+        let asked = Asked::taken(&mut req.robot_id, &mut req.scene_id, &mut req.attached, &mut req.link_padding, poses);
         let prepared = self.prepared(asked).await?;
         let base = base.unwrap_or(prepared.base);
         let robot = prepared.robot.clone();
