@@ -5,7 +5,7 @@
 //! [`RobotValidity`] answers all three for a fitted robot among a world: states by
 //! [`sublevel_robot::RobotChecker::check`] (the verdict alone, no distance), sampled edges in
 //! rakes of [`sublevel_robot::BLOCK`] samples spread along the edge
-//! ([`sublevel_robot::rake_order`], [`sublevel_robot::RobotChecker::first_collision`]), certified
+//! ([`sublevel_robot::rake_order`], [`sublevel_robot::RobotChecker::any_collision`]), certified
 //! edges by conservative advancement ([`sublevel_robot::MotionChecker::check_motion`]). Other
 //! checkers sample their edges one configuration at a time, as OMPL's discrete motion validator
 //! orders them ([`sampled_edge_free`]).
@@ -179,7 +179,7 @@ impl Validity for RobotValidity<'_, '_> {
     /// The samples of [`sampled_edge_free`] (the same configurations: `n = max(1, ⌈distance ·
     /// resolution⌉)`, t = i / n for i = 1..=n, made by [`JointSpace::interpolate`], so continuous
     /// joints take the shorter way round), checked in rakes: blocks of [`BLOCK`] samples in
-    /// [`rake_order`], each by [`sublevel_robot::RobotChecker::first_collision`] at the padding
+    /// [`rake_order`], each by [`sublevel_robot::RobotChecker::any_collision`] at the padding
     /// plus the search margin, stopping at the first block that holds a colliding sample. The
     /// verdict is the one-at-a-time check's; only the order of the samples differs (the first
     /// block already spans the whole edge). The samples are made here rather than by
@@ -204,7 +204,7 @@ impl Validity for RobotValidity<'_, '_> {
                 self.block.extend_from_slice(&self.sample);
             }
             self.counts.states += rake.len();
-            if self.motion.checker().first_collision(&self.block, &self.base, padding)?.is_some() {
+            if self.motion.checker().any_collision(&self.block, &self.base, padding)? {
                 return Ok(false);
             }
         }

@@ -7,7 +7,8 @@
 //! - [`RobotChecker::check_block`]'s verdicts (collides, world, self) equal
 //!   [`RobotChecker::check`]'s lane by lane, in blocks of 1, 3, 8 and 13 configurations (a full
 //!   block, tails), and with `stop_at_first_collision` the answers end at the first colliding one;
-//! - [`RobotChecker::first_collision`] is the first colliding index of the single checks;
+//! - [`RobotChecker::first_collision`] is the first colliding index of the single checks, and
+//!   [`RobotChecker::any_collision`] whether there is one;
 //! - [`RobotChecker::rake_motion`]'s collision parameter is the smallest colliding sample's of the
 //!   first rake block that holds one, and its sample count the samples of the blocks up to it,
 //!   both computed here from single checks of the samples and [`rake_order`].
@@ -257,6 +258,7 @@ fn compare(robot: &FittedRobot, rng: &mut ChaCha8Rng, cases: usize, center: Vect
         let expected = sequence[..n].iter().position(|&k| collides[k]);
         let flat: Vec<Real> = sequence[..n].iter().flat_map(|&k| configs[k].iter().copied()).collect();
         assert_eq!(block.first_collision(&flat, &base, padding).unwrap(), expected, "{what}: first of {n}");
+        assert_eq!(block.any_collision(&flat, &base, padding).unwrap(), expected.is_some(), "{what}: any of {n}");
         match expected {
             None => seen.first_none += 1,
             Some(0) => {}
@@ -387,4 +389,6 @@ fn bad_blocks_are_refused_naming_the_field() {
     checker.check_block(&[], &id, &options, false, &mut out).unwrap();
     assert!(out.is_empty());
     assert_eq!(checker.first_collision(&[], &id, 0.0).unwrap(), None);
+    assert!(!checker.any_collision(&[], &id, 0.0).unwrap());
+    assert_eq!(field(checker.any_collision(&flat, &id, 0.0).unwrap_err()), "configurations[2].q[4]");
 }

@@ -58,6 +58,9 @@ struct Job<'a> {
     options: &'a CheckOptions,
     /// Whether the answers end at the first colliding configuration.
     stop: bool,
+    /// Whether the answers may end at any colliding configuration (the first a block's lanes
+    /// prove colliding, before the single path for the lanes before it).
+    any: bool,
 }
 
 /// The answer of a configuration the lanes decided, among `pairs` checked pairs.
@@ -107,6 +110,27 @@ impl RobotChecker<'_> {
         stop_at_first_collision: bool,
         out: &mut Vec<ConfigurationAnswer>,
     ) -> Result<()> {
+        let job = Job { configs, base, options, stop: stop_at_first_collision, any: false };
+        self.run_job(&job, out)
+    }
+
+    /// Whether any configuration of `configs` (n × dof reals, as
+    /// [`RobotChecker::check_block`]) collides within `padding` (meters) with the world or
+    /// itself: [`RobotChecker::first_collision`]'s `is_some()`, answered as soon as the lanes
+    /// prove one configuration colliding, without the single path for the others of its block.
+    ///
+    /// # Errors
+    /// As [`RobotChecker::check_block`].
+    pub fn any_collision(&mut self, configs: &[Real], base: &Isometry3, padding: Real) -> Result<bool> {
+        let options = CheckOptions { padding, distance: false, self_collision: true, gradient: false };
+        let mut out = Vec::new();
+        self.run_job(&Job { configs, base, options: &options, stop: true, any: true }, &mut out)?;
+        Ok(out.iter().any(|a| a.collides))
+    }
+
+    /// [`RobotChecker::check_block`] for `job`.
+    fn run_job(&mut self, job: &Job<'_>, out: &mut Vec<ConfigurationAnswer>) -> Result<()> {
+        let Job { configs, base, options, stop: stop_at_first_collision, .. } = *job;
         if !(options.padding.is_finite() && options.padding >= 0.0) {
             return Err(Error::invalid("padding", format!("must be finite and ≥ 0 m, got {}", options.padding)));
         }
@@ -138,8 +162,7 @@ impl RobotChecker<'_> {
             Some(plan) => plan,
             None => Box::new(BlockPlan::new(self)),
         };
-        let job = Job { configs, base, options, stop: stop_at_first_collision };
-        let result = self.blocks_dispatch(&plan, &job, out);
+        let result = self.blocks_dispatch(&plan, job, out);
         self.block = Some(plan);
         result
     }
@@ -165,7 +188,7 @@ impl RobotChecker<'_> {
         job: &Job<'_>,
         out: &mut Vec<ConfigurationAnswer>,
     ) -> Result<()> {
-        let Job { configs, base, options, stop } = *job;
+        let Job { configs, base, options, stop, any } = *job;
         let z = L::splat(cpu, 0.0);
         let w = L::WIDTH;
         let dof = self.robot.model.dof();
@@ -229,6 +252,13 @@ impl RobotChecker<'_> {
                 kernel::decide(z, plan, &input, &table, &mut scratch, &mut verdicts);
             } else {
                 verdicts = [None; 8];
+            }
+            if any {
+                let proved = verdicts.iter().take(n).flatten().find(|d| d.world.is_some() || d.self_pair.is_some());
+                if let Some(d) = proved {
+                    out.push(decided_answer(d, pairs));
+                    return Ok(());
+                }
             }
             for (lane, verdict) in verdicts.iter().enumerate().take(n) {
                 let answer = match verdict {
