@@ -250,6 +250,7 @@ pub fn plan(
             // (a hand inside a cage), free ones are rare, not absent.
             let ik = IkSettings { random_seeds: POSE_GOAL_RESTARTS, ..IkSettings::default() };
             let mut solver = IkSolver::new(model, base, pose, &[start.to_vec()], &ik)?;
+            solver.set_deadline(deadline);
             pose_candidates(checker, &mut solver, settings.max_goals, deadline, &mut rng)?
         }
         _ => goal_candidates(&space, goal, settings.max_goals, &mut rng)?,

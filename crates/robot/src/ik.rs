@@ -209,6 +209,8 @@ pub struct IkSolver<'a> {
     random_left: usize,
     found: Vec<Vec<Real>>,
     attempts: usize,
+    /// No descent starts past this instant ([`IkSolver::set_deadline`]).
+    deadline: Option<std::time::Instant>,
     /// Scratch reused by every iteration: link poses and the 6 × dof Jacobian.
     poses: Vec<Isometry3>,
     jacobian: Matrix6xX<Real>,
@@ -250,15 +252,26 @@ impl<'a> IkSolver<'a> {
             random_left: settings.random_seeds,
             found: Vec::new(),
             attempts: 0,
+            deadline: None,
             poses: Vec::new(),
             jacobian: Matrix6xX::zeros(model.dof()),
         })
     }
 
-    /// The next distinct solution, or `None` once every seed and random restart has been tried.
-    /// Draws random restarts from `rng` (uniform within the limits) after the caller's seeds.
+    /// Stops [`IkSolver::next_solution`] at `deadline`: no descent starts after it (one that
+    /// has started runs its iteration budget out, a few milliseconds at most).
+    pub fn set_deadline(&mut self, deadline: std::time::Instant) {
+        self.deadline = Some(deadline);
+    }
+
+    /// The next distinct solution, or `None` once every seed and random restart has been tried
+    /// or the deadline ([`IkSolver::set_deadline`]) has passed. Draws random restarts from `rng`
+    /// (uniform within the limits) after the caller's seeds.
     pub fn next_solution(&mut self, rng: &mut impl Rng) -> Option<IkSolution> {
         loop {
+            if self.deadline.is_some_and(|d| std::time::Instant::now() >= d) {
+                return None;
+            }
             let start = if self.next_seed < self.seeds.len() {
                 self.next_seed += 1;
                 self.seeds[self.next_seed - 1].clone()

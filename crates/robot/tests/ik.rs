@@ -190,6 +190,12 @@ fn planar_arm_beyond_reach_has_no_solution() {
         let mut solver = IkSolver::new(&model, &Isometry3::identity(), &goal, &[vec![0.0, 0.0]], &settings).unwrap();
         assert!(solver.next_solution(&mut rng).is_none(), "a solution for {target:?}");
         assert_eq!(solver.attempts(), 1 + settings.random_seeds, "every seed and restart tried");
+        // With a deadline that has passed, no descent starts: a planner's deadline bounds the
+        // restarts of an unreachable pose.
+        let mut late = IkSolver::new(&model, &Isometry3::identity(), &goal, &[vec![0.0, 0.0]], &settings).unwrap();
+        late.set_deadline(std::time::Instant::now());
+        assert!(late.next_solution(&mut rng).is_none());
+        assert_eq!(late.attempts(), 0, "no descent after the deadline");
     }
 }
 
