@@ -194,22 +194,7 @@ impl RobotChecker<'_> {
         let dof = self.robot.model.dof();
         let mut scratch = Scratch::new(z, plan);
         let eps = plan.inflation(base);
-        let r = base.rotation.to_rotation_matrix().into_inner();
-        let t = base.translation.vector;
-        let base_rows = [
-            r[(0, 0)],
-            r[(0, 1)],
-            r[(0, 2)],
-            r[(1, 0)],
-            r[(1, 1)],
-            r[(1, 2)],
-            r[(2, 0)],
-            r[(2, 1)],
-            r[(2, 2)],
-            t.x,
-            t.y,
-            t.z,
-        ];
+        let base_rows = plan::pose_rows(base);
         let mut soa = vec![0.0; dof * w];
         let (mut world_left, mut self_left) = (Vec::new(), Vec::new());
         let mut verdicts = [None; 8];

@@ -515,7 +515,7 @@ fn inner_pair<L: Lanes>(
 
 #[cfg(test)]
 mod tests {
-    use super::super::plan::program;
+    use super::super::plan::{pose_rows, program};
     use super::*;
     use crate::RobotModel;
     use nalgebra::{Translation3, UnitQuaternion};
@@ -540,22 +540,7 @@ mod tests {
                 UnitQuaternion::from_scaled_axis(Vector3::new(next(), next(), next())),
             );
             let expected = model.link_poses(&q, &base).unwrap();
-            let m = base.rotation.to_rotation_matrix().into_inner();
-            let t = base.translation.vector;
-            let rows = [
-                m[(0, 0)],
-                m[(0, 1)],
-                m[(0, 2)],
-                m[(1, 0)],
-                m[(1, 1)],
-                m[(1, 2)],
-                m[(2, 0)],
-                m[(2, 1)],
-                m[(2, 2)],
-                t.x,
-                t.y,
-                t.z,
-            ];
+            let rows = pose_rows(&base);
             let z = Scalar::<false>(0.0);
             let lanes: Vec<Scalar<false>> = q.iter().map(|&v| Scalar(v)).collect();
             let mut poses = vec![[z; 12]; model.links().len()];

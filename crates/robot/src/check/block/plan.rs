@@ -141,6 +141,13 @@ fn rows(m: &Matrix3) -> [Real; 9] {
     [m[(0, 0)], m[(0, 1)], m[(0, 2)], m[(1, 0)], m[(1, 1)], m[(1, 2)], m[(2, 0)], m[(2, 1)], m[(2, 2)]]
 }
 
+/// `pose` as the lanes take it: its rotation row by row, then its translation.
+pub(crate) fn pose_rows(pose: &Isometry3) -> [Real; 12] {
+    let r = rows(&pose.rotation.to_rotation_matrix().into_inner());
+    let t = pose.translation.vector;
+    [r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], t.x, t.y, t.z]
+}
+
 /// `m` as a signed permutation, when every entry is within 1e-14 of 0 or ±1 (a URDF `rpy` of
 /// multiples of π/2): moving an entry by 1e-14 moves a point at 1 m by 1e-14 m, far inside the
 /// rounding margin.
