@@ -21,6 +21,7 @@ mod fit_time;
 mod peer_coal;
 mod peer_parry;
 mod primitives;
+mod robot_clouds;
 mod robot_edges;
 mod robot_labels;
 mod stability;
@@ -63,6 +64,9 @@ enum Command {
     /// Sampled start–goal edges of the MotionBenchMaker problems: rakes (`rake_motion`, blocks of
     /// 8) beside one sample at a time, time per checked sample.
     RobotEdges(robot_edges::RobotEdgesArgs),
+    /// The MotionBenchMaker problems with each scene seen by simulated depth cameras: cloud checks
+    /// against the brute force and the primitives, update times, planning with clouds.
+    RobotClouds(robot_clouds::RobotCloudsArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -81,6 +85,7 @@ fn main() -> std::process::ExitCode {
         Command::Primitives(a) => primitives::run(a),
         Command::RobotLabels(a) => robot_labels::run(a),
         Command::RobotEdges(a) => robot_edges::run(a),
+        Command::RobotClouds(a) => robot_clouds::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -73,14 +73,14 @@ struct Tally {
     single_seconds: Vec<Real>,
 }
 
-fn median(v: &[Real]) -> Real {
+pub(crate) fn median(v: &[Real]) -> Real {
     let mut v = v.to_vec();
     v.sort_by(Real::total_cmp);
     v.get(v.len() / 2).copied().unwrap_or(Real::NAN)
 }
 
 /// The scene and request files of problem `k` of `scenario`, in either layout.
-fn problem_paths(problems: &Path, scenario: &str, k: usize) -> (PathBuf, PathBuf) {
+pub(crate) fn problem_paths(problems: &Path, scenario: &str, k: usize) -> (PathBuf, PathBuf) {
     let scene = problems.join(format!("scenes/{scenario}/scene{k:04}.yaml"));
     if scene.exists() {
         return (scene, problems.join(format!("requests/{scenario}/request{k:04}.yaml")));
@@ -89,7 +89,7 @@ fn problem_paths(problems: &Path, scenario: &str, k: usize) -> (PathBuf, PathBuf
     (dir.join(format!("scene{k:04}.yaml")), dir.join(format!("request{k:04}.yaml")))
 }
 
-fn read(path: &Path) -> Result<Vec<u8>> {
+pub(crate) fn read(path: &Path) -> Result<Vec<u8>> {
     Ok(std::fs::read(path)
         .map_err(|e| std::io::Error::new(e.kind(), format!("cannot read {}: {e}", path.display())))?)
 }

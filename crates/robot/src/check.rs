@@ -55,6 +55,7 @@
 //! the root's sos solve 0.4–2 µs and the mesh stage a few µs; the sphere trees are another matter
 //! (a ball against a primitive is a closed form of a few ns).
 
+use crate::cloud::{geometry_against_cloud, CloudPair, PointCloud};
 use crate::exact::{box_gap, box_gap_past, exact_collides, exact_pair, exact_pair_within, exact_primitive, parry_pose};
 use crate::exact::{ExactShape, PairOutcome, PlacedBox};
 use crate::exact::{PairHint, Slack};
@@ -170,7 +171,10 @@ impl<'r> RobotChecker<'r> {
             .iter()
             .map(|g| {
                 let link = &links[g.link].name;
-                (0..world.len()).filter(|&o| allowed(link, &world[o].name) != Some(true)).collect()
+                // A cloud without points meets nothing.
+                (0..world.len())
+                    .filter(|&o| allowed(link, &world[o].name) != Some(true) && world[o].shape.ball().1 >= 0.0)
+                    .collect()
             })
             .collect();
         let mut self_pairs = Vec::new();
@@ -198,6 +202,8 @@ impl<'r> RobotChecker<'r> {
             .map(|o| match &o.shape {
                 WorldShape::Primitive(p) => exact_primitive(p),
                 WorldShape::Mesh(m) => ExactShape { shape: m.exact.clone(), offset: Isometry3::identity() },
+                // Never used: a cloud's pairs go to its radius queries.
+                WorldShape::Points(c) => exact_primitive(&Primitive::Sphere { radius: c.radius() }),
             })
             .collect();
         let world_boxes = world.iter().map(|o| o.shape.local_box().map(|b| PlacedBox::new(&o.pose, &b))).collect();
@@ -398,6 +404,16 @@ impl<'r> RobotChecker<'r> {
                 if primitive {
                     return Ok((self.sos_world_bound(g, o)?, true));
                 }
+                if let Some(cloud) = self.cloud(o) {
+                    let pose = self.world[o].pose.inv_mul(&self.poses[g]);
+                    let geometry = &self.robot.geometries[g];
+                    let d = match geometry_against_cloud(geometry, &pose, cloud, 0.0, cap, &mut Vec::new()) {
+                        CloudPair::Touches { .. } => 0.0,
+                        CloudPair::Free { distance, .. } => distance,
+                        CloudPair::Apart => cap,
+                    };
+                    return Ok((d, true));
+                }
                 let (a, b) = (&self.robot_exact[g], &self.world_exact[o]);
                 let pa = parry_pose(&(self.poses[g] * a.offset));
                 let pb = parry_pose(&(self.world[o].pose * b.offset));
@@ -496,6 +512,7 @@ impl<'r> RobotChecker<'r> {
         match &self.world[o].shape {
             WorldShape::Primitive(p) => Some(ShapeRef::Primitive(p)),
             WorldShape::Mesh(m) => m.body().map(ShapeRef::Body),
+            WorldShape::Points(_) => None,
         }
     }
 
@@ -693,6 +710,9 @@ impl<'r> RobotChecker<'r> {
         let geometry = &self.robot.geometries[g];
         let obj = &self.world[o];
         let pose = &self.poses[g];
+        if let Some(cloud) = self.cloud(o) {
+            return Ok(self.cloud_pair(g, o, cloud, bound, padding, answer));
+        }
         // A mesh object without a body has no sos bound: its pairs go to the triangles.
         let d = match self.world_sos_shape(o) {
             Some(shape) => {
@@ -753,6 +773,43 @@ impl<'r> RobotChecker<'r> {
             }
             (outcome, _) => outcome,
         }))
+    }
+
+    /// World object `o`'s point cloud, for a cloud object.
+    fn cloud(&self, o: usize) -> Option<&PointCloud> {
+        match &self.world[o].shape {
+            WorldShape::Points(c) => Some(c),
+            _ => None,
+        }
+    }
+
+    /// A world pair of a geometry and a point cloud ([`crate::cloud`]): `None` when every point
+    /// ball is farther than `bound` (and the padding), else contact or the closest ball, with the
+    /// geometry's closest point and the ball's as witnesses.
+    fn cloud_pair(
+        &self,
+        g: usize,
+        o: usize,
+        cloud: &PointCloud,
+        bound: Real,
+        padding: Real,
+        answer: &mut ConfigurationAnswer,
+    ) -> Option<PairOutcome> {
+        answer.pairs_exact += 1;
+        let place = &self.world[o].pose;
+        let pose = place.inv_mul(&self.poses[g]);
+        let limit = bound.max(padding);
+        match geometry_against_cloud(&self.robot.geometries[g], &pose, cloud, padding, limit, &mut Vec::new()) {
+            CloudPair::Apart => None,
+            CloudPair::Touches { .. } => Some(PairOutcome::Collides),
+            CloudPair::Free { distance, index, x } => {
+                let p = cloud.point(index);
+                let toward = x - p;
+                let y = p + toward * (cloud.radius() / toward.norm().max(Real::MIN_POSITIVE));
+                let (x, y) = (place.transform_point(&x.into()), place.transform_point(&y.into()));
+                Some(PairOutcome::Free { distance, witnesses: Some((x, y)) })
+            }
+        }
     }
 
     /// A world pair on the mesh (exact; parry's triangle BVH).

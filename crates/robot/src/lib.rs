@@ -20,7 +20,10 @@
 //! - [`fit`]: a robot fitted once — every link mesh a compound sos-convex body containing it
 //!   (paper §V), URDF primitives exact, the SRDF's allowed pairs — saved as a robot file
 //!   ([`fitted`]).
-//! - [`world`]: the world a robot is checked in — named exact primitives and triangle meshes.
+//! - [`world`]: the world a robot is checked in — named exact primitives, triangle meshes and
+//!   point clouds.
+//! - [`cloud`]: point-cloud obstacles from depth sensors — filters, depth deprojection, the
+//!   points in a k-d tree.
 //! - [`spheres`]: sphere trees of link meshes (every point of every triangle inside a chain of
 //!   nested balls), the checks' first stage after the ball and box gaps.
 //! - [`inner`]: balls inside closed link meshes, which prove a pair colliding without the mesh.
@@ -44,6 +47,7 @@ pub mod advance;
 mod answer;
 pub mod check;
 pub mod clearance;
+pub mod cloud;
 mod exact;
 pub mod fit;
 pub mod fitted;
@@ -60,6 +64,7 @@ pub mod world;
 pub use advance::{MotionAnswer, MotionChecker, MotionOptions};
 pub use check::block::{rake_order, RakeAnswer, BLOCK};
 pub use check::{CheckOptions, ConfigurationAnswer, RobotChecker};
+pub use cloud::PointCloud;
 pub use fit::{check_mesh_name, fit_robot, fit_robot_text, MeshSource, RobotFitProgress, RobotFitSettings};
 pub use fitted::{FittedRobot, LinkShape, RobotFile, RobotGeometry};
 pub use ik::{solve_ik, IkSettings, IkSolution, IkSolver, PoseGoal};

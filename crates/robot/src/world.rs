@@ -1,5 +1,5 @@
-//! The world a robot is checked in: named objects, each an exact primitive or a triangle mesh,
-//! placed in the world frame.
+//! The world a robot is checked in: named objects, each an exact primitive, a triangle mesh or a
+//! point cloud ([`crate::cloud`]), placed in the world frame.
 //!
 //! A mesh object is exact the way a link mesh is: its triangles decide contact (parry's BVH, as
 //! coal and FCL decide it). It may carry a sos-convex body that contains it — the root of the
@@ -7,6 +7,7 @@
 //! checks' model stage; without one, pairs go from the ball and box gaps straight to the
 //! triangles.
 
+use crate::cloud::PointCloud;
 use crate::fitted::{bounding_ball, bounding_box, exact_trimesh, validate_mesh};
 use crate::{Error, Result};
 use std::sync::Arc;
@@ -36,11 +37,16 @@ impl WorldObject {
         Self { name: name.into(), shape: WorldShape::Mesh(mesh), pose }
     }
 
+    /// A point cloud named `name`, its points mapped into the world by `pose`.
+    pub fn points(name: impl Into<String>, cloud: Arc<PointCloud>, pose: Isometry3) -> Self {
+        Self { name: name.into(), shape: WorldShape::Points(cloud), pose }
+    }
+
     /// The primitive, for a primitive object.
     pub fn as_primitive(&self) -> Option<&Primitive> {
         match &self.shape {
             WorldShape::Primitive(p) => Some(p),
-            WorldShape::Mesh(_) => None,
+            _ => None,
         }
     }
 }
@@ -52,6 +58,8 @@ pub enum WorldShape {
     Primitive(Primitive),
     /// A triangle mesh, shared by the objects that place it.
     Mesh(Arc<WorldMesh>),
+    /// A point cloud: a ball of the cloud's noise radius about every point ([`crate::cloud`]).
+    Points(Arc<PointCloud>),
 }
 
 impl WorldShape {
@@ -60,15 +68,17 @@ impl WorldShape {
         match self {
             WorldShape::Primitive(p) => p.kind(),
             WorldShape::Mesh(_) => "mesh",
+            WorldShape::Points(_) => "points",
         }
     }
 
     /// A ball containing the shape in its own frame: center and radius (meters; infinite for a
-    /// halfspace).
+    /// halfspace, −1 for a cloud without points).
     pub fn ball(&self) -> (Vector3, Real) {
         match self {
             WorldShape::Primitive(p) => (Vector3::zeros(), p.bounding_radius()),
             WorldShape::Mesh(m) => m.ball,
+            WorldShape::Points(c) => c.ball(),
         }
     }
 
@@ -78,6 +88,7 @@ impl WorldShape {
         match self {
             WorldShape::Primitive(p) => p.local_half_extents().map(|h| (Vector3::zeros(), h)),
             WorldShape::Mesh(m) => Some(m.local_box),
+            WorldShape::Points(c) => Some(c.local_box()),
         }
     }
 }

@@ -3,7 +3,7 @@
 
 use super::lanes::{sin_cos, Lanes};
 use super::plan::{BlockPlan, Motion, Object, Shape, Step, Turn0, Value};
-use sublevel_core::math::Real;
+use sublevel_core::math::{Real, Vector3};
 use sublevel_kernels::LaneMask;
 
 /// What the lanes decided of one configuration: free, or colliding by a proof; `None` in
@@ -102,7 +102,9 @@ fn signed_distance<L: Lanes>(o: &Object, x: [L; 3]) -> L {
     let c = |v: Real| z.constant(v);
     let zero = c(0.0);
     match o {
-        Object::Ball { c: center, r } => sq(sub(x, splat3(z, center))).sqrt() - c(*r),
+        Object::Ball { c: center, r } | Object::Cloud { c: center, r, .. } => {
+            sq(sub(x, splat3(z, center))).sqrt() - c(*r)
+        }
         Object::Plane { n, d } => x[0].mul_add(c(n[0]), x[1].mul_add(c(n[1]), x[2] * c(n[2]))) - c(*d),
         Object::Shape { rt, t, shape, .. } => {
             let p = local(rt, t, x);
@@ -135,7 +137,7 @@ fn farthest<L: Lanes>(o: &Object, x: [L; 3]) -> L {
     let z = x[0];
     let c = |v: Real| z.constant(v);
     match o {
-        Object::Ball { .. } => c(Real::NAN),
+        Object::Ball { .. } | Object::Cloud { .. } => c(Real::NAN),
         Object::Plane { .. } => c(Real::INFINITY),
         Object::Shape { rt, t, shape, .. } => {
             let p = local(rt, t, x);
@@ -305,7 +307,7 @@ pub(crate) fn decide<L: Lanes>(
             let mut free = !open & full;
             let reach = rg + pad;
             let gap2 = match object {
-                Object::Ball { c: oc, r } => {
+                Object::Ball { c: oc, r } | Object::Cloud { c: oc, r, .. } => {
                     let reach = reach + c(*r);
                     Some((sq(sub(center, splat3(z, oc))), reach * reach))
                 }
@@ -326,6 +328,25 @@ pub(crate) fn decide<L: Lanes>(
                 if free & full == full {
                     continue;
                 }
+            }
+            if let Object::Cloud { rt, t, index, .. } = object {
+                let left = open & !free;
+                let (proved, rest) =
+                    cloud_lanes(plan, input, g, pose, center, (rt, t, *index), left, &mut scratch.balls);
+                for (lane, d) in decided.iter_mut().enumerate().take(w) {
+                    if proved >> lane & 1 == 1 {
+                        d.world = Some((g, o));
+                        d.proved += 1;
+                    }
+                }
+                for lane in 0..w {
+                    if rest >> lane & 1 == 1 {
+                        scratch.pending_world.push((lane, g, o));
+                    }
+                }
+                unknown |= rest;
+                open &= !proved;
+                continue;
             }
             if !matches!(object, Object::Ball { .. }) {
                 free |= (pad + rg).lt(signed_distance(object, center)).bits();
@@ -464,6 +485,76 @@ pub(crate) fn decide<L: Lanes>(
         decided[lane].pending = unknown >> lane & 1 == 1;
         *slot = (full >> lane & 1 == 1).then_some(decided[lane]);
     }
+}
+
+/// One geometry against a point cloud, lane by lane (the k-d tree answers one point at a time):
+/// lanes of `left` where no point lies within the geometry's ball or within every cloud cut ball's
+/// reach
+/// are free; a point within the reach of a cut ball's whole ball (`r + padding − ρ`, less the
+/// rounding margin) proves contact, since a cut ball holds part of the geometry. Returns the
+/// lanes proved and the lanes left to the single path.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn cloud_lanes<L: Lanes>(
+    plan: &BlockPlan,
+    input: &BlockInput<'_>,
+    g: usize,
+    pose: &Pose<L>,
+    center: [L; 3],
+    (rt, t, index): (&[Real; 9], &[Real; 3], usize),
+    left: u32,
+    balls: &mut Vec<[L; 4]>,
+) -> (u32, u32) {
+    let geometry = &plan.geometries[g];
+    let cloud = &plan.clouds[index];
+    let pad = input.padding + input.eps + input.pad[g];
+    let reach = cloud.radius() + pad;
+    let proof = cloud.radius() + input.padding + input.pad[g] - input.eps;
+    #[inline(always)]
+    fn to_cloud<L: Lanes>(x: &[L; 3], lane: usize, rt: &[Real; 9], t: &[Real; 3]) -> Vector3 {
+        let v = [x[0].lane(lane) - t[0], x[1].lane(lane) - t[1], x[2].lane(lane) - t[2]];
+        Vector3::new(
+            rt[0] * v[0] + rt[1] * v[1] + rt[2] * v[2],
+            rt[3] * v[0] + rt[4] * v[1] + rt[5] * v[2],
+            rt[6] * v[0] + rt[7] * v[1] + rt[8] * v[2],
+        )
+    }
+    balls.clear();
+    let cut = &plan.cloud_cut[geometry.cloud_cut.clone()];
+    let (mut proved, mut rest) = (0u32, 0u32);
+    for lane in 0..L::WIDTH {
+        if left >> lane & 1 == 0 {
+            continue;
+        }
+        // The geometry's ball by the grid alone (a large ball would cost a tree search), then
+        // its cut balls by the grid and the tree.
+        if cloud.clear_by_grid(&to_cloud(&center, lane, rt, t), geometry.ball[3] + reach) {
+            continue;
+        }
+        if balls.is_empty() {
+            // A loop, not a closure: the lane arithmetic must inline into the caller's
+            // AVX2 + FMA code.
+            for b in cut {
+                let x = place(pose, b);
+                balls.push([x[0], x[1], x[2], x[0]]);
+            }
+        }
+        let mut near = false;
+        for (b, x) in cut.iter().zip(balls.iter()) {
+            let x = to_cloud(&[x[0], x[1], x[2]], lane, rt, t);
+            if cloud.any_within(&x, b[3] + reach) {
+                near = true;
+                if input.proofs && proof > b[3] && cloud.any_within(&x, proof - b[3]) {
+                    proved |= 1 << lane;
+                    break;
+                }
+            }
+        }
+        if near && proved >> lane & 1 == 0 {
+            rest |= 1 << lane;
+        }
+    }
+    (proved, rest)
 }
 
 /// Lanes where a point of `ext` (posed by `pose`) lies farther than `r` from `center`.

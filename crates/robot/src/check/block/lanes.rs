@@ -13,6 +13,8 @@ pub(crate) trait Lanes: Lane {
     fn load(cpu: Self::Cpu, v: &[Real]) -> Self;
     /// Lane-wise floor.
     fn floor(self) -> Self;
+    /// Lane `i`'s value (`i < WIDTH`).
+    fn lane(self, i: usize) -> Real;
 }
 
 impl<const FMA: bool> Lanes for Scalar<FMA> {
@@ -24,6 +26,10 @@ impl<const FMA: bool> Lanes for Scalar<FMA> {
     #[inline(always)]
     fn floor(self) -> Self {
         Scalar(self.0.floor())
+    }
+    #[inline(always)]
+    fn lane(self, _: usize) -> Real {
+        self.0
     }
 }
 
@@ -39,6 +45,10 @@ impl Lanes for sublevel_kernels::F4 {
     #[inline(always)]
     fn floor(self) -> Self {
         sublevel_kernels::F4::floor(self)
+    }
+    #[inline(always)]
+    fn lane(self, i: usize) -> Real {
+        self.to_array()[i]
     }
 }
 

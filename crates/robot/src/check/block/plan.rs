@@ -3,6 +3,7 @@
 //! closed form.
 
 use crate::check::{RobotChecker, WorldBall};
+use crate::cloud::PointCloud;
 use crate::fitted::LinkShape;
 use crate::model::{JointKind, JointValue, RobotModel};
 use crate::spheres::SphereTree;
@@ -14,6 +15,11 @@ use sublevel_core::primitive::Primitive;
 /// Most balls of a link mesh's sphere tree the block kernel tests (the cut of
 /// [`tree_cut`]).
 pub(crate) const CUT_BALLS: usize = 8;
+
+/// Balls of a link mesh's cut for point clouds ([`Geometry::cloud_cut`]): about 4 cm on the
+/// Panda, so that a ball's query with a noise radius and padding of a few centimeters stays within
+/// a cloud's grid reach.
+pub(crate) const CLOUD_CUT_BALLS: usize = 24;
 
 /// Where a joint's value comes from (a configuration entry, or a mimic of one).
 #[derive(Clone, Copy, Debug)]
@@ -86,6 +92,9 @@ pub(crate) struct Geometry {
     /// Balls that together contain it, in [`BlockPlan::cut`] (the geometry's ball for a
     /// primitive).
     pub cut: Range<usize>,
+    /// Smaller balls that together contain it, in [`BlockPlan::cloud_cut`]: the radius queries
+    /// against point clouds, which their gap grids answer up to [`crate::cloud::GRID_REACH`].
+    pub cloud_cut: Range<usize>,
     /// Its closed components' inner balls, in [`BlockPlan::components`] (none for a
     /// primitive).
     pub components: Range<usize>,
@@ -110,6 +119,9 @@ pub(crate) enum Object {
     /// A primitive: world → its frame is x ↦ rt · (x − t); `aabb` its world box (center, half
     /// extents).
     Shape { rt: [Real; 9], t: [Real; 3], shape: Shape, aabb: ([Real; 3], [Real; 3]) },
+    /// A point cloud, [`BlockPlan::clouds`]`[index]`: its ball (world frame), and world → its
+    /// frame as x ↦ rt · (x − t); the lanes ask its k-d tree one lane at a time.
+    Cloud { c: [Real; 3], r: Real, rt: [Real; 9], t: [Real; 3], index: usize },
 }
 
 /// The block kernel's view of a checker's robot and world (module docs).
@@ -123,6 +135,10 @@ pub(crate) struct BlockPlan {
     pub inner: Vec<[Real; 4]>,
     pub extremes: Vec<[Real; 3]>,
     pub objects: Vec<Object>,
+    /// The balls of every geometry's [`Geometry::cloud_cut`].
+    pub cloud_cut: Vec<[Real; 4]>,
+    /// The point clouds of the [`Object::Cloud`] objects.
+    pub clouds: Vec<std::sync::Arc<PointCloud>>,
     /// The inflation covering rounding at the base's origin (meters): scaled by the base's
     /// distance from the origin at check time ([`BlockPlan::inflation`]).
     pub eps0: Real,
@@ -249,6 +265,8 @@ impl BlockPlan {
             inner: Vec::new(),
             extremes: Vec::new(),
             objects: Vec::new(),
+            cloud_cut: Vec::new(),
+            clouds: Vec::new(),
             eps0: 0.0,
         };
         for g in &robot.geometries {
@@ -258,12 +276,17 @@ impl BlockPlan {
                 [p.x, p.y, p.z, r]
             };
             let start = plan.cut.len();
+            let cloud_start = plan.cloud_cut.len();
             let comps = plan.components.len();
             match &g.shape {
                 LinkShape::Mesh { spheres, inner, .. } if !spheres.nodes.is_empty() => {
                     for n in tree_cut(spheres, CUT_BALLS) {
                         let s = &spheres.nodes[n].sphere;
                         plan.cut.push(ball(&s.center, s.radius));
+                    }
+                    for n in tree_cut(spheres, CLOUD_CUT_BALLS) {
+                        let s = &spheres.nodes[n].sphere;
+                        plan.cloud_cut.push(ball(&s.center, s.radius));
                     }
                     for c in &inner.components {
                         let b0 = plan.inner.len();
@@ -277,13 +300,17 @@ impl BlockPlan {
                         });
                     }
                 }
-                _ => plan.cut.push(ball(&g.sphere.0, g.sphere.1)),
+                _ => {
+                    plan.cut.push(ball(&g.sphere.0, g.sphere.1));
+                    plan.cloud_cut.push(ball(&g.sphere.0, g.sphere.1));
+                }
             }
             reach = Real::max(reach, g.sphere.0.norm() + g.sphere.1 + 1.0);
             plan.geometries.push(Geometry {
                 link: g.link,
                 ball: ball(&g.sphere.0, g.sphere.1),
                 cut: start..plan.cut.len(),
+                cloud_cut: cloud_start..plan.cloud_cut.len(),
                 components: comps..plan.components.len(),
             });
         }
@@ -313,6 +340,17 @@ impl BlockPlan {
                         t: arr(&o.pose.translation.vector),
                         shape,
                         aabb: (arr(&o.pose.translation.vector), arr(&half)),
+                    }
+                }
+                (WorldBall::Ball { center, radius }, WorldShape::Points(cloud)) => {
+                    plan.clouds.push(cloud.clone());
+                    let r = o.pose.rotation.to_rotation_matrix().into_inner();
+                    Object::Cloud {
+                        c: arr(&center),
+                        r: radius,
+                        rt: rows(&r.transpose()),
+                        t: arr(&o.pose.translation.vector),
+                        index: plan.clouds.len() - 1,
                     }
                 }
                 (WorldBall::Ball { center, radius }, WorldShape::Mesh(_)) => {

@@ -1,0 +1,257 @@
+//! A gap grid over a cloud: for every cell of a uniform grid, a lower bound of the distance from
+//! any point of the cell to the cloud's nearest point, so that most of the checks' radius queries
+//! ("is some point within ρ of x?") are answered "no" by one load, before the k-d tree.
+//!
+//! ```text
+//! cells     edge h, over the cloud's box grown by ρ_max on every side
+//! gap(C)    min over points p within ρ_max of C of dist(C, p)   (the box's distance), else ρ_max
+//!           stored as f32 rounded down
+//! query     x in cell C, radius ρ:  gap(C) > ρ  ⇒  no point within ρ of x   (dist(x, p) ≥ dist(C, p))
+//!           x outside the grid      ⇒  every point is farther than ρ_max
+//! ```
+//!
+//! The grid is built by visiting, for every point, the cells within ρ_max of it:
+//! (2ρ_max/h + 1)³ cells per point, 216 at the defaults. It only ever answers "no point within
+//! ρ"; a query it cannot answer goes to the k-d tree, so the answers are the tree's.
+
+use sublevel_core::math::{Real, Vector3};
+
+/// The cell edge (meters).
+pub const GRID_CELL: Real = 0.04;
+
+/// The largest gap a cell records (meters): queries with a larger radius go to the tree.
+pub const GRID_REACH: Real = 0.1;
+
+/// Most cells a grid may have; past it the cell edge grows until the grid fits.
+const MAX_CELLS: usize = 1 << 22;
+
+/// A gap grid (module docs).
+#[derive(Clone, Debug)]
+pub(crate) struct GapGrid {
+    origin: Vector3,
+    edge: Real,
+    dims: [usize; 3],
+    gaps: Vec<f32>,
+    /// Cell `c`'s points within the reach of its box: `items[starts[c]..starts[c + 1]]`.
+    starts: Vec<u32>,
+    items: Vec<u32>,
+}
+
+impl GapGrid {
+    /// The grid of `points` (meters), with cells of [`GRID_CELL`] or larger and gaps up to
+    /// [`GRID_REACH`].
+    pub(crate) fn build(points: &[[Real; 3]]) -> Self {
+        let reach = GRID_REACH;
+        if points.is_empty() {
+            return Self {
+                origin: Vector3::zeros(),
+                edge: 1.0,
+                dims: [0; 3],
+                gaps: Vec::new(),
+                starts: Vec::new(),
+                items: Vec::new(),
+            };
+        }
+        let mut lo = Vector3::repeat(Real::INFINITY);
+        let mut hi = Vector3::repeat(Real::NEG_INFINITY);
+        for p in points {
+            let v = Vector3::from(*p);
+            lo = lo.inf(&v);
+            hi = hi.sup(&v);
+        }
+        let origin = lo.add_scalar(-reach);
+        let size = (hi - lo).add_scalar(2.0 * reach);
+        let mut edge = GRID_CELL;
+        let dims = loop {
+            let d = size.map(|s| (s / edge).ceil().max(1.0) as usize);
+            if d.x.saturating_mul(d.y).saturating_mul(d.z) <= MAX_CELLS {
+                break [d.x, d.y, d.z];
+            }
+            edge *= 2.0;
+        };
+        let cells = dims[0] * dims[1] * dims[2];
+        let mut gaps = vec![reach as f32; cells];
+        let mut counts = vec![0u32; cells + 1];
+        // Two passes over every point's cells within the reach: the gaps and the counts, then
+        // the lists.
+        visit(points, origin, edge, dims, reach, |cell, _, d| {
+            // Rounded down: a part in 10⁶ below, far beyond f32's rounding.
+            let g = (d * (1.0 - 1e-6)) as f32;
+            if g < gaps[cell] {
+                gaps[cell] = g;
+            }
+            counts[cell + 1] += 1;
+        });
+        for c in 0..cells {
+            counts[c + 1] += counts[c];
+        }
+        let mut fill = counts.clone();
+        let mut items = vec![0u32; counts[cells] as usize];
+        visit(points, origin, edge, dims, reach, |cell, i, _| {
+            items[fill[cell] as usize] = i as u32;
+            fill[cell] += 1;
+        });
+        Self { origin, edge, dims, gaps, starts: counts, items }
+    }
+
+    /// The cell holding `x`, or `None` outside the grid.
+    #[inline]
+    fn cell(&self, x: &Vector3) -> Option<usize> {
+        let mut index = 0;
+        for k in 0..3 {
+            let c = (x[k] - self.origin[k]) / self.edge;
+            if !(c >= 0.0 && c < self.dims[k] as Real) {
+                return None;
+            }
+            index = index * self.dims[k] + c as usize;
+        }
+        Some(index)
+    }
+
+    /// Whether the grid shows that no point lies within `radius` of `x` (false: it cannot tell).
+    #[inline]
+    pub(crate) fn clear(&self, x: &Vector3, radius: Real) -> bool {
+        if self.gaps.is_empty() {
+            return true;
+        }
+        match self.cell(x) {
+            // Outside the grid: every point is farther than the reach.
+            None => radius < GRID_REACH,
+            Some(c) => self.gaps[c] as Real > radius,
+        }
+    }
+
+    /// Whether some point of `points` (the grid's) lies within `radius` ≤ [`GRID_REACH`] of `x`:
+    /// `Some` with the answer, `None` for a larger radius (the grid cannot tell).
+    #[inline]
+    pub(crate) fn any_within(&self, points: &[[Real; 3]], x: &Vector3, radius: Real) -> Option<bool> {
+        if self.gaps.is_empty() {
+            return Some(false);
+        }
+        if radius > GRID_REACH {
+            return None;
+        }
+        let Some(c) = self.cell(x) else { return Some(false) };
+        if self.gaps[c] as Real > radius {
+            return Some(false);
+        }
+        let r2 = radius * radius;
+        let list = &self.items[self.starts[c] as usize..self.starts[c + 1] as usize];
+        Some(list.iter().any(|&i| {
+            let p = &points[i as usize];
+            let (dx, dy, dz) = (p[0] - x.x, p[1] - x.y, p[2] - x.z);
+            dx * dx + dy * dy + dz * dz <= r2
+        }))
+    }
+
+    /// Appends to `out` the points of `points` (the grid's) within `radius` ≤ [`GRID_REACH`] of
+    /// `x` and returns true; false for a larger radius (nothing appended: the grid cannot tell).
+    pub(crate) fn within(&self, points: &[[Real; 3]], x: &Vector3, radius: Real, out: &mut Vec<usize>) -> bool {
+        if self.gaps.is_empty() {
+            return true;
+        }
+        if radius > GRID_REACH {
+            return false;
+        }
+        let Some(c) = self.cell(x) else { return true };
+        if self.gaps[c] as Real > radius {
+            return true;
+        }
+        let r2 = radius * radius;
+        for &i in &self.items[self.starts[c] as usize..self.starts[c + 1] as usize] {
+            let p = &points[i as usize];
+            let (dx, dy, dz) = (p[0] - x.x, p[1] - x.y, p[2] - x.z);
+            if dx * dx + dy * dy + dz * dz <= r2 {
+                out.push(i as usize);
+            }
+        }
+        true
+    }
+
+    /// Bytes the grid holds.
+    pub(crate) fn memory_bytes(&self) -> usize {
+        self.gaps.len() * std::mem::size_of::<f32>() + (self.starts.len() + self.items.len()) * 4
+    }
+}
+
+/// Calls `f(cell, point index, distance from the point to the cell's box)` for every point and
+/// every cell whose box lies within `reach` of it.
+fn visit(
+    points: &[[Real; 3]],
+    origin: Vector3,
+    edge: Real,
+    dims: [usize; 3],
+    reach: Real,
+    mut f: impl FnMut(usize, usize, Real),
+) {
+    let cell = |v: Real, k: usize| ((v - origin[k]) / edge).floor().clamp(0.0, (dims[k] - 1) as Real) as usize;
+    let r2 = reach * reach;
+    for (n, p) in points.iter().enumerate() {
+        let a = [cell(p[0] - reach, 0), cell(p[1] - reach, 1), cell(p[2] - reach, 2)];
+        let b = [cell(p[0] + reach, 0), cell(p[1] + reach, 1), cell(p[2] + reach, 2)];
+        for i in a[0]..=b[0] {
+            let dx = axis_gap(p[0], origin[0] + i as Real * edge, edge);
+            for j in a[1]..=b[1] {
+                let dy = axis_gap(p[1], origin[1] + j as Real * edge, edge);
+                let row = (i * dims[1] + j) * dims[2];
+                for k in a[2]..=b[2] {
+                    let dz = axis_gap(p[2], origin[2] + k as Real * edge, edge);
+                    let d2 = dx * dx + dy * dy + dz * dz;
+                    if d2 <= r2 {
+                        f(row + k, n, d2.sqrt());
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The distance along one axis from `v` to the cell interval `[start, start + edge]`.
+#[inline(always)]
+fn axis_gap(v: Real, start: Real, edge: Real) -> Real {
+    (start - v).max(v - (start + edge)).max(0.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    #[test]
+    fn clear_answers_never_contradict_brute_force() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(3);
+        let points: Vec<[Real; 3]> = (0..2000)
+            .map(|_| [rng.random_range(0.0..0.5), rng.random_range(-0.3..0.3), rng.random_range(0.0..0.02)])
+            .collect();
+        let grid = GapGrid::build(&points);
+        let mut cleared = 0;
+        for _ in 0..20_000 {
+            let x = Vector3::new(rng.random_range(-0.3..0.8), rng.random_range(-0.6..0.6), rng.random_range(-0.3..0.3));
+            let r = rng.random_range(0.0..0.15);
+            let nearest = points.iter().map(|p| (Vector3::from(*p) - x).norm()).fold(Real::INFINITY, Real::min);
+            if grid.clear(&x, r) {
+                assert!(nearest > r, "cleared {x:?} r {r} with a point at {nearest}");
+                cleared += 1;
+            }
+        }
+        // It answers most of the far queries.
+        assert!(cleared > 8_000, "{cleared}");
+        for _ in 0..20_000 {
+            let x = Vector3::new(rng.random_range(-0.3..0.8), rng.random_range(-0.6..0.6), rng.random_range(-0.3..0.3));
+            let r = rng.random_range(0.0..0.12);
+            let brute = points.iter().any(|p| (Vector3::from(*p) - x).norm_squared() <= r * r);
+            match grid.any_within(&points, &x, r) {
+                Some(found) => assert_eq!(found, brute),
+                None => assert!(r > GRID_REACH),
+            }
+            let mut found = Vec::new();
+            if grid.within(&points, &x, r, &mut found) {
+                found.sort_unstable();
+                let all: Vec<usize> =
+                    (0..points.len()).filter(|&i| (Vector3::from(points[i]) - x).norm_squared() <= r * r).collect();
+                assert_eq!(found, all);
+            }
+        }
+        assert!(GapGrid::build(&[]).clear(&Vector3::zeros(), 1.0));
+    }
+}
