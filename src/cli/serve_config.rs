@@ -55,7 +55,8 @@ pub struct OpsArgs {
     #[arg(long, env = "SUBLEVEL_LOG_FORMAT", value_enum, default_value_t = LogFormat::Text)]
     pub log_format: LogFormat,
     /// Largest response, and largest request of the uploads (UploadBody, StartFitJob, StartGroupJob,
-    /// ImportScene, UploadRobot, StartRobotFitJob), in bytes (larger ones are OUT_OF_RANGE).
+    /// ImportScene, UploadRobot, StartRobotFitJob, UpdatePointCloud), in bytes (larger ones are
+    /// OUT_OF_RANGE).
     #[arg(long, env = "SUBLEVEL_MAX_MESSAGE_BYTES", default_value_t = defaults().max_message_bytes)]
     pub max_message_bytes: usize,
     /// Largest request message of every other method, in bytes (larger ones are OUT_OF_RANGE
@@ -109,6 +110,10 @@ pub struct OpsArgs {
     /// Most bodies (UploadBody or StartFitJob beyond it is RESOURCE_EXHAUSTED).
     #[arg(long, env = "SUBLEVEL_MAX_BODIES", default_value_t = defaults().max_bodies)]
     pub max_bodies: usize,
+    /// Most bytes held by the point clouds of every scene together, in memory (an
+    /// UpdatePointCloud beyond it is RESOURCE_EXHAUSTED).
+    #[arg(long, env = "SUBLEVEL_MAX_CLOUD_BYTES", default_value_t = defaults().max_cloud_bytes)]
+    pub max_cloud_bytes: usize,
     /// Fits running at once (each is CPU-heavy; the others wait in the queue). Default: a quarter
     /// of the CPUs, at least 1.
     #[arg(long, env = "SUBLEVEL_MAX_CONCURRENT_FITS")]
@@ -148,6 +153,7 @@ impl OpsArgs {
             ("--max-instances-per-scene", self.max_instances_per_scene),
             ("--max-scenes", self.max_scenes),
             ("--max-bodies", self.max_bodies),
+            ("--max-cloud-bytes", self.max_cloud_bytes),
             ("--max-concurrent-fits", self.max_concurrent_fits.unwrap_or(1)),
             ("--max-fit-queue", self.max_fit_queue),
             ("--max-concurrent-sdp", self.max_concurrent_sdp.unwrap_or(1)),
@@ -198,6 +204,7 @@ impl OpsArgs {
         config.max_instances_per_scene = self.max_instances_per_scene;
         config.max_scenes = self.max_scenes;
         config.max_bodies = self.max_bodies;
+        config.max_cloud_bytes = self.max_cloud_bytes;
         config.max_concurrent_fits = self.max_concurrent_fits.unwrap_or(config.max_concurrent_fits);
         config.max_fit_queue = self.max_fit_queue;
         config.max_concurrent_sdp = self.max_concurrent_sdp.unwrap_or(config.max_concurrent_sdp);

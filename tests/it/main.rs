@@ -11,6 +11,7 @@ mod jobs_api;
 mod ops;
 mod plan_service;
 mod planner;
+mod point_clouds;
 mod primitive_cli;
 mod primitives;
 mod query;

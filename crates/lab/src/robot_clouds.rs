@@ -297,6 +297,12 @@ fn plan_both(
         let out = plan(&mut validity, start, &asked, &settings, &AtomicBool::new(false))?;
         let seconds = clock.elapsed().as_secs_f64();
         if out.status != PlanStatus::Solved {
+            let status = format!("{:?}", out.status);
+            eprintln!(
+                "{} plan: {}",
+                if cloud { "cloud" } else { "primitives" },
+                status.chars().take(200).collect::<String>()
+            );
             continue;
         }
         if !cloud {

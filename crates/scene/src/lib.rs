@@ -30,6 +30,8 @@
 //!   queries never touch the database), scenes with their instances and caches — written through
 //!   to the store. Input is validated before anything is written, and memory changes only after
 //!   the store committed, so bad input never loses or half-writes data.
+//!   A scene also holds point-cloud obstacles from depth sensors, in memory only (never in the
+//!   store), replaced atomically, and a scene version raised by every change.
 //! - [`moveit`]: MoveIt planning scenes (`moveit_msgs/PlanningScene` in YAML or JSON) read into
 //!   typed, validated collision objects, allowed-collision matrix and robot state, and imported
 //!   into the catalog as scenes of exact primitives, their meshes planned for compound fits
@@ -56,8 +58,10 @@ pub use answer::{
     PRECISION_LIMIT,
 };
 pub use catalog::{
-    bounding_body, BodyEntry, BodyFacts, BuiltBody, Catalog, InstanceView, PlacedRobot, PosedInstance, RobotEntry,
-    RobotWorld, SceneRobotCheck, SceneView, WarmUp, MAX_JOB_RECORDS, MAX_NAME_BYTES,
+    bounding_body, BodyEntry, BodyFacts, BuiltBody, BuiltCloud, Catalog, CloudFrame, CloudSet, CloudUpdate,
+    InstanceView, PlacedRobot, PosedInstance, RobotEntry, RobotWorld, SceneCloud, SceneRobotCheck, SceneView, WarmUp,
+    DEFAULT_MAX_CLOUD_BYTES, DEFAULT_NOISE_RADIUS, DEFAULT_SELF_FILTER_PADDING, MAX_CLOUDS_PER_SCENE, MAX_JOB_RECORDS,
+    MAX_NAME_BYTES,
 };
 
 use serde::{Deserialize, Serialize};

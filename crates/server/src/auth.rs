@@ -15,7 +15,7 @@
 //! | method | role needed |
 //! |---|---|
 //! | Get*, List*, WatchFitJob, Distance, Growth, BatchQuery, Query, QueryStream, CheckScene | read (or admin) |
-//! | every other method: uploads, deletes, scene and instance changes, SetPoses, StartFitJob, StartGroupJob, CancelFitJob | admin |
+//! | every other method: uploads, deletes, scene and instance changes, SetPoses, point clouds (UpdatePointCloud, RemovePointCloud), StartFitJob, StartGroupJob, CancelFitJob | admin |
 //! | `grpc.health.v1.Health/*`, `grpc.reflection.*` | none (probes and tooling stay open) |
 //!
 //! No or an unknown token: UNAUTHENTICATED; a read token on a write: PERMISSION_DENIED. A method
@@ -310,6 +310,8 @@ mod tests {
             "AttachObject",
             "DetachObject",
             "ClearSceneRobot",
+            "UpdatePointCloud",
+            "RemovePointCloud",
             "SomethingNew",
         ] {
             assert_eq!(method_role(&format!("/sublevel.v1.Sublevel/{write}")), Some(Role::Admin), "{write}");

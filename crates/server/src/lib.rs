@@ -135,7 +135,8 @@ pub struct ServerConfig {
     /// `postgres`; see `deploy/SCALING.md`); `None` keeps the embedded redb store in `data_dir`.
     pub store_url: Option<String>,
     /// Largest encoded response, and largest request of the uploads (`UploadBody`,
-    /// `StartFitJob`, `StartGroupJob`, `ImportScene`, `UploadRobot`, `StartRobotFitJob`), in bytes; other requests are limited by
+    /// `StartFitJob`, `StartGroupJob`, `ImportScene`, `UploadRobot`, `StartRobotFitJob`,
+    /// `UpdatePointCloud`: a sensor frame), in bytes; other requests are limited by
     /// [`admission::AdmissionSettings::max_request_bytes`]. Larger messages are OUT_OF_RANGE
     /// before a handler runs.
     pub max_message_bytes: usize,
@@ -159,6 +160,9 @@ pub struct ServerConfig {
     pub max_bodies: usize,
     /// Most instances in one scene; adding one more is RESOURCE_EXHAUSTED.
     pub max_instances_per_scene: usize,
+    /// Most bytes held by the point clouds of every scene together (`--max-cloud-bytes`); an
+    /// `UpdatePointCloud` that would pass it is RESOURCE_EXHAUSTED. Default 2 GiB.
+    pub max_cloud_bytes: usize,
     /// Blocking SDP solves of queries (certificates, nonconvex scenes, answers Newton could not
     /// settle) running at once; the rest wait for a slot. Default: half the CPUs, at least 2.
     pub max_concurrent_sdp: usize,
@@ -199,6 +203,7 @@ impl Default for ServerConfig {
             max_scenes: 10_000,
             max_bodies: 10_000,
             max_instances_per_scene: 100_000,
+            max_cloud_bytes: sublevel_scene::DEFAULT_MAX_CLOUD_BYTES,
             max_concurrent_sdp: limits::default_sdp_slots(),
             batch_workers: limits::default_batch_workers(),
             max_request_time: None,

@@ -46,6 +46,10 @@ pub(crate) const INSTANCES: Limit = Limit {
     flag: "--max-instances-per-scene",
     env: "SUBLEVEL_MAX_INSTANCES_PER_SCENE",
 };
+/// `--max-cloud-bytes`: bytes of point clouds, all scenes together (checked by the catalog under
+/// the scene's lock, so it holds exactly, not softly).
+pub(crate) const CLOUD_BYTES: Limit =
+    Limit { what: "bytes of point clouds", flag: "--max-cloud-bytes", env: "SUBLEVEL_MAX_CLOUD_BYTES" };
 /// `--max-fit-queue`.
 pub(crate) const FIT_QUEUE: Limit =
     Limit { what: "fit and group jobs queued or running", flag: "--max-fit-queue", env: "SUBLEVEL_MAX_FIT_QUEUE" };

@@ -50,6 +50,7 @@ from ._requests import (
     _states,
     as_query,
 )
+from .clouds import CloudCalls, PointCloudInfo
 from .plans import PlanCalls
 from .robots import RobotCalls
 from .stream import PlannerStream
@@ -57,7 +58,7 @@ from .stream import PlannerStream
 __all__ = ["Client", "PlannerStream", "Query", "DEFAULT_ADDR"]
 
 
-class Client(RobotCalls, PlanCalls):
+class Client(RobotCalls, PlanCalls, CloudCalls):
     """A connection to a Sublevel server.
 
     >>> c = Client("127.0.0.1:50051")                          # doctest: +SKIP
@@ -200,7 +201,7 @@ class Client(RobotCalls, PlanCalls):
 
     def get_scene(self, scene_id: str) -> Scene:
         """A scene with its instances and their poses, its robot (:class:`SceneRobot`, None when
-        it has none) and its joint positions by name."""
+        it has none), its joint positions by name, its point clouds and its version."""
         r = self._call("GetScene", pb.GetSceneRequest(scene_id=scene_id))
         return Scene(
             scene_id=r.scene_id,
@@ -208,6 +209,8 @@ class Client(RobotCalls, PlanCalls):
             instances=[Instance.from_proto(i) for i in r.instances],
             robot=SceneRobot.from_proto(r.robot) if r.HasField("robot") else None,
             joint_positions={j.name: j.position for j in r.joint_positions},
+            point_clouds=[PointCloudInfo.from_proto(c) for c in r.point_clouds],
+            scene_version=int(r.scene_version),
         )
 
     def list_scenes(self) -> List[SceneSummary]:

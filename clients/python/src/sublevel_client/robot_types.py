@@ -131,6 +131,9 @@ class ConfigurationColumns:
         converged: shape (N,), bool: every solve the answer rests on converged.
         pairs_pruned, pairs_model, pairs_exact: pairs decided by bounding volumes, bounded by the
             sos bodies, and resolved on the meshes, summed over the configurations.
+        scene_version: the version of the scene checked against (its instances, robot, joint
+            positions and point clouds as of that version; compare with
+            ``Client.update_point_cloud``'s); 0 without a scene.
     """
 
     joint_names: List[str]
@@ -149,6 +152,7 @@ class ConfigurationColumns:
     pairs_pruned: int
     pairs_model: int
     pairs_exact: int
+    scene_version: int = 0
 
     def __len__(self) -> int:
         return len(self.collides)
@@ -176,6 +180,7 @@ class ConfigurationColumns:
             pairs_pruned=m.pairs_pruned,
             pairs_model=m.pairs_model,
             pairs_exact=m.pairs_exact,
+            scene_version=int(m.scene_version),
         )
 
 
@@ -207,6 +212,9 @@ class MotionColumns:
         samples: shape (M,), int: samples checked by a sampled check (``resolution`` > 0; it
             stops at its first block of samples holding a colliding one); 0 for a certified one.
 
+    Also ``scene_version``: the version of the scene checked against (as in
+    :class:`ConfigurationColumns`); 0 without a scene.
+
     A sampled check's ``valid`` means no sample collides, its ``contact_t`` is a colliding
     sample's t and ``contact_configuration``, ``robot_link``, ``other``, ``self_contact`` are that
     sample's; it can miss a collision between samples, which the certified check cannot.
@@ -222,6 +230,7 @@ class MotionColumns:
     self_contact: np.ndarray
     steps: np.ndarray
     samples: np.ndarray
+    scene_version: int = 0
 
     def __len__(self) -> int:
         return len(self.valid)
@@ -243,6 +252,7 @@ class MotionColumns:
             self_contact=np.asarray(m.self_contact, dtype=bool),
             steps=np.asarray(m.steps, dtype=np.int64),
             samples=_counts(m.samples, n),
+            scene_version=int(m.scene_version),
         )
 
 
@@ -282,6 +292,8 @@ class PlanResult:
             advancement steps.
         nodes: nodes of the search's two trees.
         repaired: edges the certification repaired (split or re-planned).
+        scene_version: the version of the scene planned in (as in :class:`ConfigurationColumns`);
+            0 without a scene.
     """
 
     status: str
@@ -299,6 +311,7 @@ class PlanResult:
     advancement_steps: int
     nodes: int
     repaired: int
+    scene_version: int = 0
 
     @property
     def solved(self) -> bool:
@@ -334,4 +347,5 @@ class PlanResult:
             advancement_steps=int(m.advancement_steps),
             nodes=int(m.nodes),
             repaired=int(m.repaired),
+            scene_version=int(m.scene_version),
         )

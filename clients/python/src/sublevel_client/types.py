@@ -15,6 +15,7 @@ import numpy as np
 
 from .poses import Pose
 from ._convert import _columns, _enum_name, _pose, _twist, _v3
+from .clouds import PointCloudInfo
 from .imported import AllowedCollisionMatrix, ImportedInstance, ImportedMesh, ImportedScene, SkippedShape
 from .robot_types import ConfigurationColumns, MotionColumns, PlanResult, RobotInfo, SceneRobot
 
@@ -496,6 +497,10 @@ class SceneCheck:
             checked against the scene's objects (at the check's poses) and itself with the
             check's margin as padding, with its distance: :class:`ConfigurationColumns` of one
             row. None when the scene has no robot.
+        scene_version: the version of the scene checked (its instances, poses and point clouds).
+
+    A pair with a point cloud has the instance as ``first`` and the cloud's name as ``second``,
+    with the distance to the cloud's nearest point ball.
     """
 
     pairs: List[ScenePair]
@@ -505,6 +510,7 @@ class SceneCheck:
     all_pairs: int
     server_seconds: float
     robot: Optional["ConfigurationColumns"] = None
+    scene_version: int = 0
 
     @classmethod
     def from_proto(cls, m) -> "SceneCheck":
@@ -516,6 +522,7 @@ class SceneCheck:
             all_pairs=m.all_pairs,
             server_seconds=m.server_seconds,
             robot=ConfigurationColumns.from_proto(m.robot, gradient=False) if m.HasField("robot") else None,
+            scene_version=int(m.scene_version),
         )
 
 
@@ -577,6 +584,9 @@ class Scene:
         joint_positions: the scene's robot state by joint name (radians or meters): set by
             ``Client.import_scene``, ``Client.set_scene_robot`` and ``Client.set_joint_positions``;
             it stays when the robot is removed.
+        point_clouds: its point clouds (``Client.update_point_cloud``), ordered by name: in the
+            server's memory only (a restarted server has none until the sensor sends again).
+        scene_version: the scene version this answer was read at.
     """
 
     scene_id: str
@@ -584,6 +594,8 @@ class Scene:
     instances: List[Instance] = field(default_factory=list)
     robot: Optional[SceneRobot] = None
     joint_positions: Dict[str, float] = field(default_factory=dict)
+    point_clouds: List[PointCloudInfo] = field(default_factory=list)
+    scene_version: int = 0
 
     def instance(self, instance_id: str) -> Instance:
         """The instance with this id (KeyError if absent)."""

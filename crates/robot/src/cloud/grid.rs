@@ -3,16 +3,18 @@
 //! ("is some point within ρ of x?") are answered "no" by one load, before the k-d tree.
 //!
 //! ```text
-//! cells     edge h, over the cloud's box grown by ρ_max on every side
-//! gap(C)    min over points p within ρ_max of C of dist(C, p)   (the box's distance), else ρ_max
+//! cells     edge h, over the cloud's box grown by ρ_max on every side; each lists its own points
+//!           (a counting sort)
+//! gap(C)    min over points p within ρ_max of C of dist(C, p)²  (the box's distance), else ρ_max²
 //!           stored as f32 rounded down
-//! query     x in cell C, radius ρ:  gap(C) > ρ  ⇒  no point within ρ of x   (dist(x, p) ≥ dist(C, p))
-//!           x outside the grid      ⇒  every point is farther than ρ_max
+//! query     x in cell C, radius ρ ≤ ρ_max:  gap(C) > ρ²  ⇒  no point within ρ of x
+//!           (dist(x, p) ≥ dist(C, p)); else the points of the cells the ball's box meets;
+//!           x outside the grid  ⇒  every point is farther than ρ_max
 //! ```
 //!
-//! The grid is built by visiting, for every point, the cells within ρ_max of it:
-//! (2ρ_max/h + 1)³ cells per point, 216 at the defaults. It only ever answers "no point within
-//! ρ"; a query it cannot answer goes to the k-d tree, so the answers are the tree's.
+//! The gaps are built by visiting, for every point, the cells within ρ_max of it: at most
+//! (2ρ_max/h + 1)³, 216 at the defaults. Queries with a radius above ρ_max go to the k-d tree.
+//! The answers are exact: the grid only skips cells no point of which can be within ρ.
 
 use sublevel_core::math::{Real, Vector3};
 
@@ -31,8 +33,9 @@ pub(crate) struct GapGrid {
     origin: Vector3,
     edge: Real,
     dims: [usize; 3],
+    /// Squared gaps, rounded down.
     gaps: Vec<f32>,
-    /// Cell `c`'s points within the reach of its box: `items[starts[c]..starts[c + 1]]`.
+    /// Cell `c`'s own points: `items[starts[c]..starts[c + 1]]`.
     starts: Vec<u32>,
     items: Vec<u32>,
 }
@@ -70,42 +73,67 @@ impl GapGrid {
             edge *= 2.0;
         };
         let cells = dims[0] * dims[1] * dims[2];
-        let mut gaps = vec![reach as f32; cells];
+        let r2 = reach * reach;
+        let mut gaps = vec![r2 as f32; cells];
+        let cell_of = |v: Real, k: usize| ((v - origin[k]) / edge).floor().clamp(0.0, (dims[k] - 1) as Real) as usize;
         let mut counts = vec![0u32; cells + 1];
-        // Two passes over every point's cells within the reach: the gaps and the counts, then
-        // the lists.
-        visit(points, origin, edge, dims, reach, |cell, _, d| {
-            // Rounded down: a part in 10⁶ below, far beyond f32's rounding.
-            let g = (d * (1.0 - 1e-6)) as f32;
-            if g < gaps[cell] {
-                gaps[cell] = g;
+        let mut home = Vec::with_capacity(points.len());
+        for p in points {
+            let a = [cell_of(p[0] - reach, 0), cell_of(p[1] - reach, 1), cell_of(p[2] - reach, 2)];
+            let b = [cell_of(p[0] + reach, 0), cell_of(p[1] + reach, 1), cell_of(p[2] + reach, 2)];
+            for i in a[0]..=b[0] {
+                let dx = axis_gap(p[0], origin[0] + i as Real * edge, edge);
+                for j in a[1]..=b[1] {
+                    let dy = axis_gap(p[1], origin[1] + j as Real * edge, edge);
+                    let row = (i * dims[1] + j) * dims[2];
+                    let dxy = dx * dx + dy * dy;
+                    if dxy > r2 {
+                        continue;
+                    }
+                    for k in a[2]..=b[2] {
+                        let dz = axis_gap(p[2], origin[2] + k as Real * edge, edge);
+                        // Rounded down: a part in 10⁶ below, far beyond f32's rounding.
+                        let g = ((dxy + dz * dz) * (1.0 - 1e-6)) as f32;
+                        let slot = &mut gaps[row + k];
+                        if g < *slot {
+                            *slot = g;
+                        }
+                    }
+                }
             }
-            counts[cell + 1] += 1;
-        });
+            let c = (cell_of(p[0], 0) * dims[1] + cell_of(p[1], 1)) * dims[2] + cell_of(p[2], 2);
+            counts[c + 1] += 1;
+            home.push(c as u32);
+        }
         for c in 0..cells {
             counts[c + 1] += counts[c];
         }
         let mut fill = counts.clone();
-        let mut items = vec![0u32; counts[cells] as usize];
-        visit(points, origin, edge, dims, reach, |cell, i, _| {
-            items[fill[cell] as usize] = i as u32;
-            fill[cell] += 1;
-        });
+        let mut items = vec![0u32; points.len()];
+        for (i, &c) in home.iter().enumerate() {
+            items[fill[c as usize] as usize] = i as u32;
+            fill[c as usize] += 1;
+        }
         Self { origin, edge, dims, gaps, starts: counts, items }
     }
 
-    /// The cell holding `x`, or `None` outside the grid.
+    /// The cell coordinates holding `x`, or `None` outside the grid.
     #[inline]
-    fn cell(&self, x: &Vector3) -> Option<usize> {
-        let mut index = 0;
-        for k in 0..3 {
+    fn coords(&self, x: &Vector3) -> Option<[usize; 3]> {
+        let mut out = [0; 3];
+        for (k, o) in out.iter_mut().enumerate() {
             let c = (x[k] - self.origin[k]) / self.edge;
             if !(c >= 0.0 && c < self.dims[k] as Real) {
                 return None;
             }
-            index = index * self.dims[k] + c as usize;
+            *o = c as usize;
         }
-        Some(index)
+        Some(out)
+    }
+
+    #[inline]
+    fn index(&self, c: [usize; 3]) -> usize {
+        (c[0] * self.dims[1] + c[1]) * self.dims[2] + c[2]
     }
 
     /// Whether the grid shows that no point lies within `radius` of `x` (false: it cannot tell).
@@ -114,95 +142,81 @@ impl GapGrid {
         if self.gaps.is_empty() {
             return true;
         }
-        match self.cell(x) {
+        match self.coords(x) {
             // Outside the grid: every point is farther than the reach.
             None => radius < GRID_REACH,
-            Some(c) => self.gaps[c] as Real > radius,
+            Some(c) => self.gaps[self.index(c)] as Real > radius * radius,
         }
     }
 
-    /// Whether some point of `points` (the grid's) lies within `radius` ≤ [`GRID_REACH`] of `x`:
-    /// `Some` with the answer, `None` for a larger radius (the grid cannot tell).
+    /// Calls `f(point index)` for the points of the cells that the box of the ball (`x`,
+    /// `radius`) meets, until `f` returns true; false when the grid cannot tell (a radius above
+    /// [`GRID_REACH`]), true otherwise.
     #[inline]
-    pub(crate) fn any_within(&self, points: &[[Real; 3]], x: &Vector3, radius: Real) -> Option<bool> {
-        if self.gaps.is_empty() {
-            return Some(false);
-        }
-        if radius > GRID_REACH {
-            return None;
-        }
-        let Some(c) = self.cell(x) else { return Some(false) };
-        if self.gaps[c] as Real > radius {
-            return Some(false);
-        }
-        let r2 = radius * radius;
-        let list = &self.items[self.starts[c] as usize..self.starts[c + 1] as usize];
-        Some(list.iter().any(|&i| {
-            let p = &points[i as usize];
-            let (dx, dy, dz) = (p[0] - x.x, p[1] - x.y, p[2] - x.z);
-            dx * dx + dy * dy + dz * dz <= r2
-        }))
-    }
-
-    /// Appends to `out` the points of `points` (the grid's) within `radius` ≤ [`GRID_REACH`] of
-    /// `x` and returns true; false for a larger radius (nothing appended: the grid cannot tell).
-    pub(crate) fn within(&self, points: &[[Real; 3]], x: &Vector3, radius: Real, out: &mut Vec<usize>) -> bool {
+    fn scan(&self, x: &Vector3, radius: Real, mut f: impl FnMut(usize) -> bool) -> bool {
         if self.gaps.is_empty() {
             return true;
         }
         if radius > GRID_REACH {
             return false;
         }
-        let Some(c) = self.cell(x) else { return true };
-        if self.gaps[c] as Real > radius {
+        let Some(c) = self.coords(x) else { return true };
+        if self.gaps[self.index(c)] as Real > radius * radius {
             return true;
         }
-        let r2 = radius * radius;
-        for &i in &self.items[self.starts[c] as usize..self.starts[c + 1] as usize] {
-            let p = &points[i as usize];
-            let (dx, dy, dz) = (p[0] - x.x, p[1] - x.y, p[2] - x.z);
-            if dx * dx + dy * dy + dz * dz <= r2 {
-                out.push(i as usize);
+        let range = |k: usize| {
+            let lo = ((x[k] - radius - self.origin[k]) / self.edge).floor().max(0.0) as usize;
+            let hi = (((x[k] + radius - self.origin[k]) / self.edge).floor() as usize).min(self.dims[k] - 1);
+            lo..=hi
+        };
+        for i in range(0) {
+            for j in range(1) {
+                let row = (i * self.dims[1] + j) * self.dims[2];
+                let ks = range(2);
+                let (from, to) = (self.starts[row + ks.start()] as usize, self.starts[row + ks.end() + 1] as usize);
+                // The cells of one row are adjacent in `items`.
+                for &p in &self.items[from..to] {
+                    if f(p as usize) {
+                        return true;
+                    }
+                }
             }
         }
         true
     }
 
+    /// Whether some point of `points` (the grid's) lies within `radius` ≤ [`GRID_REACH`] of `x`:
+    /// `Some` with the answer, `None` for a larger radius (the grid cannot tell).
+    #[inline]
+    pub(crate) fn any_within(&self, points: &[[Real; 3]], x: &Vector3, radius: Real) -> Option<bool> {
+        let r2 = radius * radius;
+        let mut found = false;
+        let told = self.scan(x, radius, |i| {
+            let p = &points[i];
+            let (dx, dy, dz) = (p[0] - x.x, p[1] - x.y, p[2] - x.z);
+            found = dx * dx + dy * dy + dz * dz <= r2;
+            found
+        });
+        told.then_some(found)
+    }
+
+    /// Appends to `out` the points of `points` (the grid's) within `radius` ≤ [`GRID_REACH`] of
+    /// `x` and returns true; false for a larger radius (nothing appended: the grid cannot tell).
+    pub(crate) fn within(&self, points: &[[Real; 3]], x: &Vector3, radius: Real, out: &mut Vec<usize>) -> bool {
+        let r2 = radius * radius;
+        self.scan(x, radius, |i| {
+            let p = &points[i];
+            let (dx, dy, dz) = (p[0] - x.x, p[1] - x.y, p[2] - x.z);
+            if dx * dx + dy * dy + dz * dz <= r2 {
+                out.push(i);
+            }
+            false
+        })
+    }
+
     /// Bytes the grid holds.
     pub(crate) fn memory_bytes(&self) -> usize {
         self.gaps.len() * std::mem::size_of::<f32>() + (self.starts.len() + self.items.len()) * 4
-    }
-}
-
-/// Calls `f(cell, point index, distance from the point to the cell's box)` for every point and
-/// every cell whose box lies within `reach` of it.
-fn visit(
-    points: &[[Real; 3]],
-    origin: Vector3,
-    edge: Real,
-    dims: [usize; 3],
-    reach: Real,
-    mut f: impl FnMut(usize, usize, Real),
-) {
-    let cell = |v: Real, k: usize| ((v - origin[k]) / edge).floor().clamp(0.0, (dims[k] - 1) as Real) as usize;
-    let r2 = reach * reach;
-    for (n, p) in points.iter().enumerate() {
-        let a = [cell(p[0] - reach, 0), cell(p[1] - reach, 1), cell(p[2] - reach, 2)];
-        let b = [cell(p[0] + reach, 0), cell(p[1] + reach, 1), cell(p[2] + reach, 2)];
-        for i in a[0]..=b[0] {
-            let dx = axis_gap(p[0], origin[0] + i as Real * edge, edge);
-            for j in a[1]..=b[1] {
-                let dy = axis_gap(p[1], origin[1] + j as Real * edge, edge);
-                let row = (i * dims[1] + j) * dims[2];
-                for k in a[2]..=b[2] {
-                    let dz = axis_gap(p[2], origin[2] + k as Real * edge, edge);
-                    let d2 = dx * dx + dy * dy + dz * dz;
-                    if d2 <= r2 {
-                        f(row + k, n, d2.sqrt());
-                    }
-                }
-            }
-        }
     }
 }
 

@@ -100,6 +100,7 @@ impl Catalog {
                 s.cache.invalidate_instance(old);
             }
             s.instances.insert(id.clone(), Instance::of(&entry, pose));
+            s.changed();
             Ok(id)
         })
     }

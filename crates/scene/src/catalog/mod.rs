@@ -7,9 +7,13 @@
 //! grouping.rs   reading a scene's posed bodies and replacing instances by their container (§V)
 //! robots.rs     stored robots, and a scene as the world of the robot checks
 //! scene_robot.rs the robot placed in a scene: base, joint positions, attached objects
+//! clouds.rs     point-cloud obstacles of a scene (in memory only) and the scene version
 //! ```
 
 mod body;
+mod clouds;
+#[cfg(all(test, feature = "store"))]
+mod clouds_tests;
 mod grouping;
 #[cfg(all(test, feature = "store"))]
 mod primitive_tests;
@@ -22,6 +26,10 @@ mod scene_robot_tests;
 mod tests;
 
 pub use body::{bounding_body, BodyEntry, BodyFacts, BuiltBody, WarmUp};
+pub use clouds::{
+    BuiltCloud, CloudFrame, CloudSet, CloudUpdate, SceneCloud, DEFAULT_MAX_CLOUD_BYTES, DEFAULT_NOISE_RADIUS,
+    DEFAULT_SELF_FILTER_PADDING, MAX_CLOUDS_PER_SCENE,
+};
 pub use grouping::PosedInstance;
 pub use robots::{RobotEntry, RobotWorld};
 pub use scene_robot::{PlacedRobot, SceneRobotCheck};
@@ -33,6 +41,7 @@ use super::{
 };
 use crate::{Error, Result};
 use std::collections::BTreeMap;
+use std::sync::atomic::AtomicUsize;
 use std::sync::{Arc, Mutex, MutexGuard, RwLock, RwLockReadGuard, RwLockWriteGuard};
 use sublevel_core::body::Body;
 use sublevel_core::compound::CompoundBody;
@@ -64,6 +73,10 @@ pub struct SceneView {
     pub instances: Vec<InstanceView>,
     /// What the planning scene it was imported from says beyond its shapes (empty otherwise).
     pub planning: Arc<PlanningContext>,
+    /// The scene version this view was read at ([`Catalog::scene_version`]).
+    pub version: u64,
+    /// Its point-cloud obstacles by name (in memory only, see [`Catalog::set_point_cloud`]).
+    pub clouds: Arc<CloudSet>,
 }
 
 #[derive(Debug)]
@@ -98,6 +111,35 @@ struct SceneState {
     /// Set (under this scene's lock) when the scene is deleted, so a request that fetched the
     /// scene just before cannot write it back to the store.
     deleted: bool,
+    /// The scene version: 1 when the scene is created or loaded, raised by every change of its
+    /// instances, poses, planning context (robot, joint positions) or point clouds.
+    version: u64,
+    /// Point-cloud obstacles by name, replaced whole (copy on write) by every cloud change, so a
+    /// reader's `Arc` is one moment's set ([`clouds`]).
+    clouds: Arc<CloudSet>,
+}
+
+impl SceneState {
+    /// A live scene at version 1 without point clouds.
+    fn new(id: String, name: String, instances: BTreeMap<String, Instance>, planning: Arc<PlanningContext>) -> Self {
+        Self {
+            id,
+            name,
+            instances,
+            cache: WarmStartCache::default(),
+            planning,
+            placed: None,
+            deleted: false,
+            version: 1,
+            clouds: Arc::default(),
+        }
+    }
+
+    /// Records a change of the scene: raises its version and returns the new one.
+    fn changed(&mut self) -> u64 {
+        self.version += 1;
+        self.version
+    }
 }
 
 /// A scene's built robot and the stored robot it was built from: valid while the scene's record
@@ -122,6 +164,8 @@ pub struct Catalog {
     /// The quarantine count and the bodies waiting for their build (see [`body`]).
     builds: Arc<body::Builds>,
     params: NewtonParams,
+    /// Bytes held by the point clouds of every scene ([`clouds`]).
+    cloud_bytes: AtomicUsize,
 }
 
 /// Most job records kept; beyond it the oldest finished ones are deleted.
@@ -199,15 +243,7 @@ impl Catalog {
                     }
                 }
             }
-            let state = SceneState {
-                id: id.clone(),
-                name: rec.meta.name,
-                instances,
-                cache: WarmStartCache::default(),
-                planning: Arc::new(rec.meta.planning),
-                placed: None,
-                deleted: false,
-            };
+            let state = SceneState::new(id.clone(), rec.meta.name, instances, Arc::new(rec.meta.planning));
             scenes.insert(id, Arc::new(Mutex::new(state)));
         }
         let mut jobs = BTreeMap::new();
@@ -242,6 +278,7 @@ impl Catalog {
             robots: RwLock::new(robots),
             builds,
             params,
+            cloud_bytes: AtomicUsize::new(0),
         })
     }
 
@@ -413,15 +450,7 @@ impl Catalog {
             };
             instances.insert(iid, Instance::of(&entry, pose));
         }
-        let state = SceneState {
-            id: id.to_owned(),
-            name: rec.meta.name,
-            instances,
-            cache: WarmStartCache::default(),
-            planning: Arc::new(rec.meta.planning),
-            placed: None,
-            deleted: false,
-        };
+        let state = SceneState::new(id.to_owned(), rec.meta.name, instances, Arc::new(rec.meta.planning));
         tracing::info!(scene_id = %id, "scene loaded from the shared store");
         Ok(Some(write(&self.scenes).entry(id.to_owned()).or_insert_with(|| Arc::new(Mutex::new(state))).clone()))
     }
@@ -467,15 +496,7 @@ impl Catalog {
         check_name("name", name)?;
         let id = new_id("s");
         self.store.put_scene(&id, &SceneMeta::named(name))?;
-        let state = SceneState {
-            id: id.clone(),
-            name: name.to_owned(),
-            instances: BTreeMap::new(),
-            cache: WarmStartCache::default(),
-            planning: Arc::default(),
-            placed: None,
-            deleted: false,
-        };
+        let state = SceneState::new(id.clone(), name.to_owned(), BTreeMap::new(), Arc::default());
         write(&self.scenes).insert(id.clone(), Arc::new(Mutex::new(state)));
         Ok(id)
     }
@@ -536,6 +557,7 @@ impl Catalog {
         let mut s = lock(&scene);
         self.store.delete_scene(id)?;
         s.deleted = true;
+        self.release_clouds(&mut s);
         drop(s);
         scenes.remove(id);
         Ok(())
@@ -559,6 +581,7 @@ impl Catalog {
             let rec = InstanceRecord { body_id: body_id.to_owned(), pose: stored };
             self.store.put_instances(scene_id, &[(&id, &rec)], false)?;
             s.instances.insert(id.clone(), Instance::of(&entry, pose));
+            s.changed();
             Ok(id)
         })
     }
@@ -595,6 +618,12 @@ impl Catalog {
                     s.instances.len()
                 )));
             }
+            if s.clouds.contains_key(name) {
+                return Err(Error::invalid(
+                    "name",
+                    format!("`{}` is the name of a point cloud of the scene", sublevel_core::error::clip(name)),
+                ));
+            }
             let id = new_id("i");
             let mut planning = (*s.planning).clone();
             planning.names.insert(id.clone(), name.to_owned());
@@ -607,6 +636,7 @@ impl Catalog {
             }
             s.instances.insert(id.clone(), Instance::of(&entry, pose));
             s.planning = Arc::new(meta.planning);
+            s.changed();
             Ok(id)
         })
     }
@@ -647,6 +677,7 @@ impl Catalog {
             for ((id, entry), (_, pose)) in ids.iter().zip(&entries).zip(instances) {
                 s.instances.insert(id.clone(), Instance::of(entry, *pose));
             }
+            s.changed();
             Ok(ids)
         })
     }
@@ -682,6 +713,7 @@ impl Catalog {
                     inst.pose = *pose;
                 }
             }
+            s.changed();
             Ok(poses.len())
         })
     }
@@ -698,6 +730,7 @@ impl Catalog {
             self.store.delete_instance(scene_id, instance_id)?;
             s.instances.remove(instance_id);
             s.cache.invalidate_instance(instance_id);
+            s.changed();
             Ok(())
         })
     }
@@ -722,6 +755,8 @@ fn view(s: &SceneState) -> SceneView {
             .map(|(id, i)| InstanceView { id: id.clone(), body_id: i.body_id().to_owned(), pose: i.pose })
             .collect(),
         planning: s.planning.clone(),
+        version: s.version,
+        clouds: s.clouds.clone(),
     }
 }
 

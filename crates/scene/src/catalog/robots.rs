@@ -5,14 +5,15 @@
 //! uploaded or the catalog opens, and shared by every check through an `Arc`. A scene becomes the
 //! world of [`sublevel_robot::RobotChecker`] through [`Catalog::robot_world`]: its instances of
 //! exact primitives and of bodies that kept the mesh they were fitted to (exact mesh obstacles),
-//! named as the planning scene it was imported from names them, with that scene's
-//! allowed-collision matrix and robot state.
+//! named as the planning scene it was imported from names them, and its point clouds (named
+//! by their names, [`super::clouds`]), with that scene's allowed-collision matrix and robot state.
 
 use super::{check_name, new_id, read, write, Catalog};
 use crate::store::Store;
 use crate::{Error, PlanningContext, Result, RobotRecord};
 use std::collections::BTreeMap;
 use std::sync::Arc;
+use sublevel_core::math::Isometry3;
 use sublevel_robot::{FittedRobot, RobotFile, WorldObject};
 
 /// A stored robot, validated and ready for checks.
@@ -38,6 +39,12 @@ pub struct RobotWorld {
     pub planning: Arc<PlanningContext>,
     /// The robot placed in the scene, when there is one ([`Catalog::set_scene_robot`]).
     pub robot: Option<Arc<super::PlacedRobot>>,
+    /// The scene version the world was read at ([`Catalog::scene_version`]); 0 for
+    /// [`RobotWorld::empty`].
+    pub scene_version: u64,
+    /// The scene's point clouds, as read with the instances (their objects follow the
+    /// instances' in `objects`).
+    pub clouds: Arc<super::CloudSet>,
 }
 
 /// Every stored robot, validated; one that no longer validates is moved to the store's quarantine
@@ -66,7 +73,14 @@ pub(super) fn load(store: &dyn Store) -> Result<BTreeMap<String, Arc<RobotEntry>
 impl RobotWorld {
     /// A world with no object, no planning context and no robot (self-collision checks only).
     pub fn empty() -> Self {
-        Self { objects: Vec::new(), instance_ids: Vec::new(), planning: Arc::default(), robot: None }
+        Self {
+            objects: Vec::new(),
+            instance_ids: Vec::new(),
+            planning: Arc::default(),
+            robot: None,
+            scene_version: 0,
+            clouds: Arc::default(),
+        }
     }
 
     /// Moves the objects of the instances `poses` names (instance id, pose) to those poses;
@@ -163,8 +177,9 @@ impl Catalog {
     /// Scene `scene_id` as the world of the robot checks: every instance as a [`WorldObject`]
     /// named by the planning scene's name for it (else its instance id), at its stored pose — an
     /// exact primitive, or the mesh kept with a body fitted to it (an imported planning scene's
-    /// mesh, with the body's root for the sos bound) — and the scene's robot
-    /// ([`Catalog::placed_robot`]).
+    /// mesh, with the body's root for the sos bound) — then every point cloud as a points object
+    /// named by its name (its points already in the world frame), all of one moment of the
+    /// scene, and the scene's robot ([`Catalog::placed_robot`]).
     ///
     /// # Errors
     /// [`Error::NotFound`] (kind `scene`); [`Error::FailedPrecondition`] naming an instance of a
@@ -172,7 +187,7 @@ impl Catalog {
     /// obstacles) or of a body that no longer validates, or a scene robot that was deleted.
     pub fn robot_world(&self, scene_id: &str) -> Result<RobotWorld> {
         let view = self.get_scene(scene_id)?;
-        let mut objects = Vec::with_capacity(view.instances.len());
+        let mut objects = Vec::with_capacity(view.instances.len() + view.clouds.len());
         let mut instance_ids = Vec::with_capacity(view.instances.len());
         for inst in &view.instances {
             let entry = self.body(&inst.body_id)?;
@@ -191,8 +206,18 @@ impl Catalog {
             }
             instance_ids.push(inst.id.clone());
         }
+        for c in view.clouds.values() {
+            objects.push(WorldObject::points(c.name.clone(), c.cloud.clone(), Isometry3::identity()));
+        }
         let robot = self.placed_robot(scene_id)?;
-        Ok(RobotWorld { objects, instance_ids, planning: view.planning, robot })
+        Ok(RobotWorld {
+            objects,
+            instance_ids,
+            planning: view.planning,
+            robot,
+            scene_version: view.version,
+            clouds: view.clouds,
+        })
     }
 
     /// Replaces the planning context of scene `scene_id` (written through to the store).

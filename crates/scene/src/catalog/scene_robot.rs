@@ -308,6 +308,7 @@ impl Catalog {
             let meta = crate::SceneMeta { name: s.name.clone(), planning };
             self.store.put_scene(scene_id, &meta)?;
             s.planning = Arc::new(meta.planning);
+            s.changed();
             Ok(())
         })
     }

@@ -12,9 +12,9 @@ use sublevel_query::dispatch::{self, PosedRef};
 /// A pair found by [`check_scene`].
 #[derive(Clone, Debug)]
 pub struct ScenePair {
-    /// First instance (the smaller id).
+    /// First instance (the smaller id; the instance of an instance–cloud pair).
     pub first: String,
-    /// Second instance.
+    /// Second instance, or the name of a point cloud.
     pub second: String,
     /// Their distance answer.
     pub distance: DistanceReply,
@@ -31,8 +31,10 @@ pub struct SceneCheck {
     pub candidate_pairs: u64,
     /// Distance solves run.
     pub narrow_phase_solves: u64,
-    /// Pairs a brute-force check examines.
+    /// Pairs a brute-force check examines (instance–cloud pairs included).
     pub all_pairs: u64,
+    /// The scene version the check read ([`Catalog::scene_version`]).
+    pub scene_version: u64,
 }
 
 /// Every pair of a scene (or of `focus` against the rest) that overlaps or lies closer than
@@ -42,7 +44,9 @@ pub struct SceneCheck {
 /// then cold distance solves on what remains. A nonconvex body or a halfspace (no bounded box) is
 /// a candidate for every pair; a pair of two halfspaces (no finite distance) is never reported.
 /// Pairs with a primitive are solved by [`sublevel_query::shape`], converged or not as each
-/// answer says.
+/// answer says. Each checked instance is also checked against each of the scene's point clouds,
+/// one pair per instance and cloud (the nearest point ball). Instances, poses and clouds are
+/// read under one lock: one moment of the scene, whose version the check reports.
 ///
 /// # Errors
 /// [`Error::NotFound`] for the scene or a `focus` / override instance; [`Error::InvalidArgument`]
@@ -60,7 +64,7 @@ pub fn check_scene(
         return Err(Error::invalid("margin", format!("must be finite and >= 0 meters, got {margin}")));
     }
     check_unique(|k| format!("poses[{k}].instance_id"), ids_of(overrides))?;
-    let mut all = catalog.posed_instances(scene_id, &[])?;
+    let (mut all, clouds, scene_version) = catalog.posed_scene(scene_id)?;
     let index: HashMap<String, usize> = all.iter().enumerate().map(|(k, i)| (i.id.clone(), k)).collect();
     for (k, (id, pose)) in overrides.iter().enumerate() {
         let at = *index
@@ -93,8 +97,11 @@ pub fn check_scene(
             None => Aabb::new([-far; 3].into(), [far; 3].into()),
         })
         .collect();
-    let mut out = SceneCheck { instances: n, all_pairs, ..SceneCheck::default() };
+    let mut out = SceneCheck { instances: n, all_pairs, scene_version, ..SceneCheck::default() };
+    let params = catalog.certify_params();
+    super::cloud_check::cloud_pairs(&all, &is_focus, &clouds, margin, &params, &mut out)?;
     if n < 2 {
+        out.pairs.sort_by(|x, y| x.distance.answer.result.distance.total_cmp(&y.distance.answer.result.distance));
         return Ok(out);
     }
     let bvh = Bvh::from_leaves(BvhBuildStrategy::Binned, &boxes);
@@ -105,8 +112,7 @@ pub fn check_scene(
         .collect();
     candidates.sort_unstable();
     candidates.dedup();
-    out.candidate_pairs = candidates.len() as u64;
-    let params = catalog.certify_params();
+    out.candidate_pairs += candidates.len() as u64;
     let options = QueryOptions { cold: true, ..QueryOptions::default() };
     let mut scratch = WarmStartCache::default();
     // The narrow phase: the candidates the cheap bounds do not clear (a compound body's root
@@ -170,7 +176,7 @@ pub fn check_scene(
 /// The world box of a posed instance: a primitive's own (its frame's half extents under the
 /// rotation, `|R|·h` about the translation), a body's from its bounding box; `None` without a
 /// bounded one (a halfspace, a nonconvex body).
-fn world_aabb(i: &crate::PosedInstance) -> Option<(Vector3, Vector3)> {
+pub(super) fn world_aabb(i: &crate::PosedInstance) -> Option<(Vector3, Vector3)> {
     match &i.primitive {
         Some(p) => {
             let h = p.local_half_extents()?;

@@ -24,6 +24,7 @@
 //! view.rs    QueryView: a client's private view, and the routing of a request's candidate
 //!            states to the batch solver's lanes
 //! check.rs   check_scene: the broad phase and the narrow phase
+//! cloud_check.rs  check_scene's instances against the scene's point clouds
 //! motion/    MotionScene: rigid-body motions of instances, and the proven pair bounds they step on
 //! ```
 //!
@@ -32,6 +33,7 @@
 //! per-pair answer path are re-exported here.
 
 mod check;
+mod cloud_check;
 mod motion;
 #[cfg(test)]
 mod tests;

@@ -4,7 +4,8 @@
 //!
 //! - A length over the method's limit is OUT_OF_RANGE before any byte is buffered: uploads
 //!   (`UploadBody`, `StartFitJob`, `StartGroupJob`, `ImportScene`, `UploadRobot`,
-//!   `StartRobotFitJob`) may send [`crate::ServerConfig::max_message_bytes`],
+//!   `StartRobotFitJob`, and `UpdatePointCloud`'s sensor frames) may send
+//!   [`crate::ServerConfig::max_message_bytes`],
 //!   every other method [`super::AdmissionSettings::max_request_bytes`].
 //! - Bytes held (received, message not yet complete) are charged as they arrive to the
 //!   connection's budget and to the server's, and released when the message is handed on or the
@@ -39,13 +40,15 @@ pub const SMALL_MESSAGE_BYTES: usize = 64 << 10;
 const PREFIX: usize = 5;
 
 /// The methods whose requests may be as large as [`crate::ServerConfig::max_message_bytes`].
-const UPLOADS: [&str; 6] = [
+const UPLOADS: [&str; 7] = [
     "/sublevel.v1.Sublevel/UploadBody",
     "/sublevel.v1.Sublevel/StartFitJob",
     "/sublevel.v1.Sublevel/StartGroupJob",
     "/sublevel.v1.Sublevel/ImportScene",
     "/sublevel.v1.Sublevel/UploadRobot",
     "/sublevel.v1.Sublevel/StartRobotFitJob",
+    // A sensor frame: a million-point PointCloud2 at 16 bytes per point is 16 MB.
+    "/sublevel.v1.Sublevel/UpdatePointCloud",
 ];
 
 type BoxError = Box<dyn std::error::Error + Send + Sync>;

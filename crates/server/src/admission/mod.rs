@@ -70,7 +70,8 @@ pub struct AdmissionSettings {
     /// TLS handshake, HTTP/2 preface and one request's headers. Past it the connection is closed.
     pub handshake_timeout: Duration,
     /// Largest request message of every method but the uploads (`--max-request-bytes`); the
-    /// uploads (`UploadBody`, `StartFitJob`, `StartGroupJob`, `ImportScene`, `UploadRobot`, `StartRobotFitJob`) may send up to
+    /// uploads (`UploadBody`, `StartFitJob`, `StartGroupJob`, `ImportScene`, `UploadRobot`, `StartRobotFitJob`,
+    /// `UpdatePointCloud`) may send up to
     /// [`crate::ServerConfig::max_message_bytes`]. A larger length prefix is OUT_OF_RANGE before
     /// any byte of the message is buffered.
     pub max_request_bytes: usize,

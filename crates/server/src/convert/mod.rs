@@ -22,6 +22,7 @@
 //! | `bodies.rs`     | fit options, point clouds and their checks, reports, body files               |
 //! | `primitives.rs` | exact primitives (box, sphere, cylinder, capsule, halfspace)                  |
 //! | `scenes.rs`     | points, vectors, poses, instances, scenes, `SetPoses` entries, MoveIt imports |
+//! | `clouds.rs`     | point-cloud frames (PointCloud2 bytes, depth images), filters, counts         |
 //! | `queries.rs`    | answers, certificates, gradients, query options, batch pairs                  |
 //! | `planner.rs`    | pair / answer columns, planner requests and answers, scene checks             |
 //! | `robots.rs`     | robot summaries, configuration columns, configuration and motion answers      |
@@ -33,6 +34,7 @@
 use crate::{Error, Result};
 
 mod bodies;
+mod clouds;
 mod errors;
 mod motions;
 mod planner;
@@ -49,6 +51,9 @@ pub use bodies::{
     compound_settings, fit_degree, fit_method_from_proto, fit_options, fit_stage_to_proto, mesh_format_from_proto,
     min_thickness, part_count, points_from_proto, report_from_proto, report_to_proto, sdp_status_to_proto,
     uploaded_report, FitOptions, MAX_COMPOUND_NODES,
+};
+pub use clouds::{
+    cloud_filter, cloud_frame, cloud_summary, depth_points, filter_counts_to_proto, packed_points, DEFAULT_DEPTH_SCALE,
 };
 pub use errors::{prefix_field, to_status};
 pub use motions::{instance_motions_from_proto, instance_motions_to_proto, InstanceMotions};

@@ -425,6 +425,7 @@ pub fn scene_check_to_proto(c: &sublevel_scene::planner::SceneCheck, server_seco
         all_pairs: c.all_pairs,
         server_seconds,
         robot: None,
+        scene_version: c.scene_version,
     }
 }
 

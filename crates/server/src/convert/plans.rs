@@ -186,5 +186,7 @@ pub fn plan_response(out: &PlanOutcome, robot: &FittedRobot, total: Duration) ->
         advancement_steps: out.counts.advancement_steps as u64,
         nodes: out.nodes as u32,
         repaired: out.repaired as u32,
+        // The scene's, which the handler knows.
+        scene_version: 0,
     }
 }

@@ -61,6 +61,8 @@ pub fn scene_to_proto(s: &SceneView, robot: Option<&sublevel_scene::PlacedRobot>
             .iter()
             .map(|(name, position)| pb::JointPosition { name: name.clone(), position: *position })
             .collect(),
+        point_clouds: s.clouds.values().map(|c| super::cloud_summary(c)).collect(),
+        scene_version: s.version,
     }
 }
 

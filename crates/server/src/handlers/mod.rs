@@ -10,6 +10,7 @@
 //! robot_checks.rs  the configuration and motion checks of those (and of query streams)
 //! prepared.rs the robot checkers kept across requests until their robot or scene changes
 //! scene_robots.rs  SetSceneRobot, ClearSceneRobot, SetJointPositions, AttachObject, DetachObject
+//! clouds.rs   UpdatePointCloud, RemovePointCloud: point-cloud obstacles of scenes
 //! queries.rs  Distance, Growth, BatchQuery, Query, QueryStream, CheckScene, and where query work
 //!             runs (inline on the async workers, or on the SDP slots)
 //! motions.rs  CheckInstanceMotions
@@ -19,6 +20,9 @@
 //! [`crate::runtime`], the operator's limits are [`crate::limits`].
 
 mod bodies;
+mod clouds;
+#[cfg(test)]
+mod clouds_tests;
 mod jobs;
 mod motions;
 mod plans;
@@ -267,6 +271,20 @@ impl Sublevel for SublevelService {
 
     async fn detach_object(&self, request: Request<pb::DetachObjectRequest>) -> Reply<pb::DetachObjectResponse> {
         scene_robots::detach_object(self, request).await.map_err(Status::from)
+    }
+
+    async fn update_point_cloud(
+        &self,
+        request: Request<pb::UpdatePointCloudRequest>,
+    ) -> Reply<pb::UpdatePointCloudResponse> {
+        clouds::update_point_cloud(self, request).await.map_err(Status::from)
+    }
+
+    async fn remove_point_cloud(
+        &self,
+        request: Request<pb::RemovePointCloudRequest>,
+    ) -> Reply<pb::RemovePointCloudResponse> {
+        clouds::remove_point_cloud(self, request).await.map_err(Status::from)
     }
 
     async fn plan(&self, request: Request<pb::PlanRequest>) -> Reply<pb::PlanResponse> {

@@ -37,6 +37,7 @@ pub(super) async fn plan(svc: &SublevelService, request: Request<pb::PlanRequest
     };
     let Setting { robot, world, base, link_padding } = checks.setting(asked).await?;
     let (start, goal) = cv::plan_ends(&req, &robot, &world.planning.joint_positions)?;
+    let scene_version = world.scene_version;
     let planned = robot.clone();
     let outcome = checks
         .pools
@@ -50,5 +51,7 @@ pub(super) async fn plan(svc: &SublevelService, request: Request<pb::PlanRequest
             sublevel_plan::plan(&mut validity, &start, &goal, &settings, &cancel)
         })
         .await?;
-    Ok(Response::new(cv::plan_response(&outcome, &robot, clock.elapsed())))
+    let mut out = cv::plan_response(&outcome, &robot, clock.elapsed());
+    out.scene_version = scene_version;
+    Ok(Response::new(out))
 }

@@ -10,8 +10,10 @@
 //!   The base pose is not part of it: it is an argument of every check.
 //! - **Version**, compared at every use: the stored robot (the catalog's `Arc`, or the scene
 //!   robot's), the scene's planning context (its `Arc`: every change of names, allowed-collision
-//!   matrix, joint positions or scene robot replaces it) and every instance's id and pose (the
-//!   view's poses applied). Instance ids are never reused and an instance never changes its
+//!   matrix, joint positions or scene robot replaces it), every instance's id and pose (the
+//!   view's poses applied), the scene version and the scene's point clouds (the `Arc` of its
+//!   cloud set, replaced whole by every cloud update: a checker never answers against a replaced
+//!   cloud). Instance ids are never reused and an instance never changes its
 //!   body; robots are immutable under their id. The entry holds the `Arc`s it compares, so none
 //!   is freed and its address reused while the entry lives. An entry whose version differs is
 //!   stale: it is dropped and a new one built. Deleting a scene or a robot drops its entries.
@@ -33,7 +35,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use sublevel_core::math::{Isometry3, Real};
 use sublevel_robot::{FittedRobot, RobotChecker};
-use sublevel_scene::{Catalog, PlanningContext, RobotWorld};
+use sublevel_scene::{Catalog, CloudSet, PlanningContext, RobotWorld};
 
 self_cell::self_cell!(
     /// A configuration checker that owns the robot it checks (the robot with a request's
@@ -121,6 +123,10 @@ struct Version {
     planning: Option<Arc<PlanningContext>>,
     /// Every instance of the scene by id, at its pose (the view's poses applied).
     instances: Vec<(String, Isometry3)>,
+    /// The scene version (0 without a scene).
+    scene_version: u64,
+    /// The scene's point clouds; `None` without a scene.
+    clouds: Option<Arc<CloudSet>>,
 }
 
 impl Version {
@@ -138,6 +144,8 @@ impl Version {
             (None, None) => self.instances.is_empty(),
             (Some(view), Some(planning)) => {
                 Arc::ptr_eq(&view.planning, planning)
+                    && view.version == self.scene_version
+                    && self.clouds.as_ref().is_some_and(|c| Arc::ptr_eq(&view.clouds, c))
                     && view.instances.len() == self.instances.len()
                     && view.instances.iter().zip(&self.instances).all(|(i, (id, pose))| {
                         i.id == *id && *pose == poses.iter().find(|(p, _)| *p == i.id).map_or(i.pose, |(_, p)| *p)
@@ -319,6 +327,8 @@ impl PreparedCheckers {
             robot: source.clone(),
             planning: (!asked.scene_id.is_empty()).then(|| world.planning.clone()),
             instances: world.instance_ids.iter().cloned().zip(world.objects.iter().map(|o| o.pose)).collect(),
+            scene_version: world.scene_version,
+            clouds: (!asked.scene_id.is_empty()).then(|| world.clouds.clone()),
         };
         Ok(Prepared {
             version,

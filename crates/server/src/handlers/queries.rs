@@ -463,24 +463,36 @@ pub(super) async fn check_scene(
     let slots = if svc.catalog.has_nonconvex(&req.scene_id) { &svc.pools.sdp } else { &svc.pools.batch };
     let (check, robot) = slots
         .run(move || {
-            let check = sublevel_scene::planner::check_scene(
-                &catalog,
-                &req.scene_id,
-                req.margin,
-                &req.instance_ids,
-                &overrides,
-            )?;
-            // The scene's robot, at its joint positions, within the margin as padding.
-            let options = sublevel_robot::CheckOptions { padding: req.margin, distance: true, ..Default::default() };
-            let robot = catalog.check_scene_robot(&req.scene_id, &options, &overrides)?.map(|r| {
-                let mut out = pb::CheckConfigurationsResponse {
-                    joint_names: r.placed.robot.model.variable_names().iter().map(|s| (*s).to_owned()).collect(),
-                    ..Default::default()
-                };
-                cv::push_configuration_answers(&mut out, &[r.answer], &r.placed.robot, &r.world.objects, false);
-                out
-            });
-            Ok((check, robot))
+            // The pairs and the robot read the scene apart: should it change in between, both are
+            // read again (a few times at most), so that the answer is of one scene version.
+            let mut attempt = 0;
+            loop {
+                attempt += 1;
+                let check = sublevel_scene::planner::check_scene(
+                    &catalog,
+                    &req.scene_id,
+                    req.margin,
+                    &req.instance_ids,
+                    &overrides,
+                )?;
+                // The scene's robot, at its joint positions, within the margin as padding.
+                let options =
+                    sublevel_robot::CheckOptions { padding: req.margin, distance: true, ..Default::default() };
+                let robot = catalog.check_scene_robot(&req.scene_id, &options, &overrides)?;
+                if robot.as_ref().is_some_and(|r| r.world.scene_version != check.scene_version) && attempt < 4 {
+                    continue;
+                }
+                let robot = robot.map(|r| {
+                    let mut out = pb::CheckConfigurationsResponse {
+                        joint_names: r.placed.robot.model.variable_names().iter().map(|s| (*s).to_owned()).collect(),
+                        scene_version: r.world.scene_version,
+                        ..Default::default()
+                    };
+                    cv::push_configuration_answers(&mut out, &[r.answer], &r.placed.robot, &r.world.objects, false);
+                    out
+                });
+                return Ok((check, robot));
+            }
         })
         .await?;
     let mut out = cv::scene_check_to_proto(&check, start.elapsed().as_secs_f64());

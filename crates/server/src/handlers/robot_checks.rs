@@ -166,6 +166,7 @@ impl RobotChecks {
         let robot = &prepared.robot;
         let mut out = pb::CheckConfigurationsResponse {
             joint_names: robot.model.variable_names().iter().map(|s| (*s).to_owned()).collect(),
+            scene_version: prepared.world.scene_version,
             ..Default::default()
         };
         for chunk in &answers {
@@ -251,6 +252,7 @@ impl RobotChecks {
         let answers = try_join_all(work).await?.into_iter().collect::<Result<Vec<_>>>()?;
         let mut out = pb::CheckMotionsResponse {
             joint_names: robot.model.variable_names().iter().map(|s| (*s).to_owned()).collect(),
+            scene_version: prepared.world.scene_version,
             ..Default::default()
         };
         for chunk in &answers {
