@@ -21,6 +21,7 @@ mod fit_time;
 mod peer_coal;
 mod peer_parry;
 mod primitives;
+mod robot_cloud_bodies;
 mod robot_clouds;
 mod robot_edges;
 mod robot_labels;

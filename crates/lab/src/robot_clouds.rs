@@ -69,7 +69,7 @@ pub struct RobotCloudsArgs {
     voxel: Real,
     /// Noise radius of the points (meters).
     #[arg(long, default_value_t = 0.02)]
-    radius: Real,
+    pub(crate) radius: Real,
     /// Standard deviation of the depth noise (meters).
     #[arg(long, default_value_t = 0.002)]
     noise: Real,
@@ -82,6 +82,18 @@ pub struct RobotCloudsArgs {
     /// Plan each problem against the cloud and against the primitives.
     #[arg(long)]
     plan: bool,
+    /// Also model each cloud as bodies (clusters fitted by sos-convex bodies): fit times, reuse
+    /// on a second frame with new noise, and the first `--body-configs` configurations checked
+    /// against them.
+    #[arg(long)]
+    bodies: bool,
+    /// Configurations per problem checked against the bodies.
+    #[arg(long, default_value_t = 30)]
+    pub(crate) body_configs: usize,
+    /// Slack of the bodies' reuse test (meters): a body is kept while it contains every new
+    /// point's ball grown by this much.
+    #[arg(long, default_value_t = 0.005)]
+    pub(crate) body_slack: Real,
     /// Planning timeout (seconds).
     #[arg(long, default_value_t = 1.0)]
     timeout: Real,
@@ -112,7 +124,7 @@ fn cameras(n: usize) -> Result<Vec<Isometry3>> {
 
 /// One scenario's figures.
 #[derive(Default)]
-struct Tally {
+pub(crate) struct Tally {
     problems: usize,
     points: Vec<Real>,
     frame_seconds: Vec<Real>,
@@ -129,6 +141,7 @@ struct Tally {
     plan_seconds: Vec<Real>,
     truth_plan_seconds: Vec<Real>,
     paths_free: usize,
+    bodies: crate::robot_cloud_bodies::BodyTally,
 }
 
 /// Runs `sublevel-lab robot-clouds`.
@@ -158,6 +171,7 @@ pub fn run(args: RobotCloudsArgs) -> Result<()> {
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(args.seed);
     let mut all = Tally::default();
+    let mut bodies = Vec::new();
     for scenario in &args.scenarios {
         let mut t = Tally::default();
         for k in 1..=args.limit {
@@ -196,15 +210,44 @@ pub fn run(args: RobotCloudsArgs) -> Result<()> {
             let world = vec![WorldObject::points("camera", cloud, Isometry3::identity())];
             let mut on_cloud = RobotChecker::new(&robot, world.clone(), &allowed)?;
             let mut on_truth = RobotChecker::new(&robot, truth.clone(), &allowed)?;
-            check_configurations(&robot, &mut rng, &args, &merged, &mut on_cloud, &mut on_truth, &mut t)?;
+            let configs = check_configurations(&robot, &mut rng, &args, &merged, &mut on_cloud, &mut on_truth, &mut t)?;
+            if args.bodies {
+                let frames = views
+                    .iter()
+                    .enumerate()
+                    .map(|(v, camera)| {
+                        let noise = DepthNoise { sigma: args.noise, seed: args.seed ^ (k * 8 + v) as u64 ^ 0x5eed };
+                        let depth = render_depth(&truth, camera, &CAMERA, 6.0, Some(noise))?;
+                        let mut points = Vec::new();
+                        deproject(DepthPixels::F32(&depth), &CAMERA, 1.0, &mut points)?;
+                        filter.apply(&points, camera, &mut FilterCounts::default())
+                    })
+                    .collect::<Result<Vec<_>>>()?;
+                let mut second = voxel_grid(&frames.concat(), args.voxel);
+                self_filter(&robot, &start, &base, args.radius, args.self_padding, &mut second)?;
+                crate::robot_cloud_bodies::bodies(
+                    &robot,
+                    &args,
+                    (&merged, &second),
+                    &truth,
+                    &allowed,
+                    &configs,
+                    &mut t.bodies,
+                )?;
+            }
             if args.plan {
                 plan_both(&robot, &args, (&start, &goal), world, &truth, &allowed, &mut t)?;
             }
         }
         row(scenario, &t);
+        bodies.push((scenario.clone(), t.bodies.clone()));
         merge(&mut all, t);
     }
     row("all", &all);
+    if args.bodies {
+        bodies.push(("all".into(), all.bodies.clone()));
+        crate::robot_cloud_bodies::table(&bodies);
+    }
     if all.misses + all.false_collisions > 0 {
         return Err(Error::Numerical(format!(
             "{} misses and {} false collisions against the brute force",
@@ -224,7 +267,7 @@ fn check_configurations(
     on_cloud: &mut RobotChecker<'_>,
     on_truth: &mut RobotChecker<'_>,
     t: &mut Tally,
-) -> Result<()> {
+) -> Result<Vec<Vec<Real>>> {
     use rand::Rng;
     let base = Isometry3::identity();
     let dof = robot.model.dof();
@@ -273,7 +316,7 @@ fn check_configurations(
         t.model_false += usize::from(cloud[i].world && !truth[i].world);
         t.model_misses += usize::from(!cloud[i].world && truth[i].world);
     }
-    Ok(())
+    Ok(flat.chunks(dof).map(|q| q.to_vec()).collect())
 }
 
 /// Plans the problem against the cloud and against the primitives; a cloud's path is checked
@@ -312,6 +355,16 @@ fn plan_both(
         }
         t.solved += 1;
         t.plan_seconds.push(seconds);
+        if std::env::var_os("SUBLEVEL_CLOUD_STATS").is_some() {
+            let m = &out.timing;
+            eprintln!(
+                "cloud plan {:.1} ms: search {:.1}, simplify {:.1}, certify {:.1}",
+                seconds * 1e3,
+                m.search.as_secs_f64() * 1e3,
+                m.simplify.as_secs_f64() * 1e3,
+                m.certify.as_secs_f64() * 1e3
+            );
+        }
         let mut on_truth = RobotChecker::new(robot, truth.to_vec(), allowed)?;
         let mut motions = MotionChecker::new(&mut on_truth)?;
         let mut free = true;
@@ -341,6 +394,7 @@ fn merge(all: &mut Tally, t: Tally) {
     all.plan_seconds.extend(t.plan_seconds);
     all.truth_plan_seconds.extend(t.truth_plan_seconds);
     all.paths_free += t.paths_free;
+    crate::robot_cloud_bodies::merge(&mut all.bodies, t.bodies);
 }
 
 fn row(name: &str, t: &Tally) {

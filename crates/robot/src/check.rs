@@ -55,7 +55,7 @@
 //! the root's sos solve 0.4–2 µs and the mesh stage a few µs; the sphere trees are another matter
 //! (a ball against a primitive is a closed form of a few ns).
 
-use crate::cloud::{geometry_against_cloud, CloudPair, PointCloud};
+use crate::cloud::{cloud_lower_bound, geometry_against_cloud, CloudPair, PointCloud};
 use crate::exact::{box_gap, box_gap_past, exact_collides, exact_pair, exact_pair_within, exact_primitive, parry_pose};
 use crate::exact::{ExactShape, PairOutcome, PlacedBox};
 use crate::exact::{PairHint, Slack};
@@ -399,7 +399,15 @@ impl<'r> RobotChecker<'r> {
         let primitive = self.both_primitive(g, o);
         match level {
             0 => Ok((self.world_gap(g, o).max(self.world_box_gap(g, o, Real::INFINITY)), false)),
-            1 => Ok((self.sos_world_bound(g, o)?, primitive)),
+            1 => match self.cloud(o) {
+                // A cloud has no sos model: its level 1 is the nearest point to each of the
+                // geometry's sphere-tree balls of a few centimeters.
+                Some(cloud) => {
+                    let pose = self.world[o].pose.inv_mul(&self.poses[g]);
+                    Ok((cloud_lower_bound(&self.robot.geometries[g], &pose, cloud), false))
+                }
+                None => Ok((self.sos_world_bound(g, o)?, primitive)),
+            },
             _ => {
                 if primitive {
                     return Ok((self.sos_world_bound(g, o)?, true));

@@ -306,6 +306,41 @@ pub(crate) fn geometry_against_cloud(
     }
 }
 
+/// Radius of the sphere-tree balls [`cloud_lower_bound`] measures from (meters).
+const BOUND_BALL: Real = 0.05;
+
+/// A lower bound of the gap between a robot geometry (`pose`: geometry frame → the cloud's) and
+/// the cloud's point balls (meters, ≥ 0): the nearest point to each ball of the geometry's
+/// sphere tree no larger than [`BOUND_BALL`] (the tree's leaves where larger), less the ball's
+/// radius and the noise radius; for a primitive, its bounding ball's. Some twenty nearest-point
+/// queries on a Panda link, against the hundreds of exact point distances of
+/// [`geometry_against_cloud`]: conservative advancement takes this first.
+pub(crate) fn cloud_lower_bound(geometry: &RobotGeometry, pose: &Isometry3, cloud: &PointCloud) -> Real {
+    let r = cloud.radius();
+    let gap = |center: &Vector3, radius: Real| match cloud.nearest(&pose.transform_point(&(*center).into()).coords) {
+        Some((_, d)) => d - radius - r,
+        None => Real::INFINITY,
+    };
+    let best = match &geometry.shape {
+        LinkShape::Mesh { spheres, .. } if !spheres.nodes.is_empty() => {
+            let mut best = Real::INFINITY;
+            let mut stack = vec![0u32];
+            while let Some(k) = stack.pop() {
+                let node = &spheres.nodes[k as usize];
+                if node.sphere.radius > BOUND_BALL && node.children != 0 {
+                    stack.push(node.children);
+                    stack.push(node.children + 1);
+                } else {
+                    best = best.min(gap(&node.sphere.center, node.sphere.radius));
+                }
+            }
+            best
+        }
+        _ => gap(&geometry.sphere.0, geometry.sphere.1),
+    };
+    best.max(0.0)
+}
+
 /// A link mesh's verdict against a cloud by its sphere tree ([`crate::spheres`]): a node whose
 /// ball has no point within its radius plus `r + padding` is free with everything below it; a
 /// point within `r + padding` less a node's radius of its center meets the piece of triangle the
