@@ -157,6 +157,9 @@ impl PointCloud {
         if let Some(found) = self.grid.any_within(&self.points, center, distance) {
             return found;
         }
+        if self.grid.clear(center, distance) {
+            return false;
+        }
         let nearest =
             self.tree.query(&[center.x, center.y, center.z]).nearest_one::<SquaredEuclidean<Real>>().execute();
         nearest.distance <= distance * distance
@@ -182,7 +185,11 @@ impl PointCloud {
     /// Appends to `out` the indices of the points within `distance` of `center` (own frame,
     /// meters), unsorted.
     pub fn within(&self, center: &Vector3, distance: Real, out: &mut Vec<usize>) {
-        if self.points.is_empty() || distance < 0.0 || self.grid.within(&self.points, center, distance, out) {
+        if self.points.is_empty()
+            || distance < 0.0
+            || self.grid.within(&self.points, center, distance, out)
+            || self.grid.clear(center, distance)
+        {
             return;
         }
         let found = self
