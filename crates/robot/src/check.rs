@@ -55,7 +55,6 @@
 //! the root's sos solve 0.4–2 µs and the mesh stage a few µs; the sphere trees are another matter
 //! (a ball against a primitive is a closed form of a few ns).
 
-use crate::cloud::{cloud_lower_bound, geometry_against_cloud, CloudPair, PointCloud};
 use crate::exact::{box_gap, box_gap_past, exact_collides, exact_pair, exact_pair_within, exact_primitive, parry_pose};
 use crate::exact::{ExactShape, PairOutcome, PlacedBox};
 use crate::exact::{PairHint, Slack};
@@ -71,6 +70,7 @@ use sublevel_query::shape::{shape_distance, ShapeRef};
 pub use crate::answer::{CheckOptions, ConfigurationAnswer};
 
 pub mod block;
+mod cloud_pairs;
 mod self_pairs;
 
 /// A link shape as the sos bound sees it: the primitive, or the compound body's root (which
@@ -400,12 +400,7 @@ impl<'r> RobotChecker<'r> {
         match level {
             0 => Ok((self.world_gap(g, o).max(self.world_box_gap(g, o, Real::INFINITY)), false)),
             1 => match self.cloud(o) {
-                // A cloud has no sos model: its level 1 is the nearest point to each of the
-                // geometry's sphere-tree balls of a few centimeters.
-                Some(cloud) => {
-                    let pose = self.world[o].pose.inv_mul(&self.poses[g]);
-                    Ok((cloud_lower_bound(&self.robot.geometries[g], &pose, cloud), false))
-                }
+                Some(cloud) => Ok(self.cloud_bound(g, o, cloud, 1, cap)),
                 None => Ok((self.sos_world_bound(g, o)?, primitive)),
             },
             _ => {
@@ -413,14 +408,7 @@ impl<'r> RobotChecker<'r> {
                     return Ok((self.sos_world_bound(g, o)?, true));
                 }
                 if let Some(cloud) = self.cloud(o) {
-                    let pose = self.world[o].pose.inv_mul(&self.poses[g]);
-                    let geometry = &self.robot.geometries[g];
-                    let d = match geometry_against_cloud(geometry, &pose, cloud, 0.0, cap, &mut Vec::new()) {
-                        CloudPair::Touches { .. } => 0.0,
-                        CloudPair::Free { distance, .. } => distance,
-                        CloudPair::Apart => cap,
-                    };
-                    return Ok((d, true));
+                    return Ok(self.cloud_bound(g, o, cloud, 2, cap));
                 }
                 let (a, b) = (&self.robot_exact[g], &self.world_exact[o]);
                 let pa = parry_pose(&(self.poses[g] * a.offset));
@@ -781,43 +769,6 @@ impl<'r> RobotChecker<'r> {
             }
             (outcome, _) => outcome,
         }))
-    }
-
-    /// World object `o`'s point cloud, for a cloud object.
-    fn cloud(&self, o: usize) -> Option<&PointCloud> {
-        match &self.world[o].shape {
-            WorldShape::Points(c) => Some(c),
-            _ => None,
-        }
-    }
-
-    /// A world pair of a geometry and a point cloud ([`crate::cloud`]): `None` when every point
-    /// ball is farther than `bound` (and the padding), else contact or the closest ball, with the
-    /// geometry's closest point and the ball's as witnesses.
-    fn cloud_pair(
-        &self,
-        g: usize,
-        o: usize,
-        cloud: &PointCloud,
-        bound: Real,
-        padding: Real,
-        answer: &mut ConfigurationAnswer,
-    ) -> Option<PairOutcome> {
-        answer.pairs_exact += 1;
-        let place = &self.world[o].pose;
-        let pose = place.inv_mul(&self.poses[g]);
-        let limit = bound.max(padding);
-        match geometry_against_cloud(&self.robot.geometries[g], &pose, cloud, padding, limit, &mut Vec::new()) {
-            CloudPair::Apart => None,
-            CloudPair::Touches { .. } => Some(PairOutcome::Collides),
-            CloudPair::Free { distance, index, x } => {
-                let p = cloud.point(index);
-                let toward = x - p;
-                let y = p + toward * (cloud.radius() / toward.norm().max(Real::MIN_POSITIVE));
-                let (x, y) = (place.transform_point(&x.into()), place.transform_point(&y.into()));
-                Some(PairOutcome::Free { distance, witnesses: Some((x, y)) })
-            }
-        }
     }
 
     /// A world pair on the mesh (exact; parry's triangle BVH).
