@@ -1,5 +1,5 @@
 //! The `sublevel` command: `serve`, `fit`, `group`, `primitive`, `query`, `health`, `loadtest`,
-//! `shard-probe`.
+//! `shard-probe`, `scene`, `robot`, `cloud`.
 //! The paper's reproduction, benchmarks and charts are the `sublevel-lab` command (crates/lab).
 
 #![forbid(unsafe_code)]
@@ -45,6 +45,9 @@ enum Command {
     /// Robots: `robot fit` fits a URDF robot's links, `robot check` checks joint configurations
     /// against a planning scene (collides, world / self, minimum distance), offline.
     Robot(cli::robot::RobotArgs),
+    /// Point clouds on a running server: `cloud load` sends a sensor file (.pcd, .ply, depth .png)
+    /// as a scene's point-cloud obstacle, `cloud bench` measures updates and soaks the server.
+    Cloud(cli::cloud::CloudArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -66,6 +69,7 @@ fn main() -> std::process::ExitCode {
         Command::ShardProbe(a) => cli::shard_probe::run(a),
         Command::Scene(a) => cli::scene::run(a),
         Command::Robot(a) => cli::robot::run(a),
+        Command::Cloud(a) => cli::cloud::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -1,5 +1,8 @@
 //! Subcommands of the `sublevel` binary; each file owns its clap arguments and its `run`.
 
+pub mod cloud;
+pub mod cloud_bench;
+pub mod cloud_files;
 pub mod fit;
 pub mod fit_compound;
 pub mod group;

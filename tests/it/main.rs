@@ -1,6 +1,7 @@
 //! The one integration-test binary (one link step instead of many): modules by area.
 
 mod admission;
+mod cloud_cli;
 mod deadlines;
 mod fit;
 mod gradient;
