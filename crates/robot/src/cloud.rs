@@ -29,6 +29,7 @@ pub use grid::{GRID_CELL, GRID_REACH};
 pub mod render;
 
 use crate::fitted::{bounding_ball, bounding_box, LinkShape, RobotGeometry};
+use crate::spheres::MAX_DEPTH;
 use crate::{Error, Result};
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use sublevel_core::math::{Isometry3, Point3, Real, Vector3};
@@ -331,12 +332,15 @@ pub(crate) fn cloud_lower_bound(geometry: &RobotGeometry, pose: &Isometry3, clou
     let best = match &geometry.shape {
         LinkShape::Mesh { spheres, .. } if !spheres.nodes.is_empty() => {
             let mut best = Real::INFINITY;
-            let mut stack = vec![0u32];
-            while let Some(k) = stack.pop() {
-                let node = &spheres.nodes[k as usize];
+            // A fixed stack: a descent holds at most one sibling per level.
+            let (mut stack, mut len) = ([0u32; MAX_DEPTH + 2], 1);
+            while len > 0 {
+                len -= 1;
+                let node = &spheres.nodes[stack[len] as usize];
                 if node.sphere.radius > BOUND_BALL && node.children != 0 {
-                    stack.push(node.children);
-                    stack.push(node.children + 1);
+                    stack[len] = node.children;
+                    stack[len + 1] = node.children + 1;
+                    len += 2;
                 } else {
                     best = best.min(gap(&node.sphere.center, node.sphere.radius));
                 }
@@ -362,9 +366,10 @@ fn tree_against_cloud(
 ) -> CloudPair {
     let r = cloud.radius();
     let touch = r + padding;
-    let mut stack = vec![0u32];
-    while let Some(k) = stack.pop() {
-        let node = &spheres.nodes[k as usize];
+    let (mut stack, mut len) = ([0u32; MAX_DEPTH + 2], 1);
+    while len > 0 {
+        len -= 1;
+        let node = &spheres.nodes[stack[len] as usize];
         let c = pose.transform_point(&node.sphere.center.into()).coords;
         let rho = node.sphere.radius;
         if !cloud.any_within(&c, rho + touch) {
@@ -378,8 +383,9 @@ fn tree_against_cloud(
             }
         }
         if node.children != 0 {
-            stack.push(node.children);
-            stack.push(node.children + 1);
+            stack[len] = node.children;
+            stack[len + 1] = node.children + 1;
+            len += 2;
             continue;
         }
         scratch.clear();

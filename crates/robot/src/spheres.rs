@@ -48,7 +48,7 @@ pub const MAX_PIECES: usize = 200_000;
 
 /// Depth bound of a tree: a median split halves the pieces, so 2⁶⁰ pieces would be needed to
 /// exceed it; it sizes the descents' fixed stacks.
-const MAX_DEPTH: usize = 60;
+pub(crate) const MAX_DEPTH: usize = 60;
 
 /// Leaves a descent against a primitive may find undecided (within the threshold, not wholly
 /// within the padding) while it goes on looking for a node that proves contact.

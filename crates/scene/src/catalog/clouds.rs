@@ -293,17 +293,7 @@ impl Catalog {
         })?;
         let posed = read
             .into_iter()
-            .map(|(id, entry, pose)| {
-                let built = entry.built()?;
-                Ok(PosedInstance {
-                    id,
-                    body_id: entry.id.clone(),
-                    body: built.body.clone(),
-                    tree: built.tree.clone(),
-                    primitive: built.primitive,
-                    pose,
-                })
-            })
+            .map(|(id, entry, pose)| PosedInstance::of(id, &entry, pose))
             .collect::<Result<Vec<_>>>()?;
         Ok((posed, clouds, version))
     }

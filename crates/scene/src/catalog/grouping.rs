@@ -27,6 +27,24 @@ pub struct PosedInstance {
     pub pose: Isometry3,
 }
 
+impl PosedInstance {
+    /// Instance `id` of the body `entry` at `pose`, the body built if it was not yet.
+    ///
+    /// # Errors
+    /// As [`BodyEntry::built`].
+    pub(crate) fn of(id: String, entry: &BodyEntry, pose: Isometry3) -> Result<Self> {
+        let built = entry.built()?;
+        Ok(Self {
+            id,
+            body_id: entry.id.clone(),
+            body: built.body.clone(),
+            tree: built.tree.clone(),
+            primitive: built.primitive,
+            pose,
+        })
+    }
+}
+
 impl Catalog {
     /// The posed bodies (body and stored pose) of instances of a scene, in the order of `ids`,
     /// read under the scene's lock so all poses are of one moment; nothing is copied but the
@@ -56,19 +74,7 @@ impl Catalog {
             }
             ids.iter().map(|id| instance(s, id).map(|inst| (id.clone(), inst.entry.clone(), inst.pose))).collect()
         })?;
-        read.into_iter()
-            .map(|(id, entry, pose)| {
-                let built = entry.built()?;
-                Ok(PosedInstance {
-                    id,
-                    body_id: entry.id.clone(),
-                    body: built.body.clone(),
-                    tree: built.tree.clone(),
-                    primitive: built.primitive,
-                    pose,
-                })
-            })
-            .collect()
+        read.into_iter().map(|(id, entry, pose)| PosedInstance::of(id, &entry, pose)).collect()
     }
 
     /// Replaces instances `remove` of a scene by one new instance of body `body_id` under `pose`,
