@@ -1,6 +1,8 @@
 //! A planner-side client of `sublevel serve --demo`: finds the demo scene, queries distance and
 //! growth between the chair and the human, then slides the chair in small steps with `SetPoses`
-//! and shows the warm-started answers.
+//! and shows the warm-started answers; checks a sampling planner's batch of candidate states;
+//! then asks the demo robot for a plan in its bookshelf scene (`Plan`, one call from a
+//! MotionBenchMaker request to a certified path).
 //!
 //! ```text
 //! cargo run --release -- serve --demo          # terminal 1
@@ -99,7 +101,73 @@ async fn main() -> Result<(), Box<dyn std::error::Error>> {
             x, da.distance, ga.value, ds.converged, ds.iterations, ds.kkt_residual, ds.warm_started
         );
     }
-    candidate_states(&mut client, &scene.scene_id, &chair.instance_id, &human.instance_id, human_x).await
+    candidate_states(&mut client, &scene.scene_id, &chair.instance_id, &human.instance_id, human_x).await?;
+    let Some(shelf) = scenes.iter().find(|s| s.name == "mbm_bookshelf") else {
+        return Err("no scene named `mbm_bookshelf`: start the server with `sublevel serve --demo`".into());
+    };
+    plan(&mut client, &shelf.scene_id).await
+}
+
+/// The MotionBenchMaker request of the demo's bookshelf scene (its start state and goal joint
+/// constraints, MoveIt's `MotionPlanRequest` as YAML).
+const SHELF_REQUEST: &str = include_str!("../data/robots/mbm_panda/requests/bookshelf_small/request0001.yaml");
+
+/// One `Plan` per call for the demo robot in the bookshelf scene, from the MotionBenchMaker
+/// request as it is on disk: prints the answer (status, waypoints, length, whether every edge is
+/// certified, the server's time per stage) and the median round trip over 21 calls, against the
+/// server's own median (`timing.total`): the difference is the client and the transport.
+async fn plan(
+    client: &mut SublevelClient<tonic::transport::Channel>,
+    scene_id: &str,
+) -> Result<(), Box<dyn std::error::Error>> {
+    let request = pb::PlanRequest {
+        scene_id: scene_id.to_owned(),
+        motion_plan_request: Some(pb::plan_request::MotionPlanRequest::MotionPlanRequestYaml(SHELF_REQUEST.into())),
+        settings: Some(pb::PlanSettings { timeout: Some(1.0), ..Default::default() }),
+        ..Default::default()
+    };
+    let (mut trips, mut server) = (Vec::new(), Vec::new());
+    let mut last = None;
+    for _ in 0..21 {
+        let start = std::time::Instant::now();
+        let r = client.plan(scene_request(scene_id, request.clone())).await?.into_inner();
+        trips.push(start.elapsed().as_secs_f64());
+        server.push(r.timing.as_ref().map_or(0.0, |t| t.total));
+        last = Some(r);
+    }
+    let r = last.ok_or("no answer")?;
+    let status =
+        pb::PlanStatus::try_from(r.status).map_or_else(|_| format!("{}", r.status), |s| s.as_str_name().into());
+    let t = r.timing.unwrap_or_default();
+    println!("\nPlan in mbm_bookshelf (the demo robot, MotionBenchMaker bookshelf_small request 1, 1 s):");
+    println!(
+        "  {status}: {} waypoints, length {:.3}, certified {}, {} states and {} edges checked{}",
+        r.waypoints,
+        r.length,
+        r.certified,
+        r.states_checked,
+        r.edges_checked,
+        if r.message.is_empty() { String::new() } else { format!(" ({})", r.message) }
+    );
+    println!(
+        "  server: goals {:.2} ms, search {:.2} ms, simplify {:.2} ms, certify {:.2} ms",
+        t.goals * 1e3,
+        t.search * 1e3,
+        t.simplify * 1e3,
+        t.certify * 1e3
+    );
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let (trip, own) = (median(&mut trips), median(&mut server));
+    println!(
+        "  round trip {:.3} ms median of 21 (the server's own time {:.3} ms: the client and transport add {:.3} ms)",
+        trip * 1e3,
+        own * 1e3,
+        (trip - own) * 1e3
+    );
+    Ok(())
 }
 
 /// A sampling planner's batch: 256 candidate states of the chair (uniform rotations, positions in

@@ -13,7 +13,10 @@
 //! ([`sublevel::robot::cloud::render`]) at 640 × 480 (fx = fy = 554, the principal point at the
 //! center) from a camera at `--eye` looking at `--target` (default (2, 0, 1.4) → (0.5, 0, 0.4),
 //! the shelf seen from its front and above), out to 6 m, with Gaussian depth noise of σ `--noise`
-//! meters; `--frames` frames of different noise draws are sent in turn. Each is sent as
+//! meters; `--frames` frames of different noise draws are sent in turn. The scene stands in a
+//! room — a floor at z = −5 cm and walls 3 m high, 3 m from the origin — so that, as in a real
+//! camera's frame, every pixel has a depth (`--no-room`: the scene's objects alone, most pixels
+//! holes). Each is sent as
 //!
 //! - **depth**: `depth_u16`, millimeters (a 16UC1 image, 614 400 bytes), deprojected on the server;
 //! - **packed**: the same frame deprojected here into a `PointCloud2` body of float32 x, y, z
@@ -48,8 +51,10 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use sublevel::math::{Isometry3, Vector3};
+use sublevel::primitive::Primitive;
 use sublevel::robot::cloud::depth::{deproject, DepthPixels, Intrinsics};
 use sublevel::robot::cloud::render::{look_at, render_depth, DepthNoise};
+use sublevel::robot::world::WorldObject;
 use sublevel::scene::moveit::{world_objects, PlanningScene};
 use sublevel::service::convert::pose_to_proto;
 use sublevel::service::pb::{self, sublevel_client::SublevelClient};
@@ -99,6 +104,10 @@ pub struct BenchArgs {
     /// The point the camera looks at, `x,y,z` (meters).
     #[arg(long, default_value = "0.5,0,0.4", allow_hyphen_values = true)]
     target: String,
+    /// Render the scene's objects alone, without the room (floor and walls) that gives every
+    /// pixel a depth.
+    #[arg(long)]
+    no_room: bool,
     /// Standard deviation of the depth noise, meters.
     #[arg(long, default_value_t = 0.002)]
     noise: f64,
@@ -200,6 +209,25 @@ pub fn run(args: BenchArgs) -> Result<()> {
     Ok(())
 }
 
+/// A room around the origin: a floor (top face at z = −5 cm, below the robot's base) and four walls 3 m high whose inner
+/// faces stand 3 m from the origin, all 10 cm thick.
+fn room() -> Vec<WorldObject> {
+    let slab = |name: &str, half: [f64; 3], at: [f64; 3]| {
+        WorldObject::primitive(
+            name,
+            Primitive::Box { half_extents: Vector3::from(half) },
+            Isometry3::translation(at[0], at[1], at[2]),
+        )
+    };
+    vec![
+        slab("room_floor", [3.1, 3.1, 0.05], [0.0, 0.0, -0.1]),
+        slab("room_wall_x-", [0.05, 3.1, 1.5], [-3.05, 0.0, 1.5]),
+        slab("room_wall_x+", [0.05, 3.1, 1.5], [3.05, 0.0, 1.5]),
+        slab("room_wall_y-", [3.1, 0.05, 1.5], [0.0, -3.05, 1.5]),
+        slab("room_wall_y+", [3.1, 0.05, 1.5], [0.0, 3.05, 1.5]),
+    ]
+}
+
 /// The rendered frames in both encodings, and the camera.
 struct Frames {
     depth: Vec<pb::DepthImage>,
@@ -214,7 +242,10 @@ impl Frames {
         let bytes = std::fs::read(&args.scene)
             .map_err(|e| std::io::Error::new(e.kind(), format!("cannot read --scene {}: {e}", args.scene.display())))?;
         let scene = PlanningScene::from_yaml(&bytes)?;
-        let (world, _) = world_objects(&scene)?;
+        let (mut world, _) = world_objects(&scene)?;
+        if !args.no_room {
+            world.extend(room());
+        }
         let v = |flag: &str, text: &str| numbers(flag, text, 3).map(|v| Vector3::new(v[0], v[1], v[2]));
         let camera = look_at(v("--eye", &args.eye)?, v("--target", &args.target)?, Vector3::z())
             .map_err(|e| Error::invalid("--eye/--target", e.to_string()))?;

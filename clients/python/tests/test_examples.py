@@ -17,6 +17,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 REPO = Path(__file__).resolve().parents[3]
@@ -31,6 +32,7 @@ TESTED = {
     "clients/python/examples/plan_ompl.py": "test_plan_ompl_finds_a_path_through_the_walls",
     "clients/python/examples/plan_mbm.py": "test_plan_mbm_plans_a_bookshelf_problem_with_certified_edges",
     "clients/python/examples/mbm_coal.py": "test_plan_mbm_with_the_coal_checker",
+    "clients/python/examples/depth_stream.py": "test_depth_stream_keeps_one_point_per_voxel",
     "examples/client.rs": "test_the_rust_example_client_slides_the_chair_through_the_human",
 }
 
@@ -246,3 +248,38 @@ def test_the_rust_example_client_slides_the_chair_through_the_human(server, rest
     assert all(conv == "true" for *_, conv in steps), out
     # Apart at the first step, overlapping (distance 0) when the chair passes through the human.
     assert float(steps[0][1]) > 0.0 and any(float(d) == 0.0 for _, d, *_ in steps), out
+    # The plan: solved, every edge certified, and the round trip no shorter than the server's time.
+    plan = re.search(r"^  PLAN_STATUS_SOLVED: (\d+) waypoints, length (\S+), certified true", out, re.M)
+    assert plan and int(plan.group(1)) >= 2 and float(plan.group(2)) > 0.0, out
+    trip = re.search(r"round trip (\S+) ms median of 21 \(the server's own time (\S+) ms", out)
+    assert trip and float(trip.group(1)) >= float(trip.group(2)) > 0.0, out
+
+
+def test_depth_stream_keeps_one_point_per_voxel(server):
+    # The server's filter against numpy: the example's frames deprojected here and grouped by
+    # their 2 cm world voxel. The timed frame is the 11th sent, frames[10 % 4].
+    spec = importlib.util.spec_from_file_location("depth_stream", EXAMPLES / "depth_stream.py")
+    m = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(m)
+    rng = np.random.default_rng(1)
+    depth = [m.depth_frame(rng, 0.002) for _ in range(4)][2] * 1e-3
+    u, v = np.meshgrid(np.arange(m.WIDTH), np.arange(m.HEIGHT))
+    optical = np.stack([(u - m.CX) / m.FX * depth, (v - m.CY) / m.FY * depth, depth], axis=-1).reshape(-1, 3)
+    w, x, y, z, *t = m.SENSOR
+    rotation = np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+    world = optical @ rotation.T + np.array(t)
+    voxels = len(np.unique(np.floor(world / 0.02).astype(np.int64), axis=0))
+    out = example("depth_stream.py", server, "--frames", "1", "--rate", "0", timeout=120)
+    kept = re.search(r"points kept +median (\d+) of 307200", out)
+    assert kept, out
+    # float32 on the server against float64 here: points on a voxel face may fall either side.
+    assert abs(int(kept.group(1)) - voxels) <= 0.01 * voxels, (kept.group(1), voxels, out)
+    trip = re.search(r"round trip +median +(\S+) ms", out)
+    own = re.search(r"server seconds median +(\S+) ms", out)
+    assert trip and own and float(trip.group(1)) >= float(own.group(1)) > 0.0, out

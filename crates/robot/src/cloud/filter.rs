@@ -139,7 +139,11 @@ impl CloudFilter {
         }
         counts.input += points.len();
         let (lo2, hi2) = (self.min_range * self.min_range, self.max_range * self.max_range);
-        let mut out = Vec::with_capacity(points.len() / 4);
+        // The voxel grid takes the points as they pass the crops: the frame's points are never
+        // held twice.
+        let mut voxels = (self.voxel > 0.0).then(|| Voxels::new(self.voxel, points.len() / 16));
+        let mut out = Vec::new();
+        let mut passed = 0;
         for p in points {
             if !p.iter().all(|v| v.is_finite()) {
                 counts.holes += 1;
@@ -158,12 +162,15 @@ impl CloudFilter {
                     continue;
                 }
             }
-            out.push([w.x, w.y, w.z]);
+            passed += 1;
+            match &mut voxels {
+                Some(grid) => grid.add([w.x, w.y, w.z]),
+                None => out.push([w.x, w.y, w.z]),
+            }
         }
-        if self.voxel > 0.0 {
-            let before = out.len();
-            out = voxel_grid(&out, self.voxel);
-            counts.voxel += before - out.len();
+        if let Some(grid) = voxels {
+            out = grid.means();
+            counts.voxel += passed - out.len();
         }
         if let Some(o) = &self.outliers {
             let before = out.len();
@@ -178,21 +185,93 @@ impl CloudFilter {
 /// One point per occupied voxel of edge `edge` (meters): the mean of the points in it, in the
 /// order the voxels were first met.
 pub fn voxel_grid(points: &[[Real; 3]], edge: Real) -> Vec<[Real; 3]> {
-    let mut cells: HashMap<[i64; 3], usize> = HashMap::with_capacity(points.len() / 4);
-    let mut sums: Vec<([Real; 3], u32)> = Vec::new();
+    let mut grid = Voxels::new(edge, points.len() / 4);
     for p in points {
-        let key = [(p[0] / edge).floor() as i64, (p[1] / edge).floor() as i64, (p[2] / edge).floor() as i64];
-        let k = *cells.entry(key).or_insert_with(|| {
-            sums.push(([0.0; 3], 0));
-            sums.len() - 1
-        });
-        let (s, n) = &mut sums[k];
+        grid.add(*p);
+    }
+    grid.means()
+}
+
+/// A voxel grid being filled: each occupied voxel's sum and count, found by a hash map of the
+/// voxel's integer coordinates. Consecutive points of a frame (a depth image's row, a
+/// PointCloud2 in pixel order) mostly fall in the voxel of the one before, which is looked up
+/// first, then in a voxel of the rows just before, which a small direct-mapped cache holds (the
+/// hash map of a whole frame's voxels does not stay in the processor's caches).
+struct Voxels {
+    /// 1 / the voxel edge (1/m).
+    inverse: Real,
+    cells: HashMap<[i64; 3], u32, foldhash::fast::FixedState>,
+    /// Recent voxels by a hash of their coordinates: (voxel, index in `sums`; `u32::MAX` empty).
+    recent: Vec<([i64; 3], u32)>,
+    sums: Vec<([Real; 3], u32)>,
+    /// The voxel of the last point and its index in `sums` (`u32::MAX` before the first).
+    last: ([i64; 3], u32),
+}
+
+/// Entries of [`Voxels`]' cache of recent voxels (a power of two; 128 KiB).
+const RECENT: usize = 1 << 12;
+
+/// The cache slot of a voxel: a multiplicative hash of its coordinates.
+#[inline]
+fn recent_slot(key: &[i64; 3]) -> usize {
+    let h = (key[0] as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+        ^ (key[1] as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F)
+        ^ (key[2] as u64).wrapping_mul(0x1656_67B1_9E37_79F9);
+    (h >> (64 - RECENT.trailing_zeros())) as usize
+}
+
+impl Voxels {
+    fn new(edge: Real, capacity: usize) -> Self {
+        Self {
+            inverse: 1.0 / edge,
+            cells: HashMap::with_capacity_and_hasher(capacity, Default::default()),
+            recent: vec![([0; 3], u32::MAX); RECENT],
+            sums: Vec::with_capacity(capacity),
+            last: ([0; 3], u32::MAX),
+        }
+    }
+
+    #[inline]
+    fn add(&mut self, p: [Real; 3]) {
+        // ⌊v / edge⌋ without a call to libm's floor (the cast saturates, and the cloud refuses
+        // coordinates that large).
+        let cell = |v: Real| {
+            let t = v * self.inverse;
+            let i = t as i64;
+            i - i64::from((i as Real) > t)
+        };
+        let key = [cell(p[0]), cell(p[1]), cell(p[2])];
+        // Compared coordinate by coordinate (an array compare reloads the key just stored).
+        let same = (0..3).all(|i| self.last.0[i] == key[i]);
+        let k = if same && self.last.1 != u32::MAX {
+            self.last.1
+        } else {
+            let slot = recent_slot(&key);
+            let (seen, k) = self.recent[slot];
+            let k = if k != u32::MAX && (0..3).all(|i| seen[i] == key[i]) {
+                k
+            } else {
+                let next = self.sums.len() as u32;
+                let k = *self.cells.entry(key).or_insert(next);
+                if k == next {
+                    self.sums.push(([0.0; 3], 0));
+                }
+                self.recent[slot] = (key, k);
+                k
+            };
+            self.last = (key, k);
+            k
+        };
+        let (s, n) = &mut self.sums[k as usize];
         for i in 0..3 {
             s[i] += p[i];
         }
         *n += 1;
     }
-    sums.into_iter().map(|(s, n)| [s[0] / n as Real, s[1] / n as Real, s[2] / n as Real]).collect()
+
+    fn means(self) -> Vec<[Real; 3]> {
+        self.sums.into_iter().map(|(s, n)| [s[0] / n as Real, s[1] / n as Real, s[2] / n as Real]).collect()
+    }
 }
 
 /// Statistical outlier removal ([`OutlierFilter`]); fewer than k + 1 points are kept as they are.
@@ -271,6 +350,42 @@ mod tests {
         assert!((v[0][0] - 0.005).abs() < 1e-15 && (v[0][2] - 0.005).abs() < 1e-15);
         assert_eq!(v[1], [0.011, 0.0, 0.0]);
         assert_eq!(v[2], [-0.001, 0.0, 0.0]);
+    }
+
+    #[test]
+    fn voxel_grid_equals_grouping_by_floor() {
+        // Random points of both signs, in runs (as a depth row gives them) and jumps: each
+        // voxel's mean equals the mean of the points grouped by ⌊v / edge⌋ with libm's floor.
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(7);
+        let mut pts = Vec::new();
+        for _ in 0..300 {
+            let mut p: [Real; 3] =
+                [rng.random_range(-0.5..0.5), rng.random_range(-0.5..0.5), rng.random_range(-0.5..0.5)];
+            for _ in 0..rng.random_range(1..12) {
+                p[0] += 0.003;
+                pts.push(p);
+            }
+        }
+        let edge = 0.02;
+        let mut groups: std::collections::BTreeMap<[i64; 3], ([Real; 3], usize)> = Default::default();
+        for p in &pts {
+            let key = p.map(|v| (v / edge).floor() as i64);
+            let (s, n) = groups.entry(key).or_insert(([0.0; 3], 0));
+            for k in 0..3 {
+                s[k] += p[k];
+            }
+            *n += 1;
+        }
+        let mut got = voxel_grid(&pts, edge);
+        let mut want: Vec<[Real; 3]> = groups.values().map(|(s, n)| s.map(|v| v / *n as Real)).collect();
+        let order = |a: &[Real; 3], b: &[Real; 3]| a.partial_cmp(b).expect("finite");
+        got.sort_by(order);
+        want.sort_by(order);
+        assert_eq!(got.len(), want.len());
+        for (g, w) in got.iter().zip(&want) {
+            assert!((0..3).all(|k| (g[k] - w[k]).abs() < 1e-12), "{g:?} vs {w:?}");
+        }
     }
 
     #[test]
