@@ -19,6 +19,10 @@
 //!   primitives: solved within the timeout, median plan times and their ratio, and the solved
 //!   paths whose every edge conservative advancement proves free of the true primitives.
 //!
+//! With `SUBLEVEL_CLOUD_STATS=1` it also prints the exact pairs and stage times of the checks, each
+//! cloud plan's stage times, and, where a cloud path meets the primitives, the pair, the place on
+//! the edge and the robot's distance to the cloud there (what the cameras did not see).
+//!
 //! ```text
 //! mkdir -p /tmp/mbm && tar xjf data/robots/mbm_panda/problems.tar.bz2 -C /tmp/mbm
 //! cargo run --release -p sublevel-lab -- robot-clouds --problems /tmp/mbm --limit 100 --plan
@@ -61,7 +65,8 @@ pub struct RobotCloudsArgs {
     /// Random configurations checked per problem.
     #[arg(long, default_value_t = 143)]
     configs: usize,
-    /// Depth cameras around the workspace (1–4: behind the robot, front, left, right).
+    /// Depth cameras around the workspace (1–6: behind the robot, front, left, right, then low
+    /// front-left and front-right).
     #[arg(long, default_value_t = 4)]
     cameras: usize,
     /// Voxel edge of the filter (meters).
@@ -106,7 +111,8 @@ pub struct RobotCloudsArgs {
 const CAMERA: Intrinsics = Intrinsics { width: 640, height: 480, fx: 554.0, fy: 554.0, cx: 319.5, cy: 239.5 };
 
 /// The camera poses: behind and above the robot, then in front, left and right of the workspace,
-/// all looking at its middle.
+/// then two low in front, left and right (they see the undersides of shelves and tables), all
+/// looking at its middle.
 fn cameras(n: usize) -> Result<Vec<Isometry3>> {
     let target = Vector3::new(0.5, 0.0, 0.4);
     let up = Vector3::z();
@@ -115,6 +121,8 @@ fn cameras(n: usize) -> Result<Vec<Isometry3>> {
         Vector3::new(2.2, 0.0, 1.4),
         Vector3::new(0.5, 2.0, 1.4),
         Vector3::new(0.5, -2.0, 1.4),
+        Vector3::new(2.0, 1.0, 0.1),
+        Vector3::new(2.0, -1.0, 0.1),
     ]
     .iter()
     .take(n)
@@ -149,8 +157,8 @@ pub(crate) struct Tally {
 /// # Errors
 /// Bad arguments (named), files that cannot be read or parsed, a check that fails.
 pub fn run(args: RobotCloudsArgs) -> Result<()> {
-    if !(1..=4).contains(&args.cameras) {
-        return Err(Error::invalid("--cameras", format!("must be 1–4, got {}", args.cameras)));
+    if !(1..=6).contains(&args.cameras) {
+        return Err(Error::invalid("--cameras", format!("must be 1–6, got {}", args.cameras)));
     }
     let robot = FittedRobot::load(&args.robot)?;
     let names: Vec<String> = robot.model.variable_names().iter().map(|s| s.to_string()).collect();
@@ -333,6 +341,8 @@ fn plan_both(
     let settings = PlanSettings { timeout: Duration::from_secs_f64(args.timeout), ..PlanSettings::default() };
     let base = Isometry3::identity();
     let asked = Goal::Configurations(vec![goal.to_vec()]);
+    let stats = std::env::var_os("SUBLEVEL_CLOUD_STATS").is_some();
+    let cloud_world = if stats { world.clone() } else { Vec::new() };
     for (cloud, w) in [(true, world), (false, truth.to_vec())] {
         let mut checker = RobotChecker::new(robot, w, allowed)?;
         let mut validity = RobotValidity::new(MotionChecker::new(&mut checker)?, base, settings.padding);
@@ -355,7 +365,7 @@ fn plan_both(
         }
         t.solved += 1;
         t.plan_seconds.push(seconds);
-        if std::env::var_os("SUBLEVEL_CLOUD_STATS").is_some() {
+        if stats {
             let m = &out.timing;
             eprintln!(
                 "cloud plan {:.1} ms: search {:.1}, simplify {:.1}, certify {:.1}",
@@ -371,6 +381,18 @@ fn plan_both(
         for edge in out.path.windows(2) {
             let answer = motions.check_motion(&edge[0], &edge[1], &base, &MotionOptions::default())?;
             free &= answer.valid;
+            if let (true, false, Some(q), Some((g, o))) = (stats, answer.valid, &answer.contact_q, answer.pair) {
+                // Where a cloud path meets the primitives: the pair, and how far the cloud is there.
+                let mut on_cloud = RobotChecker::new(robot, cloud_world.clone(), allowed)?;
+                let seen = on_cloud.check(q, &base, &CheckOptions { distance: true, ..CheckOptions::default() })?;
+                eprintln!(
+                    "cloud path meets the primitives: {} – {} at t {:.3}; robot–cloud distance there {:.4} m",
+                    robot.geometries[g].name,
+                    o.map_or("itself".into(), |o| truth[o].name.clone()),
+                    answer.contact.unwrap_or(Real::NAN),
+                    seen.distance
+                );
+            }
         }
         t.paths_free += usize::from(free);
     }
