@@ -358,15 +358,20 @@ mod tests {
         // voxel's mean equals the mean of the points grouped by ⌊v / edge⌋ with libm's floor.
         use rand::{Rng, SeedableRng};
         let mut rng = rand::rngs::StdRng::seed_from_u64(7);
-        let mut pts = Vec::new();
-        for _ in 0..300 {
-            let mut p: [Real; 3] =
-                [rng.random_range(-0.5..0.5), rng.random_range(-0.5..0.5), rng.random_range(-0.5..0.5)];
+        let mut pts: Vec<[Real; 3]> = Vec::new();
+        for _ in 0..6000 {
+            // A run from a fresh point, or (one in four) from an earlier one: more voxels than the
+            // cache of recent voxels holds, and voxels met again after they left it.
+            let mut p = match pts.len() {
+                n if n > 0 && rng.random_range(0..4) == 0 => pts[rng.random_range(0..n)],
+                _ => [rng.random_range(-0.5..0.5), rng.random_range(-0.5..0.5), rng.random_range(-0.5..0.5)],
+            };
             for _ in 0..rng.random_range(1..12) {
                 p[0] += 0.003;
                 pts.push(p);
             }
         }
+        assert!(voxel_grid(&pts, 0.02).len() > RECENT);
         let edge = 0.02;
         let mut groups: std::collections::BTreeMap<[i64; 3], ([Real; 3], usize)> = Default::default();
         for p in &pts {
