@@ -251,6 +251,16 @@ pub fn run(args: RobotCloudsArgs) -> Result<()> {
         bodies.push((scenario.clone(), t.bodies.clone()));
         merge(&mut all, t);
     }
+    if all.problems == 0 {
+        return Err(Error::invalid(
+            "--problems",
+            format!(
+                "no problem found in {}: give the folder holding scenes/SCENARIO/sceneNNNN.yaml and \
+                 requests/…, or problems/SCENARIO_panda/ (the archive unpacked)",
+                args.problems.display()
+            ),
+        ));
+    }
     row("all", &all);
     if args.bodies {
         bodies.push(("all".into(), all.bodies.clone()));
