@@ -89,7 +89,8 @@ impl Coarse {
         occupied.sort_unstable();
         occupied.dedup();
         let r2 = reach * reach;
-        let mut gaps = vec![r2 as f32; dims[0] * dims[1] * dims[2]];
+        // ρ_max² rounded down too: f32(0.09) lies above 0.09.
+        let mut gaps = vec![(r2 * (1.0 - 1e-6)) as f32; dims[0] * dims[1] * dims[2]];
         // Cells more than ⌈reach / edge⌉ away have whole cells of at least the reach between.
         let span = (reach / edge).ceil() as usize;
         let between = |a: usize, b: usize| (a.abs_diff(b).saturating_sub(1)) as Real * edge;
@@ -165,7 +166,8 @@ impl GapGrid {
         };
         let cells = dims[0] * dims[1] * dims[2];
         let r2 = reach * reach;
-        let mut gaps = vec![r2 as f32; cells];
+        // ρ_max² rounded down, as every gap.
+        let mut gaps = vec![(r2 * (1.0 - 1e-6)) as f32; cells];
         // Clamped at 0 first, so that truncation is the floor (and no call to libm's floor).
         let cell_of = |v: Real, k: usize| ((v - origin[k]) / edge).clamp(0.0, (dims[k] - 1) as Real) as usize;
         // Each point's own cell, then the points sorted by cell (a counting sort), so that the
