@@ -5,7 +5,7 @@
 //!
 //! ```text
 //! cargo run --release -p sublevel-lab --example plan_mbm -- [--timeout S] [--range R] [--goal-bias P] [--seed N]
-//!     [--no-simplify] [--shortcuts N] [--smoothing PASSES] [--padding M] [--search-margin M] [--pose-goal LINK]
+//!     [--no-simplify] [--no-dynamic-domain] [--no-balance] [--shortcuts N] [--smoothing PASSES] [--padding M] [--search-margin M] [--pose-goal LINK]
 //!     [--robot data/robots/panda/panda.robot.json] [--problems data/robots/mbm_panda]
 //!     [--scenarios a,b,...] [--limit 10]
 //! ```
@@ -63,6 +63,15 @@ fn args() -> Result<Args, String> {
     while i < argv.len() {
         if argv[i] == "--no-simplify" {
             a.settings.simplify = false;
+            i += 1;
+            continue;
+        }
+        if argv[i] == "--no-dynamic-domain" || argv[i] == "--no-balance" {
+            if argv[i] == "--no-balance" {
+                a.settings.balance = false;
+            } else {
+                a.settings.dynamic_domain = false;
+            }
             i += 1;
             continue;
         }

@@ -47,6 +47,11 @@ pub struct PlanSettings {
     /// certificates take few steps; 0 when an end is closer (the certificates always use the
     /// padding alone).
     pub search_margin: Real,
+    /// Whether the search keeps dynamic domains (default true; [`crate::rrt`]).
+    pub dynamic_domain: bool,
+    /// Whether the search lets a tree of at most half the other's size keep the turn (default true;
+    /// [`crate::rrt`]).
+    pub balance: bool,
 }
 
 impl Default for PlanSettings {
@@ -64,6 +69,8 @@ impl Default for PlanSettings {
             tolerance: 1e-3,
             max_goals: 8,
             search_margin: 2e-3,
+            dynamic_domain: true,
+            balance: true,
         }
     }
 }
@@ -313,8 +320,13 @@ fn plan_to(
     cancel: &AtomicBool,
     mut outcome: PlanOutcome,
 ) -> Result<PlanOutcome> {
-    let search =
-        SearchSettings { range: settings.range, resolution: settings.resolution, goal_bias: settings.goal_bias };
+    let search = SearchSettings {
+        range: settings.range,
+        resolution: settings.resolution,
+        goal_bias: settings.goal_bias,
+        dynamic_domain: settings.dynamic_domain,
+        balance: settings.balance,
+    };
     // The margin when the start and some goal keep it (only those goals then), else none.
     let mut goals = goals;
     if settings.search_margin > 0.0 {

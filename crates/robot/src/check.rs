@@ -144,6 +144,9 @@ pub struct RobotChecker<'r> {
     /// The block kernel's view of the robot and world, built at the first block check
     /// ([`block`]).
     block: Option<Box<block::BlockPlan>>,
+    /// Configurations the block path checked, and those of them its lanes left to the single
+    /// path's stages ([`RobotChecker::block_counts`]).
+    block_counts: (u64, u64),
 }
 
 impl<'r> RobotChecker<'r> {
@@ -244,6 +247,7 @@ impl<'r> RobotChecker<'r> {
             sphere_stage: true,
             contact_proofs: true,
             block: None,
+            block_counts: (0, 0),
         })
     }
 

@@ -128,6 +128,14 @@ impl RobotChecker<'_> {
         Ok(out.iter().any(|a| a.collides))
     }
 
+    /// How many configurations the block path has checked since the checker was made, and how
+    /// many of them its lanes left to the single path's stages (sphere trees, proofs, sos bound,
+    /// meshes) because a pair came within a few centimeters of contact: the share that sets a
+    /// workload's cost per configuration (module docs).
+    pub fn block_counts(&self) -> (u64, u64) {
+        self.block_counts
+    }
+
     /// [`RobotChecker::check_block`] for `job`.
     fn run_job(&mut self, job: &Job<'_>, out: &mut Vec<ConfigurationAnswer>) -> Result<()> {
         let Job { configs, base, options, stop: stop_at_first_collision, .. } = *job;
@@ -246,9 +254,11 @@ impl RobotChecker<'_> {
                 }
             }
             for (lane, verdict) in verdicts.iter().enumerate().take(n) {
+                self.block_counts.0 += 1;
                 let answer = match verdict {
                     Some(d) if !d.pending => decided_answer(d, pairs),
                     Some(d) => {
+                        self.block_counts.1 += 1;
                         world_left.clear();
                         world_left.extend(scratch.pending_world.iter().filter(|p| p.0 == lane).map(|p| (p.1, p.2)));
                         self_left.clear();
@@ -256,9 +266,11 @@ impl RobotChecker<'_> {
                         self.check_left(rows[lane], base, options, d, &world_left, &self_left, pairs)
                             .map_err(|e| prefixed(e, &format!("configurations[{}]", b * w + lane)))?
                     }
-                    None => self
-                        .check(rows[lane], base, options)
-                        .map_err(|e| prefixed(e, &format!("configurations[{}]", b * w + lane)))?,
+                    None => {
+                        self.block_counts.1 += 1;
+                        self.check(rows[lane], base, options)
+                            .map_err(|e| prefixed(e, &format!("configurations[{}]", b * w + lane)))?
+                    }
                 };
                 let collides = answer.collides;
                 out.push(answer);

@@ -39,6 +39,8 @@ pub fn plan_settings(s: Option<&pb::PlanSettings>) -> Result<PlanSettings> {
         tolerance: or(s.tolerance, d.tolerance),
         max_goals: if s.max_goals == 0 { d.max_goals } else { (s.max_goals as usize).min(64) },
         search_margin: d.search_margin,
+        dynamic_domain: d.dynamic_domain,
+        balance: d.balance,
     };
     settings.validate().map_err(|e| crate::convert::prefix_field(e, "settings"))?;
     Ok(settings)
