@@ -191,7 +191,17 @@ impl BodyRecord {
     /// [`Error::InvalidArgument`] naming `primitive` when the bounding ellipsoid does not build (a
     /// primitive smaller than the smallest body scale, 1 µm).
     pub fn primitive(name: &str, primitive: &Primitive) -> Result<Self> {
-        let body = match catalog::bounding_body(primitive)? {
+        Ok(Self::primitive_bounded(name, primitive, catalog::bounding_body(primitive)?.as_ref()))
+    }
+
+    /// [`BodyRecord::primitive`] with the primitive's bounding body already built
+    /// ([`catalog::bounding_body`]'s answer), so that adding a primitive builds it once.
+    pub(crate) fn primitive_bounded(
+        name: &str,
+        primitive: &Primitive,
+        bound: Option<&sublevel_core::body::Body>,
+    ) -> Self {
+        let body = match bound {
             Some(b) => b.to_file(),
             None => BodyFile {
                 degree: 2,
@@ -206,7 +216,7 @@ impl BodyRecord {
                 },
             },
         };
-        Ok(Self { name: name.to_owned(), body, compound: None, primitive: Some(primitive.to_file()), mesh: None })
+        Self { name: name.to_owned(), body, compound: None, primitive: Some(primitive.to_file()), mesh: None }
     }
 }
 

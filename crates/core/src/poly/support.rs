@@ -56,18 +56,24 @@ impl SupportTable {
     /// polished by at most 12 Newton steps; a node whose Newton run does not reach a KKT point
     /// (|p − 1| ≤ 10⁻¹⁰, λ > 0) keeps the candidate (on the boundary to the radial table's accuracy).
     pub fn new(p: &FastPoly, radial: &RadialTable, center: &Vector3) -> Self {
-        let mut candidates = Vec::with_capacity(6 * (CANDIDATE_GRID + 1) * (CANDIDATE_GRID + 1));
+        // The candidates' coordinates in three arrays: the search for each node's best
+        // candidate is then one pass of multiply-adds and compares.
+        let n = 6 * (CANDIDATE_GRID + 1) * (CANDIDATE_GRID + 1);
+        let (mut xs, mut ys, mut zs) = (Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n));
         for face in 0..6 {
             for k in 0..(CANDIDATE_GRID + 1) * (CANDIDATE_GRID + 1) {
                 let dir = node_direction(face, k, CANDIDATE_GRID).normalize();
-                candidates.push(center + dir * radial.radius(&dir));
+                let c = center + dir * radial.radius(&dir);
+                xs.push(c.x);
+                ys.push(c.y);
+                zs.push(c.z);
             }
         }
         let mut points = Box::new([[[0.0; 3]; NODES * NODES]; 6]);
         for (face, nodes) in points.iter_mut().enumerate() {
             for (k, node) in nodes.iter_mut().enumerate() {
                 let m = node_direction(face, k, SUPPORT_GRID).normalize();
-                let best = candidates.iter().copied().max_by(|u, v| m.dot(u).total_cmp(&m.dot(v))).unwrap_or(*center);
+                let best = best_candidate(&m, &xs, &ys, &zs).map_or(*center, |i| Vector3::new(xs[i], ys[i], zs[i]));
                 let u = polish(p, &m, best).or_else(|| support_by_penalty(p, &m, best)).unwrap_or(best);
                 *node = [u.x, u.y, u.z];
             }
@@ -96,6 +102,20 @@ impl SupportTable {
         let high = lerp(&r[k + NODES], &r[k + NODES + 1], ta);
         Some(low + (high - low) * tb)
     }
+}
+
+/// The index of the candidate `(xs[i], ys[i], zs[i])` farthest along `m` (the last of equals;
+/// `None` when there is none or every product is NaN).
+fn best_candidate(m: &Vector3, xs: &[Real], ys: &[Real], zs: &[Real]) -> Option<usize> {
+    let (mut best, mut at) = (Real::NEG_INFINITY, None);
+    for (i, ((x, y), z)) in xs.iter().zip(ys).zip(zs).enumerate() {
+        let d = m.x * x + m.y * y + m.z * z;
+        if d >= best {
+            best = d;
+            at = Some(i);
+        }
+    }
+    at
 }
 
 /// Certified upper bounds of the support function `h(m) = max{m·u : p(u) ≤ 1}` of a convex body
@@ -428,6 +448,34 @@ mod tests {
         let center = Vector3::zeros();
         let table = SupportTable::new(&p, &RadialTable::new(&p, &center), &center);
         (p, table)
+    }
+
+    #[test]
+    fn best_candidate_is_the_last_maximum_of_the_products() {
+        // Against a plain scan of m·u (nalgebra's dot), with repeated points for ties.
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        let pts: Vec<Vector3> = (0..300)
+            .map(|k| {
+                if k % 7 == 6 {
+                    Vector3::new(0.5, -0.25, 0.125)
+                } else {
+                    Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0))
+                }
+            })
+            .collect();
+        let (xs, ys, zs): (Vec<Real>, Vec<Real>, Vec<Real>) =
+            (pts.iter().map(|p| p.x).collect(), pts.iter().map(|p| p.y).collect(), pts.iter().map(|p| p.z).collect());
+        for case in 0..200 {
+            let m = if case == 0 {
+                Vector3::new(1.0, -0.5, 0.25)
+            } else {
+                Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0))
+            };
+            let top = pts.iter().map(|p| m.dot(p)).fold(Real::NEG_INFINITY, Real::max);
+            let last = pts.iter().rposition(|p| m.dot(p) == top);
+            assert_eq!(best_candidate(&m, &xs, &ys, &zs), last, "case {case}");
+        }
+        assert_eq!(best_candidate(&Vector3::x(), &[], &[], &[]), None);
     }
 
     #[test]

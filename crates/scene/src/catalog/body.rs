@@ -51,7 +51,16 @@ impl BuiltBody {
     /// # Errors
     /// As [`bounding_body`].
     pub fn of_primitive(primitive: Primitive) -> Result<Self> {
-        let body = match bounding_body(&primitive)? {
+        Self::of_bound(primitive, bounding_body(&primitive)?)
+    }
+
+    /// [`BuiltBody::of_primitive`] with the primitive's bounding body already built
+    /// ([`bounding_body`]'s answer).
+    ///
+    /// # Errors
+    /// As [`BuiltBody::of_primitive`].
+    pub(crate) fn of_bound(primitive: Primitive, bound: Option<Body>) -> Result<Self> {
+        let body = match bound {
             Some(b) => b,
             None => sublevel_core::body::ellipsoid([0.0; 3], [1.0; 3])?,
         };

@@ -403,9 +403,12 @@ impl Catalog {
     /// smaller than 1 µm ([`bounding_body`]); [`Error::Storage`].
     pub fn add_primitive(&self, name: &str, primitive: sublevel_core::primitive::Primitive) -> Result<String> {
         check_name("name", name)?;
-        let built = BuiltBody::of_primitive(primitive)?;
+        // The bounding ellipsoid built once, for the record and the built body.
+        let bound = bounding_body(&primitive)?;
+        let record = BodyRecord::primitive_bounded(name, &primitive, bound.as_ref());
+        let built = BuiltBody::of_bound(primitive, bound)?;
         let id = new_id("b");
-        self.store.put_body(&id, &BodyRecord::primitive(name, &primitive)?)?;
+        self.store.put_body(&id, &record)?;
         let entry = BodyEntry::of_built(&id, name, built);
         write(&self.bodies).insert(id.clone(), Arc::new(entry));
         Ok(id)
