@@ -10,7 +10,7 @@
 
 use std::io::Write;
 use std::path::PathBuf;
-use sublevel::fit::sdp::TraceBasis;
+use sublevel::fit::sdp::{ConvexityCone, TraceBasis};
 use sublevel::fit::{auto, fit_points, mesh, FitMethod, FitProgress, FitSettings, FitStage};
 
 /// `--degree`: a total degree 2d, or `auto`.
@@ -124,6 +124,11 @@ pub struct FitArgs {
     /// body), plain (the paper's monomials) or scaled (`fit::sdp::TraceBasis`).
     #[arg(long, default_value = "both")]
     pub trace_basis: String,
+    /// Cone of the sos-convexity Gram matrix: psd (default, sos-convex as in the paper), or sdd /
+    /// dd, the sdsos / dsos inner approximations of paper §VI (an SOCP / LP constraint in its
+    /// place; a larger body that depends on the frame). logdet_p and trace_p only.
+    #[arg(long, default_value = "psd")]
+    pub convexity_cone: String,
     /// No progress on stderr.
     #[arg(long, short)]
     pub quiet: bool,
@@ -182,7 +187,7 @@ pub fn run(args: FitArgs) -> sublevel::Result<()> {
 ///
 /// # Errors
 /// [`sublevel::Error::InvalidArgument`] naming `relaxation`, `method`, `linear_solver`,
-/// `normalization`, `alternate_normalization` or `trace_basis`.
+/// `normalization`, `alternate_normalization`, `trace_basis` or `convexity_cone`.
 pub fn fit_settings(args: &FitArgs) -> sublevel::Result<FitSettings> {
     let method: FitMethod = args.method.parse()?;
     let c = args.relaxation;
@@ -217,6 +222,12 @@ pub fn fit_settings(args: &FitArgs) -> sublevel::Result<FitSettings> {
         normalization: args.normalization.parse()?,
         alternate_normalization: sublevel::fit::hull::parse_optional_normalization(&args.alternate_normalization)?,
         rows_in_rounds: false,
+        convexity_cone: ConvexityCone::ALL.into_iter().find(|c| c.name() == args.convexity_cone).ok_or_else(|| {
+            sublevel::Error::invalid(
+                "convexity_cone",
+                format!("must be one of psd, sdd, dd, got {:?}", args.convexity_cone),
+            )
+        })?,
         trace_basis: match args.trace_basis.as_str() {
             "both" => None,
             "plain" => Some(TraceBasis::Plain),

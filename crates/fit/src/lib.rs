@@ -107,6 +107,10 @@ mod tests {
             (FitSettings::default().with_volume_samples(0), "volume_samples"),
             (FitSettings::default().with_solver_tolerance(Real::NAN), "solver_tolerance"),
             (FitSettings { max_solver_iterations: 0, ..Default::default() }, "max_solver_iterations"),
+            (
+                FitSettings::default().with_method(FitMethod::LogDetH).with_convexity_cone(sdp::ConvexityCone::Dd),
+                "convexity_cone",
+            ),
         ] {
             match fit_points(&pts, &s, &mut |_| {}) {
                 Err(Error::InvalidArgument { field: f, .. }) => assert_eq!(f, field),

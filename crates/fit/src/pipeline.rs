@@ -47,6 +47,7 @@ fn spec_of(settings: &FitSettings, trace_basis: TraceBasis) -> ProblemSpec {
         matrix,
         convexity_relaxation: settings.convexity_relaxation,
         trace_basis,
+        convexity_cone: settings.convexity_cone,
     }
 }
 

@@ -116,6 +116,11 @@ pub struct FitSettings {
     /// the hull rows with extra inactive rows, so it gives the same body up to the solver
     /// tolerance. Only `LogDetP` and `TraceP`. Off by default.
     pub rows_in_rounds: bool,
+    /// The cone of the sos-convexity Gram matrix ([`sdp::ConvexityCone`]): psd (the default, the
+    /// paper's sos-convexity), or the sdsos / dsos inner approximations of paper §VI, an SOCP or LP
+    /// constraint in place of the psd one. Only with the objective on P (`LogDetP`, `TraceP`); the
+    /// body stays convex and contains every point, but is larger, and depends on the frame.
+    pub convexity_cone: sdp::ConvexityCone,
 }
 
 impl Default for FitSettings {
@@ -135,6 +140,7 @@ impl Default for FitSettings {
             alternate_normalization: Some(hull::Normalization::PrincipalBox),
             trace_basis: None,
             rows_in_rounds: false,
+            convexity_cone: sdp::ConvexityCone::Psd,
         }
     }
 }
@@ -183,11 +189,20 @@ impl FitSettings {
     }
 
     /// True when the fitted body depends on the frame the SDP is solved in: trace objectives
-    /// (trace X⁻¹ changes under a change of monomial basis) and relaxed convexity c > 0 (the term
-    /// c(‖u‖²)ᵈ is not affine-invariant). log det P / log det H with c = 0 and the inverse moment
+    /// (trace X⁻¹ changes under a change of monomial basis), relaxed convexity c > 0 (the term
+    /// c(‖u‖²)ᵈ is not affine-invariant) and the dd / sdd cones (not invariant under a change of
+    /// frame). log det P / log det H with c = 0 and the inverse moment
     /// give the same body in every frame.
     pub fn depends_on_frame(&self) -> bool {
-        matches!(self.method, FitMethod::TraceP | FitMethod::TraceH) || self.convexity_relaxation > 0.0
+        matches!(self.method, FitMethod::TraceP | FitMethod::TraceH)
+            || self.convexity_relaxation > 0.0
+            || self.convexity_cone != sdp::ConvexityCone::Psd
+    }
+
+    /// Sets the cone of the sos-convexity Gram matrix ([`FitSettings::convexity_cone`]).
+    pub fn with_convexity_cone(mut self, cone: sdp::ConvexityCone) -> Self {
+        self.convexity_cone = cone;
+        self
     }
 
     /// Sets the relaxed-convexity parameter c (normalized coordinates, eq. "VAG.param.convex").
@@ -220,7 +235,8 @@ impl FitSettings {
     /// # Errors
     /// [`Error::InvalidArgument`] naming `degree`, `volume_samples`, `solver_tolerance`,
     /// `max_solver_iterations`, `convexity_relaxation` (negative, not finite, or > 0 with a
-    /// method other than `LogDetP` / `TraceP`) or `method` (rows in rounds with another method).
+    /// method other than `LogDetP` / `TraceP`), `convexity_cone` (dd or sdd with a method other
+    /// than those) or `method` (rows in rounds with another method).
     pub fn validate(&self) -> Result<()> {
         if !sublevel_core::body::SUPPORTED_DEGREES.contains(&self.degree) {
             return Err(Error::invalid("degree", format!("must be one of 2, 4, 6, 8, got {}", self.degree)));
@@ -234,6 +250,14 @@ impl FitSettings {
             return Err(Error::invalid(
                 "convexity_relaxation",
                 format!("only logdet_p and trace_p take a relaxation c > 0, not {}", self.method.name()),
+            ));
+        }
+        if self.convexity_cone != sdp::ConvexityCone::Psd
+            && !matches!(self.method, FitMethod::LogDetP | FitMethod::TraceP)
+        {
+            return Err(Error::invalid(
+                "convexity_cone",
+                format!("only logdet_p and trace_p take the dd or sdd cone, not {}", self.method.name()),
             ));
         }
         if self.rows_in_rounds && !matches!(self.method, FitMethod::LogDetP | FitMethod::TraceP) {

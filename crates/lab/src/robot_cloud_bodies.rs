@@ -10,6 +10,7 @@
 use crate::robot_clouds::RobotCloudsArgs;
 use sublevel_core::math::{Isometry3, Real, Vector3};
 use sublevel_core::Result;
+use sublevel_fit::sdp::ConvexityCone;
 use sublevel_query::shape::{shape_distance, ShapeRef};
 use sublevel_robot::cloud::bodies::{CloudBodies, CloudBodySettings};
 use sublevel_robot::{CheckOptions, FittedRobot, LinkShape, PointCloud, RobotChecker, WorldObject};
@@ -19,8 +20,14 @@ use sublevel_robot::{CheckOptions, FittedRobot, LinkShape, PointCloud, RobotChec
 pub(crate) struct BodyTally {
     clusters: Vec<Real>,
     first_seconds: Vec<Real>,
+    /// The first frame's bodies' volume (m³, Monte Carlo) and their fits' Clarabel seconds.
+    volume: Real,
+    solve_seconds: Vec<Real>,
     next_seconds: Vec<Real>,
+    /// The second frame's clustering, reuse checks, and rescales and fits (seconds).
+    next_parts: [Vec<Real>; 3],
     reused: usize,
+    rescaled: usize,
     refitted: usize,
     outliers: usize,
     points: usize,
@@ -44,16 +51,31 @@ pub(crate) fn bodies(
     configs: &[Vec<Real>],
     t: &mut BodyTally,
 ) -> Result<()> {
-    let settings = CloudBodySettings { slack: args.body_slack, ..CloudBodySettings::default() };
+    let mut settings = CloudBodySettings {
+        slack: args.body_slack,
+        rescale_limit: args.body_rescale_limit,
+        threads: args.body_threads,
+        ..CloudBodySettings::default()
+    };
+    if let Some(cone) = ConvexityCone::ALL.into_iter().find(|c| c.name() == args.body_cone && *c != ConvexityCone::Psd)
+    {
+        settings.fit = settings.fit.with_convexity_cone(cone).with_alternate_normalization(None);
+    }
     let mut model = CloudBodies::new();
     let first = model.update(frames.0, args.radius, &settings)?;
     t.first_seconds.push(first.total_seconds);
+    t.volume += model.bodies().map(|b| b.report.volume).sum::<Real>();
+    t.solve_seconds.extend(model.bodies().map(|b| b.report.solve_seconds));
     t.clusters.push(first.clusters as Real);
     t.outliers += first.outliers;
     t.points += first.points;
     let next = model.update(frames.1, args.radius, &settings)?;
     t.next_seconds.push(next.total_seconds);
+    for (v, s) in t.next_parts.iter_mut().zip([next.cluster_seconds, next.check_seconds, next.fit_seconds]) {
+        v.push(s);
+    }
     t.reused += next.reused;
+    t.rescaled += next.rescaled;
     t.refitted += next.refitted;
     // The configurations against the bodies of the second frame, its points and the primitives.
     let cloud = std::sync::Arc::new(PointCloud::new(frames.1.to_vec(), args.radius)?);
@@ -106,8 +128,14 @@ pub(crate) fn bodies(
 pub(crate) fn merge(all: &mut BodyTally, t: BodyTally) {
     all.clusters.extend(t.clusters);
     all.first_seconds.extend(t.first_seconds);
+    all.volume += t.volume;
+    all.solve_seconds.extend(t.solve_seconds);
     all.next_seconds.extend(t.next_seconds);
+    for (a, b) in all.next_parts.iter_mut().zip(t.next_parts) {
+        a.extend(b);
+    }
     all.reused += t.reused;
+    all.rescaled += t.rescaled;
     all.refitted += t.refitted;
     all.outliers += t.outliers;
     all.points += t.points;
@@ -124,21 +152,25 @@ pub(crate) fn merge(all: &mut BodyTally, t: BodyTally) {
 pub(crate) fn table(rows: &[(String, BodyTally)]) {
     println!();
     println!(
-        "| scenario | median clusters | outlier points | first frame (ms, median) | second frame (ms, median) | reused | \
-         refitted | configurations | µs/config, bodies | µs/config, points (single) | collide where points do not | \
+        "| scenario | median clusters | outlier points | first frame (ms, median) | Clarabel per fit (ms, median) | first frame's bodies (liters) | second frame (ms, median) | of it: cluster / check / rescale + fit (medians) | reused | \
+         rescaled | refitted | configurations | µs/config, bodies | µs/config, points (single) | collide where points do not | \
          free where points collide | false collisions vs primitives | misses vs primitives |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for (name, t) in rows {
         let per = |s: Real| 1e6 * s / t.configs.max(1) as Real;
         println!(
-            "| {name} | {:.0} | {} of {} | {:.0} | {:.0} | {} | {} | {} | {:.1} | {:.1} | {} | {} | {} | {} |",
+            "| {name} | {:.0} | {} of {} | {:.0} | {:.1} | {:.1} | {:.0} | {} | {} | {} | {} | {} | {:.1} | {:.1} | {} | {} | {} | {} |",
             crate::robot_edges::median(&t.clusters),
             t.outliers,
             t.points,
             1e3 * crate::robot_edges::median(&t.first_seconds),
+            1e3 * crate::robot_edges::median(&t.solve_seconds),
+            1e3 * t.volume,
             1e3 * crate::robot_edges::median(&t.next_seconds),
+            t.next_parts.iter().map(|v| format!("{:.0}", 1e3 * crate::robot_edges::median(v))).collect::<Vec<_>>().join(" / "),
             t.reused,
+            t.rescaled,
             t.refitted,
             t.configs,
             per(t.seconds),

@@ -99,6 +99,16 @@ pub struct RobotCloudsArgs {
     /// point's ball grown by this much.
     #[arg(long, default_value_t = 0.005)]
     pub(crate) body_slack: Real,
+    /// Largest growth by rescaling of a body since its last fit (1: never rescale, always refit).
+    #[arg(long, default_value_t = 1.25)]
+    pub(crate) body_rescale_limit: Real,
+    /// Threads fitting a frame's clusters at once (0: the machine's parallelism).
+    #[arg(long, default_value_t = 0)]
+    pub(crate) body_threads: usize,
+    /// Cone of the bodies' sos-convexity Gram matrix: psd, or the sdsos / dsos approximations
+    /// sdd and dd (paper §VI), which are solved in the bounding cube alone.
+    #[arg(long, default_value = "psd", value_parser = ["psd", "sdd", "dd"])]
+    pub(crate) body_cone: String,
     /// Planning timeout (seconds).
     #[arg(long, default_value_t = 1.0)]
     timeout: Real,

@@ -8,6 +8,9 @@
 //!   1000 random points of every ball (half of them on its sphere).
 //! - The same frame again (shuffled) reuses both bodies, the same allocations, with 0 refits;
 //!   moving one blob refits that one only; jitter below the fit's slack is reused.
+//! - A blob grown by 1.5 % is rescaled, not fitted: its new p is the old one over the factor, at
+//!   100 random points to 1e-9; grown by 10 % (past the limit of 1.25 since the fit) it is fitted
+//!   again; a limit of 1 never rescales; fits on one thread equal fits on two.
 //!
 //! The ignored `fit_table` prints the cost and tightness of cluster fits of 50–2000 points at
 //! 2d = 2 and 4 (run it in release: `cargo test --release -p sublevel-robot --test cloud_bodies
@@ -186,6 +189,81 @@ fn every_inlier_ball_is_inside_its_body_and_frames_reuse_or_refit() {
 }
 
 #[test]
+fn a_body_that_grew_out_is_rescaled_within_the_limit_then_refitted() {
+    let mut rng = ChaCha8Rng::seed_from_u64(31);
+    let (a, b) = (blob_a(&mut rng), blob_b(&mut rng));
+    // Blob A's points pushed out from its center (0, 0, 1) by `k`.
+    let grown =
+        |k: Real| -> Vec<[Real; 3]> { a.iter().map(|p| [p[0] * k, p[1] * k, 1.0 + (p[2] - 1.0) * k]).collect() };
+    let settings = CloudBodySettings::default();
+    assert_eq!(settings.rescale_limit, 1.25);
+    let mut bodies = CloudBodies::new();
+    let (points, ia, _) = scene(&a, &b, 2);
+    bodies.update(&points, R, &settings).unwrap();
+    let body_of = |bodies: &CloudBodies, ia: &[usize]| {
+        bodies.clusters().iter().find(|c| c.indices == ia).map(|c| (Arc::clone(&c.body), c.growth)).unwrap()
+    };
+    let (fitted, growth) = body_of(&bodies, &ia);
+    assert_eq!(growth, 1.0);
+
+    // 1.5 % larger: matched, not contained, rescaled (no fit): p / v with v the largest p at the
+    // new cover vertices; B is reused.
+    let (points, ia, _) = scene(&grown(1.015), &b, 3);
+    let report = bodies.update(&points, R, &settings).unwrap();
+    assert_eq!((report.reused, report.rescaled, report.refitted), (1, 1, 0));
+    let factor = report
+        .outcomes
+        .iter()
+        .find_map(|o| match o {
+            ClusterOutcome::Rescaled { factor, .. } => Some(*factor),
+            _ => None,
+        })
+        .unwrap();
+    assert!(factor > 1.0 && factor <= 1.25, "factor {factor}");
+    let (rescaled, growth) = body_of(&bodies, &ia);
+    assert!(!Arc::ptr_eq(&fitted, &rescaled));
+    assert!((growth - factor).abs() <= 1e-12 * factor, "growth {growth} against factor {factor}");
+    // The new p is the old one over the factor, anywhere (to rounding).
+    for _ in 0..100 {
+        let x = Point3::new(rng.random::<Real>() - 0.5, rng.random::<Real>() - 0.5, 0.5 + rng.random::<Real>());
+        let (old, new) = (fitted.value_at(&x), rescaled.value_at(&x));
+        assert!((old / factor - new).abs() <= 1e-9 * old.abs().max(1.0), "{old} / {factor} against {new}");
+    }
+    assert_balls_contained(&bodies, &points, BallCover::Cube, 32);
+
+    // 10 % larger than at first: the growth since the fit would pass 1.25, so it is fitted again.
+    let (points, ia, _) = scene(&grown(1.10), &b, 4);
+    let report = bodies.update(&points, R, &settings).unwrap();
+    assert_eq!((report.reused, report.rescaled, report.refitted, report.added), (1, 0, 1, 0));
+    assert_eq!(body_of(&bodies, &ia).1, 1.0);
+    assert_balls_contained(&bodies, &points, BallCover::Cube, 33);
+
+    // A limit of 1 never rescales; one thread fits the same bodies as several.
+    let never = CloudBodySettings { rescale_limit: 1.0, threads: 1, ..Default::default() };
+    let mut one = CloudBodies::new();
+    let (points, ..) = scene(&a, &b, 2);
+    one.update(&points, R, &never).unwrap();
+    let (points, ..) = scene(&grown(1.015), &b, 3);
+    let report = one.update(&points, R, &never).unwrap();
+    assert_eq!((report.reused, report.rescaled, report.refitted), (1, 0, 1));
+    let (mut single, mut many) = (CloudBodies::new(), CloudBodies::new());
+    single.update(&points, R, &never).unwrap();
+    many.update(&points, R, &CloudBodySettings { threads: 2, ..Default::default() }).unwrap();
+    for (x, y) in single.clusters().iter().zip(many.clusters()) {
+        assert_eq!(x.indices, y.indices);
+        for &i in x.indices.iter().step_by(17) {
+            let v = Point3::from(points[i]);
+            assert_eq!(x.body.value_at(&v), y.body.value_at(&v));
+        }
+    }
+    let bad = CloudBodySettings { rescale_limit: 0.9, ..Default::default() };
+    assert!(matches!(
+        one.update(&points, R, &bad),
+        Err(sublevel_robot::Error::InvalidArgument { field, .. }) if field == "rescale_limit"
+    ));
+}
+
+#[test]
 fn slack_absorbs_jitter_and_the_icosahedron_cover_contains_too() {
     let mut rng = ChaCha8Rng::seed_from_u64(11);
     let (a, b) = (blob_a(&mut rng), blob_b(&mut rng));
@@ -333,8 +411,10 @@ fn update_timing() {
         pts
     };
     let still = frame(&objects, &mut rng, 0.0);
-    println!("| settings | frame | clusters | reused | refitted | cluster ms | check ms | fit ms | total ms |");
-    println!("|---|---|---|---|---|---|---|---|---|");
+    println!(
+        "| settings | frame | clusters | reused | rescaled | refitted | cluster ms | check ms | fit ms | total ms |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|");
     for (name, settings) in [
         ("2d=4 cube", CloudBodySettings::default()),
         ("2d=2 cube", CloudBodySettings { fit: CloudBodySettings::default().fit.with_degree(2), ..Default::default() }),
@@ -353,9 +433,10 @@ fn update_timing() {
         {
             let r = bodies.update(pts, R, &settings).unwrap();
             println!(
-                "| {name} | {what} | {} | {} | {} | {:.1} | {:.2} | {:.1} | {:.1} |",
+                "| {name} | {what} | {} | {} | {} | {} | {:.1} | {:.2} | {:.1} | {:.1} |",
                 r.clusters,
                 r.reused,
+                r.rescaled,
                 r.refitted,
                 r.cluster_seconds * 1e3,
                 r.check_seconds * 1e3,

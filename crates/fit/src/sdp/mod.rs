@@ -42,7 +42,9 @@ pub mod solve;
 
 pub(crate) use identities::pair_index;
 pub use identities::{norm_power_coefficients, polynomial_of_gram};
-pub use program::{Containment, GramProgram, Objective, ObjectiveMatrix, ProblemSpec, TraceBasis, CONVEXITY_FLOOR};
+pub use program::{
+    Containment, ConvexityCone, GramProgram, Objective, ObjectiveMatrix, ProblemSpec, TraceBasis, CONVEXITY_FLOOR,
+};
 pub use solve::{
     max_on, rescale_to_contain, usable_status, KktSolver, RawSolution, SolverSettings, FIT_STATIC_REGULARIZATION,
     FIT_STEP_FRACTION,

@@ -52,6 +52,38 @@ pub enum TraceBasis {
     Scaled,
 }
 
+/// The cone the sos-convexity Gram matrix G − εI is kept in when the objective acts on P
+/// (paper §VI: "dsos / sdsos" inner approximations of the psd cone by Ahmadi and Majumdar, "DSOS
+/// and SDSOS optimization", SIAM J. Appl. Algebra Geom. 2019). The smaller cones leave p
+/// sos-convex (a dd or sdd matrix is psd) but fit a larger body, and, unlike the psd cone, depend on
+/// the frame and the monomial basis the program is written in (the scaled basis of
+/// [`super::identities`]; sdd is invariant under its diagonal scaling, dd is not).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum ConvexityCone {
+    /// G − εI ⪰ 0: one M × M psd cone (the paper's sos-convexity).
+    #[default]
+    Psd,
+    /// G − εI scaled diagonally dominant: a sum of M(M − 1)/2 psd 2 × 2 blocks, each a
+    /// 3-dimensional second-order cone (sdsos: an SOCP constraint).
+    Sdd,
+    /// G − εI diagonally dominant: Gᵢᵢ − ε ≥ Σⱼ |Gᵢⱼ| (dsos: linear constraints).
+    Dd,
+}
+
+impl ConvexityCone {
+    /// Every cone, the psd cone first.
+    pub const ALL: [ConvexityCone; 3] = [ConvexityCone::Psd, ConvexityCone::Sdd, ConvexityCone::Dd];
+
+    /// The cone's name: `psd`, `sdd` or `dd`.
+    pub fn name(self) -> &'static str {
+        match self {
+            ConvexityCone::Psd => "psd",
+            ConvexityCone::Sdd => "sdd",
+            ConvexityCone::Dd => "dd",
+        }
+    }
+}
+
 /// What to build: degree, objective × matrix, and the relaxed-convexity parameter c.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ProblemSpec {
@@ -66,6 +98,8 @@ pub struct ProblemSpec {
     pub convexity_relaxation: Real,
     /// Basis in which a trace objective takes trace X⁻¹ (log det does not depend on it).
     pub trace_basis: TraceBasis,
+    /// The cone of G − εI (objective on P only; on H, G is the objective's matrix and stays psd).
+    pub convexity_cone: ConvexityCone,
 }
 
 impl ProblemSpec {
@@ -77,6 +111,7 @@ impl ProblemSpec {
             matrix: ObjectiveMatrix::P,
             convexity_relaxation: 0.0,
             trace_basis: TraceBasis::Plain,
+            convexity_cone: ConvexityCone::Psd,
         }
     }
 
@@ -224,7 +259,8 @@ impl GramProgram {
     /// # Errors
     /// [`Error::InvalidArgument`] naming `degree` when d is outside 1..=4, `convexity_relaxation`
     /// when c is negative or not finite, or c > 0 with the objective on H (the relaxed Gram
-    /// matrix would enter the objective, see paper §III-B-2), `multiplier_degree` outside {0, 2},
+    /// matrix would enter the objective, see paper §III-B-2), `convexity_cone` other than psd with
+    /// the objective on H, `multiplier_degree` outside {0, 2},
     /// or `bodies` (none, or one of degree < 2).
     pub fn build(spec: &ProblemSpec, containment: Containment<'_>) -> Result<Self> {
         let d = spec.half_degree;
@@ -234,6 +270,12 @@ impl GramProgram {
         let c_relax = spec.convexity_relaxation;
         if !(c_relax.is_finite() && c_relax >= 0.0) {
             return Err(Error::invalid("convexity_relaxation", format!("must be finite and ≥ 0, got {c_relax}")));
+        }
+        if spec.convexity_cone != ConvexityCone::Psd && spec.matrix == ObjectiveMatrix::H {
+            return Err(Error::invalid(
+                "convexity_cone",
+                "dd and sdd need the objective on P (logdet_p or trace_p): on H, G is the objective's psd matrix",
+            ));
         }
         if c_relax > 0.0 && spec.matrix == ObjectiveMatrix::H {
             return Err(Error::invalid(
@@ -433,19 +475,23 @@ impl GramProgram {
             ObjectiveMatrix::P => m,
             ObjectiveMatrix::H => n,
         };
-        let base5 = r.next_row();
-        for j in 0..size_o {
-            for i in 0..=j {
-                let e = triangle_index(i, j);
-                let (entry, floor) = match spec.matrix {
-                    ObjectiveMatrix::P => (&gram_image[e], if i == j { CONVEXITY_FLOOR } else { 0.0 }),
-                    ObjectiveMatrix::H => (&p_image[e], 0.0),
-                };
-                let constant = r.push_affine(base5 + e, entry);
-                r.b.push(constant - floor);
+        if spec.matrix == ObjectiveMatrix::P && spec.convexity_cone != ConvexityCone::Psd {
+            num_vars = convexity_cone_rows(&mut r, &gram_image, m, spec.convexity_cone, num_vars);
+        } else {
+            let base5 = r.next_row();
+            for j in 0..size_o {
+                for i in 0..=j {
+                    let e = triangle_index(i, j);
+                    let (entry, floor) = match spec.matrix {
+                        ObjectiveMatrix::P => (&gram_image[e], if i == j { CONVEXITY_FLOOR } else { 0.0 }),
+                        ObjectiveMatrix::H => (&p_image[e], 0.0),
+                    };
+                    let constant = r.push_affine(base5 + e, entry);
+                    r.b.push(constant - floor);
+                }
             }
+            r.cones.push(SupportedConeT::PSDTriangleConeT(size_o));
         }
-        r.cones.push(SupportedConeT::PSDTriangleConeT(size_o));
 
         let mut q = vec![0.0; num_vars];
         match spec.objective {
@@ -515,6 +561,75 @@ impl GramProgram {
     pub fn polynomial_of_gram(&self, p: &nalgebra::DMatrix<Real>) -> Result<Polynomial> {
         polynomial_of_gram(self.half_degree, p)
     }
+}
+
+/// The rows keeping G − εI (its packed triangle `gram`, off-diagonals × √2; M × M) in the dd or
+/// sdd cone, with the auxiliary columns from `col`; returns the new column count.
+///
+/// ```text
+/// sdd: G − εI = Σ_{i<j} Eᵢⱼ([[aᵢⱼ, Gᵢⱼ], [Gᵢⱼ, cᵢⱼ]]), each block psd ⇔ (a + c, a − c, 2Gᵢⱼ) ∈ SOC₃;
+///      Gᵢᵢ − ε = Σ_{j>i} aᵢⱼ + Σ_{j<i} cⱼᵢ (equalities)
+/// dd:  tᵢⱼ ≥ ±Gᵢⱼ,  Gᵢᵢ − ε − Σ_{j≠i} tᵢⱼ ≥ 0 (nonnegative rows)
+/// ```
+fn convexity_cone_rows(r: &mut Rows, gram: &[AffineEntry], m: usize, cone: ConvexityCone, col: usize) -> usize {
+    let s2 = std::f64::consts::SQRT_2;
+    let per_pair = if cone == ConvexityCone::Sdd { 2 } else { 1 };
+    // Per diagonal entry i: the auxiliary columns whose sum it must equal (sdd) or exceed (dd).
+    let mut diagonal: Vec<Vec<(usize, Real)>> = vec![Vec::new(); m];
+    let mut pair = 0;
+    for j in 0..m {
+        for i in 0..j {
+            let e = &gram[triangle_index(i, j)];
+            let aux = col + per_pair * pair;
+            pair += 1;
+            let row = r.next_row();
+            match cone {
+                ConvexityCone::Sdd => {
+                    let (a, c) = (aux, aux + 1);
+                    diagonal[i].push((a, 1.0));
+                    diagonal[j].push((c, 1.0));
+                    r.push(row, a, -1.0);
+                    r.push(row, c, -1.0);
+                    r.push(row + 1, a, -1.0);
+                    r.push(row + 1, c, 1.0);
+                    // 2Gᵢⱼ = √2 × the packed entry.
+                    for &(k, coef) in &e.terms {
+                        r.push(row + 2, k, -s2 * coef);
+                    }
+                    r.b.extend([0.0, 0.0, s2 * e.constant]);
+                    r.cones.push(SupportedConeT::SecondOrderConeT(3));
+                }
+                ConvexityCone::Dd | ConvexityCone::Psd => {
+                    diagonal[i].push((aux, 1.0));
+                    diagonal[j].push((aux, 1.0));
+                    // t − Gᵢⱼ ≥ 0 and t + Gᵢⱼ ≥ 0, Gᵢⱼ = packed / √2.
+                    for (k, sign) in [(0, 1.0), (1, -1.0)] {
+                        r.push(row + k, aux, -1.0);
+                        for &(c, coef) in &e.terms {
+                            r.push(row + k, c, sign * coef / s2);
+                        }
+                        r.b.push(-sign * e.constant / s2);
+                    }
+                    r.cones.push(SupportedConeT::NonnegativeConeT(2));
+                }
+            }
+        }
+    }
+    // The diagonal rows: Gᵢᵢ − ε − Σ aux (= 0 for sdd, ≥ 0 for dd).
+    let base = r.next_row();
+    for (i, aux) in diagonal.iter().enumerate() {
+        let e = &gram[triangle_index(i, i)];
+        let constant = r.push_affine(base + i, e);
+        for &(k, coef) in aux {
+            r.push(base + i, k, coef);
+        }
+        r.b.push(constant - CONVEXITY_FLOOR);
+    }
+    r.cones.push(match cone {
+        ConvexityCone::Sdd => SupportedConeT::ZeroConeT(m),
+        _ => SupportedConeT::NonnegativeConeT(m),
+    });
+    col + per_pair * pair
 }
 
 /// The nonzero terms (exponent, coefficient) of 1 − g: the factor the S-procedure multiplier τ

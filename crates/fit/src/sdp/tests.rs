@@ -134,3 +134,96 @@ fn every_status_is_mapped() {
     assert_eq!(json, "\"closed_form\"");
     assert_eq!(serde_json::from_str::<SdpStatus>(&json).unwrap(), SdpStatus::ClosedForm);
 }
+
+/// The dd and sdd cones of G − εI (paper §VI) against the psd cone, on one cloud in normalized
+/// coordinates at 2d = 4 and 6: the feasible sets nest (dd ⊂ sdd ⊂ psd), so the maximized log det P
+/// falls from psd to sdd to dd (to the solver's tolerance); every solution's G, read back from the
+/// program's affine image, has λ_min ≥ ε − 1e-7 (p sos-convex); the dd solution satisfies
+/// Gᵢᵢ − ε ≥ Σⱼ|Gᵢⱼ| entry by entry in the program's basis, and each sdd 2 × 2 block read from
+/// the auxiliary columns is psd and the blocks sum to G − εI (all to 1e-6, the solver's
+/// feasibility residual on entries of order 1e-6 to 1).
+#[test]
+fn dd_and_sdd_cones_nest_inside_the_psd_cone() {
+    use rand::{Rng, SeedableRng};
+    use sublevel_core::poly::gram::triangle_index;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+    let points: Vec<Vector3> = (0..80)
+        .map(|_| {
+            let v = Vector3::new(
+                rng.random::<Real>() * 2.0 - 1.0,
+                rng.random::<Real>() - 0.5,
+                rng.random::<Real>() * 1.6 - 0.8,
+            );
+            v * 0.9
+        })
+        .collect();
+    let settings = SolverSettings {
+        tolerance: 1e-8,
+        max_iterations: 200,
+        linear_solver: KktSolver::default(),
+        threads: 1,
+        iterative_refinement: true,
+    };
+    for d in [2, 3] {
+        let mut objectives = Vec::new();
+        for cone in ConvexityCone::ALL {
+            let spec = ProblemSpec { convexity_cone: cone, ..ProblemSpec::log_det_p(d) };
+            let program = GramProgram::build(&spec, Containment::Points(&points)).unwrap();
+            let raw = program.solve_with_retry(&settings, None, &mut |_, _| {}).unwrap();
+            assert!(matches!(raw.status, SdpStatus::Solved), "2d = {}, {}: {:?}", 2 * d, cone.name(), raw.status);
+            let m = program.convexity_gram_size;
+            let g = program.convexity_gram(&raw.x);
+            let lambda = g.clone().symmetric_eigenvalues().min();
+            assert!(lambda >= CONVEXITY_FLOOR - 1e-7, "2d = {}, {}: λ_min {lambda}", 2 * d, cone.name());
+            // G in the program's (scaled) basis, off-diagonals unpacked from √2 × Gᵢⱼ.
+            let packed = evaluate(&program.gram_image, &raw.x);
+            let entry = |i: usize, j: usize| {
+                let (i, j) = (i.min(j), i.max(j));
+                let v = packed[triangle_index(i, j)];
+                if i == j {
+                    v
+                } else {
+                    v / std::f64::consts::SQRT_2
+                }
+            };
+            match cone {
+                ConvexityCone::Dd => {
+                    for i in 0..m {
+                        let off: Real = (0..m).filter(|&j| j != i).map(|j| entry(i, j).abs()).sum();
+                        assert!(entry(i, i) - CONVEXITY_FLOOR >= off - 1e-6, "row {i}: {} < {off}", entry(i, i));
+                    }
+                }
+                ConvexityCone::Sdd => {
+                    // The auxiliary (a, c) pairs follow every other column, pair by pair.
+                    let first = program.num_vars - m * (m - 1);
+                    let mut diagonal = vec![0.0; m];
+                    let mut pair = 0;
+                    for j in 0..m {
+                        for i in 0..j {
+                            let (a, c) = (raw.x[first + 2 * pair], raw.x[first + 2 * pair + 1]);
+                            pair += 1;
+                            let b = entry(i, j);
+                            assert!(a >= -1e-7 && c >= -1e-7 && a * c - b * b >= -1e-7, "block ({i}, {j})");
+                            diagonal[i] += a;
+                            diagonal[j] += c;
+                        }
+                    }
+                    for (i, s) in diagonal.iter().enumerate() {
+                        assert!((entry(i, i) - CONVEXITY_FLOOR - s).abs() <= 1e-6, "diagonal {i}");
+                    }
+                }
+                ConvexityCone::Psd => {}
+            }
+            objectives.push(raw.certificate.primal_objective);
+        }
+        let [psd, sdd, dd] = objectives[..] else { unreachable!() };
+        assert!(psd >= sdd - 1e-5 && sdd >= dd - 1e-5, "2d = {}: log det P {psd}, {sdd}, {dd}", 2 * d);
+        assert!(psd > dd, "2d = {}: the dd cone should cost some log det: {psd} against {dd}", 2 * d);
+    }
+    let bad =
+        ProblemSpec { matrix: ObjectiveMatrix::H, convexity_cone: ConvexityCone::Sdd, ..ProblemSpec::log_det_p(2) };
+    assert!(matches!(
+        GramProgram::build(&bad, Containment::Points(&points)),
+        Err(Error::InvalidArgument { field, .. }) if field == "convexity_cone"
+    ));
+}
