@@ -3,8 +3,9 @@
 //! frame while it still contains them.
 //!
 //! ```text
-//! cluster   flood fill over the k-d tree with radius `tolerance` (PCL's
-//!           EuclideanClusterExtraction); clusters under `min_points` are outliers and dropped;
+//! cluster   chains of points with steps ≤ `tolerance` (PCL's EuclideanClusterExtraction), by
+//!           union-find over a grid of cubes of side `tolerance`; clusters under `min_points` are
+//!           outliers and dropped;
 //!           clusters over `max_points` are split at the median of their longest box axis until
 //!           every part fits                                         [`euclidean_clusters`]
 //! cover     every point's ball B(p, r) is replaced by a polytope that contains it, the cube

@@ -1,9 +1,11 @@
 //! Euclidean clusters of a point cloud (PCL's `EuclideanClusterExtraction`), the first step of
-//! [`super`]: a flood fill over a k-d tree, small clusters dropped as outliers, large ones split.
+//! [`super`]: union-find over a grid of cubes, small clusters dropped as outliers, large ones
+//! split.
 
 use crate::cloud::MAX_CLOUD_POINTS;
 use crate::{Error, Result};
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use petgraph::unionfind::UnionFind;
+use std::collections::HashMap;
 use sublevel_core::math::{Real, Vector3, MAX_COORDINATE};
 
 /// Checks a point set: at most [`MAX_CLOUD_POINTS`], every coordinate finite within
@@ -46,11 +48,14 @@ pub(super) fn validate_clustering(tolerance: Real, min_points: usize, max_points
 
 /// Euclidean clusters of `points` (meters), as PCL's `EuclideanClusterExtraction`: two points
 /// are in one cluster when a chain of points links them with every step at most `tolerance`
-/// meters long (a flood fill over a k-d tree, one radius query per point). Clusters of fewer
-/// than `min_points` points are outliers and dropped. A cluster of more than `max_points` points
-/// is split at the median of its longest bounding-box axis, recursively, until every part has at
-/// most `max_points` (so that each part's fit stays small); parts are kept whatever their size
-/// (each has at least ⌊max_points / 2⌋ + 1 points, they are not outliers).
+/// meters long. The points are sorted into a grid of cubes of side `tolerance`, so that the
+/// points within `tolerance` of a point lie in its cube or the 26 around it; every pair of points
+/// of a cube and of each of its 13 "forward" neighbors (or of the cube itself) at most
+/// `tolerance` apart is joined in a union-find (petgraph's). Clusters of fewer than `min_points`
+/// points are outliers and dropped. A cluster of more than `max_points` points is split at the
+/// median of its longest bounding-box axis, recursively, until every part has at most
+/// `max_points` (so that each part's fit stays small); parts are kept whatever their size (each
+/// has at least ⌊max_points / 2⌋ + 1 points, they are not outliers).
 ///
 /// Returns the clusters as indices into `points`, each sorted ascending, in the order of their
 /// smallest index (deterministic). An empty cloud has no clusters.
@@ -70,36 +75,84 @@ pub fn euclidean_clusters(
     if points.is_empty() {
         return Ok(Vec::new());
     }
-    let tree = ImmutableKdTree::<Real, 3>::new_from_slice(points)
-        .map_err(|e| Error::invalid("points", format!("the k-d tree could not be built: {e:?}")))?;
+    // Cube keys (saturating casts: far or tiny-tolerance keys may share a cube, which only costs
+    // distance checks), the points sorted by key, and each occupied cube's range of them.
+    let key = |p: &[Real; 3]| p.map(|v| (v / tolerance).floor() as i64);
+    let mut order: Vec<u32> = (0..points.len() as u32).collect();
+    order.sort_unstable_by_key(|&i| key(&points[i as usize]));
+    let mut cubes: HashMap<[i64; 3], (usize, usize), foldhash::fast::FixedState> = HashMap::default();
+    let mut start = 0;
+    while start < order.len() {
+        let k = key(&points[order[start] as usize]);
+        let end = start + order[start..].partition_point(|&i| key(&points[i as usize]) == k);
+        cubes.insert(k, (start, end));
+        start = end;
+    }
     let t2 = tolerance * tolerance;
-    let mut assigned = vec![false; points.len()];
-    let mut clusters = Vec::new();
-    for seed in 0..points.len() {
-        if assigned[seed] {
-            continue;
-        }
-        assigned[seed] = true;
-        // Breadth-first: `cluster[head..]` are found but not yet expanded.
-        let mut cluster = vec![seed];
-        let mut head = 0;
-        while head < cluster.len() {
-            let q = points[cluster[head]];
-            head += 1;
-            for n in tree.query(&q).within::<SquaredEuclidean<Real>>(t2).unsorted().execute().iter() {
-                let j = n.item as usize;
-                if !assigned[j] {
-                    assigned[j] = true;
-                    cluster.push(j);
+    let near = |a: u32, b: u32| {
+        let (p, q) = (points[a as usize], points[b as usize]);
+        (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2) <= t2
+    };
+    let mut sets = UnionFind::<u32>::new(points.len());
+    for (k, &(s, e)) in &cubes {
+        let cube = &order[s..e];
+        for (n, &a) in cube.iter().enumerate() {
+            for &b in &cube[n + 1..] {
+                if near(a, b) {
+                    sets.union(a, b);
                 }
             }
         }
-        if cluster.len() >= min_points {
-            split_cluster(points, cluster, max_points, &mut clusters);
+        for d in FORWARD {
+            let Some(&(s2, e2)) =
+                cubes.get(&[k[0].saturating_add(d[0]), k[1].saturating_add(d[1]), k[2].saturating_add(d[2])])
+            else {
+                continue;
+            };
+            for &a in cube {
+                for &b in &order[s2..e2] {
+                    if near(a, b) {
+                        sets.union(a, b);
+                    }
+                }
+            }
         }
+    }
+    // Components in the order of their smallest index, each ascending.
+    let mut slot: HashMap<u32, usize, foldhash::fast::FixedState> = HashMap::default();
+    let mut components: Vec<Vec<usize>> = Vec::new();
+    for i in 0..points.len() {
+        let root = sets.find_mut(i as u32);
+        let c = *slot.entry(root).or_insert_with(|| {
+            components.push(Vec::new());
+            components.len() - 1
+        });
+        components[c].push(i);
+    }
+    let mut clusters = Vec::new();
+    for cluster in components.into_iter().filter(|c| c.len() >= min_points) {
+        split_cluster(points, cluster, max_points, &mut clusters);
     }
     Ok(clusters)
 }
+
+/// The 13 neighbor cubes of a cube that follow it in lexicographic order: each unordered pair of
+/// adjacent cubes is visited once.
+const FORWARD: [[i64; 3]; 13] = [
+    [0, 0, 1],
+    [0, 1, -1],
+    [0, 1, 0],
+    [0, 1, 1],
+    [1, -1, -1],
+    [1, -1, 0],
+    [1, -1, 1],
+    [1, 0, -1],
+    [1, 0, 0],
+    [1, 0, 1],
+    [1, 1, -1],
+    [1, 1, 0],
+    [1, 1, 1],
+];
 
 /// Appends `cluster` to `out`, split at the median of the longest axis of its bounding box until
 /// every part has at most `max_points` points.
@@ -147,5 +200,60 @@ mod tests {
         assert_eq!(c.iter().map(Vec::len).collect::<Vec<_>>(), vec![25; 4]);
         assert_eq!(c[0], (0..25).collect::<Vec<_>>());
         assert!(euclidean_clusters(&[], 0.1, 1, 10).unwrap().is_empty());
+    }
+
+    /// The components of the chains of steps ≤ `tolerance`, by a flood fill over all n² pairs.
+    fn brute_force(points: &[[Real; 3]], tolerance: Real) -> Vec<Vec<usize>> {
+        let mut seen = vec![false; points.len()];
+        let mut out = Vec::new();
+        for seed in 0..points.len() {
+            if seen[seed] {
+                continue;
+            }
+            seen[seed] = true;
+            let mut c = vec![seed];
+            let mut head = 0;
+            while head < c.len() {
+                let p = Vector3::from(points[c[head]]);
+                head += 1;
+                for j in 0..points.len() {
+                    if !seen[j] && (Vector3::from(points[j]) - p).norm_squared() <= tolerance * tolerance {
+                        seen[j] = true;
+                        c.push(j);
+                    }
+                }
+            }
+            c.sort_unstable();
+            out.push(c);
+        }
+        out
+    }
+
+    #[test]
+    fn clusters_equal_a_brute_force_flood_fill() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        for (n, spread, tolerance) in [(600, 0.5, 0.05), (800, 1.0, 0.04), (400, 0.2, 0.01), (300, 3.0, 0.5)] {
+            // Clumps and strands: points near a few random centers, with some far from any.
+            let centers: Vec<Vector3> =
+                (0..8).map(|_| Vector3::new(rng.random(), rng.random(), rng.random()) * spread).collect();
+            let points: Vec<[Real; 3]> = (0..n)
+                .map(|k| {
+                    let c = centers[k % centers.len()];
+                    let r = if k % 17 == 0 { spread } else { 0.15 * spread };
+                    (c + Vector3::new(rng.random(), rng.random(), rng.random()).add_scalar(-0.5) * r).into()
+                })
+                .collect();
+            let expected = brute_force(&points, tolerance);
+            assert!(expected.len() > 1 && expected.iter().any(|c| c.len() > 1), "a degenerate case");
+            let got = euclidean_clusters(&points, tolerance, 1, points.len()).unwrap();
+            assert_eq!(got, expected, "n {n}, tolerance {tolerance}");
+            // Outliers under min_points dropped, the rest in the same order.
+            let kept: Vec<Vec<usize>> = expected.into_iter().filter(|c| c.len() >= 5).collect();
+            assert_eq!(euclidean_clusters(&points, tolerance, 5, points.len()).unwrap(), kept);
+        }
+        // Points beyond any cube's range (a tolerance far below the spacing) stay apart.
+        let far = [[1e6, 0.0, 0.0], [1e6, 1e-3, 0.0], [-1e6, 0.0, 0.0]];
+        assert_eq!(euclidean_clusters(&far, 1e-300, 1, 10).unwrap(), vec![vec![0], vec![1], vec![2]]);
     }
 }
