@@ -131,7 +131,10 @@ impl Body {
         }
         let fast = polynomial.fast();
         let radial = RadialTable::new(&fast, &interior_u);
-        let support = SupportTable::new(&fast, &radial, &interior_u);
+        // An ellipsoid's support map in closed form (the bounding ellipsoids of primitives, built
+        // at every scene import), any other body's by search.
+        let support =
+            SupportTable::quadratic(&polynomial).unwrap_or_else(|| SupportTable::new(&fast, &radial, &interior_u));
         // The box's six support points come from the support table (exact nodes on the axes)
         // rather than from six new solves, which would dominate loading a compound body of many
         // nodes.

@@ -81,6 +81,56 @@ impl SupportTable {
         Self { points }
     }
 
+    /// The table of a quadratic p (2d = 2, an ellipsoid) in closed form, with no search: with
+    /// p(u) = uᵀQu + bᵀu + c, Q positive definite, center u₀ = −Q⁻¹b/2 and ρ = 1 − p(u₀) > 0,
+    ///
+    /// ```text
+    /// u*(m) = u₀ + √ρ · Q⁻¹m / √(mᵀQ⁻¹m)
+    /// ```
+    ///
+    /// (∇p(u*) = 2√ρ·m/√(mᵀQ⁻¹m) ∥ m and p(u*) = 1: the KKT point of the module docs). `None`
+    /// when p is not of degree 2, Q is not positive definite, or ρ ≤ 0 (then [`Self::new`]
+    /// applies). A primitive's bounding ellipsoid is built this way when a scene is imported.
+    pub fn quadratic(p: &Polynomial) -> Option<Self> {
+        if p.degree() != 2 {
+            return None;
+        }
+        let (mut q, mut b, mut c) = (crate::math::Matrix3::zeros(), Vector3::zeros(), 0.0);
+        for (e, &v) in p.exponents().iter().zip(p.coefficients()) {
+            let at: Vec<usize> = (0..3).flat_map(|i| std::iter::repeat_n(i, e[i] as usize)).collect();
+            match at[..] {
+                [] => c += v,
+                [i] => b[i] += v,
+                [i, j] if i == j => q[(i, i)] += v,
+                [i, j] => {
+                    q[(i, j)] += 0.5 * v;
+                    q[(j, i)] += 0.5 * v;
+                }
+                _ => return None,
+            }
+        }
+        let chol = q.cholesky()?;
+        let center = chol.solve(&b) * -0.5;
+        let rho = 1.0 - (center.dot(&(q * center)) + b.dot(&center) + c);
+        if !(rho.is_finite() && rho > 0.0) {
+            return None;
+        }
+        let root = rho.sqrt();
+        let mut points = Box::new([[[0.0; 3]; NODES * NODES]; 6]);
+        for (face, nodes) in points.iter_mut().enumerate() {
+            for (k, node) in nodes.iter_mut().enumerate() {
+                let m = node_direction(face, k, SUPPORT_GRID);
+                let w = chol.solve(&m);
+                let u = center + w * (root / m.dot(&w).sqrt());
+                if !(u.x.is_finite() && u.y.is_finite() && u.z.is_finite()) {
+                    return None;
+                }
+                *node = [u.x, u.y, u.z];
+            }
+        }
+        Some(Self { points })
+    }
+
     /// The (interpolated) support point in the direction of `m` (any nonzero length; normalized
     /// units). Returns `None` for a zero or non-finite `m`.
     #[inline(always)]
@@ -431,6 +481,7 @@ pub fn bounding_box_from_support(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::math::Matrix3;
     use crate::poly::radial::face_direction;
     use crate::poly::Polynomial;
     use rand::{Rng, SeedableRng};
@@ -506,6 +557,51 @@ mod tests {
         }
         assert!(worst <= 0.07, "largest relative support-value error {worst}");
         assert!(table.support(&Vector3::zeros()).is_none());
+    }
+
+    #[test]
+    fn a_quadratic_table_in_closed_form_equals_the_searched_one() {
+        // A rotated, off-center ellipsoid: p(u) = (u − c)ᵀ Rᵀ D⁻² R (u − c) + 0.2 expanded into
+        // monomials (cross and linear terms), its table in closed form against the Newton search
+        // of `SupportTable::new`, node by node, and p = 1, ∇p ∥ m at every node.
+        let r = nalgebra::Rotation3::from_euler_angles(0.3, -0.7, 1.1).into_inner();
+        let d = Matrix3::from_diagonal(&Vector3::new(1.0 / 0.64, 1.0 / 0.09, 1.0 / 0.25));
+        let q = r.transpose() * d * r;
+        let c = Vector3::new(0.1, -0.2, 0.05);
+        let b = -2.0 * q * c;
+        let k = c.dot(&(q * c)) + 0.2;
+        let mut terms = vec![([0, 0, 0], k)];
+        for i in 0..3 {
+            let mut e = [0u8; 3];
+            e[i] = 1;
+            terms.push((e, b[i]));
+            for j in i..3 {
+                let mut e = [0u8; 3];
+                e[i] += 1;
+                e[j] += 1;
+                terms.push((e, if i == j { q[(i, i)] } else { 2.0 * q[(i, j)] }));
+            }
+        }
+        let p = Polynomial::from_terms(2, &terms).unwrap();
+        let closed = SupportTable::quadratic(&p).unwrap();
+        let fast = p.fast();
+        let searched = SupportTable::new(&fast, &RadialTable::new(&fast, &c), &c);
+        for face in 0..6 {
+            for (node, (u, v)) in closed.nodes()[face].iter().zip(&searched.nodes()[face]).enumerate() {
+                let (u, v) = (Vector3::from(*u), Vector3::from(*v));
+                assert!((u - v).norm() <= 1e-8, "face {face} node {node}: {u} against {v}");
+                let (value, gradient) = p.value_gradient(&u);
+                let m = node_direction(face, node, SUPPORT_GRID).normalize();
+                assert!((value - 1.0).abs() <= 1e-12, "p = {value}");
+                assert!((gradient.normalize() - m).norm() <= 1e-12);
+            }
+        }
+        // Not quadratic, or an empty sublevel set: no closed form.
+        let quartic = Polynomial::from_terms(4, &[([4, 0, 0], 1.0), ([0, 4, 0], 1.0), ([0, 0, 4], 1.0)]).unwrap();
+        assert!(SupportTable::quadratic(&quartic).is_none());
+        let empty =
+            Polynomial::from_terms(2, &[([2, 0, 0], 1.0), ([0, 2, 0], 1.0), ([0, 0, 2], 1.0), ([0, 0, 0], 1.5)]);
+        assert!(SupportTable::quadratic(&empty.unwrap()).is_none());
     }
 
     #[test]
