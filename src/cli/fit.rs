@@ -10,7 +10,7 @@
 
 use std::io::Write;
 use std::path::PathBuf;
-use sublevel::fit::sdp::{ConvexityCone, TraceBasis};
+use sublevel::fit::sdp::TraceBasis;
 use sublevel::fit::{auto, fit_points, mesh, FitMethod, FitProgress, FitSettings, FitStage};
 
 /// `--degree`: a total degree 2d, or `auto`.
@@ -222,12 +222,7 @@ pub fn fit_settings(args: &FitArgs) -> sublevel::Result<FitSettings> {
         normalization: args.normalization.parse()?,
         alternate_normalization: sublevel::fit::hull::parse_optional_normalization(&args.alternate_normalization)?,
         rows_in_rounds: false,
-        convexity_cone: ConvexityCone::ALL.into_iter().find(|c| c.name() == args.convexity_cone).ok_or_else(|| {
-            sublevel::Error::invalid(
-                "convexity_cone",
-                format!("must be one of psd, sdd, dd, got {:?}", args.convexity_cone),
-            )
-        })?,
+        convexity_cone: args.convexity_cone.parse()?,
         trace_basis: match args.trace_basis.as_str() {
             "both" => None,
             "plain" => Some(TraceBasis::Plain),

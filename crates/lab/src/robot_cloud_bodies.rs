@@ -57,8 +57,8 @@ pub(crate) fn bodies(
         threads: args.body_threads,
         ..CloudBodySettings::default()
     };
-    if let Some(cone) = ConvexityCone::ALL.into_iter().find(|c| c.name() == args.body_cone && *c != ConvexityCone::Psd)
-    {
+    let cone: ConvexityCone = args.body_cone.parse()?;
+    if cone != ConvexityCone::Psd {
         settings.fit = settings.fit.with_convexity_cone(cone).with_alternate_normalization(None);
     }
     let mut model = CloudBodies::new();

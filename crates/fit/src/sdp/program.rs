@@ -84,6 +84,18 @@ impl ConvexityCone {
     }
 }
 
+impl std::str::FromStr for ConvexityCone {
+    type Err = Error;
+
+    /// `psd`, `sdd` or `dd` ([`ConvexityCone::name`]).
+    fn from_str(s: &str) -> Result<Self> {
+        ConvexityCone::ALL
+            .into_iter()
+            .find(|c| c.name() == s)
+            .ok_or_else(|| Error::invalid("convexity_cone", format!("must be one of psd, sdd, dd, got {s:?}")))
+    }
+}
+
 /// What to build: degree, objective × matrix, and the relaxed-convexity parameter c.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ProblemSpec {

@@ -191,7 +191,7 @@ pub fn fit_cluster(
     let r = radius + settings.slack;
     let cover = settings.cover.vertices(points, indices, r);
     let fitted = match sublevel_fit::fit_points(&cover, &settings.fit, &mut |_| {}) {
-        Ok(body) => contain(body, points, indices, r, settings.cover),
+        Ok(body) => contain(body, points, indices, r, settings.cover, None),
         Err(e @ Error::Cancelled(_)) => return Err(e),
         Err(e) => Err(e.to_string()),
     };
@@ -208,16 +208,19 @@ pub fn fit_cluster(
 
 /// `body` with p ≤ 1 at every cover vertex of `points[indices]` (radius `r`), evaluated as every
 /// later check evaluates it: divided by its largest value there (and a hair more) when that is
-/// above 1. Err names why not (a rescaled polynomial refused as a body).
+/// above 1. `known`: that largest value when the caller has just computed it (saves one pass).
+/// Err names why not (a rescaled polynomial refused as a body).
 fn contain(
     mut body: Body,
     points: &[[Real; 3]],
     indices: &[usize],
     r: Real,
     cover: BallCover,
+    known: Option<Real>,
 ) -> std::result::Result<(Body, Real), String> {
+    let mut known = known;
     for _ in 0..4 {
-        let m = max_cover_value(&body, points, indices, r, cover, None);
+        let m = known.take().unwrap_or_else(|| max_cover_value(&body, points, indices, r, cover, None));
         if m <= 1.0 {
             return Ok((body, m));
         }
@@ -465,10 +468,14 @@ impl CloudBodies {
         );
         let mut fitted: Vec<Option<(ClusterFit, Real)>> = (0..candidates.len()).map(|_| None).collect();
         for (i, r) in todo.into_iter().zip(renewed) {
-            let (fit, growth) = r?;
-            if let (ClusterOutcome::Refitted { previous, .. }, true) = (outcomes[i], growth > 1.0) {
-                outcomes[i] = ClusterOutcome::Rescaled { previous, factor: growth / old[previous].growth };
-            }
+            let (fit, factor) = r?;
+            let growth = match (outcomes[i], factor) {
+                (ClusterOutcome::Refitted { previous, .. }, Some(factor)) => {
+                    outcomes[i] = ClusterOutcome::Rescaled { previous, factor };
+                    old[previous].growth * factor
+                }
+                _ => 1.0,
+            };
             fitted[i] = Some((fit, growth));
         }
         let fit_seconds = fits.elapsed().as_secs_f64();
@@ -520,32 +527,34 @@ impl CloudBodies {
 /// A new body for the cluster `points[indices]`: the old cluster's body rescaled when that keeps
 /// its growth since its last fit within `settings.rescale_limit` (its p divided by the largest
 /// p at the cover vertices of radius `radius + slack`, [`contain`]), else a fit
-/// ([`fit_cluster`]). Returns the body and its growth (1 for a fit).
+/// ([`fit_cluster`]). Returns the body and, when it was rescaled, the divisor of p.
 fn renew(
     old: Option<&ClusterBody>,
     points: &[[Real; 3]],
     indices: &[usize],
     radius: Real,
     settings: &CloudBodySettings,
-) -> Result<(ClusterFit, Real)> {
+) -> Result<(ClusterFit, Option<Real>)> {
     if let Some(old) = old.filter(|o| o.fallback.is_none() && settings.rescale_limit > o.growth) {
         let start = Instant::now();
         let r = radius + settings.slack;
         let allowed = settings.rescale_limit / old.growth;
         let v = max_cover_value(&old.body, points, indices, r, settings.cover, Some(allowed));
         if v <= allowed {
-            if let Ok((mut body, max_value)) = contain(old.body.as_ref().clone(), points, indices, r, settings.cover) {
-                let growth = old.growth * v.max(1.0);
+            let rescaled = contain(old.body.as_ref().clone(), points, indices, r, settings.cover, Some(v));
+            if let Ok((mut body, max_value)) = rescaled {
+                let factor = v.max(1.0);
+                let growth = old.growth * factor;
                 body.report.notes.retain(|n| !n.starts_with("rescaled"));
                 body.report
                     .notes
                     .push(format!("rescaled by {growth:.6} in all since its fit, for p ≤ 1 at every cover vertex"));
                 let seconds = start.elapsed().as_secs_f64();
-                return Ok((ClusterFit { body, max_value, fallback: None, seconds }, growth.max(1.0 + Real::EPSILON)));
+                return Ok((ClusterFit { body, max_value, fallback: None, seconds }, Some(factor)));
             }
         }
     }
-    Ok((fit_cluster(points, indices, radius, settings)?, 1.0))
+    Ok((fit_cluster(points, indices, radius, settings)?, None))
 }
 
 /// `f` of every item of `items`, in their order, on up to `threads` scoped threads (0: the
