@@ -106,6 +106,16 @@ struct LoadArgs {
     /// Meters per unit of a depth image's pixels.
     #[arg(long, default_value_t = 0.001)]
     depth_scale: f64,
+    /// How the checks see the cloud: `points` (every kept point a ball) or `bodies` (Euclidean
+    /// clusters, each fitted by a convex sos body; docs/point_clouds.md).
+    #[arg(long, default_value = "points", value_parser = ["points", "bodies"])]
+    model: String,
+    /// Degree 2d of the bodies model's bodies: 2 or 4 (server default 4).
+    #[arg(long)]
+    body_degree: Option<u32>,
+    /// Largest step within one cluster of the bodies model, meters (server default 0.05).
+    #[arg(long)]
+    body_tolerance: Option<f64>,
     /// Print the answer as one JSON object.
     #[arg(long)]
     json: bool,
@@ -319,6 +329,12 @@ fn load(args: LoadArgs) -> Result<()> {
         sensor_pose,
         noise_radius: args.noise_radius,
         filter: Some(filter),
+        model: if args.model == "bodies" { pb::CloudModel::Bodies } else { pb::CloudModel::Points } as i32,
+        bodies: Some(pb::CloudBodyOptions {
+            degree: args.body_degree.unwrap_or(0),
+            tolerance: args.body_tolerance.unwrap_or(0.0),
+            ..Default::default()
+        }),
     };
     let timeout = Duration::from_secs_f64(args.timeout.clamp(0.01, 3600.0));
     let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
@@ -350,6 +366,11 @@ fn load(args: LoadArgs) -> Result<()> {
                 "voxel": c.voxel, "outliers": c.outliers, "robot": c.robot, "kept": c.kept,
             },
             "memory_bytes": reply.memory_bytes,
+            "bodies": reply.bodies.as_ref().map(|b| serde_json::json!({
+                "clusters": b.clusters, "outliers": b.outliers, "reused": b.reused, "rescaled": b.rescaled,
+                "fitted": b.fitted, "fallbacks": b.fallbacks,
+                "cluster_seconds": b.cluster_seconds, "fit_seconds": b.fit_seconds,
+            })),
             "server_seconds": reply.seconds,
             "round_trip_seconds": seconds,
         });
@@ -367,6 +388,20 @@ fn load(args: LoadArgs) -> Result<()> {
             "  dropped: {} holes, {} out of range, {} outside the workspace, {} merged by the voxel grid, {} outliers, {} on the robot",
             c.holes, c.range, c.workspace, c.voxel, c.outliers, c.robot
         );
+        if let Some(b) = &reply.bodies {
+            println!(
+                "  bodies: {} clusters ({} reused, {} rescaled, {} fitted, {} fits failed to a ball), {} outlier points; \
+                 clustering {:.1} ms, fits {:.1} ms",
+                b.clusters,
+                b.reused,
+                b.rescaled,
+                b.fitted,
+                b.fallbacks,
+                b.outliers,
+                1e3 * b.cluster_seconds,
+                1e3 * b.fit_seconds
+            );
+        }
         println!(
             "  memory {:.1} KiB, server {:.2} ms, round trip {:.2} ms",
             reply.memory_bytes as f64 / 1024.0,

@@ -143,9 +143,22 @@ pub struct BenchArgs {
     /// more than this (MiB).
     #[arg(long)]
     max_rss_growth_mib: Option<f64>,
+    /// How the server models the cloud: `points` or `bodies` (its clusters fitted by sos bodies,
+    /// warm-started from the previous frame's; docs/point_clouds.md).
+    #[arg(long, value_enum, default_value_t = BenchModel::Points)]
+    model: BenchModel,
     /// Write the figures as JSON to this file.
     #[arg(long)]
     json: Option<PathBuf>,
+}
+
+/// The cloud model of `--model`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum BenchModel {
+    /// Every kept point a ball.
+    Points,
+    /// Euclidean clusters, each fitted by a convex sos body.
+    Bodies,
 }
 
 /// The Panda's MotionBenchMaker start state.
@@ -192,6 +205,10 @@ pub fn run(args: BenchArgs) -> Result<()> {
     let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
     let outcome = runtime.block_on(async {
         let (mut session, joints) = Session::open(&addr, token, robot_file).await?;
+        session.model = match args.model {
+            BenchModel::Points => pb::CloudModel::Points,
+            BenchModel::Bodies => pb::CloudModel::Bodies,
+        } as i32;
         let result = match session.setup(joints, args.config.as_deref()).await {
             Ok(()) if soak => soak_run(&args, &frames, &mut session, &addr, pid).await,
             Ok(()) => bench_run(&args, &frames, &mut session, pid).await,
@@ -364,6 +381,8 @@ struct Session {
     scene: String,
     robot: String,
     check: pb::CheckConfigurationsRequest,
+    /// `pb::CloudModel` of every update.
+    model: i32,
 }
 
 impl Session {
@@ -382,7 +401,14 @@ impl Session {
             .into_inner()
             .robot
             .ok_or_else(|| io("UploadRobot", "no robot in the answer"))?;
-        let session = Session { client, token, scene: String::new(), robot: robot.robot_id, check: Default::default() };
+        let session = Session {
+            client,
+            token,
+            scene: String::new(),
+            robot: robot.robot_id,
+            check: Default::default(),
+            model: pb::CloudModel::Points as i32,
+        };
         Ok((session, robot.joint_names))
     }
 
@@ -437,6 +463,8 @@ impl Session {
             sensor_pose: Some(pose_to_proto(camera)),
             noise_radius: None,
             filter: None,
+            model: self.model,
+            bodies: None,
         }
     }
 
@@ -458,6 +486,10 @@ impl Session {
             t.check.saturating_record(micros(answered - updated));
             t.kept.push(c.kept);
             t.holes.push(c.holes);
+            if let Some(b) = &r.bodies {
+                t.bodies.push([b.clusters, b.reused, b.rescaled, b.fitted].map(u64::from));
+                t.body_seconds.push([b.cluster_seconds, b.fit_seconds]);
+            }
             t.input = c.input;
             t.memory = r.memory_bytes;
             t.colliding += u64::from(a.collides.first().copied().unwrap_or(false));
@@ -484,6 +516,10 @@ struct Tally {
     first_check: Histogram<u64>,
     check: Histogram<u64>,
     kept: Vec<u64>,
+    /// The bodies model's clusters, reused, rescaled and fitted per update (`--model bodies`).
+    bodies: Vec<[u64; 4]>,
+    /// The bodies model's clustering and fitting seconds per update.
+    body_seconds: Vec<[f64; 2]>,
     holes: Vec<u64>,
     input: u64,
     memory: u64,
@@ -501,6 +537,8 @@ impl Tally {
             check: histogram(),
             kept: Vec::new(),
             holes: Vec::new(),
+            bodies: Vec::new(),
+            body_seconds: Vec::new(),
             input: 0,
             memory: 0,
             colliding: 0,
@@ -546,6 +584,24 @@ impl Tally {
             self.colliding,
             self.update.len()
         );
+        let bodies: [u64; 4] = std::array::from_fn(|k| self.bodies.iter().map(|b| b[k]).sum());
+        if !self.bodies.is_empty() {
+            let ms = |k: usize| {
+                let mut v: Vec<f64> = self.body_seconds.iter().map(|s| 1e3 * s[k]).collect();
+                v.sort_by(f64::total_cmp);
+                v[v.len() / 2]
+            };
+            println!(
+                "  bodies: clusters median {}; of all clusters {} reused, {} rescaled, {} fitted; \
+                 clustering median {:.2} ms, reuse checks and fits median {:.2} ms",
+                median(&self.bodies.iter().map(|b| b[0]).collect::<Vec<_>>()),
+                bodies[1],
+                bodies[2],
+                bodies[3],
+                ms(0),
+                ms(1)
+            );
+        }
         let q = |h: &Histogram<u64>| serde_json::json!({"median_ms": ms(h, 0.5), "p95_ms": ms(h, 0.95), "max_ms": h.max() as f64 / 1e3});
         serde_json::json!({
             "format": self.name(),
@@ -559,6 +615,9 @@ impl Tally {
             "holes_median": median(&self.holes),
             "cloud_memory_bytes": self.memory,
             "colliding": self.colliding,
+            "bodies": (!self.bodies.is_empty()).then(|| serde_json::json!({
+                "reused": bodies[1], "rescaled": bodies[2], "fitted": bodies[3],
+            })),
         })
     }
 }

@@ -187,3 +187,46 @@ def test_the_self_filter_drops_the_arm(client, cell):
     assert (r.counts.robot, r.counts.kept) == (40, 3)
     assert not client.check_configurations(None, [[0.0]], scene=scene).collides[0]
     client.remove_point_cloud(scene, "arm view")
+
+
+def blob(n=200, radius=0.05, j=1.0):
+    """``n`` points on a sphere of ``radius`` about the arm's ball at ``j`` (a Fibonacci sphere)."""
+    k = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * k / n
+    a = np.arange(n) * 2.399963229728653
+    s = np.sqrt(1.0 - z * z)
+    return arm_ball(j) + radius * np.stack([s * np.cos(a), s * np.sin(a), z], axis=1)
+
+
+def test_the_bodies_model_contains_the_points_balls(client, cell):
+    _, scene = cell
+    inliers = blob()
+    lone = np.array([[-0.8, 0.0, 0.3], [0.0, -0.9, -0.4]])
+    js = np.linspace(-3.0, 3.0, 61)
+    client.update_point_cloud(scene, "camera", points=to_sensor(inliers), sensor_pose=SENSOR, voxel=0.0)
+    points = client.check_configurations(None, js[:, None], scene=scene, distance=True)
+
+    frame = to_sensor(np.vstack([inliers, lone]))
+    r = client.update_point_cloud(scene, "camera", points=frame, sensor_pose=SENSOR, voxel=0.0, model="bodies")
+    assert r.bodies is not None
+    assert (r.bodies.clusters, r.bodies.outliers, r.bodies.fitted) == (1, 2, 1)
+    bodies = client.check_configurations(None, js[:, None], scene=scene, distance=True)
+    assert bodies.scene_version == r.scene_version
+    for k, j in enumerate(js):
+        # The body contains every inlier's ball: never free where they collide, never farther.
+        if points.collides[k]:
+            assert bodies.collides[k], j
+        elif not bodies.collides[k]:
+            assert bodies.distance[k] <= points.distance[k] + 1e-9, j
+            assert bodies.world_object[k] == "camera"
+    assert np.sum(points.collides) >= 3
+
+    again = client.update_point_cloud(scene, "camera", points=frame, sensor_pose=SENSOR, voxel=0.0, model="bodies")
+    assert (again.bodies.reused, again.bodies.fitted) == (1, 0)
+    (info,) = client.get_scene(scene).point_clouds
+    assert (info.model, info.bodies, info.points) == ("bodies", 1, 202)
+    with pytest.raises(ValueError, match="body_degree"):
+        client.update_point_cloud(scene, "camera", points=frame, model="bodies", body_degree=6)
+    with pytest.raises(ValueError, match="model"):
+        client.update_point_cloud(scene, "camera", points=frame, model="octree")
+    client.remove_point_cloud(scene, "camera")

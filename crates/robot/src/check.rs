@@ -205,6 +205,7 @@ impl<'r> RobotChecker<'r> {
             .map(|o| match &o.shape {
                 WorldShape::Primitive(p) => exact_primitive(p),
                 WorldShape::Mesh(m) => ExactShape { shape: m.exact.clone(), offset: Isometry3::identity() },
+                WorldShape::Body(b) => ExactShape { shape: b.exact.clone(), offset: Isometry3::identity() },
                 // Never used: a cloud's pairs go to its radius queries.
                 WorldShape::Points(c) => exact_primitive(&Primitive::Sphere { radius: c.radius() }),
             })
@@ -512,6 +513,7 @@ impl<'r> RobotChecker<'r> {
         match &self.world[o].shape {
             WorldShape::Primitive(p) => Some(ShapeRef::Primitive(p)),
             WorldShape::Mesh(m) => m.body().map(ShapeRef::Body),
+            WorldShape::Body(b) => Some(ShapeRef::Body(b.body())),
             WorldShape::Points(_) => None,
         }
     }

@@ -188,7 +188,7 @@ pub(crate) fn exact_collides(
             .map_err(unsupported);
     }
     Ok(!matches!(
-        parry3d_f64::query::closest_points(pa, a.shape.as_ref(), pb, b.shape.as_ref(), padding).map_err(unsupported)?,
+        crate::world::closest_points(pa, a.shape.as_ref(), pb, b.shape.as_ref(), padding).map_err(unsupported)?,
         ClosestPoints::Disjoint
     ))
 }
@@ -275,8 +275,9 @@ pub(crate) fn exact_pair_within(
     };
     let points = match points {
         Some(points) => points,
-        None => parry3d_f64::query::closest_points(pa, a.shape.as_ref(), pb, b.shape.as_ref(), max_dist)
-            .map_err(unsupported)?,
+        None => {
+            crate::world::closest_points(pa, a.shape.as_ref(), pb, b.shape.as_ref(), max_dist).map_err(unsupported)?
+        }
     };
     match points {
         ClosestPoints::Intersecting => Ok(PairOutcome::Collides),
@@ -386,7 +387,7 @@ fn triangles_touch_in(
         }
         parry3d_f64::query::intersection_test(&identity, &ta, rel, &tb).is_ok_and(|r| r.intersecting)
     } else {
-        parry3d_f64::query::closest_points(&identity, &ta, rel, &tb, padding)
+        crate::world::closest_points(&identity, &ta, rel, &tb, padding)
             .is_ok_and(|c| !matches!(c, ClosestPoints::Disjoint))
     }
 }
@@ -546,7 +547,7 @@ pub(crate) fn mesh_touches_solid(
         if padding == 0.0 {
             parry3d_f64::query::intersection_test(&identity, &triangle, &rel, shape).is_ok_and(|r| r.intersecting)
         } else {
-            parry3d_f64::query::closest_points(&identity, &triangle, &rel, shape, padding)
+            crate::world::closest_points(&identity, &triangle, &rel, shape, padding)
                 .is_ok_and(|c| !matches!(c, ClosestPoints::Disjoint))
         }
     }))
@@ -618,7 +619,7 @@ pub(crate) fn mesh_solid_closest_points(
         if triangle_box_gap(&triangle, &r, &center, &hs) - hair >= best - slack.margin(best) {
             return None;
         }
-        let points = parry3d_f64::query::closest_points(&identity, &triangle, &rel, shape, best).ok()?;
+        let points = crate::world::closest_points(&identity, &triangle, &rel, shape, best).ok()?;
         Some(match points {
             ClosestPoints::WithinMargin(p1, p2) => ((p1 - p2).length(), points),
             ClosestPoints::Intersecting => (-Real::MAX, points),
@@ -687,7 +688,7 @@ pub(crate) fn meshes_closest_points(
     let mut closest = None;
     // The last closest pair first: its distance, an upper bound, prunes the descent from the start.
     if let Some((i, j)) = hint.get().filter(|&(i, j)| i < ma.num_triangles() as u32 && j < mb.num_triangles() as u32) {
-        match parry3d_f64::query::closest_points(&identity, &ma.triangle(i), &rel, &mb.triangle(j), max_dist) {
+        match crate::world::closest_points(&identity, &ma.triangle(i), &rel, &mb.triangle(j), max_dist) {
             Ok(ClosestPoints::Intersecting) => return ClosestPoints::Intersecting,
             Ok(ClosestPoints::WithinMargin(p1, p2)) => {
                 best.set((p1 - p2).length());
@@ -707,7 +708,7 @@ pub(crate) fn meshes_closest_points(
         {
             continue;
         }
-        match parry3d_f64::query::closest_points(&identity, &ta, &rel, &tb, margin) {
+        match crate::world::closest_points(&identity, &ta, &rel, &tb, margin) {
             Ok(ClosestPoints::Intersecting) => {
                 hint.set(Some((i, j)));
                 return ClosestPoints::Intersecting;

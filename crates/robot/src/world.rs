@@ -1,11 +1,20 @@
-//! The world a robot is checked in: named objects, each an exact primitive, a triangle mesh or a
-//! point cloud ([`crate::cloud`]), placed in the world frame.
+//! The world a robot is checked in: named objects, each an exact primitive, a triangle mesh, a
+//! point cloud ([`crate::cloud`]) or a sos-convex body (a cloud's cluster,
+//! [`crate::cloud::bodies`]), placed in the world frame.
 //!
 //! A mesh object is exact the way a link mesh is: its triangles decide contact (parry's BVH, as
 //! coal and FCL decide it). It may carry a sos-convex body that contains it — the root of the
 //! compound body it was fitted to (paper §V) — which then gives the cheap lower bound of the
 //! checks' model stage; without one, pairs go from the ball and box gaps straight to the
 //! triangles.
+//!
+//! A body object is its own exact shape: the convex set {p ≤ 1}. Its sos bound is the body
+//! itself, and the exact stage gives it to parry as a support map ([`body_shape`]), so a link
+//! mesh meets it triangle by triangle, as it meets a primitive.
+
+mod body_shape;
+
+pub(crate) use body_shape::closest_points;
 
 use crate::cloud::PointCloud;
 use crate::fitted::{bounding_ball, bounding_box, exact_trimesh, validate_mesh};
@@ -42,6 +51,11 @@ impl WorldObject {
         Self { name: name.into(), shape: WorldShape::Points(cloud), pose }
     }
 
+    /// A sos-convex body named `name` at `pose`.
+    pub fn body(name: impl Into<String>, body: Arc<WorldBody>, pose: Isometry3) -> Self {
+        Self { name: name.into(), shape: WorldShape::Body(body), pose }
+    }
+
     /// The primitive, for a primitive object.
     pub fn as_primitive(&self) -> Option<&Primitive> {
         match &self.shape {
@@ -60,6 +74,8 @@ pub enum WorldShape {
     Mesh(Arc<WorldMesh>),
     /// A point cloud: a ball of the cloud's noise radius about every point ([`crate::cloud`]).
     Points(Arc<PointCloud>),
+    /// A convex sos body, its own exact shape (module docs).
+    Body(Arc<WorldBody>),
 }
 
 impl WorldShape {
@@ -69,6 +85,7 @@ impl WorldShape {
             WorldShape::Primitive(p) => p.kind(),
             WorldShape::Mesh(_) => "mesh",
             WorldShape::Points(_) => "points",
+            WorldShape::Body(_) => "body",
         }
     }
 
@@ -79,6 +96,7 @@ impl WorldShape {
             WorldShape::Primitive(p) => (Vector3::zeros(), p.bounding_radius()),
             WorldShape::Mesh(m) => m.ball,
             WorldShape::Points(c) => c.ball(),
+            WorldShape::Body(b) => b.ball,
         }
     }
 
@@ -89,6 +107,7 @@ impl WorldShape {
             WorldShape::Primitive(p) => p.local_half_extents().map(|h| (Vector3::zeros(), h)),
             WorldShape::Mesh(m) => Some(m.local_box),
             WorldShape::Points(c) => Some(c.local_box()),
+            WorldShape::Body(b) => Some(b.local_box),
         }
     }
 }
@@ -150,5 +169,44 @@ impl WorldMesh {
     /// The sos-convex body containing the mesh, when it has one.
     pub fn body(&self) -> Option<&Body> {
         self.body.as_ref()
+    }
+}
+
+/// A convex sos body obstacle with its parry shape, built once (see the module docs).
+#[derive(Clone, Debug)]
+pub struct WorldBody {
+    body: Arc<Body>,
+    pub(crate) exact: parry3d_f64::shape::SharedShape,
+    ball: (Vector3, Real),
+    local_box: (Vector3, Vector3),
+}
+
+impl WorldBody {
+    /// The obstacle {x : p(x) ≤ 1} of a convex `body` (its own frame, meters).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `body` for a nonconvex body (it has no certified
+    /// bounding box or support bound, and the exact stage needs a convex set).
+    pub fn new(body: Arc<Body>) -> Result<Self> {
+        let nonconvex = || Error::invalid("body", "is not convex: a body obstacle must be a convex sublevel set");
+        let (c, h) = body.bounding_box().ok_or_else(nonconvex)?;
+        let (sc, r) = body.bounding_sphere().ok_or_else(nonconvex)?;
+        let shape = body_shape::BodyShape::new(body.clone()).ok_or_else(nonconvex)?;
+        Ok(Self {
+            body,
+            exact: parry3d_f64::shape::SharedShape(Arc::new(shape)),
+            ball: (sc.coords, r),
+            local_box: (c.coords, h),
+        })
+    }
+
+    /// The body.
+    pub fn body(&self) -> &Body {
+        &self.body
+    }
+
+    /// The shared body.
+    pub fn shared(&self) -> &Arc<Body> {
+        &self.body
     }
 }

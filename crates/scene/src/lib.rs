@@ -58,10 +58,10 @@ pub use answer::{
     PRECISION_LIMIT,
 };
 pub use catalog::{
-    bounding_body, BodyEntry, BodyFacts, BuiltBody, BuiltCloud, Catalog, CloudFrame, CloudSet, CloudUpdate,
-    InstanceView, PlacedRobot, PosedInstance, RobotEntry, RobotWorld, SceneCloud, SceneRobotCheck, SceneView, WarmUp,
-    DEFAULT_MAX_CLOUD_BYTES, DEFAULT_NOISE_RADIUS, DEFAULT_SELF_FILTER_PADDING, MAX_CLOUDS_PER_SCENE, MAX_JOB_RECORDS,
-    MAX_NAME_BYTES,
+    bounding_body, BodyEntry, BodyFacts, BuiltBody, BuiltCloud, Catalog, CloudBodiesModel, CloudFrame, CloudSet,
+    CloudUpdate, InstanceView, PlacedRobot, PosedInstance, RobotEntry, RobotWorld, SceneCloud, SceneRobotCheck,
+    SceneView, WarmUp, BODY_MEMORY_BYTES, DEFAULT_MAX_CLOUD_BYTES, DEFAULT_NOISE_RADIUS, DEFAULT_SELF_FILTER_PADDING,
+    MAX_CLOUDS_PER_SCENE, MAX_JOB_RECORDS, MAX_NAME_BYTES,
 };
 
 use serde::{Deserialize, Serialize};

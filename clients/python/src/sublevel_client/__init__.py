@@ -22,7 +22,7 @@ generated from the repository's ``proto/`` when the package is built.
 """
 
 from .bodies import ellipsoid_body, sphere_body
-from .clouds import FilterCounts, PointCloudInfo, PointCloudUpdate
+from .clouds import CloudBodiesReport, FilterCounts, PointCloudInfo, PointCloudUpdate
 from .client import DEFAULT_ADDR, Client, PlannerStream, Query
 from .errors import SublevelError
 from .poses import Pose, as_pose, matrix_to_quat, quat_from_axis_angle, quat_multiply, quat_to_matrix
@@ -88,6 +88,7 @@ __all__ = [
     "InstanceMotionColumns",
     "MotionColumns",
     "PlanResult",
+    "CloudBodiesReport",
     "PointCloudInfo",
     "PointCloudUpdate",
     "QueryResult",

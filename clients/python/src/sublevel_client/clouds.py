@@ -54,6 +54,44 @@ class FilterCounts:
 
 
 @dataclass(frozen=True)
+class CloudBodiesReport:
+    """What the bodies model did with a frame (``model="bodies"``).
+
+    Attributes:
+        clusters: clusters of the frame, each one convex sos body.
+        outliers: points dropped as outliers (in clusters under ``min_points``).
+        reused: clusters whose previous body still contains every new point ball (kept).
+        rescaled: clusters whose previous body was rescaled to contain them, with no fit.
+        fitted: clusters fitted (new, or grown past the rescale limit).
+        fallbacks: fits that failed and got a bounding ball.
+        cluster_seconds: the server's time clustering.
+        fit_seconds: the server's time on reuse checks, rescales and fits.
+    """
+
+    clusters: int
+    outliers: int
+    reused: int
+    rescaled: int
+    fitted: int
+    fallbacks: int
+    cluster_seconds: float
+    fit_seconds: float
+
+    @classmethod
+    def from_proto(cls, m) -> "CloudBodiesReport":
+        return cls(
+            clusters=int(m.clusters),
+            outliers=int(m.outliers),
+            reused=int(m.reused),
+            rescaled=int(m.rescaled),
+            fitted=int(m.fitted),
+            fallbacks=int(m.fallbacks),
+            cluster_seconds=float(m.cluster_seconds),
+            fit_seconds=float(m.fit_seconds),
+        )
+
+
+@dataclass(frozen=True)
 class PointCloudUpdate:
     """The answer of :meth:`CloudCalls.update_point_cloud`.
 
@@ -62,13 +100,16 @@ class PointCloudUpdate:
             at least this one saw this frame (or a later one).
         counts: what the filters did (:class:`FilterCounts`).
         memory_bytes: bytes the cloud holds on the server.
-        seconds: the server's time on the frame (decoding, filters, k-d tree).
+        seconds: the server's time on the frame (decoding, filters, k-d tree, bodies).
+        bodies: what the bodies model did (:class:`CloudBodiesReport`); None for the points
+            model.
     """
 
     scene_version: int
     counts: FilterCounts
     memory_bytes: int
     seconds: float
+    bodies: Optional[CloudBodiesReport] = None
 
 
 @dataclass(frozen=True)
@@ -82,6 +123,8 @@ class PointCloudInfo:
         memory_bytes: bytes it holds on the server.
         version: the scene version its update produced.
         counts: what the filters of its frame did.
+        model: ``"points"`` or ``"bodies"``.
+        bodies: its bodies (0 for the points model).
     """
 
     name: str
@@ -90,6 +133,8 @@ class PointCloudInfo:
     memory_bytes: int
     version: int
     counts: FilterCounts
+    model: str = "points"
+    bodies: int = 0
 
     @classmethod
     def from_proto(cls, m) -> "PointCloudInfo":
@@ -100,6 +145,8 @@ class PointCloudInfo:
             memory_bytes=int(m.memory_bytes),
             version=int(m.version),
             counts=FilterCounts.from_proto(m.counts),
+            model="bodies" if m.model == pb.CLOUD_MODEL_BODIES else "points",
+            bodies=int(m.bodies),
         )
 
 
@@ -201,6 +248,11 @@ class CloudCalls:
         outliers: Optional[Tuple[int, float]] = None,
         self_filter: bool = False,
         self_filter_padding: float = 0.02,
+        model: str = "points",
+        body_degree: int = 4,
+        body_tolerance: float = 0.05,
+        body_min_points: int = 10,
+        body_rescale_limit: float = 1.25,
     ) -> PointCloudUpdate:
         """Sets (or replaces) the point cloud ``name`` of ``scene`` from one sensor frame: the
         server filters it, keeps each point as a ball of ``noise_radius`` in the world frame, and
@@ -228,8 +280,18 @@ class CloudCalls:
             self_filter: drop the points whose ball comes within ``self_filter_padding`` meters
                 of the scene's robot at the scene's joint positions (the arm in the sensor's
                 view).
+            model: how the checks see the cloud: ``"points"`` (every kept point a ball; exact
+                against the filtered cloud) or ``"bodies"`` (the points' Euclidean clusters, each
+                fitted by a convex sos body containing its points' balls, warm-started from this
+                cloud's previous bodies: a body that still contains its cluster is kept).
+            body_degree: degree 2d of the bodies, 2 or 4.
+            body_tolerance: largest step within one cluster, meters.
+            body_min_points: clusters with fewer points are outliers, dropped.
+            body_rescale_limit: largest growth of a body by rescaling since its last fit (>= 1;
+                1 never rescales).
 
-        Returns a :class:`PointCloudUpdate` (scene version, filter counts, memory, server time).
+        Returns a :class:`PointCloudUpdate` (scene version, filter counts, memory, server time,
+        and for the bodies model what it did).
         Raises ValueError naming the argument for a malformed array or setting (nothing is sent),
         and SublevelError for the server's refusals: INVALID_ARGUMENT naming the field
         (``name``, ``filter.voxel``, ``depth.width``, …), NOT_FOUND for the scene,
@@ -257,12 +319,27 @@ class CloudCalls:
                 self_filter_padding=self_filter_padding,
             )
         )
+        if model not in ("points", "bodies"):
+            raise ValueError(f"`model`: 'points' or 'bodies', got {model!r}")
+        if model == "bodies":
+            if body_degree not in (2, 4):
+                raise ValueError(f"`body_degree`: 2 or 4, got {body_degree!r}")
+            req.model = pb.CLOUD_MODEL_BODIES
+            req.bodies.CopyFrom(
+                pb.CloudBodyOptions(
+                    degree=int(body_degree),
+                    tolerance=_meters(body_tolerance, "body_tolerance", positive=True),
+                    min_points=int(body_min_points),
+                    rescale_limit=float(body_rescale_limit),
+                )
+            )
         r = self._call("UpdatePointCloud", req)
         return PointCloudUpdate(
             scene_version=int(r.scene_version),
             counts=FilterCounts.from_proto(r.counts),
             memory_bytes=int(r.memory_bytes),
             seconds=float(r.seconds),
+            bodies=CloudBodiesReport.from_proto(r.bodies) if r.HasField("bodies") else None,
         )
 
     def remove_point_cloud(self, scene: str, name: str) -> int:

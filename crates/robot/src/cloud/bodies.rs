@@ -433,12 +433,17 @@ impl CloudBodies {
         let old = if self.key == Some(key) { self.clusters.as_slice() } else { &[] };
         let matches = match_clusters(old, &candidates, settings);
 
+        // The reuse checks, on the fit threads too (a pass over every matched point's cover).
         let checks = Instant::now();
-        let mut outcomes = Vec::with_capacity(candidates.len());
-        for (c, m) in candidates.iter().zip(&matches) {
-            outcomes.push(match *m {
+        let all: Vec<usize> = (0..candidates.len()).collect();
+        let mut outcomes = in_parallel(
+            &all,
+            |i| if matches[i].is_some() { candidates[i].indices.len() } else { 0 },
+            settings.threads,
+            |i| match matches[i] {
                 None => ClusterOutcome::Added,
                 Some(j) => {
+                    let c = &candidates[i];
                     let v = max_cover_value(&old[j].body, points, &c.indices, radius, settings.cover, Some(1.0));
                     if v <= 1.0 {
                         ClusterOutcome::Reused { previous: j, unchanged: old[j].fingerprint == c.fingerprint }
@@ -446,8 +451,8 @@ impl CloudBodies {
                         ClusterOutcome::Refitted { previous: j, max_value: v }
                     }
                 }
-            });
-        }
+            },
+        );
         let check_seconds = checks.elapsed().as_secs_f64();
 
         // Every rescale and fit first: a cancelled fit leaves `self` as it was.

@@ -63,6 +63,7 @@ fn targets(world: &[WorldObject]) -> Vec<Target> {
                     (e.shape, e.offset)
                 }
                 WorldShape::Mesh(m) => (m.exact.clone(), Isometry3::identity()),
+                WorldShape::Body(b) => (b.exact.clone(), Isometry3::identity()),
                 WorldShape::Points(_) => return None,
             };
             let (c, radius) = o.shape.ball();

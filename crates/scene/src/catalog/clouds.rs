@@ -8,8 +8,17 @@
 //! cloud    world-frame points, each a ball of the noise radius (sublevel_robot::cloud)
 //!   │      set_point_cloud: under the scene's lock — name and limits checked, the scene's
 //!   ▼      cloud set replaced whole, the scene version raised
-//! scene    robot_world adds every cloud as WorldObject::points(name, cloud, identity)
+//! scene    robot_world adds every cloud as WorldObject::points(name, cloud, identity), or, for
+//!          the bodies model, every cluster body as WorldObject::body(name, body, identity)
 //! ```
+//!
+//! **Two models.** A cloud is its points (each a ball of the noise radius; exact against the
+//! filtered cloud) or, when the frame asks for it, bodies ([`Catalog::build_cloud_bodies`]): the
+//! points' Euclidean clusters, each fitted by a convex sos body containing its points' balls
+//! ([`sublevel_robot::cloud::bodies`]). The bodies are updated online: the previous frame's
+//! bodies of the same cloud are the warm start, so a cluster whose body still contains it keeps
+//! it, a slightly grown one is rescaled, and only the rest are fitted. Switching a cloud from one
+//! model to the other starts the bodies afresh.
 //!
 //! **In memory only.** Clouds are sensor data, replaced at sensor rate: they live with the
 //! scene's in-memory state and are never written to the store. A restarted server, or another
@@ -38,8 +47,10 @@ use std::collections::BTreeMap;
 use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use sublevel_core::math::{Isometry3, Real};
+use sublevel_robot::cloud::bodies::{CloudBodies, CloudBodySettings, UpdateReport};
 use sublevel_robot::cloud::filter::{self_filter, CloudFilter, FilterCounts};
 use sublevel_robot::cloud::{PointCloud, MAX_NOISE_RADIUS};
+use sublevel_robot::world::WorldBody;
 
 /// Most point clouds one scene holds; one more is `ResourceExhausted` naming `name`.
 pub const MAX_CLOUDS_PER_SCENE: usize = 16;
@@ -53,6 +64,22 @@ pub const DEFAULT_NOISE_RADIUS: Real = 0.01;
 /// The default padding of the self filter (meters).
 pub const DEFAULT_SELF_FILTER_PADDING: Real = 0.02;
 
+/// Bytes counted per body of the bodies model, for the memory limit: an upper estimate of a
+/// degree-4 body with its query tables (polynomial forms, support and radial tables, bounds).
+pub const BODY_MEMORY_BYTES: usize = 64 << 10;
+
+/// A cloud's bodies model (module docs): the clusters with their bodies, kept for the next
+/// frame's warm start, and the bodies as world objects.
+#[derive(Clone, Debug)]
+pub struct CloudBodiesModel {
+    /// The clusters and their bodies (world frame, meters).
+    pub state: CloudBodies,
+    /// Each cluster's body as an obstacle, in the order of the clusters.
+    pub objects: Vec<Arc<WorldBody>>,
+    /// What the update that made them did.
+    pub report: UpdateReport,
+}
+
 /// A point cloud of a scene (module docs).
 #[derive(Debug)]
 pub struct SceneCloud {
@@ -65,8 +92,10 @@ pub struct SceneCloud {
     pub counts: FilterCounts,
     /// The scene version its update produced.
     pub version: u64,
-    /// Bytes it holds ([`PointCloud::memory_bytes`]).
+    /// Bytes it holds ([`PointCloud::memory_bytes`], and [`BODY_MEMORY_BYTES`] per body).
     pub memory_bytes: usize,
+    /// The bodies model, when the cloud has it; `None`: the points model.
+    pub bodies: Option<Arc<CloudBodiesModel>>,
 }
 
 /// A scene's point clouds by name.
@@ -100,6 +129,15 @@ pub struct BuiltCloud {
     pub cloud: PointCloud,
     /// What each filter dropped.
     pub counts: FilterCounts,
+    /// The bodies model ([`Catalog::build_cloud_bodies`]); `None`: the points model.
+    pub bodies: Option<CloudBodiesModel>,
+}
+
+impl BuiltCloud {
+    /// Bytes the cloud will hold: its points and tree, and [`BODY_MEMORY_BYTES`] per body.
+    pub fn memory_bytes(&self) -> usize {
+        self.cloud.memory_bytes() + self.bodies.as_ref().map_or(0, |b| b.objects.len() * BODY_MEMORY_BYTES)
+    }
 }
 
 /// What [`Catalog::set_point_cloud`] did.
@@ -194,7 +232,37 @@ impl Catalog {
             Error::InvalidArgument { field, reason } if field == "radius" => Error::invalid("noise_radius", reason),
             other => other,
         })?;
-        Ok(BuiltCloud { cloud, counts })
+        Ok(BuiltCloud { cloud, counts, bodies: None })
+    }
+
+    /// Gives `built` the bodies model (module docs): its points clustered and each cluster fitted
+    /// by a convex body, warm-started from the bodies of the cloud `name` of scene `scene_id`
+    /// when it has them ([`CloudBodies::update`]). Fits take tens of milliseconds each, on
+    /// `settings.threads` threads, holding no lock: call it off the async workers.
+    ///
+    /// # Errors
+    /// [`Error::NotFound`] (kind `scene`); [`Error::InvalidArgument`] naming a field of
+    /// `settings` ([`CloudBodySettings::validate`]); [`Error::Cancelled`] when the request was
+    /// abandoned.
+    pub fn build_cloud_bodies(
+        &self,
+        scene_id: &str,
+        name: &str,
+        built: &mut BuiltCloud,
+        settings: &CloudBodySettings,
+    ) -> Result<()> {
+        let previous = self.with_scene(scene_id, |s| {
+            Ok(s.clouds.get(name).and_then(|c| c.bodies.as_ref()).map(|b| b.state.clone()))
+        })?;
+        let mut state = previous.unwrap_or_default();
+        let report = state.update(built.cloud.points(), built.cloud.radius(), settings)?;
+        let objects = state
+            .clusters()
+            .iter()
+            .map(|c| WorldBody::new(c.body.clone()).map(Arc::new))
+            .collect::<Result<Vec<_>>>()?;
+        built.bodies = Some(CloudBodiesModel { state, objects, report });
+        Ok(())
     }
 
     /// Sets (or replaces) the cloud `name` of scene `scene_id` to `built`, atomically, under the
@@ -214,8 +282,9 @@ impl Catalog {
         built: BuiltCloud,
         max_total_bytes: usize,
     ) -> Result<CloudUpdate> {
-        let new = built.cloud.memory_bytes();
+        let new = built.memory_bytes();
         let cloud = Arc::new(built.cloud);
+        let bodies = built.bodies.map(Arc::new);
         self.with_scene(scene_id, |s| {
             check_cloud_name(s, name)?;
             let old = s.clouds.get(name).map(|c| c.memory_bytes);
@@ -242,7 +311,8 @@ impl Catalog {
                     ))
                 })?;
             let version = s.changed();
-            let entry = SceneCloud { name: name.to_owned(), cloud, counts: built.counts, version, memory_bytes: new };
+            let entry =
+                SceneCloud { name: name.to_owned(), cloud, counts: built.counts, version, memory_bytes: new, bodies };
             let mut next = (*s.clouds).clone();
             next.insert(name.to_owned(), Arc::new(entry));
             s.clouds = Arc::new(next);

@@ -368,3 +368,61 @@ fn check_scene_reports_instances_near_a_cloud() {
     let p = check.pairs.iter().find(|p| p.first == near && p.second == "cam").unwrap();
     assert!(p.distance.answer.result.overlapping);
 }
+
+#[test]
+fn the_bodies_model_is_one_body_per_cluster_in_checks_and_check_scene() {
+    let c = Catalog::open(Box::new(MemoryStore::new()), NewtonParams::default()).unwrap();
+    let scene = c.create_scene("s").unwrap();
+    let ball = c.add_primitive("ball", Primitive::Sphere { radius: 0.2 }).unwrap();
+    let block = c.add_primitive("block", Primitive::Box { half_extents: Vector3::new(0.1, 0.2, 0.3) }).unwrap();
+    let at = |x: Real, z: Real| pose_from_parts("pose", [1.0, 0.0, 0.0, 0.0], [x, 0.0, z]).unwrap();
+    let near = c.add_instance(&scene, &ball, at(0.0, 1.0)).unwrap();
+    let far = c.add_instance(&scene, &block, at(3.0, 1.0)).unwrap();
+    // Two blobs 0.5 m apart (two clusters) and a lone point (an outlier).
+    let r = 0.01;
+    let mut points = sphere_points(Vector3::new(0.6, 0.0, 1.0), 0.1, 400);
+    points.extend(sphere_points(Vector3::new(0.6, 0.0, 1.6), 0.1, 400));
+    points.push(Vector3::new(-2.0, 0.0, 0.0));
+    let mut built = c.build_point_cloud(&scene, &frame_of(&points, r)).unwrap();
+    let settings = sublevel_robot::cloud::bodies::CloudBodySettings::default();
+    c.build_cloud_bodies(&scene, "cam", &mut built, &settings).unwrap();
+    let report = built.bodies.as_ref().unwrap().report.clone();
+    assert_eq!((report.clusters, report.outliers, report.refitted), (2, 1, 2));
+    let update = c.set_point_cloud(&scene, "cam", built, DEFAULT_MAX_CLOUD_BYTES).unwrap();
+    assert!(update.memory_bytes >= 2 * BODY_MEMORY_BYTES);
+    // The robot world holds the two bodies, named by the cloud.
+    let world = c.robot_world(&scene).unwrap();
+    let kinds: Vec<_> = world.objects.iter().filter(|o| o.name == "cam").map(|o| o.shape.kind()).collect();
+    assert_eq!(kinds, ["body", "body"]);
+
+    // The ball's surface is 0.6 − 0.1 − r − 0.2 from the nearest point ball (brute force); the
+    // bodies contain those balls, so their distance is at most that, and they hug them.
+    let stored = c.get_scene(&scene).unwrap().clouds["cam"].cloud.clone();
+    let inliers = &stored.points()[..800];
+    let brute = inliers
+        .iter()
+        .map(|p| (Vector3::from(*p) - Vector3::new(0.0, 0.0, 1.0)).norm())
+        .fold(Real::INFINITY, Real::min)
+        - 0.2
+        - r;
+    let check = crate::planner::check_scene(&c, &scene, 0.4, &[], &[]).unwrap();
+    let pair = |a: &str| check.pairs.iter().find(|p| p.first == a && p.second == "cam");
+    let d = &pair(&near).expect("the ball is within the margin").distance.answer.result;
+    assert!(!d.overlapping && d.distance <= brute + 1e-9 && d.distance > brute - 0.03, "{} vs {brute}", d.distance);
+    assert!(pair(&far).is_none(), "the box is 2 m away");
+
+    // Moved into the first blob: overlapping its body.
+    let into = [(near.clone(), at(0.55, 1.0))];
+    let check = crate::planner::check_scene(&c, &scene, 0.0, std::slice::from_ref(&near), &into).unwrap();
+    assert!(pair_overlaps(&check, &near));
+
+    // The same frame again: both bodies kept, no fit.
+    let mut again = c.build_point_cloud(&scene, &frame_of(&points, r)).unwrap();
+    c.build_cloud_bodies(&scene, "cam", &mut again, &settings).unwrap();
+    let report = &again.bodies.as_ref().unwrap().report;
+    assert_eq!((report.reused, report.refitted), (2, 0));
+}
+
+fn pair_overlaps(check: &crate::planner::SceneCheck, first: &str) -> bool {
+    check.pairs.iter().any(|p| p.first == first && p.second == "cam" && p.distance.answer.result.overlapping)
+}

@@ -27,8 +27,8 @@ mod tests;
 
 pub use body::{bounding_body, BodyEntry, BodyFacts, BuiltBody, WarmUp};
 pub use clouds::{
-    BuiltCloud, CloudFrame, CloudSet, CloudUpdate, SceneCloud, DEFAULT_MAX_CLOUD_BYTES, DEFAULT_NOISE_RADIUS,
-    DEFAULT_SELF_FILTER_PADDING, MAX_CLOUDS_PER_SCENE,
+    BuiltCloud, CloudBodiesModel, CloudFrame, CloudSet, CloudUpdate, SceneCloud, BODY_MEMORY_BYTES,
+    DEFAULT_MAX_CLOUD_BYTES, DEFAULT_NOISE_RADIUS, DEFAULT_SELF_FILTER_PADDING, MAX_CLOUDS_PER_SCENE,
 };
 pub use grouping::PosedInstance;
 pub use robots::{RobotEntry, RobotWorld};

@@ -207,7 +207,12 @@ impl Catalog {
             instance_ids.push(inst.id.clone());
         }
         for c in view.clouds.values() {
-            objects.push(WorldObject::points(c.name.clone(), c.cloud.clone(), Isometry3::identity()));
+            match &c.bodies {
+                None => objects.push(WorldObject::points(c.name.clone(), c.cloud.clone(), Isometry3::identity())),
+                Some(model) => objects.extend(
+                    model.objects.iter().map(|b| WorldObject::body(c.name.clone(), b.clone(), Isometry3::identity())),
+                ),
+            }
         }
         let robot = self.placed_robot(scene_id)?;
         Ok(RobotWorld {

@@ -14,12 +14,16 @@
 //!
 //! A point ball of radius under 1 µm (noise radius 0) is solved as a 1 µm ball and its distance
 //! corrected by the difference: an overlap with it is within 1 µm of the point.
+//!
+//! A cloud of the bodies model ([`crate::catalog::CloudBodiesModel`]) is its cluster bodies: the
+//! candidates are the bodies whose box lies within the margin of the instance's box, solved as
+//! body pairs by increasing box gap, with the same stopping rule; the pair reports the nearest.
 
 use super::check::world_aabb;
 use super::{SceneCheck, ScenePair};
 use crate::answer::{self, DistanceReply, Posed, QueryKind, QueryOptions, QueryPair};
 use crate::cache::WarmStartCache;
-use crate::catalog::{CloudSet, PosedInstance};
+use crate::catalog::{CloudBodiesModel, CloudSet, PosedInstance};
 use crate::Result;
 use std::sync::Arc;
 use sublevel_core::math::{Isometry3, Real, Vector3};
@@ -54,6 +58,10 @@ pub(super) fn cloud_pairs(
     for (inst, _) in all.iter().zip(is_focus).filter(|(_, f)| **f) {
         for (name, c) in clouds.iter() {
             out.all_pairs += 1;
+            if let Some(model) = &c.bodies {
+                body_pair(inst, name, model, margin, params, &mut scratch, out)?;
+                continue;
+            }
             let cloud = &c.cloud;
             let candidates = candidates(inst, cloud, margin, &mut near);
             if candidates.is_empty() {
@@ -104,6 +112,72 @@ pub(super) fn cloud_pairs(
                     out.pairs.push(ScenePair { first: inst.id.clone(), second: name.clone(), distance: d });
                 }
             }
+        }
+    }
+    Ok(())
+}
+
+/// The pair of instance `inst` and the bodies model `model` of cloud `name` (module docs):
+/// pushed to `out` when the nearest body overlaps the instance or lies within `margin`.
+fn body_pair(
+    inst: &PosedInstance,
+    name: &str,
+    model: &CloudBodiesModel,
+    margin: Real,
+    params: &CertifyParams,
+    scratch: &mut WarmStartCache,
+    out: &mut SceneCheck,
+) -> Result<()> {
+    let boxed = world_aabb(inst);
+    let mut candidates: Vec<(Real, usize)> = model
+        .objects
+        .iter()
+        .enumerate()
+        .filter_map(|(k, b)| {
+            let lower = match (boxed, b.body().bounding_box()) {
+                (Some((lo, hi)), Some((c, h))) => {
+                    (lo - c.coords - h).sup(&(c.coords - h - hi)).sup(&Vector3::zeros()).norm()
+                }
+                _ => 0.0,
+            };
+            (lower <= margin).then_some((lower, k))
+        })
+        .collect();
+    if candidates.is_empty() {
+        return Ok(());
+    }
+    out.candidate_pairs += 1;
+    candidates.sort_by(|x, y| x.0.total_cmp(&y.0));
+    let pair = QueryPair {
+        kind: QueryKind::Distance,
+        first: inst.id.clone(),
+        second: name.to_owned(),
+        options: QueryOptions { cold: true, ..QueryOptions::default() },
+        margin,
+    };
+    let a = Posed { body: inst.body.clone(), tree: inst.tree.clone(), primitive: inst.primitive, pose: inst.pose };
+    let mut best: Option<DistanceReply> = None;
+    for (lower, k) in candidates {
+        if best.as_ref().is_some_and(|b| b.answer.result.distance <= lower) {
+            break;
+        }
+        sublevel_core::cancel::check()?;
+        out.narrow_phase_solves += 1;
+        let b =
+            Posed { body: model.objects[k].shared().clone(), tree: None, primitive: None, pose: Isometry3::identity() };
+        let d = answer::any_distance_reply(pair.view(), &a, &b, scratch, params, None);
+        let overlapping = d.answer.result.overlapping;
+        if overlapping || best.as_ref().is_none_or(|b| d.answer.result.distance < b.answer.result.distance) {
+            best = Some(d);
+        }
+        if overlapping {
+            break;
+        }
+    }
+    if let Some(d) = best {
+        let res = &d.answer.result;
+        if res.overlapping || res.distance < margin {
+            out.pairs.push(ScenePair { first: inst.id.clone(), second: name.to_owned(), distance: d });
         }
     }
     Ok(())

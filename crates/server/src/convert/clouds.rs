@@ -9,6 +9,7 @@ use super::{pose_from_proto, prefix_field};
 use crate::pb;
 use crate::{Error, Result};
 use sublevel_core::math::{Real, Vector3};
+use sublevel_robot::cloud::bodies::{CloudBodySettings, UpdateReport};
 use sublevel_robot::cloud::depth::{deproject, DepthPixels, Intrinsics};
 use sublevel_robot::cloud::filter::{CloudFilter, FilterCounts, OutlierFilter};
 use sublevel_scene::{CloudFrame, SceneCloud, DEFAULT_NOISE_RADIUS, DEFAULT_SELF_FILTER_PADDING};
@@ -170,6 +171,62 @@ pub fn cloud_frame(req: &pb::UpdatePointCloudRequest) -> Result<CloudFrame> {
     })
 }
 
+/// The bodies model's settings of a request, `None` for the points model: `bodies`' fields, each
+/// at 0 taking [`CloudBodySettings::default`]'s value.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `model` (a value this server does not know), `bodies.degree`
+/// (not 2 or 4) or another `bodies.` field ([`CloudBodySettings::validate`]).
+pub fn cloud_model(req: &pb::UpdatePointCloudRequest) -> Result<Option<CloudBodySettings>> {
+    match pb::CloudModel::try_from(req.model) {
+        Ok(pb::CloudModel::Points) => return Ok(None),
+        Ok(pb::CloudModel::Bodies) => {}
+        Err(_) => {
+            return Err(Error::invalid(
+                "model",
+                format!("unknown cloud model {}: CLOUD_MODEL_POINTS (0) or CLOUD_MODEL_BODIES (1)", req.model),
+            ))
+        }
+    }
+    let o = req.bodies.unwrap_or_default();
+    let mut settings = CloudBodySettings::default();
+    if o.tolerance != 0.0 {
+        settings.tolerance = o.tolerance;
+    }
+    if o.min_points != 0 {
+        settings.min_points = o.min_points as usize;
+    }
+    if o.max_points != 0 {
+        settings.max_points = o.max_points as usize;
+    }
+    match o.degree {
+        0 => {}
+        2 | 4 => settings.fit = settings.fit.with_degree(o.degree as usize),
+        d => return Err(Error::invalid("bodies.degree", format!("must be 2 or 4 (or 0 for 4), got {d}"))),
+    }
+    if o.rescale_limit != 0.0 {
+        settings.rescale_limit = o.rescale_limit;
+    }
+    settings.slack = o.slack;
+    settings.validate().map_err(|e| prefix_field(e, "bodies"))?;
+    Ok(Some(settings))
+}
+
+/// What the bodies model did with a frame, as the proto message.
+pub fn bodies_report_to_proto(r: &UpdateReport) -> pb::CloudBodiesReport {
+    let n = |v: usize| v as u32;
+    pb::CloudBodiesReport {
+        clusters: n(r.clusters),
+        outliers: r.outliers as u64,
+        reused: n(r.reused),
+        rescaled: n(r.rescaled),
+        fitted: n(r.refitted),
+        fallbacks: n(r.fallbacks),
+        cluster_seconds: r.cluster_seconds,
+        fit_seconds: r.check_seconds + r.fit_seconds,
+    }
+}
+
 /// Filter counts as the proto message.
 pub fn filter_counts_to_proto(c: &FilterCounts) -> pb::FilterCounts {
     let n = |v: usize| v as u64;
@@ -194,6 +251,8 @@ pub fn cloud_summary(c: &SceneCloud) -> pb::PointCloudSummary {
         memory_bytes: c.memory_bytes as u64,
         version: c.version,
         counts: Some(filter_counts_to_proto(&c.counts)),
+        model: if c.bodies.is_some() { pb::CloudModel::Bodies } else { pb::CloudModel::Points } as i32,
+        bodies: c.bodies.as_ref().map_or(0, |b| b.objects.len() as u32),
     }
 }
 

@@ -26,21 +26,26 @@ pub(super) async fn update_point_cloud(
     require_id("scene_id", &req.scene_id)?;
     let catalog = svc.catalog.clone();
     let max_bytes = svc.config.max_cloud_bytes;
-    let (update, counts) = blocking(move || {
+    let (update, counts, report) = blocking(move || {
         // A bad name fails before the frame's work is spent (and is checked again at the swap).
         catalog.check_point_cloud_name(&req.scene_id, &req.name)?;
         let frame = cv::cloud_frame(&req)?;
+        let model = cv::cloud_model(&req)?;
         let pb::UpdatePointCloudRequest { scene_id, name, .. } = req;
-        let built = catalog.build_point_cloud(&scene_id, &frame)?;
+        let mut built = catalog.build_point_cloud(&scene_id, &frame)?;
         drop(frame);
+        if let Some(settings) = &model {
+            catalog.build_cloud_bodies(&scene_id, &name, &mut built, settings)?;
+        }
         let counts = built.counts;
+        let report = built.bodies.as_ref().map(|b| cv::bodies_report_to_proto(&b.report));
         let update = catalog.set_point_cloud(&scene_id, &name, built, max_bytes).map_err(|e| match e {
             Error::ResourceExhausted(m) if m.starts_with("point-cloud memory") => {
                 Error::ResourceExhausted(format!("{m} (set by {} / {})", CLOUD_BYTES.flag, CLOUD_BYTES.env))
             }
             other => other,
         })?;
-        Ok((update, counts))
+        Ok((update, counts, report))
     })
     .await?;
     Ok(Response::new(pb::UpdatePointCloudResponse {
@@ -48,6 +53,7 @@ pub(super) async fn update_point_cloud(
         counts: Some(cv::filter_counts_to_proto(&counts)),
         memory_bytes: update.memory_bytes as u64,
         seconds: start.elapsed().as_secs_f64(),
+        bodies: report,
     }))
 }
 

@@ -62,6 +62,7 @@ fn update(
         sensor_pose: Some(sensor_pb()),
         noise_radius: Some(0.01),
         filter,
+        ..Default::default()
     })
 }
 
@@ -233,4 +234,90 @@ async fn bad_frames_name_their_field() {
     // Nothing changed.
     assert!(svc.catalog.get_scene(&scene).unwrap().clouds.is_empty());
     assert_eq!(svc.catalog.cloud_bytes(), 0);
+}
+
+/// 200 points on a sphere of radius 0.05 m about the arm's ball at j = 1 (z = 0), and 3 lone
+/// points far from everything (outliers of the bodies model).
+fn blob() -> Vec<Vector3> {
+    let mut points: Vec<Vector3> = (0..200)
+        .map(|k| {
+            // A Fibonacci sphere.
+            let z = 1.0 - 2.0 * (k as Real + 0.5) / 200.0;
+            let a = k as Real * 2.399_963_229_728_653;
+            let s = (1.0 - z * z).sqrt();
+            arm_ball(1.0) + 0.05 * Vector3::new(s * a.cos(), s * a.sin(), z)
+        })
+        .collect();
+    points.extend([Vector3::new(-0.8, 0.0, 0.3), Vector3::new(0.0, -0.9, -0.4), Vector3::new(0.7, 0.7, 0.7)]);
+    points
+}
+
+/// The bodies model through the service: the blob becomes one body and the lone points outliers;
+/// the body never answers free where the blob's points collide and its distance is never over
+/// theirs (it contains every inlier's ball); a repeated frame keeps the body; GetScene says the model; bad
+/// settings are refused naming the field.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_bodies_model_contains_the_points_and_keeps_its_body() {
+    use pb::update_point_cloud_request::Frame;
+    let (svc, scene) = cell(ServerConfig::default());
+    let frame = || Frame::Points(packed(&blob()));
+    let sweep: Vec<Real> = (0..=72).map(|k| -3.0 + k as Real / 12.0).collect();
+    // The reference: the blob's points alone (the lone points are the bodies model's outliers).
+    let inliers = Frame::Points(packed(&blob()[..200]));
+    svc.update_point_cloud(update(&scene, "camera", inliers, no_voxel())).await.unwrap();
+    let points = check(&svc, &scene, &sweep).await;
+
+    let bodies_request = || {
+        let mut r = update(&scene, "camera", frame(), no_voxel());
+        r.get_mut().model = pb::CloudModel::Bodies as i32;
+        r
+    };
+    let first = svc.update_point_cloud(bodies_request()).await.unwrap().into_inner();
+    let report = first.bodies.unwrap();
+    assert_eq!((report.clusters, report.outliers, report.fitted, report.reused), (1, 3, 1, 0));
+    let bodies = check(&svc, &scene, &sweep).await;
+    assert_eq!(bodies.scene_version, first.scene_version);
+    let (mut both, mut only_bodies) = (0, 0);
+    for (k, j) in sweep.iter().enumerate() {
+        if points.collides[k] {
+            assert!(bodies.collides[k], "j = {}: free of the body, not of the points", j);
+            both += 1;
+        } else if bodies.collides[k] {
+            only_bodies += 1;
+        } else {
+            assert!(bodies.distance[k] <= points.distance[k] + 1e-9, "j = {}", j);
+            // The body hugs the points: within a few centimeters of their distance.
+            assert!(bodies.distance[k] > points.distance[k] - 0.03, "j = {}", j);
+        }
+    }
+    assert!(both >= 3 && only_bodies <= 3, "{both} colliding in both, {only_bodies} in the bodies only");
+
+    // The same frame again: the body is kept, no fit.
+    let second = svc.update_point_cloud(bodies_request()).await.unwrap().into_inner();
+    let report = second.bodies.unwrap();
+    assert_eq!((report.clusters, report.reused, report.fitted), (1, 1, 0));
+    assert!(second.scene_version > first.scene_version);
+    let view = svc.get_scene(Request::new(pb::GetSceneRequest { scene_id: scene.clone() })).await.unwrap().into_inner();
+    let summary = &view.point_clouds[0];
+    assert_eq!((summary.model, summary.bodies, summary.points), (pb::CloudModel::Bodies as i32, 1, 203));
+
+    // Bad settings name their field; the stored cloud is untouched.
+    let refused = |r: Result<Response<pb::UpdatePointCloudResponse>, Status>| {
+        let s = r.unwrap_err();
+        assert_eq!(s.code(), Code::InvalidArgument);
+        tonic_types::StatusExt::get_details_bad_request(&s).map(|b| b.field_violations[0].field.clone()).unwrap()
+    };
+    let mut r = bodies_request();
+    r.get_mut().bodies = Some(pb::CloudBodyOptions { degree: 6, ..Default::default() });
+    assert_eq!(refused(svc.update_point_cloud(r).await), "bodies.degree");
+    let mut r = bodies_request();
+    r.get_mut().bodies = Some(pb::CloudBodyOptions { tolerance: -1.0, ..Default::default() });
+    assert_eq!(refused(svc.update_point_cloud(r).await), "bodies.tolerance");
+    let mut r = bodies_request();
+    r.get_mut().bodies = Some(pb::CloudBodyOptions { rescale_limit: 0.5, ..Default::default() });
+    assert_eq!(refused(svc.update_point_cloud(r).await), "bodies.rescale_limit");
+    let mut r = bodies_request();
+    r.get_mut().model = 7;
+    assert_eq!(refused(svc.update_point_cloud(r).await), "model");
+    assert_eq!(svc.catalog.scene_version(&scene).unwrap(), second.scene_version);
 }

@@ -353,7 +353,7 @@ impl BlockPlan {
                         index: plan.clouds.len() - 1,
                     }
                 }
-                (WorldBall::Ball { center, radius }, WorldShape::Mesh(_)) => {
+                (WorldBall::Ball { center, radius }, WorldShape::Mesh(_) | WorldShape::Body(_)) => {
                     Object::Ball { c: arr(&center), r: radius }
                 }
             });

@@ -78,23 +78,29 @@ pub fn euclidean_clusters(
     // Cube keys (saturating casts: far or tiny-tolerance keys may share a cube, which only costs
     // distance checks), the points sorted by key, and each occupied cube's range of them.
     let key = |p: &[Real; 3]| p.map(|v| (v / tolerance).floor() as i64);
-    let mut order: Vec<u32> = (0..points.len() as u32).collect();
-    order.sort_unstable_by_key(|&i| key(&points[i as usize]));
-    let mut cubes: HashMap<[i64; 3], (usize, usize), foldhash::fast::FixedState> = HashMap::default();
-    let mut start = 0;
-    while start < order.len() {
-        let k = key(&points[order[start] as usize]);
-        let end = start + order[start..].partition_point(|&i| key(&points[i as usize]) == k);
-        cubes.insert(k, (start, end));
-        start = end;
+    let mut keyed: Vec<([i64; 3], u32)> = points.iter().enumerate().map(|(i, p)| (key(p), i as u32)).collect();
+    keyed.sort_unstable();
+    let order: Vec<u32> = keyed.iter().map(|&(_, i)| i).collect();
+    let mut cubes: Vec<([i64; 3], usize, usize)> = Vec::new();
+    for (n, &(k, _)) in keyed.iter().enumerate() {
+        match cubes.last_mut() {
+            Some(last) if last.0 == k => last.2 = n + 1,
+            _ => cubes.push((k, n, n + 1)),
+        }
     }
+    drop(keyed);
+    let index: HashMap<[i64; 3], usize, foldhash::fast::FixedState> =
+        cubes.iter().enumerate().map(|(c, &(k, _, _))| (k, c)).collect();
     let t2 = tolerance * tolerance;
     let near = |a: u32, b: u32| {
         let (p, q) = (points[a as usize], points[b as usize]);
         (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2) <= t2
     };
     let mut sets = UnionFind::<u32>::new(points.len());
-    for (k, &(s, e)) in &cubes {
+    // The pairs within each cube; then whether the cube is whole (its points all one set, which
+    // later unions keep true).
+    let mut whole = Vec::with_capacity(cubes.len());
+    for &(_, s, e) in &cubes {
         let cube = &order[s..e];
         for (n, &a) in cube.iter().enumerate() {
             for &b in &cube[n + 1..] {
@@ -103,14 +109,31 @@ pub fn euclidean_clusters(
                 }
             }
         }
+        let root = sets.find_mut(cube[0]);
+        whole.push(cube[1..].iter().all(|&b| sets.find_mut(b) == root));
+    }
+    // The pairs across each cube and its forward neighbors. Two whole cubes need one near pair:
+    // none when they are one set already, and the search stops at the first.
+    for (c, &(k, s, e)) in cubes.iter().enumerate() {
+        let cube = &order[s..e];
         for d in FORWARD {
-            let Some(&(s2, e2)) =
-                cubes.get(&[k[0].saturating_add(d[0]), k[1].saturating_add(d[1]), k[2].saturating_add(d[2])])
+            let Some(&o) =
+                index.get(&[k[0].saturating_add(d[0]), k[1].saturating_add(d[1]), k[2].saturating_add(d[2])])
             else {
                 continue;
             };
+            let other = &order[cubes[o].1..cubes[o].2];
+            if whole[c] && whole[o] {
+                if sets.find_mut(cube[0]) == sets.find_mut(other[0]) {
+                    continue;
+                }
+                if let Some((a, b)) = cube.iter().find_map(|&a| other.iter().find(|&&b| near(a, b)).map(|&b| (a, b))) {
+                    sets.union(a, b);
+                }
+                continue;
+            }
             for &a in cube {
-                for &b in &order[s2..e2] {
+                for &b in other {
                     if near(a, b) {
                         sets.union(a, b);
                     }
