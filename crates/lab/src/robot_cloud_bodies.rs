@@ -4,16 +4,24 @@
 //! point's ball grown by `--body-slack`), then the first `--body-configs` configurations checked
 //! against them: every robot geometry's sos body (a link mesh's root body, a primitive itself)
 //! against every cluster body whose box its ball reaches, by the Newton / active-set distance
-//! (`sublevel_query::shape::shape_distance`). The verdicts are compared with the points model's
-//! and the primitives'.
+//! (`sublevel_query::shape::shape_distance`), and by the service's check: [`RobotChecker`] with
+//! every cluster body a world object (`WorldShape::Body`: the link meshes' triangles against the
+//! convex body). The verdicts are compared with the points model's and the primitives'. With
+//! `--plan`, the problem is planned against the bodies too: solved, median plan time, its ratio to
+//! the primitives' (planned again beside it), and the paths whose every edge conservative
+//! advancement proves free of the true primitives.
 
 use crate::robot_clouds::RobotCloudsArgs;
 use sublevel_core::math::{Isometry3, Real, Vector3};
 use sublevel_core::Result;
 use sublevel_fit::sdp::ConvexityCone;
+use sublevel_plan::{plan, Goal, PlanSettings, PlanStatus, RobotValidity};
 use sublevel_query::shape::{shape_distance, ShapeRef};
 use sublevel_robot::cloud::bodies::{CloudBodies, CloudBodySettings};
-use sublevel_robot::{CheckOptions, FittedRobot, LinkShape, PointCloud, RobotChecker, WorldObject};
+use sublevel_robot::world::WorldBody;
+use sublevel_robot::{
+    CheckOptions, FittedRobot, LinkShape, MotionChecker, MotionOptions, PointCloud, RobotChecker, WorldObject,
+};
 
 /// The bodies model's figures for a set of problems.
 #[derive(Clone, Default)]
@@ -38,17 +46,30 @@ pub(crate) struct BodyTally {
     misses_vs_points: usize,
     false_vs_truth: usize,
     misses_vs_truth: usize,
+    /// The service's check (link meshes against the bodies): seconds, and its errors.
+    exact_seconds: Real,
+    exact_false_vs_points: usize,
+    exact_misses_vs_points: usize,
+    /// `--plan`: problems solved against the bodies, plan seconds against the bodies and the
+    /// primitives (both solved), and bodies' paths free of the primitives.
+    solved: usize,
+    plan_seconds: Vec<Real>,
+    truth_plan_seconds: Vec<Real>,
+    paths_free: usize,
 }
 
+/// A problem's start and goal configurations.
+pub(crate) type Endpoints<'a> = (&'a [Real], &'a [Real]);
+
 /// One problem: `frames` are the cloud's points and a second frame's, `configs` the problem's
-/// configurations.
+/// configurations, `problem` its start and goal when it is planned (`--plan`).
 pub(crate) fn bodies(
     robot: &FittedRobot,
     args: &RobotCloudsArgs,
     frames: (&[[Real; 3]], &[[Real; 3]]),
     truth: &[WorldObject],
     allowed: &dyn Fn(&str, &str) -> Option<bool>,
-    configs: &[Vec<Real>],
+    (configs, problem): (&[Vec<Real>], Option<Endpoints<'_>>),
     t: &mut BodyTally,
 ) -> Result<()> {
     let mut settings = CloudBodySettings {
@@ -86,6 +107,12 @@ pub(crate) fn bodies(
     let identity = Isometry3::identity();
     let boxes: Vec<(Vector3, Vector3)> =
         model.clusters().iter().map(|c| (c.bounds.0, c.bounds.1.add_scalar(args.radius * 3f64.sqrt()))).collect();
+    let objects = model
+        .clusters()
+        .iter()
+        .map(|c| Ok(WorldObject::body("camera", std::sync::Arc::new(WorldBody::new(c.body.clone())?), identity)))
+        .collect::<Result<Vec<_>>>()?;
+    let mut on_bodies = RobotChecker::new(robot, objects.clone(), allowed)?;
     let mut poses = Vec::new();
     for q in configs.iter().take(args.body_configs) {
         let clock = std::time::Instant::now();
@@ -113,6 +140,9 @@ pub(crate) fn bodies(
         }
         t.seconds += clock.elapsed().as_secs_f64();
         let clock = std::time::Instant::now();
+        let exact = on_bodies.check(q, &identity, &options)?.world;
+        t.exact_seconds += clock.elapsed().as_secs_f64();
+        let clock = std::time::Instant::now();
         let points = on_points.check(q, &identity, &options)?.world;
         t.points_seconds += clock.elapsed().as_secs_f64();
         let truth = on_truth.check(q, &identity, &options)?.world;
@@ -121,7 +151,62 @@ pub(crate) fn bodies(
         t.misses_vs_points += usize::from(!hit && points);
         t.false_vs_truth += usize::from(hit && !truth);
         t.misses_vs_truth += usize::from(!hit && truth);
+        t.exact_false_vs_points += usize::from(exact && !points);
+        t.exact_misses_vs_points += usize::from(!exact && points);
     }
+    if let Some((start, goal)) = problem {
+        plan_bodies(robot, args, (start, goal), objects, truth, allowed, t)?;
+    }
+    Ok(())
+}
+
+/// Plans the problem against the bodies and against the primitives; a bodies path is checked
+/// edge by edge against the primitives by conservative advancement.
+fn plan_bodies(
+    robot: &FittedRobot,
+    args: &RobotCloudsArgs,
+    (start, goal): (&[Real], &[Real]),
+    bodies: Vec<WorldObject>,
+    truth: &[WorldObject],
+    allowed: &dyn Fn(&str, &str) -> Option<bool>,
+    t: &mut BodyTally,
+) -> Result<()> {
+    let settings =
+        PlanSettings { timeout: std::time::Duration::from_secs_f64(args.timeout), ..PlanSettings::default() };
+    let base = Isometry3::identity();
+    let asked = Goal::Configurations(vec![goal.to_vec()]);
+    let mut seconds = [None, None];
+    let mut path = Vec::new();
+    for (k, w) in [bodies, truth.to_vec()].into_iter().enumerate() {
+        let mut checker = RobotChecker::new(robot, w, allowed)?;
+        let mut validity = RobotValidity::new(MotionChecker::new(&mut checker)?, base, settings.padding);
+        let clock = std::time::Instant::now();
+        let out = plan(&mut validity, start, &asked, &settings, &std::sync::atomic::AtomicBool::new(false))?;
+        if out.status == PlanStatus::Solved {
+            seconds[k] = Some(clock.elapsed().as_secs_f64());
+            if k == 0 {
+                path = out.path;
+            }
+        } else if k == 0 {
+            let status = format!("{:?}", out.status);
+            eprintln!("bodies plan: {}", status.chars().take(200).collect::<String>());
+        }
+    }
+    if let [Some(b), Some(p)] = seconds {
+        t.plan_seconds.push(b);
+        t.truth_plan_seconds.push(p);
+    }
+    if seconds[0].is_none() {
+        return Ok(());
+    }
+    t.solved += 1;
+    let mut on_truth = RobotChecker::new(robot, truth.to_vec(), allowed)?;
+    let mut motions = MotionChecker::new(&mut on_truth)?;
+    let mut free = true;
+    for edge in path.windows(2) {
+        free &= motions.check_motion(&edge[0], &edge[1], &base, &MotionOptions::default())?.valid;
+    }
+    t.paths_free += usize::from(free);
     Ok(())
 }
 
@@ -146,6 +231,13 @@ pub(crate) fn merge(all: &mut BodyTally, t: BodyTally) {
     all.misses_vs_points += t.misses_vs_points;
     all.false_vs_truth += t.false_vs_truth;
     all.misses_vs_truth += t.misses_vs_truth;
+    all.exact_seconds += t.exact_seconds;
+    all.exact_false_vs_points += t.exact_false_vs_points;
+    all.exact_misses_vs_points += t.exact_misses_vs_points;
+    all.solved += t.solved;
+    all.plan_seconds.extend(t.plan_seconds);
+    all.truth_plan_seconds.extend(t.truth_plan_seconds);
+    all.paths_free += t.paths_free;
 }
 
 /// Prints the bodies' table, one row per scenario.
@@ -154,13 +246,17 @@ pub(crate) fn table(rows: &[(String, BodyTally)]) {
     println!(
         "| scenario | median clusters | outlier points | first frame (ms, median) | Clarabel per fit (ms, median) | first frame's bodies (liters) | second frame (ms, median) | of it: cluster / check / rescale + fit (medians) | reused | \
          rescaled | refitted | configurations | µs/config, bodies | µs/config, points (single) | collide where points do not | \
-         free where points collide | false collisions vs primitives | misses vs primitives |"
+         free where points collide | false collisions vs primitives | misses vs primitives | µs/config, service check | \
+         service check: collide where points do not | service check: free where points collide | solved, bodies | \
+         median plan ms, bodies / primitives | ratio | bodies paths free of the primitives |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for (name, t) in rows {
         let per = |s: Real| 1e6 * s / t.configs.max(1) as Real;
+        let plan_ms = 1e3 * crate::robot_edges::median(&t.plan_seconds);
+        let truth_ms = 1e3 * crate::robot_edges::median(&t.truth_plan_seconds);
         println!(
-            "| {name} | {:.0} | {} of {} | {:.0} | {:.1} | {:.1} | {:.0} | {} | {} | {} | {} | {} | {:.1} | {:.1} | {} | {} | {} | {} |",
+            "| {name} | {:.0} | {} of {} | {:.0} | {:.1} | {:.1} | {:.0} | {} | {} | {} | {} | {} | {:.1} | {:.1} | {} | {} | {} | {} | {:.1} | {} | {} | {} | {:.1} / {:.1} | {:.1} | {} |",
             crate::robot_edges::median(&t.clusters),
             t.outliers,
             t.points,
@@ -179,6 +275,14 @@ pub(crate) fn table(rows: &[(String, BodyTally)]) {
             t.misses_vs_points,
             t.false_vs_truth,
             t.misses_vs_truth,
+            per(t.exact_seconds),
+            t.exact_false_vs_points,
+            t.exact_misses_vs_points,
+            t.solved,
+            plan_ms,
+            truth_ms,
+            plan_ms / truth_ms,
+            t.paths_free,
         );
     }
 }

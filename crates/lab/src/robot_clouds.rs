@@ -111,7 +111,7 @@ pub struct RobotCloudsArgs {
     pub(crate) body_cone: String,
     /// Planning timeout (seconds).
     #[arg(long, default_value_t = 1.0)]
-    timeout: Real,
+    pub(crate) timeout: Real,
     /// Seed of the configurations and the noise.
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -249,7 +249,7 @@ pub fn run(args: RobotCloudsArgs) -> Result<()> {
                     (&merged, &second),
                     &truth,
                     &allowed,
-                    &configs,
+                    (&configs, args.plan.then_some((start.as_slice(), goal.as_slice()))),
                     &mut t.bodies,
                 )?;
             }

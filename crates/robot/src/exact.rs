@@ -183,9 +183,7 @@ pub(crate) fn exact_collides(
         }
     }
     if padding == 0.0 {
-        return parry3d_f64::query::intersection_test(pa, a.shape.as_ref(), pb, b.shape.as_ref())
-            .map(|r| r.intersecting)
-            .map_err(unsupported);
+        return crate::world::intersection_test(pa, a.shape.as_ref(), pb, b.shape.as_ref()).map_err(unsupported);
     }
     Ok(!matches!(
         crate::world::closest_points(pa, a.shape.as_ref(), pb, b.shape.as_ref(), padding).map_err(unsupported)?,
@@ -545,7 +543,7 @@ pub(crate) fn mesh_touches_solid(
             return false;
         }
         if padding == 0.0 {
-            parry3d_f64::query::intersection_test(&identity, &triangle, &rel, shape).is_ok_and(|r| r.intersecting)
+            crate::world::intersection_test(&identity, &triangle, &rel, shape).is_ok_and(|r| r)
         } else {
             crate::world::closest_points(&identity, &triangle, &rel, shape, padding)
                 .is_ok_and(|c| !matches!(c, ClosestPoints::Disjoint))

@@ -14,7 +14,7 @@
 
 mod body_shape;
 
-pub(crate) use body_shape::closest_points;
+pub(crate) use body_shape::{closest_points, intersection_test};
 
 use crate::cloud::PointCloud;
 use crate::fitted::{bounding_ball, bounding_box, exact_trimesh, validate_mesh};

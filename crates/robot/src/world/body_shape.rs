@@ -160,6 +160,73 @@ impl Shape for BodyShape {
     }
 }
 
+/// What the cheap tests of a triangle against a body show ([`triangle_quick`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Quick {
+    /// Farther apart than the margin.
+    Apart,
+    /// A vertex of the triangle lies in the body: they intersect.
+    Touches,
+    /// Neither shown: GJK decides.
+    Unknown,
+}
+
+/// The cheap tests of a parry triangle (`a`, posed by `pa`) against a body shape (posed by `pb`)
+/// within `margin` ≥ 0: a vertex with p ≤ 1 is a contact; a separating gap along the triangle's
+/// normal (either side) or along the direction from the body's center to the triangle's centroid,
+/// taken with the certified upper bound of the body's support function
+/// ([`Body::support_upper`]), that exceeds the margin proves them apart. `Unknown` for any other
+/// pair of shapes.
+fn triangle_quick(pa: &Pose, a: &dyn Shape, pb: &Pose, b: &dyn Shape, margin: PReal) -> Quick {
+    let (Some(t), Some(body)) = (a.as_shape::<parry3d_f64::shape::Triangle>(), b.as_shape::<BodyShape>()) else {
+        return Quick::Unknown;
+    };
+    let v = [t.a, t.b, t.c].map(|p| {
+        let q = pb.inverse_transform_point(pa.transform_point(p));
+        Vector3::new(q.x, q.y, q.z)
+    });
+    let body = &body.body;
+    if v.iter().any(|x| body.value_at(&(*x).into()) <= 1.0) {
+        return Quick::Touches;
+    }
+    let normal = (v[1] - v[0]).cross(&(v[2] - v[0]));
+    let toward = (v[0] + v[1] + v[2]) / 3.0 - body.center();
+    for u in [normal, -normal, toward] {
+        let n = u.norm();
+        if !(n > 0.0 && n.is_finite()) {
+            continue;
+        }
+        let u = u / n;
+        let Some(upper) = body.support_upper(&u) else { return Quick::Unknown };
+        let low = v.iter().map(|x| u.dot(x)).fold(Real::INFINITY, Real::min);
+        if low - upper > margin {
+            return Quick::Apart;
+        }
+    }
+    Quick::Unknown
+}
+
+/// parry's `intersection_test` of two shapes, with the cheap tests of a triangle against a
+/// [`BodyShape`] first ([`triangle_quick`]; either order).
+///
+/// # Errors
+/// parry's, for a pair its dispatcher does not support.
+pub(crate) fn intersection_test(pa: &Pose, a: &dyn Shape, pb: &Pose, b: &dyn Shape) -> Result<bool, Unsupported> {
+    match quick_either(pa, a, pb, b, 0.0) {
+        Quick::Apart => Ok(false),
+        Quick::Touches => Ok(true),
+        Quick::Unknown => parry3d_f64::query::intersection_test(pa, a, pb, b).map(|r| r.intersecting),
+    }
+}
+
+/// [`triangle_quick`] with the triangle first or second.
+fn quick_either(pa: &Pose, a: &dyn Shape, pb: &Pose, b: &dyn Shape, margin: PReal) -> Quick {
+    match triangle_quick(pa, a, pb, b, margin) {
+        Quick::Unknown => triangle_quick(pb, b, pa, a, margin),
+        known => known,
+    }
+}
+
 /// How far past the asked margin parry's GJK is run on a body pair (meters): above the largest
 /// overestimate seen (9 µm), so a pair truly within the margin is never answered disjoint.
 pub(crate) const GJK_SLACK: Real = 1e-4;
@@ -181,6 +248,11 @@ pub(crate) fn closest_points(
     let (Some(sa), Some(sb), true) = (a.as_support_map(), b.as_support_map(), curved) else {
         return parry3d_f64::query::closest_points(pa, a, pb, b, margin);
     };
+    match quick_either(pa, a, pb, b, margin) {
+        Quick::Apart => return Ok(ClosestPoints::Disjoint),
+        Quick::Touches => return Ok(ClosestPoints::Intersecting),
+        Quick::Unknown => {}
+    }
     let found = parry3d_f64::query::closest_points(pa, a, pb, b, margin + GJK_SLACK)?;
     let ClosestPoints::WithinMargin(p1, p2) = found else { return Ok(found) };
     let upper = (p1 - p2).length();
@@ -283,5 +355,39 @@ mod tests {
         }
         // Measured: 6 µm at worst, where a vertex or an edge is closest.
         assert!(worst < 2e-5, "worst {worst}");
+    }
+
+    #[test]
+    fn intersection_verdicts_of_triangles_equal_the_balls() {
+        // Triangles about a sphere body of radius 0.25 at distances −0.1 to 0.1 from its surface
+        // (some with a vertex inside, some crossing it with every vertex outside), against
+        // parry's ball.
+        let shape = BodyShape::new(ellipsoid(0.25, 0.25, 0.25, Vector3::zeros())).unwrap();
+        let ball = parry3d_f64::shape::Ball::new(0.25);
+        let at = Pose::IDENTITY;
+        let (mut hits, mut misses) = (0, 0);
+        for k in 0..300 {
+            let t = k as Real * 0.47;
+            let n = PVector::new(t.cos() * (1.7 * t).sin(), t.sin() * (1.7 * t).sin(), (1.7 * t).cos());
+            let u = n.any_orthonormal_vector();
+            let v = n.cross(u);
+            let c = n * (0.15 + 0.2 * ((k % 11) as Real / 10.0)) + (u * (k % 3) as Real + v * (k % 4) as Real) * 0.03;
+            let size = 0.05 + 0.2 * (k % 5) as Real;
+            let tri = parry3d_f64::shape::Triangle::new(c + u * size, c - u * size * 0.5 + v * size, c - v * size);
+            let want = parry3d_f64::query::intersection_test(&at, &tri, &at, &ball).unwrap().intersecting;
+            let got = intersection_test(&at, &tri, &at, &shape).unwrap();
+            // A triangle apart by under a nanometer may go either way.
+            let near = !want && parry3d_f64::query::distance(&at, &tri, &at, &ball).unwrap().distance < 1e-9;
+            if !near {
+                assert_eq!(got, want, "{k}");
+                assert_eq!(intersection_test(&at, &shape, &at, &tri).unwrap(), want, "{k} swapped");
+            }
+            if want {
+                hits += 1;
+            } else {
+                misses += 1;
+            }
+        }
+        assert!(hits > 50 && misses > 50, "{hits} intersecting, {misses} apart");
     }
 }
