@@ -574,12 +574,16 @@ impl<'r> RobotChecker<'r> {
     /// The sphere tree of robot geometry `g` against world object `o` ([`crate::spheres`]):
     /// apart past `threshold`, touching within `padding` (the inner stage's proofs from the
     /// outside), or unknown — also where the stage does not apply (a primitive geometry, whose
-    /// sos answer is exact, or a mesh object).
+    /// sos answer is exact, or a mesh object). Against a body object it only proves apart.
     fn tree_against_world(&self, g: usize, o: usize, threshold: Real, padding: Real) -> TreeAnswer {
         let LinkShape::Mesh { spheres, .. } = &self.robot.geometries[g].shape else { return TreeAnswer::Unknown };
         let obj = &self.world[o];
-        let WorldShape::Primitive(p) = &obj.shape else { return TreeAnswer::Unknown };
         let rel = obj.pose.inv_mul(&self.poses[g]);
+        let p = match &obj.shape {
+            WorldShape::Primitive(p) => p,
+            WorldShape::Body(b) if b.tree_apart(spheres, &rel, threshold) => return TreeAnswer::Apart,
+            _ => return TreeAnswer::Unknown,
+        };
         let padding = if self.contact_proofs { padding } else { Real::NEG_INFINITY };
         spheres.against_primitive(
             rel.rotation.to_rotation_matrix().matrix(),

@@ -187,6 +187,33 @@ impl SphereTree {
         self.against_primitive(r, t, p, threshold, Real::NEG_INFINITY) == TreeAnswer::Apart
     }
 
+    /// Whether every piece of the tree, its centers mapped by `x ↦ r·x + t` into another shape's
+    /// frame, is farther than `threshold` (meters, ≥ 0) from that shape, given `lower(x)`, a lower
+    /// bound of the distance from point `x` to the shape (any value ≤ 0 where it has none): a
+    /// node is dropped once `lower(center) − radius` exceeds the threshold. `false` for an empty
+    /// tree, or when some leaf is not dropped.
+    pub fn apart_by(&self, r: &Matrix3, t: &Vector3, threshold: Real, lower: impl Fn(&Vector3) -> Real) -> bool {
+        if self.nodes.is_empty() {
+            return false;
+        }
+        let mut stack = [0u32; MAX_DEPTH + 2];
+        let mut len = 1;
+        while len > 0 {
+            len -= 1;
+            let node = &self.nodes[stack[len] as usize];
+            if lower(&(r * node.sphere.center + t)) - node.sphere.radius > threshold + 1e-12 {
+                continue;
+            }
+            if node.children == 0 {
+                return false;
+            }
+            stack[len] = node.children;
+            stack[len + 1] = node.children + 1;
+            len += 2;
+        }
+        true
+    }
+
     /// The tree against the primitive `p` (its centers mapped by `x ↦ r·x + t` into `p`'s frame):
     /// [`TreeAnswer::Apart`] when every piece is farther than `threshold` (meters, ≥ 0),
     /// [`TreeAnswer::Touches`] when a node's whole ball lies closer than `padding` to `p` (inside

@@ -209,4 +209,22 @@ impl WorldBody {
     pub fn shared(&self) -> &Arc<Body> {
         &self.body
     }
+
+    /// Whether every piece of a link's sphere tree, posed in the body's frame by `rel`, is
+    /// farther than `threshold` (meters) from the body: each node dropped by the gap between its
+    /// center and the body's supporting plane normal to the direction from the body's center, with
+    /// the certified upper bound of the body's support function ([`Body::support_upper`]).
+    pub(crate) fn tree_apart(&self, spheres: &crate::spheres::SphereTree, rel: &Isometry3, threshold: Real) -> bool {
+        let body = &self.body;
+        let lower = |x: &Vector3| {
+            let d = x - body.center();
+            let n = d.norm();
+            if !(n > 0.0 && n.is_finite()) {
+                return 0.0;
+            }
+            let u = d / n;
+            body.support_upper(&u).map_or(0.0, |h| u.dot(x) - h)
+        };
+        spheres.apart_by(rel.rotation.to_rotation_matrix().matrix(), &rel.translation.vector, threshold, lower)
+    }
 }

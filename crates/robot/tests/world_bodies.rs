@@ -11,9 +11,10 @@
 //! - a motion that conservative advancement proves free among the bodies has every sample at
 //!   2 mm of joint travel free of the primitives, and a contact it reports lies within the
 //!   tolerance of a primitive;
-//! - a body stretched along one axis (an ellipsoid, not a ball) collides exactly where the link
-//!   meshes come within it, by the brute force of every mesh vertex's value and parry's
-//!   distance from the primitive ellipsoid's axes-aligned box (a containment sandwich).
+//! - an ellipsoid body (not a ball) collides wherever the box inscribed in it does, and is free
+//!   wherever the box around it is (a containment sandwich);
+//! - the sphere-tree descent on a distance bound (the body stage's) decides as the primitive
+//!   descent does, given the exact distance to a ball.
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -180,4 +181,31 @@ fn an_ellipsoid_body_collides_between_its_inner_and_outer_boxes() {
         }
     }
     assert!(sure > 5 && clear > 5, "{sure} inside, {clear} outside");
+}
+
+#[test]
+fn sphere_tree_apart_by_a_distance_bound_equals_the_primitive_descent() {
+    // `apart_by` with the exact distance to a ball decides as the primitive descent does.
+    let robot = panda();
+    let mut rng = ChaCha8Rng::seed_from_u64(41);
+    let (mut apart, mut near) = (0, 0);
+    for g in &robot.geometries {
+        let sublevel_robot::LinkShape::Mesh { spheres, .. } = &g.shape else { continue };
+        for _ in 0..40 {
+            let t = Vector3::new(rng.random_range(-0.3..0.3), rng.random_range(-0.3..0.3), rng.random_range(-0.3..0.3));
+            let r = nalgebra::Rotation3::from_euler_angles(rng.random(), rng.random(), rng.random()).into_inner();
+            let radius = rng.random_range(0.01..0.1);
+            let threshold = rng.random_range(0.0..0.05);
+            let ball = Primitive::Sphere { radius };
+            let want = spheres.apart_from_primitive(&r, &t, &ball, threshold);
+            let got = spheres.apart_by(&r, &t, threshold, |x| x.norm() - radius);
+            assert_eq!(got, want, "{}: t {t:?}, radius {radius}, threshold {threshold}", g.name);
+            if want {
+                apart += 1;
+            } else {
+                near += 1;
+            }
+        }
+    }
+    assert!(apart > 20 && near > 20, "{apart} apart, {near} near");
 }
