@@ -289,7 +289,7 @@ fn frame(args: &LoadArgs) -> Result<(pb::update_point_cloud_request::Frame, usiz
 }
 
 /// The request fields the server's errors name, and the flags that set them.
-const FIELD_FLAGS: [(&str, &str); 14] = [
+const FIELD_FLAGS: [(&str, &str); 16] = [
     ("name", "--name"),
     ("sensor_pose", "--sensor-pose"),
     ("noise_radius", "--noise-radius"),
@@ -304,6 +304,8 @@ const FIELD_FLAGS: [(&str, &str); 14] = [
     ("depth.cx", "--cx"),
     ("depth.cy", "--cy"),
     ("depth.depth_scale", "--depth-scale"),
+    ("bodies.degree", "--body-degree"),
+    ("bodies.tolerance", "--body-tolerance"),
 ];
 
 fn load(args: LoadArgs) -> Result<()> {
