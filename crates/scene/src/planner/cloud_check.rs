@@ -64,28 +64,9 @@ pub(super) fn cloud_pairs(
             }
             let cloud = &c.cloud;
             let candidates = candidates(inst, cloud, margin, &mut near);
-            if candidates.is_empty() {
-                continue;
-            }
-            out.candidate_pairs += 1;
             let r = cloud.radius();
             let solved = MIN_BALL_RADIUS.max(r);
-            let pair = QueryPair {
-                kind: QueryKind::Distance,
-                first: inst.id.clone(),
-                second: name.clone(),
-                options: QueryOptions { cold: true, ..QueryOptions::default() },
-                margin,
-            };
-            let a =
-                Posed { body: inst.body.clone(), tree: inst.tree.clone(), primitive: inst.primitive, pose: inst.pose };
-            let mut best: Option<DistanceReply> = None;
-            for (lower, k) in candidates {
-                if best.as_ref().is_some_and(|b| b.answer.result.distance <= lower) {
-                    break;
-                }
-                sublevel_core::cancel::check()?;
-                out.narrow_phase_solves += 1;
+            let ball = |k: usize| {
                 let p = cloud.point(k);
                 let b = Posed {
                     body: stand_in.clone(),
@@ -93,25 +74,9 @@ pub(super) fn cloud_pairs(
                     primitive: Some(Primitive::Sphere { radius: solved }),
                     pose: Isometry3::translation(p.x, p.y, p.z),
                 };
-                let mut d = answer::any_distance_reply(pair.view(), &a, &b, &mut scratch, params, None);
-                let result = &mut d.answer.result;
-                if !result.overlapping {
-                    result.distance += solved - r;
-                }
-                let overlapping = result.overlapping;
-                if best.as_ref().is_none_or(|b| d.answer.result.distance < b.answer.result.distance) || overlapping {
-                    best = Some(d);
-                }
-                if overlapping {
-                    break;
-                }
-            }
-            if let Some(d) = best {
-                let res = &d.answer.result;
-                if res.overlapping || res.distance < margin {
-                    out.pairs.push(ScenePair { first: inst.id.clone(), second: name.clone(), distance: d });
-                }
-            }
+                (b, solved - r)
+            };
+            nearest_pair(inst, name, candidates, margin, params, &mut scratch, out, ball)?;
         }
     }
     Ok(())
@@ -143,11 +108,37 @@ fn body_pair(
             (lower <= margin).then_some((lower, k))
         })
         .collect();
+    candidates.sort_by(|x, y| x.0.total_cmp(&y.0));
+    let body = |k: usize| {
+        let b = model.objects[k].shared().clone();
+        (Posed { body: b, tree: None, primitive: None, pose: Isometry3::identity() }, 0.0)
+    };
+    nearest_pair(inst, name, candidates, margin, params, scratch, out, body)
+}
+
+/// The pair of instance `inst` and cloud `name` from `candidates` (a lower bound of the distance
+/// and an index, by increasing bound): each solved against `obstacle(k)` (a posed shape and a
+/// correction added to a free distance) until one overlaps or the bound reaches the best distance;
+/// the nearest is pushed to `out` when it overlaps or lies within `margin`. Counts the pair as a
+/// candidate pair (when it has candidates) and every solve.
+///
+/// # Errors
+/// [`crate::Error::Cancelled`] when the request was abandoned.
+#[allow(clippy::too_many_arguments)]
+fn nearest_pair(
+    inst: &PosedInstance,
+    name: &str,
+    candidates: Vec<(Real, usize)>,
+    margin: Real,
+    params: &CertifyParams,
+    scratch: &mut WarmStartCache,
+    out: &mut SceneCheck,
+    obstacle: impl Fn(usize) -> (Posed, Real),
+) -> Result<()> {
     if candidates.is_empty() {
         return Ok(());
     }
     out.candidate_pairs += 1;
-    candidates.sort_by(|x, y| x.0.total_cmp(&y.0));
     let pair = QueryPair {
         kind: QueryKind::Distance,
         first: inst.id.clone(),
@@ -163,10 +154,13 @@ fn body_pair(
         }
         sublevel_core::cancel::check()?;
         out.narrow_phase_solves += 1;
-        let b =
-            Posed { body: model.objects[k].shared().clone(), tree: None, primitive: None, pose: Isometry3::identity() };
-        let d = answer::any_distance_reply(pair.view(), &a, &b, scratch, params, None);
-        let overlapping = d.answer.result.overlapping;
+        let (b, correction) = obstacle(k);
+        let mut d = answer::any_distance_reply(pair.view(), &a, &b, scratch, params, None);
+        let result = &mut d.answer.result;
+        if !result.overlapping {
+            result.distance += correction;
+        }
+        let overlapping = result.overlapping;
         if overlapping || best.as_ref().is_none_or(|b| d.answer.result.distance < b.answer.result.distance) {
             best = Some(d);
         }
