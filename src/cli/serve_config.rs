@@ -129,6 +129,10 @@ pub struct OpsArgs {
     /// CheckScene) running at once, each on its own thread. Default: the CPUs.
     #[arg(long, env = "SUBLEVEL_BATCH_WORKERS")]
     pub batch_workers: Option<usize>,
+    /// Plan calls running at once, on slots of their own (the rest wait, their timeouts running;
+    /// the checks' batch slots are never theirs). Default: half the CPUs, at least 1.
+    #[arg(long, env = "SUBLEVEL_MAX_CONCURRENT_PLANS")]
+    pub max_concurrent_plans: Option<usize>,
     /// Longest time of one call in milliseconds, whatever the client's deadline (past it:
     /// DEADLINE_EXCEEDED, its query solves cancelled); 0 = only client deadlines apply.
     #[arg(long, env = "SUBLEVEL_MAX_REQUEST_MS", default_value_t = 0)]
@@ -158,6 +162,7 @@ impl OpsArgs {
             ("--max-fit-queue", self.max_fit_queue),
             ("--max-concurrent-sdp", self.max_concurrent_sdp.unwrap_or(1)),
             ("--batch-workers", self.batch_workers.unwrap_or(1)),
+            ("--max-concurrent-plans", self.max_concurrent_plans.unwrap_or(1)),
             ("--max-request-bytes", self.max_request_bytes),
             ("--request-memory-bytes", self.request_memory_bytes),
             ("--connection-memory-bytes", self.connection_memory_bytes),
@@ -209,6 +214,7 @@ impl OpsArgs {
         config.max_fit_queue = self.max_fit_queue;
         config.max_concurrent_sdp = self.max_concurrent_sdp.unwrap_or(config.max_concurrent_sdp);
         config.batch_workers = self.batch_workers.unwrap_or(config.batch_workers);
+        config.max_concurrent_plans = self.max_concurrent_plans.unwrap_or(config.max_concurrent_plans);
         config.admission = sublevel::service::admission::AdmissionSettings {
             max_connections: self.max_connections,
             max_streams_per_connection: self.max_streams_per_connection,

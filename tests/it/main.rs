@@ -10,6 +10,7 @@ mod hardening;
 mod instance_motions;
 mod jobs_api;
 mod ops;
+mod plan_hardening;
 mod plan_service;
 mod planner;
 mod point_clouds;

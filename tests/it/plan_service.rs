@@ -4,7 +4,7 @@
 //! start to the goal, every edge confirmed free by dense sampling on the meshes in process (3 200
 //! configurations per unit of joint distance, 100× the search's resolution). Bad requests name
 //! their field; colliding ends are statuses naming the pair; a plan whose client went away frees
-//! its batch slot.
+//! its planning slot.
 
 use crate::util::{assert_status, config, Server};
 use std::path::PathBuf;
@@ -207,19 +207,20 @@ async fn bad_plans_name_their_field_and_colliding_ends_name_the_pair() {
 #[tokio::test]
 async fn a_plan_whose_client_went_away_frees_its_slot() {
     let dir = tempfile::tempdir().unwrap();
-    let server = Server::start(sublevel::service::ServerConfig { batch_workers: 1, ..config(dir.path()) }).await;
+    let server = Server::start(sublevel::service::ServerConfig { max_concurrent_plans: 1, ..config(dir.path()) }).await;
     let mut c = server.client().await;
     let (robot_id, scene_id, _, text) = setup(&mut c, "cage").await;
-    // A search made slow on purpose (tiny steps, edges sampled 10⁵ times per unit): it
-    // would run its full 60 s.
+    // A search made slow on purpose (tiny steps, edges sampled at the finest resolution allowed):
+    // it would run its full 60 s.
     let mut slow = plan_request(&robot_id, &scene_id);
     slow.motion_plan_request = Some(pb::plan_request::MotionPlanRequest::MotionPlanRequestYaml(text.clone()));
-    slow.settings = Some(pb::PlanSettings { timeout: Some(60.0), range: 1e-3, resolution: 1e5, ..Default::default() });
+    slow.settings =
+        Some(pb::PlanSettings { timeout: Some(60.0), range: 1e-3, resolution: 1000.0, ..Default::default() });
     let mut gone = c.clone();
     let call = tokio::time::timeout(Duration::from_millis(300), gone.plan(slow.clone())).await;
     assert!(call.is_err(), "the slow plan answered within 300 ms");
     drop(gone);
-    // The one batch slot is free again: a plan asked now is answered well before the slow one's
+    // The one planning slot is free again: a plan asked now is answered well before the slow one's
     // 60 s would have ended.
     let mut quick = plan_request(&robot_id, &scene_id);
     quick.motion_plan_request = Some(pb::plan_request::MotionPlanRequest::MotionPlanRequestYaml(text));

@@ -109,12 +109,20 @@ fn certify_edge(
         .map(|found| found.path))
 }
 
+/// The finest contact tolerance (meters) the certificates of a plan at `tolerance` use: a
+/// hundredth of it ([`proven`]). A motion check of a certified edge at the plan's padding and
+/// this tolerance answers free; at a coarser one it may report a contact within the tolerance
+/// (an edge that passes closer than the tolerance to the padding, never through it).
+pub fn certificate_tolerance(tolerance: Real) -> Real {
+    tolerance / 100.0
+}
+
 /// Whether the edge `a → b` is proven free at `tolerance`, or else at a hundredth of it (an end
 /// within the tolerance of an obstacle, as grasp configurations and points the simplification
 /// put on an edge can be).
 fn proven(checker: &mut dyn Validity, a: &[Real], b: &[Real], tolerance: Real) -> Result<bool> {
     Ok(checker.certify(a, b, tolerance)? == Certificate::Free
-        || checker.certify(a, b, tolerance / 100.0)? == Certificate::Free)
+        || checker.certify(a, b, certificate_tolerance(tolerance))? == Certificate::Free)
 }
 
 /// A checker whose edge test is the certificate (a re-plan's edges are proven as they are made).

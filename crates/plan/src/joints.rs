@@ -12,11 +12,15 @@ use sublevel_robot::RobotModel;
 pub type JointConstraint = (String, Real, Real, Real);
 
 /// The start configuration of a MoveIt start state: the robot's moving joints from `given`
-/// (joints the robot does not move, such as fixed fingers, ignored), the others from `defaults`
-/// (a scene's joint positions), else 0.
+/// (joints of the URDF the robot does not move, such as fixed or mimic fingers, ignored), the
+/// others from `defaults` (a scene's joint positions), else 0. A name that is not a joint of the
+/// URDF is refused, as MoveIt refuses a joint state naming a variable its model lacks: a
+/// misspelled start would otherwise be planned from the scene's positions, a start the client
+/// never gave.
 ///
 /// # Errors
-/// [`Error::InvalidArgument`] naming `field` or `field[k]` for a value that is not finite or is
+/// [`Error::InvalidArgument`] naming `field.joint_state.name[k]` for a name that is not a joint
+/// of the robot or is repeated, `field` or `field[k]` for a value that is not finite or is
 /// outside the joint's limits.
 pub fn start_from_joints(
     model: &RobotModel,
@@ -24,6 +28,25 @@ pub fn start_from_joints(
     given: &[(String, Real)],
     defaults: &[(String, Real)],
 ) -> Result<Vec<Real>> {
+    for (k, (name, _)) in given.iter().enumerate() {
+        let at = || format!("{field}.joint_state.name[{k}]");
+        if !model.joints().iter().any(|j| j.name == *name) {
+            return Err(Error::invalid(
+                at(),
+                format!(
+                    "`{}` is not a joint of the robot; its moving joints: {:?}",
+                    sublevel_core::error::clip(name),
+                    model.variable_names()
+                ),
+            ));
+        }
+        if given[..k].iter().any(|(m, _)| m == name) {
+            return Err(Error::invalid(at(), format!("`{}` is repeated", sublevel_core::error::clip(name))));
+        }
+        if !given[k].1.is_finite() {
+            return Err(Error::invalid(format!("{field}.joint_state.position[{k}]"), "must be finite"));
+        }
+    }
     let q: Vec<Real> = model
         .variable_names()
         .iter()

@@ -34,7 +34,11 @@ pub mod simplify;
 pub mod space;
 pub mod validity;
 
+pub use certify::certificate_tolerance;
 pub use joints::{joint_goal, start_from_joints, JointConstraint};
-pub use plan::{check_configuration, plan, Goal, JointRegion, PlanOutcome, PlanSettings, PlanStatus, PlanTiming};
+pub use plan::{
+    check_configuration, plan, Goal, JointRegion, PlanOutcome, PlanSettings, PlanStatus, PlanTiming, MAX_GOALS,
+    MAX_PADDING, MAX_RESOLUTION, MAX_SHORTCUT_ATTEMPTS, MAX_SMOOTHING_PASSES, MAX_TIMEOUT, MAX_TOLERANCE,
+};
 pub use space::{HaltonSampler, JointSpace};
 pub use validity::{Certificate, CheckCounts, RobotValidity, Validity};

@@ -13,6 +13,29 @@ use sublevel_core::math::Real;
 use sublevel_core::{Error, Result};
 use sublevel_robot::ik::{IkSettings, IkSolver, PoseGoal};
 
+/// The longest timeout of a plan.
+pub const MAX_TIMEOUT: Duration = Duration::from_secs(3600);
+
+/// The largest sampling resolution of the search's edges (samples per unit of joint distance):
+/// 30 times VAMP's 32, far finer than any obstacle needs, and an edge across a 7-joint robot's
+/// whole range still lists under 10⁵ samples.
+pub const MAX_RESOLUTION: Real = 1000.0;
+
+/// The largest contact tolerance of the certificates (meters).
+pub const MAX_TOLERANCE: Real = 0.1;
+
+/// The largest padding around the robot's geometries (meters).
+pub const MAX_PADDING: Real = 1.0;
+
+/// The most goal configurations a goal tree is rooted at, and the most a request may give.
+pub const MAX_GOALS: usize = 64;
+
+/// The most corner-cutting passes of the simplification.
+pub const MAX_SMOOTHING_PASSES: usize = 8;
+
+/// The most shortcut tries of the simplification.
+pub const MAX_SHORTCUT_ATTEMPTS: usize = 1024;
+
 /// Planner settings; [`PlanSettings::default`] gives the service's defaults.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PlanSettings {
@@ -76,33 +99,77 @@ impl Default for PlanSettings {
 }
 
 impl PlanSettings {
-    /// Checks the settings.
+    /// Checks the settings: every one that sizes the work is bounded ([`MAX_TIMEOUT`],
+    /// [`MAX_RESOLUTION`], [`MAX_GOALS`], [`MAX_SMOOTHING_PASSES`], [`MAX_SHORTCUT_ATTEMPTS`]),
+    /// and the lengths are physical ([`MAX_TOLERANCE`], [`MAX_PADDING`]).
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] naming the setting out of its range (`timeout`, `range`,
-    /// `resolution`, `goal_bias`, `padding`, `tolerance`, `max_goals`).
+    /// `resolution`, `goal_bias`, `padding`, `tolerance`, `max_goals`, `smoothing_passes`,
+    /// `shortcut_attempts`, `search_margin`).
     pub fn validate(&self) -> Result<()> {
         let positive = |field: &str, v: Real, unit: &str| {
             if v.is_finite() && v > 0.0 {
                 Ok(())
             } else {
-                Err(Error::invalid(field, format!("must be finite and > 0{unit}, got {v}")))
+                Err(Error::invalid(
+                    field,
+                    format!("must be finite and > 0{unit}, got {}", sublevel_core::error::show_real(v)),
+                ))
+            }
+        };
+        let at_most = |field: &str, v: Real, max: Real, unit: &str| {
+            if v <= max {
+                Ok(())
+            } else {
+                Err(Error::invalid(
+                    field,
+                    format!("must be at most {max}{unit}, got {}", sublevel_core::error::show_real(v)),
+                ))
             }
         };
         if self.timeout.is_zero() {
             return Err(Error::invalid("timeout", "must be > 0 s: a plan needs time to check its ends"));
         }
+        if self.timeout > MAX_TIMEOUT {
+            return Err(Error::invalid(
+                "timeout",
+                format!("must be at most {} s, got {} s", MAX_TIMEOUT.as_secs(), self.timeout.as_secs_f64()),
+            ));
+        }
         positive("range", self.range, "")?;
         positive("resolution", self.resolution, " samples per unit of joint distance")?;
+        // The samples of one edge are listed before they are checked: bounded with the resolution.
+        at_most("resolution", self.resolution, MAX_RESOLUTION, " samples per unit of joint distance")?;
         positive("tolerance", self.tolerance, " m")?;
+        at_most("tolerance", self.tolerance, MAX_TOLERANCE, " m")?;
         if !(self.goal_bias.is_finite() && (0.0..1.0).contains(&self.goal_bias)) {
-            return Err(Error::invalid("goal_bias", format!("must be in [0, 1), got {}", self.goal_bias)));
+            return Err(Error::invalid(
+                "goal_bias",
+                format!("must be in [0, 1), got {}", sublevel_core::error::show_real(self.goal_bias)),
+            ));
         }
         if !(self.padding.is_finite() && self.padding >= 0.0) {
-            return Err(Error::invalid("padding", format!("must be finite and ≥ 0 m, got {}", self.padding)));
+            return Err(Error::invalid(
+                "padding",
+                format!("must be finite and ≥ 0 m, got {}", sublevel_core::error::show_real(self.padding)),
+            ));
         }
-        if self.max_goals == 0 {
-            return Err(Error::invalid("max_goals", "must be ≥ 1"));
+        at_most("padding", self.padding, MAX_PADDING, " m")?;
+        if !(1..=MAX_GOALS).contains(&self.max_goals) {
+            return Err(Error::invalid("max_goals", format!("must be in [1, {MAX_GOALS}], got {}", self.max_goals)));
+        }
+        if self.smoothing_passes > MAX_SMOOTHING_PASSES {
+            return Err(Error::invalid(
+                "smoothing_passes",
+                format!("must be at most {MAX_SMOOTHING_PASSES}, got {}", self.smoothing_passes),
+            ));
+        }
+        if self.shortcut_attempts > MAX_SHORTCUT_ATTEMPTS {
+            return Err(Error::invalid(
+                "shortcut_attempts",
+                format!("must be at most {MAX_SHORTCUT_ATTEMPTS}, got {}", self.shortcut_attempts),
+            ));
         }
         if !(self.search_margin.is_finite() && self.search_margin >= 0.0) {
             return Err(Error::invalid(
@@ -183,6 +250,25 @@ pub struct PlanOutcome {
     pub repaired: usize,
 }
 
+impl PlanOutcome {
+    /// The outcome of a plan whose time ran out before it found anything: TIMED_OUT, no path, no
+    /// check made.
+    pub fn timed_out() -> Self {
+        Self {
+            status: PlanStatus::TimedOut,
+            path: Vec::new(),
+            length: 0.0,
+            certified: false,
+            unproven: Vec::new(),
+            goal: None,
+            timing: PlanTiming::default(),
+            counts: CheckCounts::default(),
+            nodes: 0,
+            repaired: 0,
+        }
+    }
+}
+
 /// What a plan is asked for.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Goal {
@@ -238,6 +324,22 @@ pub fn plan(
     settings.validate()?;
     let clock = Instant::now();
     let deadline = clock + settings.timeout;
+    checker.set_deadline(Some(deadline));
+    let answer = plan_within(checker, start, goal, settings, cancel, clock, deadline);
+    checker.set_deadline(None);
+    answer
+}
+
+/// [`plan`] once its settings are checked and its checker knows the deadline.
+fn plan_within(
+    checker: &mut dyn Validity,
+    start: &[Real],
+    goal: &Goal,
+    settings: &PlanSettings,
+    cancel: &AtomicBool,
+    clock: Instant,
+    deadline: Instant,
+) -> Result<PlanOutcome> {
     let space = checker.space().clone();
     check_configuration(&space, "start", start)?;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(settings.seed);
@@ -262,18 +364,7 @@ pub fn plan(
         }
         _ => goal_candidates(&space, goal, settings.max_goals, &mut rng)?,
     };
-    let mut outcome = PlanOutcome {
-        status: PlanStatus::TimedOut,
-        path: Vec::new(),
-        length: 0.0,
-        certified: false,
-        unproven: Vec::new(),
-        goal: None,
-        timing: PlanTiming::default(),
-        counts: CheckCounts::default(),
-        nodes: 0,
-        repaired: 0,
-    };
+    let mut outcome = PlanOutcome::timed_out();
     let finish = |mut o: PlanOutcome, checker: &dyn Validity| {
         o.counts = checker.counts();
         o
@@ -283,9 +374,14 @@ pub fn plan(
         outcome.timing.goals = clock.elapsed();
         return Ok(finish(outcome, checker));
     }
+    // Every candidate is checked, and the first `max_goals` free ones kept: colliding goals
+    // given first never hide a free one behind them.
     let mut goals = Vec::new();
     let mut first_collision = None;
     for q in candidates {
+        if goals.len() == settings.max_goals {
+            break;
+        }
         match checker.collision(&q)? {
             None => goals.push(q),
             Some(why) => {
@@ -431,18 +527,25 @@ fn pose_candidates(
     Ok(free)
 }
 
-/// The goal configurations to try, checked against the space: those given (at most
-/// `max_goals`), or a region's center then samples inside it.
+/// The goal configurations to try, checked against the space: every one given (at most
+/// [`MAX_GOALS`]; the plan keeps the first `max_goals` free ones), or a region's center then
+/// samples inside it (`max_goals` in all).
 fn goal_candidates(space: &JointSpace, goal: &Goal, max_goals: usize, rng: &mut impl Rng) -> Result<Vec<Vec<Real>>> {
     match goal {
         Goal::Configurations(qs) => {
             if qs.is_empty() {
                 return Err(Error::invalid("goal", "needs at least one goal configuration"));
             }
+            if qs.len() > MAX_GOALS {
+                return Err(Error::invalid(
+                    "goal.configurations",
+                    format!("at most {MAX_GOALS} goal configurations, got {}", qs.len()),
+                ));
+            }
             for (k, q) in qs.iter().enumerate() {
                 check_configuration(space, &format!("goal.configurations[{k}]"), q)?;
             }
-            Ok(qs.iter().take(max_goals).cloned().collect())
+            Ok(qs.clone())
         }
         Goal::Pose(_) => Err(Error::invalid("goal.pose", "this checker has no robot: pose goals need one")),
         Goal::Region(r) => {

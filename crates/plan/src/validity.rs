@@ -11,6 +11,7 @@
 //! orders them ([`sampled_edge_free`]).
 
 use crate::space::JointSpace;
+use std::time::Instant;
 use sublevel_core::math::{Isometry3, Real};
 use sublevel_core::Result;
 use sublevel_robot::{rake_order, CheckOptions, MotionChecker, MotionOptions, RobotModel, BLOCK};
@@ -87,6 +88,13 @@ pub trait Validity {
     fn kinematics(&mut self) -> Option<(&RobotModel, Isometry3)> {
         None
     }
+
+    /// Sets the instant past which the checker's long answers stop early, conservatively: a
+    /// sampled edge not yet proven colliding answers "not free" and a certificate
+    /// [`Certificate::Undecided`], so that the planner sees its deadline within one block of
+    /// samples (or a few advancement steps) rather than at the end of an edge of any length. A
+    /// checker whose answers are all short ignores it; `None` never stops early.
+    fn set_deadline(&mut self, _deadline: Option<Instant>) {}
 }
 
 /// The sampled edge test of [`Validity::edge_free`]: the samples of `a → b` at `resolution` per
@@ -138,6 +146,8 @@ pub struct RobotValidity<'c, 'r> {
     padding: Real,
     margin: Real,
     max_steps: usize,
+    /// Past it, edges answer "not free" and certificates undecided ([`Validity::set_deadline`]).
+    deadline: Option<Instant>,
     counts: CheckCounts,
     /// The samples of one rake, row by row (reused).
     block: Vec<Real>,
@@ -157,10 +167,18 @@ impl<'c, 'r> RobotValidity<'c, 'r> {
             padding,
             margin: 0.0,
             max_steps: 100_000,
+            deadline: None,
             counts: CheckCounts::default(),
             block: Vec::new(),
             sample: Vec::new(),
         }
+    }
+}
+
+impl RobotValidity<'_, '_> {
+    /// Whether the deadline has passed or the thread's cancellation scope is cancelled.
+    fn stopped(&self) -> bool {
+        self.deadline.is_some_and(|d| Instant::now() >= d) || sublevel_core::cancel::is_cancelled()
     }
 }
 
@@ -190,6 +208,10 @@ impl Validity for RobotValidity<'_, '_> {
     /// # Errors
     /// [`sublevel_core::Error::InvalidArgument`] naming `start` / `end` (a length other than the
     /// robot's entries, a value that is not finite); the checker's errors.
+    ///
+    /// Past the deadline ([`Validity::set_deadline`]) or in a cancelled
+    /// [`sublevel_core::cancel::cancellable`] scope, the edge answers "not free" before its next
+    /// block: an edge of 10⁵ samples never outlives its plan.
     fn edge_free(&mut self, a: &[Real], b: &[Real], resolution: Real) -> Result<bool> {
         self.counts.edges += 1;
         let model = &self.motion.checker().robot().model;
@@ -198,6 +220,9 @@ impl Validity for RobotValidity<'_, '_> {
         let n = ((self.space.distance(a, b) * resolution).ceil() as usize).max(1);
         let padding = self.padding + self.margin;
         for rake in rake_order(n, BLOCK).chunks(BLOCK) {
+            if self.stopped() {
+                return Ok(false);
+            }
             self.block.clear();
             for &i in rake {
                 self.space.interpolate(a, b, i as Real / n as Real, &mut self.sample);
@@ -214,6 +239,7 @@ impl Validity for RobotValidity<'_, '_> {
     fn certify(&mut self, a: &[Real], b: &[Real], tolerance: Real) -> Result<Certificate> {
         self.counts.edges_certified += 1;
         let options = MotionOptions { padding: self.padding, tolerance, max_steps: self.max_steps };
+        self.motion.set_deadline(self.deadline);
         let answer = self.motion.check_motion(a, b, &self.base, &options)?;
         self.counts.advancement_steps += answer.steps;
         Ok(match (answer.valid, answer.decided, answer.contact) {
@@ -250,6 +276,10 @@ impl Validity for RobotValidity<'_, '_> {
 
     fn set_search_margin(&mut self, margin: Real) {
         self.margin = margin;
+    }
+
+    fn set_deadline(&mut self, deadline: Option<Instant>) {
+        self.deadline = deadline;
     }
 
     fn kinematics(&mut self) -> Option<(&RobotModel, Isometry3)> {

@@ -163,3 +163,86 @@ fn a_continuous_joint_edge_goes_the_shorter_way_round() {
     assert!(!sampled_edge_free(&mut validity, &[2.8], &[-2.8], 32.0).unwrap());
     assert!(validity.state_free(&[2.8]).unwrap() && validity.state_free(&[-2.8]).unwrap());
 }
+
+/// A deadline reaches inside the long answers: past it, a free edge at the finest resolution
+/// allowed answers "not free" before its first block, without checking a configuration, and a
+/// certificate (the box scene's request, from the start to just before the straight line's first
+/// contact) stops undecided within [`sublevel_robot::advance::STOP_EVERY`] steps; without a
+/// deadline the same edge is free (the every-sample reference agrees) and the certificate proves
+/// the motion free in more steps.
+#[test]
+fn a_deadline_stops_edges_and_certificates_conservatively() {
+    let robot = FittedRobot::load(&root().join("data/robots/panda/panda.robot.json")).unwrap();
+    let space = JointSpace::of(&robot.model);
+    let path = root().join("data/robots/mbm_panda/scenes/box/scene0001.yaml");
+    let scene = PlanningScene::from_yaml(&std::fs::read(path).unwrap()).unwrap();
+    let (world, _) = world_objects(&scene).unwrap();
+    let allowed = allowed_override(&scene);
+    let mut reference = RobotChecker::new(&robot, Vec::new(), &|_, _| None).unwrap();
+    let mut free = RobotChecker::new(&robot, Vec::new(), &|_, _| None).unwrap();
+    let mut edges = RobotValidity::new(MotionChecker::new(&mut free).unwrap(), Isometry3::identity(), 0.0);
+    // The Panda's ready pose, and joint 1 turned by one radian: free all along, with no world.
+    let a = vec![0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785];
+    let mut b = a.clone();
+    b[0] = 1.0;
+    let resolution = sublevel_plan::MAX_RESOLUTION;
+    assert!(every_sample_free(&mut reference, &space, &a, &b, resolution, 0.0));
+    edges.set_deadline(Some(std::time::Instant::now()));
+    assert!(!edges.edge_free(&a, &b, resolution).unwrap());
+    assert_eq!(edges.counts().states, 0, "the stopped edge checked configurations");
+    edges.set_deadline(None);
+    assert!(edges.edge_free(&a, &b, resolution).unwrap());
+    assert_eq!(edges.counts().states, 1000);
+
+    let text = std::fs::read(root().join("data/robots/mbm_panda/requests/box/request0001.yaml")).unwrap();
+    let request = sublevel_scene::moveit::MotionPlanRequest::from_yaml(&text).unwrap();
+    let names = robot.model.variable_names();
+    let pick = |joints: &[(String, Real)]| -> Vec<Real> {
+        names.iter().map(|n| joints.iter().find(|(m, _)| m == n).unwrap().1).collect()
+    };
+    let (q0, goal) = (pick(&request.start), pick(&request.goal));
+    // Up to just before the straight line's first contact (t ≈ 0.0974): free, and ending within
+    // millimeters of the box, where conservative advancement takes small steps.
+    let q1: Vec<Real> = q0.iter().zip(&goal).map(|(a, b)| a + 0.0970 * (b - a)).collect();
+    let mut checker = RobotChecker::new(&robot, world, &allowed).unwrap();
+    let mut certified = RobotValidity::new(MotionChecker::new(&mut checker).unwrap(), Isometry3::identity(), 0.0);
+    certified.set_deadline(Some(std::time::Instant::now()));
+    assert_eq!(certified.certify(&q0, &q1, 1e-3).unwrap(), sublevel_plan::Certificate::Undecided);
+    let stopped = certified.counts().advancement_steps;
+    assert!(stopped <= sublevel_robot::advance::STOP_EVERY, "{stopped} steps past the deadline");
+    certified.set_deadline(None);
+    assert_eq!(certified.certify(&q0, &q1, 1e-3).unwrap(), sublevel_plan::Certificate::Free);
+    let full = certified.counts().advancement_steps - stopped;
+    assert!(full > stopped, "the whole certificate took {full} steps, the stopped one {stopped}");
+}
+
+/// Every setting that sizes a plan's work is bounded: just inside each bound validates, just
+/// outside is refused naming the setting.
+#[test]
+fn plan_settings_are_bounded() {
+    use std::time::Duration;
+    use sublevel_plan::PlanSettings;
+    let field = |s: PlanSettings| match s.validate() {
+        Ok(()) => String::new(),
+        Err(sublevel_core::Error::InvalidArgument { field, .. }) => field,
+        Err(e) => panic!("{e}"),
+    };
+    let d = PlanSettings::default;
+    assert_eq!(field(d()), "");
+    let edge = [
+        (PlanSettings { resolution: 1000.0, ..d() }, PlanSettings { resolution: 1000.5, ..d() }, "resolution"),
+        (PlanSettings { tolerance: 0.1, ..d() }, PlanSettings { tolerance: 1e300, ..d() }, "tolerance"),
+        (PlanSettings { padding: 1.0, ..d() }, PlanSettings { padding: 1.01, ..d() }, "padding"),
+        (PlanSettings { max_goals: 64, ..d() }, PlanSettings { max_goals: 65, ..d() }, "max_goals"),
+        (PlanSettings { smoothing_passes: 8, ..d() }, PlanSettings { smoothing_passes: 9, ..d() }, "smoothing_passes"),
+        (
+            PlanSettings { timeout: Duration::from_secs(3600), ..d() },
+            PlanSettings { timeout: Duration::from_secs(3601), ..d() },
+            "timeout",
+        ),
+    ];
+    for (inside, outside, name) in edge {
+        assert_eq!(field(inside), "", "{name}");
+        assert_eq!(field(outside), name);
+    }
+}

@@ -57,6 +57,10 @@ use std::collections::BinaryHeap;
 use std::f64::consts::PI;
 use sublevel_core::math::{Isometry3, Real};
 
+/// Steps between two looks at a motion's deadline and cancellation ([`MotionChecker::set_deadline`]):
+/// a step takes microseconds, so a stop is seen well within a millisecond.
+pub const STOP_EVERY: usize = 16;
+
 /// Settings of [`MotionChecker::check_motion`].
 #[derive(Clone, Copy, Debug)]
 pub struct MotionOptions {
@@ -129,6 +133,8 @@ pub struct MotionChecker<'c, 'r> {
     bounds: MotionBounds,
     /// Whether pairs carry their proofs across steps (the default; [`MotionChecker::set_carried_bounds`]).
     carry: bool,
+    /// When a motion stops undecided, whatever its steps ([`MotionChecker::set_deadline`]).
+    deadline: Option<std::time::Instant>,
     scratch: Scratch,
 }
 
@@ -248,7 +254,7 @@ impl<'c, 'r> MotionChecker<'c, 'r> {
             radius[g.link] = Real::max(radius[g.link], reach);
         }
         let bounds = robot.model.motion_bounds(&radius)?;
-        Ok(Self { checker, bounds, carry: true, scratch: Scratch::default() })
+        Ok(Self { checker, bounds, carry: true, deadline: None, scratch: Scratch::default() })
     }
 
     /// The configuration checker the motions are checked with (its robot, world and padding),
@@ -265,6 +271,19 @@ impl<'c, 'r> MotionChecker<'c, 'r> {
     /// every step is covered by a valid bound of every pair.
     pub fn set_carried_bounds(&mut self, on: bool) {
         self.carry = on;
+    }
+
+    /// Sets the instant past which a motion stops undecided (`decided = false`, `valid = false`,
+    /// as at `max_steps`), and so does a motion inside a cancelled
+    /// [`sublevel_core::cancel::cancellable`] scope: a planner's deadline reaches into a long
+    /// certificate. Looked at every [`STOP_EVERY`] steps; `None` (the default) never stops early.
+    pub fn set_deadline(&mut self, deadline: Option<std::time::Instant>) {
+        self.deadline = deadline;
+    }
+
+    /// Whether the deadline has passed or the thread's cancellation scope is cancelled.
+    fn stopped(&self) -> bool {
+        self.deadline.is_some_and(|d| std::time::Instant::now() >= d) || sublevel_core::cancel::is_cancelled()
     }
 
     /// Checks the motion from `q0` to `q1` (radians, meters; continuous joints the shorter way)
@@ -409,7 +428,7 @@ impl<'c, 'r> MotionChecker<'c, 'r> {
                 continue;
             }
             // Every pair is free up to `top.until`: step there.
-            if answer.steps >= options.max_steps {
+            if answer.steps >= options.max_steps || (answer.steps % STOP_EVERY == 1 && self.stopped()) {
                 answer.decided = false;
                 return Ok(answer);
             }

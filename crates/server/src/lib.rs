@@ -169,6 +169,10 @@ pub struct ServerConfig {
     /// Blocking Newton-only query work running at once (batches and planner requests too large
     /// for an async worker, CheckScene); the rest wait for a slot. Default: the CPUs.
     pub batch_workers: usize,
+    /// `Plan` calls running at once, on slots of their own (`--max-concurrent-plans`): the rest
+    /// wait, their timeouts running, and never take the batch slots the checks use. Default: half
+    /// the CPUs, at least 1.
+    pub max_concurrent_plans: usize,
     /// Longest time a `sublevel.v1` call may take (`--max-request-ms`); the shorter of it and the
     /// client's `grpc-timeout` applies, and a call past it answers DEADLINE_EXCEEDED with its
     /// blocking query work cancelled ([`deadline`]). `None`: only client deadlines apply.
@@ -206,6 +210,7 @@ impl Default for ServerConfig {
             max_cloud_bytes: sublevel_scene::DEFAULT_MAX_CLOUD_BYTES,
             max_concurrent_sdp: limits::default_sdp_slots(),
             batch_workers: limits::default_batch_workers(),
+            max_concurrent_plans: limits::default_plan_slots(),
             max_request_time: None,
             newton: NewtonParams::default(),
             fit: FitSettings::default(),

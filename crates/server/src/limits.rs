@@ -14,10 +14,14 @@
 //! - **batch** ([`super::ServerConfig::batch_workers`], default the CPUs): Newton-only work too
 //!   large for an async worker — big batches, planner requests, compound scenes, CheckScene;
 //! - **SDP** ([`super::ServerConfig::max_concurrent_sdp`], default half the CPUs, at least 2):
-//!   certificates, nonconvex scenes, and the rare answer Newton could not settle.
+//!   certificates, nonconvex scenes, and the rare answer Newton could not settle;
+//! - **plans** ([`super::ServerConfig::max_concurrent_plans`], default half the CPUs, at least
+//!   1): `Plan` calls, each holding its slot for up to its whole timeout.
 //!
 //! Separate pools so that large batches (microseconds per pair, all cores' worth of them) never
-//! wait behind seconds-long SDP solves, and a burst of `certify` calls cannot take every thread.
+//! wait behind seconds-long SDP solves or plans, and a burst of `certify` or `Plan` calls cannot
+//! take every thread: however many plans clients send, the batch slots stay free for the checks,
+//! and the plans queue among themselves (a plan's timeout counts its wait, [`Slots::run_before`]).
 
 use crate::runtime::cancellable_blocking;
 use crate::{Error, Result};
@@ -103,12 +107,14 @@ pub(crate) struct QueryPools {
     pub(crate) batch: Slots,
     /// SDP work: certificates, nonconvex scenes, SDP fallbacks.
     pub(crate) sdp: Slots,
+    /// `Plan` calls.
+    pub(crate) plans: Slots,
 }
 
 impl QueryPools {
-    /// `batch` batch slots and `sdp` SDP slots.
-    pub(crate) fn new(batch: usize, sdp: usize) -> Self {
-        Self { batch: Slots::new(batch), sdp: Slots::new(sdp) }
+    /// `batch` batch slots, `sdp` SDP slots and `plans` planning slots.
+    pub(crate) fn new(batch: usize, sdp: usize, plans: usize) -> Self {
+        Self { batch: Slots::new(batch), sdp: Slots::new(sdp), plans: Slots::new(plans) }
     }
 }
 
@@ -122,6 +128,12 @@ pub fn default_batch_workers() -> usize {
 /// seconds; half the cores keeps the rest for batches and the async workers).
 pub fn default_sdp_slots() -> usize {
     (default_batch_workers() / 2).max(2)
+}
+
+/// The default number of plans running at once: half the CPUs, at least 1 (a plan keeps one
+/// core busy for up to its timeout; the other half stays with the checks).
+pub fn default_plan_slots() -> usize {
+    (default_batch_workers() / 2).max(1)
 }
 
 /// The default number of fit jobs running at once: a quarter of the CPUs, at least 1 (a fit is
@@ -157,6 +169,30 @@ impl Slots {
             f()
         })
         .await
+    }
+
+    /// As [`Slots::run`], but gives up waiting for a slot at `deadline`: `Ok(None)` when no slot
+    /// was free before it (`f` never ran). Work whose time budget counts from its arrival (a
+    /// plan's timeout) waits no longer than that budget.
+    ///
+    /// # Errors
+    /// As [`Slots::run`].
+    pub(crate) async fn run_before<T: Send + 'static>(
+        &self,
+        deadline: std::time::Instant,
+        f: impl FnOnce() -> Result<T> + Send + 'static,
+    ) -> Result<Option<T>, Status> {
+        let acquire = self.slots.clone().acquire_owned();
+        let permit = match tokio::time::timeout_at(deadline.into(), acquire).await {
+            Err(_) => return Ok(None),
+            Ok(permit) => permit.map_err(|_| Status::unavailable("the server is shutting down"))?,
+        };
+        cancellable_blocking(move || {
+            let _permit = permit;
+            f()
+        })
+        .await
+        .map(Some)
     }
 
     /// Slots free right now (for tests and metrics).

@@ -73,22 +73,24 @@ def _plan_settings(
     """The ``PlanSettings`` of :meth:`PlanCalls.plan` (same arguments; None: the server's default)."""
     s = pb.PlanSettings(
         timeout=_real(timeout, "timeout", low=0.0, low_open=True, high=3600.0, what=" of seconds"),
-        padding=_real(padding, "padding", low=0.0, what=" of meters"),
+        padding=_real(padding, "padding", low=0.0, high=1.0, what=" of meters"),
         simplify=bool(simplify),
-        smoothing_passes=_integer(smoothing_passes, "smoothing_passes", 0, 2**32 - 1),
+        smoothing_passes=_integer(smoothing_passes, "smoothing_passes", 0, 8),
     )
     if seed is not None:
         s.seed = _integer(seed, "seed", 0)
     if range is not None:
         s.range = _real(range, "range", low=0.0, low_open=True, what=" (joint-space distance)")
     if resolution is not None:
-        s.resolution = _real(resolution, "resolution", low=0.0, low_open=True, what=" of configurations per unit")
+        s.resolution = _real(
+            resolution, "resolution", low=0.0, low_open=True, high=1000.0, what=" of configurations per unit"
+        )
     if goal_bias is not None:
         s.goal_bias = _real(goal_bias, "goal_bias", low=0.0, high=1.0, high_open=True)
     if tolerance is not None:
-        s.tolerance = _real(tolerance, "tolerance", low=0.0, low_open=True, what=" of meters")
+        s.tolerance = _real(tolerance, "tolerance", low=0.0, low_open=True, high=0.1, what=" of meters")
     if max_goals is not None:
-        s.max_goals = _integer(max_goals, "max_goals", 1, 2**32 - 1)
+        s.max_goals = _integer(max_goals, "max_goals", 1, 64)
     return s
 
 
@@ -301,9 +303,9 @@ class PlanCalls:
                 or a 4x4 matrix); tolerances 0 (the default): 1 mm and 0.01 rad; an orientation
                 tolerance >= pi: any orientation. Goal configurations are found by inverse
                 kinematics.
-            motion_plan_request: a MoveIt ``MotionPlanRequest`` (its start state, and its first
-                goal constraint's joint constraints, as MotionBenchMaker's request files hold
-                them): YAML or JSON text (JSON when it starts with ``{``), bytes, a mapping (sent
+            motion_plan_request: a MoveIt ``MotionPlanRequest`` (its start state, whose names must
+                be joints of the robot, and its goal constraints' joint constraints, as
+                MotionBenchMaker's request files hold them; other constraints are refused): YAML or JSON text (JSON when it starts with ``{``), bytes, a mapping (sent
                 as JSON), or a path to such a file (``os.PathLike``, or a one-line ``str`` naming
                 an existing file).
             joint_names: the n joints of ``start``'s and ``goal``'s columns, each once; None:
@@ -312,19 +314,22 @@ class PlanCalls:
                 positions, else 0.
             base: the pose of the robot's root link in the scene (as ``goal_pose``'s pose); None:
                 the scene robot's base, else the identity.
-            timeout: the whole plan's time on the server, seconds (> 0; at most 3600): the goals,
-                the search, the simplification and the certification.
+            timeout: the whole plan's time on the server, seconds (> 0; at most 3600), counted
+                from the request's arrival: the wait for a planning slot, the goals, the search,
+                the simplification and the certification.
             seed: the sampler's and the simplification's seed (>= 0): the same request gives the
                 same path; None: 1.
             range: the longest extension step (joint-space distance, > 0); None: 1.0.
-            padding: meters (>= 0) every robot geometry keeps clear, on top of the link padding.
+            padding: meters (in [0, 1]) every robot geometry keeps clear, on top of the link
+                padding.
             simplify: whether the path is simplified (shortcuts, redundant waypoints dropped).
-            smoothing_passes: corner-cutting passes after the shortcuts (>= 0; at most 8 are run).
-            resolution: configurations per unit of joint distance on the search's edges (> 0);
-                None: 32.
+            smoothing_passes: corner-cutting passes after the shortcuts (0 to 8).
+            resolution: configurations per unit of joint distance on the search's edges (in
+                (0, 1000]); None: 32.
             goal_bias: the chance that a round of the search draws a goal, in [0, 1); None: 0.05.
-            tolerance: the edge certificates' contact tolerance, meters (> 0); None: 1 mm.
-            max_goals: most goal configurations the goal tree is rooted at (>= 1); None: 8.
+            tolerance: the edge certificates' contact tolerance, meters (in (0, 0.1]); None: 1 mm.
+            max_goals: most goal configurations the goal tree is rooted at (1 to 64; the first
+                free ones of those given are kept); None: 8.
             attached, link_padding: as in :meth:`check_configurations`.
             grpc_timeout: the call's gRPC deadline, seconds; None: ``timeout`` plus
                 :data:`PLAN_DEADLINE_MARGIN` (5 s), so that the server answers ``timed_out``

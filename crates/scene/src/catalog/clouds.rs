@@ -178,12 +178,26 @@ fn check_cloud_name(s: &SceneState, name: &str) -> Result<()> {
 
 impl Catalog {
     /// Checks that scene `scene_id` exists and `name` is a name its next cloud may take (the
-    /// same rule [`Catalog::set_point_cloud`] applies), before a frame's work is spent.
+    /// same rule [`Catalog::set_point_cloud`] applies, and not the name of a link of the scene's
+    /// robot: the allowed-collision matrix would read the link's row for the cloud), before a
+    /// frame's work is spent.
     ///
     /// # Errors
     /// [`Error::NotFound`] (kind `scene`); [`Error::InvalidArgument`] naming `name`.
     pub fn check_point_cloud_name(&self, scene_id: &str, name: &str) -> Result<()> {
-        self.with_scene(scene_id, |s| check_cloud_name(s, name))
+        self.with_scene(scene_id, |s| check_cloud_name(s, name))?;
+        if let Ok(Some(placed)) = self.placed_robot(scene_id) {
+            if placed.robot.model.link_index(name).is_some() {
+                return Err(Error::invalid(
+                    "name",
+                    format!(
+                        "`{}` is a link of the scene's robot: name the point cloud otherwise",
+                        sublevel_core::error::clip(name)
+                    ),
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// Builds the cloud of `frame` for scene `scene_id` (module docs): filters, self filter (the

@@ -194,10 +194,19 @@ pub(crate) fn new_id(prefix: &str) -> String {
     format!("{prefix}-{:016x}", rand::random::<u64>())
 }
 
-/// Rejects a body or scene name longer than [`MAX_NAME_BYTES`].
+/// Rejects a name (of a body, scene, robot, instance, cloud or attached object) longer than
+/// [`MAX_NAME_BYTES`] or holding a control character (NUL, newline, …): names are printed in
+/// logs and answers, and keyed in the allowed-collision matrix, where such bytes would forge or
+/// split them.
 pub(crate) fn check_name(field: &str, name: &str) -> Result<()> {
     if name.len() > MAX_NAME_BYTES {
         return Err(Error::invalid(field, format!("at most {MAX_NAME_BYTES} bytes, got {}", name.len())));
+    }
+    if let Some((at, c)) = name.char_indices().find(|(_, c)| c.is_control()) {
+        return Err(Error::invalid(
+            field,
+            format!("holds the control character U+{:04X} at byte {at}: names are printable text", c as u32),
+        ));
     }
     Ok(())
 }

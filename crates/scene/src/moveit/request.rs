@@ -1,9 +1,12 @@
 //! A MoveIt motion plan request (`moveit_msgs/MotionPlanRequest`, YAML or JSON) as the
-//! MotionBenchMaker problems write it: the start state's joint positions, the goal's joint
-//! constraints and the planning group. Other constraints, tolerances and planner settings are
-//! not read.
+//! MotionBenchMaker problems write it: the start state's joint positions, the goals' joint
+//! constraints and the planning group. Planner settings (planner id, attempts, scaling factors,
+//! the workspace) are not read; constraints the planner cannot honor (a goal's position,
+//! orientation or visibility constraints, path and trajectory constraints) are refused, naming
+//! the field, rather than ignored.
 
 use crate::{Error, Result};
+use serde::de::IgnoredAny;
 use serde::Deserialize;
 use sublevel_core::math::Real;
 
@@ -12,13 +15,17 @@ use sublevel_core::math::Real;
 pub struct MotionPlanRequest {
     /// The planning group (`group_name`; empty when absent).
     pub group_name: String,
-    /// The start state's joint positions, in message order.
+    /// The start state's joint positions, in message order (each name once).
     pub start: Vec<(String, Real)>,
     /// The first goal constraint's joint positions, in message order.
     pub goal: Vec<(String, Real)>,
     /// Their tolerances, in the same order: (below, above), radians or meters, ≥ 0 (0 when the
     /// message leaves them out).
     pub goal_tolerances: Vec<(Real, Real)>,
+    /// Every goal constraint (MoveIt plans to any one of them), each as
+    /// `(joint, position, tolerance below, tolerance above)` in message order; the first is
+    /// `goal` with `goal_tolerances`.
+    pub goals: Vec<Vec<(String, Real, Real, Real)>>,
 }
 
 #[derive(Deserialize)]
@@ -29,6 +36,10 @@ struct RawRequest {
     start_state: RawStart,
     #[serde(default)]
     goal_constraints: Vec<RawGoal>,
+    #[serde(default)]
+    path_constraints: Option<RawGoal>,
+    #[serde(default)]
+    trajectory_constraints: Option<RawTrajectory>,
 }
 
 #[derive(Deserialize, Default)]
@@ -49,6 +60,18 @@ struct RawJoints {
 struct RawGoal {
     #[serde(default)]
     joint_constraints: Vec<RawConstraint>,
+    #[serde(default)]
+    position_constraints: Vec<IgnoredAny>,
+    #[serde(default)]
+    orientation_constraints: Vec<IgnoredAny>,
+    #[serde(default)]
+    visibility_constraints: Vec<IgnoredAny>,
+}
+
+#[derive(Deserialize)]
+struct RawTrajectory {
+    #[serde(default)]
+    constraints: Vec<IgnoredAny>,
 }
 
 #[derive(Deserialize)]
@@ -61,15 +84,25 @@ struct RawConstraint {
     tolerance_above: Real,
 }
 
+impl RawGoal {
+    /// The constraint kinds this goal holds that the planner does not take, by field name.
+    fn unsupported(&self) -> Option<&'static str> {
+        [
+            ("position_constraints", self.position_constraints.len()),
+            ("orientation_constraints", self.orientation_constraints.len()),
+            ("visibility_constraints", self.visibility_constraints.len()),
+        ]
+        .into_iter()
+        .find(|(_, n)| *n > 0)
+        .map(|(field, _)| field)
+    }
+}
+
 impl MotionPlanRequest {
-    /// The goal's joint constraints as `(joint, position, tolerance below, tolerance above)`, in
-    /// message order (radians or meters).
+    /// The first goal's joint constraints as `(joint, position, tolerance below, tolerance
+    /// above)`, in message order (radians or meters).
     pub fn goal_constraints(&self) -> Vec<(String, Real, Real, Real)> {
-        self.goal
-            .iter()
-            .zip(&self.goal_tolerances)
-            .map(|((n, v), (below, above))| (n.clone(), *v, *below, *above))
-            .collect()
+        self.goals.first().cloned().unwrap_or_default()
     }
 
     /// Reads a request from YAML (or JSON) bytes.
@@ -77,7 +110,12 @@ impl MotionPlanRequest {
     /// # Errors
     /// [`Error::InvalidArgument`] naming `request` for bytes that are not the message,
     /// `start_state.joint_state` when names and positions differ in number,
-    /// `goal_constraints` when there is no joint goal, or the first non-finite position.
+    /// `start_state.joint_state.name[k]` for a repeated name, the first non-finite position,
+    /// `goal_constraints` when there is no goal, `goal_constraints[k]` for a goal without joint
+    /// constraints, `goal_constraints[k].joint_constraints[j].…` for a position that is not
+    /// finite or a tolerance that is negative or not finite, `goal_constraints[k].position_constraints`
+    /// (and `orientation_constraints`, `visibility_constraints`), `path_constraints` and
+    /// `trajectory_constraints` when they hold a constraint (the planner takes joint goals only).
     pub fn from_yaml(bytes: &[u8]) -> Result<Self> {
         let raw: RawRequest = super::parse_yaml("request", bytes)?;
         let js = raw.start_state.joint_state;
@@ -87,40 +125,72 @@ impl MotionPlanRequest {
                 format!("{} names for {} positions", js.name.len(), js.position.len()),
             ));
         }
+        for (k, name) in js.name.iter().enumerate() {
+            if js.name[..k].contains(name) {
+                return Err(Error::invalid(
+                    format!("start_state.joint_state.name[{k}]"),
+                    format!("`{}` is repeated", sublevel_core::error::clip(name)),
+                ));
+            }
+        }
         if let Some(k) = js.position.iter().position(|v| !v.is_finite()) {
             return Err(Error::invalid(format!("start_state.joint_state.position[{k}]"), "must be finite"));
         }
-        let goal: Vec<(String, Real)> = raw
-            .goal_constraints
-            .first()
-            .map(|g| g.joint_constraints.iter().map(|c| (c.joint_name.clone(), c.position)).collect())
-            .unwrap_or_default();
-        if goal.is_empty() {
-            return Err(Error::invalid("goal_constraints", "no joint constraints: a joint-space goal is needed"));
+        if let Some(path) = &raw.path_constraints {
+            if !path.joint_constraints.is_empty() || path.unsupported().is_some() {
+                return Err(Error::invalid(
+                    "path_constraints",
+                    "path constraints are not supported: the planner takes a start and joint goals",
+                ));
+            }
         }
-        if let Some(k) = goal.iter().position(|(_, v)| !v.is_finite()) {
+        if raw.trajectory_constraints.is_some_and(|t| !t.constraints.is_empty()) {
             return Err(Error::invalid(
-                format!("goal_constraints[0].joint_constraints[{k}].position"),
-                "must be finite",
+                "trajectory_constraints",
+                "trajectory constraints are not supported: the planner takes a start and joint goals",
             ));
         }
-        let goal_tolerances: Vec<(Real, Real)> =
-            raw.goal_constraints[0].joint_constraints.iter().map(|c| (c.tolerance_below, c.tolerance_above)).collect();
-        for (k, (below, above)) in goal_tolerances.iter().enumerate() {
-            for (name, v) in [("tolerance_below", below), ("tolerance_above", above)] {
-                if !(v.is_finite() && *v >= 0.0) {
-                    return Err(Error::invalid(
-                        format!("goal_constraints[0].joint_constraints[{k}].{name}"),
-                        format!("must be finite and ≥ 0, got {v}"),
-                    ));
-                }
+        if raw.goal_constraints.is_empty() {
+            return Err(Error::invalid("goal_constraints", "no goal: a joint-space goal is needed"));
+        }
+        let mut goals = Vec::with_capacity(raw.goal_constraints.len());
+        for (g, goal) in raw.goal_constraints.iter().enumerate() {
+            if let Some(kind) = goal.unsupported() {
+                return Err(Error::invalid(
+                    format!("goal_constraints[{g}].{kind}"),
+                    "not supported: give the goal as joint constraints (or use the typed goal_pose)",
+                ));
             }
+            if goal.joint_constraints.is_empty() {
+                return Err(Error::invalid(
+                    format!("goal_constraints[{g}]"),
+                    "no joint constraints: a joint-space goal is needed",
+                ));
+            }
+            let mut constraints = Vec::with_capacity(goal.joint_constraints.len());
+            for (k, c) in goal.joint_constraints.iter().enumerate() {
+                let field = format!("goal_constraints[{g}].joint_constraints[{k}]");
+                if !c.position.is_finite() {
+                    return Err(Error::invalid(format!("{field}.position"), "must be finite"));
+                }
+                for (name, v) in [("tolerance_below", c.tolerance_below), ("tolerance_above", c.tolerance_above)] {
+                    if !(v.is_finite() && v >= 0.0) {
+                        return Err(Error::invalid(
+                            format!("{field}.{name}"),
+                            format!("must be finite and ≥ 0, got {}", sublevel_core::error::show_real(v)),
+                        ));
+                    }
+                }
+                constraints.push((c.joint_name.clone(), c.position, c.tolerance_below, c.tolerance_above));
+            }
+            goals.push(constraints);
         }
         Ok(Self {
             group_name: raw.group_name,
             start: js.name.into_iter().zip(js.position).collect(),
-            goal,
-            goal_tolerances,
+            goal: goals[0].iter().map(|(n, v, _, _)| (n.clone(), *v)).collect(),
+            goal_tolerances: goals[0].iter().map(|(_, _, b, a)| (*b, *a)).collect(),
+            goals,
         })
     }
 }
@@ -155,5 +225,26 @@ mod tests {
         assert_eq!(field("start_state: {joint_state: {name: [a, b], position: [1]}}"), "start_state.joint_state");
         assert_eq!(field("start_state: {joint_state: {name: [a], position: [1]}}"), "goal_constraints");
         assert_eq!(field("- 1\n- 2\n"), "request");
+        let goal = "goal_constraints: [{joint_constraints: [{joint_name: a, position: 1}]}]";
+        assert_eq!(
+            field(&format!("start_state: {{joint_state: {{name: [a, b, a], position: [1, 2, 3]}}}}\n{goal}")),
+            "start_state.joint_state.name[2]"
+        );
+        assert_eq!(
+            field("goal_constraints: [{joint_constraints: [{joint_name: a, position: 1}]}, {joint_constraints: [{joint_name: a, position: .nan}]}]"),
+            "goal_constraints[1].joint_constraints[0].position"
+        );
+        assert_eq!(
+            field("goal_constraints: [{joint_constraints: [{joint_name: a, position: 1}], position_constraints: [{link_name: hand}]}]"),
+            "goal_constraints[0].position_constraints"
+        );
+        assert_eq!(field("goal_constraints: [{position_constraints: []}]"), "goal_constraints[0]");
+        assert_eq!(
+            field(&format!("{goal}\npath_constraints: {{joint_constraints: [{{joint_name: a, position: 1}}]}}")),
+            "path_constraints"
+        );
+        // Empty constraint lists, as MoveIt writes them, are no constraint.
+        let empty = format!("{goal}\npath_constraints: {{name: '', joint_constraints: [], position_constraints: []}}");
+        assert_eq!(MotionPlanRequest::from_yaml(empty.as_bytes()).unwrap().goals.len(), 1);
     }
 }

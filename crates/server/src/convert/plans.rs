@@ -10,7 +10,8 @@ use sublevel_robot::ik::PoseGoal;
 use sublevel_robot::FittedRobot;
 use sublevel_scene::moveit::MotionPlanRequest;
 
-/// The planner settings of a request: absent or zero fields take their defaults.
+/// The planner settings of a request: absent or zero fields take their defaults; nothing is
+/// clamped silently ([`PlanSettings::validate`] gives every range).
 ///
 /// # Errors
 /// [`Error::InvalidArgument`] naming `settings.FIELD` for a value out of its range (a 0 s
@@ -23,7 +24,10 @@ pub fn plan_settings(s: Option<&pb::PlanSettings>) -> Result<PlanSettings> {
         None => d.timeout,
         Some(t) if t.is_finite() && t > 0.0 && t <= 3600.0 => Duration::from_secs_f64(t),
         Some(t) => {
-            return Err(Error::invalid("settings.timeout", format!("must be in (0, 3600] seconds, got {t}")));
+            return Err(Error::invalid(
+                "settings.timeout",
+                format!("must be in (0, 3600] seconds, got {}", sublevel_core::error::show_real(t)),
+            ));
         }
     };
     let settings = PlanSettings {
@@ -35,9 +39,9 @@ pub fn plan_settings(s: Option<&pb::PlanSettings>) -> Result<PlanSettings> {
         padding: s.padding,
         simplify: s.simplify.unwrap_or(d.simplify),
         shortcut_attempts: d.shortcut_attempts,
-        smoothing_passes: (s.smoothing_passes as usize).min(8),
+        smoothing_passes: s.smoothing_passes as usize,
         tolerance: or(s.tolerance, d.tolerance),
-        max_goals: if s.max_goals == 0 { d.max_goals } else { (s.max_goals as usize).min(64) },
+        max_goals: if s.max_goals == 0 { d.max_goals } else { s.max_goals as usize },
         search_margin: d.search_margin,
         dynamic_domain: d.dynamic_domain,
         balance: d.balance,
@@ -113,6 +117,9 @@ pub fn plan_ends(req: &pb::PlanRequest, robot: &FittedRobot, defaults: &[(String
                 format!("`{}` is not a link of the robot", sublevel_core::error::clip(&pose.link)),
             ));
         }
+        if pose.pose.is_none() {
+            return Err(Error::invalid("goal_pose.pose", "required: the pose the link should reach"));
+        }
         let target = crate::convert::pose_from_proto("goal_pose.pose", pose.pose.as_ref())?;
         let mut goal = PoseGoal::new(pose.link.clone(), target);
         for (field, value, slot) in [
@@ -138,8 +145,10 @@ pub fn plan_ends(req: &pb::PlanRequest, robot: &FittedRobot, defaults: &[(String
 }
 
 /// The start and goal of a MoveIt MotionPlanRequest: the start state's joints the robot moves
-/// (others, such as fixed fingers, ignored), the scene's joint positions for the rest; the first
-/// goal constraint's joint constraints, each a joint the robot moves.
+/// (others of the URDF, such as fixed fingers, ignored; a name the URDF lacks refused), the
+/// scene's joint positions for the rest; the goal constraints' joint constraints, each a joint
+/// the robot moves. Several goal constraints (MoveIt plans to any one of them) are goal
+/// configurations, each exact; a goal region (tolerances) must be the only goal.
 fn ends_of_moveit(
     field: &str,
     request: &MotionPlanRequest,
@@ -147,10 +156,28 @@ fn ends_of_moveit(
     defaults: &[(String, Real)],
 ) -> Result<(Vec<Real>, Goal)> {
     let start = start_from_joints(&robot.model, &format!("{field}.start_state"), &request.start, defaults)?;
-    let constraints = request.goal_constraints();
-    let goal =
-        joint_goal(&robot.model, &format!("{field}.goal_constraints[0].joint_constraints"), &constraints, &start)?;
-    Ok((start, goal))
+    if request.goals.len() > sublevel_plan::MAX_GOALS {
+        return Err(Error::invalid(
+            format!("{field}.goal_constraints"),
+            format!("at most {} goals, got {}", sublevel_plan::MAX_GOALS, request.goals.len()),
+        ));
+    }
+    let mut configurations = Vec::with_capacity(request.goals.len());
+    for (g, constraints) in request.goals.iter().enumerate() {
+        let at = format!("{field}.goal_constraints[{g}].joint_constraints");
+        match joint_goal(&robot.model, &at, constraints, &start)? {
+            Goal::Configurations(qs) => configurations.extend(qs),
+            region if request.goals.len() == 1 => return Ok((start, region)),
+            _ => {
+                return Err(Error::invalid(
+                    format!("{field}.goal_constraints[{g}]"),
+                    "a goal with tolerances must be the request's only goal: give several goals without tolerances, \
+                     or one goal region",
+                ))
+            }
+        }
+    }
+    Ok((start, Goal::Configurations(configurations)))
 }
 
 /// The response of a plan: its status and message, the path in rows of the robot's joints, the
@@ -190,5 +217,7 @@ pub fn plan_response(out: &PlanOutcome, robot: &FittedRobot, total: Duration) ->
         repaired: out.repaired as u32,
         // The scene's, which the handler knows.
         scene_version: 0,
+        // The plan's settings, which the handler knows.
+        check_tolerance: 0.0,
     }
 }

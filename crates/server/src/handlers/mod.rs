@@ -63,7 +63,7 @@ impl SublevelService {
     /// A service over `catalog` with `config`'s limits.
     pub fn new(catalog: Arc<Catalog>, config: ServerConfig) -> Self {
         let jobs = Arc::new(FitJobs::new(catalog.clone(), config.max_concurrent_fits, config.max_fit_queue));
-        let pools = QueryPools::new(config.batch_workers, config.max_concurrent_sdp);
+        let pools = QueryPools::new(config.batch_workers, config.max_concurrent_sdp, config.max_concurrent_plans);
         let robot_builds = Arc::new(tokio::sync::Semaphore::new(robots::ROBOT_BUILD_BUDGET_MIB as usize));
         let prepared = Arc::new(prepared::PreparedCheckers::new(config.batch_workers));
         Self { catalog, config, jobs, pools, robot_builds, prepared }

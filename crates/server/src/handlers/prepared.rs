@@ -330,6 +330,11 @@ impl PreparedCheckers {
             scene_version: world.scene_version,
             clouds: (!asked.scene_id.is_empty()).then(|| world.clouds.clone()),
         };
+        let scene_attached: Vec<&str> = match (&world.robot, asked.robot_id.is_empty()) {
+            (Some(placed), true) => placed.record.attached.iter().map(|a| a.name.as_str()).collect(),
+            _ => Vec::new(),
+        };
+        check_names(&source, &world, &scene_attached, &asked.attached)?;
         Ok(Prepared {
             version,
             robot: with_attached(&source, &asked.attached)?,
@@ -341,6 +346,80 @@ impl PreparedCheckers {
             used: AtomicU64::new(0),
         })
     }
+}
+
+/// Refuses a setting in which one name stands for things of two kinds: a link of the robot, a
+/// scene object (an instance, by its planning-scene name or id), a point cloud, an object
+/// attached by the request. The allowed-collision matrix and the answers key pairs by name, so a
+/// cloud named like a link would take the link's row of the matrix (and with it every pair the
+/// matrix allows the link), turning an obstacle into free space; MoveIt keeps one namespace for
+/// links, world objects and attached objects for the same reason.
+///
+/// # Errors
+/// [`Error::FailedPrecondition`] naming the scene's object or cloud that shares a link's name, or
+/// the cloud that shares an object's name or the name of an object attached to the scene's
+/// robot (`scene_attached`; the scene must be changed); [`Error::InvalidArgument`] naming
+/// `attached[k].name` (a control character, or the name of a link, object or cloud).
+fn check_names(
+    robot: &FittedRobot,
+    world: &RobotWorld,
+    scene_attached: &[&str],
+    attached: &[pb::AttachedObject],
+) -> Result<()> {
+    let links = robot.model.links();
+    let is_link = |name: &str| links.iter().any(|l| l.name == name);
+    let instances = &world.objects[..world.instance_ids.len()];
+    let clouds: Vec<&str> = world.clouds.keys().map(String::as_str).collect();
+    for o in instances {
+        if is_link(&o.name) {
+            return Err(Error::FailedPrecondition(format!(
+                "object `{}` of the scene has the name of a link of the robot: the allowed-collision matrix would read                  the link's entries for it; rename the object",
+                sublevel_core::error::clip(&o.name)
+            )));
+        }
+    }
+    for name in &clouds {
+        let clash = if is_link(name) {
+            Some("a link of the robot")
+        } else if instances.iter().any(|o| o.name == *name) {
+            Some("an object of the scene")
+        } else if scene_attached.contains(name) {
+            Some("an object attached to the scene's robot")
+        } else {
+            None
+        };
+        if let Some(what) = clash {
+            return Err(Error::FailedPrecondition(format!(
+                "point cloud `{}` of the scene has the name of {what}: the allowed-collision matrix would read its                  entries for the cloud; remove the cloud (RemovePointCloud) and send it under another name",
+                sublevel_core::error::clip(name)
+            )));
+        }
+    }
+    for (k, a) in attached.iter().enumerate() {
+        let field = format!("attached[{k}].name");
+        if let Some(c) = a.name.chars().find(|c| c.is_control()) {
+            return Err(Error::invalid(field, format!("holds the control character U+{:04X}", c as u32)));
+        }
+        let clash = if is_link(&a.name) {
+            Some("a link of the robot")
+        } else if instances.iter().any(|o| o.name == a.name) {
+            Some("an object of the scene")
+        } else if clouds.contains(&a.name.as_str()) {
+            Some("a point cloud of the scene")
+        } else {
+            None
+        };
+        if let Some(what) = clash {
+            return Err(Error::invalid(
+                field,
+                format!(
+                    "`{}` is the name of {what}: name the attached object otherwise",
+                    sublevel_core::error::clip(&a.name)
+                ),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// The error of a check that names no robot in a scene without one.
