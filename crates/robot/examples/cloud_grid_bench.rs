@@ -7,7 +7,9 @@
 //! ```
 //!
 //! Prints one line per case: points, memory (bytes), build (ms), radius queries (ns each), block
-//! checks of 300 configurations (µs per configuration); each time the median of ROUNDS rounds
+//! checks of 300 configurations (µs per configuration); each time the thread's time on the CPU
+//! (Linux's schedstat, so that other processes' load counts less; it advances by scheduler ticks,
+//! so each round repeats the queries 5 times and the checks 10 times), the median of ROUNDS rounds
 //! (default 5), FAR_ROUNDS (default 1) for the cloud with the far points; SCATTER (default 0)
 //! random points added in the robot's workspace.
 
@@ -52,9 +54,19 @@ fn shelf_cloud(rng: &mut ChaCha8Rng, spacing: Real, scatter: usize) -> Vec<[Real
     points
 }
 
+/// The calling thread's time on the CPU (seconds), from `/proc/thread-self/schedstat` (Linux);
+/// the wall clock's elapsed time where it cannot be read.
+fn cpu_seconds(wall: &Instant) -> Real {
+    std::fs::read_to_string("/proc/thread-self/schedstat")
+        .ok()
+        .and_then(|s| s.split_whitespace().next()?.parse::<u64>().ok())
+        .map_or_else(|| wall.elapsed().as_secs_f64(), |ns| ns as Real * 1e-9)
+}
+
+/// The median of `v` (NaN when empty).
 fn median(mut v: Vec<Real>) -> Real {
     v.sort_by(Real::total_cmp);
-    v[v.len() / 2]
+    v.get(v.len() / 2).copied().unwrap_or(Real::NAN)
 }
 
 fn main() {
@@ -87,24 +99,31 @@ fn main() {
         .collect();
     let options = CheckOptions { padding: 0.0, distance: false, self_collision: false, gradient: false };
     let base = Isometry3::identity();
+    let epoch = Instant::now();
+    let clock = || cpu_seconds(&epoch);
     println!("case\tpoints\tmemory_bytes\tbuild_ms\tquery_ns\tblock_us_per_config\tcolliding");
     for (name, points, rounds) in [("shelf", &shelf, rounds), ("shelf+far", &far, far_rounds)] {
         let (mut build, mut query, mut block) = (Vec::new(), Vec::new(), Vec::new());
         let (mut memory, mut hits, mut colliding) = (0, 0, 0);
         for _ in 0..rounds {
-            let t = Instant::now();
+            let t = clock();
             let cloud = Arc::new(PointCloud::new(points.clone(), 0.01).expect("a valid cloud"));
-            build.push(t.elapsed().as_secs_f64() * 1e3);
+            build.push((clock() - t) * 1e3);
             memory = cloud.memory_bytes();
-            let t = Instant::now();
-            hits = queries.iter().filter(|(x, r)| cloud.any_within(x, *r)).count();
-            query.push(t.elapsed().as_secs_f64() * 1e9 / queries.len() as Real);
+            let t = clock();
+            for _ in 0..5 {
+                hits = queries.iter().filter(|(x, r)| cloud.any_within(x, *r)).count();
+            }
+            query.push((clock() - t) * 1e9 / (5 * queries.len()) as Real);
             let world = vec![WorldObject::points("camera", cloud, Isometry3::identity())];
             let mut checker = RobotChecker::new(&robot, world, &|_, _| None).expect("a checker");
             let mut lanes = Vec::new();
-            let t = Instant::now();
-            checker.check_block(&configs, &base, &options, false, &mut lanes).expect("block check");
-            block.push(t.elapsed().as_secs_f64() * 1e6 / 300.0);
+            let t = clock();
+            for _ in 0..10 {
+                lanes.clear();
+                checker.check_block(&configs, &base, &options, false, &mut lanes).expect("block check");
+            }
+            block.push((clock() - t) * 1e6 / 3000.0);
             colliding = lanes.iter().filter(|a| a.world).count();
         }
         println!(

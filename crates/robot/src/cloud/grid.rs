@@ -25,7 +25,8 @@
 //! changes and each occupied cell allocates at most 2 × 2 × 2 blocks of 2 KiB of gaps, plus 2 KiB
 //! of point lists for each block holding points; a compact cloud takes about the dense grid's
 //! memory. A query is one block look-up (a load from the table, or one hash look-up when the box
-//! is too sparse for a table) and one load of the gap.
+//! is too sparse for a table) and one load of the gap: the blocks not allocated all read as one
+//! shared block of ρ_max² gaps and no points, so there is no branch between the two loads.
 //!
 //! The gaps are built by visiting, for every occupied cell, the cells within ρ_max of its points'
 //! box: at most (2ρ_max/h + 2)³, 343 at the defaults. A cell's box, not each of its points, keeps
@@ -64,8 +65,9 @@ const TABLE_PER_POINT: usize = 4;
 /// Entries a block table may always have.
 const TABLE_FLOOR: usize = 4096;
 
-/// A table entry without a block.
-const NO_BLOCK: u32 = u32::MAX;
+/// The slot of every block not allocated: a block whose every gap is the reach (squared, rounded
+/// down) and whose cells list no points, so that a query loads a gap without a branch.
+const FAR: usize = 0;
 
 /// Every stored squared gap is scaled down by a part in 10⁶ (far beyond f32's rounding) so that
 /// it stays below the true one.
@@ -74,7 +76,7 @@ const DOWN: f32 = 1.0 - 1e-6;
 /// Where the allocated blocks lie: block coordinates → slot.
 #[derive(Clone, Debug)]
 enum Blocks {
-    /// An entry for every block of the box (x-major): [`NO_BLOCK`] or the slot.
+    /// An entry for every block of the box (x-major): the slot, [`FAR`] where none.
     Table { dims: [usize; 3], slots: Vec<u32> },
     /// The allocated blocks alone.
     Map(HashMap<[u32; 3], u32, foldhash::fast::FixedState>),
@@ -87,30 +89,36 @@ impl Blocks {
         let dims = cells.map(|c| c.div_ceil(BLOCK));
         let entries = dims[0].saturating_mul(dims[1]).saturating_mul(dims[2]);
         if entries <= TABLE_FLOOR.max(points.saturating_mul(TABLE_PER_POINT)) {
-            Self::Table { dims, slots: vec![NO_BLOCK; entries] }
+            Self::Table { dims, slots: vec![FAR as u32; entries] }
         } else {
             Self::Map(HashMap::default())
         }
     }
 
-    /// The slot of block `b` (block coordinates within the grid), if allocated.
-    #[inline]
-    fn get(&self, b: [usize; 3]) -> Option<usize> {
-        let slot = match self {
-            Self::Table { dims, slots } => slots[(b[0] * dims[1] + b[1]) * dims[2] + b[2]],
-            // Block coordinates fit in u32: a grid spans at most 2·10⁶ m of 4 cm cells.
-            Self::Map(map) => *map.get(&b.map(|v| v as u32))?,
-        };
-        (slot != NO_BLOCK).then_some(slot as usize)
+    /// The slot of block `b` (block coordinates within the grid), [`FAR`] when not allocated.
+    #[inline(always)]
+    fn get(&self, b: [usize; 3]) -> usize {
+        match self {
+            Self::Table { dims, slots } => slots[(b[0] * dims[1] + b[1]) * dims[2] + b[2]] as usize,
+            Self::Map(map) => Self::look_up(map, b),
+        }
     }
 
-    /// The slot of block `b`, given `next` (as u32) when it has none yet: (slot, whether new).
+    /// The slot of block `b` in `map`, [`FAR`] when not allocated (out of line: the table's
+    /// look-up stays small where it is inlined).
+    #[inline(never)]
+    fn look_up(map: &HashMap<[u32; 3], u32, foldhash::fast::FixedState>, b: [usize; 3]) -> usize {
+        // Block coordinates fit in u32: a grid spans at most 2·10⁶ m of 4 cm cells.
+        map.get(&[b[0] as u32, b[1] as u32, b[2] as u32]).map_or(FAR, |&s| s as usize)
+    }
+
+    /// The slot of block `b`, given `next` (> [`FAR`]) when it has none yet: (slot, whether new).
     fn get_or_insert(&mut self, b: [usize; 3], next: usize) -> (usize, bool) {
         let entry = match self {
             Self::Table { dims, slots } => &mut slots[(b[0] * dims[1] + b[1]) * dims[2] + b[2]],
-            Self::Map(map) => map.entry(b.map(|v| v as u32)).or_insert(NO_BLOCK),
+            Self::Map(map) => map.entry(b.map(|v| v as u32)).or_insert(FAR as u32),
         };
-        if *entry == NO_BLOCK {
+        if *entry == FAR as u32 {
             *entry = next as u32;
             (next, true)
         } else {
@@ -128,7 +136,7 @@ impl Blocks {
 }
 
 /// Squared gaps of a grid's cells, block by block (module docs): cell `c` of the block in slot
-/// `s` at `gaps[s · 512 + local(c)]`.
+/// `s` at `gaps[s · 512 + local(c)]`, slot [`FAR`] standing for every block not allocated.
 #[derive(Clone, Debug)]
 struct Gaps {
     /// The low corner of cell (0, 0, 0) (meters).
@@ -152,14 +160,14 @@ fn local(c: [usize; 3]) -> usize {
 }
 
 impl Gaps {
-    /// No blocks, over the box [`lo`, `hi`] (meters) grown by `reach`, cells of `edge`, for a
+    /// No blocks but [`FAR`], over the box [`lo`, `hi`] (meters) grown by `reach`, cells of `edge`, for a
     /// cloud of `points` points.
     fn new(lo: &Vector3, hi: &Vector3, edge: Real, reach: Real, points: usize) -> Self {
         let origin = lo.add_scalar(-reach);
         let size = (hi - lo).add_scalar(2.0 * reach);
         let dims = [0, 1, 2].map(|k| (size[k] / edge).ceil().max(1.0) as usize);
         let far = (reach * reach * (1.0 - 1e-6)) as f32;
-        Self { origin, edge, dims, blocks: Blocks::new(dims, points), gaps: Vec::new(), far }
+        Self { origin, edge, dims, blocks: Blocks::new(dims, points), gaps: vec![far; BLOCK_CELLS], far }
     }
 
     /// The cell holding `x`, or `None` outside the grid.
@@ -183,25 +191,22 @@ impl Gaps {
         ((v - self.origin[k]) / self.edge).clamp(0.0, (self.dims[k] - 1) as Real) as usize
     }
 
-    /// The slot of the block holding cell `c`, if allocated.
-    #[inline]
-    fn slot(&self, c: [usize; 3]) -> Option<usize> {
-        self.blocks.get(c.map(|v| v >> BLOCK_BITS))
+    /// The slot of the block holding cell `c` ([`FAR`] when not allocated).
+    #[inline(always)]
+    fn slot(&self, c: [usize; 3]) -> usize {
+        self.blocks.get([c[0] >> BLOCK_BITS, c[1] >> BLOCK_BITS, c[2] >> BLOCK_BITS])
     }
 
     /// The squared gap of the cell holding `x` ([`Gaps::far`] outside the grid or any block).
     #[inline]
     fn gap(&self, x: &Vector3) -> f32 {
         match self.cell(x) {
-            Some(c) => match self.slot(c) {
-                Some(s) => self.gaps[s * BLOCK_CELLS + local(c)],
-                None => self.far,
-            },
+            Some(c) => self.gaps[self.slot(c) * BLOCK_CELLS + local(c)],
             None => self.far,
         }
     }
 
-    /// Allocated blocks.
+    /// Slots: the allocated blocks and [`FAR`].
     fn len(&self) -> usize {
         self.gaps.len() / BLOCK_CELLS
     }
@@ -268,11 +273,11 @@ impl Gaps {
 #[derive(Clone, Debug)]
 pub(crate) struct GapGrid {
     /// Squared gaps of the [`GRID_CELL`] cells up to [`GRID_REACH`]; the blocks holding points
-    /// take the first slots.
+    /// take the slots after [`FAR`].
     fine: Gaps,
-    /// Blocks holding points (the first slots of `fine`).
+    /// The slots below it hold points ([`FAR`]'s cells list none).
     occupied: usize,
-    /// Cell `c` of the occupied block in slot `s` lists its own points:
+    /// Cell `c` of the block in slot `s` < `occupied` lists its own points:
     /// `items[starts[s · 512 + local(c)]..starts[s · 512 + local(c) + 1]]`.
     starts: Vec<u32>,
     items: Vec<u32>,
@@ -332,7 +337,7 @@ impl GapGrid {
         }
         let mut fine = Gaps::new(&lo, &hi, GRID_CELL, reach, points.len());
         // Each point's home: its block's slot · 512 + its cell within the block, the blocks that
-        // hold points taking the first slots. Consecutive points mostly share their block.
+        // hold points taking the slots after FAR. Consecutive points mostly share their block.
         let mut last: Option<([usize; 3], usize)> = None;
         let home: Vec<u32> = points
             .iter()
@@ -347,7 +352,7 @@ impl GapGrid {
                         s
                     }
                 };
-                // At most a block per point: below 2²⁰ · 512.
+                // At most a block per point and FAR: below (2²⁰ + 1) · 512.
                 (slot * BLOCK_CELLS + local(c)) as u32
             })
             .collect();
@@ -431,8 +436,7 @@ impl GapGrid {
         let g = &self.fine;
         // Outside the grid: every point is farther than the reach.
         let Some(c) = g.cell(x) else { return true };
-        let gap = g.slot(c).map_or(g.far, |s| g.gaps[s * BLOCK_CELLS + local(c)]);
-        if gap as Real > radius * radius {
+        if g.gaps[g.slot(c) * BLOCK_CELLS + local(c)] as Real > radius * radius {
             return true;
         }
         let range = |k: usize| {
@@ -440,15 +444,18 @@ impl GapGrid {
             let hi = (((x[k] + radius - g.origin[k]) / g.edge).floor() as usize).min(g.dims[k] - 1);
             (lo, hi)
         };
-        let bounds = [0, 1, 2].map(range);
-        let (lo, hi) = (bounds.map(|r| r.0), bounds.map(|r| r.1));
+        let ((l0, h0), (l1, h1), (l2, h2)) = (range(0), range(1), range(2));
+        let (lo, hi) = ([l0, l1, l2], [h0, h1, h2]);
         // The cells of block coordinate `q` along axis k within the range.
         let cells = |k: usize, q: usize| (lo[k].max(q << BLOCK_BITS), hi[k].min(((q + 1) << BLOCK_BITS) - 1));
         for bx in lo[0] >> BLOCK_BITS..=hi[0] >> BLOCK_BITS {
             for by in lo[1] >> BLOCK_BITS..=hi[1] >> BLOCK_BITS {
                 for bz in lo[2] >> BLOCK_BITS..=hi[2] >> BLOCK_BITS {
-                    // Only the first slots' blocks hold points.
-                    let Some(s) = g.blocks.get([bx, by, bz]).filter(|&s| s < self.occupied) else { continue };
+                    // Only the slots after FAR and below `occupied` hold points.
+                    let s = g.blocks.get([bx, by, bz]);
+                    if s == FAR || s >= self.occupied {
+                        continue;
+                    }
                     let base = s * BLOCK_CELLS;
                     let ((i0, i1), (j0, j1), (k0, k1)) = (cells(0, bx), cells(1, by), cells(2, bz));
                     for i in i0..=i1 {
@@ -636,7 +643,7 @@ mod tests {
                 assert!(grid.clear(x, r), "{x:?} r {r}");
                 assert!(agrees(&grid, &points, x, r));
             }
-            assert_eq!(grid.fine.cell(x).and_then(|c| grid.fine.slot(c)), None);
+            assert!(grid.fine.cell(x).is_none_or(|c| grid.fine.slot(c) == FAR));
         };
         for _ in 0..1000 {
             empty(&Vector3::from_fn(|_, _| rng.random_range(5.0..45.0)));
