@@ -20,13 +20,13 @@
 //! ```
 //!
 //! Why blocks: the memory follows what is kept, not the box. A dense grid over the box of two
-//! points 10 m apart holds some 30 MB, and one whose box spans kilometers must grow its cell until
-//! it fits, until a cell holds every point and each query scans them all. Here the cell edge never
+//! points 10 m apart holds tens of megabytes, and one whose box spans kilometers must grow its cell
+//! until it fits, until a cell holds every point and each query scans them all. The cell edge never
 //! changes and each occupied cell allocates at most 2 × 2 × 2 blocks of 2 KiB of gaps, plus 2 KiB
 //! of point lists for each block holding points; a compact cloud takes about the dense grid's
-//! memory. A query is one block look-up (a load from the table, or one hash look-up when the box
-//! is too sparse for a table) and one load of the gap: the blocks not allocated all read as one
-//! shared block of ρ_max² gaps and no points, so there is no branch between the two loads.
+//! memory. A query is one block look-up (a load from the table, or one hash look-up when the box is
+//! too sparse for a table) and one load of the gap: the blocks not allocated all read as one shared
+//! block of ρ_max² gaps and no points, so there is no branch between the two loads.
 //!
 //! The gaps are built by visiting, for every occupied cell, the cells within ρ_max of its points'
 //! box: at most (2ρ_max/h + 2)³, 343 at the defaults. A cell's box, not each of its points, keeps
@@ -160,8 +160,8 @@ fn local(c: [usize; 3]) -> usize {
 }
 
 impl Gaps {
-    /// No blocks but [`FAR`], over the box [`lo`, `hi`] (meters) grown by `reach`, cells of `edge`, for a
-    /// cloud of `points` points.
+    /// No blocks but [`FAR`], over the box from `lo` to `hi` (meters) grown by `reach`, cells of
+    /// `edge`, for a cloud of `points` points.
     fn new(lo: &Vector3, hi: &Vector3, edge: Real, reach: Real, points: usize) -> Self {
         let origin = lo.add_scalar(-reach);
         let size = (hi - lo).add_scalar(2.0 * reach);
@@ -290,7 +290,7 @@ pub(crate) struct GapGrid {
 /// [`COARSE_REACH`], in blocks as the fine level; built from the occupied cells, a few hundred on
 /// a MotionBenchMaker scene. `points`, best given cell by cell of the fine grid (consecutive
 /// points mostly share their coarse cell, which is then listed once), has `count` points in the
-/// box [`lo`, `hi`].
+/// box from `lo` to `hi`.
 fn coarse<'a>(points: impl Iterator<Item = &'a [Real; 3]>, count: usize, lo: &Vector3, hi: &Vector3) -> Gaps {
     let reach = COARSE_REACH;
     let mut grid = Gaps::new(lo, hi, COARSE_CELL, reach, count);
