@@ -476,3 +476,62 @@ async fn every_plan_setting_at_hostile_values_is_answered_or_refused_naming_it()
     let r = c.plan(yaml(&robot, &scene, &text, pb::PlanSettings { timeout: Some(20.0), ..Default::default() })).await;
     assert_eq!(r.unwrap().into_inner().status(), pb::PlanStatus::Solved);
 }
+
+/// Two far points no longer stretch a cloud's gap grid: a two-point frame 10 m apart holds well
+/// under a megabyte (its dense grid held 31 MB), and a wall with two extra points at ±9.9e5 m holds
+/// about what the wall alone holds and gives every configuration the wall's verdict (the far points
+/// are out of every link's reach).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn far_points_hold_memory_in_proportion_and_change_no_verdict() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(config(dir.path())).await;
+    let mut c = server.client().await;
+    let (robot_id, scene, _, start, _) = setup(&mut c, "cage").await;
+    let packed = |points: &[[f32; 3]]| {
+        let data = points.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
+        pb::update_point_cloud_request::Frame::Points(pb::PackedPoints { data, point_step: 12, ..Default::default() })
+    };
+    let update = |name: &str, frame| pb::UpdatePointCloudRequest {
+        scene_id: scene.clone(),
+        name: name.into(),
+        frame: Some(frame),
+        // The far points kept: no range filter.
+        filter: Some(pb::CloudFilter { max_range: 2e6, ..Default::default() }),
+        ..Default::default()
+    };
+    let pair = c.update_point_cloud(update("pair", packed(&[[0.0, 0.0, 0.0], [10.0, 0.0, 0.0]]))).await;
+    let pair = pair.unwrap().into_inner();
+    assert_eq!(pair.counts.unwrap().kept, 2);
+    assert!(pair.memory_bytes < 1 << 20, "a two-point cloud holds {} bytes", pair.memory_bytes);
+    c.remove_point_cloud(pb::RemovePointCloudRequest { scene_id: scene.clone(), name: "pair".into() }).await.unwrap();
+
+    // A 0.4 m wall of points 1 cm apart through the workspace at x = 0.5.
+    let mut wall: Vec<[f32; 3]> = Vec::new();
+    for i in -20..=20 {
+        for j in 0..=40 {
+            wall.push([0.5, 0.01 * i as f32, 0.2 + 0.01 * j as f32]);
+        }
+    }
+    let q: Vec<Vec<f64>> = (0..300).map(|i| start.iter().map(|v| v + 0.004 * (i as f64) - 0.6).collect()).collect();
+    let check = pb::CheckConfigurationsRequest {
+        robot_id: robot_id.clone(),
+        scene_id: scene.clone(),
+        configurations: columns(&q),
+        ..Default::default()
+    };
+    let alone = c.update_point_cloud(update("wall", packed(&wall))).await.unwrap().into_inner();
+    let near = c.check_configurations(check.clone()).await.unwrap().into_inner().collides;
+    let mut far = wall.clone();
+    far.extend([[9.9e5, 9.9e5, 9.9e5], [-9.9e5, -9.9e5, -9.9e5]]);
+    let stretched = c.update_point_cloud(update("wall", packed(&far))).await.unwrap().into_inner();
+    assert_eq!(stretched.counts.unwrap().kept, alone.counts.unwrap().kept + 2);
+    assert!(
+        stretched.memory_bytes < 2 * alone.memory_bytes,
+        "{} bytes with the far points, {} without",
+        stretched.memory_bytes,
+        alone.memory_bytes
+    );
+    let with_far = c.check_configurations(check).await.unwrap().into_inner().collides;
+    assert_eq!(with_far, near);
+    assert!(near.iter().any(|&c| c) && near.iter().any(|&c| !c), "the wall decides some configurations either way");
+}
