@@ -98,5 +98,33 @@ pub fn clip(s: &str) -> String {
     format!("{}…", &s[..end])
 }
 
+/// A client-supplied number as an error message repeats it: plainly when its magnitude is between
+/// 10⁻⁴ and 10⁷ (or it is 0), else in scientific notation, so that `1e300` is shown as `1e300` and
+/// not as a 301-digit number; NaN and ±∞ as `NaN`, `inf`, `-inf`.
+pub fn show_real(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() || (1e-4..1e7).contains(&v.abs()) {
+        format!("{v}")
+    } else {
+        format!("{v:e}")
+    }
+}
+
 /// `Result` with the crate's [`Error`].
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn numbers_in_messages_stay_short() {
+        assert_eq!(show_real(0.05), "0.05");
+        assert_eq!(show_real(-525.0), "-525");
+        assert_eq!(show_real(0.0), "0");
+        assert_eq!(show_real(1e300), "1e300");
+        assert_eq!(show_real(1e-300), "1e-300");
+        assert_eq!(show_real(f64::NAN), "NaN");
+        assert_eq!(show_real(f64::NEG_INFINITY), "-inf");
+        assert!(show_real(f64::MAX).len() < 30);
+    }
+}
