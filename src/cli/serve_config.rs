@@ -114,6 +114,14 @@ pub struct OpsArgs {
     /// UpdatePointCloud beyond it is RESOURCE_EXHAUSTED).
     #[arg(long, env = "SUBLEVEL_MAX_CLOUD_BYTES", default_value_t = defaults().max_cloud_bytes)]
     pub max_cloud_bytes: usize,
+    /// Most points of one UpdatePointCloud frame: a depth image's width × height, a PointCloud2's
+    /// points (checked before the frame is decoded; a larger one is RESOURCE_EXHAUSTED).
+    #[arg(long, env = "SUBLEVEL_MAX_FRAME_POINTS", default_value_t = defaults().max_frame_points)]
+    pub max_frame_points: usize,
+    /// Most points of UpdatePointCloud frames decoded and filtered at once, all calls together
+    /// (at most 160 bytes of memory each; frames past it wait, holding no thread).
+    #[arg(long, env = "SUBLEVEL_MAX_FRAME_POINTS_IN_FLIGHT", default_value_t = defaults().max_frame_points_in_flight)]
+    pub max_frame_points_in_flight: usize,
     /// Fits running at once (each is CPU-heavy; the others wait in the queue). Default: a quarter
     /// of the CPUs, at least 1.
     #[arg(long, env = "SUBLEVEL_MAX_CONCURRENT_FITS")]
@@ -158,6 +166,8 @@ impl OpsArgs {
             ("--max-scenes", self.max_scenes),
             ("--max-bodies", self.max_bodies),
             ("--max-cloud-bytes", self.max_cloud_bytes),
+            ("--max-frame-points", self.max_frame_points),
+            ("--max-frame-points-in-flight", self.max_frame_points_in_flight),
             ("--max-concurrent-fits", self.max_concurrent_fits.unwrap_or(1)),
             ("--max-fit-queue", self.max_fit_queue),
             ("--max-concurrent-sdp", self.max_concurrent_sdp.unwrap_or(1)),
@@ -210,6 +220,8 @@ impl OpsArgs {
         config.max_scenes = self.max_scenes;
         config.max_bodies = self.max_bodies;
         config.max_cloud_bytes = self.max_cloud_bytes;
+        config.max_frame_points = self.max_frame_points;
+        config.max_frame_points_in_flight = self.max_frame_points_in_flight;
         config.max_concurrent_fits = self.max_concurrent_fits.unwrap_or(config.max_concurrent_fits);
         config.max_fit_queue = self.max_fit_queue;
         config.max_concurrent_sdp = self.max_concurrent_sdp.unwrap_or(config.max_concurrent_sdp);

@@ -75,7 +75,10 @@ impl PointCloud {
         if !(radius.is_finite() && (0.0..=MAX_NOISE_RADIUS).contains(&radius)) {
             return Err(Error::invalid(
                 "radius",
-                format!("must be finite, in [0, {MAX_NOISE_RADIUS}] m, got {radius}"),
+                format!(
+                    "must be finite, in [0, {MAX_NOISE_RADIUS}] m, got {}",
+                    sublevel_core::error::show_real(radius)
+                ),
             ));
         }
         if points.len() > MAX_CLOUD_POINTS {

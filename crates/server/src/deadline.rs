@@ -18,6 +18,10 @@
 //!
 //! Streams (QueryStream, WatchFitJob): the deadline covers the call up to its response headers;
 //! a stream's messages are not cut.
+//!
+//! The layer also puts the moment it will answer DEADLINE_EXCEEDED in the request's extensions
+//! ([`CallDeadline`]), so a handler whose work would land after it (`UpdatePointCloud` storing a
+//! cloud) can stop that work first and store nothing.
 
 use std::future::Future;
 use std::pin::Pin;
@@ -31,6 +35,12 @@ use tonic::Status;
 /// tonic's timer, which answers CANCELLED at the deadline itself, never wins: tokio's timer has a
 /// resolution of 1 ms).
 pub const DEADLINE_MARGIN: Duration = Duration::from_millis(2);
+
+/// The moment the deadline layer answers a call DEADLINE_EXCEEDED (its deadline less
+/// [`DEADLINE_MARGIN`]), in the call's request extensions (`tonic::Request::extensions`); absent
+/// when the call has no deadline.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CallDeadline(pub std::time::Instant);
 
 /// Parses a `grpc-timeout` header value (gRPC over HTTP/2: at most 8 digits and a unit `H`, `M`,
 /// `S`, `m`, `u` or `n`). `None` for a missing or malformed value (then the request has no client
@@ -110,14 +120,16 @@ where
         self.inner.poll_ready(cx)
     }
 
-    fn call(&mut self, req: Request<B>) -> Self::Future {
+    fn call(&mut self, mut req: Request<B>) -> Self::Future {
         let Some((limit, source)) = request_deadline(req.uri().path(), req.headers(), self.cap) else {
             return Box::pin(self.inner.call(req));
         };
         let path = req.uri().path().to_owned();
+        let wait = limit.saturating_sub(DEADLINE_MARGIN);
+        req.extensions_mut().insert(CallDeadline(std::time::Instant::now() + wait));
         let fut = self.inner.call(req);
         Box::pin(async move {
-            match tokio::time::timeout(limit.saturating_sub(DEADLINE_MARGIN), fut).await {
+            match tokio::time::timeout(wait, fut).await {
                 Ok(out) => out,
                 Err(_) => {
                     let method = path.rsplit('/').next().unwrap_or("").to_owned();

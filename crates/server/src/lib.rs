@@ -126,6 +126,24 @@ pub const KEEPALIVE_INTERVAL: std::time::Duration = std::time::Duration::from_se
 /// How long an HTTP/2 keepalive ping may go unanswered before the connection is closed.
 pub const KEEPALIVE_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(10);
 
+/// The default most points of one sensor frame ([`ServerConfig::max_frame_points`]): 2²² =
+/// 4 194 304, a 2048 × 2048 depth image, whose float32 pixels (16 MiB) pass the default
+/// `--max-message-bytes` (64 MiB) with room to spare, as does a PointCloud2 of as many 12-byte
+/// points (48 MiB).
+pub const DEFAULT_MAX_FRAME_POINTS: usize = 1 << 22;
+
+/// The default most points of frames decoded at once
+/// ([`ServerConfig::max_frame_points_in_flight`]): two frames of the largest size.
+pub const DEFAULT_MAX_FRAME_POINTS_IN_FLIGHT: usize = 2 * DEFAULT_MAX_FRAME_POINTS;
+
+/// Bytes of server memory a frame's decoding and filtering takes per point at its peak, at most
+/// (an upper estimate, checked by the tests): its float32 points (12), the float64 world points
+/// the filters keep (24, and as much again while that vector grows), a 16-bit or 32-bit copy of
+/// the pixels (4), the voxel grid's map when every point has its own voxel; the k-d tree comes
+/// after the point limit (1 000 000 kept). `--max-frame-points-in-flight` × this bounds the
+/// frames' working memory.
+pub const FRAME_BYTES_PER_POINT: usize = 160;
+
 /// Server settings and request limits.
 #[derive(Clone, Debug)]
 pub struct ServerConfig {
@@ -163,6 +181,16 @@ pub struct ServerConfig {
     /// Most bytes held by the point clouds of every scene together (`--max-cloud-bytes`); an
     /// `UpdatePointCloud` that would pass it is RESOURCE_EXHAUSTED. Default 2 GiB.
     pub max_cloud_bytes: usize,
+    /// Most points of one `UpdatePointCloud` frame (`--max-frame-points`): a depth image's
+    /// width × height, a PointCloud2's records. Checked before the frame is decoded; a larger one
+    /// is RESOURCE_EXHAUSTED naming the field. Default [`DEFAULT_MAX_FRAME_POINTS`].
+    pub max_frame_points: usize,
+    /// Most points of frames decoded and filtered at once, all calls together
+    /// (`--max-frame-points-in-flight`): a frame takes one unit per point (at most all of them)
+    /// until its cloud is built, and the others wait, holding no thread. Bounds the server's
+    /// frame memory near [`FRAME_BYTES_PER_POINT`] bytes per unit. Default
+    /// [`DEFAULT_MAX_FRAME_POINTS_IN_FLIGHT`].
+    pub max_frame_points_in_flight: usize,
     /// Blocking SDP solves of queries (certificates, nonconvex scenes, answers Newton could not
     /// settle) running at once; the rest wait for a slot. Default: half the CPUs, at least 2.
     pub max_concurrent_sdp: usize,
@@ -208,6 +236,8 @@ impl Default for ServerConfig {
             max_bodies: 10_000,
             max_instances_per_scene: 100_000,
             max_cloud_bytes: sublevel_scene::DEFAULT_MAX_CLOUD_BYTES,
+            max_frame_points: DEFAULT_MAX_FRAME_POINTS,
+            max_frame_points_in_flight: DEFAULT_MAX_FRAME_POINTS_IN_FLIGHT,
             max_concurrent_sdp: limits::default_sdp_slots(),
             batch_workers: limits::default_batch_workers(),
             max_concurrent_plans: limits::default_plan_slots(),

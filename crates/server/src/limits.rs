@@ -54,6 +54,10 @@ pub(crate) const INSTANCES: Limit = Limit {
 /// the scene's lock, so it holds exactly, not softly).
 pub(crate) const CLOUD_BYTES: Limit =
     Limit { what: "bytes of point clouds", flag: "--max-cloud-bytes", env: "SUBLEVEL_MAX_CLOUD_BYTES" };
+/// `--max-frame-points`: points of one sensor frame (a depth image's pixels, a PointCloud2's
+/// records), checked before the frame is decoded.
+pub(crate) const FRAME_POINTS: Limit =
+    Limit { what: "points of a frame", flag: "--max-frame-points", env: "SUBLEVEL_MAX_FRAME_POINTS" };
 /// `--max-fit-queue`.
 pub(crate) const FIT_QUEUE: Limit =
     Limit { what: "fit and group jobs queued or running", flag: "--max-fit-queue", env: "SUBLEVEL_MAX_FIT_QUEUE" };

@@ -50,3 +50,44 @@ pub(crate) async fn cancellable_blocking<T: Send + 'static>(
     guard.0 = None;
     out
 }
+
+/// Aborts its timer task when dropped.
+struct AbortOnDrop(Option<tokio::task::JoinHandle<()>>);
+
+impl Drop for AbortOnDrop {
+    fn drop(&mut self) {
+        if let Some(task) = self.0.take() {
+            task.abort();
+        }
+    }
+}
+
+/// [`cancellable_blocking`] whose scope is also cancelled at `deadline` (when given): work that
+/// would land after the caller's deadline (a cloud stored, answered DEADLINE_EXCEEDED all the
+/// same) sees its flag set first and stops. The caller tells a deadline from a client gone by
+/// the clock ([`past`]).
+///
+/// # Errors
+/// `f`'s error as a status; INTERNAL when the worker panicked.
+pub(crate) async fn cancellable_blocking_until<T: Send + 'static>(
+    deadline: Option<std::time::Instant>,
+    f: impl FnOnce() -> Result<T> + Send + 'static,
+) -> Result<T, Status> {
+    let flag = Arc::new(AtomicBool::new(false));
+    let _timer = AbortOnDrop(deadline.map(|at| {
+        let flag = flag.clone();
+        tokio::spawn(async move {
+            tokio::time::sleep_until(at.into()).await;
+            flag.store(true, Ordering::Relaxed);
+        })
+    }));
+    let mut guard = CancelOnDrop(Some(flag.clone()));
+    let out = blocking(move || sublevel_core::cancel::cancellable(flag, f)).await;
+    guard.0 = None;
+    out
+}
+
+/// Whether `deadline` (when given) has passed.
+pub(crate) fn past(deadline: Option<std::time::Instant>) -> bool {
+    deadline.is_some_and(|d| std::time::Instant::now() >= d)
+}

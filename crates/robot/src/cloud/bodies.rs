@@ -54,25 +54,42 @@ use std::hash::{Hash, Hasher};
 use std::sync::Arc;
 use std::time::Instant;
 use sublevel_core::body::Body;
+use sublevel_core::error::show_real;
 use sublevel_core::math::{Real, Vector3, MAX_COORDINATE};
 use sublevel_fit::{FitMethod, FitSettings};
+
+/// Largest clustering `tolerance` (meters): a chain step of a meter already joins a room's
+/// furniture into one cluster, and the clustering grid's cubes have this side.
+pub const MAX_TOLERANCE: Real = 1.0;
+
+/// The default most clusters of one frame ([`CloudBodySettings::max_clusters`]): the
+/// MotionBenchMaker scenes' frames have 5–20 clusters and a room's 42 (docs/point_clouds.md);
+/// 256 fits at 20–100 ms each are seconds of work, about the most one sensor frame should take.
+pub const DEFAULT_MAX_CLUSTERS: usize = 256;
+
+/// The largest [`CloudBodySettings::max_clusters`] a caller may ask for.
+pub const MAX_CLUSTERS: usize = 4096;
 
 /// Settings of [`CloudBodies::update`] and [`fit_cluster`].
 #[derive(Clone, Debug)]
 pub struct CloudBodySettings {
-    /// Largest step of a chain of points within one cluster (meters, > 0; default 0.05, 2.5
-    /// voxels of the default 2 cm grid).
+    /// Largest step of a chain of points within one cluster (meters, in (0,
+    /// [`MAX_TOLERANCE`]]; default 0.05, 2.5 voxels of the default 2 cm grid).
     pub tolerance: Real,
-    /// Clusters with fewer points are outliers, dropped (≥ 1; default 10).
+    /// Clusters with fewer points are outliers, dropped (1 to `max_points`; default 10).
     pub min_points: usize,
-    /// Clusters with more points are split until every part has at most this many (≥ 4 and
-    /// ≥ `min_points`; default 2000).
+    /// Clusters with more points are split until every part has at most this many (≥ 4;
+    /// default 2000).
     pub max_points: usize,
+    /// Most clusters one frame may have (1 to [`MAX_CLUSTERS`]; default
+    /// [`DEFAULT_MAX_CLUSTERS`]): a frame with more is refused after clustering, before any
+    /// body is checked or fitted, since each cluster may cost a fit of tens of milliseconds.
+    pub max_clusters: usize,
     /// The polytope standing in for each point's ball (default the cube).
     pub cover: BallCover,
-    /// Extra radius the fits use (meters, ≥ 0; default 0): a body fitted to balls of radius
-    /// r + `slack` still contains the balls of the next frame's points when they moved by less
-    /// than `slack`, so it is reused rather than refitted. The reuse check itself uses r.
+    /// Extra radius the fits use (meters, 0 to [`MAX_NOISE_RADIUS`]; default 0): a body fitted
+    /// to balls of radius r + `slack` still contains the balls of the next frame's points when
+    /// they moved by less than `slack`, so it is reused rather than refitted. The reuse check itself uses r.
     pub slack: Real,
     /// Largest centroid shift, and largest change of any half extent of the bounding box, of a
     /// cluster matched to the last frame's (meters, ≥ 0; default 0.05).
@@ -99,6 +116,7 @@ impl Default for CloudBodySettings {
             tolerance: 0.05,
             min_points: 10,
             max_points: 2000,
+            max_clusters: DEFAULT_MAX_CLUSTERS,
             cover: BallCover::Cube,
             slack: 0.0,
             match_distance: 0.05,
@@ -114,24 +132,36 @@ impl CloudBodySettings {
     /// Checks every field.
     ///
     /// # Errors
-    /// [`Error::InvalidArgument`] naming `tolerance`, `min_points`, `max_points`, `slack`,
-    /// `match_distance`, `match_count_change`, `rescale_limit`, `fit.method` (the inverse moment, not convex),
+    /// [`Error::InvalidArgument`] naming `tolerance`, `min_points`, `max_points`,
+    /// `max_clusters`, `slack`, `match_distance`, `match_count_change`, `rescale_limit`,
+    /// `fit.method` (the inverse moment, not convex),
     /// `fit.convexity_relaxation` (> 0: the body may be nonconvex) or another `fit.` field
     /// ([`FitSettings::validate`]).
     pub fn validate(&self) -> Result<()> {
         validate_clustering(self.tolerance, self.min_points, self.max_points)?;
-        for (field, v) in [("slack", self.slack), ("match_distance", self.match_distance)] {
-            if !(v.is_finite() && (0.0..=MAX_COORDINATE).contains(&v)) {
-                return Err(Error::invalid(field, format!("must be finite and in [0, {MAX_COORDINATE:e}] m, got {v}")));
+        if !(1..=MAX_CLUSTERS).contains(&self.max_clusters) {
+            return Err(Error::invalid(
+                "max_clusters",
+                format!("must be 1 to {MAX_CLUSTERS}, got {}", self.max_clusters),
+            ));
+        }
+        for (field, v, most) in
+            [("slack", self.slack, MAX_NOISE_RADIUS), ("match_distance", self.match_distance, MAX_COORDINATE)]
+        {
+            if !(v.is_finite() && (0.0..=most).contains(&v)) {
+                return Err(Error::invalid(
+                    field,
+                    format!("must be finite and in [0, {}] m, got {}", show_real(most), show_real(v)),
+                ));
             }
         }
         let c = self.match_count_change;
         if !(0.0..=1.0).contains(&c) {
-            return Err(Error::invalid("match_count_change", format!("must be in [0, 1], got {c}")));
+            return Err(Error::invalid("match_count_change", format!("must be in [0, 1], got {}", show_real(c))));
         }
         let g = self.rescale_limit;
         if !(g.is_finite() && g >= 1.0) {
-            return Err(Error::invalid("rescale_limit", format!("must be finite and ≥ 1, got {g}")));
+            return Err(Error::invalid("rescale_limit", format!("must be finite and ≥ 1, got {}", show_real(g))));
         }
         self.fit.validate().map_err(|e| match e {
             Error::InvalidArgument { field, reason } => Error::invalid(format!("fit.{field}"), reason),
@@ -413,9 +443,13 @@ impl CloudBodies {
     /// error the previous clusters are kept.
     ///
     /// # Errors
-    /// [`Error::InvalidArgument`] naming `radius` (not in [0, 1] m), `points[k]` or a settings
-    /// field ([`CloudBodySettings::validate`]); [`Error::ResourceExhausted`] naming `points` past
-    /// [`super::MAX_CLOUD_POINTS`]; [`Error::Cancelled`] when a fit is cancelled.
+    /// [`Error::InvalidArgument`] naming `radius` (not in [0, 1] m), `points[k]`, a settings
+    /// field ([`CloudBodySettings::validate`]), or `max_clusters` when the frame has more
+    /// clusters than it (checked before any body is checked or fitted);
+    /// [`Error::ResourceExhausted`] naming `points` past [`super::MAX_CLOUD_POINTS`];
+    /// [`Error::Cancelled`] when the caller's cancellation scope ([`sublevel_core::cancel`]) is
+    /// cancelled: it is looked at after clustering, after the reuse checks and before every
+    /// rescale or fit, and a running fit's solver stops at its next iteration.
     pub fn update(&mut self, points: &[[Real; 3]], radius: Real, settings: &CloudBodySettings) -> Result<UpdateReport> {
         let start = Instant::now();
         settings.validate()?;
@@ -426,6 +460,20 @@ impl CloudBodies {
             ));
         }
         let clusters = euclidean_clusters(points, settings.tolerance, settings.min_points, settings.max_points)?;
+        if clusters.len() > settings.max_clusters {
+            return Err(Error::invalid(
+                "max_clusters",
+                format!(
+                    "the frame has {} clusters of at least min_points ({}) points, more than the {} one frame may \
+                     have; raise min_points or tolerance, crop the frame, or raise max_clusters (at most \
+                     {MAX_CLUSTERS})",
+                    clusters.len(),
+                    settings.min_points,
+                    settings.max_clusters
+                ),
+            ));
+        }
+        cancelled()?;
         let candidates: Vec<Candidate> = clusters.into_iter().map(|c| Candidate::new(points, c)).collect();
         let cluster_seconds = start.elapsed().as_secs_f64();
 
@@ -454,6 +502,7 @@ impl CloudBodies {
             },
         );
         let check_seconds = checks.elapsed().as_secs_f64();
+        cancelled()?;
 
         // Every rescale and fit first: a cancelled fit leaves `self` as it was.
         let fits = Instant::now();
@@ -464,6 +513,8 @@ impl CloudBodies {
             |i| candidates[i].indices.len(),
             settings.threads,
             |i| {
+                // Looked at before every cluster: an abandoned update stops within one fit.
+                cancelled()?;
                 let previous = match outcomes[i] {
                     ClusterOutcome::Refitted { previous, .. } => Some(&old[previous]),
                     _ => None,
@@ -527,6 +578,14 @@ impl CloudBodies {
         report.total_seconds = start.elapsed().as_secs_f64();
         Ok(report)
     }
+}
+
+/// [`Error::Cancelled`] when the caller's cancellation scope is cancelled.
+fn cancelled() -> Result<()> {
+    if sublevel_core::cancel::is_cancelled() {
+        return Err(Error::Cancelled("the cloud's bodies update was cancelled".into()));
+    }
+    Ok(())
 }
 
 /// A new body for the cluster `points[indices]`: the old cluster's body rescaled when that keeps
@@ -655,7 +714,11 @@ mod tests {
         assert_eq!(field(euclidean_clusters(&p, 0.0, 1, 10).unwrap_err()), "tolerance");
         assert_eq!(field(euclidean_clusters(&p, Real::NAN, 1, 10).unwrap_err()), "tolerance");
         assert_eq!(field(euclidean_clusters(&p, 0.1, 0, 10).unwrap_err()), "min_points");
-        assert_eq!(field(euclidean_clusters(&p, 0.1, 20, 10).unwrap_err()), "max_points");
+        assert_eq!(field(euclidean_clusters(&p, 0.1, 20, 10).unwrap_err()), "min_points");
+        assert_eq!(field(euclidean_clusters(&p, 0.1, 1, 3).unwrap_err()), "max_points");
+        assert_eq!(field(euclidean_clusters(&p, 1.5, 1, 10).unwrap_err()), "tolerance");
+        let huge = euclidean_clusters(&p, 1e300, 1, 10).unwrap_err().to_string();
+        assert!(huge.contains("tolerance") && huge.contains("1e300") && huge.len() < 200, "{huge}");
         assert_eq!(field(euclidean_clusters(&[[0.0, Real::INFINITY, 0.0]], 0.1, 1, 10).unwrap_err()), "points[0]");
         let mut bodies = CloudBodies::new();
         let s = CloudBodySettings::default();
@@ -668,8 +731,33 @@ mod tests {
         assert_eq!(field(bodies.update(&p, 0.01, &bad).unwrap_err()), "fit.degree");
         let bad = CloudBodySettings { match_count_change: 2.0, ..s.clone() };
         assert_eq!(field(bodies.update(&p, 0.01, &bad).unwrap_err()), "match_count_change");
+        for bad in [
+            CloudBodySettings { max_clusters: 0, ..s.clone() },
+            CloudBodySettings { max_clusters: MAX_CLUSTERS + 1, ..s.clone() },
+        ] {
+            assert_eq!(field(bodies.update(&p, 0.01, &bad).unwrap_err()), "max_clusters");
+        }
+        let bad = CloudBodySettings { slack: 1e300, ..s.clone() };
+        assert_eq!(field(bodies.update(&p, 0.01, &bad).unwrap_err()), "slack");
         let report = bodies.update(&[], 0.01, &s).unwrap();
         assert_eq!((report.clusters, bodies.len()), (0, 0));
+    }
+
+    /// Five points 1 m apart, each its own cluster at `min_points` 1: refused past
+    /// `max_clusters` before any fit, and a cancelled scope stops the update with nothing kept.
+    #[test]
+    fn clusters_are_bounded_and_updates_cancellable() {
+        let pts: Vec<[Real; 3]> = (0..5).map(|i| [i as Real, 0.0, 0.0]).collect();
+        let s = CloudBodySettings { min_points: 1, max_clusters: 4, threads: 1, ..Default::default() };
+        let mut bodies = CloudBodies::new();
+        let e = bodies.update(&pts, 0.01, &s).unwrap_err();
+        assert!(e.to_string().contains("5 clusters"), "{e}");
+        assert!(matches!(e, Error::InvalidArgument { ref field, .. } if field == "max_clusters"));
+        let flag = Arc::new(std::sync::atomic::AtomicBool::new(true));
+        let s = CloudBodySettings { max_clusters: 5, ..s };
+        let e = sublevel_core::cancel::cancellable(flag, || bodies.update(&pts, 0.01, &s)).unwrap_err();
+        assert!(matches!(e, Error::Cancelled(_)), "{e}");
+        assert!(bodies.is_empty());
     }
 
     #[test]

@@ -15,10 +15,40 @@
 //! frame deprojects onto the rendered surfaces.
 
 use crate::{Error, Result};
+use sublevel_core::error::show_real;
 use sublevel_core::math::{Real, Vector3};
 
-/// Most pixels a depth image may have (4096 × 4096; a 640 × 480 frame has 307 200).
+/// Most pixels a depth image may have (4096 × 4096; a 640 × 480 frame has 307 200). A server
+/// bounds its frames further (`sublevel serve --max-frame-points`).
 pub const MAX_PIXELS: usize = 1 << 24;
+
+/// Smallest and largest focal length `fx`, `fy` (pixels): a lens with a focal length under a
+/// thousandth of a pixel, or over ten million pixels, is no camera's; outside these bounds the
+/// deprojected coordinates lose every significant digit or overflow.
+pub const FOCAL_RANGE: (Real, Real) = (1e-3, 1e7);
+
+/// Largest magnitude of the principal point `cx`, `cy` (pixels).
+pub const MAX_PRINCIPAL: Real = 1e7;
+
+/// Smallest and largest `depth_scale` of 16-bit depths (meters per unit): the largest depth,
+/// 65 535 units, is then 6.6 cm to 65.5 km, and one unit 1 µm to 1 m (most cameras: 1 mm, some
+/// 0.1 mm).
+pub const DEPTH_SCALE_RANGE: (Real, Real) = (1e-6, 1.0);
+
+/// Checks a 16-bit depth image's `depth_scale` (meters per unit) against [`DEPTH_SCALE_RANGE`].
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `depth_scale` when it is not finite or outside the range.
+pub fn check_depth_scale(depth_scale: Real) -> Result<()> {
+    let (lo, hi) = DEPTH_SCALE_RANGE;
+    if depth_scale.is_finite() && (lo..=hi).contains(&depth_scale) {
+        return Ok(());
+    }
+    Err(Error::invalid(
+        "depth_scale",
+        format!("must be finite and in [{lo:e}, {hi}] m per unit, got {}", show_real(depth_scale)),
+    ))
+}
 
 /// Pinhole intrinsics of a depth image (pixels), as a ROS `sensor_msgs/CameraInfo`'s K.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -42,8 +72,8 @@ impl Intrinsics {
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] naming `width` (0, or above [`MAX_PIXELS`]), `height` (0, or
-    /// width × height above [`MAX_PIXELS`]), `fx` or `fy` (not finite or ≤ 0), `cx` or `cy`
-    /// (not finite).
+    /// width × height above [`MAX_PIXELS`]), `fx` or `fy` (not finite or outside
+    /// [`FOCAL_RANGE`]), `cx` or `cy` (not finite, or beyond ±[`MAX_PRINCIPAL`]).
     pub fn validate(&self) -> Result<()> {
         if self.width == 0 || self.width > MAX_PIXELS {
             return Err(Error::invalid("width", format!("must be 1–{MAX_PIXELS} pixels, got {}", self.width)));
@@ -55,14 +85,21 @@ impl Intrinsics {
                 format!("must be ≥ 1 with width × height ≤ {MAX_PIXELS} pixels, got {} × {}", self.width, self.height),
             ));
         }
+        let (lo, hi) = FOCAL_RANGE;
         for (field, f) in [("fx", self.fx), ("fy", self.fy)] {
-            if !(f.is_finite() && f > 0.0) {
-                return Err(Error::invalid(field, format!("must be finite and > 0 pixels, got {f}")));
+            if !(f.is_finite() && (lo..=hi).contains(&f)) {
+                return Err(Error::invalid(
+                    field,
+                    format!("must be finite and in [{lo:e}, {hi:e}] pixels, got {}", show_real(f)),
+                ));
             }
         }
         for (field, c) in [("cx", self.cx), ("cy", self.cy)] {
-            if !c.is_finite() {
-                return Err(Error::invalid(field, format!("must be finite, got {c}")));
+            if !(c.is_finite() && c.abs() <= MAX_PRINCIPAL) {
+                return Err(Error::invalid(
+                    field,
+                    format!("must be finite and within ±{MAX_PRINCIPAL:e} pixels, got {}", show_real(c)),
+                ));
             }
         }
         Ok(())
@@ -113,8 +150,8 @@ pub fn pixel_ray(intrinsics: &Intrinsics, u: Real, v: Real) -> Vector3 {
 ///
 /// # Errors
 /// As [`Intrinsics::validate`]; [`Error::InvalidArgument`] naming `depth_scale` (for u16
-/// depths: not finite or ≤ 0) or `depth` (its pixel count differs from width × height). `out`
-/// is unchanged on error.
+/// depths: [`check_depth_scale`]) or `depth` (its pixel count differs from width × height).
+/// `out` is unchanged on error.
 pub fn deproject(
     depth: DepthPixels<'_>,
     intrinsics: &Intrinsics,
@@ -122,8 +159,8 @@ pub fn deproject(
     out: &mut Vec<[f32; 3]>,
 ) -> Result<usize> {
     intrinsics.validate()?;
-    if matches!(depth, DepthPixels::U16(_)) && !(depth_scale.is_finite() && depth_scale > 0.0) {
-        return Err(Error::invalid("depth_scale", format!("must be finite and > 0 m per unit, got {depth_scale}")));
+    if matches!(depth, DepthPixels::U16(_)) {
+        check_depth_scale(depth_scale)?;
     }
     let (w, h) = (intrinsics.width, intrinsics.height);
     if depth.len() != w * h {
@@ -237,7 +274,12 @@ mod tests {
         assert!(run(Intrinsics { cx: Real::NAN, ..k(4, 2) }, f, 1.0).contains("cx"));
         assert!(run(Intrinsics { cy: Real::NEG_INFINITY, ..k(4, 2) }, f, 1.0).contains("cy"));
         let u = [1u16; 8];
-        for scale in [0.0, -0.001, Real::NAN, Real::INFINITY] {
+        assert!(run(Intrinsics { fx: 1e-300, ..k(4, 2) }, f, 1.0).contains("fx"));
+        assert!(run(Intrinsics { fy: 1e300, ..k(4, 2) }, f, 1.0).contains("fy"));
+        assert!(run(Intrinsics { cx: -1e8, ..k(4, 2) }, f, 1.0).contains("cx"));
+        let shown = run(Intrinsics { fy: 1e300, ..k(4, 2) }, f, 1.0);
+        assert!(shown.contains("1e300") && shown.len() < 200, "{shown}");
+        for scale in [0.0, -0.001, Real::NAN, Real::INFINITY, 1e300, 2.0, 1e-300] {
             assert!(run(k(4, 2), DepthPixels::U16(&u), scale).contains("depth_scale"));
         }
         let msg = run(k(3, 2), f, 1.0);
@@ -248,8 +290,8 @@ mod tests {
     #[test]
     fn points_beyond_float32_are_holes() {
         let mut out = Vec::new();
-        let holes = deproject(DepthPixels::U16(&[1, 2]), &k(2, 1), 1e300, &mut out).unwrap();
-        assert_eq!((holes, out.len()), (2, 0));
+        let holes = deproject(DepthPixels::F32(&[1e38, 2.0]), &Intrinsics { fx: 1e-3, ..k(2, 1) }, 1.0, &mut out);
+        assert_eq!((holes.unwrap(), out.len()), (1, 1));
     }
 
     #[test]

@@ -8,6 +8,7 @@ use crate::{Error, Result};
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use std::collections::HashMap;
 use std::num::NonZero;
+use sublevel_core::error::show_real;
 use sublevel_core::math::{Isometry3, Real, Vector3};
 
 /// Statistical outlier removal (as PCL's `StatisticalOutlierRemoval`): a point whose mean
@@ -83,13 +84,13 @@ impl CloudFilter {
         if !(self.min_range.is_finite() && self.min_range >= 0.0) {
             return Err(Error::invalid(
                 "filter.min_range",
-                format!("must be finite and ≥ 0 m, got {}", self.min_range),
+                format!("must be finite and ≥ 0 m, got {}", show_real(self.min_range)),
             ));
         }
         if self.max_range.is_nan() || self.max_range <= self.min_range {
             return Err(Error::invalid(
                 "filter.max_range",
-                format!("must exceed min_range ({} m), got {}", self.min_range, self.max_range),
+                format!("must exceed min_range ({} m), got {}", show_real(self.min_range), show_real(self.max_range)),
             ));
         }
         if let Some((lo, hi)) = &self.workspace {
@@ -103,7 +104,7 @@ impl CloudFilter {
         if !(self.voxel.is_finite() && (self.voxel == 0.0 || (1e-4..=1.0).contains(&self.voxel))) {
             return Err(Error::invalid(
                 "filter.voxel",
-                format!("must be 0 (off) or in [1e-4, 1] m, got {}", self.voxel),
+                format!("must be 0 (off) or in [1e-4, 1] m, got {}", show_real(self.voxel)),
             ));
         }
         if let Some(o) = &self.outliers {
@@ -113,7 +114,7 @@ impl CloudFilter {
             if !(o.std_ratio.is_finite() && o.std_ratio > 0.0) {
                 return Err(Error::invalid(
                     "filter.outliers.std_ratio",
-                    format!("must be finite and > 0, got {}", o.std_ratio),
+                    format!("must be finite and > 0, got {}", show_real(o.std_ratio)),
                 ));
             }
         }
@@ -313,7 +314,10 @@ pub fn self_filter(
     points: &mut Vec<[Real; 3]>,
 ) -> Result<usize> {
     if !(padding.is_finite() && padding >= 0.0) {
-        return Err(Error::invalid("self_filter.padding", format!("must be finite and ≥ 0 m, got {padding}")));
+        return Err(Error::invalid(
+            "self_filter.padding",
+            format!("must be finite and ≥ 0 m, got {}", show_real(padding)),
+        ));
     }
     let mut link_poses = Vec::new();
     robot.model.forward_kinematics(q, base, &mut link_poses)?;

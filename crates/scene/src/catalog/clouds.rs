@@ -46,6 +46,7 @@ use crate::{Error, Result};
 use std::collections::BTreeMap;
 use std::sync::atomic::Ordering;
 use std::sync::Arc;
+use sublevel_core::error::show_real;
 use sublevel_core::math::{Isometry3, Real};
 use sublevel_robot::cloud::bodies::{CloudBodies, CloudBodySettings, UpdateReport};
 use sublevel_robot::cloud::filter::{self_filter, CloudFilter, FilterCounts};
@@ -149,12 +150,27 @@ pub struct CloudUpdate {
     pub memory_bytes: usize,
 }
 
+/// [`Error::Cancelled`] when the calling thread's cancellation scope ([`sublevel_core::cancel`])
+/// has been cancelled: the update was abandoned (its client went away, or its deadline passed).
+fn check_abandoned() -> Result<()> {
+    if sublevel_core::cancel::is_cancelled() {
+        return Err(Error::Cancelled(
+            "the point-cloud update was abandoned (its client went away or its deadline passed); nothing was stored"
+                .into(),
+        ));
+    }
+    Ok(())
+}
+
 /// Rejects a noise radius outside `[0, MAX_NOISE_RADIUS]` naming `noise_radius`.
 fn check_noise_radius(radius: Real) -> Result<()> {
     if radius.is_finite() && (0.0..=MAX_NOISE_RADIUS).contains(&radius) {
         return Ok(());
     }
-    Err(Error::invalid("noise_radius", format!("must be finite, in [0, {MAX_NOISE_RADIUS}] m, got {radius}")))
+    Err(Error::invalid(
+        "noise_radius",
+        format!("must be finite, in [0, {MAX_NOISE_RADIUS}] m, got {}", show_real(radius)),
+    ))
 }
 
 /// Rejects a cloud name that is empty, longer than [`super::MAX_NAME_BYTES`], or the name or id
@@ -210,7 +226,9 @@ impl Catalog {
     /// `sensor_pose`, `filter.…` or `filter.self_filter_padding`;
     /// [`Error::FailedPrecondition`] for the self filter of a scene without a robot (or whose
     /// robot was deleted); [`Error::ResourceExhausted`] naming `points` past
-    /// [`sublevel_robot::cloud::MAX_CLOUD_POINTS`] points kept.
+    /// [`sublevel_robot::cloud::MAX_CLOUD_POINTS`] points kept; [`Error::Cancelled`] when the
+    /// calling thread's cancellation scope ([`sublevel_core::cancel`]) is cancelled, looked at
+    /// between the filters, the self filter and the k-d tree.
     pub fn build_point_cloud(&self, scene_id: &str, frame: &CloudFrame) -> Result<BuiltCloud> {
         check_noise_radius(frame.noise_radius)?;
         frame.filter.validate()?;
@@ -218,7 +236,7 @@ impl Catalog {
             if !(padding.is_finite() && padding >= 0.0) {
                 return Err(Error::invalid(
                     "filter.self_filter_padding",
-                    format!("must be finite and >= 0 m, got {padding}"),
+                    format!("must be finite and >= 0 m, got {}", show_real(padding)),
                 ));
             }
         }
@@ -238,10 +256,12 @@ impl Catalog {
         };
         let mut counts = FilterCounts { input: frame.holes, holes: frame.holes, ..FilterCounts::default() };
         let mut points = frame.filter.apply(&frame.points, &frame.sensor_pose, &mut counts)?;
+        check_abandoned()?;
         if let Some((placed, q, padding)) = robot {
             counts.robot = self_filter(&placed.robot, &q, &placed.base, frame.noise_radius, padding, &mut points)?;
         }
         counts.kept = points.len();
+        check_abandoned()?;
         let cloud = PointCloud::new(points, frame.noise_radius).map_err(|e| match e {
             Error::InvalidArgument { field, reason } if field == "radius" => Error::invalid("noise_radius", reason),
             other => other,
@@ -287,8 +307,10 @@ impl Catalog {
     /// [`Error::NotFound`] (kind `scene`); [`Error::InvalidArgument`] naming `name` (empty, too
     /// long, the name of an instance or attached object); [`Error::ResourceExhausted`] naming
     /// `name` when the scene holds [`MAX_CLOUDS_PER_SCENE`] other clouds, or naming the cloud
-    /// memory with its numbers when the total would pass `max_total_bytes`. Nothing changes on
-    /// error.
+    /// memory with its numbers when the total would pass `max_total_bytes`;
+    /// [`Error::Cancelled`] when the calling thread's cancellation scope
+    /// ([`sublevel_core::cancel`]) is cancelled, looked at under the scene's lock: an abandoned
+    /// update is never stored. Nothing changes on error.
     pub fn set_point_cloud(
         &self,
         scene_id: &str,
@@ -300,6 +322,7 @@ impl Catalog {
         let cloud = Arc::new(built.cloud);
         let bodies = built.bodies.map(Arc::new);
         self.with_scene(scene_id, |s| {
+            check_abandoned()?;
             check_cloud_name(s, name)?;
             let old = s.clouds.get(name).map(|c| c.memory_bytes);
             if old.is_none() && s.clouds.len() >= MAX_CLOUDS_PER_SCENE {

@@ -426,3 +426,22 @@ fn the_bodies_model_is_one_body_per_cluster_in_checks_and_check_scene() {
 fn pair_overlaps(check: &crate::planner::SceneCheck, first: &str) -> bool {
     check.pairs.iter().any(|p| p.first == first && p.second == "cam" && p.distance.answer.result.overlapping)
 }
+
+/// An update whose cancellation scope is cancelled (its client went away, its deadline passed)
+/// is refused under the scene's lock: nothing is stored, the memory count and version unchanged.
+#[test]
+fn an_abandoned_update_is_not_stored() {
+    let (c, scene) = cell();
+    let world = sphere_points(Vector3::new(1.0, 0.0, 0.0), 0.2, 50);
+    let built = c.build_point_cloud(&scene, &frame_of(&world, 0.01)).unwrap();
+    let version = c.scene_version(&scene).unwrap();
+    let flag = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(true));
+    let out = sublevel_core::cancel::cancellable(flag.clone(), || {
+        c.set_point_cloud(&scene, "cam", built, DEFAULT_MAX_CLOUD_BYTES)
+    });
+    assert!(matches!(out, Err(Error::Cancelled(_))), "{out:?}");
+    assert_eq!((c.scene_version(&scene).unwrap(), c.cloud_bytes()), (version, 0));
+    let frame = frame_of(&world, 0.01);
+    let out = sublevel_core::cancel::cancellable(flag, || c.build_point_cloud(&scene, &frame));
+    assert!(matches!(out, Err(Error::Cancelled(_))), "{out:?}");
+}

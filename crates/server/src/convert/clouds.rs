@@ -2,15 +2,18 @@
 //! image deprojected here), its filters, and the counts and summaries sent back.
 //!
 //! Decoding is validated field by field before anything is allocated for the points: a data
-//! length that is no multiple of the point step, an offset beyond it, a depth image's size or
-//! intrinsics; NaN and infinite coordinates are holes (counted by the filters), not errors.
+//! length that is no multiple of the point step, an offset beyond it, a depth image's size,
+//! intrinsics or depth scale, and the frame's points against the server's limit
+//! ([`frame_points`], called before the frame waits for its share of the decoding budget); NaN
+//! and infinite coordinates are holes (counted by the filters), not errors.
 
 use super::{pose_from_proto, prefix_field};
+use crate::limits::FRAME_POINTS;
 use crate::pb;
 use crate::{Error, Result};
 use sublevel_core::math::{Real, Vector3};
 use sublevel_robot::cloud::bodies::{CloudBodySettings, UpdateReport};
-use sublevel_robot::cloud::depth::{deproject, DepthPixels, Intrinsics};
+use sublevel_robot::cloud::depth::{check_depth_scale, deproject, DepthPixels, Intrinsics};
 use sublevel_robot::cloud::filter::{CloudFilter, FilterCounts, OutlierFilter};
 use sublevel_scene::{CloudFrame, SceneCloud, DEFAULT_NOISE_RADIUS, DEFAULT_SELF_FILTER_PADDING};
 
@@ -27,6 +30,27 @@ const FLOAT: usize = 4;
 /// `points.y_offset` / `points.z_offset` (a float that does not fit in the step) or
 /// `points.data` (a length that is no multiple of the step).
 pub fn packed_points(p: &pb::PackedPoints) -> Result<Vec<[f32; 3]>> {
+    let (step, offsets) = packed_layout(p)?;
+    let read = |b: &[u8]| {
+        let bytes = [b[0], b[1], b[2], b[3]];
+        if p.is_bigendian {
+            f32::from_be_bytes(bytes)
+        } else {
+            f32::from_le_bytes(bytes)
+        }
+    };
+    Ok(p.data
+        .chunks_exact(step)
+        .map(|r| [read(&r[offsets[0]..]), read(&r[offsets[1]..]), read(&r[offsets[2]..])])
+        .collect())
+}
+
+/// A PointCloud2's point step and x, y, z offsets (bytes), its data length checked to be a whole
+/// number of points; reads none of the points.
+///
+/// # Errors
+/// As [`packed_points`].
+fn packed_layout(p: &pb::PackedPoints) -> Result<(usize, [usize; 3])> {
     let step = if p.point_step == 0 { 3 * FLOAT } else { p.point_step as usize };
     if step < 3 * FLOAT {
         return Err(Error::invalid(
@@ -53,37 +77,30 @@ pub fn packed_points(p: &pb::PackedPoints) -> Result<Vec<[f32; 3]>> {
             format!("{} bytes are no whole number of points of {step} bytes (point_step)", p.data.len()),
         ));
     }
-    let read = |b: &[u8]| {
-        let bytes = [b[0], b[1], b[2], b[3]];
-        if p.is_bigendian {
-            f32::from_be_bytes(bytes)
-        } else {
-            f32::from_le_bytes(bytes)
-        }
-    };
-    Ok(p.data
-        .chunks_exact(step)
-        .map(|r| [read(&r[offsets[0]..]), read(&r[offsets[1]..]), read(&r[offsets[2]..])])
-        .collect())
+    Ok((step, offsets))
 }
 
-/// The points of a depth image (sensor frame, holes left out) and the number of holes.
+/// The depth image's intrinsics, its pixels' bytes and bytes per pixel, and its depth
+/// scale (meters per unit of `depth_u16`), every field checked; reads none of the pixels.
 ///
 /// # Errors
-/// [`Error::InvalidArgument`] naming `depth.pixels` (none given), `depth.width`,
-/// `depth.height`, `depth.fx`, `depth.fy`, `depth.cx`, `depth.cy`, `depth.depth_scale`, or
-/// `depth.depth_u16` / `depth.depth_f32` (a byte count other than width × height × 2 or × 4).
-pub fn depth_points(d: &pb::DepthImage) -> Result<(Vec<[f32; 3]>, usize)> {
+/// As [`depth_points`].
+fn depth_layout(d: &pb::DepthImage) -> Result<(Intrinsics, &[u8], usize, Real)> {
     use pb::depth_image::Pixels;
     let intrinsics =
         Intrinsics { width: d.width as usize, height: d.height as usize, fx: d.fx, fy: d.fy, cx: d.cx, cy: d.cy };
     intrinsics.validate().map_err(|e| prefix_field(e, "depth"))?;
-    let pixels = intrinsics.pixels();
+    // Checked even for float32 pixels, which do not use it: an absurd scale is a client's bug.
+    if d.depth_scale != 0.0 {
+        check_depth_scale(d.depth_scale).map_err(|e| prefix_field(e, "depth"))?;
+    }
+    let scale = if d.depth_scale == 0.0 { DEFAULT_DEPTH_SCALE } else { d.depth_scale };
     let (field, bytes, size) = match &d.pixels {
         None => return Err(Error::invalid("depth.pixels", "required: set `depth_u16` or `depth_f32`")),
-        Some(Pixels::DepthU16(b)) => ("depth.depth_u16", b, 2),
-        Some(Pixels::DepthF32(b)) => ("depth.depth_f32", b, 4),
+        Some(Pixels::DepthU16(b)) => ("depth.depth_u16", b.as_slice(), 2),
+        Some(Pixels::DepthF32(b)) => ("depth.depth_f32", b.as_slice(), 4),
     };
+    let pixels = intrinsics.pixels();
     if bytes.len() != pixels * size {
         return Err(Error::invalid(
             field,
@@ -96,11 +113,57 @@ pub fn depth_points(d: &pb::DepthImage) -> Result<(Vec<[f32; 3]>, usize)> {
             ),
         ));
     }
-    let scale = if d.depth_scale == 0.0 { DEFAULT_DEPTH_SCALE } else { d.depth_scale };
+    Ok((intrinsics, bytes, size, scale))
+}
+
+/// The number of points of the frame of `req` (a depth image's width × height, a PointCloud2's
+/// records), every field of the frame checked and its size held against `max_points` (the
+/// server's `--max-frame-points`), before any point is decoded: microseconds, whatever the
+/// frame's size.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `frame` (none given) or a field of the frame (as
+/// [`packed_points`] and [`depth_points`]); [`Error::ResourceExhausted`] naming `points.data`
+/// or `depth.width × depth.height`, the frame's points, the limit and its flag when the frame
+/// has more than `max_points` points.
+pub fn frame_points(req: &pb::UpdatePointCloudRequest, max_points: usize) -> Result<usize> {
+    use pb::update_point_cloud_request::Frame;
+    let (n, field, what) = match &req.frame {
+        None => return Err(Error::invalid("frame", "required: set `points` or `depth`")),
+        Some(Frame::Points(p)) => {
+            let (step, _) = packed_layout(p)?;
+            let n = p.data.len() / step;
+            (n, "points.data", format!("{} bytes of {step}-byte points: {n} points", p.data.len()))
+        }
+        Some(Frame::Depth(d)) => {
+            let (intrinsics, ..) = depth_layout(d)?;
+            let n = intrinsics.pixels();
+            (n, "depth.width × depth.height", format!("{} × {} = {n} pixels", d.width, d.height))
+        }
+    };
+    if n > max_points {
+        return Err(Error::ResourceExhausted(format!(
+            "{field}: {what}, more than the {max_points} of one frame (set by {} / {}); send a smaller \
+             or subsampled frame",
+            FRAME_POINTS.flag, FRAME_POINTS.env
+        )));
+    }
+    Ok(n)
+}
+
+/// The points of a depth image (sensor frame, holes left out) and the number of holes.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `depth.pixels` (none given), `depth.width`,
+/// `depth.height`, `depth.fx`, `depth.fy` (outside 1e-3 to 1e7 pixels), `depth.cx`,
+/// `depth.cy` (beyond ±1e7 pixels), `depth.depth_scale` (set, and outside 1e-6 to 1 m per unit),
+/// or `depth.depth_u16` / `depth.depth_f32` (a byte count other than width × height × 2 or × 4).
+pub fn depth_points(d: &pb::DepthImage) -> Result<(Vec<[f32; 3]>, usize)> {
+    let (intrinsics, bytes, size, scale) = depth_layout(d)?;
     let mut out = Vec::new();
-    let holes = match &d.pixels {
-        Some(Pixels::DepthU16(b)) => {
-            let raw: Vec<u16> = b.chunks_exact(2).map(|c| u16::from_le_bytes([c[0], c[1]])).collect();
+    let holes = match size {
+        2 => {
+            let raw: Vec<u16> = bytes.chunks_exact(2).map(|c| u16::from_le_bytes([c[0], c[1]])).collect();
             deproject(DepthPixels::U16(&raw), &intrinsics, scale, &mut out)
         }
         _ => {
@@ -176,7 +239,9 @@ pub fn cloud_frame(req: &pb::UpdatePointCloudRequest) -> Result<CloudFrame> {
 ///
 /// # Errors
 /// [`Error::InvalidArgument`] naming `model` (a value this server does not know), `bodies.degree`
-/// (not 2 or 4) or another `bodies.` field ([`CloudBodySettings::validate`]).
+/// (not 2 or 4) or another `bodies.` field ([`CloudBodySettings::validate`]: `tolerance` in
+/// (0, 1] m, `min_points` 1 to `max_points`, `max_points` ≥ 4, `max_clusters` 1 to 4096,
+/// `slack` 0 to 1 m, `rescale_limit` finite ≥ 1).
 pub fn cloud_model(req: &pb::UpdatePointCloudRequest) -> Result<Option<CloudBodySettings>> {
     match pb::CloudModel::try_from(req.model) {
         Ok(pb::CloudModel::Points) => return Ok(None),
@@ -198,6 +263,9 @@ pub fn cloud_model(req: &pb::UpdatePointCloudRequest) -> Result<Option<CloudBody
     }
     if o.max_points != 0 {
         settings.max_points = o.max_points as usize;
+    }
+    if o.max_clusters != 0 {
+        settings.max_clusters = o.max_clusters as usize;
     }
     match o.degree {
         0 => {}
@@ -352,6 +420,129 @@ mod tests {
         let mut bad = image(Some(Pixels::DepthU16(vec![0; 96])));
         bad.depth_scale = -1.0;
         assert_eq!(field(depth_points(&bad).unwrap_err()), "depth.depth_scale");
+    }
+
+    fn depth_request(width: u32, height: u32, pixels: Option<pb::depth_image::Pixels>) -> pb::UpdatePointCloudRequest {
+        let depth = pb::DepthImage { width, height, fx: 500.0, fy: 500.0, cx: 1.0, cy: 1.0, pixels, depth_scale: 0.0 };
+        pb::UpdatePointCloudRequest {
+            frame: Some(pb::update_point_cloud_request::Frame::Depth(depth)),
+            ..Default::default()
+        }
+    }
+
+    /// The frame's size is read from its fields alone: a 64 × 64 image and 1001 points of a
+    /// PointCloud2 are refused past their limits naming the field, the limit and its flag; at
+    /// the limit they pass. A wrong byte count is named before the size is looked at.
+    #[test]
+    fn frame_sizes_are_checked_before_decoding() {
+        use pb::depth_image::Pixels;
+        let exhausted = |r: Result<usize>| match r {
+            Err(Error::ResourceExhausted(m)) => m,
+            other => panic!("{other:?}"),
+        };
+        // Width × height pixels of 2 bytes: the byte count is checked first, so send them.
+        let req = depth_request(64, 64, Some(Pixels::DepthU16(vec![0; 64 * 64 * 2])));
+        assert_eq!(frame_points(&req, 4096).unwrap(), 4096);
+        let m = exhausted(frame_points(&req, 4095));
+        assert!(m.starts_with("depth.width × depth.height: 64 × 64 = 4096 pixels"), "{m}");
+        assert!(m.contains("--max-frame-points") && m.contains("SUBLEVEL_MAX_FRAME_POINTS"), "{m}");
+        // A wrong byte count names its field before the size limit is looked at.
+        let req = depth_request(4096, 4096, Some(Pixels::DepthU16(vec![0; 10])));
+        assert_eq!(field(frame_points(&req, 1 << 22).unwrap_err()), "depth.depth_u16");
+
+        let points = |n: usize| pb::UpdatePointCloudRequest {
+            frame: Some(pb::update_point_cloud_request::Frame::Points(pb::PackedPoints {
+                data: vec![0; 16 * n],
+                point_step: 16,
+                ..Default::default()
+            })),
+            ..Default::default()
+        };
+        assert_eq!(frame_points(&points(1000), 1000).unwrap(), 1000);
+        let m = exhausted(frame_points(&points(1001), 1000));
+        assert!(m.starts_with("points.data: 16016 bytes of 16-byte points: 1001 points"), "{m}");
+        assert_eq!(field(frame_points(&pb::UpdatePointCloudRequest::default(), 10).unwrap_err()), "frame");
+    }
+
+    /// Focal lengths, principal points and depth scales no camera has are refused naming the
+    /// field, and the message shows the number in a few characters.
+    #[test]
+    fn absurd_intrinsics_are_refused_naming_the_field() {
+        use pb::depth_image::Pixels;
+        let image = |edit: &dyn Fn(&mut pb::DepthImage)| {
+            let mut req = depth_request(2, 2, Some(Pixels::DepthU16(vec![0; 8])));
+            if let Some(pb::update_point_cloud_request::Frame::Depth(d)) = &mut req.frame {
+                edit(d);
+            }
+            req
+        };
+        let refused = |edit: &dyn Fn(&mut pb::DepthImage)| {
+            let req = image(edit);
+            let Some(pb::update_point_cloud_request::Frame::Depth(d)) = &req.frame else { unreachable!() };
+            let (a, b) = (frame_points(&req, 100).unwrap_err(), depth_points(d).unwrap_err());
+            assert_eq!(a.to_string(), b.to_string());
+            assert!(a.to_string().len() < 300, "{a}");
+            (field(a), b.to_string())
+        };
+        let (f, m) = refused(&|d| d.fx = 1e-300);
+        assert_eq!(f, "depth.fx");
+        assert!(m.contains("1e-300"), "{m}");
+        assert_eq!(refused(&|d| d.fy = 1e-300).0, "depth.fy");
+        assert_eq!(refused(&|d| d.fy = 1e8).0, "depth.fy");
+        assert_eq!(refused(&|d| d.cx = 1e300).0, "depth.cx");
+        let (f, m) = refused(&|d| d.depth_scale = 1e300);
+        assert_eq!(f, "depth.depth_scale");
+        assert!(m.contains("1e300"), "{m}");
+        assert_eq!(refused(&|d| d.depth_scale = 2.0).0, "depth.depth_scale");
+        // Checked for float32 pixels too, where it is otherwise unused.
+        assert_eq!(
+            refused(&|d| {
+                d.depth_scale = -1.0;
+                d.pixels = Some(Pixels::DepthF32(vec![0; 16]));
+            })
+            .0,
+            "depth.depth_scale"
+        );
+        // Sensible values at the ends of the ranges pass.
+        for edit in [
+            &(|d: &mut pb::DepthImage| d.fx = 1e-3) as &dyn Fn(&mut pb::DepthImage),
+            &|d| d.fy = 1e7,
+            &|d| d.depth_scale = 1e-6,
+            &|d| d.depth_scale = 1.0,
+        ] {
+            let req = image(edit);
+            assert_eq!(frame_points(&req, 100).unwrap(), 4);
+        }
+    }
+
+    /// The bodies settings: absurd tolerances and slacks, `min_points` above `max_points`, and
+    /// `max_clusters` out of range are refused naming `bodies.<field>`; 0 takes the defaults.
+    #[test]
+    fn bodies_settings_are_bounded() {
+        let req = |o: pb::CloudBodyOptions| pb::UpdatePointCloudRequest {
+            model: pb::CloudModel::Bodies as i32,
+            bodies: Some(o),
+            ..Default::default()
+        };
+        let s = cloud_model(&req(pb::CloudBodyOptions::default())).unwrap().unwrap();
+        assert_eq!((s.tolerance, s.min_points, s.max_points, s.max_clusters), (0.05, 10, 2000, 256));
+        let s = cloud_model(&req(pb::CloudBodyOptions { max_clusters: 4096, ..Default::default() })).unwrap().unwrap();
+        assert_eq!(s.max_clusters, 4096);
+        let bad = |o: pb::CloudBodyOptions| {
+            let e = cloud_model(&req(o)).unwrap_err();
+            assert!(e.to_string().len() < 300, "{e}");
+            field(e)
+        };
+        assert_eq!(bad(pb::CloudBodyOptions { tolerance: 1e300, ..Default::default() }), "bodies.tolerance");
+        assert_eq!(bad(pb::CloudBodyOptions { tolerance: 1.5, ..Default::default() }), "bodies.tolerance");
+        assert_eq!(bad(pb::CloudBodyOptions { slack: 1e300, ..Default::default() }), "bodies.slack");
+        assert_eq!(bad(pb::CloudBodyOptions { max_clusters: 4097, ..Default::default() }), "bodies.max_clusters");
+        assert_eq!(bad(pb::CloudBodyOptions { min_points: 3000, ..Default::default() }), "bodies.min_points");
+        assert_eq!(
+            bad(pb::CloudBodyOptions { max_points: 3, min_points: 1, ..Default::default() }),
+            "bodies.max_points"
+        );
+        assert_eq!(bad(pb::CloudBodyOptions { rescale_limit: 0.5, ..Default::default() }), "bodies.rescale_limit");
     }
 
     #[test]

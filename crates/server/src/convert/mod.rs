@@ -54,7 +54,7 @@ pub use bodies::{
 };
 pub use clouds::{
     bodies_report_to_proto, cloud_filter, cloud_frame, cloud_model, cloud_summary, depth_points,
-    filter_counts_to_proto, packed_points, DEFAULT_DEPTH_SCALE,
+    filter_counts_to_proto, frame_points, packed_points, DEFAULT_DEPTH_SCALE,
 };
 pub use errors::{prefix_field, to_status};
 pub use motions::{instance_motions_from_proto, instance_motions_to_proto, InstanceMotions};

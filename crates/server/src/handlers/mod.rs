@@ -57,6 +57,9 @@ pub struct SublevelService {
     robot_builds: Arc<tokio::sync::Semaphore>,
     /// Robot checkers kept across requests ([`prepared`]).
     prepared: Arc<prepared::PreparedCheckers>,
+    /// Points of sensor frames being decoded and filtered at once
+    /// (`ServerConfig::max_frame_points_in_flight`; [`clouds`]).
+    cloud_frames: Arc<tokio::sync::Semaphore>,
 }
 
 impl SublevelService {
@@ -66,7 +69,9 @@ impl SublevelService {
         let pools = QueryPools::new(config.batch_workers, config.max_concurrent_sdp, config.max_concurrent_plans);
         let robot_builds = Arc::new(tokio::sync::Semaphore::new(robots::ROBOT_BUILD_BUDGET_MIB as usize));
         let prepared = Arc::new(prepared::PreparedCheckers::new(config.batch_workers));
-        Self { catalog, config, jobs, pools, robot_builds, prepared }
+        let in_flight = config.max_frame_points_in_flight.clamp(1, tokio::sync::Semaphore::MAX_PERMITS);
+        let cloud_frames = Arc::new(tokio::sync::Semaphore::new(in_flight));
+        Self { catalog, config, jobs, pools, robot_builds, prepared, cloud_frames }
     }
 }
 

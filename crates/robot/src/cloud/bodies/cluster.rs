@@ -6,6 +6,7 @@ use crate::cloud::MAX_CLOUD_POINTS;
 use crate::{Error, Result};
 use petgraph::unionfind::UnionFind;
 use std::collections::HashMap;
+use sublevel_core::error::show_real;
 use sublevel_core::math::{Real, Vector3, MAX_COORDINATE};
 
 /// Checks a point set: at most [`MAX_CLOUD_POINTS`], every coordinate finite within
@@ -26,21 +27,23 @@ pub(super) fn validate_points(points: &[[Real; 3]]) -> Result<()> {
     Ok(())
 }
 
-/// Checks the clustering parameters of [`euclidean_clusters`].
+/// Checks the clustering parameters of [`euclidean_clusters`]: `tolerance` in (0,
+/// [`super::MAX_TOLERANCE`]] m, `max_points` at least 4, `min_points` in [1, `max_points`].
 pub(super) fn validate_clustering(tolerance: Real, min_points: usize, max_points: usize) -> Result<()> {
-    if !(tolerance.is_finite() && tolerance > 0.0 && tolerance <= MAX_COORDINATE) {
+    let most = super::MAX_TOLERANCE;
+    if !(tolerance.is_finite() && tolerance > 0.0 && tolerance <= most) {
         return Err(Error::invalid(
             "tolerance",
-            format!("must be finite and in (0, {MAX_COORDINATE:e}] m, got {tolerance}"),
+            format!("must be finite and in (0, {most}] m, got {}", show_real(tolerance)),
         ));
     }
-    if min_points == 0 {
-        return Err(Error::invalid("min_points", "must be at least 1"));
+    if max_points < 4 {
+        return Err(Error::invalid("max_points", format!("must be at least 4, got {max_points}")));
     }
-    if max_points < 4 || max_points < min_points {
+    if min_points == 0 || min_points > max_points {
         return Err(Error::invalid(
-            "max_points",
-            format!("must be at least 4 and at least min_points ({min_points}), got {max_points}"),
+            "min_points",
+            format!("must be at least 1 and at most max_points ({max_points}), got {min_points}"),
         ));
     }
     Ok(())
