@@ -535,3 +535,33 @@ async fn far_points_hold_memory_in_proportion_and_change_no_verdict() {
     assert_eq!(with_far, near);
     assert!(near.iter().any(|&c| c) && near.iter().any(|&c| !c), "the wall decides some configurations either way");
 }
+
+/// 48 plans at once on the default planning slots: every one answered with a status (no error),
+/// none later than its 1 s timeout plus 50 ms by the server's clock, those that waited past their
+/// deadline for a slot TIMED_OUT saying so.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn forty_eight_concurrent_plans_are_each_answered_by_their_timeout() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(config(dir.path())).await;
+    let mut c = server.client().await;
+    let (robot, scene, text, _, _) = setup(&mut c, "cage").await;
+    let mut calls = Vec::new();
+    for _ in 0..48 {
+        let (mut pc, req) = (c.clone(), yaml(&robot, &scene, &text, slow(1.0)));
+        calls.push(tokio::spawn(async move { pc.plan(req).await }));
+    }
+    let (mut waited, mut planned) = (0, 0);
+    for call in calls {
+        let r = call.await.unwrap().expect("a plan answered with an error").into_inner();
+        let total = r.timing.unwrap().total;
+        assert!(total <= 1.05, "answered {:.1} ms past its timeout", (total - 1.0) * 1e3);
+        if r.message.contains("--max-concurrent-plans") {
+            assert_eq!(r.status(), pb::PlanStatus::TimedOut);
+            waited += 1;
+        } else {
+            planned += 1;
+        }
+    }
+    assert_eq!(waited + planned, 48);
+    assert!(planned >= 1 && waited >= 1, "{planned} planned, {waited} waited past their deadline");
+}
