@@ -52,16 +52,17 @@ pub(super) async fn plan(svc: &SublevelService, request: Request<pb::PlanRequest
         .pools
         .plans
         .run_before(deadline, move || {
-            // The time left after the wait for the slot (and the reading of the setting).
+            let allowed = world.planning.allowed_override();
+            let mut checker = RobotChecker::new(&planned, world.objects.clone(), &allowed)?;
+            checker.set_link_padding(&link_padding)?;
+            let mut validity = RobotValidity::new(MotionChecker::new(&mut checker)?, base, settings.padding);
+            // The time left after the wait for the slot, the reading of the setting and the
+            // checker's build.
             let left = deadline.saturating_duration_since(Instant::now());
             if left < LEAST_PLAN_TIME {
                 return Ok(None);
             }
             settings.timeout = left;
-            let allowed = world.planning.allowed_override();
-            let mut checker = RobotChecker::new(&planned, world.objects.clone(), &allowed)?;
-            checker.set_link_padding(&link_padding)?;
-            let mut validity = RobotValidity::new(MotionChecker::new(&mut checker)?, base, settings.padding);
             let cancel = sublevel_core::cancel::current().unwrap_or_else(|| Arc::new(AtomicBool::new(false)));
             sublevel_plan::plan(&mut validity, &start, &goal, &settings, &cancel).map(Some)
         })
