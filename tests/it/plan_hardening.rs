@@ -5,8 +5,8 @@
 //! name never stands for two kinds of thing (a cloud named like a link would take the link's row
 //! of the allowed-collision matrix); every part of a request is used or refused, naming its field.
 
+use crate::plan_service::{columns, data, JOINTS};
 use crate::util::{assert_status, config, Server};
-use std::path::PathBuf;
 use std::time::{Duration, Instant};
 use sublevel::math::Isometry3;
 use sublevel::robot::FittedRobot;
@@ -14,20 +14,6 @@ use sublevel::scene::moveit::MotionPlanRequest;
 use sublevel::service::pb::{self, sublevel_client::SublevelClient};
 use tonic::transport::Channel;
 use tonic::Code;
-
-fn data(path: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data/robots").join(path)
-}
-
-const JOINTS: [&str; 7] =
-    ["panda_joint1", "panda_joint2", "panda_joint3", "panda_joint4", "panda_joint5", "panda_joint6", "panda_joint7"];
-
-fn columns(rows: &[Vec<f64>]) -> Option<pb::ConfigurationColumns> {
-    Some(pb::ConfigurationColumns {
-        joint_names: JOINTS.iter().map(|s| (*s).to_owned()).collect(),
-        values: rows.iter().flatten().copied().collect(),
-    })
-}
 
 /// The Panda uploaded and `scenario`'s first scene imported: (robot id, scene id, request text,
 /// start, goal).

@@ -17,14 +17,17 @@ use sublevel::service::pb::{self, sublevel_client::SublevelClient};
 use tonic::transport::Channel;
 use tonic::Code;
 
-fn data(path: &str) -> PathBuf {
+/// A file of `data/robots`.
+pub(crate) fn data(path: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data/robots").join(path)
 }
 
-const JOINTS: [&str; 7] =
+/// The Panda's seven arm joints.
+pub(crate) const JOINTS: [&str; 7] =
     ["panda_joint1", "panda_joint2", "panda_joint3", "panda_joint4", "panda_joint5", "panda_joint6", "panda_joint7"];
 
-fn columns(rows: &[Vec<f64>]) -> Option<pb::ConfigurationColumns> {
+/// Panda configurations as columns of [`JOINTS`].
+pub(crate) fn columns(rows: &[Vec<f64>]) -> Option<pb::ConfigurationColumns> {
     Some(pb::ConfigurationColumns {
         joint_names: JOINTS.iter().map(|s| (*s).to_owned()).collect(),
         values: rows.iter().flatten().copied().collect(),
