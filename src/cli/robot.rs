@@ -199,6 +199,12 @@ fn fit(args: FitArgs) -> Result<()> {
     for f in &r.fallbacks {
         eprintln!("  fallback taken: {f}");
     }
+    for w in &r.warnings {
+        eprintln!("  warning: {w}");
+    }
+    for [a, b] in &r.rigid_pairs {
+        eprintln!("  not checked: {a} – {b} (one rigid body: joined by fixed joints)");
+    }
     Ok(())
 }
 

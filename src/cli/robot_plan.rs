@@ -11,7 +11,9 @@ use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 use sublevel::math::{Isometry3, Real};
-use sublevel::plan::{joint_goal, plan, start_from_joints, PlanSettings, PlanStatus, RobotValidity};
+use sublevel::plan::{
+    joint_goal, plan, start_from_joints, PlanSettings, PlanStatus, RobotValidity, START_STATE_MAX_BOUNDS_ERROR,
+};
 use sublevel::robot::{FittedRobot, MotionChecker, RobotChecker};
 use sublevel::scene::moveit::{allowed_override, world_objects, MotionPlanRequest, PlanningScene};
 use sublevel::Result;
@@ -76,9 +78,19 @@ pub fn run(args: PlanArgs) -> Result<()> {
     for s in &skipped {
         eprintln!("warning: {}[{}] ({}) left out: {}", s.object_id, s.shape_index, s.kind, s.reason);
     }
-    let start = start_from_joints(&robot.model, "request.start_state", &request.start, &scene.joint_positions)?;
+    let (start, moved) = start_from_joints(
+        &robot.model,
+        "request.start_state",
+        &request.start,
+        &scene.joint_positions,
+        START_STATE_MAX_BOUNDS_ERROR,
+    )?;
     let constraints = request.goal_constraints();
-    let goal = joint_goal(&robot.model, "request.goal_constraints[0].joint_constraints", &constraints, &start)?;
+    let (goal, goal_moved) =
+        joint_goal(&robot.model, "request.goal_constraints[0].joint_constraints", &constraints, &start)?;
+    for line in moved.iter().chain(&goal_moved) {
+        eprintln!("warning: {line}");
+    }
     if !(args.timeout.is_finite() && args.timeout > 0.0) {
         return Err(sublevel::Error::invalid("--timeout", format!("must be > 0 s, got {}", args.timeout)));
     }

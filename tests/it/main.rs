@@ -23,6 +23,7 @@ mod robot_cli;
 mod robot_hardening;
 mod robot_sampled;
 mod robot_service;
+mod robots_brought;
 mod scene_import;
 mod scene_import_hardening;
 mod scene_robot;

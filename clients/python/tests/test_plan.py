@@ -206,6 +206,26 @@ def test_server_refusals_name_the_field(client, panda, box):
     assert e.value.code == grpc.StatusCode.NOT_FOUND
 
 
+def test_a_start_just_past_a_limit_is_moved_onto_it_and_said(client, panda):
+    # MoveIt's FixStartStateBounds: a start value up to 0.05 rad past its limit is planned from the
+    # limit, and the answer says so naming the value; farther, or past a smaller bound error, it
+    # is refused naming it. No scene: self-collision only.
+    start, goal = request_ends()
+    past = start.copy()
+    past[0] = panda.upper[0] + 0.03
+    r = client.plan(panda.robot_id, start=past, goal=goal, joint_names=JOINTS, timeout=TIMEOUT, seed=SEED)
+    assert r.solved, r
+    assert r.path[0][0] == panda.upper[0]
+    np.testing.assert_array_equal(r.path[0][1:], start[1:])
+    assert len(r.warnings) == 1 and r.warnings[0].startswith("start.values[0]: joint `panda_joint1`"), r.warnings
+    with pytest.raises(SublevelError) as e:
+        client.plan(panda.robot_id, start=past, goal=goal, joint_names=JOINTS, timeout=TIMEOUT,
+                    start_state_max_bounds_error=0.01)
+    assert e.value.code == grpc.StatusCode.INVALID_ARGUMENT and e.value.field == "start.values[0]", e.value
+    r = client.plan(panda.robot_id, start=start, goal=goal, joint_names=JOINTS, timeout=TIMEOUT, seed=SEED)
+    assert r.solved and r.warnings == [], r
+
+
 def test_bad_arguments_raise_before_sending():
     # A client on an address no server listens on: a ValueError, not UNAVAILABLE, shows that
     # nothing was sent (the joint names given, so that no robot summary is fetched either).
@@ -236,6 +256,7 @@ def test_bad_arguments_raise_before_sending():
         (dict(ok, tolerance=0.0), r"`tolerance`"),
         (dict(ok, padding=-0.01), r"`padding`"),
         (dict(ok, max_goals=0), r"`max_goals`"),
+        (dict(ok, start_state_max_bounds_error=2.0), r"`start_state_max_bounds_error`"),
         (dict(ok, seed=-1), r"`seed`"),
         (dict(ok, smoothing_passes=1.5), r"`smoothing_passes`"),
         (dict(ok, smoothing_passes=9), r"`smoothing_passes`"),

@@ -35,7 +35,7 @@ pub mod space;
 pub mod validity;
 
 pub use certify::certificate_tolerance;
-pub use joints::{joint_goal, start_from_joints, JointConstraint};
+pub use joints::{fix_start_bounds, joint_goal, start_from_joints, JointConstraint, START_STATE_MAX_BOUNDS_ERROR};
 pub use plan::{
     check_configuration, plan, Goal, JointRegion, PlanOutcome, PlanSettings, PlanStatus, PlanTiming, MAX_GOALS,
     MAX_PADDING, MAX_RESOLUTION, MAX_SHORTCUT_ATTEMPTS, MAX_SMOOTHING_PASSES, MAX_TIMEOUT, MAX_TOLERANCE,

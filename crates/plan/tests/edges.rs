@@ -9,7 +9,10 @@ use std::f64::consts::PI;
 use sublevel_core::math::{Isometry3, Real};
 use sublevel_core::primitive::Primitive;
 use sublevel_plan::validity::sampled_edge_free;
-use sublevel_plan::{JointSpace, RobotValidity, Validity};
+use sublevel_plan::{
+    fix_start_bounds, joint_goal, start_from_joints, Goal, JointSpace, RobotValidity, Validity,
+    START_STATE_MAX_BOUNDS_ERROR,
+};
 use sublevel_robot::{
     fit_robot_text, CheckOptions, FittedRobot, MeshSource, MotionChecker, RobotChecker, RobotFitSettings, WorldObject,
 };
@@ -245,4 +248,66 @@ fn plan_settings_are_bounded() {
         assert_eq!(field(inside), "", "{name}");
         assert_eq!(field(outside), name);
     }
+}
+
+/// A revolute joint printed at five digits (±3.14159), a prismatic torso and a continuous wrist.
+const BOUNDED_URDF: &str = r#"<robot name="bounded">
+  <link name="base"/><link name="torso"/><link name="arm"/><link name="hand"/>
+  <joint name="torso_lift" type="prismatic"><parent link="base"/><child link="torso"/><axis xyz="0 0 1"/>
+    <limit lower="0" upper="0.4" effort="1" velocity="1"/></joint>
+  <joint name="wrist_roll" type="revolute"><parent link="torso"/><child link="arm"/><axis xyz="0 0 1"/>
+    <limit lower="-3.14159" upper="3.14159" effort="1" velocity="1"/></joint>
+  <joint name="spin" type="continuous"><parent link="arm"/><child link="hand"/><axis xyz="1 0 0"/></joint>
+</robot>"#;
+
+/// The bound of ±π as URDFs print it, at five digits.
+#[allow(clippy::approx_constant)]
+const PRINTED_PI: f64 = 3.14159;
+
+#[test]
+fn starts_and_goals_near_the_limits_are_taken_as_moveit_takes_them() {
+    let model = sublevel_robot::RobotModel::from_urdf_str(BOUNDED_URDF).unwrap();
+    let field = |e: sublevel_core::Error| match e {
+        sublevel_core::Error::InvalidArgument { field, .. } => field,
+        other => panic!("{other:?}"),
+    };
+    // A start at ±π, 2.65e-6 past the printed bound: moved onto it, said; the continuous joint
+    // and values inside are kept.
+    let given = [("wrist_roll".to_owned(), -PI), ("torso_lift".to_owned(), 0.2), ("spin".to_owned(), 7.0)];
+    let (q, moved) = start_from_joints(&model, "start", &given, &[], START_STATE_MAX_BOUNDS_ERROR).unwrap();
+    assert_eq!(q, vec![0.2, -PRINTED_PI, 7.0]);
+    assert_eq!(moved.len(), 1);
+    assert!(moved[0].starts_with("start[1]: joint `wrist_roll`") && moved[0].contains("-3.14159"), "{}", moved[0]);
+    // 0.05 past the bound is still moved (MoveIt's default), 0.0501 is refused naming the entry;
+    // a value within the rounding margin is moved silently.
+    let mut q = vec![0.45, 0.0, 0.0];
+    assert_eq!(fix_start_bounds(&model, "start", &mut q, 0.05).unwrap().len(), 1);
+    assert_eq!(q[0], 0.4);
+    assert_eq!(field(fix_start_bounds(&model, "s", &mut [0.4501, 0.0, 0.0], 0.05).unwrap_err()), "s[0]");
+    let mut q = vec![0.4 + 1e-12, PRINTED_PI + 1e-10, 0.0];
+    assert!(fix_start_bounds(&model, "start", &mut q, 0.05).unwrap().is_empty());
+    assert_eq!(q, vec![0.4, PRINTED_PI, 0.0]);
+    // With a bound error of 0, only rounding is moved.
+    assert_eq!(field(fix_start_bounds(&model, "s", &mut [0.0, -PI, 0.0], 0.0).unwrap_err()), "s[1]");
+
+    // A goal at π with a tolerance of 0.01 meets the limits: the region is cut to [π − 0.01,
+    // PRINTED_PI] and centered on the bound, and the answer says so.
+    let start = vec![0.2, 0.0, 0.0];
+    let constraints = vec![("wrist_roll".to_owned(), PI, 0.01, 0.01)];
+    let (goal, moved) = joint_goal(&model, "goal", &constraints, &start).unwrap();
+    let Goal::Region(r) = goal else { panic!("{goal:?}") };
+    assert_eq!(r.center[1], PRINTED_PI);
+    assert!((r.center[1] - r.below[1] - (PI - 0.01)).abs() < 1e-12 && r.above[1] == 0.0, "{r:?}");
+    assert!(moved.len() == 1 && moved[0].starts_with("goal[0].position: joint `wrist_roll`"), "{moved:?}");
+    // A goal interval that misses the limits is refused; one exactly on the bound within
+    // rounding is a single configuration, moved silently.
+    let off = vec![("torso_lift".to_owned(), 0.5, 0.05, 0.05)];
+    assert_eq!(field(joint_goal(&model, "goal", &off, &start).unwrap_err()), "goal[0].position");
+    let rounding = vec![("wrist_roll".to_owned(), -(PRINTED_PI + 7e-16), 0.0, 0.0)];
+    let (goal, moved) = joint_goal(&model, "goal", &rounding, &start).unwrap();
+    assert_eq!(goal, Goal::Configurations(vec![vec![0.2, -PRINTED_PI, 0.0]]));
+    assert!(moved.is_empty());
+    // A goal past the bound with no tolerance is refused, as the interval is the point.
+    let exact = vec![("wrist_roll".to_owned(), -PI, 0.0, 0.0)];
+    assert_eq!(field(joint_goal(&model, "goal", &exact, &start).unwrap_err()), "goal[0].position");
 }

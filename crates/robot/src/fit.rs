@@ -9,6 +9,10 @@
 //! SRDF ──► disable_collisions ──► allowed pairs (the robot's allowed-collision matrix)
 //! ```
 //!
+//! The SRDF is read as MoveIt reads it: entries naming links the URDF lacks are skipped, each with
+//! a warning in the report ([`Semantics::known_to`]). Pairs of links on one rigid body (joined by
+//! fixed joints) are never checked, and the report lists those the SRDF did not already allow.
+//!
 //! Distinct meshes (by SHA-256 of the file, scale and fit settings) are fitted once, in parallel
 //! (one per core), and cached in `cache_dir` as `KEY.json` compound files, so a re-fit of the same
 //! robot reads them back at once. Every leaf contains its triangles (the fit checks it); a leaf
@@ -177,14 +181,14 @@ pub fn fit_robot_text(
 ) -> Result<FittedRobot> {
     let start = Instant::now();
     let model = RobotModel::from_urdf_str(&urdf)?;
-    let allowed_pairs: Vec<[String; 2]> = match srdf {
+    let (allowed_pairs, warnings): (Vec<[String; 2]>, Vec<String>) = match srdf {
         Some(text) => {
-            let srdf = Semantics::from_srdf_str(text)?;
-            model.self_collision_pairs(&srdf.disabled_pairs)?;
-            srdf.disabled_pairs.iter().map(|d| [d.link1.clone(), d.link2.clone()]).collect()
+            let (srdf, warnings) = Semantics::from_srdf_str(text)?.known_to(&model);
+            (srdf.disabled_pairs.iter().map(|d| [d.link1.clone(), d.link2.clone()]).collect(), warnings)
         }
-        None => Vec::new(),
+        None => (Vec::new(), Vec::new()),
     };
+    let rigid_pairs = model.rigid_pairs_not_in(&allowed_pairs);
     crate::limits::check_self_pairs(&model, &allowed_pairs)?;
     let tag = settings_tag(&settings.compound, settings.leaves);
     let mut geometries = Vec::new();
@@ -253,7 +257,7 @@ pub fn fit_robot_text(
             g.compound = body;
         }
     }
-    let report = RobotFitReport { seconds: start.elapsed().as_secs_f64(), ..report };
+    let report = RobotFitReport { seconds: start.elapsed().as_secs_f64(), warnings, rigid_pairs, ..report };
     let mut file = RobotFile {
         format: ROBOT_FORMAT.to_owned(),
         name: model.name.clone(),

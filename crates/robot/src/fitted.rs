@@ -145,6 +145,14 @@ pub struct RobotFitReport {
     /// failures on the way.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub fallbacks: Vec<String>,
+    /// What was skipped in the SRDF, one line each naming its element
+    /// ([`crate::srdf::Semantics::known_to`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
+    /// Link pairs on one rigid body (joined by fixed joints) that the SRDF does not allow, left
+    /// out of self-collision checking all the same ([`RobotModel::rigid_pairs`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub rigid_pairs: Vec<[String; 2]>,
 }
 
 /// A robot file (see the module docs).

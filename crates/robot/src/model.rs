@@ -24,6 +24,14 @@ use nalgebra::{Translation3, Unit};
 use std::collections::HashMap;
 use sublevel_core::math::{Isometry3, Real, UnitQuaternion, Vector3, MAX_COORDINATE};
 
+/// How far past a joint limit a value still counts as on it, relative to the bound's size: a
+/// value `v` is within `[lo, hi]` when `lo − ε(lo) ≤ v ≤ hi + ε(hi)`, `ε(b) = LIMIT_ROUNDING ·
+/// max(1, |b|)` (radians or meters). Floating-point rounding puts planners' states there: OMPL
+/// and MoveIt interpolate and enforce bounds in double precision, and a UR5 state sampled on its
+/// bound of ±3.14159265 arrives as −3.1415926500000007. Such a state is checked as sent; one past
+/// the margin is refused as out of limits.
+pub const LIMIT_ROUNDING: Real = 1e-9;
+
 /// How a joint moves its child link.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum JointKind {
@@ -55,6 +63,11 @@ pub enum JointValue {
     },
 }
 
+/// The margin past bound `b` that [`LIMIT_ROUNDING`] allows.
+fn rounding_margin(b: Real) -> Real {
+    LIMIT_ROUNDING * b.abs().max(1.0)
+}
+
 /// A joint of the tree.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Joint {
@@ -77,6 +90,21 @@ pub struct Joint {
 }
 
 impl Joint {
+    /// Whether `v` lies within the joint's limits, up to [`LIMIT_ROUNDING`] past either bound
+    /// (always, for a continuous joint; never, for a value that is not finite).
+    pub fn admits(&self, v: Real) -> bool {
+        match self.limits {
+            _ if !v.is_finite() => false,
+            None => true,
+            Some((lo, hi)) => lo - rounding_margin(lo) <= v && v <= hi + rounding_margin(hi),
+        }
+    }
+
+    /// `v` moved into the joint's limits (unchanged for a continuous joint).
+    pub fn clamp(&self, v: Real) -> Real {
+        self.limits.map_or(v, |(lo, hi)| v.clamp(lo, hi))
+    }
+
     /// The child link's frame in the parent link's frame at joint value `v`: `origin · motion(v)`.
     pub fn transform(&self, v: Real) -> Isometry3 {
         match self.kind {
@@ -439,13 +467,46 @@ impl RobotModel {
         self.variables.iter().map(|&j| self.joints[j].name.as_str()).collect()
     }
 
+    /// The rigid body each link belongs to, by link index: links joined by fixed joints (a chain
+    /// of them) share one, the index of the link nearest the root among them. No joint moves two
+    /// links of one rigid body relative to each other, so their geometries keep one relative
+    /// pose in every configuration.
+    pub fn rigid_bodies(&self) -> Vec<usize> {
+        let mut body: Vec<usize> = (0..self.links.len()).collect();
+        for joint in &self.joints {
+            if joint.kind == JointKind::Fixed {
+                body[joint.child] = body[joint.parent];
+            }
+        }
+        body
+    }
+
+    /// The pairs `(i, j)`, `i < j`, of links with collision geometry on one rigid body
+    /// ([`RobotModel::rigid_bodies`]): their contact never changes, so self-collision checking
+    /// leaves them out, as MoveIt's setup assistant disables them ("Adjacent" or "Always") and
+    /// pinocchio never pairs geometries of one joint.
+    pub fn rigid_pairs(&self) -> Vec<(usize, usize)> {
+        let body = self.rigid_bodies();
+        let with_geometry: Vec<usize> =
+            (0..self.links.len()).filter(|&l| !self.links[l].collision.is_empty()).collect();
+        let mut pairs = Vec::new();
+        for (n, &i) in with_geometry.iter().enumerate() {
+            for &j in &with_geometry[n + 1..] {
+                if body[i] == body[j] {
+                    pairs.push((i.min(j), i.max(j)));
+                }
+            }
+        }
+        pairs
+    }
+
     /// The index of the link named `name`.
     pub fn link_index(&self, name: &str) -> Option<usize> {
         self.links.iter().position(|l| l.name == name)
     }
 
     /// Checks a configuration against the joint limits (revolute and prismatic joints; continuous
-    /// joints have none).
+    /// joints have none), up to [`LIMIT_ROUNDING`] past a bound.
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] naming `field[k]` for the first entry outside its joint's limits
@@ -454,13 +515,11 @@ impl RobotModel {
         self.check_configuration(field, q)?;
         for (k, (&v, &j)) in q.iter().zip(&self.variables).enumerate() {
             let joint = &self.joints[j];
-            if let Some((lo, hi)) = joint.limits {
-                if v < lo || v > hi {
-                    return Err(Error::invalid(
-                        format!("{field}[{k}]"),
-                        format!("joint `{}` at {v} is outside its limits [{lo}, {hi}]", joint.name),
-                    ));
-                }
+            if let (false, Some((lo, hi))) = (joint.admits(v), joint.limits) {
+                return Err(Error::invalid(
+                    format!("{field}[{k}]"),
+                    format!("joint `{}` at {v} is outside its limits [{lo}, {hi}]", joint.name),
+                ));
             }
         }
         Ok(())
@@ -472,7 +531,8 @@ impl RobotModel {
     /// (radians, meters), configuration-major. Entries not named take `defaults` (by joint name;
     /// names the robot lacks are ignored), else 0.
     ///
-    /// Every value must lie within its joint's URDF limits, ends included (revolute and
+    /// Every value must lie within its joint's URDF limits, ends included, up to
+    /// [`LIMIT_ROUNDING`] past them ([`Joint::admits`]; revolute and
     /// prismatic joints; continuous joints take any finite value, wrapped by the kinematics): a
     /// state outside them is not one a planner may take, so it is refused rather than answered.
     ///
@@ -486,6 +546,34 @@ impl RobotModel {
         names: &[String],
         values: &[Real],
         defaults: &[(String, Real)],
+    ) -> Result<Vec<Vec<Real>>> {
+        self.columns(field, names, values, defaults, true)
+    }
+
+    /// As [`RobotModel::configurations`], with values outside the joint limits kept as given, for
+    /// a caller that moves them into the limits itself and says so (a plan's start state, as
+    /// MoveIt's `FixStartStateBounds` adapter does).
+    ///
+    /// # Errors
+    /// As [`RobotModel::configurations`], less the limits.
+    pub fn configurations_outside_limits(
+        &self,
+        field: &str,
+        names: &[String],
+        values: &[Real],
+        defaults: &[(String, Real)],
+    ) -> Result<Vec<Vec<Real>>> {
+        self.columns(field, names, values, defaults, false)
+    }
+
+    /// [`RobotModel::configurations`], with the limits checked when `limits`.
+    fn columns(
+        &self,
+        field: &str,
+        names: &[String],
+        values: &[Real],
+        defaults: &[(String, Real)],
+        limits: bool,
     ) -> Result<Vec<Vec<Real>>> {
         let all = self.variable_names();
         let columns: Vec<usize> = if names.is_empty() {
@@ -528,19 +616,18 @@ impl RobotModel {
                 base[k] = *v;
             }
         }
-        for (i, &v) in values.iter().enumerate() {
+        for (i, &v) in values.iter().enumerate().filter(|_| limits) {
             let joint = &self.joints[self.variables[columns[i % n]]];
-            if let Some((lo, hi)) = joint.limits {
-                if !(lo..=hi).contains(&v) {
-                    return Err(Error::invalid(
-                        format!("{field}.values[{i}]"),
-                        format!(
-                            "joint `{}` at {v} is outside its URDF limits [{lo}, {hi}] (a planner's state must lie \
-                             within them; continuous joints take any value)",
-                            joint.name
-                        ),
-                    ));
-                }
+            if let (false, Some((lo, hi))) = (joint.admits(v), joint.limits) {
+                return Err(Error::invalid(
+                    format!("{field}.values[{i}]"),
+                    format!(
+                        "joint `{}` at {v} is outside its URDF limits [{lo}, {hi}] (a planner's state must lie \
+                         within them, up to a rounding of {LIMIT_ROUNDING}·max(1, |bound|); continuous joints take \
+                         any value)",
+                        joint.name
+                    ),
+                ));
             }
         }
         Ok(values

@@ -171,11 +171,68 @@ impl Semantics {
     }
 }
 
+impl Semantics {
+    /// The SRDF as MoveIt's SRDF loader keeps it for `model`: `disable_collisions` entries that
+    /// name a link the URDF lacks, and group-state joints that are not joints of the URDF, are
+    /// skipped, each with a warning naming its element (real SRDFs name links of other versions of
+    /// their URDF: MoveIt warns and skips them). Also the warnings, in document order.
+    pub fn known_to(&self, model: &RobotModel) -> (Semantics, Vec<String>) {
+        let mut warnings = Vec::new();
+        let mut kept = self.clone();
+        kept.disabled_pairs.clear();
+        for (k, p) in self.disabled_pairs.iter().enumerate() {
+            let missing: Vec<&str> = [&p.link1, &p.link2]
+                .into_iter()
+                .filter(|l| model.link_index(l).is_none())
+                .map(String::as_str)
+                .collect();
+            if missing.is_empty() {
+                kept.disabled_pairs.push(p.clone());
+            } else {
+                let names: Vec<String> =
+                    missing.iter().map(|l| format!("`{}`", sublevel_core::error::clip(l))).collect();
+                warnings.push(format!(
+                    "srdf.disable_collisions[{k}]: skipped, link {} is not in the robot",
+                    names.join(" and ")
+                ));
+            }
+        }
+        for (g, state) in kept.group_states.iter_mut().enumerate() {
+            let mut joints = Vec::with_capacity(state.joints.len());
+            for (k, (name, value)) in state.joints.drain(..).enumerate() {
+                if model.joints().iter().any(|j| j.name == name) {
+                    joints.push((name, value));
+                } else {
+                    warnings.push(format!(
+                        "srdf.group_state[{g}].joint[{k}]: skipped, joint `{}` is not in the robot",
+                        sublevel_core::error::clip(&name)
+                    ));
+                }
+            }
+            state.joints = joints;
+        }
+        (kept, warnings)
+    }
+}
+
 impl RobotModel {
+    /// The pairs of links on one rigid body ([`RobotModel::rigid_pairs`]) that `allowed` (link
+    /// names, either order) does not already allow, by name: left out of self-collision checking
+    /// all the same, and listed in the fit report and the robot's summary.
+    pub fn rigid_pairs_not_in(&self, allowed: &[[String; 2]]) -> Vec<[String; 2]> {
+        let name = |l: usize| self.links()[l].name.clone();
+        self.rigid_pairs()
+            .into_iter()
+            .map(|(i, j)| [name(i), name(j)])
+            .filter(|[a, b]| !allowed.iter().any(|[c, d]| (a == c && b == d) || (a == d && b == c)))
+            .collect()
+    }
+
     /// The link pairs `(i, j)`, `i < j` (indices of [`RobotModel::links`]), that self-collision
     /// checking must test: both links have collision geometry and the pair is not among
     /// `allowed` (pairs of link names whose contacts are allowed, e.g. an SRDF's
-    /// [`Semantics::disabled_pairs`], in either order).
+    /// [`Semantics::disabled_pairs`], in either order) nor on one rigid body
+    /// ([`RobotModel::rigid_pairs`]: no joint moves them relative to each other).
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] naming `srdf.disable_collisions[k]` when a pair names a link the
@@ -195,6 +252,7 @@ impl RobotModel {
             let (a, b) = (index(&p.link1)?, index(&p.link2)?);
             skip.insert((a.min(b), a.max(b)));
         }
+        skip.extend(self.rigid_pairs());
         let with_geometry: Vec<usize> =
             (0..self.links().len()).filter(|&l| !self.links()[l].collision.is_empty()).collect();
         let mut pairs = Vec::new();

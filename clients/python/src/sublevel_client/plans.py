@@ -69,6 +69,7 @@ def _plan_settings(
     goal_bias: Optional[float],
     tolerance: Optional[float],
     max_goals: Optional[int],
+    start_state_max_bounds_error: Optional[float] = None,
 ) -> pb.PlanSettings:
     """The ``PlanSettings`` of :meth:`PlanCalls.plan` (same arguments; None: the server's default)."""
     s = pb.PlanSettings(
@@ -91,6 +92,11 @@ def _plan_settings(
         s.tolerance = _real(tolerance, "tolerance", low=0.0, low_open=True, high=0.1, what=" of meters")
     if max_goals is not None:
         s.max_goals = _integer(max_goals, "max_goals", 1, 64)
+    if start_state_max_bounds_error is not None:
+        s.start_state_max_bounds_error = _real(
+            start_state_max_bounds_error, "start_state_max_bounds_error", low=0.0, high=1.0,
+            what=" (radians or meters)"
+        )
     return s
 
 
@@ -196,6 +202,7 @@ class PlanCalls:
         max_goals: Optional[int] = None,
         attached: Optional[Sequence[dict]] = None,
         link_padding: Optional[Mapping[str, float]] = None,
+        start_state_max_bounds_error: Optional[float] = None,
     ) -> pb.PlanRequest:
         """The ``PlanRequest`` of :meth:`plan` (same arguments), validated here."""
         if robot is not None and not isinstance(robot, str):
@@ -208,7 +215,7 @@ class PlanCalls:
             robot_id=robot or "",
             scene_id=scene,
             settings=_plan_settings(timeout, seed, range, padding, simplify, smoothing_passes, resolution, goal_bias,
-                                    tolerance, max_goals),
+                                    tolerance, max_goals, start_state_max_bounds_error),
             attached=_attached_pb(attached),
             link_padding=_link_padding(link_padding),
         )
@@ -275,6 +282,7 @@ class PlanCalls:
         max_goals: Optional[int] = None,
         attached: Optional[Sequence[dict]] = None,
         link_padding: Optional[Mapping[str, float]] = None,
+        start_state_max_bounds_error: Optional[float] = None,
         grpc_timeout: Optional[float] = None,
     ) -> PlanResult:
         """Plans a path of a stored robot among a scene in one call (``Plan``; docs/planning.md):
@@ -331,6 +339,9 @@ class PlanCalls:
             max_goals: most goal configurations the goal tree is rooted at (1 to 64; the first
                 free ones of those given are kept); None: 8.
             attached, link_padding: as in :meth:`check_configurations`.
+            start_state_max_bounds_error: how far a start value may lie outside its joint's limits
+                (radians or meters, in [0, 1]) and still be planned from, moved onto the limit and
+                said in :attr:`PlanResult.warnings` (MoveIt's ``FixStartStateBounds``); None: 0.05.
             grpc_timeout: the call's gRPC deadline, seconds; None: ``timeout`` plus
                 :data:`PLAN_DEADLINE_MARGIN` (5 s), so that the server answers ``timed_out``
                 itself. A shorter deadline also shortens the plan.
@@ -345,7 +356,8 @@ class PlanCalls:
         wrong length or not finite, no goal or two kinds of goal, ``motion_plan_request`` with
         typed ends, a setting out of its range; nothing is sent), and SublevelError for the
         server's refusals: NOT_FOUND for an unknown robot or scene, INVALID_ARGUMENT naming the
-        field (``start.values[1]`` for a value outside its joint limits,
+        field (``start.values[1]`` for a value farther than ``start_state_max_bounds_error``
+        outside its joint limits,
         ``goal_configurations.joint_names[0]`` for an unknown joint, ``goal_pose.link`` for a link
         the robot lacks, ``goal_joint_constraints[0].joint_name``,
         ``motion_plan_request_yaml.start_state[3]``), DEADLINE_EXCEEDED when ``grpc_timeout``
@@ -356,7 +368,7 @@ class PlanCalls:
             motion_plan_request=motion_plan_request, joint_names=joint_names, base=base, timeout=timeout, seed=seed,
             range=range, padding=padding, simplify=simplify, smoothing_passes=smoothing_passes,
             resolution=resolution, goal_bias=goal_bias, tolerance=tolerance, max_goals=max_goals, attached=attached,
-            link_padding=link_padding,
+            link_padding=link_padding, start_state_max_bounds_error=start_state_max_bounds_error,
         )
         if grpc_timeout is None:
             deadline = req.settings.timeout + PLAN_DEADLINE_MARGIN

@@ -6,7 +6,7 @@ distances and points.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Dict, List, Optional
+from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
@@ -75,7 +75,12 @@ class RobotInfo:
             joint).
         link_names: the links with collision geometry, in URDF order.
         geometries: collision geometries (a link may have several).
-        self_pairs: link pairs the self-collision check tests (the SRDF's disabled pairs left out).
+        self_pairs: link pairs the self-collision check tests (the SRDF's disabled pairs and the
+            pairs on one rigid body left out).
+        fit_warnings: what the fit skipped in the SRDF, one line each naming the element (entries
+            naming links the URDF lacks, skipped as MoveIt's SRDF loader skips them).
+        rigid_pairs: ``(link_a, link_b)`` pairs of links joined by fixed joints (no joint moves
+            them relative to each other) that the SRDF does not disable, never checked all the same.
     """
 
     robot_id: str
@@ -86,6 +91,8 @@ class RobotInfo:
     link_names: List[str]
     geometries: int
     self_pairs: int
+    fit_warnings: List[str] = field(default_factory=list)
+    rigid_pairs: List[Tuple[str, str]] = field(default_factory=list)
 
     @property
     def dof(self) -> int:
@@ -103,6 +110,8 @@ class RobotInfo:
             link_names=list(m.link_names),
             geometries=m.geometries,
             self_pairs=m.self_pairs,
+            fit_warnings=list(m.fit_warnings),
+            rigid_pairs=[tuple(p.split(" ", 1)) for p in m.rigid_pairs],
         )
 
 
@@ -294,6 +303,9 @@ class PlanResult:
         repaired: edges the certification repaired (split or re-planned).
         scene_version: the version of the scene planned in (as in :class:`ConfigurationColumns`);
             0 without a scene.
+        warnings: what the server changed in the request to plan it, one line each naming the
+            field: start values moved into the joint limits (``start_state_max_bounds_error``),
+            goal constraints outside the limits taken where their tolerance meets them.
     """
 
     status: str
@@ -312,6 +324,7 @@ class PlanResult:
     nodes: int
     repaired: int
     scene_version: int = 0
+    warnings: List[str] = field(default_factory=list)
 
     @property
     def solved(self) -> bool:
@@ -348,4 +361,5 @@ class PlanResult:
             nodes=int(m.nodes),
             repaired=int(m.repaired),
             scene_version=int(m.scene_version),
+            warnings=list(m.warnings),
         )

@@ -5,7 +5,10 @@ use crate::pb;
 use crate::{Error, Result};
 use std::time::Duration;
 use sublevel_core::math::Real;
-use sublevel_plan::{joint_goal, start_from_joints, Goal, JointConstraint, PlanOutcome, PlanSettings, PlanStatus};
+use sublevel_plan::{
+    fix_start_bounds, joint_goal, start_from_joints, Goal, JointConstraint, PlanOutcome, PlanSettings, PlanStatus,
+    START_STATE_MAX_BOUNDS_ERROR,
+};
 use sublevel_robot::ik::PoseGoal;
 use sublevel_robot::FittedRobot;
 use sublevel_scene::moveit::MotionPlanRequest;
@@ -51,14 +54,33 @@ pub fn plan_settings(s: Option<&pb::PlanSettings>) -> Result<PlanSettings> {
 }
 
 /// The start configuration and the goal of a request (its typed fields or its MoveIt
-/// MotionPlanRequest text), `defaults` the scene's joint positions.
+/// MotionPlanRequest text), `defaults` the scene's joint positions, and what was changed to plan
+/// them (`PlanResponse.warnings`): start values up to `settings.start_state_max_bounds_error`
+/// outside the limits moved onto them ([`fix_start_bounds`]), goal constraints taken where their
+/// tolerance meets the limits ([`joint_goal`]). Goal configurations within the rounding margin of
+/// a limit ([`sublevel_robot::model::LIMIT_ROUNDING`]) are moved onto it silently.
 ///
 /// # Errors
 /// [`Error::InvalidArgument`] naming the field: no goal or two kinds of goal, a start of more than
 /// one configuration, unknown or repeated joints, values that are not finite or outside the
-/// limits, a malformed MotionPlanRequest.
-pub fn plan_ends(req: &pb::PlanRequest, robot: &FittedRobot, defaults: &[(String, Real)]) -> Result<(Vec<Real>, Goal)> {
+/// limits (past the margins above), a malformed MotionPlanRequest,
+/// `settings.start_state_max_bounds_error` outside [0, 1].
+pub fn plan_ends(
+    req: &pb::PlanRequest,
+    robot: &FittedRobot,
+    defaults: &[(String, Real)],
+) -> Result<(Vec<Real>, Goal, Vec<String>)> {
     let model = &robot.model;
+    let max_error = match req.settings.as_ref().and_then(|s| s.start_state_max_bounds_error) {
+        None => START_STATE_MAX_BOUNDS_ERROR,
+        Some(e) if (0.0..=1.0).contains(&e) => e,
+        Some(e) => {
+            return Err(Error::invalid(
+                "settings.start_state_max_bounds_error",
+                format!("must be in [0, 1] (radians or meters), got {}", sublevel_core::error::show_real(e)),
+            ))
+        }
+    };
     if let Some(text) = &req.motion_plan_request {
         let (field, bytes) = match text {
             pb::plan_request::MotionPlanRequest::MotionPlanRequestYaml(t) => ("motion_plan_request_yaml", t),
@@ -78,17 +100,26 @@ pub fn plan_ends(req: &pb::PlanRequest, robot: &FittedRobot, defaults: &[(String
         }
         let request =
             MotionPlanRequest::from_yaml(bytes.as_bytes()).map_err(|e| crate::convert::prefix_field(e, field))?;
-        return ends_of_moveit(field, &request, robot, defaults);
+        return ends_of_moveit(field, &request, robot, defaults, max_error);
     }
-    let start = match &req.start {
+    let (start, mut warnings) = match &req.start {
         Some(columns) => {
-            let mut qs = crate::convert::configurations_from_proto("start", Some(columns), robot, defaults)?;
+            if columns.values.len() > sublevel_robot::limits::MAX_MOVING_JOINTS {
+                return Err(Error::invalid(
+                    "start.values",
+                    format!("one start configuration: at most {} values", sublevel_robot::limits::MAX_MOVING_JOINTS),
+                ));
+            }
+            let mut qs =
+                model.configurations_outside_limits("start", &columns.joint_names, &columns.values, defaults)?;
             if qs.len() != 1 {
                 return Err(Error::invalid("start.values", format!("one start configuration, got {}", qs.len())));
             }
-            qs.remove(0)
+            let mut q = qs.remove(0);
+            let moved = fix_start_bounds(model, "start.values", &mut q, max_error)?;
+            (q, moved)
         }
-        None => start_from_joints(model, "start", &[], defaults)?,
+        None => start_from_joints(model, "start", &[], defaults, max_error)?,
     };
     let kinds = [req.goal_configurations.is_some(), !req.goal_joint_constraints.is_empty(), req.goal_pose.is_some()];
     match kinds.iter().filter(|k| **k).count() {
@@ -107,8 +138,14 @@ pub fn plan_ends(req: &pb::PlanRequest, robot: &FittedRobot, defaults: &[(String
         }
     }
     if let Some(columns) = &req.goal_configurations {
-        let qs = crate::convert::configurations_from_proto("goal_configurations", Some(columns), robot, defaults)?;
-        return Ok((start, Goal::Configurations(qs)));
+        let mut qs = crate::convert::configurations_from_proto("goal_configurations", Some(columns), robot, defaults)?;
+        // Within the rounding margin of a limit: onto it, where the planner takes it.
+        for q in &mut qs {
+            for (k, v) in q.iter_mut().enumerate() {
+                *v = model.variable_joint(k).clamp(*v);
+            }
+        }
+        return Ok((start, Goal::Configurations(qs), warnings));
     }
     if let Some(pose) = &req.goal_pose {
         if model.link_index(&pose.link).is_none() {
@@ -133,29 +170,33 @@ pub fn plan_ends(req: &pb::PlanRequest, robot: &FittedRobot, defaults: &[(String
                 *slot = value;
             }
         }
-        return Ok((start, Goal::Pose(goal)));
+        return Ok((start, Goal::Pose(goal), warnings));
     }
     let constraints: Vec<JointConstraint> = req
         .goal_joint_constraints
         .iter()
         .map(|c| (c.joint_name.clone(), c.position, c.tolerance_below, c.tolerance_above))
         .collect();
-    let goal = joint_goal(model, "goal_joint_constraints", &constraints, &start)?;
-    Ok((start, goal))
+    let (goal, moved) = joint_goal(model, "goal_joint_constraints", &constraints, &start)?;
+    warnings.extend(moved);
+    Ok((start, goal, warnings))
 }
 
 /// The start and goal of a MoveIt MotionPlanRequest: the start state's joints the robot moves
 /// (others of the URDF, such as fixed fingers, ignored; a name the URDF lacks refused), the
 /// scene's joint positions for the rest; the goal constraints' joint constraints, each a joint
 /// the robot moves. Several goal constraints (MoveIt plans to any one of them) are goal
-/// configurations, each exact; a goal region (tolerances) must be the only goal.
+/// configurations, each exact; a goal region (tolerances) must be the only goal. Start values up
+/// to `max_error` outside the limits are moved onto them; what was moved, in the lines returned.
 fn ends_of_moveit(
     field: &str,
     request: &MotionPlanRequest,
     robot: &FittedRobot,
     defaults: &[(String, Real)],
-) -> Result<(Vec<Real>, Goal)> {
-    let start = start_from_joints(&robot.model, &format!("{field}.start_state"), &request.start, defaults)?;
+    max_error: Real,
+) -> Result<(Vec<Real>, Goal, Vec<String>)> {
+    let (start, mut warnings) =
+        start_from_joints(&robot.model, &format!("{field}.start_state"), &request.start, defaults, max_error)?;
     if request.goals.len() > sublevel_plan::MAX_GOALS {
         return Err(Error::invalid(
             format!("{field}.goal_constraints"),
@@ -165,9 +206,11 @@ fn ends_of_moveit(
     let mut configurations = Vec::with_capacity(request.goals.len());
     for (g, constraints) in request.goals.iter().enumerate() {
         let at = format!("{field}.goal_constraints[{g}].joint_constraints");
-        match joint_goal(&robot.model, &at, constraints, &start)? {
+        let (goal, moved) = joint_goal(&robot.model, &at, constraints, &start)?;
+        warnings.extend(moved);
+        match goal {
             Goal::Configurations(qs) => configurations.extend(qs),
-            region if request.goals.len() == 1 => return Ok((start, region)),
+            region if request.goals.len() == 1 => return Ok((start, region, warnings)),
             _ => {
                 return Err(Error::invalid(
                     format!("{field}.goal_constraints[{g}]"),
@@ -177,7 +220,7 @@ fn ends_of_moveit(
             }
         }
     }
-    Ok((start, Goal::Configurations(configurations)))
+    Ok((start, Goal::Configurations(configurations), warnings))
 }
 
 /// The response of a plan: its status and message, the path in rows of the robot's joints, the
@@ -219,5 +262,7 @@ pub fn plan_response(out: &PlanOutcome, robot: &FittedRobot, total: Duration) ->
         scene_version: 0,
         // The plan's settings, which the handler knows.
         check_tolerance: 0.0,
+        // The request's, which the handler knows.
+        warnings: Vec::new(),
     }
 }

@@ -30,6 +30,12 @@ pub fn robot_summary(entry: &RobotEntry) -> pb::RobotSummary {
         link_names,
         geometries: entry.robot.geometries.len() as u32,
         self_pairs: entry.robot.self_pairs.len() as u32,
+        fit_warnings: entry.robot.file.report.warnings.clone(),
+        rigid_pairs: model
+            .rigid_pairs_not_in(&entry.robot.file.allowed_pairs)
+            .iter()
+            .map(|[a, b]| format!("{a} {b}"))
+            .collect(),
     }
 }
 
@@ -59,7 +65,7 @@ pub fn configurations_from_proto(
 /// The configurations of `robot` from columns, row by row in one vector (n × dof reals, the
 /// robot's variable order): the request's own values, moved, when its columns are the robot's
 /// joints in order (no names, or every name in order) and every value is finite and within its
-/// joint's limits; otherwise [`configurations_from_proto`]'s rows (and its errors), joined.
+/// joint's limits ([`sublevel_robot::Joint::admits`]); otherwise [`configurations_from_proto`]'s rows (and its errors), joined.
 ///
 /// # Errors
 /// As [`configurations_from_proto`].
@@ -75,8 +81,8 @@ pub fn configuration_rows(
     let in_order = columns.joint_names.is_empty()
         || (columns.joint_names.len() == dof
             && columns.joint_names.iter().zip(model.variable_names()).all(|(given, name)| given == name));
-    let limits: Vec<Option<(Real, Real)>> = (0..dof).map(|k| model.variable_joint(k).limits).collect();
-    let fits = |(i, v): (usize, &Real)| v.is_finite() && limits[i % dof].is_none_or(|(lo, hi)| (lo..=hi).contains(v));
+    let joints: Vec<&sublevel_robot::Joint> = (0..dof).map(|k| model.variable_joint(k)).collect();
+    let fits = |(i, v): (usize, &Real)| joints[i % dof].admits(*v);
     if in_order
         && dof > 0
         && !columns.values.is_empty()

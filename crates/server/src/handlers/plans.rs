@@ -45,7 +45,7 @@ pub(super) async fn plan(svc: &SublevelService, request: Request<pb::PlanRequest
         poses: Vec::new(),
     };
     let Setting { robot, world, base, link_padding } = checks.setting(asked).await?;
-    let (start, goal) = cv::plan_ends(&req, &robot, &world.planning.joint_positions)?;
+    let (start, goal, warnings) = cv::plan_ends(&req, &robot, &world.planning.joint_positions)?;
     let scene_version = world.scene_version;
     let planned = robot.clone();
     let outcome = checks
@@ -82,6 +82,7 @@ pub(super) async fn plan(svc: &SublevelService, request: Request<pb::PlanRequest
         }
     };
     out.scene_version = scene_version;
+    out.warnings = warnings;
     if !out.path.is_empty() {
         out.check_tolerance = sublevel_plan::certificate_tolerance(settings.tolerance);
     }

@@ -37,8 +37,10 @@ pub(super) async fn start_robot_fit_job(
     let (srdf, allowed) = if req.srdf.trim().is_empty() {
         (None, Vec::new())
     } else {
-        let semantics = Semantics::from_srdf_str(&req.srdf).map_err(|e| cv::prefix_field(e, "srdf"))?;
-        model.self_collision_pairs(&semantics.disabled_pairs)?;
+        // Entries naming links the URDF lacks are skipped (the fit report says which), as
+        // MoveIt's SRDF loader skips them.
+        let (semantics, _) =
+            Semantics::from_srdf_str(&req.srdf).map_err(|e| cv::prefix_field(e, "srdf"))?.known_to(&model);
         let allowed: Vec<[String; 2]> =
             semantics.disabled_pairs.iter().map(|d| [d.link1.clone(), d.link2.clone()]).collect();
         (Some(req.srdf), allowed)
