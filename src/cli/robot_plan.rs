@@ -86,8 +86,13 @@ pub fn run(args: PlanArgs) -> Result<()> {
         START_STATE_MAX_BOUNDS_ERROR,
     )?;
     let constraints = request.goal_constraints();
-    let (goal, goal_moved) =
-        joint_goal(&robot.model, "request.goal_constraints[0].joint_constraints", &constraints, &start)?;
+    let (goal, goal_moved) = joint_goal(
+        &robot.model,
+        "request.goal_constraints[0].joint_constraints",
+        &constraints,
+        &start,
+        START_STATE_MAX_BOUNDS_ERROR,
+    )?;
     for line in moved.iter().chain(&goal_moved) {
         eprintln!("warning: {line}");
     }

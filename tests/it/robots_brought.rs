@@ -121,7 +121,7 @@ async fn a_robot_brought_as_moveit_takes_it_loads_checks_and_plans_saying_what_w
     assert_status(c.plan(bad).await, Code::InvalidArgument, "settings.start_state_max_bounds_error");
 
     // A MoveIt MotionPlanRequest with the start at −π: the same, named in its text's fields; a
-    // goal with no tolerance past the bound is refused.
+    // goal with no tolerance at π is taken at the bound, one 0.1 past it refused.
     let text = |goal: f64, tolerance: f64| {
         format!(
             "start_state:\n  joint_state:\n    name: [j1, j2]\n    position: [{}, 0.5]\n\
@@ -140,8 +140,13 @@ async fn a_robot_brought_as_moveit_takes_it_loads_checks_and_plans_saying_what_w
     assert_eq!(r.status(), pb::PlanStatus::Solved, "{r:?}");
     assert_eq!(r.warnings.len(), 1, "{:?}", r.warnings);
     assert!(r.warnings[0].starts_with("motion_plan_request_yaml.start_state[0]: joint `j1`"), "{}", r.warnings[0]);
+    let r = c.plan(moveit(text(PI, 0.0))).await.unwrap().into_inner();
+    assert_eq!(r.status(), pb::PlanStatus::Solved, "{r:?}");
+    assert_eq!(r.path[r.path.len() - 2], PRINTED_PI);
+    assert_eq!(r.warnings.len(), 2, "{:?}", r.warnings);
+    assert!(r.warnings[1].contains("misses its limits"), "{}", r.warnings[1]);
     assert_status(
-        c.plan(moveit(text(PI, 0.0))).await,
+        c.plan(moveit(text(PI + 0.1, 0.0))).await,
         Code::InvalidArgument,
         "motion_plan_request_yaml.goal_constraints[0].joint_constraints[0].position",
     );

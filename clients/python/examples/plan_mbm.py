@@ -195,9 +195,34 @@ def load_problems(source: Path, robot: str, scenarios: Optional[Sequence[str]], 
     return out
 
 
+# MoveIt's default ``start_state_max_bounds_error``: a start value this far (radians, meters) past its
+# limit is planned from the limit (FixStartStateBounds), as the service's ``Plan`` does; a goal
+# constraint this far past it is taken at the limit (MoveIt's JointConstraint).
+BOUNDS_ERROR = 0.05
+
+
+def into_limits(q: np.ndarray, joints: List[Joint], what: str) -> np.ndarray:
+    """``q`` with each value at most :data:`BOUNDS_ERROR` past its joint's limits moved onto them, as
+    MoveIt moves a start state and a goal constraint before OMPL sees them (OMPL skips a start or a
+    goal outside its state space's bounds); a line on stderr per value moved by more than rounding.
+    ValueError for a value farther out."""
+    out = q.copy()
+    for k, j in enumerate(joints):
+        if j.kind == "continuous":
+            continue
+        v = float(np.clip(q[k], j.lower, j.upper))
+        if abs(v - q[k]) > BOUNDS_ERROR:
+            raise ValueError(f"{what}: joint {j.name} at {q[k]} is outside its limits [{j.lower}, {j.upper}]")
+        if abs(v - q[k]) > 1e-9 * max(1.0, abs(v)):
+            print(f"  {what}: joint {j.name} at {q[k]} moved onto its limit {v}", file=sys.stderr)
+        out[k] = v
+    return out
+
+
 def read_request(text: bytes, joints: List[Joint]):
     """(planning joint indices, start, goal): the start state's positions of every joint (radians,
-    meters) and the goal, whose joint constraints name the planning joints."""
+    meters) and the goal, whose joint constraints name the planning joints; values up to
+    :data:`BOUNDS_ERROR` past a limit moved onto it (:func:`into_limits`)."""
     import yaml
 
     req = yaml.safe_load(text)
@@ -220,7 +245,7 @@ def read_request(text: bytes, joints: List[Joint]):
         if n in goal_by_name:
             goal[k] = goal_by_name[n]
     plan = [k for k, n in enumerate(names) if n in goal_by_name]
-    return plan, start, goal
+    return plan, into_limits(start, joints, "start"), into_limits(goal, joints, "goal")
 
 
 # -- checkers -------------------------------------------------------------------------------------

@@ -109,16 +109,19 @@ pub fn start_from_joints(
 }
 
 /// The goal of joint constraints, the joints not named at `start`'s values: one goal
-/// configuration when every tolerance is 0, else a [`JointRegion`]. A constraint is accepted when
-/// its interval `[position − tolerance_below, position + tolerance_above]` meets its joint's
-/// limits (up to [`sublevel_robot::model::LIMIT_ROUNDING`]), as MoveIt's goal sampler accepts any
-/// state within both; the goal is then taken inside both: the interval is cut to the limits, and
-/// a position outside them moved to the nearest point of the cut interval, with a line naming
-/// `field[k].position` in the second return value.
+/// configuration when every tolerance is 0, else a [`JointRegion`]. Constraints are taken as
+/// MoveIt's `JointConstraint` takes them: one whose interval `[position − tolerance_below,
+/// position + tolerance_above]` meets its joint's limits (up to
+/// [`sublevel_robot::model::LIMIT_ROUNDING`]) is cut to them, and a position outside them moved to
+/// the nearest point of the cut interval; one whose interval misses the limits by at most
+/// `max_error` (radians or meters; MoveIt moves it by any distance) is taken at the nearer limit.
+/// Each move of a position past the rounding margin is a line naming `field[k].position` in the
+/// second return value.
 ///
 /// # Errors
 /// [`Error::InvalidArgument`] naming `field[k].joint_name` (not a moving joint of the robot, or
-/// repeated), `field[k].position` (not finite, or an interval that misses the limits),
+/// repeated), `field[k].position` (not finite, or an interval that misses the limits by more than
+/// `max_error`: a goal that far out is more likely a wrong joint or unit than a rounding),
 /// `field[k].tolerance_below` / `_above` (negative or not finite), or `field` (a joint not
 /// constrained whose `start` value is outside the limits).
 pub fn joint_goal(
@@ -126,6 +129,7 @@ pub fn joint_goal(
     field: &str,
     constraints: &[JointConstraint],
     start: &[Real],
+    max_error: Real,
 ) -> Result<(Goal, Vec<String>)> {
     let names = model.variable_names();
     let mut center = start.to_vec();
@@ -166,19 +170,28 @@ pub fn joint_goal(
                 } else {
                     from.max(lo)
                 };
-                if !joint.admits(nearest) {
+                let by = (nearest - nearest.clamp(lo, hi)).abs();
+                if !joint.admits(nearest) && by > max_error {
                     return Err(Error::invalid(
                         format!("{field}[{k}].position"),
                         format!(
-                            "joint `{}`: the goal interval [{from}, {to}] (position {position} − {b}, + {a}) does \
-                             not meet its limits [{lo}, {hi}]",
+                            "joint `{}`: the goal interval [{from}, {to}] (position {position} − {b}, + {a}) misses \
+                             its limits [{lo}, {hi}] by {by:.3e}, more than the start_state_max_bounds_error of \
+                             {max_error} that is moved onto them",
                             joint.name
                         ),
                     ));
                 }
                 let (l, h) = (from.max(lo).min(hi), to.min(hi).max(lo));
                 let c = position.clamp(l, h);
-                if !joint.admits(*position) {
+                if !joint.admits(nearest) {
+                    moved.push(format!(
+                        "{field}[{k}].position: joint `{}`: the goal interval [{from}, {to}] misses its limits [{lo}, \
+                         {hi}] by {by:.3e}; the goal is taken at the limit {c} (start_state_max_bounds_error \
+                         {max_error}), as MoveIt's JointConstraint takes it",
+                        joint.name
+                    ));
+                } else if !joint.admits(*position) {
                     moved.push(format!(
                         "{field}[{k}].position: joint `{}` at {position} is outside its limits [{lo}, {hi}]; the goal \
                          is taken at {c}, in the limits and within the constraint's tolerances",

@@ -57,7 +57,8 @@ pub fn plan_settings(s: Option<&pb::PlanSettings>) -> Result<PlanSettings> {
 /// MotionPlanRequest text), `defaults` the scene's joint positions, and what was changed to plan
 /// them (`PlanResponse.warnings`): start values up to `settings.start_state_max_bounds_error`
 /// outside the limits moved onto them ([`fix_start_bounds`]), goal constraints taken where their
-/// tolerance meets the limits ([`joint_goal`]). Goal configurations within the rounding margin of
+/// tolerance meets the limits, or at the limit when they miss it by at most as much
+/// ([`joint_goal`]). Goal configurations within the rounding margin of
 /// a limit ([`sublevel_robot::model::LIMIT_ROUNDING`]) are moved onto it silently.
 ///
 /// # Errors
@@ -177,7 +178,7 @@ pub fn plan_ends(
         .iter()
         .map(|c| (c.joint_name.clone(), c.position, c.tolerance_below, c.tolerance_above))
         .collect();
-    let (goal, moved) = joint_goal(model, "goal_joint_constraints", &constraints, &start)?;
+    let (goal, moved) = joint_goal(model, "goal_joint_constraints", &constraints, &start, max_error)?;
     warnings.extend(moved);
     Ok((start, goal, warnings))
 }
@@ -206,7 +207,7 @@ fn ends_of_moveit(
     let mut configurations = Vec::with_capacity(request.goals.len());
     for (g, constraints) in request.goals.iter().enumerate() {
         let at = format!("{field}.goal_constraints[{g}].joint_constraints");
-        let (goal, moved) = joint_goal(&robot.model, &at, constraints, &start)?;
+        let (goal, moved) = joint_goal(&robot.model, &at, constraints, &start, max_error)?;
         warnings.extend(moved);
         match goal {
             Goal::Configurations(qs) => configurations.extend(qs),
