@@ -111,6 +111,10 @@ pub fn run(args: PlanArgs) -> Result<()> {
     let allowed = allowed_override(&scene);
     let mut checker = RobotChecker::new(&robot, world, &allowed)?;
     let mut validity = RobotValidity::new(MotionChecker::new(&mut checker)?, Isometry3::identity(), settings.padding);
+    // The joints the goal names move (MoveIt's planning group); the others stay at the start's.
+    let moving: Vec<bool> =
+        robot.model.variable_names().iter().map(|n| constraints.iter().any(|c| c.0 == *n)).collect();
+    validity.hold_all_but(&moving, &start);
     let clock = Instant::now();
     let out = plan(&mut validity, &start, &goal, &settings, &AtomicBool::new(false))?;
     let wall = clock.elapsed();

@@ -151,3 +151,58 @@ async fn a_robot_brought_as_moveit_takes_it_loads_checks_and_plans_saying_what_w
         "motion_plan_request_yaml.goal_constraints[0].joint_constraints[0].position",
     );
 }
+
+#[tokio::test]
+async fn a_plan_moves_the_joints_its_goal_names_and_holds_the_others() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(config(dir.path())).await;
+    let mut c = server.client().await;
+    let fit =
+        pb::StartRobotFitJobRequest { urdf: SPLIT_ARM_URDF.into(), srdf: SPLIT_ARM_SRDF.into(), ..Default::default() };
+    let job_id = c.start_robot_fit_job(fit).await.unwrap().into_inner().job_id;
+    let robot_id = crate::util::watch_to_end(&mut c, job_id).await.pop().unwrap().robot_id;
+    let request = |planning: &[&str]| pb::PlanRequest {
+        robot_id: robot_id.clone(),
+        start: cols(&[0.0, 0.5]),
+        planning_joints: planning.iter().map(|s| (*s).to_owned()).collect(),
+        settings: Some(pb::PlanSettings { timeout: Some(10.0), ..Default::default() }),
+        ..Default::default()
+    };
+    let j2 = |r: &pb::PlanResponse| r.path.chunks(2).map(|q| q[1]).collect::<Vec<_>>();
+    // A joint goal naming j1: j2 stays at the start's 0.5 on every waypoint.
+    let mut req = request(&[]);
+    req.goal_joint_constraints =
+        vec![pb::JointConstraint { joint_name: "j1".into(), position: 2.0, ..Default::default() }];
+    let r = c.plan(req).await.unwrap().into_inner();
+    assert_eq!(r.status(), pb::PlanStatus::Solved, "{r:?}");
+    assert_eq!(r.planning_joints, vec!["j1".to_owned()]);
+    assert!(j2(&r).iter().all(|v| *v == 0.5), "{:?}", r.path);
+    // Goal configurations naming j1 only: j2 is held at the start's value (not the scene's 0).
+    let mut req = request(&[]);
+    req.goal_configurations = Some(pb::ConfigurationColumns { joint_names: vec!["j1".into()], values: vec![-2.0] });
+    let r = c.plan(req).await.unwrap().into_inner();
+    assert_eq!(r.status(), pb::PlanStatus::Solved, "{r:?}");
+    assert_eq!(r.goal, vec![-2.0, 0.5]);
+    assert!(j2(&r).iter().all(|v| *v == 0.5));
+    // Goal configurations of every joint move both; planning_joints that leave out a joint the
+    // goal moves are refused, as are unknown names and planning joints with a pose goal.
+    let mut req = request(&[]);
+    req.goal_configurations = cols(&[-2.0, -0.5]);
+    let r = c.plan(req.clone()).await.unwrap().into_inner();
+    assert_eq!(r.status(), pb::PlanStatus::Solved, "{r:?}");
+    assert_eq!(r.planning_joints, vec!["j1".to_owned(), "j2".to_owned()]);
+    req.planning_joints = vec!["j1".into()];
+    assert_status(c.plan(req.clone()).await, Code::InvalidArgument, "planning_joints");
+    req.planning_joints = vec!["j1".into(), "nope".into()];
+    assert_status(c.plan(req).await, Code::InvalidArgument, "planning_joints[1]");
+    let mut req = request(&["j1"]);
+    req.goal_pose = Some(pb::PoseGoal {
+        link: "l2".into(),
+        pose: Some(pb::Pose {
+            rotation: Some(pb::Quaternion { w: 1.0, x: 0.0, y: 0.0, z: 0.0 }),
+            translation: Some(pb::Vec3 { x: 0.5, y: 0.0, z: 0.2 }),
+        }),
+        ..Default::default()
+    });
+    assert_status(c.plan(req).await, Code::InvalidArgument, "planning_joints");
+}

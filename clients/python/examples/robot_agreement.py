@@ -23,16 +23,11 @@ For each robot named with ``--robot`` (URDF and SRDF from the PyPI package ``exa
 
     python robot_agreement.py --sublevel target/release/sublevel \\
         --robots-dir SITE_PACKAGES/cmeel.prefix/share/example-robot-data/robots \\
-        --robot xarm7 --robot pr2 --robot talos --configs 2000 --seed 1 --out DIR [--json results.json] \\
-        [--mirror-negative-scales] [--srdf-disable-only]
+        --robot xarm7 --robot pr2 --robot talos --configs 2000 --seed 1 --out DIR [--json results.json]
 
 Mesh URIs are ``package://example-robot-data/robots/...``, so the package directory given to both
 sides is the robots directory's grandparent (``.../share``) unless ``--package-dir`` says otherwise.
-Sublevel refuses mesh scales with a negative component (talos mirrors its left/right meshes that
-way): ``--mirror-negative-scales`` fits a copy of the URDF with mirrored STL files instead, while
-pinocchio keeps reading the original. ``--srdf-disable-only`` fits a copy of the SRDF with only its
-``disable_collisions`` entries (talos's ``group_state`` gives its free-flyer ``root_joint`` seven
-values, which Sublevel refuses). Needs numpy, pin (pinocchio + coal) and example-robot-data. Exits 1
+Needs numpy, pin (pinocchio + coal) and example-robot-data. Exits 1
 when a robot has a miss, or when a fit or a check failed.
 """
 
@@ -133,83 +128,6 @@ class Urdf:
         for n in self.mimic:
             value(n)
         return vals
-
-
-def read_stl(path: Path) -> np.ndarray:
-    """An STL's triangles, shape (n, 3, 3)."""
-    raw = path.read_bytes()
-    if len(raw) >= 84:
-        n = int(np.frombuffer(raw, dtype="<u4", count=1, offset=80)[0])
-        if len(raw) == 84 + 50 * n:  # binary (some binary files also begin with "solid")
-            rec = np.dtype([("normal", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")])
-            return np.frombuffer(raw, dtype=rec, count=n, offset=84)["v"].astype(float)
-    vs = re.findall(rb"vertex\s+(\S+)\s+(\S+)\s+(\S+)", raw)
-    return np.array(vs, dtype=float).reshape(-1, 3, 3)
-
-
-def write_stl(path: Path, tris: np.ndarray) -> None:
-    rec = np.dtype([("normal", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")])
-    a = np.zeros(len(tris), dtype=rec)
-    a["v"] = tris
-    n = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
-    a["normal"] = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
-    with open(path, "wb") as f:
-        f.write(b"mirrored by robot_agreement.py".ljust(80, b" "))
-        f.write(np.uint32(len(tris)).tobytes())
-        f.write(a.tobytes())
-
-
-def mirror_negative_scales(urdf_path: Path, package_dir: Path, outdir: Path) -> Tuple[Path, int]:
-    """A copy of the URDF in which every mesh with a negative scale component is replaced by a mirrored
-    copy of its file (winding flipped when the mirror reverses orientation) and the absolute scale.
-    Returns the copy's path and how many meshes were mirrored (0: the URDF itself is returned)."""
-    tree = ET.parse(urdf_path)
-    done: Dict[Tuple[str, Tuple[float, ...]], Path] = {}
-    count = 0
-    for link in tree.getroot().findall("link"):
-        for mesh in link.findall("collision/geometry/mesh"):
-            scale = [float(x) for x in (mesh.get("scale") or "1 1 1").split()]
-            if len(scale) != 3 or min(scale) >= 0:
-                continue
-            uri = mesh.get("filename")
-            if uri.startswith("package://"):
-                src = package_dir / uri[len("package://"):].lstrip("/")
-            elif uri.startswith("file://"):
-                src = Path(uri[len("file://"):])
-            else:
-                src = urdf_path.parent / uri
-            if src.suffix.lower() != ".stl":
-                raise ValueError(f"cannot mirror {src}: only STL meshes are handled")
-            sign = tuple(1.0 if s >= 0 else -1.0 for s in scale)
-            key = (str(src), sign)
-            if key not in done:
-                tris = read_stl(src) * np.array(sign)
-                if sign.count(-1.0) % 2:
-                    tris = tris[:, [0, 2, 1]]
-                dst = outdir / f"{src.stem}_mirror_{''.join('n' if s < 0 else 'p' for s in sign)}.stl"
-                outdir.mkdir(parents=True, exist_ok=True)
-                write_stl(dst, tris)
-                done[key] = dst.resolve()
-            mesh.set("filename", str(done[key]))
-            mesh.set("scale", " ".join(repr(abs(s)) for s in scale))
-            count += 1
-    if not count:
-        return urdf_path, 0
-    out = outdir / urdf_path.name
-    tree.write(out, xml_declaration=True, encoding="utf-8")
-    return out, count
-
-
-def srdf_disable_only(srdf_path: Path, outdir: Path) -> Path:
-    """A copy of the SRDF holding only its robot element and its disable_collisions entries."""
-    root = ET.parse(srdf_path).getroot()
-    out = ET.Element(root.tag, root.attrib)
-    for d in root.findall("disable_collisions"):
-        ET.SubElement(out, "disable_collisions", d.attrib)
-    outdir.mkdir(parents=True, exist_ok=True)
-    path = outdir / srdf_path.name
-    ET.ElementTree(out).write(path, xml_declaration=True, encoding="utf-8")
-    return path
 
 
 # -- Sublevel ---------------------------------------------------------------------------------------
@@ -395,18 +313,8 @@ def run_robot(args, name: str) -> dict:
                  "mimic_joints": len(urdf.mimic)}
     log = lambda s: print(f"[{name}] {s}", file=sys.stderr, flush=True)  # noqa: E731
 
-    fit_urdf = urdf_path
-    if args.mirror_negative_scales:
-        fit_urdf, n = mirror_negative_scales(urdf_path, args.package_dir, work / "mirrored")
-        res["mirrored_meshes"] = n
-        if n:
-            log(f"{n} collision meshes with a negative scale mirrored for Sublevel: {fit_urdf}")
-    fit_srdf = srdf_path
-    if args.srdf_disable_only:
-        fit_srdf = srdf_disable_only(srdf_path, work / "srdf")
-        log(f"Sublevel fits the SRDF's disable_collisions only: {fit_srdf}")
     log(f"fitting ({len(urdf.config_joints)} joints, {len(urdf.links_with_geometry)} links with <collision>)")
-    fit = run_fit(args, fit_urdf, fit_srdf, work)
+    fit = run_fit(args, urdf_path, srdf_path, work)
     res["fit"] = fit
     log(f"fit: rc {fit['rc']}, {fit['seconds']:.1f} s, {len(fit['warnings'])} warnings, "
         f"{len(fit['not_checked'])} 'not checked' lines")
@@ -525,12 +433,6 @@ def main(argv=None) -> int:
     ap.add_argument("--out", required=True, type=Path, help="working directory (robot files, CSVs, outputs)")
     ap.add_argument("--json", type=Path, help="write all results here")
     ap.add_argument("--tie", type=float, default=1e-4, help="contact within this distance (m) is a numerical tie")
-    ap.add_argument("--mirror-negative-scales", action="store_true",
-                    help="Sublevel refuses negative mesh scales: fit a copy of the URDF whose mirrored STL meshes are "
-                    "written under OUT/ROBOT/mirrored (pinocchio keeps the original URDF)")
-    ap.add_argument("--srdf-disable-only", action="store_true",
-                    help="fit with a copy of the SRDF that keeps only its disable_collisions entries (written under "
-                    "OUT/ROBOT/srdf; pinocchio reads only those anyway)")
     ap.add_argument("--fit-timeout", type=float, default=300.0, help="seconds before a fit is stopped (default 300)")
     args = ap.parse_args(argv)
     args.robots_dir = args.robots_dir.resolve()

@@ -40,6 +40,15 @@ impl JointSpace {
         Self { bounds, wraps }
     }
 
+    /// Holds entry `k` at `value` (radians or meters): its bounds become `(value, value)` and it
+    /// no longer wraps, so the sampler, the distance and the segments leave it there. The joints a
+    /// plan does not move (those outside MoveIt's planning group) are held so, and the search
+    /// runs in the space of the others.
+    pub fn hold(&mut self, k: usize, value: Real) {
+        self.bounds[k] = (value, value);
+        self.wraps[k] = false;
+    }
+
     /// The number of configuration entries.
     pub fn dof(&self) -> usize {
         self.bounds.len()

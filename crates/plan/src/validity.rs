@@ -176,6 +176,17 @@ impl<'c, 'r> RobotValidity<'c, 'r> {
 }
 
 impl RobotValidity<'_, '_> {
+    /// Holds every configuration entry not in `moving` at its value in `at` (the start): the plan
+    /// moves only the `moving` joints, as MoveIt plans only its planning group's
+    /// ([`JointSpace::hold`]).
+    pub fn hold_all_but(&mut self, moving: &[bool], at: &[Real]) {
+        for (k, (&m, &v)) in moving.iter().zip(at).enumerate() {
+            if !m {
+                self.space.hold(k, v);
+            }
+        }
+    }
+
     /// Whether the deadline has passed or the thread's cancellation scope is cancelled.
     fn stopped(&self) -> bool {
         self.deadline.is_some_and(|d| Instant::now() >= d) || sublevel_core::cancel::is_cancelled()

@@ -359,11 +359,18 @@ fn read_mesh(
     if mesh.triangles.is_empty() {
         return Err(Error::invalid(field, format!("{shown} holds no triangles")));
     }
-    if scale.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
-        return Err(Error::invalid(format!("{field}.scale"), format!("must be finite and positive, got {scale:?}")));
+    if scale.iter().any(|s| !(s.is_finite() && *s != 0.0)) {
+        return Err(Error::invalid(format!("{field}.scale"), format!("must be finite and nonzero, got {scale:?}")));
     }
     for v in &mut mesh.vertices {
         *v = Point3::new(v.x * scale[0], v.y * scale[1], v.z * scale[2]);
+    }
+    // A mirror (an odd number of negative entries, as URDFs give one side of a symmetric robot)
+    // turns the triangles inside out: their order is reversed so that they face out again.
+    if scale.iter().filter(|s| **s < 0.0).count() % 2 == 1 {
+        for t in &mut mesh.triangles {
+            t.swap(1, 2);
+        }
     }
     let sha256 = hex(&Sha256::digest(bytes));
     let key = mesh_key(&sha256, scale, tag);

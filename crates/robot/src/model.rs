@@ -237,13 +237,10 @@ fn collision(field: &str, c: &urdf_rs::Collision) -> Result<CollisionGeometry> {
         }
         urdf_rs::Geometry::Mesh { filename, scale } => {
             let scale = scale.map_or([1.0; 3], |s| *s);
-            if scale.iter().any(|v| !(v.is_finite() && *v > 0.0 && *v <= MAX_COORDINATE)) {
+            if scale.iter().any(|v| !(v.is_finite() && *v != 0.0 && v.abs() <= MAX_COORDINATE)) {
                 return Err(Error::invalid(
                     format!("{field}.mesh.scale"),
-                    format!(
-                        "must be finite and positive, got {scale:?} (a negative scale mirrors the mesh, turning \
-                         its triangles inside out: mirror the file instead)"
-                    ),
+                    format!("must be finite and nonzero, got {scale:?} (a negative entry mirrors the mesh)"),
                 ));
             }
             CollisionGeometry::Mesh { origin, filename: filename.clone(), scale }

@@ -36,6 +36,10 @@ pub struct GroupState {
     pub group: String,
     /// Joint values by name (radians or meters).
     pub joints: Vec<(String, Real)>,
+    /// Joints given several values (MoveIt's multi-DOF joints: a planar or floating root, e.g.
+    /// `root_joint` at `0 0 1.02 0 0 0 1`), by name, kept as read: a robot model has no such
+    /// joint, so [`Semantics::known_to`] skips them with a warning.
+    pub multi_dof: Vec<(String, Vec<Real>)>,
 }
 
 /// The virtual joint attaching the root link to the world.
@@ -125,6 +129,7 @@ impl Semantics {
                         name: required(&field, e, "name")?,
                         group: required(&field, e, "group")?,
                         joints: Vec::new(),
+                        multi_dof: Vec::new(),
                     };
                     if empty {
                         out.group_states.push(s);
@@ -134,17 +139,29 @@ impl Semantics {
                 }
                 b"joint" => {
                     if let Some(s) = state.as_mut() {
-                        let field = format!("srdf.group_state[{}].joint[{}]", out.group_states.len(), s.joints.len());
+                        let k = s.joints.len() + s.multi_dof.len();
+                        let field = format!("srdf.group_state[{}].joint[{k}]", out.group_states.len());
                         let name = required(&field, e, "name")?;
                         let text = required(&field, e, "value")?;
-                        let value: Real =
-                            text.trim().parse().ok().filter(|v: &Real| v.is_finite()).ok_or_else(|| {
-                                Error::invalid(
-                                    &field,
-                                    format!("value `{}` is not a finite number", sublevel_core::error::clip(&text)),
-                                )
-                            })?;
-                        s.joints.push((name, value));
+                        let values: Option<Vec<Real>> = text
+                            .split_whitespace()
+                            .map(|v| v.parse().ok().filter(|v: &Real| v.is_finite()))
+                            .collect::<Option<_>>()
+                            .filter(|v: &Vec<Real>| !v.is_empty());
+                        let Some(values) = values else {
+                            return Err(Error::invalid(
+                                &field,
+                                format!(
+                                    "value `{}` is not a finite number (or several, for a multi-DOF joint)",
+                                    sublevel_core::error::clip(&text)
+                                ),
+                            ));
+                        };
+                        if let [value] = values[..] {
+                            s.joints.push((name, value));
+                        } else {
+                            s.multi_dof.push((name, values));
+                        }
                     }
                 }
                 b"virtual_joint" => {
@@ -210,6 +227,14 @@ impl Semantics {
                 }
             }
             state.joints = joints;
+            for (name, values) in state.multi_dof.drain(..) {
+                warnings.push(format!(
+                    "srdf.group_state[{g}]: skipped joint `{}` of {} values, a planar or floating joint (the robot has \
+                     none: its base pose is given apart)",
+                    sublevel_core::error::clip(&name),
+                    values.len()
+                ));
+            }
         }
         (kept, warnings)
     }

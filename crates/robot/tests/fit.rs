@@ -80,3 +80,47 @@ fn a_fit_that_fails_numerically_takes_the_documented_fallback() {
         assert!((d - (0.5 - slide)).abs() <= 1e-9, "slide {slide}: {d}");
     }
 }
+
+/// The corner tetrahedron {x, y, z ≥ 0, x + y + z ≤ 1}, faces wound outward.
+const TETRAHEDRON: &str = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
+
+/// A link holding the tetrahedron at `scale` (a negative entry mirrors it, as URDFs give one side
+/// of a symmetric robot), fitted.
+fn tetrahedron_robot(scale: &str) -> FittedRobot {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("tet.obj"), TETRAHEDRON).unwrap();
+    let urdf = format!(
+        r#"<robot name="tet"><link name="base"/>
+          <link name="tet"><collision><geometry><mesh filename="tet.obj" scale="{scale}"/></geometry></collision></link>
+          <joint name="lift" type="prismatic"><parent link="base"/><child link="tet"/><axis xyz="0 0 1"/>
+            <limit lower="0" upper="1" effort="1" velocity="1"/></joint></robot>"#
+    );
+    std::fs::write(dir.path().join("tet.urdf"), urdf).unwrap();
+    fit_robot(&dir.path().join("tet.urdf"), None, &RobotFitSettings::default(), &|_| {}).unwrap()
+}
+
+#[test]
+fn a_negative_mesh_scale_mirrors_the_mesh_and_keeps_its_faces_outward() {
+    // A box around (0.1, 0.3, 0.1), on the face x + y + z = 0.5 of the tetrahedron scaled by 0.5:
+    // touched by it, 0.25 m from its mirror in y (the face y = 0).
+    let cube = sublevel_robot::WorldObject::primitive(
+        "cube",
+        sublevel_core::primitive::Primitive::Box { half_extents: sublevel_core::math::Vector3::new(0.05, 0.05, 0.05) },
+        sublevel_core::math::pose_from_parts("cube", [1.0, 0.0, 0.0, 0.0], [0.1, 0.3, 0.1]).unwrap(),
+    );
+    let options = CheckOptions { distance: true, ..CheckOptions::default() };
+    for (scale, collides) in [("0.5 0.5 0.5", true), ("0.5 -0.5 0.5", false)] {
+        let robot = tetrahedron_robot(scale);
+        let mesh = robot.file.geometries[0].mesh.as_ref().unwrap();
+        // The stored mesh's signed volume: positive (faces outward), 0.5³ / 6.
+        let p = |i: u32| sublevel_core::math::Vector3::from(mesh.vertices[i as usize]);
+        let volume: Real = mesh.triangles.iter().map(|t| p(t[0]).dot(&p(t[1]).cross(&p(t[2]))) / 6.0).sum();
+        assert!((volume - 0.125 / 6.0).abs() < 1e-12, "scale {scale}: signed volume {volume}");
+        let mut checker = RobotChecker::new(&robot, vec![cube.clone()], &|_, _| None).unwrap();
+        let answer = checker.check(&[0.0], &Isometry3::identity(), &options).unwrap();
+        assert_eq!(answer.collides, collides, "scale {scale}");
+        if !collides {
+            assert!((answer.distance - 0.25).abs() < 1e-9, "{}", answer.distance);
+        }
+    }
+}

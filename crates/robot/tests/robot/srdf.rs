@@ -143,7 +143,8 @@ fn srdf_entries_naming_links_or_joints_the_urdf_lacks_are_skipped_with_a_warning
           <disable_collisions link1="base" link2="arm" reason="Adjacent"/>
           <disable_collisions link1="bellows_link2" link2="arm" reason="Never"/>
           <disable_collisions link1="ghost_a" link2="ghost_b" reason="Never"/>
-          <group_state name="home" group="arm"><joint name="shoulder" value="0.5"/><joint name="elbow" value="1"/></group_state>
+          <group_state name="home" group="arm"><joint name="shoulder" value="0.5"/><joint name="elbow" value="1"/>
+            <joint name="root_joint" value="0. 0. 1.01927 0. 0. 0. 1."/></group_state>
         </robot>"#,
     )
     .unwrap();
@@ -151,7 +152,13 @@ fn srdf_entries_naming_links_or_joints_the_urdf_lacks_are_skipped_with_a_warning
     assert_eq!(kept.disabled_pairs.len(), 1);
     assert_eq!((kept.disabled_pairs[0].link1.as_str(), kept.disabled_pairs[0].link2.as_str()), ("base", "arm"));
     assert_eq!(kept.group_states[0].joints, vec![("shoulder".to_owned(), 0.5)]);
-    assert_eq!(warnings.len(), 3, "{warnings:?}");
+    assert_eq!(
+        s.group_states[0].multi_dof,
+        vec![("root_joint".to_owned(), vec![0.0, 0.0, 1.01927, 0.0, 0.0, 0.0, 1.0])]
+    );
+    assert!(kept.group_states[0].multi_dof.is_empty());
+    assert_eq!(warnings.len(), 4, "{warnings:?}");
+    assert!(warnings[3].starts_with("srdf.group_state[0]: skipped joint `root_joint` of 7 values"), "{}", warnings[3]);
     assert!(warnings[0].starts_with("srdf.disable_collisions[1]:") && warnings[0].contains("`bellows_link2`"));
     assert!(warnings[1].starts_with("srdf.disable_collisions[2]:") && warnings[1].contains("`ghost_a` and `ghost_b`"));
     assert!(warnings[2].starts_with("srdf.group_state[0].joint[1]:") && warnings[2].contains("`elbow`"));

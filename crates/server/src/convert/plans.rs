@@ -53,6 +53,115 @@ pub fn plan_settings(s: Option<&pb::PlanSettings>) -> Result<PlanSettings> {
     Ok(settings)
 }
 
+/// What a plan request asks, as the planner takes it ([`plan_ends`]).
+#[derive(Clone, Debug)]
+pub struct PlanEnds {
+    /// The start configuration (radians, meters), moved into the limits.
+    pub start: Vec<Real>,
+    /// The goal; its configurations hold the joints the plan does not move at the start's values.
+    pub goal: Goal,
+    /// What was changed to plan them (`PlanResponse.warnings`).
+    pub warnings: Vec<String>,
+    /// Per configuration entry, whether the plan moves it (`PlanRequest.planning_joints`).
+    pub moving: Vec<bool>,
+}
+
+/// The start, the goal and the planning joints of a request: its start and goal (its typed fields or
+/// its MoveIt MotionPlanRequest text, `defaults` the scene's joint positions, values near the limits
+/// moved into them and said in the warnings), then the joints the plan
+/// moves: `planning_joints`, else the joints the goal names (a joint goal's constraints, a
+/// MotionPlanRequest's goal constraints, goal configurations' `joint_names`), else every joint.
+/// The others are held at the start's values: a goal configuration's value of such a joint the
+/// goal does not name is set to the start's.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming the field: no goal or two kinds of goal, a start of more than
+/// one configuration, unknown or repeated joints, values that are not finite or outside the limits
+/// past their margins, a malformed MotionPlanRequest, `settings.start_state_max_bounds_error`
+/// outside [0, 1]; `planning_joints[k]` for a name that is not a
+/// moving joint of the robot or is repeated, `planning_joints` with a pose goal (inverse
+/// kinematics moves every joint) or when the goal moves a joint it leaves out.
+pub fn plan_ends(req: &pb::PlanRequest, robot: &FittedRobot, defaults: &[(String, Real)]) -> Result<PlanEnds> {
+    let model = &robot.model;
+    let names = model.variable_names();
+    let (start, mut goal, warnings) = ends(req, robot, defaults)?;
+    // The joints the goal names; None: every joint.
+    let named: Option<Vec<String>> = if let Some(text) = &req.motion_plan_request {
+        let bytes = match text {
+            pb::plan_request::MotionPlanRequest::MotionPlanRequestYaml(t)
+            | pb::plan_request::MotionPlanRequest::MotionPlanRequestJson(t) => t,
+        };
+        let request = MotionPlanRequest::from_yaml(bytes.as_bytes())?;
+        Some(request.goals.iter().flatten().map(|c| c.0.clone()).collect())
+    } else if !req.goal_joint_constraints.is_empty() {
+        Some(req.goal_joint_constraints.iter().map(|c| c.joint_name.clone()).collect())
+    } else {
+        req.goal_configurations.as_ref().map(|c| c.joint_names.clone()).filter(|n| !n.is_empty())
+    };
+    let moving: Vec<bool> = if req.planning_joints.is_empty() {
+        match &named {
+            Some(named) if !matches!(goal, Goal::Pose(_)) => {
+                names.iter().map(|n| named.iter().any(|m| m == n)).collect()
+            }
+            _ => vec![true; names.len()],
+        }
+    } else {
+        if matches!(goal, Goal::Pose(_)) {
+            return Err(Error::invalid(
+                "planning_joints",
+                "a pose goal moves every joint (its inverse kinematics does): leave planning_joints empty",
+            ));
+        }
+        let mut moving = vec![false; names.len()];
+        for (k, n) in req.planning_joints.iter().enumerate() {
+            let j = names.iter().position(|m| m == n).ok_or_else(|| {
+                Error::invalid(
+                    format!("planning_joints[{k}]"),
+                    format!(
+                        "`{}` is not a moving joint of the robot; its joints: {names:?}",
+                        sublevel_core::error::clip(n)
+                    ),
+                )
+            })?;
+            if std::mem::replace(&mut moving[j], true) {
+                return Err(Error::invalid(format!("planning_joints[{k}]"), format!("`{n}` is repeated")));
+            }
+        }
+        moving
+    };
+    let named_all = named.is_none();
+    let names_joint = |k: usize| named_all || named.as_ref().is_some_and(|n| n.iter().any(|m| m == names[k]));
+    let held = |k: usize, v: Real| -> Result<Real> {
+        if v == start[k] || !names_joint(k) {
+            return Ok(start[k]);
+        }
+        Err(Error::invalid(
+            "planning_joints",
+            format!(
+                "the goal moves joint `{}` from {} to {v}, and it is not among the planning joints",
+                names[k], start[k]
+            ),
+        ))
+    };
+    match &mut goal {
+        Goal::Configurations(qs) => {
+            for q in qs.iter_mut() {
+                for k in (0..q.len()).filter(|&k| !moving[k]) {
+                    q[k] = held(k, q[k])?;
+                }
+            }
+        }
+        Goal::Region(r) => {
+            for k in (0..r.center.len()).filter(|&k| !moving[k]) {
+                r.center[k] = held(k, r.center[k])?;
+                (r.below[k], r.above[k]) = (0.0, 0.0);
+            }
+        }
+        Goal::Pose(_) => {}
+    }
+    Ok(PlanEnds { start, goal, warnings, moving })
+}
+
 /// The start configuration and the goal of a request (its typed fields or its MoveIt
 /// MotionPlanRequest text), `defaults` the scene's joint positions, and what was changed to plan
 /// them (`PlanResponse.warnings`): start values up to `settings.start_state_max_bounds_error`
@@ -66,7 +175,7 @@ pub fn plan_settings(s: Option<&pb::PlanSettings>) -> Result<PlanSettings> {
 /// one configuration, unknown or repeated joints, values that are not finite or outside the
 /// limits (past the margins above), a malformed MotionPlanRequest,
 /// `settings.start_state_max_bounds_error` outside [0, 1].
-pub fn plan_ends(
+fn ends(
     req: &pb::PlanRequest,
     robot: &FittedRobot,
     defaults: &[(String, Real)],
@@ -265,5 +374,6 @@ pub fn plan_response(out: &PlanOutcome, robot: &FittedRobot, total: Duration) ->
         check_tolerance: 0.0,
         // The request's, which the handler knows.
         warnings: Vec::new(),
+        planning_joints: Vec::new(),
     }
 }

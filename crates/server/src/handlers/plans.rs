@@ -45,9 +45,10 @@ pub(super) async fn plan(svc: &SublevelService, request: Request<pb::PlanRequest
         poses: Vec::new(),
     };
     let Setting { robot, world, base, link_padding } = checks.setting(asked).await?;
-    let (start, goal, warnings) = cv::plan_ends(&req, &robot, &world.planning.joint_positions)?;
+    let cv::PlanEnds { start, goal, warnings, moving } = cv::plan_ends(&req, &robot, &world.planning.joint_positions)?;
     let scene_version = world.scene_version;
     let planned = robot.clone();
+    let moving_joints = moving.clone();
     let outcome = checks
         .pools
         .plans
@@ -56,6 +57,7 @@ pub(super) async fn plan(svc: &SublevelService, request: Request<pb::PlanRequest
             let mut checker = RobotChecker::new(&planned, world.objects.clone(), &allowed)?;
             checker.set_link_padding(&link_padding)?;
             let mut validity = RobotValidity::new(MotionChecker::new(&mut checker)?, base, settings.padding);
+            validity.hold_all_but(&moving_joints, &start);
             // The time left after the wait for the slot, the reading of the setting and the
             // checker's build.
             let left = deadline.saturating_duration_since(Instant::now());
@@ -83,6 +85,8 @@ pub(super) async fn plan(svc: &SublevelService, request: Request<pb::PlanRequest
     };
     out.scene_version = scene_version;
     out.warnings = warnings;
+    out.planning_joints =
+        robot.model.variable_names().iter().zip(&moving).filter(|(_, m)| **m).map(|(n, _)| (*n).to_owned()).collect();
     if !out.path.is_empty() {
         out.check_tolerance = sublevel_plan::certificate_tolerance(settings.tolerance);
     }
