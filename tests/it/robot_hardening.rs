@@ -248,7 +248,7 @@ fn columns(names: &[&str], values: &[f64]) -> Option<pb::ConfigurationColumns> {
 }
 
 /// Joint values outside the URDF limits are refused, naming the value, by CheckConfigurations
-/// (10 rad, 1e300, the upper limit + 1e-9), CheckMotions (an end 100 rad away; an end naming
+/// (10 rad, 1e300, the upper limit + 1e-7; a few ulps past is rounding, admitted), CheckMotions (an end 100 rad away; an end naming
 /// other joints than its start) and SetJointPositions (100 rad, and the stored positions stay);
 /// the limits themselves are accepted.
 #[tokio::test]
@@ -271,7 +271,8 @@ async fn joint_values_outside_the_urdf_limits_are_refused_where_configurations_e
         configurations: columns(&JOINTS, &values),
         ..Default::default()
     };
-    for (k, v) in [(0, 10.0), (2, 1e300), (3, upper[3] + 1e-9), (5, lower[5] - 1e-9)] {
+    // Past a limit by more than rounding (LIMIT_ROUNDING · max(1, |bound|), 1e-9 relative): refused.
+    for (k, v) in [(0, 10.0), (2, 1e300), (3, upper[3] + 1e-7), (5, lower[5] - 1e-7)] {
         let mut q = mid.clone();
         q.extend(mid.iter().copied());
         q[7 + k] = v;
@@ -280,8 +281,11 @@ async fn joint_values_outside_the_urdf_limits_are_refused_where_configurations_e
         assert!(e.message().contains(&format!("configurations.values[{}]", 7 + k)), "{}", e.message());
         assert!(e.message().contains(JOINTS[k]) && e.message().contains("limits"), "{}", e.message());
     }
-    // The limits themselves are states.
+    // The limits themselves are states, and so are values rounded a few ulps past them.
     let answer = c.check_configurations(check([lower.clone(), upper.clone()].concat())).await.unwrap().into_inner();
+    assert_eq!(answer.collides.len(), 2);
+    let rounded: Vec<f64> = lower.iter().map(|v| v - 1e-15).chain(upper.iter().map(|v| v + 1e-15)).collect();
+    let answer = c.check_configurations(check(rounded)).await.unwrap().into_inner();
     assert_eq!(answer.collides.len(), 2);
 
     let motion = |start: Option<pb::ConfigurationColumns>, end| pb::CheckMotionsRequest {

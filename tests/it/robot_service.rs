@@ -345,7 +345,7 @@ async fn a_robot_fit_job_stores_a_robot_whose_checks_meet_the_closed_forms() {
         max_parts: 2,
         leaves: false,
     };
-    // Validated before a job exists: a missing mesh, an unsafe name, a broken SRDF.
+    // Validated before a job exists: a missing mesh, an unsafe name, malformed SRDF XML.
     let mut missing = meshes.clone();
     missing.remove("meshes/tip.obj");
     assert_status(c.start_robot_fit_job(request(missing)).await, Code::InvalidArgument, "meshes[meshes/tip.obj]");
@@ -353,8 +353,8 @@ async fn a_robot_fit_job_stores_a_robot_whose_checks_meet_the_closed_forms() {
     unsafe_name.insert("../escape.obj".into(), CUBE.as_bytes().to_vec());
     assert_status(c.start_robot_fit_job(request(unsafe_name)).await, Code::InvalidArgument, "meshes[../escape.obj]");
     let mut bad = request(meshes.clone());
-    bad.srdf = r#"<robot name="slider"><disable_collisions link1="base" link2="nope"/></robot>"#.into();
-    assert_status(c.start_robot_fit_job(bad).await, Code::InvalidArgument, "srdf");
+    bad.srdf = r#"<robot name="slider"><disable_collisions link1="base"/></robot>"#.into();
+    assert_status(c.start_robot_fit_job(bad).await, Code::InvalidArgument, "srdf.disable_collisions[0]");
 
     let job_id = c.start_robot_fit_job(request(meshes)).await.unwrap().into_inner().job_id;
     let updates = crate::util::watch_to_end(&mut c, job_id.clone()).await;

@@ -224,6 +224,24 @@ def test_a_start_just_past_a_limit_is_moved_onto_it_and_said(client, panda):
     assert e.value.code == grpc.StatusCode.INVALID_ARGUMENT and e.value.field == "start.values[0]", e.value
     r = client.plan(panda.robot_id, start=start, goal=goal, joint_names=JOINTS, timeout=TIMEOUT, seed=SEED)
     assert r.solved and r.warnings == [], r
+    assert r.planning_joints == JOINTS
+
+
+def test_a_plan_moves_only_its_planning_joints(client, panda):
+    # The goal names two joints: the other five stay at the start's values on every waypoint. No
+    # scene: self-collision only.
+    start, goal = request_ends()
+    r = client.plan(panda.robot_id, start=start, joint_names=JOINTS,
+                    goal_joints={"panda_joint1": goal[0], "panda_joint4": goal[3]}, timeout=TIMEOUT, seed=SEED)
+    assert r.solved, r
+    assert r.planning_joints == ["panda_joint1", "panda_joint4"]
+    held = [k for k in range(7) if k not in (0, 3)]
+    np.testing.assert_array_equal(r.path[:, held], np.tile(start[held], (r.waypoints, 1)))
+    assert r.path[-1][0] == goal[0] and r.path[-1][3] == goal[3]
+    with pytest.raises(SublevelError) as e:
+        client.plan(panda.robot_id, start=start, goal=goal, joint_names=JOINTS, planning_joints=["panda_joint1"],
+                    timeout=TIMEOUT)
+    assert e.value.code == grpc.StatusCode.INVALID_ARGUMENT and e.value.field == "planning_joints", e.value
 
 
 def test_bad_arguments_raise_before_sending():
@@ -257,6 +275,7 @@ def test_bad_arguments_raise_before_sending():
         (dict(ok, padding=-0.01), r"`padding`"),
         (dict(ok, max_goals=0), r"`max_goals`"),
         (dict(ok, start_state_max_bounds_error=2.0), r"`start_state_max_bounds_error`"),
+        (dict(ok, planning_joints="panda_joint1"), r"`planning_joints`"),
         (dict(ok, seed=-1), r"`seed`"),
         (dict(ok, smoothing_passes=1.5), r"`smoothing_passes`"),
         (dict(ok, smoothing_passes=9), r"`smoothing_passes`"),

@@ -203,6 +203,7 @@ class PlanCalls:
         attached: Optional[Sequence[dict]] = None,
         link_padding: Optional[Mapping[str, float]] = None,
         start_state_max_bounds_error: Optional[float] = None,
+        planning_joints: Optional[Sequence[str]] = None,
     ) -> pb.PlanRequest:
         """The ``PlanRequest`` of :meth:`plan` (same arguments), validated here."""
         if robot is not None and not isinstance(robot, str):
@@ -219,6 +220,10 @@ class PlanCalls:
             attached=_attached_pb(attached),
             link_padding=_link_padding(link_padding),
         )
+        if planning_joints is not None:
+            if isinstance(planning_joints, str) or not all(isinstance(n, str) for n in planning_joints):
+                raise ValueError(f"`planning_joints`: expected a sequence of joint names, got {planning_joints!r}")
+            req.planning_joints.extend(planning_joints)
         if base is not None:
             req.base.CopyFrom(_pose_pb(base, "base"))
         given = {"start": start, "goal": goal, "goal_joints": goal_joints, "goal_pose": goal_pose,
@@ -283,6 +288,7 @@ class PlanCalls:
         attached: Optional[Sequence[dict]] = None,
         link_padding: Optional[Mapping[str, float]] = None,
         start_state_max_bounds_error: Optional[float] = None,
+        planning_joints: Optional[Sequence[str]] = None,
         grpc_timeout: Optional[float] = None,
     ) -> PlanResult:
         """Plans a path of a stored robot among a scene in one call (``Plan``; docs/planning.md):
@@ -342,6 +348,10 @@ class PlanCalls:
             start_state_max_bounds_error: how far a start value may lie outside its joint's limits
                 (radians or meters, in [0, 1]) and still be planned from, moved onto the limit and
                 said in :attr:`PlanResult.warnings` (MoveIt's ``FixStartStateBounds``); None: 0.05.
+            planning_joints: the joints the plan moves (MoveIt's planning group), the others held at
+                the start's values on every waypoint; None: the joints the goal names
+                (``goal_joints``, the request's goal constraints, ``joint_names`` of ``goal``), or
+                every joint when it names none (a goal of every joint, ``goal_pose``).
             grpc_timeout: the call's gRPC deadline, seconds; None: ``timeout`` plus
                 :data:`PLAN_DEADLINE_MARGIN` (5 s), so that the server answers ``timed_out``
                 itself. A shorter deadline also shortens the plan.
@@ -369,6 +379,7 @@ class PlanCalls:
             range=range, padding=padding, simplify=simplify, smoothing_passes=smoothing_passes,
             resolution=resolution, goal_bias=goal_bias, tolerance=tolerance, max_goals=max_goals, attached=attached,
             link_padding=link_padding, start_state_max_bounds_error=start_state_max_bounds_error,
+            planning_joints=planning_joints,
         )
         if grpc_timeout is None:
             deadline = req.settings.timeout + PLAN_DEADLINE_MARGIN

@@ -306,6 +306,8 @@ class PlanResult:
         warnings: what the server changed in the request to plan it, one line each naming the
             field: start values moved into the joint limits (``start_state_max_bounds_error``),
             goal constraints outside the limits taken where their tolerance meets them.
+        planning_joints: the joints the plan moved (the request's, or the goal's); the others stay
+            at the start's values on every waypoint.
     """
 
     status: str
@@ -325,6 +327,7 @@ class PlanResult:
     repaired: int
     scene_version: int = 0
     warnings: List[str] = field(default_factory=list)
+    planning_joints: List[str] = field(default_factory=list)
 
     @property
     def solved(self) -> bool:
@@ -362,4 +365,5 @@ class PlanResult:
             repaired=int(m.repaired),
             scene_version=int(m.scene_version),
             warnings=list(m.warnings),
+            planning_joints=list(m.planning_joints),
         )

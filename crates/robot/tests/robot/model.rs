@@ -129,8 +129,13 @@ fn configurations_from_named_columns_fill_the_rest_from_defaults() {
     assert_eq!(err(&["rail", "spin"], &[0.0, 0.0, 0.0]), "c.values");
     assert_eq!(err(&["rail"], &[]), "c.values");
     assert_eq!(err(&["rail", "spin"], &[0.0, f64::NAN]), "c.values[1]");
-    // Outside the URDF limits, by however little.
-    assert_eq!(err(&["rail"], &[0.8 + 1e-9]), "c.values[0]");
+    // Outside the URDF limits by more than rounding (LIMIT_ROUNDING · max(1, |bound|) = 1e-9 here);
+    // a value rounded 1e-12 past the bound is on it.
+    assert_eq!(err(&["rail"], &[0.8 + 2e-9]), "c.values[0]");
+    assert_eq!(
+        gantry.configurations("c", &["rail".to_owned()], &[0.8 + 1e-12], &[]).unwrap(),
+        [vec![0.8 + 1e-12, 0.0, 0.0, 0.0]]
+    );
     assert_eq!(err(&["spin", "shoulder"], &[100.0, -2.5]), "c.values[1]");
     assert_eq!(err(&["elbow"], &[0.0, 1e300]), "c.values[1]");
 }
