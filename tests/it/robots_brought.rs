@@ -7,7 +7,8 @@
 
 use crate::util::{assert_status, config, Server};
 use std::f64::consts::PI;
-use sublevel::service::pb;
+use sublevel::service::pb::{self, sublevel_client::SublevelClient};
+use tonic::transport::Channel;
 use tonic::Code;
 
 /// A planar arm on a base split in two overlapping boxes (`base`, `base_2`, joined by a fixed
@@ -40,17 +41,22 @@ fn cols(q: &[f64]) -> Option<pb::ConfigurationColumns> {
 #[allow(clippy::approx_constant)]
 const PRINTED_PI: f64 = 3.14159;
 
+/// Fits the split arm with its SRDF by `StartRobotFitJob`; the stored robot's id.
+async fn fit_split_arm(c: &mut SublevelClient<Channel>) -> String {
+    let fit =
+        pb::StartRobotFitJobRequest { urdf: SPLIT_ARM_URDF.into(), srdf: SPLIT_ARM_SRDF.into(), ..Default::default() };
+    let job_id = c.start_robot_fit_job(fit).await.unwrap().into_inner().job_id;
+    let last = crate::util::watch_to_end(c, job_id).await.pop().unwrap();
+    assert_eq!(last.state, pb::JobState::Succeeded as i32, "{last:?}");
+    last.robot_id
+}
+
 #[tokio::test]
 async fn a_robot_brought_as_moveit_takes_it_loads_checks_and_plans_saying_what_was_moved() {
     let dir = tempfile::tempdir().unwrap();
     let server = Server::start(config(dir.path())).await;
     let mut c = server.client().await;
-    let fit =
-        pb::StartRobotFitJobRequest { urdf: SPLIT_ARM_URDF.into(), srdf: SPLIT_ARM_SRDF.into(), ..Default::default() };
-    let job_id = c.start_robot_fit_job(fit).await.unwrap().into_inner().job_id;
-    let last = crate::util::watch_to_end(&mut c, job_id).await.pop().unwrap();
-    assert_eq!(last.state, pb::JobState::Succeeded as i32, "{last:?}");
-    let robot_id = last.robot_id;
+    let robot_id = fit_split_arm(&mut c).await;
     let summary =
         c.get_robot(pb::GetRobotRequest { robot_id: robot_id.clone() }).await.unwrap().into_inner().robot.unwrap();
     // The two entries naming links the URDF lacks, each named; the rigid pair listed.
@@ -157,10 +163,7 @@ async fn a_plan_moves_the_joints_its_goal_names_and_holds_the_others() {
     let dir = tempfile::tempdir().unwrap();
     let server = Server::start(config(dir.path())).await;
     let mut c = server.client().await;
-    let fit =
-        pb::StartRobotFitJobRequest { urdf: SPLIT_ARM_URDF.into(), srdf: SPLIT_ARM_SRDF.into(), ..Default::default() };
-    let job_id = c.start_robot_fit_job(fit).await.unwrap().into_inner().job_id;
-    let robot_id = crate::util::watch_to_end(&mut c, job_id).await.pop().unwrap().robot_id;
+    let robot_id = fit_split_arm(&mut c).await;
     let request = |planning: &[&str]| pb::PlanRequest {
         robot_id: robot_id.clone(),
         start: cols(&[0.0, 0.5]),
