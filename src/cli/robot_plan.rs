@@ -4,18 +4,27 @@
 //! ```text
 //! sublevel robot plan robot.json --scene SCENE.yaml --request REQUEST.yaml [--timeout 1] [--seed 1]
 //!     [--padding 0] [--no-simplify] [--smoothing 0] [--json]
+//!     [--trajectory [--joint-limits joint_limits.yaml] [--sample-dt 0.01] [--max-deviation 0.1]
+//!      [--velocity-scaling 1] [--acceleration-scaling 1] [--moveit]]
 //! ```
+//!
+//! With `--trajectory` the path is timed as `Plan` times it (docs/planning.md, "Timed
+//! trajectories"); `--moveit` prints it as a MoveIt `moveit_msgs/RobotTrajectory` in YAML.
 
 use std::io::Write;
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 use sublevel::math::{Isometry3, Real};
+use sublevel::plan::trajectory::{
+    joint_limits, timed_trajectory, TimedTrajectory, TimingSettings, TrajectoryRequest, DEFAULT_MAX_DEVIATION,
+    DEFAULT_SAMPLE_DT,
+};
 use sublevel::plan::{
     joint_goal, plan, start_from_joints, PlanSettings, PlanStatus, RobotValidity, START_STATE_MAX_BOUNDS_ERROR,
 };
 use sublevel::robot::{FittedRobot, MotionChecker, RobotChecker};
-use sublevel::scene::moveit::{allowed_override, world_objects, MotionPlanRequest, PlanningScene};
+use sublevel::scene::moveit::{allowed_override, world_objects, JointLimitsYaml, MotionPlanRequest, PlanningScene};
 use sublevel::Result;
 
 /// Arguments of `sublevel robot plan`.
@@ -52,6 +61,27 @@ pub struct PlanArgs {
     /// One JSON object (status, path, times, counts) instead of the table.
     #[arg(long)]
     json: bool,
+    /// Time the path: blended corners proven free, time-optimal within the joint limits.
+    #[arg(long)]
+    trajectory: bool,
+    /// A MoveIt joint_limits.yaml (velocity and acceleration limits) for `--trajectory`.
+    #[arg(long)]
+    joint_limits: Option<PathBuf>,
+    /// Seconds between the trajectory's points.
+    #[arg(long, default_value_t = DEFAULT_SAMPLE_DT)]
+    sample_dt: Real,
+    /// Most joint-space distance a blended corner passes from its waypoint (0: stop at each).
+    #[arg(long, default_value_t = DEFAULT_MAX_DEVIATION)]
+    max_deviation: Real,
+    /// Factor in (0, 1] on the velocity limits (else the request's, the file's default, 1).
+    #[arg(long)]
+    velocity_scaling: Option<Real>,
+    /// Factor in (0, 1] on the acceleration limits.
+    #[arg(long)]
+    acceleration_scaling: Option<Real>,
+    /// Print the trajectory as a MoveIt RobotTrajectory (YAML) instead of the table.
+    #[arg(long)]
+    moveit: bool,
 }
 
 fn read(path: &PathBuf) -> Result<Vec<u8>> {
@@ -119,6 +149,22 @@ pub fn run(args: PlanArgs) -> Result<()> {
     let out = plan(&mut validity, &start, &goal, &settings, &AtomicBool::new(false))?;
     let wall = clock.elapsed();
     let names: Vec<&str> = robot.model.variable_names();
+    let timed = match (args.trajectory, out.path.is_empty()) {
+        (true, false) => {
+            let ask = trajectory_request(&args, &robot, &request, &moving)?;
+            Some(timed_trajectory(&mut validity, &out.path, &ask, settings.tolerance)?)
+        }
+        _ => None,
+    };
+    if args.moveit {
+        let Some(t) = &timed else {
+            return Err(sublevel::Error::invalid("--moveit", format!("no trajectory: the plan is {:?}", out.status)));
+        };
+        let stdout = std::io::stdout();
+        let mut w = std::io::BufWriter::new(stdout.lock());
+        write_moveit(&mut w, &names, t)?;
+        return Ok(());
+    }
     let (status, message) = match &out.status {
         PlanStatus::Solved => ("solved", String::new()),
         PlanStatus::TimedOut => ("timed_out", String::new()),
@@ -148,6 +194,21 @@ pub fn run(args: PlanArgs) -> Result<()> {
             "advancement_steps": out.counts.advancement_steps,
             "nodes": out.nodes,
             "repaired": out.repaired,
+            "trajectory": timed.as_ref().map(|t| serde_json::json!({
+                "time_from_start": t.trajectory.time_from_start,
+                "positions": t.trajectory.positions,
+                "velocities": t.trajectory.velocities,
+                "accelerations": t.trajectory.accelerations,
+                "duration": t.trajectory.duration,
+                "max_velocity": t.limits.velocity,
+                "max_acceleration": t.limits.acceleration,
+                "certified": out.certified,
+                "blends": t.blends.arcs_certified,
+                "blends_tightened": t.blends.tightened,
+                "stops": t.stops,
+                "corner_deviation": t.blends.path.deviation,
+                "seconds": t.seconds,
+            })),
         });
         writeln!(w, "{json}")?;
         return Ok(());
@@ -176,5 +237,90 @@ pub fn run(args: PlanArgs) -> Result<()> {
     for q in &out.path {
         writeln!(w, "{}", q.iter().map(|v| format!("{v:.6}")).collect::<Vec<_>>().join(","))?;
     }
+    if let Some(t) = &timed {
+        writeln!(
+            w,
+            "trajectory: {:.4} s, {} points, {} blends ({} tightened), {} stops, certified: {}, timed in {:.2} ms \
+             (blends {:.2}, timing {:.2}, sampling {:.2})",
+            t.trajectory.duration,
+            t.trajectory.time_from_start.len(),
+            t.blends.arcs_certified,
+            t.blends.tightened,
+            t.stops,
+            out.certified,
+            t.seconds * 1e3,
+            t.stage_seconds[0] * 1e3,
+            t.stage_seconds[1] * 1e3,
+            t.stage_seconds[2] * 1e3
+        )?;
+    }
+    Ok(())
+}
+
+/// The trajectory request of `--trajectory`: limits from `--joint-limits`, the URDF, or the
+/// defaults (a warning on stderr per joint that took one), the scaling factors from the flags,
+/// the request, the file, else 1.
+fn trajectory_request(
+    args: &PlanArgs,
+    robot: &FittedRobot,
+    request: &MotionPlanRequest,
+    moving: &[bool],
+) -> Result<TrajectoryRequest> {
+    let names = robot.model.variable_names();
+    let (mut velocity_scaling, mut acceleration_scaling) = (None, None);
+    let (mut velocity, mut acceleration) = Default::default();
+    if let Some(path) = &args.joint_limits {
+        let file = JointLimitsYaml::from_yaml(&read(path)?)?;
+        let maps = file.for_joints(&names);
+        for name in &maps.skipped {
+            eprintln!("warning: {}: joint `{name}` is not a moving joint of the robot; skipped", path.display());
+        }
+        (velocity, acceleration) = (maps.velocity, maps.acceleration);
+        (velocity_scaling, acceleration_scaling) =
+            (file.default_velocity_scaling_factor, file.default_acceleration_scaling_factor);
+    }
+    let (limits, warnings) = joint_limits(&robot.model, &velocity, &acceleration, moving)?;
+    for line in warnings {
+        eprintln!("warning: {line}");
+    }
+    let timing = TimingSettings {
+        velocity_scaling: args
+            .velocity_scaling
+            .or(request.max_velocity_scaling_factor)
+            .or(velocity_scaling)
+            .unwrap_or(1.0),
+        acceleration_scaling: args
+            .acceleration_scaling
+            .or(request.max_acceleration_scaling_factor)
+            .or(acceleration_scaling)
+            .unwrap_or(1.0),
+        ..TimingSettings::default()
+    };
+    timing.validate().map_err(|e| match e {
+        sublevel::Error::InvalidArgument { field, reason } => {
+            sublevel::Error::InvalidArgument { field: format!("--{}", field.replace('_', "-")), reason }
+        }
+        other => other,
+    })?;
+    Ok(TrajectoryRequest { limits, timing, sample_dt: args.sample_dt, max_deviation: args.max_deviation })
+}
+
+/// `t` as a MoveIt `moveit_msgs/RobotTrajectory` in YAML: `joint_trajectory` with its joint names
+/// and points (`time_from_start` as `sec` and `nanosec`).
+fn write_moveit(w: &mut impl Write, names: &[&str], t: &TimedTrajectory) -> Result<()> {
+    let list = |v: &[Real]| v.iter().map(|x| format!("{x:.9}")).collect::<Vec<_>>().join(", ");
+    writeln!(w, "joint_trajectory:")?;
+    writeln!(w, "  joint_names: [{}]", names.join(", "))?;
+    writeln!(w, "  points:")?;
+    let tr = &t.trajectory;
+    for i in 0..tr.time_from_start.len() {
+        let time = tr.time_from_start[i];
+        let (sec, nanosec) = (time.floor(), ((time - time.floor()) * 1e9).round().min(999_999_999.0));
+        writeln!(w, "    - positions: [{}]", list(&tr.positions[i]))?;
+        writeln!(w, "      velocities: [{}]", list(&tr.velocities[i]))?;
+        writeln!(w, "      accelerations: [{}]", list(&tr.accelerations[i]))?;
+        writeln!(w, "      time_from_start: {{sec: {sec}, nanosec: {nanosec}}}")?;
+    }
+    writeln!(w, "multi_dof_joint_trajectory: {{joint_names: [], points: []}}")?;
     Ok(())
 }

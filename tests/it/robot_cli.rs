@@ -127,3 +127,69 @@ fn robot_fit_writes_a_robot_file_and_names_what_it_cannot_read() {
     let a: Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!((a["collides"].as_bool(), a["self"].as_bool()), (Some(false), Some(false)));
 }
+
+#[test]
+fn robot_plan_times_its_path_within_the_joint_limits_and_prints_moveit_yaml() {
+    let args = |extra: &[&str]| {
+        let mut a = vec![
+            "robot".to_owned(),
+            "plan".to_owned(),
+            repo("data/robots/panda/panda.robot.json"),
+            "--scene".to_owned(),
+            repo("data/robots/mbm_panda/scenes/box/scene0001.yaml"),
+            "--request".to_owned(),
+            repo("data/robots/mbm_panda/requests/box/request0001.yaml"),
+            "--timeout".to_owned(),
+            "30".to_owned(),
+            "--trajectory".to_owned(),
+            "--joint-limits".to_owned(),
+            repo("data/robots/panda/joint_limits.yaml"),
+        ];
+        a.extend(extra.iter().map(|s| s.to_string()));
+        a
+    };
+    let run = |extra: &[&str]| {
+        let a = args(extra);
+        let out = sublevel(&a.iter().map(String::as_str).collect::<Vec<_>>());
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        out
+    };
+    let out = run(&["--json", "--sample-dt", "0.001"]);
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["status"], "solved");
+    let t = &v["trajectory"];
+    assert_eq!(t["certified"], true);
+    let reals = |x: &Value| x.as_array().unwrap().iter().map(|y| y.as_f64().unwrap()).collect::<Vec<f64>>();
+    let rows = |x: &Value| x.as_array().unwrap().iter().map(reals).collect::<Vec<_>>();
+    let (vmax, amax) = (reals(&t["max_velocity"]), reals(&t["max_acceleration"]));
+    // The Panda's joint_limits.yaml.
+    assert_eq!(vmax, [2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61]);
+    assert_eq!(amax, [3.75, 1.875, 2.5, 3.125, 3.75, 5.0, 5.0]);
+    let (q, qd, qdd, time) =
+        (rows(&t["positions"]), rows(&t["velocities"]), rows(&t["accelerations"]), reals(&t["time_from_start"]));
+    let path = rows(&v["path"]);
+    assert_eq!(q[0], path[0]);
+    assert_eq!(q.last(), path.last());
+    assert!(qd[0].iter().chain(qd.last().unwrap()).all(|x| *x == 0.0));
+    assert_eq!(*time.last().unwrap(), t["duration"].as_f64().unwrap());
+    for (v, a) in qd.iter().zip(&qdd) {
+        for j in 0..7 {
+            assert!(v[j].abs() <= vmax[j] * (1.0 + 1e-6) && a[j].abs() <= amax[j] * (1.0 + 1e-6));
+        }
+    }
+    // The same trajectory as MoveIt's RobotTrajectory YAML, every 0.25 s.
+    let yaml = String::from_utf8(run(&["--moveit", "--sample-dt", "0.25"]).stdout).unwrap();
+    assert!(yaml.starts_with("joint_trajectory:\n  joint_names: [panda_joint1, "), "{yaml}");
+    let points = yaml.matches("- positions: [").count();
+    let duration = t["duration"].as_f64().unwrap();
+    assert_eq!(points, (duration / 0.25).ceil() as usize + 1);
+    assert!(yaml.contains("time_from_start: {sec: 0, nanosec: 0}"));
+    // A bad setting names its flag.
+    let out = sublevel(&args(&["--velocity-scaling", "2"]).iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(!out.status.success());
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("--velocity-scaling"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}

@@ -31,6 +31,7 @@ TESTED = {
     "clients/python/examples/round_trips.py": "test_round_trips_times_every_call",
     "clients/python/examples/plan_ompl.py": "test_plan_ompl_finds_a_path_through_the_walls",
     "clients/python/examples/plan_mbm.py": "test_plan_mbm_plans_a_bookshelf_problem_with_certified_edges",
+    "clients/python/examples/trajectory_mbm.py": "test_trajectory_mbm_times_and_checks_each_plan",
     "clients/python/examples/mbm_coal.py": "test_plan_mbm_with_the_coal_checker",
     "clients/python/examples/depth_stream.py": "test_depth_stream_keeps_one_point_per_voxel",
     "examples/client.rs": "test_the_rust_example_client_slides_the_chair_through_the_human",
@@ -182,6 +183,27 @@ def test_plan_mbm_plans_a_bookshelf_problem_with_certified_edges(server):
     # The problem is a valid one (start and goal free), solved, and its path certified.
     assert row.group(2) == "True", out
     assert re.search(r"^\| bookshelf_small \| 1 \| 1 \| 1 \| 100 \|", out, re.M), out
+
+
+def test_trajectory_mbm_times_and_checks_each_plan(server, tmp_path):
+    need("yaml")
+    out = example(
+        "trajectory_mbm.py",
+        server,
+        "--problems", REPO / "data" / "robots" / "mbm_panda" / "problems.tar.bz2",
+        "--scenarios", "bookshelf_small", "box",
+        "--limit", "1",
+        "--timeout", "20",
+        "--joint-limits", REPO / "data" / "robots" / "panda" / "joint_limits.yaml",
+        "--json", tmp_path / "t.json",
+        timeout=600,
+    )  # fmt: skip
+    for s in ("bookshelf_small", "box"):
+        # solved 1/1, certified 1, no error, no limit violation, no colliding 1 ms sample.
+        assert re.search(rf"^{s} \| 1/1 \| 1 \| 0 \| 0 \| 0 \| ", out, re.M), out
+    rows = json.loads((tmp_path / "t.json").read_text())["problems"]
+    assert all(r["same_duration"] and r["at_rest"] and r["on_ends"] for r in rows), rows
+    assert all(r["duration"] <= r["stop_duration"] for r in rows), rows
 
 
 def test_plan_mbm_service_mode_plans_each_problem_in_one_call(server, tmp_path):

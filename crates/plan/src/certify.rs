@@ -144,6 +144,12 @@ impl Validity for Certified<'_> {
     fn certify(&mut self, a: &[Real], b: &[Real], tolerance: Real) -> Result<Certificate> {
         self.inner.certify(a, b, tolerance)
     }
+    fn certify_tube(&mut self, a: &[Real], b: &[Real], tube: &[Real], tolerance: Real) -> Result<Certificate> {
+        self.inner.certify_tube(a, b, tube, tolerance)
+    }
+    fn box_free(&mut self, center: &[Real], tube: &[Real]) -> Result<bool> {
+        self.inner.box_free(center, tube)
+    }
     fn counts(&self) -> CheckCounts {
         self.inner.counts()
     }

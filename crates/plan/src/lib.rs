@@ -14,6 +14,8 @@
 //! simplify  redundant waypoints dropped, random shortcuts, optional corner cutting [`simplify`]
 //! certify   every edge proven free by conservative advancement; one that is not is split, or
 //!           re-planned with certified edges in the time left                     [`certify`]
+//! time      on request, the path's corners blended by arcs proven free, then time-optimal within
+//!           the joints' velocity and acceleration limits (TOPP-RA)            [`trajectory`]
 //! ```
 //!
 //! The planner sees its checker through [`Validity`] ([`RobotValidity`] for a fitted robot among
@@ -32,6 +34,7 @@ mod plan;
 pub mod rrt;
 pub mod simplify;
 pub mod space;
+pub mod trajectory;
 pub mod validity;
 
 pub use certify::certificate_tolerance;
@@ -41,4 +44,7 @@ pub use plan::{
     MAX_PADDING, MAX_RESOLUTION, MAX_SHORTCUT_ATTEMPTS, MAX_SMOOTHING_PASSES, MAX_TIMEOUT, MAX_TOLERANCE,
 };
 pub use space::{HaltonSampler, JointSpace};
+pub use trajectory::{
+    certify_blends, time_path, BlendCertificate, BlendedPath, JointLimits, Timing, TimingSettings, Trajectory,
+};
 pub use validity::{Certificate, CheckCounts, RobotValidity, Validity};

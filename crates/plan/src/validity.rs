@@ -69,6 +69,38 @@ pub trait Validity {
     /// As [`Validity::state_free`].
     fn certify(&mut self, a: &[Real], b: &[Real], tolerance: Real) -> Result<Certificate>;
 
+    /// Whether every configuration within `tube[k]` of the segment from `a` to `b` in every entry
+    /// k (radians or meters, ≥ 0) is proven free at the checker's padding, with contacts
+    /// reported within `tolerance` meters: a blend of a timed trajectory lies in such a tube
+    /// around its chords ([`crate::trajectory::certify_blends`]). The default proves the
+    /// segment alone when the tube is empty (every entry 0) and answers
+    /// [`Certificate::Undecided`] otherwise.
+    ///
+    /// # Errors
+    /// As [`Validity::state_free`].
+    fn certify_tube(&mut self, a: &[Real], b: &[Real], tube: &[Real], tolerance: Real) -> Result<Certificate> {
+        if tube.iter().all(|&w| w == 0.0) {
+            self.certify(a, b, tolerance)
+        } else {
+            Ok(Certificate::Undecided)
+        }
+    }
+
+    /// Whether every configuration within `tube[k]` of `center` in every entry k (a box,
+    /// radians or meters, ≥ 0) is proven free at the checker's padding: one check of `center`
+    /// with the padding grown by what the box can move the links. The default proves the box
+    /// only when it is a point (every entry 0).
+    ///
+    /// # Errors
+    /// As [`Validity::state_free`].
+    fn box_free(&mut self, center: &[Real], tube: &[Real]) -> Result<bool> {
+        if tube.iter().all(|&w| w == 0.0) {
+            self.state_free(center)
+        } else {
+            Ok(false)
+        }
+    }
+
     /// The counts of the checks made so far.
     fn counts(&self) -> CheckCounts;
 
@@ -176,6 +208,14 @@ impl<'c, 'r> RobotValidity<'c, 'r> {
 }
 
 impl RobotValidity<'_, '_> {
+    /// `2 · max_L D_L(tube)`: how much closer any two geometries, or a geometry and the world,
+    /// can come within a joint-space box of half-widths `tube` (meters).
+    fn inflation(&mut self, tube: &[Real]) -> Real {
+        let links = self.motion.checker().robot().model.links().len();
+        let bounds = self.motion.bounds();
+        2.0 * (0..links).map(|l| bounds.displacement(l, tube)).fold(0.0, Real::max)
+    }
+
     /// Holds every configuration entry not in `moving` at its value in `at` (the start): the plan
     /// moves only the `moving` joints, as MoveIt plans only its planning group's
     /// ([`JointSpace::hold`]).
@@ -258,6 +298,44 @@ impl Validity for RobotValidity<'_, '_> {
             (false, true, Some(t)) => Certificate::Contact(t),
             _ => Certificate::Undecided,
         })
+    }
+
+    /// The segment certified with every geometry padded by `2 · max_L D_L(tube)` more, `D_L` the
+    /// configuration-free motion bound of link L ([`sublevel_robot::MotionBounds::displacement`]):
+    /// no point of a link is farther than `D_L(tube)` from where it is at the nearest
+    /// configuration of the segment, so a world pair closes by at most one link's bound and a
+    /// self pair by two.
+    fn certify_tube(&mut self, a: &[Real], b: &[Real], tube: &[Real], tolerance: Real) -> Result<Certificate> {
+        let model = &self.motion.checker().robot().model;
+        if tube.len() != model.dof() {
+            return Err(sublevel_core::Error::invalid(
+                "tube",
+                format!("{} values for {} configuration entries", tube.len(), model.dof()),
+            ));
+        }
+        let inflation = self.inflation(tube);
+        let padding = self.padding;
+        self.padding = padding + inflation;
+        let answer = self.certify(a, b, tolerance);
+        self.padding = padding;
+        answer
+    }
+
+    /// `center` checked with every geometry padded by `2 · max_L D_L(tube)` more (as
+    /// [`Validity::certify_tube`]): no configuration of the box moves a link farther than
+    /// `D_L(tube)` from where it is at `center`.
+    fn box_free(&mut self, center: &[Real], tube: &[Real]) -> Result<bool> {
+        let model = &self.motion.checker().robot().model;
+        if tube.len() != model.dof() {
+            return Err(sublevel_core::Error::invalid(
+                "tube",
+                format!("{} values for {} configuration entries", tube.len(), model.dof()),
+            ));
+        }
+        self.counts.states += 1;
+        let padding = self.padding + self.inflation(tube);
+        let options = CheckOptions { padding, distance: false, self_collision: true, gradient: false };
+        Ok(!self.motion.checker().check(center, &self.base, &options)?.collides)
     }
 
     fn counts(&self) -> CheckCounts {

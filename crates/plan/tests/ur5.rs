@@ -2,12 +2,15 @@
 //! post placed where the straight joint-space motion's wrist passes, so the direct motion
 //! collides; the plan goes around it, every edge certified, and every edge re-checked
 //! independently by dense sampling on the meshes (3 200 configurations per unit of joint
-//! distance, 100× the search's resolution).
+//! distance, 100× the search's resolution). The path is then timed within the URDF's velocity
+//! limits (and MoveIt's default acceleration, said in the warnings): at rest at both ends, within
+//! the limits at every 1 ms sample, and every sample free on the meshes.
 
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 use sublevel_core::math::{Isometry3, Real, Vector3};
 use sublevel_core::primitive::Primitive;
+use sublevel_plan::trajectory::{joint_limits, timed_trajectory, TimingSettings, TrajectoryRequest};
 use sublevel_plan::{plan, Goal, JointSpace, PlanSettings, PlanStatus, RobotValidity};
 use sublevel_robot::{CheckOptions, FittedRobot, MotionChecker, RobotChecker, WorldObject};
 
@@ -68,5 +71,32 @@ fn the_ur5_plans_around_a_post_with_a_certified_path_that_dense_sampling_confirm
             space.interpolate(&w[0], &w[1], i as Real / n as Real, &mut q);
             assert!(!dense.check(&q, &base, &options).unwrap().collides, "edge {e} collides at sample {i} of {n}");
         }
+    }
+
+    // Timed within the URDF's velocity limits (3.15 rad/s), MoveIt's default 1 rad/s² each.
+    let none = Default::default();
+    let (limits, warnings) = joint_limits(&robot.model, &none, &none, &vec![true; dof]).unwrap();
+    assert!(limits.velocity.iter().all(|v| *v == 3.15), "{:?}", limits.velocity);
+    assert!(limits.acceleration.iter().all(|a| *a == 1.0));
+    assert_eq!(warnings.len(), dof, "{warnings:?}");
+    assert!(warnings.iter().all(|w| w.contains("no acceleration limit")), "{warnings:?}");
+    let ask = TrajectoryRequest {
+        limits: limits.clone(),
+        timing: TimingSettings::default(),
+        sample_dt: 1e-3,
+        max_deviation: 0.1,
+    };
+    let timed = timed_trajectory(&mut validity, &out.path, &ask, settings.tolerance).unwrap();
+    let t = &timed.trajectory;
+    assert_eq!(t.positions[0], start);
+    assert_eq!(t.positions.last(), Some(&goal));
+    assert!(t.velocities[0].iter().chain(t.velocities.last().unwrap()).all(|v| *v == 0.0));
+    for (i, (q, (v, a))) in t.positions.iter().zip(t.velocities.iter().zip(&t.accelerations)).enumerate() {
+        for j in 0..dof {
+            assert!(
+                v[j].abs() <= limits.velocity[j] * (1.0 + 1e-6) && a[j].abs() <= limits.acceleration[j] * (1.0 + 1e-6)
+            );
+        }
+        assert!(!dense.check(q, &base, &options).unwrap().collides, "sample {i} collides");
     }
 }

@@ -263,6 +263,11 @@ impl<'c, 'r> MotionChecker<'c, 'r> {
         self.checker
     }
 
+    /// The robot's motion bounds ([`crate::motion`]), as the advancement uses them.
+    pub fn bounds(&self) -> &MotionBounds {
+        &self.bounds
+    }
+
     /// Turns carried bounds on (the default) or off. On, a pair keeps what it has proven — free
     /// up to some `t` — across steps, only the pairs whose proofs end within half the last step
     /// past the new configuration get new bounds there, and the meshes are searched with a slack

@@ -87,6 +87,9 @@ pub struct Joint {
     pub limits: Option<(Real, Real)>,
     /// Where its value comes from.
     pub value: JointValue,
+    /// The URDF `<limit velocity>` of a revolute, continuous or prismatic joint (radians or
+    /// meters per second), where it is given, finite and > 0.
+    pub max_velocity: Option<Real>,
 }
 
 impl Joint {
@@ -351,7 +354,9 @@ impl RobotModel {
                 _ => None,
             };
             let value = if kind == JointKind::Fixed { JointValue::Fixed } else { JointValue::Variable(usize::MAX) };
-            raw.push(Joint { name: j.name.clone(), kind, parent, child, origin, axis, limits, value });
+            let v = j.limit.velocity;
+            let max_velocity = (kind != JointKind::Fixed && v.is_finite() && v > 0.0).then_some(v);
+            raw.push(Joint { name: j.name.clone(), kind, parent, child, origin, axis, limits, value, max_velocity });
         }
         let roots: Vec<usize> = (0..links.len()).filter(|&l| links[l].parent_joint.is_none()).collect();
         let [root] = roots[..] else {

@@ -22,7 +22,7 @@ from ._requests import (
     _link_padding,
     _pose_pb,
 )
-from .robot_types import PlanResult
+from .robot_types import JointTrajectory, PlanResult
 
 #: Seconds the gRPC deadline of :meth:`PlanCalls.plan` leaves beyond the plan's ``timeout`` by
 #: default, so that the server answers ``timed_out`` itself (with its partial figures) rather than
@@ -97,6 +97,47 @@ def _plan_settings(
             start_state_max_bounds_error, "start_state_max_bounds_error", low=0.0, high=1.0,
             what=" (radians or meters)"
         )
+    return s
+
+
+def _trajectory_settings(
+    sample_dt: Optional[float],
+    velocity_scaling: Optional[float],
+    acceleration_scaling: Optional[float],
+    max_deviation: Optional[float],
+    max_velocity: Optional[Mapping[str, float]],
+    max_acceleration: Optional[Mapping[str, float]],
+    joint_limits: Any,
+) -> pb.TrajectorySettings:
+    """The ``TrajectorySettings`` of :meth:`PlanCalls.plan` (same arguments; None: the server's
+    default); ValueError naming the argument when one is malformed."""
+    s = pb.TrajectorySettings()
+    if sample_dt is not None:
+        s.sample_dt = _real(sample_dt, "sample_dt", low=0.0, low_open=True, what=" of seconds")
+    if velocity_scaling is not None:
+        s.velocity_scaling = _real(velocity_scaling, "velocity_scaling", low=0.0, low_open=True, high=1.0)
+    if acceleration_scaling is not None:
+        s.acceleration_scaling = _real(acceleration_scaling, "acceleration_scaling", low=0.0, low_open=True, high=1.0)
+    if max_deviation is not None:
+        s.max_deviation = _real(max_deviation, "max_deviation", low=0.0, what=" (radians or meters)")
+    for name, limits, target in (("max_velocity", max_velocity, s.max_velocity),
+                                 ("max_acceleration", max_acceleration, s.max_acceleration)):
+        if limits is None:
+            continue
+        if not isinstance(limits, Mapping):
+            raise ValueError(f"`{name}`: expected a mapping of joint name to limit, got {type(limits).__name__}")
+        for joint, v in limits.items():
+            target[str(joint)] = _real(v, f"{name}[{joint}]", low=0.0, low_open=True)
+    if joint_limits is not None:
+        if isinstance(joint_limits, os.PathLike):
+            text = Path(joint_limits).read_text(encoding="utf-8")
+        elif isinstance(joint_limits, str):
+            one_line = "\n" not in joint_limits
+            text = (Path(joint_limits).read_text(encoding="utf-8")
+                    if one_line and os.path.isfile(joint_limits) else joint_limits)
+        else:
+            raise ValueError(f"`joint_limits`: expected YAML text or a path, got {type(joint_limits).__name__}")
+        s.joint_limits_yaml = text
     return s
 
 
@@ -204,6 +245,7 @@ class PlanCalls:
         link_padding: Optional[Mapping[str, float]] = None,
         start_state_max_bounds_error: Optional[float] = None,
         planning_joints: Optional[Sequence[str]] = None,
+        trajectory: Optional[pb.TrajectorySettings] = None,
     ) -> pb.PlanRequest:
         """The ``PlanRequest`` of :meth:`plan` (same arguments), validated here."""
         if robot is not None and not isinstance(robot, str):
@@ -224,6 +266,8 @@ class PlanCalls:
             if isinstance(planning_joints, str) or not all(isinstance(n, str) for n in planning_joints):
                 raise ValueError(f"`planning_joints`: expected a sequence of joint names, got {planning_joints!r}")
             req.planning_joints.extend(planning_joints)
+        if trajectory is not None:
+            req.trajectory.CopyFrom(trajectory)
         if base is not None:
             req.base.CopyFrom(_pose_pb(base, "base"))
         given = {"start": start, "goal": goal, "goal_joints": goal_joints, "goal_pose": goal_pose,
@@ -289,6 +333,14 @@ class PlanCalls:
         link_padding: Optional[Mapping[str, float]] = None,
         start_state_max_bounds_error: Optional[float] = None,
         planning_joints: Optional[Sequence[str]] = None,
+        trajectory: bool = False,
+        sample_dt: Optional[float] = None,
+        velocity_scaling: Optional[float] = None,
+        acceleration_scaling: Optional[float] = None,
+        max_deviation: Optional[float] = None,
+        max_velocity: Optional[Mapping[str, float]] = None,
+        max_acceleration: Optional[Mapping[str, float]] = None,
+        joint_limits: Any = None,
         grpc_timeout: Optional[float] = None,
     ) -> PlanResult:
         """Plans a path of a stored robot among a scene in one call (``Plan``; docs/planning.md):
@@ -352,6 +404,21 @@ class PlanCalls:
                 the start's values on every waypoint; None: the joints the goal names
                 (``goal_joints``, the request's goal constraints, ``joint_names`` of ``goal``), or
                 every joint when it names none (a goal of every joint, ``goal_pose``).
+            trajectory: whether the answer holds the path timed too (:attr:`PlanResult.trajectory`,
+                docs/planning.md "Timed trajectories"): corners blended by arcs proven free, then
+                time-optimal within the joints' velocity and acceleration limits, at rest at both
+                ends. The settings below apply only with it.
+            sample_dt: seconds between the trajectory's points (> 0); None: 0.01.
+            velocity_scaling, acceleration_scaling: factors in (0, 1] on the limits (MoveIt's
+                ``max_velocity_scaling_factor`` / ``max_acceleration_scaling_factor``); None: the
+                request's MotionPlanRequest's, else ``joint_limits``' defaults, else 1.
+            max_deviation: most joint-space distance a blended corner passes from its waypoint
+                (>= 0; 0 stops at every waypoint); None: 0.1.
+            max_velocity, max_acceleration: limits by joint name (> 0), over the others.
+            joint_limits: a MoveIt ``joint_limits.yaml`` (text, or a path as ``os.PathLike`` or a
+                one-line ``str`` naming a file): its limits where its ``has_..._limits`` flags are
+                true. Joints with no limit anywhere (nor a URDF ``<limit velocity>``) take 1 per
+                second and 1 per second squared, said in :attr:`PlanResult.warnings`.
             grpc_timeout: the call's gRPC deadline, seconds; None: ``timeout`` plus
                 :data:`PLAN_DEADLINE_MARGIN` (5 s), so that the server answers ``timed_out``
                 itself. A shorter deadline also shortens the plan.
@@ -380,9 +447,80 @@ class PlanCalls:
             resolution=resolution, goal_bias=goal_bias, tolerance=tolerance, max_goals=max_goals, attached=attached,
             link_padding=link_padding, start_state_max_bounds_error=start_state_max_bounds_error,
             planning_joints=planning_joints,
+            trajectory=_trajectory_settings(
+                sample_dt, velocity_scaling, acceleration_scaling, max_deviation, max_velocity, max_acceleration,
+                joint_limits,
+            ) if trajectory else None,
         )
         if grpc_timeout is None:
             deadline = req.settings.timeout + PLAN_DEADLINE_MARGIN
         else:
             deadline = _real(grpc_timeout, "grpc_timeout", low=0.0, low_open=True, what=" of seconds")
         return PlanResult.from_proto(self._call("Plan", req, timeout=deadline))
+
+    def time_trajectory(
+        self,
+        robot: Optional[str],
+        path: Any,
+        *,
+        scene: str = "",
+        joint_names: Optional[Sequence[str]] = None,
+        base: Any = None,
+        padding: float = 0.0,
+        tolerance: Optional[float] = None,
+        attached: Optional[Sequence[dict]] = None,
+        link_padding: Optional[Mapping[str, float]] = None,
+        sample_dt: Optional[float] = None,
+        velocity_scaling: Optional[float] = None,
+        acceleration_scaling: Optional[float] = None,
+        max_deviation: Optional[float] = None,
+        max_velocity: Optional[Mapping[str, float]] = None,
+        max_acceleration: Optional[Mapping[str, float]] = None,
+        joint_limits: Any = None,
+        grpc_timeout: Optional[float] = None,
+    ) -> JointTrajectory:
+        """Times a path from any planner (OMPL, MoveIt, a teach pendant) among a scene
+        (``TimeTrajectory``; docs/planning.md, "Timed trajectories"): every edge proven free by
+        conservative advancement, the corners blended by arcs proven free, then timed within the
+        joints' velocity and acceleration limits, at rest at both ends.
+
+        Args:
+            robot, scene, joint_names, base, attached, link_padding: as in :meth:`plan`.
+            path: the waypoints, shape (W, n) in ``joint_names`` order (W >= 2, at least two
+                distinct; consecutive repeats are dropped).
+            padding: meters (in [0, 1]) every robot geometry keeps clear along the path.
+            tolerance: the certificates' contact tolerance, meters (in (0, 0.1]); None: 1 mm.
+            sample_dt, velocity_scaling, acceleration_scaling, max_deviation, max_velocity,
+                max_acceleration, joint_limits: as in :meth:`plan` with ``trajectory=True``.
+            grpc_timeout: the call's gRPC deadline, seconds; None: none (the server allows 60 s).
+
+        Returns :class:`JointTrajectory` (``certified`` true), its ``warnings`` saying which
+        limits took defaults and what was skipped.
+
+        Raises ValueError naming the argument when one is malformed (nothing is sent), and
+        SublevelError: INVALID_ARGUMENT naming ``path`` and its first edge that is not free (with
+        the colliding pair), ``path.values[k]`` for a value outside its joint's limits,
+        ``trajectory.FIELD`` for a bad setting; NOT_FOUND for an unknown robot or scene.
+        """
+        robot_id, names, n, what = self._joints(robot, scene, joint_names)
+        rows = _configurations(path, n, "path", what)
+        req = pb.TimeTrajectoryRequest(
+            robot_id=robot_id,
+            scene_id=scene,
+            path=_configuration_columns(rows, names),
+            trajectory=_trajectory_settings(sample_dt, velocity_scaling, acceleration_scaling, max_deviation,
+                                            max_velocity, max_acceleration, joint_limits),
+            padding=_real(padding, "padding", low=0.0, high=1.0, what=" of meters"),
+            attached=_attached_pb(attached),
+            link_padding=_link_padding(link_padding),
+        )
+        if tolerance is not None:
+            req.tolerance = _real(tolerance, "tolerance", low=0.0, low_open=True, high=0.1, what=" of meters")
+        if base is not None:
+            req.base.CopyFrom(_pose_pb(base, "base"))
+        deadline = None if grpc_timeout is None else _real(
+            grpc_timeout, "grpc_timeout", low=0.0, low_open=True, what=" of seconds")
+        m = self._call("TimeTrajectory", req, timeout=deadline)
+        out = JointTrajectory.from_proto(m.trajectory)
+        out.warnings = list(m.warnings)
+        return out

@@ -270,6 +270,73 @@ PLAN_STATUSES = ("solved", "timed_out", "start_in_collision", "goal_in_collision
 
 
 @dataclass
+class JointTrajectory:
+    """A timed trajectory of a plan (``Client.plan(..., trajectory=True)``; docs/planning.md,
+    "Timed trajectories"), as MoveIt's ``trajectory_msgs/JointTrajectory``: P points of the n
+    joints of :attr:`joint_names`, at rest at the first and the last, within the velocity and
+    acceleration limits it was timed with. Units: radians (meters for prismatic joints) and
+    seconds.
+
+    Attributes:
+        joint_names: the n joints, the columns of ``q``, ``qd`` and ``qdd``.
+        t: shape (P,): seconds from the start (``time_from_start``), increasing, first 0, last
+            ``duration``.
+        q, qd, qdd: shape (P, n): positions, velocities, accelerations.
+        duration: seconds from rest at the start to rest at the goal.
+        max_velocity, max_acceleration: shape (n,): the limits it was timed within, scaling
+            applied.
+        certified: every piece of the geometry it sweeps (the path's straight pieces and the
+            arcs blending its corners) is proven free at the plan's padding.
+        blends: corners blended by an arc (each proven free); blends_tightened: corners whose
+            blend was tightened to be proven; stops: corners where the robot comes to rest.
+        seconds: the server's time for the trajectory stage.
+        corner_deviation: shape (W,): per waypoint of the path it times (consecutive repeats
+            dropped), the joint-space distance its corner's blend passes from it (0 at the ends,
+            at stops and on straight runs): with the waypoints, the timed geometry exactly.
+        warnings: from ``Client.time_trajectory``, what the server assumed or skipped, one line
+            each naming the field (limits that took defaults); from a plan, empty (the plan's
+            :attr:`PlanResult.warnings` hold them).
+    """
+
+    joint_names: List[str]
+    t: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    duration: float
+    max_velocity: np.ndarray
+    max_acceleration: np.ndarray
+    certified: bool
+    blends: int
+    blends_tightened: int
+    stops: int
+    seconds: float
+    corner_deviation: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    warnings: List[str] = field(default_factory=list)
+
+    @classmethod
+    def from_proto(cls, m) -> "JointTrajectory":
+        n = len(m.joint_names)
+        rows = lambda v: np.asarray(v, dtype=float).reshape(-1, n)  # noqa: E731
+        return cls(
+            joint_names=list(m.joint_names),
+            t=np.asarray(m.time_from_start, dtype=float),
+            q=rows(m.positions),
+            qd=rows(m.velocities),
+            qdd=rows(m.accelerations),
+            duration=float(m.duration),
+            max_velocity=np.asarray(m.max_velocity, dtype=float),
+            max_acceleration=np.asarray(m.max_acceleration, dtype=float),
+            certified=bool(m.certified),
+            blends=int(m.blends),
+            blends_tightened=int(m.blends_tightened),
+            stops=int(m.stops),
+            seconds=float(m.seconds),
+            corner_deviation=np.asarray(m.corner_deviation, dtype=float),
+        )
+
+
+@dataclass
 class PlanResult:
     """The answer of ``Client.plan``: a path from the start to a goal whose every edge is proven
     free by conservative advancement (docs/planning.md). Units: radians for revolute and continuous
@@ -308,6 +375,8 @@ class PlanResult:
             goal constraints outside the limits taken where their tolerance meets them.
         planning_joints: the joints the plan moved (the request's, or the goal's); the others stay
             at the start's values on every waypoint.
+        trajectory: the path timed (:class:`JointTrajectory`) when the plan asked for one and
+            found a path; else None.
     """
 
     status: str
@@ -328,6 +397,7 @@ class PlanResult:
     scene_version: int = 0
     warnings: List[str] = field(default_factory=list)
     planning_joints: List[str] = field(default_factory=list)
+    trajectory: Optional[JointTrajectory] = None
 
     @property
     def solved(self) -> bool:
@@ -366,4 +436,5 @@ class PlanResult:
             scene_version=int(m.scene_version),
             warnings=list(m.warnings),
             planning_joints=list(m.planning_joints),
+            trajectory=JointTrajectory.from_proto(m.trajectory) if m.HasField("trajectory") else None,
         )

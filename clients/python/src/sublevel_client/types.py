@@ -17,7 +17,7 @@ from .poses import Pose
 from ._convert import _columns, _enum_name, _pose, _twist, _v3
 from .clouds import PointCloudInfo
 from .imported import AllowedCollisionMatrix, ImportedInstance, ImportedMesh, ImportedScene, SkippedShape
-from .robot_types import ConfigurationColumns, MotionColumns, PlanResult, RobotInfo, SceneRobot
+from .robot_types import ConfigurationColumns, JointTrajectory, MotionColumns, PlanResult, RobotInfo, SceneRobot
 
 __all__ = [
     "SolveInfo",
@@ -45,6 +45,7 @@ __all__ = [
     "RobotInfo",
     "ConfigurationColumns",
     "MotionColumns",
+    "JointTrajectory",
     "PlanResult",
 ]
 

@@ -746,11 +746,13 @@ impl RawScene {
 
 mod budget;
 mod import;
+mod limits;
 mod request;
 #[cfg(test)]
 mod tests;
 mod world;
 
 pub use import::{ImportPlan, ImportedInstance, ImportedScene, MeshImport, PlannedInstance, PlannedMesh, SkippedShape};
+pub use limits::{JointLimitEntry, JointLimitMaps, JointLimitsYaml};
 pub use request::MotionPlanRequest;
 pub use world::{acm_override, allowed_override, world_objects};

@@ -1,7 +1,8 @@
 //! A MoveIt motion plan request (`moveit_msgs/MotionPlanRequest`, YAML or JSON) as the
 //! MotionBenchMaker problems write it: the start state's joint positions, the goals' joint
-//! constraints and the planning group. Planner settings (planner id, attempts, scaling factors,
-//! the workspace) are not read; constraints the planner cannot honor (a goal's position,
+//! constraints, the planning group and the scaling factors of the velocity and acceleration
+//! limits (for the timed trajectory). Other planner settings (planner id, attempts, the
+//! workspace) are not read; constraints the planner cannot honor (a goal's position,
 //! orientation or visibility constraints, path and trajectory constraints) are refused, naming
 //! the field, rather than ignored.
 
@@ -26,6 +27,11 @@ pub struct MotionPlanRequest {
     /// `(joint, position, tolerance below, tolerance above)` in message order; the first is
     /// `goal` with `goal_tolerances`.
     pub goals: Vec<Vec<(String, Real, Real, Real)>>,
+    /// `max_velocity_scaling_factor`, in (0, 1], when the message gives one other than 0 (MoveIt
+    /// reads 0 as "the default").
+    pub max_velocity_scaling_factor: Option<Real>,
+    /// `max_acceleration_scaling_factor`, likewise.
+    pub max_acceleration_scaling_factor: Option<Real>,
 }
 
 #[derive(Deserialize)]
@@ -40,6 +46,10 @@ struct RawRequest {
     path_constraints: Option<RawGoal>,
     #[serde(default)]
     trajectory_constraints: Option<RawTrajectory>,
+    #[serde(default)]
+    max_velocity_scaling_factor: Real,
+    #[serde(default)]
+    max_acceleration_scaling_factor: Real,
 }
 
 #[derive(Deserialize, Default)]
@@ -185,7 +195,27 @@ impl MotionPlanRequest {
             }
             goals.push(constraints);
         }
+        let mut factors = [None, None];
+        for (k, (name, v)) in [
+            ("max_velocity_scaling_factor", raw.max_velocity_scaling_factor),
+            ("max_acceleration_scaling_factor", raw.max_acceleration_scaling_factor),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            if v != 0.0 {
+                if !(v > 0.0 && v <= 1.0) {
+                    return Err(Error::invalid(
+                        name,
+                        format!("must be in (0, 1] (or 0 for the default), got {}", sublevel_core::error::show_real(v)),
+                    ));
+                }
+                factors[k] = Some(v);
+            }
+        }
         Ok(Self {
+            max_velocity_scaling_factor: factors[0],
+            max_acceleration_scaling_factor: factors[1],
             group_name: raw.group_name,
             start: js.name.into_iter().zip(js.position).collect(),
             goal: goals[0].iter().map(|(n, v, _, _)| (n.clone(), *v)).collect(),
@@ -214,6 +244,11 @@ mod tests {
         assert_eq!(r.goal_tolerances, vec![(0.0, 0.0); 7]);
         let with = "goal_constraints: [{joint_constraints: [{joint_name: a, position: 1, tolerance_below: 0.1, tolerance_above: 0.2}]}]";
         assert_eq!(MotionPlanRequest::from_yaml(with.as_bytes()).unwrap().goal_tolerances, vec![(0.1, 0.2)]);
+        // MotionBenchMaker's files give no scaling factors (MoveIt reads 0 as its default).
+        assert_eq!((r.max_velocity_scaling_factor, r.max_acceleration_scaling_factor), (None, None));
+        let scaled = format!("{with}\nmax_velocity_scaling_factor: 0.5\nmax_acceleration_scaling_factor: 0");
+        let scaled = MotionPlanRequest::from_yaml(scaled.as_bytes()).unwrap();
+        assert_eq!((scaled.max_velocity_scaling_factor, scaled.max_acceleration_scaling_factor), (Some(0.5), None));
     }
 
     #[test]
@@ -243,6 +278,8 @@ mod tests {
             field(&format!("{goal}\npath_constraints: {{joint_constraints: [{{joint_name: a, position: 1}}]}}")),
             "path_constraints"
         );
+        assert_eq!(field(&format!("{goal}\nmax_velocity_scaling_factor: 1.5")), "max_velocity_scaling_factor");
+        assert_eq!(field(&format!("{goal}\nmax_acceleration_scaling_factor: -1")), "max_acceleration_scaling_factor");
         // Empty constraint lists, as MoveIt writes them, are no constraint.
         let empty = format!("{goal}\npath_constraints: {{name: '', joint_constraints: [], position_constraints: []}}");
         assert_eq!(MotionPlanRequest::from_yaml(empty.as_bytes()).unwrap().goals.len(), 1);

@@ -62,7 +62,9 @@ pub use planner::{
     answers_to_columns, columns_kind, pair_columns_from_proto, planner_answers_to_proto, planner_request_from_proto,
     scene_check_to_proto, ColumnsSink, PairColumns,
 };
-pub use plans::{plan_ends, plan_response, plan_settings, PlanEnds};
+pub use plans::{
+    plan_ends, plan_response, plan_settings, timing_request, trajectory_request, trajectory_response, PlanEnds,
+};
 pub use primitives::{primitive_from_proto, primitive_to_proto};
 pub use queries::{
     answer_to_proto, certificate_to_proto, distance_reply_to_proto, distance_to_proto, gradient_to_proto,

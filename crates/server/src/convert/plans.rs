@@ -3,15 +3,19 @@
 
 use crate::pb;
 use crate::{Error, Result};
+use std::collections::BTreeMap;
 use std::time::Duration;
 use sublevel_core::math::Real;
+use sublevel_plan::trajectory::{
+    joint_limits, TimedTrajectory, TimingSettings, TrajectoryRequest, DEFAULT_MAX_DEVIATION, DEFAULT_SAMPLE_DT,
+};
 use sublevel_plan::{
     fix_start_bounds, joint_goal, start_from_joints, Goal, JointConstraint, PlanOutcome, PlanSettings, PlanStatus,
     START_STATE_MAX_BOUNDS_ERROR,
 };
 use sublevel_robot::ik::PoseGoal;
 use sublevel_robot::FittedRobot;
-use sublevel_scene::moveit::MotionPlanRequest;
+use sublevel_scene::moveit::{JointLimitsYaml, MotionPlanRequest};
 
 /// The planner settings of a request: absent or zero fields take their defaults; nothing is
 /// clamped silently ([`PlanSettings::validate`] gives every range).
@@ -375,5 +379,119 @@ pub fn plan_response(out: &PlanOutcome, robot: &FittedRobot, total: Duration) ->
         // The request's, which the handler knows.
         warnings: Vec::new(),
         planning_joints: Vec::new(),
+        // The trajectory stage's, which the handler runs.
+        trajectory: None,
+    }
+}
+
+/// The timed trajectory a plan request asks for (`PlanRequest.trajectory`), or `None`, with the
+/// warnings of its limits: which joints took default limits, which joints of the
+/// `joint_limits_yaml` are not the robot's. Limits and scaling factors are taken as
+/// `TrajectorySettings` documents (the request's, then the MotionPlanRequest's factors, then the
+/// file's defaults).
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `trajectory.FIELD`: a scaling factor outside (0, 1], a
+/// `sample_dt` not finite and > 0, a `max_deviation` negative or not finite, a limit not
+/// finite and > 0 or naming a joint the robot does not move, a malformed `joint_limits_yaml`;
+/// `motion_plan_request_…` for a malformed MotionPlanRequest.
+pub fn trajectory_request(
+    req: &pb::PlanRequest,
+    robot: &FittedRobot,
+    moving: &[bool],
+) -> Result<Option<(TrajectoryRequest, Vec<String>)>> {
+    match &req.trajectory {
+        None => Ok(None),
+        Some(t) => timing_request(t, req.motion_plan_request.as_ref(), robot, moving).map(Some),
+    }
+}
+
+/// The timing `t` asks for (fields named `trajectory.…`), with the scaling factors of a
+/// MotionPlanRequest text `mpr` when it gives them, and the warnings of its limits (as
+/// [`trajectory_request`]).
+///
+/// # Errors
+/// As [`trajectory_request`].
+pub fn timing_request(
+    t: &pb::TrajectorySettings,
+    mpr: Option<&pb::plan_request::MotionPlanRequest>,
+    robot: &FittedRobot,
+    moving: &[bool],
+) -> Result<(TrajectoryRequest, Vec<String>)> {
+    let model = &robot.model;
+    let names = model.variable_names();
+    let mut velocity = BTreeMap::new();
+    let mut acceleration = BTreeMap::new();
+    let mut warnings = Vec::new();
+    let (mut velocity_scaling, mut acceleration_scaling) = (None, None);
+    if !t.joint_limits_yaml.is_empty() {
+        let file = JointLimitsYaml::from_yaml(t.joint_limits_yaml.as_bytes())
+            .map_err(|e| crate::convert::errors::prefix_field(e, "trajectory.joint_limits_yaml"))?;
+        let maps = file.for_joints(&names);
+        for name in &maps.skipped {
+            warnings.push(format!(
+                "trajectory.joint_limits_yaml.joint_limits.{}: not a moving joint of the robot; skipped",
+                sublevel_core::error::clip(name)
+            ));
+        }
+        velocity = maps.velocity;
+        acceleration = maps.acceleration;
+        velocity_scaling = file.default_velocity_scaling_factor;
+        acceleration_scaling = file.default_acceleration_scaling_factor;
+    }
+    if let Some(text) = mpr {
+        let (field, bytes) = match text {
+            pb::plan_request::MotionPlanRequest::MotionPlanRequestYaml(t) => ("motion_plan_request_yaml", t),
+            pb::plan_request::MotionPlanRequest::MotionPlanRequestJson(t) => ("motion_plan_request_json", t),
+        };
+        let request = MotionPlanRequest::from_yaml(bytes.as_bytes())
+            .map_err(|e| crate::convert::errors::prefix_field(e, field))?;
+        velocity_scaling = request.max_velocity_scaling_factor.or(velocity_scaling);
+        acceleration_scaling = request.max_acceleration_scaling_factor.or(acceleration_scaling);
+    }
+    velocity.extend(t.max_velocity.iter().map(|(k, v)| (k.clone(), *v)));
+    acceleration.extend(t.max_acceleration.iter().map(|(k, v)| (k.clone(), *v)));
+    let (limits, limit_warnings) = joint_limits(model, &velocity, &acceleration, moving)
+        .map_err(|e| crate::convert::errors::prefix_field(e, "trajectory"))?;
+    warnings.extend(limit_warnings.into_iter().map(|w| format!("trajectory.{w}")));
+    let timing = TimingSettings {
+        velocity_scaling: t.velocity_scaling.or(velocity_scaling).unwrap_or(1.0),
+        acceleration_scaling: t.acceleration_scaling.or(acceleration_scaling).unwrap_or(1.0),
+        ..TimingSettings::default()
+    };
+    timing.validate().map_err(|e| crate::convert::errors::prefix_field(e, "trajectory"))?;
+    let sample_dt = t.sample_dt.unwrap_or(DEFAULT_SAMPLE_DT);
+    if !(sample_dt.is_finite() && sample_dt > 0.0) {
+        return Err(Error::invalid("trajectory.sample_dt", format!("must be finite and > 0 s, got {sample_dt}")));
+    }
+    let max_deviation = t.max_deviation.unwrap_or(DEFAULT_MAX_DEVIATION);
+    if !(max_deviation.is_finite() && max_deviation >= 0.0) {
+        return Err(Error::invalid(
+            "trajectory.max_deviation",
+            format!("must be finite and ≥ 0 (radians or meters), got {max_deviation}"),
+        ));
+    }
+    Ok((TrajectoryRequest { limits, timing, sample_dt, max_deviation }, warnings))
+}
+
+/// A timed trajectory as `PlanResponse.trajectory`; `certified` whether the path it times is.
+pub fn trajectory_response(t: &TimedTrajectory, robot: &FittedRobot, certified: bool) -> pb::JointTrajectory {
+    let tr = &t.trajectory;
+    pb::JointTrajectory {
+        joint_names: robot.model.variable_names().iter().map(|s| (*s).to_owned()).collect(),
+        points: tr.time_from_start.len() as u32,
+        time_from_start: tr.time_from_start.clone(),
+        positions: tr.positions.iter().flatten().copied().collect(),
+        velocities: tr.velocities.iter().flatten().copied().collect(),
+        accelerations: tr.accelerations.iter().flatten().copied().collect(),
+        duration: tr.duration,
+        max_velocity: t.limits.velocity.clone(),
+        max_acceleration: t.limits.acceleration.clone(),
+        certified,
+        blends: t.blends.arcs_certified as u32,
+        blends_tightened: t.blends.tightened as u32,
+        stops: t.stops as u32,
+        seconds: t.seconds,
+        corner_deviation: t.blends.path.deviation.clone(),
     }
 }

@@ -296,6 +296,10 @@ impl Sublevel for SublevelService {
         plans::plan(self, request).await.map_err(Status::from)
     }
 
+    async fn time_trajectory(&self, request: Request<pb::TimeTrajectoryRequest>) -> Reply<pb::TimeTrajectoryResponse> {
+        plans::time_trajectory(self, request).await.map_err(Status::from)
+    }
+
     async fn check_instance_motions(
         &self,
         request: Request<pb::CheckInstanceMotionsRequest>,
