@@ -47,16 +47,11 @@ pub struct JointLimitMaps {
     pub skipped: Vec<String>,
 }
 
+/// The ROS 2 layout: the limits under `robot_description_planning` (other keys ignored).
 #[derive(Deserialize, Default)]
-struct RawFile {
+struct RawRos2 {
     #[serde(default)]
     robot_description_planning: Option<RawLimits>,
-    #[serde(default)]
-    joint_limits: BTreeMap<String, RawJoint>,
-    #[serde(default)]
-    default_velocity_scaling_factor: Option<Real>,
-    #[serde(default)]
-    default_acceleration_scaling_factor: Option<Real>,
 }
 
 #[derive(Deserialize, Default)]
@@ -113,12 +108,12 @@ impl JointLimitsYaml {
     /// (`joint_limits.panda_joint1.max_velocity`) of a limit whose flag is true and whose value
     /// is missing, not finite or ≤ 0, or a scaling factor outside (0, 1].
     pub fn from_yaml(bytes: &[u8]) -> Result<Self> {
-        let raw: RawFile = super::parse_yaml("joint_limits", bytes)?;
-        let limits = raw.robot_description_planning.unwrap_or(RawLimits {
-            joint_limits: raw.joint_limits,
-            default_velocity_scaling_factor: raw.default_velocity_scaling_factor,
-            default_acceleration_scaling_factor: raw.default_acceleration_scaling_factor,
-        });
+        // The ROS 2 layout, else the ROS 1 one (the same keys at the top).
+        let ros2: RawRos2 = super::parse_yaml("joint_limits", bytes)?;
+        let limits = match ros2.robot_description_planning {
+            Some(limits) => limits,
+            None => super::parse_yaml("joint_limits", bytes)?,
+        };
         let mut out = JointLimitsYaml::default();
         for (name, v) in [
             ("default_velocity_scaling_factor", limits.default_velocity_scaling_factor),
