@@ -3,6 +3,7 @@
 pub mod cloud;
 pub mod cloud_bench;
 pub mod cloud_files;
+pub mod fidelity;
 pub mod fit;
 pub mod fit_compound;
 pub mod group;

@@ -137,6 +137,8 @@ struct CheckArgs {
     /// meter), when the robot is free of the world.
     #[arg(long)]
     gradient: bool,
+    #[command(flatten)]
+    fidelity: super::fidelity::FidelityArgs,
 }
 
 /// Runs `sublevel robot`.
@@ -278,6 +280,7 @@ fn check(args: CheckArgs) -> Result<()> {
     let configs = read_configs(&args.configs, &robot, &scene.joint_positions)?;
     let allowed = allowed_override(&scene);
     let mut checker = RobotChecker::new(&robot, world, &allowed)?;
+    checker.set_fidelity(args.fidelity.level()?)?;
     let options = CheckOptions {
         padding: args.padding,
         distance: !args.no_distance,
@@ -327,6 +330,7 @@ fn check(args: CheckArgs) -> Result<()> {
                 "pair": pair.as_ref().map(|(x, y)| [x, y]),
                 "self_pair": self_pair.as_ref().map(|(x, y)| [x, y]),
                 "converged": a.converged,
+                "fidelity": a.fidelity.name(),
                 "gradient": &a.gradient,
             });
             writeln!(out, "{line}")?;

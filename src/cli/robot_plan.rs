@@ -82,6 +82,8 @@ pub struct PlanArgs {
     /// Print the trajectory as a MoveIt RobotTrajectory (YAML) instead of the table.
     #[arg(long)]
     moveit: bool,
+    #[command(flatten)]
+    fidelity: super::fidelity::FidelityArgs,
 }
 
 fn read(path: &PathBuf) -> Result<Vec<u8>> {
@@ -140,6 +142,7 @@ pub fn run(args: PlanArgs) -> Result<()> {
     };
     let allowed = allowed_override(&scene);
     let mut checker = RobotChecker::new(&robot, world, &allowed)?;
+    checker.set_fidelity(args.fidelity.level()?)?;
     let mut validity = RobotValidity::new(MotionChecker::new(&mut checker)?, Isometry3::identity(), settings.padding);
     // The joints the goal names move (MoveIt's planning group); the others stay at the start's.
     let moving: Vec<bool> =

@@ -372,9 +372,9 @@ fn speed_accuracy(a: &CommonArgs) -> Result<()> {
         plot_points(
             path,
             &format!("Speed vs accuracy ({} vs human_10)", a.shape),
-            "median distance query time [µs] (log)",
-            "|d − d_mesh| [m]",
+            ("median distance query time [µs] (log)", "|d − d_mesh| [m]"),
             &pts,
+            "filled: mean error, ring: max error",
         )?;
     }
     Ok(())
@@ -468,13 +468,14 @@ fn plot_err(e: impl std::fmt::Display) -> Error {
 /// Height of a label line in the scatter charts (pixels, 16 px font).
 const LABEL_LINE: i32 = 18;
 
-/// Log-x scatter of (name, x, y_mean, y_max): a filled dot at the mean, a ring at the max, a label.
-fn plot_points(
+/// Log-x scatter of (name, x, y_mean, y_max): a filled dot at the mean, a ring at the max (not
+/// drawn where it is NaN), a label, and `legend` in the top left corner.
+pub(crate) fn plot_points(
     path: &std::path::Path,
     title: &str,
-    x_label: &str,
-    y_label: &str,
+    (x_label, y_label): (&str, &str),
     pts: &[(String, Real, Real, Real)],
+    legend: &str,
 ) -> Result<()> {
     let finite = |v: Real| v.is_finite() && v >= 0.0;
     let xs: Vec<Real> = pts.iter().map(|p| p.1).filter(|v| finite(*v) && *v > 0.0).collect();
@@ -543,7 +544,7 @@ fn plot_points(
     }
     chart
         .draw_series(std::iter::once(Text::new(
-            "filled: mean error, ring: max error".to_string(),
+            legend.to_string(),
             (x0 / 1.8, y1 * 0.95),
             ("sans-serif", 15).into_font(),
         )))

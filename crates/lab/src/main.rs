@@ -24,6 +24,7 @@ mod primitives;
 mod robot_cloud_bodies;
 mod robot_clouds;
 mod robot_edges;
+mod robot_fidelity;
 mod robot_labels;
 mod stability;
 mod startup;
@@ -62,6 +63,9 @@ enum Command {
     /// A fitted robot's configuration checks against mesh-exact labels (misses, false
     /// collisions, distance error, time per configuration), per scenario.
     RobotLabels(robot_labels::RobotLabelsArgs),
+    /// The fidelity dial charted: each level's time per configuration against its false
+    /// collisions on the mesh labels, with VAMP's point.
+    RobotFidelity(robot_fidelity::RobotFidelityArgs),
     /// Sampled start–goal edges of the MotionBenchMaker problems: rakes (`rake_motion`, blocks of
     /// 8) beside one sample at a time, time per checked sample.
     RobotEdges(robot_edges::RobotEdgesArgs),
@@ -85,6 +89,7 @@ fn main() -> std::process::ExitCode {
         Command::Startup(a) => startup::run(a),
         Command::Primitives(a) => primitives::run(a),
         Command::RobotLabels(a) => robot_labels::run(a),
+        Command::RobotFidelity(a) => robot_fidelity::run(a),
         Command::RobotEdges(a) => robot_edges::run(a),
         Command::RobotClouds(a) => robot_clouds::run(a),
     };

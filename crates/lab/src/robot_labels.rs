@@ -26,12 +26,12 @@ use std::time::Instant;
 use sublevel_core::math::{Isometry3, Real};
 use sublevel_core::{Error, Result};
 use sublevel_robot::{
-    CheckOptions, ConfigurationAnswer, FittedRobot, MotionChecker, MotionOptions, RobotChecker, BLOCK,
+    CheckOptions, ConfigurationAnswer, Fidelity, FittedRobot, MotionChecker, MotionOptions, RobotChecker, BLOCK,
 };
 use sublevel_scene::moveit::{allowed_override, world_objects, PlanningScene};
 
 /// Arguments of `sublevel-lab robot-labels`.
-#[derive(clap::Args, Debug)]
+#[derive(clap::Args, Debug, Clone)]
 pub struct RobotLabelsArgs {
     /// The fitted robot (`sublevel robot fit`).
     #[arg(long, default_value = "data/robots/panda/panda.robot.json")]
@@ -66,36 +66,59 @@ pub struct RobotLabelsArgs {
     /// The verdicts one `check` call per configuration instead of in blocks of 8 (`check_block`).
     #[arg(long)]
     single: bool,
+    /// The level of the checks (`RobotChecker::set_fidelity`): mesh, bodies or spheres. At a
+    /// conservative level the block and single paths may differ in false collisions (each
+    /// calls free only what a body containing the meshes shows free), so their agreement is
+    /// not required.
+    #[arg(long, default_value = "mesh")]
+    pub fidelity: String,
+    /// The spheres level's tolerance (meters; 0: its default).
+    #[arg(long, default_value_t = 0.0)]
+    pub tolerance: Real,
+}
+
+impl RobotLabelsArgs {
+    /// The level asked for.
+    ///
+    /// # Errors
+    /// An unknown level or a tolerance out of range, naming `--fidelity` or `--tolerance`.
+    pub fn level(&self) -> Result<Fidelity> {
+        Fidelity::parse("fidelity", &self.fidelity, Some(self.tolerance))
+    }
 }
 
 #[derive(Default)]
-struct Tally {
-    n: usize,
-    mesh_colliding: usize,
-    mesh_free: usize,
+pub(crate) struct Tally {
+    pub(crate) n: usize,
+    pub(crate) mesh_colliding: usize,
+    pub(crate) mesh_free: usize,
     ours_colliding: usize,
-    miss_world: usize,
-    miss_self: usize,
+    pub(crate) miss_world: usize,
+    pub(crate) miss_self: usize,
     false_world: usize,
     false_self: usize,
-    false_any: usize,
+    pub(crate) false_any: usize,
     false_clearance: Vec<Real>,
+    /// Configurations the block path's lanes left to the single path.
+    pub(crate) lanes_left: usize,
+    /// The mesh clearance of the configurations falsely called colliding with the world.
+    false_world_clearance: Vec<Real>,
     dist_err: Vec<Real>,
     above: usize,
     unconverged: usize,
     exact_pairs: usize,
     full_ns: Vec<Real>,
-    verdict_ns: Vec<Real>,
+    pub(crate) verdict_ns: Vec<Real>,
     /// The other path's verdict times on the same configurations (the single path's with blocks,
     /// the blocks' with `--single`), timed right after, for a ratio in one run.
     other_ns: Vec<Real>,
 }
 
-fn average(v: &[Real]) -> Real {
+pub(crate) fn average(v: &[Real]) -> Real {
     v.iter().sum::<Real>() / v.len().max(1) as Real
 }
 
-fn median(v: &mut [Real]) -> Real {
+pub(crate) fn median(v: &mut [Real]) -> Real {
     if v.is_empty() {
         return Real::NAN;
     }
@@ -129,6 +152,7 @@ fn scene_checker<'r>(
     let mut checker = RobotChecker::new(robot, world, &allowed)?;
     checker.set_sphere_stage(!args.no_sphere_stage);
     checker.set_contact_proofs(!args.no_contact_proofs);
+    checker.set_fidelity(args.level()?)?;
     Ok(checker)
 }
 
@@ -264,7 +288,7 @@ fn verdicts(
 }
 
 /// Checks the labelled configurations, per scenario.
-fn evaluate(args: &RobotLabelsArgs) -> Result<BTreeMap<String, Tally>> {
+pub(crate) fn evaluate(args: &RobotLabelsArgs) -> Result<BTreeMap<String, Tally>> {
     let robot = FittedRobot::load(&args.robot)?;
     let mut reader = csv::Reader::from_path(&args.labels).map_err(|e| Error::invalid("labels", e.to_string()))?;
     let header = reader.headers().map_err(|e| Error::invalid("labels", e.to_string()))?.clone();
@@ -291,10 +315,14 @@ fn evaluate(args: &RobotLabelsArgs) -> Result<BTreeMap<String, Tally>> {
             .iter()
             .map(|r| (1..=dof).map(|j| num(r, &header, &format!("q{j}"))).collect::<Result<_>>())
             .collect::<Result<_>>()?;
+        let before = checker.block_counts();
         let verdicts = verdicts(&mut checker, &qs, &verdict, args.single, &mut t.verdict_ns)?;
+        let after = checker.block_counts();
+        t.lanes_left += (after.1 - before.1) as usize;
         let other = self::verdicts(&mut checker, &qs, &verdict, !args.single, &mut t.other_ns)?;
         let flags = |v: &[ConfigurationAnswer]| v.iter().map(|a| (a.world, a.self_collision)).collect::<Vec<_>>();
-        if flags(&other) != flags(&verdicts) {
+        let exact = args.level()?.is_mesh();
+        if exact && flags(&other) != flags(&verdicts) {
             return Err(Error::Numerical(format!("{scenario} scene {scene_no}: the block and single verdicts differ")));
         }
         for ((r, q), v) in rows.iter().zip(&qs).zip(&verdicts) {
@@ -305,7 +333,7 @@ fn evaluate(args: &RobotLabelsArgs) -> Result<BTreeMap<String, Tally>> {
             let s = Instant::now();
             let a = checker.check(q, &base, &full)?;
             t.full_ns.push(s.elapsed().as_nanos() as Real);
-            if v.world != a.world || v.self_collision != a.self_collision || v.collides != a.collides {
+            if exact && (v.world != a.world || v.self_collision != a.self_collision || v.collides != a.collides) {
                 return Err(Error::Numerical(format!(
                     "{scenario} scene {scene_no} idx {}: the verdict-only check disagrees with the full one",
                     field(r, &header, "idx")?
@@ -340,6 +368,9 @@ fn evaluate(args: &RobotLabelsArgs) -> Result<BTreeMap<String, Tally>> {
                 }
             }
             t.false_world += usize::from(!mesh_world && v.world);
+            if !mesh_world && v.world {
+                t.false_world_clearance.push(mesh_dist);
+            }
             t.false_self += usize::from(!mesh_self && v.self_collision);
             if !mesh && v.collides {
                 if args.verbose {
@@ -412,6 +443,12 @@ fn print_table(tallies: &mut BTreeMap<String, Tally>) {
         lo = hi;
     }
     println!("\nmesh clearance of the false collisions (meters of min world distance): {}", hist.join(", "));
+    let left: usize = tallies.values().map(|t| t.lanes_left).sum();
+    println!(
+        "configurations the lanes left to the single path: {left} of {} ({:.1} %)",
+        all.n,
+        100.0 * left as Real / all.n.max(1) as Real
+    );
 }
 
 fn row(name: &str, t: &mut Tally) {
@@ -456,6 +493,8 @@ mod tests {
             no_sphere_stage: false,
             no_contact_proofs: false,
             single: false,
+            fidelity: "mesh".into(),
+            tolerance: 0.0,
         }
     }
 
@@ -479,6 +518,31 @@ mod tests {
             assert_eq!(t.unconverged, 0, "{name}: not converged");
             let worst = t.dist_err.iter().fold(0.0, |m: Real, e| m.max(e.abs()));
             assert!(worst < 1e-5, "{name}: distance differs from coal's by {worst} m");
+        }
+    }
+
+    /// Every conservative level against the labels (every 10th configuration): no miss, no
+    /// distance above the meshes', and false collisions only within the sphere tolerance of
+    /// contact (world pairs) at the spheres levels.
+    #[test]
+    fn no_fidelity_level_misses_a_labelled_collision() {
+        for (level, tolerance) in [("bodies", 0.0), ("spheres", 0.01), ("spheres", 0.03), ("spheres", 0.2)] {
+            let args = RobotLabelsArgs { fidelity: level.into(), tolerance, ..repository_args(10, false) };
+            let tallies = evaluate(&args).unwrap();
+            let mut false_collisions = 0;
+            for (name, t) in &tallies {
+                assert_eq!((t.miss_world, t.miss_self), (0, 0), "{level} {tolerance}: {name}: misses");
+                assert_eq!(t.above, 0, "{level} {tolerance}: {name}: a distance above the mesh's");
+                false_collisions += t.false_any;
+                if level == "spheres" {
+                    let far = t.false_world_clearance.iter().copied().fold(0.0, Real::max);
+                    assert!(
+                        far <= tolerance + 1e-5,
+                        "{level} {tolerance}: {name}: a world false collision {far} m out"
+                    );
+                }
+            }
+            assert!(false_collisions > 0, "{level} {tolerance}: conservative near contact");
         }
     }
 

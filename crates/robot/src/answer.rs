@@ -1,6 +1,7 @@
 //! What a configuration check is asked ([`CheckOptions`]) and what it answers
 //! ([`ConfigurationAnswer`]); the checks themselves are in [`crate::check`].
 
+use crate::fidelity::Fidelity;
 use sublevel_core::math::{Point3, Real};
 
 /// What a check computes.
@@ -63,6 +64,12 @@ pub struct ConfigurationAnswer {
     pub pairs_model: usize,
     /// Pairs resolved on the meshes.
     pub pairs_exact: usize,
+    /// The model a collision rests on ([`crate::fidelity`]): [`Fidelity::Mesh`] when the
+    /// verdict is the meshes' own — every free verdict at any level (a free pair is proven free
+    /// by a shape containing the mesh), and a collision found on the meshes or proven by a
+    /// contact proof — else the conservative level whose bodies came within the padding (the
+    /// meshes may be free there: a possible false collision, never a miss).
+    pub fidelity: Fidelity,
 }
 
 impl ConfigurationAnswer {
@@ -85,6 +92,7 @@ impl ConfigurationAnswer {
             pairs_proved: 0,
             pairs_model: 0,
             pairs_exact: 0,
+            fidelity: Fidelity::Mesh,
         }
     }
 }

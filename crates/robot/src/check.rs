@@ -58,9 +58,10 @@
 use crate::exact::{box_gap, box_gap_past, exact_collides, exact_pair, exact_pair_within, exact_primitive, parry_pose};
 use crate::exact::{ExactShape, PairOutcome, PlacedBox};
 use crate::exact::{PairHint, Slack};
+use crate::fidelity::Fidelity;
 use crate::fitted::{FittedRobot, LinkShape, RobotGeometry};
 use crate::inner::{link_touches_primitive, link_vertex_touches};
-use crate::spheres::TreeAnswer;
+use crate::spheres::{Sphere, TreeAnswer};
 use crate::world::{WorldObject, WorldShape};
 use crate::{Error, Result};
 use sublevel_core::math::{Isometry3, Point3, Real, Vector3};
@@ -70,8 +71,15 @@ use sublevel_query::shape::{shape_distance, ShapeRef};
 pub use crate::answer::{CheckOptions, ConfigurationAnswer};
 
 pub mod block;
+mod bounds;
 mod cloud_pairs;
+mod model_pairs;
 mod self_pairs;
+
+/// Most balls of one geometry's cut the block path's lanes test at [`Fidelity::Spheres`]: a
+/// geometry whose cut at the tolerance needs more keeps the lanes' usual cut, and the pairs it
+/// leaves go to the single path's descent of its sphere tree.
+pub const MAX_CUT_BALLS: usize = 64;
 
 /// A link shape as the sos bound sees it: the primitive, or the compound body's root (which
 /// contains every leaf, hence every triangle).
@@ -147,7 +155,21 @@ pub struct RobotChecker<'r> {
     /// Configurations the block path checked, and those of them its lanes left to the single
     /// path's stages ([`RobotChecker::block_counts`]).
     block_counts: (u64, u64),
+    /// The level of the checks ([`RobotChecker::set_fidelity`]).
+    fidelity: Fidelity,
+    /// At [`Fidelity::Spheres`], each mesh geometry's cut balls (its frame) for the lanes;
+    /// empty otherwise ([`RobotChecker::sphere_cut`]).
+    cuts: Vec<Vec<Sphere>>,
+    /// At [`Fidelity::Spheres`], per geometry, which sphere-tree nodes the model's cut holds
+    /// (the descents' leaves); empty otherwise.
+    model_leaves: Vec<Vec<bool>>,
+    /// The level set before the current one, with its cuts and block plan, restored without a
+    /// rebuild when that level is set again.
+    stash: Option<Stash>,
 }
+
+/// A level's cuts and block plan, kept across one switch of level.
+type Stash = (Fidelity, Vec<Vec<Sphere>>, Vec<Vec<bool>>, Option<Box<block::BlockPlan>>);
 
 impl<'r> RobotChecker<'r> {
     /// A checker of `robot` among `world`. `allowed(a, b)` overrides which pairs may touch, by
@@ -249,6 +271,10 @@ impl<'r> RobotChecker<'r> {
             contact_proofs: true,
             block: None,
             block_counts: (0, 0),
+            fidelity: Fidelity::Mesh,
+            cuts: Vec::new(),
+            model_leaves: Vec::new(),
+            stash: None,
         })
     }
 
@@ -388,114 +414,6 @@ impl<'r> RobotChecker<'r> {
     /// The checked world pairs of geometry `g` (object indices).
     pub(crate) fn world_pairs_of(&self, g: usize) -> &[usize] {
         &self.world_pairs[g]
-    }
-
-    /// A lower bound of the distance of robot geometry `g` and world object `o` as placed by
-    /// [`RobotChecker::place`] (meters; 0 when they touch), and whether it is the meshes' (or an
-    /// exact primitive's: a motion reports contacts only from these), at `level`:
-    /// 0 the ball and box gaps, 1 the sos root bound (exact for a primitive link), 2 the meshes'
-    /// distance, to within `slack` ([`Slack::bound`] of the distance of the closest triangles
-    /// found) — or that bound of `cap` when the meshes are farther apart than `cap` (the search
-    /// stops there).
-    ///
-    /// # Errors
-    /// A query that fails outright.
-    pub(crate) fn world_bound(&self, g: usize, o: usize, level: u8, cap: Real, slack: Slack) -> Result<(Real, bool)> {
-        let primitive = self.both_primitive(g, o);
-        match level {
-            0 => Ok((self.world_gap(g, o).max(self.world_box_gap(g, o, Real::INFINITY)), false)),
-            1 => match self.cloud(o) {
-                Some(cloud) => Ok(self.cloud_bound(g, o, cloud, 1, cap)),
-                None => Ok((self.sos_world_bound(g, o)?, primitive)),
-            },
-            _ => {
-                if primitive {
-                    return Ok((self.sos_world_bound(g, o)?, true));
-                }
-                if let Some(cloud) = self.cloud(o) {
-                    return Ok(self.cloud_bound(g, o, cloud, 2, cap));
-                }
-                let (a, b) = (&self.robot_exact[g], &self.world_exact[o]);
-                let pa = parry_pose(&(self.poses[g] * a.offset));
-                let pb = parry_pose(&(self.world[o].pose * b.offset));
-                Ok((
-                    match exact_pair_within(
-                        &pa,
-                        a,
-                        &pb,
-                        b,
-                        0.0,
-                        cap,
-                        &self.world_hints[g * self.world.len() + o],
-                        slack,
-                    )? {
-                        PairOutcome::Collides => 0.0,
-                        PairOutcome::Free { distance, .. } => slack.bound(distance.min(cap)),
-                    },
-                    true,
-                ))
-            }
-        }
-    }
-
-    /// The ball gap of robot geometry `g` and world object `o` as placed: the cheapest lower
-    /// bound of their distance (level 0 of [`RobotChecker::world_bound`] is at least this).
-    pub(crate) fn world_ball_gap(&self, g: usize, o: usize) -> Real {
-        self.world_gap(g, o)
-    }
-
-    /// The ball gap of checked self pair `k` as placed (level 0 of [`RobotChecker::self_bound`]
-    /// is at least this).
-    pub(crate) fn self_ball_gap(&self, k: usize) -> Real {
-        let (a, b) = self.self_pairs[k];
-        let (ga, gb) = (&self.robot.geometries[a], &self.robot.geometries[b]);
-        (self.centers[a] - self.centers[b]).norm() - ga.sphere.1 - gb.sphere.1
-    }
-
-    /// As [`RobotChecker::world_bound`] for checked self pair `k` ([`RobotChecker::self_pairs`]).
-    ///
-    /// # Errors
-    /// A query that fails outright.
-    pub(crate) fn self_bound(&self, k: usize, level: u8, cap: Real, slack: Slack) -> Result<(Real, bool)> {
-        let (a, b) = self.self_pairs[k];
-        let (ga, gb) = (&self.robot.geometries[a], &self.robot.geometries[b]);
-        let both_primitive = matches!((&ga.shape, &gb.shape), (LinkShape::Primitive(_), LinkShape::Primitive(_)));
-        let (pa, pb) = (self.poses[a], self.poses[b]);
-        match level {
-            0 => {
-                let gap = (self.centers[a] - self.centers[b]).norm() - ga.sphere.1 - gb.sphere.1;
-                let box_gap = match (&self.boxes[a], &self.boxes[b]) {
-                    (Some(x), Some(y)) => box_gap(x, y),
-                    _ => Real::NEG_INFINITY,
-                };
-                Ok((gap.max(box_gap).max(self.table_bound(k)), false))
-            }
-            1 => {
-                let d = shape_distance(root_shape(&ga.shape), &pa, root_shape(&gb.shape), &pb, None)?;
-                let ok = d.status.converged() && !d.overlapping;
-                Ok((if ok { d.distance.max(0.0) } else { 0.0 }, both_primitive && ok))
-            }
-            _ => {
-                let (ea, eb) = (&self.robot_exact[a], &self.robot_exact[b]);
-                let outcome = exact_pair_within(
-                    &parry_pose(&(pa * ea.offset)),
-                    ea,
-                    &parry_pose(&(pb * eb.offset)),
-                    eb,
-                    0.0,
-                    cap,
-                    &self.self_hints[k],
-                    slack,
-                )?;
-                Ok((
-                    match outcome {
-                        PairOutcome::Collides => 0.0,
-                        PairOutcome::Free { distance, .. } => slack.bound(distance.min(cap)),
-                    },
-                    true,
-                ))
-            }
-        }
     }
 
     /// Whether robot geometry `g` and world object `o` are both exact primitives (their sos
@@ -650,27 +568,31 @@ impl<'r> RobotChecker<'r> {
                 answer.pairs_pruned += 1;
                 continue;
             }
-            let tree = if self.contact_proofs && self.inner_touches_world(g, o) {
-                TreeAnswer::Touches
-            } else if self.sphere_stage {
-                self.tree_against_world(g, o, bound, padding)
+            let outcome = if self.fidelity.is_mesh() {
+                let tree = if self.contact_proofs && self.inner_touches_world(g, o) {
+                    TreeAnswer::Touches
+                } else if self.sphere_stage {
+                    self.tree_against_world(g, o, bound, padding)
+                } else {
+                    TreeAnswer::Unknown
+                };
+                match tree {
+                    TreeAnswer::Apart => {
+                        answer.pairs_spheres += 1;
+                        continue;
+                    }
+                    TreeAnswer::Touches => {
+                        answer.pairs_proved += 1;
+                        Ok(Some(PairOutcome::Collides))
+                    }
+                    TreeAnswer::Unknown if self.contact_proofs && self.vertex_touches_world(g, o, padding) => {
+                        answer.pairs_proved += 1;
+                        Ok(Some(PairOutcome::Collides))
+                    }
+                    TreeAnswer::Unknown => self.world_pair(g, o, bound, padding, answer),
+                }
             } else {
-                TreeAnswer::Unknown
-            };
-            let outcome = match tree {
-                TreeAnswer::Apart => {
-                    answer.pairs_spheres += 1;
-                    continue;
-                }
-                TreeAnswer::Touches => {
-                    answer.pairs_proved += 1;
-                    Ok(Some(PairOutcome::Collides))
-                }
-                TreeAnswer::Unknown if self.contact_proofs && self.vertex_touches_world(g, o, padding) => {
-                    answer.pairs_proved += 1;
-                    Ok(Some(PairOutcome::Collides))
-                }
-                TreeAnswer::Unknown => self.world_pair(g, o, bound, padding, answer),
+                self.model_world_pair(g, o, bound, padding, answer)
             };
             match outcome {
                 Ok(None) => {}
@@ -705,7 +627,7 @@ impl<'r> RobotChecker<'r> {
 
     /// One world pair: `None` when the sos bound shows the pair is at least `bound` apart (and
     /// farther than the padding), else the mesh's answer.
-    fn world_pair(
+    pub(super) fn world_pair(
         &self,
         g: usize,
         o: usize,

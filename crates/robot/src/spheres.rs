@@ -228,6 +228,21 @@ impl SphereTree {
         threshold: Real,
         padding: Real,
     ) -> TreeAnswer {
+        self.against_primitive_to(r, t, p, threshold, padding, |_| false)
+    }
+
+    /// [`SphereTree::against_primitive`] with every node `leaf` says is one taken as a leaf: a
+    /// descent of a cut ([`SphereTree::cut_by`]) that stops wherever a coarser node already shows
+    /// its branch apart.
+    pub fn against_primitive_to(
+        &self,
+        r: &Matrix3,
+        t: &Vector3,
+        p: &Primitive,
+        threshold: Real,
+        padding: Real,
+        leaf: impl Fn(u32) -> bool,
+    ) -> TreeAnswer {
         if self.nodes.is_empty() {
             return TreeAnswer::Unknown;
         }
@@ -247,7 +262,7 @@ impl SphereTree {
             if d + node.sphere.radius < padding - 1e-12 {
                 return TreeAnswer::Touches;
             }
-            if node.children == 0 {
+            if node.children == 0 || leaf(k) {
                 undecided += 1;
                 if undecided > PROOF_LEAVES || padding == Real::NEG_INFINITY {
                     return TreeAnswer::Unknown;
@@ -270,10 +285,113 @@ impl SphereTree {
         }
     }
 
+    /// The cut of the tree at radius `stop` (meters): [`SphereTree::cut_by`] with the nodes of
+    /// radius at most `stop` small. Each ball holds pieces of the mesh, so every point of a
+    /// ball of radius r lies within 2r of the mesh.
+    pub fn cut(&self, stop: Real, max_balls: usize) -> Vec<u32> {
+        self.cut_by(max_balls, |n| self.nodes[n as usize].sphere.radius <= stop)
+    }
+
+    /// A cut of the tree: nodes whose balls together hold every piece, found by splitting the
+    /// largest ball that is neither a leaf nor `small` (the root is split at least once when it
+    /// has children), at most `max_balls` of them (past that the largest are left unsplit);
+    /// node indices, increasing. Empty for an empty tree.
+    pub fn cut_by(&self, max_balls: usize, mut small: impl FnMut(u32) -> bool) -> Vec<u32> {
+        use std::cmp::Ordering;
+        use std::collections::BinaryHeap;
+        /// A node ordered by its radius (largest first out of the heap).
+        struct ByRadius(Real, u32);
+        impl PartialEq for ByRadius {
+            fn eq(&self, other: &Self) -> bool {
+                self.cmp(other) == Ordering::Equal
+            }
+        }
+        impl Eq for ByRadius {}
+        impl PartialOrd for ByRadius {
+            fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
+                Some(self.cmp(other))
+            }
+        }
+        impl Ord for ByRadius {
+            fn cmp(&self, other: &Self) -> Ordering {
+                self.0.total_cmp(&other.0).then(other.1.cmp(&self.1))
+            }
+        }
+        if self.nodes.is_empty() {
+            return Vec::new();
+        }
+        let mut done = Vec::new();
+        let mut heap = BinaryHeap::from([ByRadius(self.nodes[0].sphere.radius, 0)]);
+        while let Some(ByRadius(_, n)) = heap.pop() {
+            let children = self.nodes[n as usize].children;
+            let first = n == 0;
+            if children == 0 || done.len() + heap.len() + 2 > max_balls.max(2) || (!first && small(n)) {
+                done.push(n);
+                continue;
+            }
+            for c in [children, children + 1] {
+                heap.push(ByRadius(self.nodes[c as usize].sphere.radius, c));
+            }
+        }
+        done.sort_unstable();
+        done
+    }
+
+    /// A lower bound of the distance from the tree's pieces (centers mapped by `x ↦ r·x + t`
+    /// into the primitive `p`'s frame) to `p`: the least `signed distance − radius` over the
+    /// cut whose nodes `leaf` names (and the leaves), branches whose bound reaches `cap` or more
+    /// dropped (the answer is then at least `cap`); negative where a ball overlaps `p`. `cap`
+    /// for an empty tree.
+    pub fn lower_bound_to_primitive(
+        &self,
+        r: &Matrix3,
+        t: &Vector3,
+        p: &Primitive,
+        leaf: impl Fn(u32) -> bool,
+        cap: Real,
+    ) -> Real {
+        if self.nodes.is_empty() {
+            return cap;
+        }
+        let mut best = cap;
+        let mut stack = [0u32; MAX_DEPTH + 2];
+        let mut len = 1;
+        while len > 0 {
+            len -= 1;
+            let k = stack[len];
+            let node = &self.nodes[k as usize];
+            let gap = primitive_signed_distance(p, &(r * node.sphere.center + t)) - node.sphere.radius;
+            if gap >= best {
+                continue;
+            }
+            if node.children == 0 || leaf(k) {
+                best = gap;
+                continue;
+            }
+            stack[len] = node.children;
+            stack[len + 1] = node.children + 1;
+            len += 2;
+        }
+        best
+    }
+
     /// Whether every piece of this tree is farther than `threshold` (meters, ≥ 0) from every
     /// piece of `other`, whose centers map into this tree's frame by `x ↦ r·x + t` (a dual
     /// descent, module docs), with a hair for rounding. `false` when either tree is empty.
     pub fn apart_from_tree(&self, other: &SphereTree, r: &Matrix3, t: &Vector3, threshold: Real) -> bool {
+        self.apart_from_tree_to(other, r, t, threshold, (|_| false, |_| false))
+    }
+
+    /// [`SphereTree::apart_from_tree`] with the nodes `leaves.0` says are leaves of this tree,
+    /// and those `leaves.1` says are of `other`, taken as leaves.
+    pub fn apart_from_tree_to(
+        &self,
+        other: &SphereTree,
+        r: &Matrix3,
+        t: &Vector3,
+        threshold: Real,
+        leaves: (impl Fn(u32) -> bool, impl Fn(u32) -> bool),
+    ) -> bool {
         if self.nodes.is_empty() || other.nodes.is_empty() {
             return false;
         }
@@ -287,7 +405,9 @@ impl SphereTree {
             if (a.sphere.center - (r * b.sphere.center + t)).norm_squared() > reach * reach {
                 continue;
             }
-            match (a.children, b.children) {
+            let ca = if leaves.0(i) { 0 } else { a.children };
+            let cb = if leaves.1(j) { 0 } else { b.children };
+            match (ca, cb) {
                 (0, 0) => return false,
                 (ca, cb) if ca != 0 && (cb == 0 || a.sphere.radius >= b.sphere.radius) => {
                     stack[len] = (ca, j);

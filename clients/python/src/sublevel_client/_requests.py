@@ -298,6 +298,26 @@ def _joint_positions(positions: Any, name: str) -> pb.ConfigurationColumns:
     return pb.ConfigurationColumns(joint_names=names, values=values)
 
 
+FIDELITY_LEVELS = ("mesh", "bodies", "spheres")
+
+
+def _fidelity_pb(fidelity: Optional[str], sphere_tolerance: float = 0.0) -> "Optional[pb.Fidelity]":
+    """The ``Fidelity`` message of a request: None (or "mesh" with no tolerance) sends none (the
+    meshes' level). ValueError naming ``fidelity`` or ``sphere_tolerance`` for an unknown level or
+    a tolerance that is not a number >= 0 (the server checks its range, naming
+    ``fidelity.tolerance``)."""
+    level = "mesh" if fidelity is None else fidelity
+    if not isinstance(level, str) or level.strip().lower() not in FIDELITY_LEVELS:
+        raise ValueError(f"`fidelity`: expected one of {', '.join(FIDELITY_LEVELS)}, got {fidelity!r}")
+    tolerance = float(sphere_tolerance)
+    if not math.isfinite(tolerance) or tolerance < 0.0:
+        raise ValueError(f"`sphere_tolerance`: expected meters >= 0 (0: the default), got {sphere_tolerance!r}")
+    level = level.strip().lower()
+    if level == "mesh" and tolerance == 0.0:
+        return None
+    return pb.Fidelity(level=level, tolerance=tolerance)
+
+
 def _link_padding(link_padding: Optional[Mapping[str, float]]) -> dict:
     return {str(k): float(v) for k, v in (link_padding or {}).items()}
 

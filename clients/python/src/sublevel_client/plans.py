@@ -19,6 +19,7 @@ from ._requests import (
     _attached_pb,
     _configuration_columns,
     _configurations,
+    _fidelity_pb,
     _link_padding,
     _pose_pb,
 )
@@ -246,6 +247,8 @@ class PlanCalls:
         start_state_max_bounds_error: Optional[float] = None,
         planning_joints: Optional[Sequence[str]] = None,
         trajectory: Optional[pb.TrajectorySettings] = None,
+        fidelity: Optional[str] = None,
+        sphere_tolerance: float = 0.0,
     ) -> pb.PlanRequest:
         """The ``PlanRequest`` of :meth:`plan` (same arguments), validated here."""
         if robot is not None and not isinstance(robot, str):
@@ -268,6 +271,9 @@ class PlanCalls:
             req.planning_joints.extend(planning_joints)
         if trajectory is not None:
             req.trajectory.CopyFrom(trajectory)
+        level = _fidelity_pb(fidelity, sphere_tolerance)
+        if level is not None:
+            req.fidelity.CopyFrom(level)
         if base is not None:
             req.base.CopyFrom(_pose_pb(base, "base"))
         given = {"start": start, "goal": goal, "goal_joints": goal_joints, "goal_pose": goal_pose,
@@ -342,6 +348,8 @@ class PlanCalls:
         max_acceleration: Optional[Mapping[str, float]] = None,
         joint_limits: Any = None,
         grpc_timeout: Optional[float] = None,
+        fidelity: Optional[str] = None,
+        sphere_tolerance: float = 0.0,
     ) -> PlanResult:
         """Plans a path of a stored robot among a scene in one call (``Plan``; docs/planning.md):
         RRT-Connect from the start to the goal, the path simplified, then every edge proven free by
@@ -419,6 +427,9 @@ class PlanCalls:
                 one-line ``str`` naming a file): its limits where its ``has_..._limits`` flags are
                 true. Joints with no limit anywhere (nor a URDF ``<limit velocity>``) take 1 per
                 second and 1 per second squared, said in :attr:`PlanResult.warnings`.
+            fidelity, sphere_tolerance: the level of the search's checks, as in
+                :meth:`check_configurations` (None: "mesh"): a conservative level searches among
+                links inflated by its bodies; the path's edges are still certified on the meshes.
             grpc_timeout: the call's gRPC deadline, seconds; None: ``timeout`` plus
                 :data:`PLAN_DEADLINE_MARGIN` (5 s), so that the server answers ``timed_out``
                 itself. A shorter deadline also shortens the plan.
@@ -451,6 +462,7 @@ class PlanCalls:
                 sample_dt, velocity_scaling, acceleration_scaling, max_deviation, max_velocity, max_acceleration,
                 joint_limits,
             ) if trajectory else None,
+            fidelity=fidelity, sphere_tolerance=sphere_tolerance,
         )
         if grpc_timeout is None:
             deadline = req.settings.timeout + PLAN_DEADLINE_MARGIN

@@ -143,6 +143,9 @@ class ConfigurationColumns:
         scene_version: the version of the scene checked against (its instances, robot, joint
             positions and point clouds as of that version; compare with
             ``Client.update_point_cloud``'s); 0 without a scene.
+        fidelity: length-N list of str: the model each verdict rests on, "mesh" for the meshes'
+            own (every free verdict, and a collision found on the meshes), else the conservative
+            level asked for, whose bodies came within the padding (the meshes may be free there).
     """
 
     joint_names: List[str]
@@ -162,6 +165,7 @@ class ConfigurationColumns:
     pairs_model: int
     pairs_exact: int
     scene_version: int = 0
+    fidelity: List[str] = field(default_factory=list)
 
     def __len__(self) -> int:
         return len(self.collides)
@@ -190,6 +194,7 @@ class ConfigurationColumns:
             pairs_model=m.pairs_model,
             pairs_exact=m.pairs_exact,
             scene_version=int(m.scene_version),
+            fidelity=list(m.fidelity) or ["mesh"] * n,
         )
 
 

@@ -25,6 +25,7 @@ from ._requests import (
     _attached_pb,
     _configuration_columns,
     _configurations,
+    _fidelity_pb,
     _joint_names,
     _joint_positions,
     _link_padding,
@@ -211,6 +212,8 @@ class RobotCalls:
         link_padding: Optional[Mapping[str, float]] = None,
         stop_at_first_collision: bool = False,
         scene_joints: Optional[Callable[[str], List[str]]] = None,
+        fidelity: Optional[str] = None,
+        sphere_tolerance: float = 0.0,
     ) -> pb.CheckConfigurationsRequest:
         """The ``CheckConfigurationsRequest`` of :meth:`check_configurations` (same arguments),
         validated here; also ``QueryRequest.robot_states`` on a stream."""
@@ -228,6 +231,9 @@ class RobotCalls:
             link_padding=_link_padding(link_padding),
             stop_at_first_collision=bool(stop_at_first_collision),
         )
+        level = _fidelity_pb(fidelity, sphere_tolerance)
+        if level is not None:
+            req.fidelity.CopyFrom(level)
         if base is not None:
             req.base.CopyFrom(_pose_pb(base, "base"))
         return req
@@ -295,6 +301,8 @@ class RobotCalls:
         attached: Optional[Sequence[dict]] = None,
         link_padding: Optional[Mapping[str, float]] = None,
         stop_at_first_collision: bool = False,
+        fidelity: Optional[str] = None,
+        sphere_tolerance: float = 0.0,
     ) -> ConfigurationColumns:
         """Checks joint configurations of a stored robot among a scene's primitives, in columns.
 
@@ -331,6 +339,15 @@ class RobotCalls:
             stop_at_first_collision: check the rows in order and stop at the first that
                 collides: the answer then has that many rows, the last one colliding (a sampled
                 motion's states in van der Corput order find a collision in a few checks).
+            fidelity: how closely the links are modelled: "mesh" (None: the default; the meshes'
+                own verdicts and distances), "bodies" (their sos-convex bodies) or "spheres"
+                (their sphere trees cut at ``sphere_tolerance``). Every level's bodies contain the
+                meshes, so no level misses a mesh collision; a conservative one may call a
+                configuration near contact colliding that the meshes call free, and its distance
+                is a lower bound of the meshes'. The ``fidelity`` column says which model each
+                verdict rests on.
+            sphere_tolerance: meters in [0.01, 1] that the "spheres" level's balls may reach past
+                the meshes (0: 0.03).
 
         Returns :class:`ConfigurationColumns` (numpy columns of N rows, fewer with
         ``stop_at_first_collision``). Raises ValueError naming
@@ -343,7 +360,7 @@ class RobotCalls:
         req = self._configurations_request(
             robot, q, scene=scene, joint_names=joint_names, base=base, padding=padding, distance=distance,
             self_collision=self_collision, gradient=gradient, attached=attached, link_padding=link_padding,
-            stop_at_first_collision=stop_at_first_collision,
+            stop_at_first_collision=stop_at_first_collision, fidelity=fidelity, sphere_tolerance=sphere_tolerance,
         )
         return ConfigurationColumns.from_proto(self._call("CheckConfigurations", req), gradient=bool(gradient))
 

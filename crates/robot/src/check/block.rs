@@ -38,6 +38,7 @@
 
 use super::RobotChecker;
 use crate::answer::{CheckOptions, ConfigurationAnswer};
+use crate::fidelity::Fidelity;
 use crate::{Error, Result};
 use kernel::{BlockInput, Decided, Scratch};
 use lanes::{Lanes, MAX_ANGLE};
@@ -64,8 +65,11 @@ struct Job<'a> {
 }
 
 /// The answer of a configuration the lanes decided, among `pairs` checked pairs.
-fn decided_answer(d: &Decided, pairs: usize) -> ConfigurationAnswer {
+fn decided_answer(d: &Decided, pairs: usize, fidelity: Fidelity) -> ConfigurationAnswer {
     let mut a = ConfigurationAnswer::start(false);
+    if d.conservative {
+        a.fidelity = fidelity;
+    }
     a.world = d.world.is_some();
     a.pair = d.world;
     a.self_collision = d.self_pair.is_some();
@@ -235,7 +239,8 @@ impl RobotChecker<'_> {
                     world_pairs: &self.world_pairs,
                     self_pairs: &self.self_pairs,
                     self_collision: options.self_collision,
-                    proofs: true,
+                    proofs: self.fidelity.is_mesh(),
+                    conclusive: matches!(self.fidelity, Fidelity::Spheres { .. }),
                     lanes,
                 };
                 let (tables, clearance) = (&self.self_tables, &self.robot.clearance);
@@ -249,14 +254,14 @@ impl RobotChecker<'_> {
             if any {
                 let proved = verdicts.iter().take(n).flatten().find(|d| d.world.is_some() || d.self_pair.is_some());
                 if let Some(d) = proved {
-                    out.push(decided_answer(d, pairs));
+                    out.push(decided_answer(d, pairs, self.fidelity));
                     return Ok(());
                 }
             }
             for (lane, verdict) in verdicts.iter().enumerate().take(n) {
                 self.block_counts.0 += 1;
                 let answer = match verdict {
-                    Some(d) if !d.pending => decided_answer(d, pairs),
+                    Some(d) if !d.pending => decided_answer(d, pairs, self.fidelity),
                     Some(d) => {
                         self.block_counts.1 += 1;
                         world_left.clear();
@@ -297,7 +302,7 @@ impl RobotChecker<'_> {
         pairs: usize,
     ) -> Result<ConfigurationAnswer> {
         self.place(q, base)?;
-        let mut answer = decided_answer(d, pairs);
+        let mut answer = decided_answer(d, pairs, self.fidelity);
         answer.pairs_pruned = pairs.saturating_sub(d.tables + d.proved + world.len() + selfs.len());
         if d.world.is_none() && !world.is_empty() {
             self.world_check(options, &mut answer, Some(world))?;

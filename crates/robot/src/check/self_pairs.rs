@@ -115,6 +115,22 @@ impl RobotChecker<'_> {
             }
             pending.push(k);
         }
+        if !self.fidelity.is_mesh() {
+            for &k in pending.iter() {
+                let (a, b) = self.self_pairs[k];
+                let padding = options.padding + self.pad[a] + self.pad[b];
+                let collides = match self.model_self_pair(k, padding, answer)? {
+                    Some(collides) => collides,
+                    None => self.exact_self_collides(k, padding, answer)?,
+                };
+                if collides {
+                    answer.self_collision = true;
+                    answer.self_pair = Some((a, b));
+                    return Ok(());
+                }
+            }
+            return Ok(());
+        }
         if self.sphere_stage {
             let before = pending.len();
             pending.retain(|&k| {
@@ -146,16 +162,22 @@ impl RobotChecker<'_> {
             if free {
                 continue;
             }
-            answer.pairs_exact += 1;
-            let (ea, eb) = (&self.robot_exact[a], &self.robot_exact[b]);
-            let (pa, pb) = (parry_pose(&(pa * ea.offset)), parry_pose(&(pb * eb.offset)));
-            if exact_collides(&pa, ea, &pb, eb, padding, &self.self_hints[k])? {
+            if self.exact_self_collides(k, padding, answer)? {
                 answer.self_collision = true;
                 answer.self_pair = Some((a, b));
                 return Ok(());
             }
         }
         Ok(())
+    }
+
+    /// Whether self pair `k`'s meshes (or primitives) come within `padding` (exact).
+    fn exact_self_collides(&self, k: usize, padding: Real, answer: &mut ConfigurationAnswer) -> Result<bool> {
+        let (a, b) = self.self_pairs[k];
+        answer.pairs_exact += 1;
+        let (ea, eb) = (&self.robot_exact[a], &self.robot_exact[b]);
+        let (pa, pb) = (parry_pose(&(self.poses[a] * ea.offset)), parry_pose(&(self.poses[b] * eb.offset)));
+        exact_collides(&pa, ea, &pb, eb, padding, &self.self_hints[k])
     }
 }
 

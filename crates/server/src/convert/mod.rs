@@ -72,9 +72,9 @@ pub use queries::{
     tree_to_proto, tree_tolerance,
 };
 pub use robots::{
-    attached_record_from_proto, configuration_rows, configurations_from_proto, motion_options, motion_samples, padding,
-    push_configuration_answers, push_motion_answers, resolution, robot_summary, scene_robot_to_proto,
-    MAX_CONFIGURATIONS_PER_CALL, MAX_SAMPLES_PER_MOTION,
+    attached_record_from_proto, configuration_rows, configurations_from_proto, fidelity, motion_options,
+    motion_samples, padding, push_configuration_answers, push_motion_answers, resolution, robot_summary,
+    scene_robot_to_proto, MAX_CONFIGURATIONS_PER_CALL, MAX_SAMPLES_PER_MOTION,
 };
 pub use scenes::{
     import_mesh_settings, imported_scene_to_proto, instance_to_proto, planned_mesh_to_fit, planning_scene_from_proto,

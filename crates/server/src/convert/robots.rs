@@ -132,6 +132,18 @@ pub fn motion_samples(m: usize, a: &[Real], b: &[Real], resolution: Real) -> Res
     }
 }
 
+/// The fidelity level of a request's robot checks (`sublevel_robot::fidelity`); absent: mesh.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `fidelity.level` (unknown) or `fidelity.tolerance` (out of
+/// range, or given for a level other than spheres).
+pub fn fidelity(value: Option<&pb::Fidelity>) -> Result<sublevel_robot::Fidelity> {
+    match value {
+        Some(f) => sublevel_robot::Fidelity::parse("fidelity", &f.level, Some(f.tolerance)),
+        None => Ok(sublevel_robot::Fidelity::Mesh),
+    }
+}
+
 /// Checks padding (meters, finite, ≥ 0).
 ///
 /// # Errors
@@ -211,6 +223,7 @@ pub fn push_configuration_answers(
             }
         }
         out.converged.push(a.converged);
+        out.fidelity.push(a.fidelity.name().to_owned());
         out.pairs_pruned += (a.pairs_pruned + a.pairs_table + a.pairs_spheres) as u64;
         out.pairs_model += a.pairs_model as u64;
         out.pairs_exact += a.pairs_exact as u64;

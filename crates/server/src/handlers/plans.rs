@@ -31,6 +31,7 @@ pub(super) async fn plan(svc: &SublevelService, request: Request<pb::PlanRequest
     let call_deadline = crate::deadline::parse_grpc_timeout(&request.metadata().clone().into_headers());
     let req = request.into_inner();
     let mut settings = cv::plan_settings(req.settings.as_ref())?;
+    let fidelity = cv::fidelity(req.fidelity.as_ref())?;
     if let Some(left) = call_deadline {
         settings.timeout = settings.timeout.min(left.saturating_sub(ANSWER_MARGIN).max(LEAST_PLAN_TIME));
     }
@@ -51,6 +52,7 @@ pub(super) async fn plan(svc: &SublevelService, request: Request<pb::PlanRequest
             let allowed = world.planning.allowed_override();
             let mut checker = RobotChecker::new(&planned, world.objects.clone(), &allowed)?;
             checker.set_link_padding(&link_padding)?;
+            checker.set_fidelity(fidelity)?;
             let mut validity = RobotValidity::new(MotionChecker::new(&mut checker)?, base, settings.padding);
             validity.hold_all_but(&moving_joints, &start);
             // The time left after the wait for the slot, the reading of the setting and the

@@ -203,8 +203,12 @@ impl Prepared {
     }
 
     /// Gives back a checker taken from this setting, to be used again (dropped when enough are
-    /// idle).
-    pub(super) fn put(&self, checker: Checker) {
+    /// idle), at the mesh level (its other level's plan kept for the next switch).
+    pub(super) fn put(&self, mut checker: Checker) {
+        // Idle checkers check at the meshes' level: a request that wants another sets it.
+        if checker.with_dependent_mut(|_, c| c.set_fidelity(sublevel_robot::Fidelity::Mesh)).is_err() {
+            return;
+        }
         let mut idle = lock(&self.idle);
         if idle.len() < self.max_idle {
             idle.push(checker);

@@ -121,6 +121,7 @@ impl RobotChecks {
         poses: Vec<(String, Isometry3)>,
     ) -> Result<pb::CheckConfigurationsResponse, HandlerError> {
         let padding = cv::padding(req.padding)?;
+        let fidelity = cv::fidelity(req.fidelity.as_ref())?;
         let base = req.base.as_ref().map(|b| cv::pose_from_proto("base", Some(b))).transpose()?;
         let asked = Asked::taken(&mut req.robot_id, &mut req.scene_id, &mut req.attached, &mut req.link_padding, poses);
         let prepared = self.prepared(asked).await?;
@@ -145,7 +146,10 @@ impl RobotChecks {
             let mut out = Vec::with_capacity(range.len());
             let rows = &configs[range.start * dof..range.end * dof];
             checker
-                .with_dependent_mut(|_, c| c.check_block(rows, &base, &options, stop, &mut out))
+                .with_dependent_mut(|_, c| {
+                    c.set_fidelity(fidelity)?;
+                    c.check_block(rows, &base, &options, stop, &mut out)
+                })
                 .map_err(|e| shift_configuration(e, range.start))?;
             prepared.put(checker);
             Ok::<Vec<ConfigurationAnswer>, Error>(out)

@@ -20,6 +20,9 @@ pub(crate) struct Decided {
     pub proved: usize,
     /// Whether pairs were left undecided ([`Scratch::pending_world`], [`Scratch::pending_self`]).
     pub pending: bool,
+    /// Whether the collision rests on the sphere model ([`BlockInput::conclusive`]), not on a
+    /// contact proof.
+    pub conservative: bool,
 }
 
 /// The inputs of one block besides the plan.
@@ -45,6 +48,9 @@ pub(crate) struct BlockInput<'a> {
     pub self_collision: bool,
     /// Whether contact proofs may decide lanes colliding.
     pub proofs: bool,
+    /// Whether a pair left within the padding by modelled cuts ([`super::plan::Geometry::modelled`])
+    /// collides (the [`crate::Fidelity::Spheres`] level) instead of going to the single path.
+    pub conclusive: bool,
     /// Lanes the kernel must decide (bit i: lane i); the others are ignored.
     pub lanes: u32,
 }
@@ -394,6 +400,11 @@ pub(crate) fn decide<L: Lanes>(
                 }
             }
             let rest = left & !proved;
+            if input.conclusive && geometry.modelled && matches!(object, Object::Shape { .. } | Object::Plane { .. }) {
+                conclude(&mut decided, rest, w, |d| d.world = Some((g, o)));
+                open &= !rest;
+                continue;
+            }
             for lane in 0..w {
                 if rest >> lane & 1 == 1 {
                     scratch.pending_world.push((lane, g, o));
@@ -472,6 +483,11 @@ pub(crate) fn decide<L: Lanes>(
                 }
             }
             let rest = left & !proved;
+            if input.conclusive && ga.modelled && gb.modelled {
+                conclude(&mut decided, rest, w, |d| d.self_pair = Some((a, b)));
+                open &= !rest;
+                continue;
+            }
             for lane in 0..w {
                 if rest >> lane & 1 == 1 {
                     scratch.pending_self.push((lane, k));
@@ -484,6 +500,17 @@ pub(crate) fn decide<L: Lanes>(
     for (lane, slot) in out.iter_mut().enumerate().take(w) {
         decided[lane].pending = unknown >> lane & 1 == 1;
         *slot = (full >> lane & 1 == 1).then_some(decided[lane]);
+    }
+}
+
+/// Marks the lanes of `rest` colliding on the sphere model, with `pair` naming the pair.
+#[inline(always)]
+fn conclude(decided: &mut [Decided; 8], rest: u32, w: usize, pair: impl Fn(&mut Decided)) {
+    for (lane, d) in decided.iter_mut().enumerate().take(w) {
+        if rest >> lane & 1 == 1 {
+            pair(d);
+            d.conservative = true;
+        }
     }
 }
 

@@ -98,6 +98,10 @@ pub(crate) struct Geometry {
     /// Its closed components' inner balls, in [`BlockPlan::components`] (none for a
     /// primitive).
     pub components: Range<usize>,
+    /// Whether `cut` is the checker's [`crate::Fidelity::Spheres`] model of the geometry (a
+    /// mesh's cut of at least two balls): a pair it leaves within the padding collides at that
+    /// level.
+    pub modelled: bool,
 }
 
 /// A world primitive in its own frame.
@@ -280,9 +284,14 @@ impl BlockPlan {
             let comps = plan.components.len();
             match &g.shape {
                 LinkShape::Mesh { spheres, inner, .. } if !spheres.nodes.is_empty() => {
-                    for n in tree_cut(spheres, CUT_BALLS) {
-                        let s = &spheres.nodes[n].sphere;
-                        plan.cut.push(ball(&s.center, s.radius));
+                    let model = checker.sphere_cut(plan.geometries.len());
+                    if model.is_empty() {
+                        for n in tree_cut(spheres, CUT_BALLS) {
+                            let s = &spheres.nodes[n].sphere;
+                            plan.cut.push(ball(&s.center, s.radius));
+                        }
+                    } else {
+                        plan.cut.extend(model.iter().map(|s| ball(&s.center, s.radius)));
                     }
                     for n in tree_cut(spheres, CLOUD_CUT_BALLS) {
                         let s = &spheres.nodes[n].sphere;
@@ -312,6 +321,7 @@ impl BlockPlan {
                 cut: start..plan.cut.len(),
                 cloud_cut: cloud_start..plan.cloud_cut.len(),
                 components: comps..plan.components.len(),
+                modelled: plan.cut.len() - start > 1 && !checker.sphere_cut(plan.geometries.len()).is_empty(),
             });
         }
         for (o, wb) in checker.world.iter().zip(&checker.world_balls) {
