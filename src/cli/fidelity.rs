@@ -35,3 +35,26 @@ impl FidelityArgs {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn args(level: &str, tolerance: Real) -> FidelityArgs {
+        FidelityArgs { fidelity: level.into(), tolerance }
+    }
+
+    #[test]
+    fn levels_parse_and_bad_ones_name_the_flag() {
+        assert_eq!(args("mesh", 0.0).level().unwrap(), Fidelity::Mesh);
+        assert_eq!(args("bodies", 0.0).level().unwrap(), Fidelity::Bodies);
+        assert_eq!(args("spheres", 0.1).level().unwrap(), Fidelity::Spheres { tolerance: 0.1 });
+        let flag = |a: FidelityArgs| match a.level().unwrap_err() {
+            Error::InvalidArgument { field, .. } => field,
+            other => panic!("{other}"),
+        };
+        assert_eq!(flag(args("voxels", 0.0)), "--fidelity");
+        assert_eq!(flag(args("spheres", 5.0)), "--tolerance");
+        assert_eq!(flag(args("bodies", 0.1)), "--tolerance");
+    }
+}
