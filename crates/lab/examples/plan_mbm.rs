@@ -7,7 +7,7 @@
 //! cargo run --release -p sublevel-lab --example plan_mbm -- [--timeout S] [--range R] [--goal-bias P] [--seed N]
 //!     [--no-simplify] [--no-dynamic-domain] [--no-balance] [--shortcuts N] [--smoothing PASSES] [--padding M] [--search-margin M] [--pose-goal LINK]
 //!     [--robot data/robots/panda/panda.robot.json] [--problems data/robots/mbm_panda]
-//!     [--scenarios a,b,...] [--limit 10]
+//!     [--scenarios a,b,...] [--limit 10] [--fidelity mesh|bodies|spheres[:TOLERANCE]]
 //! ```
 //!
 //! With `--pose-goal panda_hand` the goal is that link's pose at the request's joint goal (forward
@@ -25,7 +25,7 @@ use std::time::{Duration, Instant};
 use sublevel_core::math::{Isometry3, Real};
 use sublevel_plan::{plan, Goal, PlanSettings, PlanStatus, RobotValidity};
 use sublevel_robot::ik::PoseGoal;
-use sublevel_robot::{FittedRobot, MotionChecker, RobotChecker};
+use sublevel_robot::{Fidelity, FittedRobot, MotionChecker, RobotChecker};
 use sublevel_scene::moveit::{allowed_override, world_objects, MotionPlanRequest, PlanningScene};
 
 struct Args {
@@ -37,6 +37,8 @@ struct Args {
     problems: String,
     scenarios: Vec<String>,
     limit: usize,
+    /// The level of the search's checks (`--fidelity LEVEL[:TOLERANCE]`).
+    fidelity: Fidelity,
 }
 
 fn args() -> Result<Args, String> {
@@ -57,6 +59,7 @@ fn args() -> Result<Args, String> {
         .map(String::from)
         .to_vec(),
         limit: 10,
+        fidelity: Fidelity::Mesh,
     };
     let argv: Vec<String> = std::env::args().skip(1).collect();
     let mut i = 0;
@@ -91,6 +94,13 @@ fn args() -> Result<Args, String> {
             "--problems" => a.problems = value,
             "--scenarios" => a.scenarios = value.split(',').map(String::from).collect(),
             "--limit" => a.limit = value.parse().map_err(|e| format!("--limit: {e}"))?,
+            "--fidelity" => {
+                let (level, tolerance) = match value.split_once(':') {
+                    Some((l, t)) => (l, Some(t.parse::<Real>().map_err(|e| format!("--fidelity: {e}"))?)),
+                    None => (value.as_str(), None),
+                };
+                a.fidelity = Fidelity::parse("fidelity", level, tolerance).map_err(|e| format!("--fidelity: {e}"))?;
+            }
             other => return Err(format!("unknown argument {other}")),
         }
         i += 2;
@@ -140,6 +150,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let (world, _) = world_objects(&scene)?;
             let allowed = allowed_override(&scene);
             let mut checker = RobotChecker::new(&robot, world, &allowed)?;
+            checker.set_fidelity(a.fidelity)?;
             let mut validity = RobotValidity::new(MotionChecker::new(&mut checker)?, Isometry3::identity(), s.padding);
             total += 1;
             let clock = Instant::now();

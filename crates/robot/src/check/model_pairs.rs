@@ -59,13 +59,13 @@ impl RobotChecker<'_> {
     /// otherwise. At [`Fidelity::Spheres`] the model is each mesh geometry's sphere tree cut
     /// where every ball reaches at most `tolerance` past the mesh (its radius plus its center's
     /// distance to the mesh, at most twice its radius): the single path descends it no deeper,
-    /// and the block path's lanes test the whole cut where it has at most [`MAX_CUT_BALLS`]
+    /// and the block path's lanes test the whole cut where it has at most [`super::MAX_CUT_BALLS`]
     /// balls (a pair left within the padding then collides without the single path). Motions
     /// ([`crate::MotionChecker`]) start with a check at the level and advance on the meshes'
     /// bounds.
     ///
     /// # Errors
-    /// [`Error::InvalidArgument`] naming `fidelity.tolerance` out of range (nothing changes).
+    /// [`crate::Error::InvalidArgument`] naming `fidelity.tolerance` out of range (nothing changes).
     pub fn set_fidelity(&mut self, fidelity: Fidelity) -> Result<()> {
         fidelity.validate("fidelity")?;
         if fidelity == self.fidelity {
@@ -94,7 +94,7 @@ impl RobotChecker<'_> {
     }
 
     /// At [`Fidelity::Spheres`], the balls of geometry `g`'s cut the lanes test as its model
-    /// (its frame; empty for a primitive geometry, a cut of more than [`MAX_CUT_BALLS`] balls,
+    /// (its frame; empty for a primitive geometry, a cut of more than [`super::MAX_CUT_BALLS`] balls,
     /// or at another level).
     pub fn sphere_cut(&self, g: usize) -> &[Sphere] {
         self.cuts.get(g).map_or(&[], Vec::as_slice)
